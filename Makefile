@@ -1,0 +1,71 @@
+# mpmd build.  `make` builds everything; `make test` installs missing Debian
+# packages, builds the sanitizer build and runs every test; `make bench` runs
+# the benchmarks.  Modules are picked up by wildcard: a new server/mpm/mpm_*.c
+# joins the solver library, a new server/*.c the daemon library, a new
+# tests/t_*.c the test runner.
+
+CC      ?= cc
+CSTD    := -std=c11 -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
+WARN    := -Wall -Wextra -Werror -Wshadow -Wpointer-arith -Wstrict-prototypes -Wmissing-prototypes
+OPT     ?= -O2 -g
+SAN     := -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
+LDLIBS  := -lm -lpthread
+SRVLIBS := -lzmq -lsqlite3 -lprotobuf-c -ljansson
+
+MPM_SRCS  := $(wildcard server/mpm/mpm_*.c)
+SRV_SRCS  := $(filter-out server/main.c,$(wildcard server/*.c))
+TEST_SRCS := $(wildcard tests/t_*.c) tests/runner.c
+PROTOS    := $(wildcard proto/*.proto)
+GEN_C     := $(patsubst proto/%.proto,build/gen/%.pb-c.c,$(PROTOS))
+GEN_H     := $(GEN_C:.c=.h)
+INC       := -Iserver/mpm -Iserver -Ibuild/gen -Itests
+
+# Two builds: release (build/rel, bin/) and sanitizers (build/asan).
+REL  := build/rel
+ASAN := build/asan
+
+.PHONY: all deps test test-quick bench demo clean
+all: bin/mpmtest
+
+deps:
+	@bash deploy/install-deps.sh
+
+build/gen/%.pb-c.c build/gen/%.pb-c.h: proto/%.proto
+	@mkdir -p build/gen
+	protoc-c --proto_path=proto --c_out=build/gen $<
+
+# Objects: $(1) build dir, $(2) flags
+define objs
+$(1)/%.o: %.c $(GEN_H) $(wildcard server/mpm/*.h server/*.h tests/*.h)
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(CSTD) $$(WARN) $(2) $$(INC) -c $$< -o $$@
+$(1)/gen/%.o: build/gen/%.c $(GEN_H)
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(CSTD) $(2) $$(INC) -c $$< -o $$@
+endef
+$(eval $(call objs,$(REL),$(OPT)))
+$(eval $(call objs,$(ASAN),$(SAN)))
+
+mpm_objs  = $(patsubst %.c,$(1)/%.o,$(MPM_SRCS))
+srv_objs  = $(patsubst %.c,$(1)/%.o,$(SRV_SRCS)) $(patsubst build/gen/%.c,$(1)/gen/%.o,$(GEN_C))
+test_objs = $(patsubst %.c,$(1)/%.o,$(TEST_SRCS))
+
+bin/mpmtest: $(call test_objs,$(REL)) $(call srv_objs,$(REL)) $(call mpm_objs,$(REL))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ $(if $(SRV_SRCS)$(PROTOS),$(SRVLIBS)) $(LDLIBS)
+
+$(ASAN)/mpmtest: $(call test_objs,$(ASAN)) $(call srv_objs,$(ASAN)) $(call mpm_objs,$(ASAN))
+	$(CC) $(SAN) -o $@ $^ $(if $(SRV_SRCS)$(PROTOS),$(SRVLIBS)) $(LDLIBS)
+
+# make test: every test under ASan+UBSan.  T=name runs one test.
+test: deps
+	@$(MAKE) --no-print-directory $(ASAN)/mpmtest
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	  $(ASAN)/mpmtest $(T)
+
+# Release build, no sanitizers: quick local iteration.
+test-quick: bin/mpmtest
+	bin/mpmtest $(T)
+
+clean:
+	rm -rf build bin

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages mpmd needs to build, test and run, and only
+# those that are missing. Safe to run again: with everything present it does
+# nothing and prints nothing. Called by `make deps` (and so by `make test` and
+# `make demo`); needs root (or sudo) only when something must be installed.
+set -euo pipefail
+
+pkgs=(
+  gcc make pkg-config
+  libzmq3-dev          # ZeroMQ
+  libsqlite3-dev       # run records
+  libprotobuf-c-dev    # protobuf-c runtime
+  protobuf-c-compiler  # protoc-c, generates proto/*.pb-c.[ch]
+  libjansson-dev       # JSON case files
+)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+
+echo "install-deps: installing missing packages: ${missing[*]}" >&2
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then
+  command -v sudo >/dev/null || { echo "install-deps: need root or sudo to apt-get install ${missing[*]}" >&2; exit 1; }
+  SUDO=sudo
+fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "install-deps: done" >&2

@@ -1,0 +1,212 @@
+/*
+ * mpm.h - public API of the mpmd solver library (explicit MPM and GMPM).
+ *
+ * The solver implements the explicit algorithm of Buzzi, Pedroso & Giacomini,
+ * "Caveats on the implementation of the generalized material point method"
+ * (Figs. 5-7): linear tent shape functions (MPM) or uGIMP weighting functions
+ * (GMPM, Eqs. 17-20), direct momentum extrapolation (Eq. 26), the "correct"
+ * essential boundary conditions (BC1: zero momentum at grid initialisation,
+ * Eq. 27; BC2: zero rate of momentum before the nodal update, Eq. 28), and
+ * phantom nodes below M_TOL that never divide by a tiny mass (Eqs. 30-31).
+ *
+ * Usage: fill an mpm_case (plain data, owned by the caller), call
+ * mpm_sim_new(), then mpm_sim_run() or mpm_sim_step(), and read results with
+ * mpm_sim_energy() and mpm_sim_snapshot() only when they are wanted.
+ * This library is plain C11 + libm + pthreads: no I/O, no sockets, no
+ * database.  All functions return 0 or a negative MPM_E* code; the text of
+ * the last error of a simulation is mpm_sim_error().
+ */
+#ifndef MPM_H
+#define MPM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define MPM_MAX_DIM 3
+
+/* Error codes (negative).  mpm_strerror() names them. */
+enum {
+    MPM_OK = 0,
+    MPM_EINVAL = -1,     /* a case field is invalid (the text names it) */
+    MPM_ENOMEM = -2,     /* allocation failed */
+    MPM_ELEFTGRID = -3,  /* a particle left the grid */
+    MPM_EDIVERGED = -4,  /* NaN or Inf in the state */
+    MPM_ECANCELLED = -5, /* mpm_sim_cancel() was called */
+    MPM_ECFL = -6,       /* given dt above the CFL limit */
+    MPM_ESTATE = -7      /* the simulation already failed; no more steps */
+};
+
+typedef enum { MPM_METHOD_MPM = 0, MPM_METHOD_GIMP = 1 } mpm_method;
+typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
+typedef enum { MPM_MODEL_LINEAR_ELASTIC = 0 } mpm_model_kind;
+typedef enum { MPM_SHAPE_BOX = 0, MPM_SHAPE_SPHERE = 1 } mpm_shape;
+
+/* Structured grid: nodes[d] nodes along axis d, spacing h[d], first node at
+ * origin[d].  Only the first `dim` entries are used. */
+typedef struct {
+    int dim;                      /* 1, 2 or 3 */
+    double origin[MPM_MAX_DIM];
+    double h[MPM_MAX_DIM];
+    int nodes[MPM_MAX_DIM];       /* >= 2 per axis */
+} mpm_grid_desc;
+
+/* Material.  1D: uniaxial (E only); 2D: plane strain; 3D: isotropic. */
+typedef struct {
+    mpm_model_kind model;
+    double youngs_modulus;        /* E > 0 */
+    double poisson_ratio;         /* -1 < nu < 0.5 (ignored in 1D) */
+    double density;               /* rho > 0 */
+} mpm_material_desc;
+
+/* Essential boundary conditions.  Direction masks: bit d fixes axis d. */
+typedef struct {
+    /* face_mask[2*d + s]: fixed directions on the face of the grid box with
+     * normal axis d, s = 0 the low face, s = 1 the high face.  A wall is
+     * all directions (7), a roller only the normal one (1 << d). */
+    unsigned face_mask[2 * MPM_MAX_DIM];
+    /* An explicit node set: node_ijk[3*i + d] is the grid index of node i
+     * along axis d; node_mask[i] its fixed directions. */
+    size_t n_nodes;
+    const int *node_ijk;
+    const unsigned *node_mask;
+} mpm_bc_desc;
+
+/* A body: a material filled into a shape, or an explicit list of points.
+ * Stress and strain use 6 Voigt components: xx, yy, zz, xy, yz, xz. */
+typedef struct {
+    int material;                 /* index into mpm_case.materials */
+    double velocity[MPM_MAX_DIM]; /* uniform initial velocity */
+
+    /* Generated particles (used when n_points == 0). */
+    mpm_shape shape;
+    double lo[MPM_MAX_DIM], hi[MPM_MAX_DIM];  /* box */
+    double center[MPM_MAX_DIM], radius;       /* sphere (disk in 2D) */
+    int ppc;                      /* particles per cell per axis (1..8) */
+
+    /* Explicit particles (used when n_points > 0).  Arrays of n_points
+     * entries (x, v: n_points * dim; stress: n_points * 6); volume is
+     * required; mass, v and stress are optional (NULL: rho*V, the body's
+     * uniform velocity, zero).  half_length: GIMP particle half-width per
+     * axis (NULL: V^(1/dim)/2 in every axis). */
+    size_t n_points;
+    const double *x, *volume, *mass, *v, *stress, *half_length;
+} mpm_body_desc;
+
+/* A traction on the particles whose centres lie in a box region: the total
+ * force traction * area is shared among them in proportion to their volume.
+ * area is the product of the region's extents across the normal axis (1 in
+ * 1D, per unit thickness in 2D).  A point force is a region holding one
+ * particle with `force` given instead of `traction` (is_force = 1). */
+typedef struct {
+    double lo[MPM_MAX_DIM], hi[MPM_MAX_DIM];
+    int normal;                   /* axis of the surface normal */
+    int is_force;                 /* 1: `value` is a total force */
+    double value[MPM_MAX_DIM];    /* traction (force / area) or force */
+} mpm_traction_desc;
+
+/* A whole simulation case.  The library copies what it needs in
+ * mpm_sim_new(); the caller keeps ownership of every array here. */
+typedef struct {
+    mpm_grid_desc grid;
+    mpm_method method;
+    mpm_update update;
+
+    double dt;            /* > 0: fixed time step; 0: automatic (CFL) */
+    double cfl;           /* Courant factor C for automatic dt (0: default) */
+    int allow_unstable_dt;/* accept a given dt above the CFL limit */
+    double mass_tol;      /* M_TOL relative to the mean particle mass (0: default) */
+
+    double gravity[MPM_MAX_DIM];
+
+    size_t n_materials;
+    const mpm_material_desc *materials;
+    size_t n_bodies;
+    const mpm_body_desc *bodies;
+    size_t n_tractions;
+    const mpm_traction_desc *tractions;
+    mpm_bc_desc bc;
+
+    int threads;          /* solver threads (0 or 1: serial) */
+} mpm_case;
+
+#define MPM_DEFAULT_CFL 0.5
+#define MPM_DEFAULT_MASS_TOL 1e-9
+#define MPM_MAX_PARTICLES ((size_t)1 << 31)
+#define MPM_MAX_NODES ((size_t)1 << 31)
+#define MPM_MAX_THREADS 64
+
+/* Energies and conserved quantities at the current time. */
+typedef struct {
+    double kinetic;       /* sum 1/2 m v.v */
+    double strain;        /* sum 1/2 sigma:eps V */
+    double potential;     /* -sum m g.x (gravity), 0 without gravity */
+    double external_work; /* work done by tractions so far */
+    double total;         /* kinetic + strain + potential - external_work */
+    double mass;
+    double momentum[MPM_MAX_DIM];
+} mpm_energy;
+
+/* Snapshot request: the caller passes arrays of n_particles entries
+ * (times dim for position and velocity, times 6 for stress); a NULL array
+ * is not filled. */
+typedef struct {
+    double *x, *v, *stress, *pressure, *volume;
+} mpm_snapshot;
+
+typedef struct mpm_sim mpm_sim;
+
+/* Creates a simulation from a case.  Returns NULL only on allocation
+ * failure with err NULL; otherwise an invalid case returns NULL and writes a
+ * message naming the field and the limit into err (errlen bytes). */
+mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen);
+void mpm_sim_destroy(mpm_sim **sim);
+
+/* Checks a case without building it (used before queueing a job).
+ * Returns 0 or MPM_EINVAL / MPM_ECFL with a message in err. */
+int mpm_case_check(const mpm_case *c, char *err, size_t errlen);
+
+/* Advances one step.  Returns 0, or MPM_ELEFTGRID / MPM_EDIVERGED (after
+ * which the state is frozen and every further step returns MPM_ESTATE). */
+int mpm_sim_step(mpm_sim *sim);
+
+/* Advances up to nsteps steps, stopping early on error or cancellation. */
+int mpm_sim_run(mpm_sim *sim, long nsteps);
+
+/* Asks a running mpm_sim_run() to stop before its next step.  Safe to call
+ * from any thread. */
+void mpm_sim_cancel(mpm_sim *sim);
+
+long mpm_sim_steps(const mpm_sim *sim);
+double mpm_sim_time(const mpm_sim *sim);
+double mpm_sim_dt(const mpm_sim *sim);          /* dt of the next step */
+double mpm_sim_dt_limit(const mpm_sim *sim);    /* CFL limit (C = 1) now */
+size_t mpm_sim_particles(const mpm_sim *sim);
+size_t mpm_sim_nodes(const mpm_sim *sim);       /* real grid nodes */
+int mpm_sim_dim(const mpm_sim *sim);
+const char *mpm_sim_error(const mpm_sim *sim);  /* "" when none */
+
+/* Computes energies (one pass over the particles, only when called). */
+void mpm_sim_energy(const mpm_sim *sim, mpm_energy *e);
+
+/* Copies the requested particle fields into caller arrays. */
+void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *s);
+
+/* Grid state after the last step, for tests and diagnostics: node mass and
+ * momentum of real node (i, j, k) (unused indices 0). */
+void mpm_sim_node(const mpm_sim *sim, const int ijk[3], double *mass,
+                  double q[MPM_MAX_DIM]);
+
+const char *mpm_strerror(int code);
+
+/* p-wave speed of a material: sqrt(E/rho) in 1D, sqrt((lambda+2mu)/rho)
+ * otherwise. */
+double mpm_material_wave_speed(const mpm_material_desc *m, int dim);
+
+/* uGIMP / linear weights along one axis (exposed for tests).  For a particle
+ * at reference-cell-relative coordinate, fills the nn = 2 (MPM) or 4 (GIMP)
+ * weights and gradients of consecutive nodes starting at the reference node
+ * (Eq. 21 / 22); returns the reference node index. */
+int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp,
+                 double *w, double *g);
+
+#endif
