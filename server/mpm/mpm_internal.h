@@ -1,0 +1,173 @@
+/*
+ * mpm_internal.h - the solver's private data layout, shared by the solver's
+ * own modules (mpm_sim.c, mpm_kernels.c, mpm_case.c, mpm_model.c) only.
+ *
+ * Hot data is struct-of-arrays: particle field c of particle p is
+ * P.field[c][p].  The grid is padded by one ghost layer per side for GMPM,
+ * so that the 4 nodes per axis of Eq. 22 never index outside the arrays; a
+ * particle's cell index along an axis is then also its padded reference node
+ * (Eq. 21 for MPM, Eq. 22 + 1 for GMPM).  Nothing here is allocated inside a
+ * time step.
+ */
+#ifndef MPM_INTERNAL_H
+#define MPM_INTERNAL_H
+
+#include "mpm.h"
+
+#include <pthread.h>
+#include <stdatomic.h>
+
+/* Stress and strain components stored per dimension: 1D xx; 2D plane strain
+ * xx yy zz xy; 3D xx yy zz xy yz xz.  Component c is the Voigt index c. */
+#define MPM_NCOMP(dim) ((dim) == 1 ? 1 : (dim) == 2 ? 4 : 6)
+
+/* Particle block size for the constitutive update (scratch per thread). */
+#define MPM_BLOCK 64
+
+typedef struct {
+    size_t n;
+    double *x[3], *v[3];     /* position, velocity (dim arrays) */
+    double *m, *vol;         /* mass, current volume */
+    double *lp[3];           /* GMPM half-width per axis (NULL for MPM) */
+    double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays) */
+    uint16_t *mat;           /* material index */
+} mpm_particles;
+
+/* Per-material constants for the constitutive models. */
+typedef struct {
+    double E, nu, rho, lambda, mu, c; /* c: p-wave speed */
+} mpm_mat_params;
+
+/* One grid's worth of scatter targets (the main grid, or a thread's private
+ * copy when several threads scatter). */
+typedef struct {
+    double *m;          /* mass */
+    double *q[3];       /* momentum */
+    double *f[3];       /* rate of momentum f_ext - f_int (Eq. 13) */
+    double *q2[3];      /* MUSL: momentum of the updated particle velocities */
+} mpm_gridbuf;
+
+typedef struct mpm_kernels mpm_kernels;
+typedef struct mpm_model_ops mpm_model_ops;
+
+/* Per-thread results of a particle pass, padded to a cache line. */
+typedef struct {
+    double vmax2;          /* max |v|^2 seen */
+    size_t bad;            /* first particle that left the grid or blew up */
+    double *deps[6];       /* MPM_BLOCK strain increments (scratch) */
+    char pad[64];
+} mpm_thread_out;
+
+struct mpm_sim {
+    int dim;
+    mpm_method method;
+    mpm_update update;
+    int ns;                        /* nodes per axis per particle: 2 or 4 */
+
+    /* grid */
+    int nreal[3];                  /* real nodes per axis (1 for unused axes) */
+    int pad;                       /* ghost layers per side: 0 MPM, 1 GMPM */
+    int np[3];                     /* padded nodes per axis */
+    size_t stride[3];              /* 1, np[0], np[0]*np[1] */
+    size_t nn;                     /* padded node count */
+    double x0[3], h[3], inv_h[3];
+    double lo[3], hi[3];           /* particle centres must stay in [lo, hi) */
+    mpm_gridbuf g;                 /* the grid */
+    double *minv;                  /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
+    double mtol;
+
+    /* fixed degrees of freedom: node (padded index) and direction mask */
+    size_t nfixed;
+    size_t *fixed_node;
+    unsigned char *fixed_mask;
+
+    /* loads */
+    int has_gravity;
+    double gravity[3];
+    size_t nload;                  /* particles with a point force */
+    size_t *load_p;
+    double *load_f[3];
+    double *load_xold[3];
+    double external_work;
+
+    /* particles and materials */
+    mpm_particles P;
+    size_t nmat;
+    mpm_mat_params *mats;
+    const mpm_model_ops *model;
+    double cmax;                   /* largest p-wave speed */
+
+    /* time */
+    double dt_fixed;               /* > 0: given */
+    double cfl;
+    double dt;                     /* dt of the next step */
+    double t;
+    long steps;
+    double vmax;                   /* max particle speed after the last step */
+
+    /* kernels chosen once per job */
+    const mpm_kernels *k;
+
+    /* threads */
+    int nthreads;
+    mpm_gridbuf *tbuf;             /* per-thread scatter buffers (nthreads > 1) */
+    mpm_thread_out *tout;
+    pthread_t *threads;
+    pthread_barrier_t bar_start, bar_end;
+    void (*phase)(mpm_sim *, int tid);
+    int quit;
+    pthread_mutex_t gate_mu;       /* start gate for the team */
+    pthread_cond_t gate_cv;
+    int gate;                      /* 0 closed, 1 open, -1 abort */
+    int sync_init;                 /* 1: gate made, 2: barriers made too */
+
+    atomic_int cancel;
+    int failed;                    /* 0 or the MPM_E* code that froze the run */
+    char err[256];
+};
+
+/* Kernel family for one (dimension, method).  Each runs over the particles
+ * [p0, p1) with scatter target gb and per-thread output o. */
+struct mpm_kernels {
+    void (*p2g_mq)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
+    void (*p2g_mqf)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
+    void (*p2g_q2)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
+    /* USF: strain from grid velocity, stress update, then internal forces */
+    void (*stress_force)(mpm_sim *, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1);
+    /* position and velocity update (Eqs. 30-31) */
+    void (*g2p_xv)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    /* USL: position and velocity update, then strain and stress */
+    void (*g2p_xv_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    /* MUSL: velocity only, then position + strain from q2 */
+    void (*g2p_v)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    void (*g2p_x_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    /* point forces of the loaded particles, scattered into the main grid */
+    void (*scatter_loads)(mpm_sim *);
+};
+
+const mpm_kernels *mpm_kernels_select(int dim, mpm_method method);
+
+/* Constitutive model interface.  update() receives the strain increments of
+ * particles [p0, p0 + n) in block-local arrays deps[c][0..n) and updates the
+ * particles' stress and strain.  A new model plugs in here without touching
+ * the kernels. */
+struct mpm_model_ops {
+    const char *name;
+    void (*update[3])(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
+                      size_t n, double *const deps[6]);
+};
+
+const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
+/* Fills derived constants; returns 0 or MPM_EINVAL with a message naming
+ * materials[i] and the limit. */
+int mpm_model_params(const mpm_material_desc *d, int dim, size_t i,
+                     mpm_mat_params *out, char *err, size_t errlen);
+
+/* Generates the particles of a checked case into P (arrays allocated for the
+ * count; P NULL: count only), with material constants mats (may be NULL
+ * when counting).  Returns the particle count, or a negative code with a
+ * message; *vmax (if not NULL) gets the largest initial speed. */
+long mpm_case_particles(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats,
+                        double *vmax, char *err, size_t errlen);
+
+#endif

@@ -1,0 +1,72 @@
+/*
+ * srv_json.h - generic conversion between JSON text and protobuf-c messages,
+ * following the protobuf JSON mapping, driven only by the message
+ * descriptors (so a field added to a .proto needs no C change here).
+ *
+ * JSON -> protobuf: field names in lowerCamelCase or as in the .proto;
+ * enums as value names (or numbers); 64-bit integers as numbers or decimal
+ * strings; floating point as numbers or the strings "NaN", "Infinity",
+ * "-Infinity" (or a numeric string); bytes as base64; repeated fields as
+ * arrays; map fields as objects; sub-messages as objects; null means absent.
+ * Unknown fields, two members of one oneof, a field given twice (under both
+ * of its names) and values of the wrong type are errors; every error starts
+ * with the JSON path of the offending value, e.g.
+ *   "materials[0].youngsModulus: expected a number, got string \"ten\"".
+ * The path uses the keys as the input spelled them.
+ *
+ * protobuf -> JSON: lowerCamelCase names in field-number order, only the
+ * fields that are present (proto2 has_ flags, non-NULL strings/messages,
+ * the set member of a oneof, non-empty repeated fields); 64-bit integers as
+ * strings; doubles in the shortest form that reads back exactly.
+ *
+ * Messages built here are allocated with malloc in the layout protobuf-c's
+ * unpacker uses, so protobuf_c_message_free_unpacked(msg, NULL) frees them.
+ * Well-known types (Timestamp, Any, wrappers, ...) get no special mapping.
+ */
+#ifndef SRV_JSON_H
+#define SRV_JSON_H
+
+#include <stddef.h>
+
+#include <protobuf-c/protobuf-c.h>
+
+/* Return codes (negative on error). */
+enum {
+    SRV_JSON_OK = 0,
+    SRV_JSON_ESYNTAX = -1,  /* the text is not JSON */
+    SRV_JSON_ESCHEMA = -2,  /* JSON that does not fit the message type */
+    SRV_JSON_ENOMEM = -3    /* allocation failed */
+};
+
+/* Flags for srv_json_from_pb(). */
+#define SRV_JSON_PRETTY 1u  /* indent two spaces, one field per line */
+
+/* Deepest message nesting accepted in either direction. */
+#define SRV_JSON_MAX_DEPTH 64
+
+/* Parses `len` bytes of JSON text (a JSON object) into a new message of
+ * type `desc`.  On success stores it in *out (free it with
+ * protobuf_c_message_free_unpacked(*out, NULL)) and returns 0; otherwise
+ * sets *out to NULL, writes a message into err (errlen bytes; err may be
+ * NULL) and returns SRV_JSON_ESYNTAX, SRV_JSON_ESCHEMA or SRV_JSON_ENOMEM.
+ * A syntax error names the line and column. */
+int srv_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
+                   size_t len, ProtobufCMessage **out, char *err,
+                   size_t errlen);
+
+/* Prints a message as JSON text.  flags: 0 (compact, one line) or
+ * SRV_JSON_PRETTY (ends with a newline).  On success stores a malloc'd,
+ * NUL-terminated string in *out (the caller frees it) and returns 0;
+ * otherwise sets *out to NULL, writes a message into err and returns
+ * SRV_JSON_ESCHEMA (a string that is not UTF-8, a NULL array element,
+ * nesting too deep) or SRV_JSON_ENOMEM. */
+int srv_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
+                     char *err, size_t errlen);
+
+/* Writes the JSON (lowerCamelCase) name of a .proto field name into buf:
+ * underscores are dropped and the letter after one is upper-cased
+ * ("youngs_modulus" -> "youngsModulus").  Returns the length of the full
+ * name (as snprintf does: the result was truncated if >= len). */
+size_t srv_json_name(const char *proto_name, char *buf, size_t len);
+
+#endif
