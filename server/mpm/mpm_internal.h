@@ -4,9 +4,9 @@
  *
  * Hot data is struct-of-arrays: particle field c of particle p is
  * P.field[c][p].  The grid is padded by one ghost layer per side for GMPM,
- * so that the 4 nodes per axis of Eq. 22 never index outside the arrays; a
- * particle's cell index along an axis is then also its padded reference node
- * (Eq. 21 for MPM, Eq. 22 + 1 for GMPM).  Nothing here is allocated inside a
+ * so that the 4 nodes per axis of Eq. 22 never index outside the arrays: a
+ * particle in real cell c (0 .. nodes-2) touches real nodes c-1 .. c+2,
+ * which are padded nodes c .. c+3.  Nothing here is allocated inside a
  * time step.
  */
 #ifndef MPM_INTERNAL_H

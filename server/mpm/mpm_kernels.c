@@ -41,8 +41,8 @@ INLINE double tent_int(double s)
     return 0.5 + s - 0.5 * s * fabs(s);
 }
 
-/* Weights of one axis; returns the cell index c (the padded reference
- * node along this axis). */
+/* Weights of one axis; returns the cell index c of x relative to x0.  The
+ * weights are those of nodes c, c+1 (NS = 2) or c-1 .. c+2 (NS = 4). */
 INLINE int axis(double x, double x0, double inv_h, double lp, int NS, double *w, double *g)
 {
     double r = (x - x0) * inv_h;
@@ -86,7 +86,8 @@ INLINE void nodes(const mpm_sim *s, size_t p, int D, int NS, shp *o)
     for (int d = 0; d < D; d++) {
         double lp = NS == 4 ? s->P.lp[d][p] : 0;
         int c = axis(s->P.x[d][p], s->x0[d], s->inv_h[d], lp, NS, w[d], g[d]);
-        base += (size_t)c * s->stride[d];
+        /* w[k] belongs to node c + k (MPM) or c - 1 + k (GMPM, Eq. 22) */
+        base += (size_t)(NS == 4 ? c - 1 : c) * s->stride[d];
     }
     int r = 0;
     for (int kz = 0; kz < (D > 2 ? NS : 1); kz++)

@@ -341,45 +341,43 @@ static size_t node_index(const mpm_sim *s, const int ijk[3])
     return n;
 }
 
-/* Builds the list of fixed nodes from the face masks and the node set. */
+/* Builds the list of fixed nodes from the face masks and the node set.  A
+ * face condition covers the whole plane of the face, including its ghost
+ * extension in GMPM (so that a roller wall does not end where the real
+ * grid does); a node set names real nodes. */
 static int build_fixed(mpm_sim *s, const mpm_bc_desc *bc)
 {
-    size_t nreal = 1;
-    for (int d = 0; d < s->dim; d++) nreal *= (size_t)s->nreal[d];
     int any = bc->n_nodes > 0;
     for (int f = 0; f < 2 * s->dim; f++) any |= bc->face_mask[f] != 0;
     if (!any) return 0;
-    unsigned char *mask = calloc(nreal, 1);
+    unsigned char *mask = calloc(s->nn, 1);
     if (!mask) return MPM_ENOMEM;
-    for (size_t r = 0; r < nreal; r++) {
-        int ijk[3] = {(int)(r % s->nreal[0]), (int)(r / s->nreal[0] % s->nreal[1]),
-                      (int)(r / ((size_t)s->nreal[0] * s->nreal[1]))};
+    for (size_t n = 0; n < s->nn; n++) {
+        size_t rest = n;
         for (int d = 0; d < s->dim; d++) {
-            if (ijk[d] == 0) mask[r] |= bc->face_mask[2 * d];
-            if (ijk[d] == s->nreal[d] - 1) mask[r] |= bc->face_mask[2 * d + 1];
+            int r = (int)(rest % (size_t)s->np[d]) - s->pad; /* real index along d */
+            rest /= (size_t)s->np[d];
+            if (r == 0) mask[n] |= bc->face_mask[2 * d];
+            if (r == s->nreal[d] - 1) mask[n] |= bc->face_mask[2 * d + 1];
         }
     }
     for (size_t i = 0; i < bc->n_nodes; i++) {
-        const int *ijk = bc->node_ijk + 3 * i;
-        size_t r = (size_t)ijk[0];
-        if (s->dim > 1) r += (size_t)ijk[1] * s->nreal[0];
-        if (s->dim > 2) r += (size_t)ijk[2] * s->nreal[0] * s->nreal[1];
-        mask[r] |= (unsigned char)bc->node_mask[i];
+        int ijk[3] = {0, 0, 0};
+        for (int d = 0; d < s->dim; d++) ijk[d] = bc->node_ijk[3 * i + d];
+        mask[node_index(s, ijk)] |= (unsigned char)bc->node_mask[i];
     }
     size_t cnt = 0;
-    for (size_t r = 0; r < nreal; r++) cnt += mask[r] != 0;
-    s->fixed_node = malloc(cnt * sizeof *s->fixed_node);
+    for (size_t n = 0; n < s->nn; n++) cnt += mask[n] != 0;
+    s->fixed_node = malloc((cnt ? cnt : 1) * sizeof *s->fixed_node);
     s->fixed_mask = malloc(cnt ? cnt : 1);
     if (!s->fixed_node || !s->fixed_mask) {
         free(mask);
         return MPM_ENOMEM;
     }
-    for (size_t r = 0; r < nreal; r++) {
-        if (!mask[r]) continue;
-        int ijk[3] = {(int)(r % s->nreal[0]), (int)(r / s->nreal[0] % s->nreal[1]),
-                      (int)(r / ((size_t)s->nreal[0] * s->nreal[1]))};
-        s->fixed_node[s->nfixed] = node_index(s, ijk);
-        s->fixed_mask[s->nfixed++] = mask[r];
+    for (size_t n = 0; n < s->nn; n++) {
+        if (!mask[n]) continue;
+        s->fixed_node[s->nfixed] = n;
+        s->fixed_mask[s->nfixed++] = mask[n];
     }
     free(mask);
     return 0;
