@@ -130,7 +130,7 @@ typedef struct {
 } mpm_case;
 
 #define MPM_DEFAULT_CFL 0.5
-#define MPM_DEFAULT_MASS_TOL 1e-9
+#define MPM_DEFAULT_MASS_TOL 1e-12
 #define MPM_MAX_PARTICLES ((size_t)1 << 31)
 #define MPM_MAX_NODES ((size_t)1 << 31)
 #define MPM_MAX_THREADS 64

@@ -3,11 +3,12 @@
  * own modules (mpm_sim.c, mpm_kernels.c, mpm_case.c, mpm_model.c) only.
  *
  * Hot data is struct-of-arrays: particle field c of particle p is
- * P.field[c][p].  The grid is padded by one ghost layer per side for GMPM,
+ * P.field[c][p].  The grid is padded by two ghost layers per side for GMPM,
  * so that the 4 nodes per axis of Eq. 22 never index outside the arrays: a
- * particle in real cell c (0 .. nodes-2) touches real nodes c-1 .. c+2,
- * which are padded nodes c .. c+3.  Nothing here is allocated inside a
- * time step.
+ * particle in real cell c touches real nodes c-1 .. c+2 (padded c+1 ..
+ * c+4), and its centre may be anywhere from the first ghost cell below the
+ * grid to the first above it (c = -1 .. nodes-1).  Nothing here is
+ * allocated inside a time step.
  */
 #ifndef MPM_INTERNAL_H
 #define MPM_INTERNAL_H
@@ -66,7 +67,7 @@ struct mpm_sim {
 
     /* grid */
     int nreal[3];                  /* real nodes per axis (1 for unused axes) */
-    int pad;                       /* ghost layers per side: 0 MPM, 1 GMPM */
+    int pad;                       /* ghost layers per side: 0 MPM, 2 GMPM */
     int np[3];                     /* padded nodes per axis */
     size_t stride[3];              /* 1, np[0], np[0]*np[1] */
     size_t nn;                     /* padded node count */

@@ -341,10 +341,12 @@ static size_t node_index(const mpm_sim *s, const int ijk[3])
     return n;
 }
 
-/* Builds the list of fixed nodes from the face masks and the node set.  A
- * face condition covers the whole plane of the face, including its ghost
- * extension in GMPM (so that a roller wall does not end where the real
- * grid does); a node set names real nodes. */
+/* Builds the list of fixed nodes from the face masks and the node set.  In
+ * GMPM a particle's support reaches the ghost layers, so a face condition
+ * covers the whole plane of the face including its ghost extension (a
+ * roller wall does not end where the real grid does) and the ghost nodes
+ * behind it (material cannot flow through a wall by way of nodes outside
+ * the grid).  A node set names real nodes. */
 static int build_fixed(mpm_sim *s, const mpm_bc_desc *bc)
 {
     int any = bc->n_nodes > 0;
@@ -357,8 +359,8 @@ static int build_fixed(mpm_sim *s, const mpm_bc_desc *bc)
         for (int d = 0; d < s->dim; d++) {
             int r = (int)(rest % (size_t)s->np[d]) - s->pad; /* real index along d */
             rest /= (size_t)s->np[d];
-            if (r == 0) mask[n] |= bc->face_mask[2 * d];
-            if (r == s->nreal[d] - 1) mask[n] |= bc->face_mask[2 * d + 1];
+            if (r <= 0) mask[n] |= bc->face_mask[2 * d];
+            if (r >= s->nreal[d] - 1) mask[n] |= bc->face_mask[2 * d + 1];
         }
     }
     for (size_t i = 0; i < bc->n_nodes; i++) {
@@ -516,7 +518,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     s->method = c->method;
     s->update = c->update;
     s->ns = c->method == MPM_METHOD_GIMP ? 4 : 2;
-    s->pad = c->method == MPM_METHOD_GIMP ? 1 : 0;
+    s->pad = c->method == MPM_METHOD_GIMP ? 2 : 0;
     s->nthreads = c->threads > 1 ? c->threads : 1;
     atomic_init(&s->cancel, 0);
     s->nn = 1;
@@ -529,8 +531,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
         s->inv_h[d] = 1.0 / s->h[d];
         /* node 0 of the padded grid sits pad cells below the origin */
         s->x0[d] = d < dim ? c->grid.origin[d] - s->pad * s->h[d] : 0;
-        s->lo[d] = d < dim ? c->grid.origin[d] : 0;
-        s->hi[d] = d < dim ? c->grid.origin[d] + (c->grid.nodes[d] - 1) * c->grid.h[d] : 0;
+        /* a GMPM centre may enter the first ghost cell (see build_fixed) */
+        s->lo[d] = d < dim ? c->grid.origin[d] - (s->pad / 2) * s->h[d] : 0;
+        s->hi[d] = d < dim ? c->grid.origin[d] + (c->grid.nodes[d] - 1 + s->pad / 2) * s->h[d] : 0;
     }
     s->k = mpm_kernels_select(dim, c->method);
     s->model = mpm_model_get(c->materials[0].model);
@@ -637,11 +640,13 @@ static int finish_step(mpm_sim *s)
     long step = s->steps + 1;
     double t = s->t + s->dt;
     if (bad != SIZE_MAX) {
-        int finite = 1;
+        int finite = 1, axis = 0;
         char pos[128] = "", *w = pos;
         for (int d = 0; d < s->dim; d++) {
-            finite &= isfinite(s->P.x[d][bad]) && isfinite(s->P.v[d][bad]);
-            w += snprintf(w, sizeof pos - (size_t)(w - pos), "%s%.9g", d ? ", " : "", s->P.x[d][bad]);
+            double x = s->P.x[d][bad];
+            finite &= isfinite(x) && isfinite(s->P.v[d][bad]);
+            if (!(x >= s->lo[d] && x < s->hi[d])) axis = d;
+            w += snprintf(w, sizeof pos - (size_t)(w - pos), "%s%.9g", d ? ", " : "", x);
         }
         if (!finite) {
             snprintf(s->err, sizeof s->err, "diverged at step %ld, time %.9g: particle %zu has a "
@@ -649,8 +654,8 @@ static int finish_step(mpm_sim *s)
             s->failed = MPM_EDIVERGED;
         } else {
             snprintf(s->err, sizeof s->err, "particle %zu left the grid at step %ld, time %.9g: "
-                     "position (%s) is outside [%g, %g)%s", bad, step, t, pos, s->lo[0], s->hi[0],
-                     s->dim > 1 ? " x ..." : "");
+                     "position (%s), %c outside [%g, %g)", bad, step, t, pos, "xyz"[axis],
+                     s->lo[axis], s->hi[axis]);
             s->failed = MPM_ELEFTGRID;
         }
         return s->failed;
