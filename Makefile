@@ -25,7 +25,7 @@ REL  := build/rel
 ASAN := build/asan
 
 .PHONY: all deps test test-quick bench demo clean
-all: bin/mpmtest
+all: bin/mpmtest bin/mpmrun
 
 deps:
 	@bash deploy/install-deps.sh
@@ -56,6 +56,16 @@ bin/mpmtest: $(call test_objs,$(REL)) $(call srv_objs,$(REL)) $(call mpm_objs,$(
 
 $(ASAN)/mpmtest: $(call test_objs,$(ASAN)) $(call srv_objs,$(ASAN)) $(call mpm_objs,$(ASAN))
 	$(CC) $(SAN) -o $@ $^ $(if $(SRV_SRCS)$(PROTOS),$(SRVLIBS)) $(LDLIBS)
+
+# Tools that need only the solver library.
+bin/%: $(REL)/server/tools/%.o $(call mpm_objs,$(REL))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
+
+# make demo: the paper's fine bouncing disks, in-process, with a live view.
+demo: deps
+	@$(MAKE) --no-print-directory bin/mpmrun
+	bin/mpmrun --case disks-fine --every 250
 
 # make test: every test under ASan+UBSan.  T=name runs one test.
 test: deps

@@ -8,14 +8,16 @@
  */
 #include "mpm.h"
 #include "t.h"
-#include "tcase.h"
+#include "mpm_paper.h"
+
+#include <stdlib.h>
 
 #include <pthread.h>
 #include <string.h>
 #include <time.h>
 
 /* A block of material in a larger grid, away from the edges. */
-static void block_case(tcase *t, int dim, mpm_method m, mpm_update up, const double *v)
+static void block_case(mpm_paper *t, int dim, mpm_method m, mpm_update up, const double *v)
 {
     memset(t, 0, sizeof *t);
     t->mat[0] = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
@@ -59,7 +61,7 @@ TEST(inv_p2g_conserves_mass_and_momentum)
     static int ijk[21 * 21 * 21][3];
     for (int dim = 1; dim <= 3; dim++)
         for (int m = 0; m < 2; m++) {
-            tcase t;
+            mpm_paper t;
             double v[3] = {0.7, -0.4, 0.25};
             block_case(&t, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, MPM_USF, v);
             char err[256];
@@ -87,7 +89,7 @@ TEST(inv_p2g_conserves_mass_and_momentum)
                  "after 51 steps %.1e (relative errors)", dim, m ? "GMPM" : "MPM ",
                  mpm_sim_particles(s), rm, rq, rp);
             mpm_sim_destroy(&s);
-            tcase_free(&t);
+            mpm_paper_free(&t);
             CHECK(rm < 1e-13); /* round-off of sums over up to 13440 terms */
             CHECK(rq < 1e-13);
             CHECK(rp < 1e-13);
@@ -107,12 +109,12 @@ TEST(inv_uniform_velocity_translates_rigidly)
         for (int m = 0; m < 2; m++)
             for (int up = 0; up < 3; up++) {
                 if (m == 0 && up == MPM_USL) continue;
-                tcase t;
+                mpm_paper t;
                 double v[3] = {0.3, -0.2, 0.1};
                 block_case(&t, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, (mpm_update)up, v);
                 char err[256];
                 mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-                tcase_free(&t);
+                mpm_paper_free(&t);
                 CHECKF(s, "%s", err);
                 size_t n = mpm_sim_particles(s);
                 double *x0 = malloc(n * dim * sizeof *x0), *x1 = malloc(n * dim * sizeof *x1),
@@ -156,8 +158,8 @@ TEST(inv_fixed_dofs_keep_zero_momentum)
     for (int m = 0; m < 2; m++)
         for (int up = 0; up < 3; up++) {
             if (m == 0 && up == MPM_USL) continue; /* unstable: see above */
-            tcase t;
-            tcase_disks(&t, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, (mpm_update)up, 0.05);
+            mpm_paper t;
+            mpm_paper_disks(&t, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, (mpm_update)up, 0.05);
             for (int f = 0; f < 4; f++) t.c.bc.face_mask[f] = 3; /* walls */
             /* push the disks into the walls: throw them apart */
             t.body[0].velocity[0] = t.body[0].velocity[1] = -0.5;
@@ -167,7 +169,7 @@ TEST(inv_fixed_dofs_keep_zero_momentum)
             t.c.gravity[1] = -1;
             char err[256];
             mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-            tcase_free(&t);
+            mpm_paper_free(&t);
             CHECKF(s, "%s", err);
             double worst = 0, touched = 0;
             for (int k = 0; k < 300; k++) {
@@ -240,14 +242,14 @@ TEST(inv_phantom_nodes_below_mtol)
  * kinetic + potential energy drift only O(dt) (symplectic Euler). */
 TEST(inv_gravity_free_fall)
 {
-    tcase t;
+    mpm_paper t;
     double v[3] = {0, 0, 0};
     block_case(&t, 2, MPM_METHOD_GIMP, MPM_USF, v);
     t.c.gravity[1] = -9.81;
     t.c.dt = 1e-4;
     char err[256];
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     CHECKF(s, "%s", err);
     mpm_energy e0, e1;
     mpm_sim_energy(s, &e0);
@@ -268,7 +270,7 @@ TEST(inv_gravity_free_fall)
 TEST(inv_traction_momentum_and_work)
 {
     for (int dim = 1; dim <= 2; dim++) {
-        tcase t;
+        mpm_paper t;
         double v[3] = {0, 0, 0};
         block_case(&t, dim, MPM_METHOD_MPM, MPM_USF, v);
         mpm_traction_desc tr = {{0.62, 0.2}, {0.66, 0.8}, 0, 0, {5.0, 0}};
@@ -277,7 +279,7 @@ TEST(inv_traction_momentum_and_work)
         t.c.dt = 2e-5;
         char err[256];
         mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-        tcase_free(&t);
+        mpm_paper_free(&t);
         CHECKF(s, "%s", err);
         CHECK(mpm_sim_run(s, 2000) == 0);
         mpm_energy e;
@@ -297,14 +299,14 @@ TEST(inv_traction_momentum_and_work)
 
 TEST(inv_particle_leaving_grid_is_an_error)
 {
-    tcase t;
-    tcase_point(&t, MPM_USF, 1e-3, 0);
+    mpm_paper t;
+    mpm_paper_point(&t, MPM_USF, 1e-3, 0);
     t.c.bc.face_mask[0] = 0;
     t.body[0].velocity[0] = 5.0;
     t.mat[0].youngs_modulus = 1.0;
     char err[256];
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     CHECKF(s, "%s", err);
     int rc = mpm_sim_run(s, 100000);
     TLOG("%s", mpm_sim_error(s));
@@ -342,8 +344,8 @@ TEST(inv_nan_is_divergence)
 
 TEST(inv_dt_above_cfl_refused_unless_allowed)
 {
-    tcase t;
-    tcase_bar(&t, MPM_METHOD_MPM, MPM_USF, 7, 1, 0, 0.1, 0.1);
+    mpm_paper t;
+    CHECK(mpm_paper_bar(&t, MPM_METHOD_MPM, MPM_USF, 7, 1, 0, 0.1, 0.1) == 0);
     char err[256];
     CHECK(mpm_case_check(&t.c, err, sizeof err) == MPM_ECFL);
     TLOG("%s", err);
@@ -351,7 +353,7 @@ TEST(inv_dt_above_cfl_refused_unless_allowed)
     CHECK(mpm_sim_new(&t.c, err, sizeof err) == NULL);
     t.c.allow_unstable_dt = 1;
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     CHECKF(s, "%s", err);
     int rc = mpm_sim_run(s, 100000);
     TLOG("allowed, then: %s", mpm_sim_error(s));
@@ -361,12 +363,12 @@ TEST(inv_dt_above_cfl_refused_unless_allowed)
 
 TEST(inv_automatic_dt_follows_cfl)
 {
-    tcase t;
-    tcase_bar(&t, MPM_METHOD_MPM, MPM_USF, 7, 1, 0, 0, 0.1);
+    mpm_paper t;
+    CHECK(mpm_paper_bar(&t, MPM_METHOD_MPM, MPM_USF, 7, 1, 0, 0, 0.1) == 0);
     t.c.cfl = 0.4;
     char err[256];
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     CHECKF(s, "%s", err);
     double h = 1.0 / 7, c = sqrt(10.0);
     CHECK_NEAR(mpm_sim_dt(s), 0.4 * h / (c + 0.1 * sin(M_PI / 2 * 13 / 14.0)), 1e-15);
@@ -398,8 +400,8 @@ TEST(inv_case_errors_name_the_field)
         {"grid.dim: must be 1, 2 or 3 (got 4)", 13},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        tcase t;
-        tcase_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.05);
+        mpm_paper t;
+        mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.05);
         switch (cases[i].what) {
         case 0: t.mat[0].youngs_modulus = -1; break;
         case 1: t.mat[0].density = 0; break;
@@ -419,7 +421,7 @@ TEST(inv_case_errors_name_the_field)
         char err[256] = "";
         int rc = mpm_case_check(&t.c, err, sizeof err);
         mpm_sim *s = mpm_sim_new(&t.c, NULL, 0);
-        tcase_free(&t);
+        mpm_paper_free(&t);
         CHECKF(rc == MPM_EINVAL && s == NULL, "case %zu: rc %d", i, rc);
         CHECKF(strstr(err, cases[i].expect) != NULL, "case %zu: got '%s', want '%s'", i, err,
                cases[i].expect);
@@ -430,13 +432,13 @@ TEST(inv_case_errors_name_the_field)
  * sums run in another order, so only the last bits may differ. */
 static int run_disks_threads(int threads, double *x, double *sig, size_t *n)
 {
-    tcase t;
-    tcase_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.025);
+    mpm_paper t;
+    mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.025);
     t.c.threads = threads;
     t.c.dt = 1e-3;
     char err[256];
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     if (!s) return -1;
     int rc = mpm_sim_run(s, 2500); /* through the impact */
     *n = mpm_sim_particles(s);
@@ -476,12 +478,12 @@ static void *canceller(void *arg)
 
 TEST(inv_cancel_between_steps)
 {
-    tcase t;
-    tcase_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.025);
+    mpm_paper t;
+    mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.025);
     t.c.allow_unstable_dt = 0;
     char err[256];
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     CHECKF(s, "%s", err);
     mpm_sim_cancel(s); /* pending cancel: the run stops before its first step */
     CHECK(mpm_sim_run(s, 10) == MPM_ECANCELLED);

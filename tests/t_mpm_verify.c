@@ -7,7 +7,9 @@
  */
 #include "mpm.h"
 #include "t.h"
-#include "tcase.h"
+#include "mpm_paper.h"
+
+#include <stdlib.h>
 
 #define V0 0.1
 
@@ -19,16 +21,16 @@ typedef struct {
 
 static int run_point(mpm_update up, double dt, double tend, point_run *o)
 {
-    tcase t;
+    mpm_paper t;
     char err[256];
-    tcase_point(&t, up, dt, V0);
+    mpm_paper_point(&t, up, dt, V0);
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     if (!s) {
         printf("    %s\n", err);
         return -1;
     }
-    double w = 2 * M_PI, x0 = 0.5, xv, vv;
+    double xv, vv;
     mpm_energy e;
     mpm_sim_energy(s, &e);
     *o = (point_run){0, 0, 0, e.total, e.total, e.total, e.total};
@@ -41,7 +43,7 @@ static int run_point(mpm_update up, double dt, double tend, point_run *o)
         }
         double tt = mpm_sim_time(s);
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = &xv, .v = &vv});
-        double va = V0 * cos(w * tt), xa = x0 * exp(V0 / w * sin(w * tt));
+        double va = mpm_paper_point_v(V0, tt), xa = mpm_paper_point_x(V0, tt);
         o->verr = fmax(o->verr, fabs(vv - va));
         o->xerr = fmax(o->xerr, fabs(xv - xa));
         o->eq38 = fmax(o->eq38, fabs(va - vv) / (1 + fabs(va)));
@@ -98,16 +100,16 @@ TEST(verify_point_eq38_error_falls_with_dt)
 static double bar_error(mpm_method m, mpm_update up, int ncell, int extra, double dt, double periods,
                         double v0)
 {
-    tcase t;
+    mpm_paper t;
     char err[256];
-    tcase_bar(&t, m, up, ncell, 1, extra, dt, v0);
+    if (mpm_paper_bar(&t, m, up, ncell, 1, extra, dt, v0)) return INFINITY;
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     if (!s) {
         printf("    %s\n", err);
         return INFINITY;
     }
-    long n = lround(periods * 2 * M_PI / bar_omega() / dt);
+    long n = lround(periods * 2 * M_PI / mpm_paper_bar_omega() / dt);
     double worst = 0;
     mpm_energy e;
     for (long i = 0; i < n; i++) {
@@ -118,7 +120,7 @@ static double bar_error(mpm_method m, mpm_update up, int ncell, int extra, doubl
         }
         mpm_sim_energy(s, &e);
         double vcm = e.momentum[0] / e.mass;
-        worst = fmax(worst, fabs(vcm - bar_vcm(v0, mpm_sim_time(s))));
+        worst = fmax(worst, fabs(vcm - mpm_paper_bar_vcm(v0, mpm_sim_time(s))));
     }
     mpm_sim_destroy(&s);
     return worst;
@@ -168,12 +170,12 @@ typedef struct {
 
 static int run_disks(mpm_method m, mpm_update up, double h, double dt, double tend, disk_run *o)
 {
-    tcase t;
+    mpm_paper t;
     char err[256];
-    tcase_disks(&t, m, up, h);
+    mpm_paper_disks(&t, m, up, h);
     t.c.dt = dt;
     mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-    tcase_free(&t);
+    mpm_paper_free(&t);
     if (!s) {
         printf("    %s\n", err);
         return -1;
@@ -255,6 +257,13 @@ static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, dou
     int per_x = ppc, across = 2 * ppc, nlat = dim == 1 ? 1 : dim == 2 ? across : across * across;
     size_t n = (size_t)ncell * per_x * nlat;
     double *x = malloc(n * dim * sizeof *x), *vol = malloc(n * sizeof *vol), *v = calloc(n * dim, sizeof *v);
+    if (!x || !vol || !v) {
+        free(x);
+        free(vol);
+        free(v);
+        snprintf(err, 256, "out of memory");
+        return NULL;
+    }
     size_t p = 0;
     for (int i = 0; i < ncell * per_x; i++)
         for (int l = 0; l < nlat; l++, p++) {
@@ -301,7 +310,7 @@ TEST(verify_bar_2d_3d_match_1d)
         mpm_sim *s1 = bar_nd(1, meth, 8, 2, V0, 1e-300, err), *s2 = bar_nd(2, meth, 8, 2, V0, 1e-300, err),
                 *s3 = bar_nd(3, meth, 8, 2, V0, 1e-300, err);
         CHECKF(s1 && s2 && s3, "%s", err);
-        long n = lround(2 * 2 * M_PI / bar_omega() / 1e-3);
+        long n = lround(2 * 2 * M_PI / mpm_paper_bar_omega() / 1e-3);
         double d2 = 0, d3 = 0, ea = 0, amp = V0 * 2 / M_PI;
         mpm_energy e1, e2, e3;
         int rc = 0;
@@ -313,7 +322,7 @@ TEST(verify_bar_2d_3d_match_1d)
             double v1 = e1.momentum[0] / e1.mass;
             d2 = fmax(d2, fabs(e2.momentum[0] / e2.mass - v1));
             d3 = fmax(d3, fabs(e3.momentum[0] / e3.mass - v1));
-            ea = fmax(ea, fabs(e3.momentum[0] / e3.mass - bar_vcm(V0, mpm_sim_time(s3))));
+            ea = fmax(ea, fabs(e3.momentum[0] / e3.mass - mpm_paper_bar_vcm(V0, mpm_sim_time(s3))));
             d3 = fmax(d3, fabs(e3.momentum[1]) + fabs(e3.momentum[2]));
         }
         TLOG("%s, 8 cells x 2 ppc, 2 periods: max |vcm 2D - 1D| = %.2e, |vcm 3D - 1D| = %.2e, "
