@@ -155,7 +155,8 @@ typedef struct {
     size_t queue_cap;           /* bytes of pending writes above which
                                    snapshots are dropped (default 64 MiB) */
     int busy_timeout_ms;        /* SQLite busy timeout (default 5000) */
-    store_log_fn log;           /* log lines (default: stderr) */
+    store_log_fn log;           /* log lines (default: stderr); called from
+                                   any thread, so it must be thread-safe */
     void *log_ud;
 } store_options;
 
@@ -208,7 +209,9 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out);
 
 /* Sets a run's status.  RUNNING also sets started_at = at; the terminal
  * statuses also set ended_at = at (at == 0: now).  error, if not NULL,
- * replaces the run's error text.  Transitions are not checked. */
+ * replaces the run's error text.  Like progress and finish, it applies only
+ * to a run still 'queued' or 'running': a terminal status is final, and an
+ * update of an ended run fails (as a write error: "run N already ended"). */
 int store_run_set_status(store *s, int64_t id, store_status status,
                          double at, const char *error);
 
