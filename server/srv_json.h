@@ -8,6 +8,8 @@
  * strings; floating point as numbers or the strings "NaN", "Infinity",
  * "-Infinity" (or a numeric string); bytes as base64; repeated fields as
  * arrays; map fields as objects; sub-messages as objects; null means absent.
+ * (A 64-bit value above 2^63 - 1 must be a string: jansson reads JSON
+ * numbers into a long long.)
  * Unknown fields, two members of one oneof, a field given twice (under both
  * of its names) and values of the wrong type are errors; every error starts
  * with the JSON path of the offending value, e.g.
@@ -68,5 +70,9 @@ int srv_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
  * ("youngs_modulus" -> "youngsModulus").  Returns the length of the full
  * name (as snprintf does: the result was truncated if >= len). */
 size_t srv_json_name(const char *proto_name, char *buf, size_t len);
+
+/* Whether the NUL-terminated string s is valid UTF-8 (no overlong forms,
+ * no surrogates), as JSON text requires. */
+int srv_json_utf8_valid(const char *s);
 
 #endif

@@ -1,0 +1,767 @@
+/*
+ * t_codec.c - tests of the wire schema, the generic JSON <-> protobuf
+ * converter (srv_json) and the case codec (srv_codec): every example case
+ * loads into the expected mpm_case, cases survive JSON -> protobuf -> bytes
+ * -> JSON unchanged, bad input is rejected with the JSON path of the
+ * offending field, damaged bytes give errors (not crashes), and the
+ * Request / Reply / StreamMsg helpers encode and decode what they should.
+ * Example files are read relative to the repository root.
+ */
+#include "t.h"
+
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "srv_codec.h"
+#include "srv_json.h"
+
+#define ERRLEN 512
+
+/* Reads a whole file into a malloc'd NUL-terminated buffer. */
+static char *slurp(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    char *buf = NULL;
+    long n;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0) {
+        buf = malloc((size_t)n + 1);
+        if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
+            free(buf);
+            buf = NULL;
+        }
+        if (buf) {
+            buf[n] = 0;
+            *len = (size_t)n;
+        }
+    }
+    fclose(f);
+    return buf;
+}
+
+/* Loads proto/examples/<name>.json into a srv_case (NULL on failure, with
+ * the reason printed). */
+static srv_case *load_example(const char *name)
+{
+    char path[256], err[ERRLEN];
+    size_t len = 0;
+    srv_case *sc = NULL;
+    snprintf(path, sizeof path, "proto/examples/%s.json", name);
+    char *text = slurp(path, &len);
+    if (!text) {
+        TLOG("cannot read %s (run from the repository root)", path);
+        return NULL;
+    }
+    int rc = srv_case_load(text, len, &sc, err, sizeof err);
+    if (rc) TLOG("%s: rc %d: %s", path, rc, err);
+    free(text);
+    return sc;
+}
+
+/* Builds the solver from a converted case and returns its particle count
+ * (0 with the reason printed if the solver refuses it). */
+static size_t sim_particles(const srv_case *sc)
+{
+    char err[ERRLEN];
+    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    size_t n;
+    if (!sim) {
+        TLOG("mpm_sim_new: %s", err);
+        return 0;
+    }
+    n = mpm_sim_particles(sim);
+    mpm_sim_destroy(&sim);
+    return n;
+}
+
+/* srv_case_load of a JSON text, returning the code and the error text. */
+static int load_text(const char *json, char *err)
+{
+    srv_case *sc = NULL;
+    int rc = srv_case_load(json, strlen(json), &sc, err, ERRLEN);
+    srv_case_destroy(&sc);
+    return rc;
+}
+
+/* A valid 2D case to break in the error tests. */
+static const char *const good2d =
+    "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
+    " \"materials\": [{\"youngsModulus\": 1, \"poissonRatio\": 0.2, \"density\": 1}],"
+    " \"bodies\": [{\"sphere\": {\"center\": [0.3, 0.3], \"radius\": 0.1}},"
+    "              {\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, \"velocity\": [-0.1, 0]}],"
+    " \"endTime\": 1}";
+
+/* good2d with the first occurrence of `from` replaced by `to`. */
+static char *patch(const char *from, const char *to)
+{
+    const char *p = strstr(good2d, from);
+    size_t n = strlen(good2d) - strlen(from) + strlen(to) + 1;
+    char *s = malloc(n);
+    if (!p || !s) {
+        free(s);
+        return NULL;
+    }
+    snprintf(s, n, "%.*s%s%s", (int)(p - good2d), good2d, to, p + strlen(from));
+    return s;
+}
+
+/* Expects the patched good2d to fail with rc and an error containing
+ * want; returns 0 or 1 on mismatch (after reporting it). */
+static int expect_bad(const char *from, const char *to, int rc_want, const char *want)
+{
+    char err[ERRLEN] = "";
+    char *json = patch(from, to);
+    int rc;
+    if (!json) {
+        t_fail(__FILE__, __LINE__, "patch: \"%s\" not in the base case", from);
+        return 1;
+    }
+    rc = load_text(json, err);
+    free(json);
+    if (rc != rc_want || !strstr(err, want)) {
+        t_fail(__FILE__, __LINE__, "%s -> %s: rc %d (want %d), error \"%s\" (want \"%s\")", from, to,
+               rc, rc_want, err, want);
+        return 1;
+    }
+    TLOG("%-44.44s -> %s", to, err);
+    return 0;
+}
+
+/* Number of sub-cell centres of a grid inside a disk, by the fill rule the
+ * solver documents: x = origin + (c + (s + 0.5)/ppc) h, kept if inside. */
+static int disk_count(const mpm_case *c, const mpm_body_desc *b)
+{
+    int n = 0, ppc = b->ppc;
+    for (int i = 0; i < (c->grid.nodes[0] - 1) * ppc; i++)
+        for (int j = 0; j < (c->grid.nodes[1] - 1) * ppc; j++) {
+            double x = c->grid.origin[0] + (i / ppc + (i % ppc + 0.5) / ppc) * c->grid.h[0];
+            double y = c->grid.origin[1] + (j / ppc + (j % ppc + 0.5) / ppc) * c->grid.h[1];
+            double dx = x - b->center[0], dy = y - b->center[1];
+            n += dx * dx + dy * dy < b->radius * b->radius;
+        }
+    return n;
+}
+
+TEST(codec_example_point1d)
+{
+    srv_case *sc = load_example("point1d");
+    CHECK(sc);
+    const mpm_case *c = &sc->c;
+    CHECK(!strcmp(sc->name, "point1d"));
+    CHECK(c->grid.dim == 1 && c->grid.nodes[0] == 2);
+    CHECK_NEAR(c->grid.h[0], 1.0, 0);
+    CHECK_NEAR(c->grid.origin[0], 0.0, 0);
+    CHECK(c->method == MPM_METHOD_MPM && c->update == MPM_USF);
+    CHECK_NEAR(c->dt, 0.001, 0);
+    CHECK(c->n_materials == 1);
+    CHECK_NEAR(c->materials[0].youngs_modulus, 4 * M_PI * M_PI, 1e-13);
+    CHECK_NEAR(c->materials[0].density, 1.0, 0);
+    CHECK(c->n_bodies == 1 && c->bodies[0].n_points == 1);
+    CHECK_NEAR(c->bodies[0].x[0], 0.5, 0);
+    CHECK_NEAR(c->bodies[0].volume[0], 1.0, 0);
+    CHECK(!c->bodies[0].mass && !c->bodies[0].v && !c->bodies[0].stress && !c->bodies[0].half_length);
+    CHECK_NEAR(c->bodies[0].velocity[0], 0.1, 0);
+    CHECK(c->bc.face_mask[0] == 1 && c->bc.face_mask[1] == 0 && c->bc.n_nodes == 0);
+    CHECK(sc->has_end_time);
+    CHECK_NEAR(sc->end_time, 3.0, 0);
+    CHECK(sc->energy_every == 10 && sc->snapshot_every == 0 && sc->snapshot_fields == SRV_SNAP_ALL);
+    CHECK(sc->explicit_points == 1 && sc->est_particles == 1);
+    CHECK(sim_particles(sc) == 1);
+    srv_case_destroy(&sc);
+    CHECK(sc == NULL);
+}
+
+/* The 1D bars: n points at cell centres, v = 0.1 sin(pi x / 2). */
+static void check_bar(const char *name, int n, mpm_method method)
+{
+    srv_case *sc = load_example(name);
+    CHECK(sc);
+    const mpm_case *c = &sc->c;
+    const mpm_body_desc *b = &c->bodies[0];
+    double h = 1.0 / n;
+    CHECK(c->grid.dim == 1 && c->grid.nodes[0] == n + 1);
+    CHECK_NEAR(c->grid.h[0], h, 1e-16);
+    CHECK(c->method == method && c->update == MPM_USF);
+    CHECK_NEAR(c->dt, 0.001, 0);
+    CHECK_NEAR(c->materials[0].youngs_modulus, 10, 0);
+    CHECK_NEAR(c->materials[0].density, 1, 0);
+    CHECK(c->n_bodies == 1 && b->n_points == (size_t)n && b->v && !b->mass);
+    for (int i = 0; i < n; i++) {
+        double x = (i + 0.5) * h;
+        CHECK_NEAR(b->x[i], x, 1e-15);
+        CHECK_NEAR(b->volume[i], h, 1e-16);
+        CHECK_NEAR(b->v[i], 0.1 * sin(M_PI * x / 2), 1e-16);
+    }
+    CHECK(c->bc.face_mask[0] == 1 && c->bc.face_mask[1] == 0);
+    CHECK(sim_particles(sc) == (size_t)n);
+    srv_case_destroy(&sc);
+}
+
+TEST(codec_example_bar1d_mpm)
+{
+    check_bar("bar1d_mpm", 7, MPM_METHOD_MPM);
+}
+
+TEST(codec_example_bar1d_gimp)
+{
+    check_bar("bar1d_gimp", 13, MPM_METHOD_GIMP);
+}
+
+static void check_disks(const char *name, int nodes, double h, int per_disk)
+{
+    srv_case *sc = load_example(name);
+    CHECK(sc);
+    const mpm_case *c = &sc->c;
+    CHECK(c->grid.dim == 2 && c->grid.nodes[0] == nodes && c->grid.nodes[1] == nodes);
+    CHECK_NEAR(c->grid.h[0], h, 0);
+    CHECK_NEAR(c->grid.h[1], h, 0);
+    CHECK(c->method == MPM_METHOD_GIMP && c->update == MPM_USF);
+    CHECK(c->dt == 0);
+    CHECK_NEAR(c->materials[0].youngs_modulus, 1, 0);
+    CHECK_NEAR(c->materials[0].poisson_ratio, 0.2, 0);
+    CHECK(c->n_bodies == 2);
+    for (int k = 0; k < 2; k++) {
+        const mpm_body_desc *b = &c->bodies[k];
+        double ctr = k ? 0.75 : 0.25, sgn = k ? -1 : 1;
+        CHECK(b->n_points == 0 && b->shape == MPM_SHAPE_SPHERE && b->ppc == 2 && b->material == 0);
+        CHECK_NEAR(b->center[0], ctr, 0);
+        CHECK_NEAR(b->center[1], ctr, 0);
+        CHECK_NEAR(b->radius, 0.14, 0);
+        CHECK_NEAR(b->velocity[0], sgn * 0.0707106781186548, 1e-15);
+        CHECK_NEAR(hypot(b->velocity[0], b->velocity[1]), 0.1, 1e-15);
+        int cnt = disk_count(c, b);
+        TLOG("%s: disk %d has %d particles (h = %g, ppc 2)", name, k, cnt, h);
+        CHECK(cnt == per_disk);
+    }
+    CHECK(sc->has_end_time);
+    CHECK_NEAR(sc->end_time, 3.5, 0);
+    CHECK(sc->snapshot_every == 100);
+    CHECK(sc->snapshot_fields == (SRV_SNAP_X | SRV_SNAP_V | SRV_SNAP_PRESSURE));
+    CHECK(sc->explicit_points == 0 && sc->est_particles >= (size_t)(2 * per_disk));
+    size_t np = sim_particles(sc);
+    TLOG("%s: the solver fills %zu particles", name, np);
+    CHECK(np == (size_t)(2 * per_disk));
+    srv_case_destroy(&sc);
+}
+
+TEST(codec_example_disks2d)
+{
+    check_disks("disks2d_coarse", 11, 0.1, 24);
+    if (t_failed()) return;
+    check_disks("disks2d_fine", 41, 0.025, 392);
+}
+
+TEST(codec_example_cube3d)
+{
+    srv_case *sc = load_example("cube3d");
+    CHECK(sc);
+    const mpm_case *c = &sc->c;
+    const mpm_body_desc *b = &c->bodies[0];
+    CHECK(c->grid.dim == 3);
+    CHECK(c->grid.nodes[0] == 11 && c->grid.nodes[1] == 3 && c->grid.nodes[2] == 3);
+    CHECK(b->n_points == 320 && b->v && b->x);
+    CHECK_NEAR(c->materials[0].poisson_ratio, 0, 0);
+    unsigned want[6] = {7, 0, 2, 2, 4, 4};
+    for (int f = 0; f < 6; f++) CHECK(c->bc.face_mask[f] == want[f]);
+    double vol = 0, xmax = 0;
+    for (size_t i = 0; i < b->n_points; i++) {
+        vol += b->volume[i];
+        if (b->x[3 * i] > xmax) xmax = b->x[3 * i];
+        CHECK_NEAR(b->v[3 * i], 0.1 * sin(M_PI * b->x[3 * i] / 2), 1e-15);
+        CHECK(b->v[3 * i + 1] == 0 && b->v[3 * i + 2] == 0);
+    }
+    CHECK_NEAR(vol, 1.0 * 0.2 * 0.2, 1e-12);
+    CHECK_NEAR(xmax, 0.975, 1e-15);
+    CHECK(sim_particles(sc) == 320);
+    srv_case_destroy(&sc);
+}
+
+/* JSON -> pb -> bytes -> pb -> JSON -> pb -> bytes: same bytes. */
+TEST(codec_roundtrip)
+{
+    static const char *const names[] = {"point1d", "bar1d_mpm", "bar1d_gimp", "disks2d_coarse",
+                                        "disks2d_fine", "cube3d"};
+    for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
+        char path[256], err[ERRLEN];
+        size_t len = 0, n1 = 0, n2 = 0;
+        uint8_t *b1 = NULL, *b2 = NULL;
+        char *json = NULL, *compact = NULL;
+        Mpmd__Case *p1 = NULL, *p2 = NULL, *p3 = NULL, *p4 = NULL;
+        int ok = 0;
+        snprintf(path, sizeof path, "proto/examples/%s.json", names[k]);
+        char *text = slurp(path, &len);
+        if (text && !srv_case_from_json(text, len, &p1, err, sizeof err) && !srv_case_pack(p1, &b1, &n1) &&
+            !srv_case_unpack(b1, n1, 0, &p2, err, sizeof err) &&
+            !srv_case_to_json(p2, SRV_JSON_PRETTY, &json, err, sizeof err) &&
+            !srv_case_from_json(json, strlen(json), &p3, err, sizeof err) && !srv_case_pack(p3, &b2, &n2) &&
+            !srv_case_to_json(p3, 0, &compact, err, sizeof err) &&
+            !srv_case_from_json(compact, strlen(compact), &p4, err, sizeof err))
+            ok = 1;
+        if (ok) TLOG("%s: %zu bytes JSON, %zu bytes protobuf, %zu bytes compact JSON", names[k], len, n1,
+                     strlen(compact));
+        int same = ok && n1 == n2 && !memcmp(b1, b2, n1);
+        /* the examples are in the pretty printer's canonical form */
+        int same_text = ok && !strcmp(json, text);
+        free(text);
+        free(b1);
+        free(b2);
+        free(json);
+        free(compact);
+        srv_case_pb_free(&p1);
+        srv_case_pb_free(&p2);
+        srv_case_pb_free(&p3);
+        srv_case_pb_free(&p4);
+        CHECKF(ok, "%s: %s", names[k], err);
+        CHECKF(same, "%s: bytes differ after the round trip (%zu vs %zu)", names[k], n1, n2);
+        CHECKF(same_text, "%s: printed JSON differs from the file", names[k]);
+        CHECK(p1 == NULL && p4 == NULL);
+    }
+}
+
+/* Mapping details: snake_case names, 64-bit integers as strings, the
+ * special float strings, null = absent, enum numbers. */
+TEST(codec_json_mapping)
+{
+    char err[ERRLEN];
+    Mpmd__Case *pb = NULL;
+    char *out = NULL;
+    srv_case *sc = NULL;
+    const char *in =
+        "{\"grid\": {\"dim\": 1, \"spacing\": [\"0.5\"], \"nodes\": [3], \"origin\": null},"
+        " \"method\": 1, \"update\": \"MUSL\", \"mass_tol\": 1e-8, \"cfl\": null,"
+        " \"materials\": [{\"youngs_modulus\": 2, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.25], \"hi\": [0.75]}, \"ppc\": 3}],"
+        " \"gravity\": [\"-Infinity\"], \"steps\": \"100\", \"threads\": 2.0}";
+    int rc = srv_case_from_json(in, strlen(in), &pb, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    rc = srv_case_to_json(pb, 0, &out, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    TLOG("%s", out);
+    const char *want =
+        "{\"grid\":{\"dim\":1,\"spacing\":[0.5],\"nodes\":[3]},\"method\":\"GIMP\",\"update\":\"MUSL\","
+        "\"massTol\":1e-08,\"gravity\":[\"-Infinity\"],\"materials\":[{\"youngsModulus\":2,\"density\":1}],"
+        "\"bodies\":[{\"box\":{\"lo\":[0.25],\"hi\":[0.75]},\"ppc\":3}],\"steps\":\"100\",\"threads\":2}";
+    int same = !strcmp(out, want);
+    free(out);
+    /* gravity -inf is schema-valid JSON but not a valid case */
+    rc = srv_case_from_pb(pb, &sc, err, sizeof err);
+    srv_case_pb_free(&pb);
+    CHECKF(same, "got %s", want);
+    CHECK(rc == SRV_CODEC_EINVAL && sc == NULL);
+    CHECKF(strstr(err, "gravity[0]: must be a finite number"), "%s", err);
+
+    /* the same without gravity converts, with the snake_case and string values */
+    const char *in2 =
+        "{\"grid\": {\"dim\": 1, \"spacing\": [\"0.5\"], \"nodes\": [3]}, \"method\": 1,"
+        " \"materials\": [{\"youngs_modulus\": 2, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.25], \"hi\": [0.75]}, \"ppc\": 3}], \"steps\": \"100\"}";
+    rc = srv_case_load(in2, strlen(in2), &sc, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(sc->c.method == MPM_METHOD_GIMP && sc->c.grid.h[0] == 0.5 && sc->c.bodies[0].ppc == 3);
+    CHECK(!sc->has_end_time && sc->steps == 100);
+    CHECK(sc->c.materials[0].youngs_modulus == 2);
+    srv_case_destroy(&sc);
+
+    CHECK(srv_json_name("youngs_modulus", err, sizeof err) == 13 && !strcmp(err, "youngsModulus"));
+    CHECK(srv_json_name("x_lo", err, 3) == 3 && !strcmp(err, "xL"));
+}
+
+/* Schema errors: each names the JSON path of the bad value. */
+TEST(codec_bad_json)
+{
+    const int S = SRV_CODEC_EINVAL;
+    if (expect_bad("\"youngsModulus\": 1", "\"youngsModulus\": \"ten\"", S,
+                   "materials[0].youngsModulus: expected a number, got string \"ten\"")) return;
+    if (expect_bad("\"youngsModulus\": 1", "\"youngsModulus\": 1, \"colour\": \"red\"", S,
+                   "materials[0].colour: unknown field")) return;
+    if (expect_bad("\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"colour\": 1", S,
+                   "bodies[1].colour: unknown field (Body has: material, velocity, box, sphere, points, ppc)"))
+        return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"method\": \"FEM\"", S,
+                   "method: unknown value string \"FEM\" for enum mpmd.Case.Method (expected one of: MPM, GIMP)"))
+        return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"update\": 7", S,
+                   "update: unknown value number 7 for enum mpmd.Case.Update")) return;
+    if (expect_bad("\"radius\": 0.1", "\"radius\": [0.1]", S,
+                   "bodies[0].sphere.radius: expected a number, got array")) return;
+    if (expect_bad("\"hi\": [0.8, 0.8]", "\"hi\": [0.8, true]", S,
+                   "bodies[1].box.hi[1]: expected a number, got boolean true")) return;
+    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, -11]", S,
+                   "grid.nodes[1]: expected a non-negative integer, got -11")) return;
+    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, 4294967296]", S,
+                   "grid.nodes[1]: number 4294967296 out of range for uint32")) return;
+    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, 11.5]", S,
+                   "grid.nodes[1]: expected an integer, got number 11.5")) return;
+    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, null]", S,
+                   "grid.nodes[1]: null is not allowed in an array")) return;
+    if (expect_bad("\"dim\": 2", "\"dim\": \"two\"", S, "grid.dim: expected an integer, got string \"two\""))
+        return;
+    if (expect_bad("\"grid\": {", "\"grid\": [], \"x\": {", S, "grid: expected an object, got array")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"steps\": 5", S,
+                   "steps: only one member of a oneof may be set, and \"endTime\" is set already")) return;
+    if (expect_bad("\"sphere\": {", "\"box\": {}, \"sphere\": {", S,
+                   "bodies[0].sphere: only one member of a oneof may be set, and \"box\" is set already")) return;
+    if (expect_bad("\"density\": 1", "\"density\": 1, \"youngs_modulus\": 3", S,
+                   "materials[0].youngs_modulus: field given twice (also as \"youngsModulus\")")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [1, \"a\"]}]}", S,
+                   "boundary.nodes[0].ijk[1]: expected an integer, got string \"a\"")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"output\": {\"snapshotFields\": [\"X\", \"Q\"]}", S,
+                   "output.snapshotFields[1]: unknown value string \"Q\"")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"name\": 5", S,
+                   "name: expected a string, got number 5")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"allowUnstableDt\": 1", S,
+                   "allowUnstableDt: expected true or false, got number 1")) return;
+    if (expect_bad("{\"grid\"", "[{\"grid\"", SRV_CODEC_ESYNTAX, "invalid JSON at line 1")) return;
+    if (expect_bad("\"endTime\": 1}", "\"endTime\": 1,}", SRV_CODEC_ESYNTAX, "invalid JSON at line 1")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"endTime\": 2", SRV_CODEC_ESYNTAX, "duplicate")) return;
+    {
+        char err[ERRLEN];
+        CHECK(load_text("[1, 2]", err) == SRV_CODEC_EINVAL);
+        CHECKF(strstr(err, "expected a JSON object (Case), got array"), "%s", err);
+    }
+}
+
+/* Case errors the schema cannot catch, again naming the field. */
+TEST(codec_bad_case)
+{
+    const int I = SRV_CODEC_EINVAL;
+    char err[ERRLEN];
+    /* the base case itself is fine */
+    CHECKF(load_text(good2d, err) == 0, "%s", err);
+    if (expect_bad("\"radius\": 0.1", "\"radius\": 0", I, "bodies[0].sphere.radius: must be > 0")) return;
+    if (expect_bad("\"radius\": 0.1", "\"radius\": \"NaN\"", I, "bodies[0].sphere.radius: must be > 0")) return;
+    if (expect_bad(", \"radius\": 0.1", "", I, "bodies[0].sphere.radius: missing")) return;
+    if (expect_bad("\"center\": [0.3, 0.3]", "\"center\": [0.3]", I,
+                   "bodies[0].sphere.center: expected 2 values (one per axis), got 1")) return;
+    if (expect_bad("\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"material\": 3", I,
+                   "bodies[1].material: no material 3 (the case has 1)")) return;
+    if (expect_bad("\"hi\": [0.8, 0.8]", "\"hi\": [0.8, 0.6]", I, "bodies[1].box.hi[1]: must be > lo[1]"))
+        return;
+    if (expect_bad("\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"ppc\": 9", I,
+                   "bodies[1].ppc: must be 1..8 (got 9)")) return;
+    if (expect_bad("{\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, ", "{", I,
+                   "bodies[1]: needs one of box, sphere or points")) return;
+    if (expect_bad("\"dim\": 2", "\"dim\": 4", I, "grid.dim: must be 1, 2 or 3 (got 4)")) return;
+    if (expect_bad("\"dim\": 2, ", "", I, "grid.dim: missing")) return;
+    if (expect_bad("\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, -0.1]", I, "grid.spacing[1]: must be > 0"))
+        return;
+    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, 1]", I, "grid.nodes[1]: must be >= 2")) return;
+    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [100000, 100000]", SRV_CODEC_ETOOBIG,
+                   "grid.nodes: 10000000000 nodes, more than the limit")) return;
+    if (expect_bad("\"radius\": 0.1", "\"radius\": 0.1}, \"ppc\": 8, \"x\": {", SRV_CODEC_EINVAL,
+                   "bodies[0].x: unknown field")) return;
+    if (expect_bad("\"spacing\": [0.1, 0.1], \"nodes\": [11, 11]", "\"spacing\": [1e-4, 1e-4], \"nodes\": [4000, 4000]",
+                   SRV_CODEC_ETOOBIG, "bodies[0]: about")) return;
+    if (expect_bad("\"density\": 1", "\"density\": -1", I, "materials[0].density: must be > 0 (got -1)"))
+        return;
+    if (expect_bad("\"poissonRatio\": 0.2", "\"poissonRatio\": 0.5", I, "materials[0].poissonRatio: must be in (-1, 0.5)"))
+        return;
+    if (expect_bad("\"youngsModulus\": 1, ", "", I, "materials[0].youngsModulus: missing")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 0", I, "endTime: must be > 0")) return;
+    if (expect_bad("\"endTime\": 1", "\"steps\": 0", I, "steps: must be 1..")) return;
+    if (expect_bad(", \"endTime\": 1", "", I, "endTime: missing (a case needs endTime or steps)")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"dt\": -1", I, "dt: must be >= 0")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"threads\": 1000", I, "threads: must be 0..")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"gravity\": [0, -9.8, 0]", I,
+                   "gravity: expected 2 values (one per axis), got 3")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"zLo\": 7}", I,
+                   "boundary.zLo: the grid has no axis 2 (dim 2)")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"xHi\": 8}", I,
+                   "boundary.xHi: mask 8 has bits other than")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [0, 0]}, {\"ijk\": [3, 11]}]}", I,
+                   "boundary.nodes[1].ijk[1]: 11 is outside the grid (nodes[1] = 11)")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [0]}]}", I,
+                   "boundary.nodes[0].ijk: expected 2 indices")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"tractions\": [{\"lo\": [0, 0], \"hi\": [1, 1], \"normal\": 2, \"value\": [1, 0]}]", I,
+                   "tractions[0].normal: must be an axis below dim 2 (got 2)")) return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"tractions\": [{\"lo\": [0, 0], \"hi\": [1, 1]}]", I,
+                   "tractions[0].value: missing")) return;
+    if (expect_bad("\"materials\": [{", "\"materials\": [], \"x\": [{", I, "x: unknown field")) return;
+    {
+        const char *nomat = "{\"grid\": {\"dim\": 1, \"spacing\": [1], \"nodes\": [2]}, \"bodies\": [{\"points\": "
+                            "{\"x\": [0.5], \"volume\": [1]}}], \"endTime\": 1}";
+        CHECK(load_text(nomat, err) == I);
+        CHECKF(strstr(err, "materials: at least one material is required"), "%s", err);
+    }
+    /* explicit points: sizes per point */
+    static const struct { const char *to, *want; } pts[] = {
+        {"\"x\": [0.5, 0.5, 0.7], \"volume\": [0.01, 0.01]", "bodies[0].points.x: expected 4 values (per point), got 3"},
+        {"\"x\": [0.5, 0.5], \"volume\": []", "bodies[0].points.volume: at least one point is required"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0]", "bodies[0].points.volume[0]: must be > 0 (got 0)"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"mass\": [1, 2]", "bodies[0].points.mass: expected 1 values (per point, or none), got 2"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"v\": [1]", "bodies[0].points.v: expected 2 values"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"stress\": [1, 2, 3]", "bodies[0].points.stress: expected 6 values"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"halfLength\": [0.05, -0.05]", "bodies[0].points.halfLength[1]: must be > 0"},
+        {"\"x\": [0.5, \"Infinity\"], \"volume\": [0.01]", "bodies[0].points.x[1]: must be a finite number"},
+    };
+    for (size_t i = 0; i < sizeof pts / sizeof pts[0]; i++) {
+        char json[512];
+        snprintf(json, sizeof json,
+                 "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
+                 " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+                 " \"bodies\": [{\"points\": {%s}}], \"endTime\": 1}", pts[i].to);
+        int rc = load_text(json, err);
+        CHECKF(rc == I && strstr(err, pts[i].want), "rc %d: %s (want %s)", rc, err, pts[i].want);
+        TLOG("%s", err);
+    }
+}
+
+/* Damaged protobuf bytes: errors, never crashes (ASan watches). */
+TEST(codec_bad_bytes)
+{
+    char err[ERRLEN];
+    size_t len = 0, n = 0;
+    uint8_t *buf = NULL;
+    Mpmd__Case *pb = NULL;
+    char *text = slurp("proto/examples/disks2d_coarse.json", &len);
+    CHECK(text);
+    int rc = srv_case_from_json(text, len, &pb, err, sizeof err);
+    free(text);
+    CHECKF(rc == 0, "%s", err);
+    rc = srv_case_pack(pb, &buf, &n);
+    srv_case_pb_free(&pb);
+    CHECK(rc == 0 && n > 20);
+
+    int bad_prefix = 0, ok_prefix = 0;
+    for (size_t k = 0; k < n; k++) {
+        rc = srv_case_unpack(buf, k, 0, &pb, err, sizeof err);
+        if (rc) {
+            if (rc != SRV_CODEC_ESYNTAX || pb || !strstr(err, "not a valid mpmd.Case message")) break;
+            bad_prefix++;
+        } else {
+            /* a prefix that ends between fields is a valid, smaller case */
+            srv_case *sc = NULL;
+            ok_prefix++;
+            if (!srv_case_from_pb(pb, &sc, err, sizeof err)) srv_case_destroy(&sc);
+            srv_case_pb_free(&pb);
+        }
+    }
+    TLOG("%zu-byte case: %d truncations rejected, %d decode as smaller cases", n, bad_prefix, ok_prefix);
+    CHECK(bad_prefix + ok_prefix == (int)n);
+    CHECK(bad_prefix > (int)n / 2);
+
+    /* every single-byte corruption: decode fails or yields a case that
+     * converts or is rejected cleanly */
+    int rejected = 0, decoded = 0;
+    for (size_t k = 0; k < n; k++) {
+        static const uint8_t vals[] = {0x00, 0xff, 0x80, 0x07, 0x12};
+        for (size_t v = 0; v < sizeof vals; v++) {
+            uint8_t save = buf[k];
+            char *json = NULL;
+            buf[k] = vals[v];
+            rc = srv_case_unpack(buf, n, 0, &pb, err, sizeof err);
+            if (rc) {
+                CHECK(rc == SRV_CODEC_ESYNTAX && pb == NULL);
+                rejected++;
+            } else {
+                srv_case *sc = NULL;
+                decoded++;
+                if (!srv_case_from_pb(pb, &sc, err, sizeof err)) srv_case_destroy(&sc);
+                if (!srv_case_to_json(pb, 0, &json, err, sizeof err)) free(json);
+                srv_case_pb_free(&pb);
+            }
+            buf[k] = save;
+        }
+    }
+    TLOG("corrupted bytes: %d rejected, %d decoded", rejected, decoded);
+    CHECK(rejected > 0);
+
+    static const uint8_t garbage[] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
+    rc = srv_case_unpack(garbage, sizeof garbage, 0, &pb, err, sizeof err);
+    CHECK(rc == SRV_CODEC_ESYNTAX && pb == NULL);
+    /* a field 2 (grid) claiming 100 bytes with 2 present */
+    static const uint8_t shortlen[] = {0x12, 100, 0x08, 0x01};
+    rc = srv_case_unpack(shortlen, sizeof shortlen, 0, &pb, err, sizeof err);
+    CHECK(rc == SRV_CODEC_ESYNTAX && pb == NULL);
+    rc = srv_case_unpack(buf, n, n - 1, &pb, err, sizeof err);
+    CHECKF(rc == SRV_CODEC_ETOOBIG && pb == NULL && strstr(err, "more than the limit"), "%s", err);
+    /* unknown enum numbers survive protobuf decoding (appended fields
+     * override / extend the valid case) but not the conversion */
+    static const struct { uint8_t tail[8]; size_t n; const char *want; } tails[] = {
+        {{0x18, 0x05}, 2, "method: unknown value 5"},                                 /* method = 5 */
+        {{0x20, 0x03}, 2, "update: unknown value 3"},                                 /* update = 3 */
+        {{0x8a, 0x01, 0x03, 0x1a, 0x01, 0x09}, 6, "output.snapshotFields[3]: unknown value 9"},
+        {{0x52, 0x02, 0x08, 0x04}, 4, "materials[1].model: unknown value 4"},         /* materials += {model: 4} */
+    };
+    for (size_t i = 0; i < sizeof tails / sizeof tails[0]; i++) {
+        uint8_t *b2 = malloc(n + tails[i].n);
+        srv_case *sc = NULL;
+        CHECK(b2);
+        memcpy(b2, buf, n);
+        memcpy(b2 + n, tails[i].tail, tails[i].n);
+        rc = srv_case_unpack(b2, n + tails[i].n, 0, &pb, err, sizeof err);
+        free(b2);
+        CHECKF(rc == 0 && pb, "tail %zu: %s", i, err);
+        rc = srv_case_from_pb(pb, &sc, err, sizeof err);
+        srv_case_pb_free(&pb);
+        CHECKF(rc == SRV_CODEC_EINVAL && sc == NULL && strstr(err, tails[i].want), "tail %zu: %s", i, err);
+        TLOG("%s", err);
+    }
+    free(buf);
+}
+
+/* Request decoding and Reply / StreamMsg encoding. */
+TEST(codec_envelopes)
+{
+    char err[ERRLEN];
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    srv_request rq;
+    char *json = NULL;
+    int rc;
+
+    /* Submit carrying a case */
+    char *caseText = NULL;
+    size_t clen = 0;
+    caseText = slurp("proto/examples/point1d.json", &clen);
+    CHECK(caseText);
+    size_t rlen = clen + 64;
+    char *req = malloc(rlen);
+    CHECK(req);
+    snprintf(req, rlen, "{\"schemaVersion\": 1, \"submit\": {\"case\": %s}}", caseText);
+    free(caseText);
+    rc = srv_msg_json_to_bytes(SRV_MSG_REQUEST, req, strlen(req), &buf, &n, err, sizeof err);
+    free(req);
+    CHECKF(rc == 0, "%s", err);
+    rc = srv_request_decode(buf, n, 0, &rq, err, sizeof err);
+    free(buf);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(rq.kind == SRV_REQ_SUBMIT && rq.case_pb);
+    {
+        srv_case *sc = NULL;
+        rc = srv_case_from_pb(rq.case_pb, &sc, err, sizeof err);
+        srv_request_clear(&rq);
+        CHECKF(rc == 0, "%s", err);
+        CHECK(sc->c.bodies[0].n_points == 1);
+        srv_case_destroy(&sc);
+    }
+
+    static const struct {
+        const char *json;
+        int rc;
+        srv_req_kind kind;
+        uint64_t id;
+        const char *err;
+    } reqs[] = {
+        {"{\"schemaVersion\": 1, \"cancel\": {\"jobId\": \"18446744073709551615\"}}", 0, SRV_REQ_CANCEL,
+         UINT64_MAX, ""},
+        {"{\"schemaVersion\": 1, \"status\": {\"jobId\": 7}}", 0, SRV_REQ_STATUS, 7, ""},
+        {"{\"schemaVersion\": 1, \"listRuns\": {\"status\": \"FAILED\", \"limit\": 5}}", 0, SRV_REQ_LIST_RUNS, 0, ""},
+        {"{\"schemaVersion\": 1, \"getRun\": {\"runId\": 3, \"withCase\": true}}", 0, SRV_REQ_GET_RUN, 3, ""},
+        {"{\"schemaVersion\": 1, \"getEnergy\": {\"runId\": 3, \"fromSeq\": 10}}", 0, SRV_REQ_GET_ENERGY, 3, ""},
+        {"{\"schemaVersion\": 1, \"getSnapshot\": {\"runId\": 4, \"step\": \"-1\"}}", 0, SRV_REQ_GET_SNAPSHOT, 4, ""},
+        {"{\"schemaVersion\": 1, \"ping\": {}}", 0, SRV_REQ_PING, 0, ""},
+        {"{\"schemaVersion\": 1, \"version\": {}}", 0, SRV_REQ_VERSION, 0, ""},
+        {"{\"schemaVersion\": 2, \"ping\": {}}", SRV_CODEC_EVERSION, 0, 0, "schemaVersion: 2; this server speaks 1"},
+        {"{\"ping\": {}}", SRV_CODEC_EVERSION, 0, 0, "schemaVersion: missing"},
+        {"{\"schemaVersion\": 1}", SRV_CODEC_EINVAL, 0, 0, "request: no body"},
+        {"{\"schemaVersion\": 1, \"cancel\": {}}", SRV_CODEC_EINVAL, 0, 0, "cancel.jobId: missing"},
+        {"{\"schemaVersion\": 1, \"submit\": {}}", SRV_CODEC_EINVAL, 0, 0, "submit.case: missing"},
+    };
+    for (size_t i = 0; i < sizeof reqs / sizeof reqs[0]; i++) {
+        rc = srv_msg_json_to_bytes(SRV_MSG_REQUEST, reqs[i].json, strlen(reqs[i].json), &buf, &n, err,
+                                   sizeof err);
+        CHECKF(rc == 0, "%s: %s", reqs[i].json, err);
+        err[0] = 0;
+        rc = srv_request_decode(buf, n, 0, &rq, err, sizeof err);
+        free(buf);
+        int ok = rc == reqs[i].rc && strstr(err, reqs[i].err) && (rc || (rq.kind == reqs[i].kind && rq.id == reqs[i].id));
+        if (ok && rq.kind == SRV_REQ_LIST_RUNS) ok = rq.status == SRV_STATUS_FAILED && rq.limit == 5;
+        if (ok && rq.kind == SRV_REQ_GET_RUN) ok = rq.with_case == 1;
+        if (ok && rq.kind == SRV_REQ_GET_ENERGY) ok = rq.from_seq == 10;
+        if (ok && rq.kind == SRV_REQ_GET_SNAPSHOT) ok = rq.has_step && rq.step == -1;
+        srv_request_clear(&rq);
+        CHECKF(ok, "%s: rc %d, kind %d, id %llu, err \"%s\"", reqs[i].json, rc, (int)rq.kind,
+               (unsigned long long)rq.id, err);
+    }
+    static const uint8_t junk[] = {0x0a, 0xff, 0xff};
+    CHECK(srv_request_decode(junk, sizeof junk, 0, &rq, err, sizeof err) == SRV_CODEC_ESYNTAX);
+    srv_request_clear(&rq);
+    CHECK(srv_request_decode(junk, sizeof junk, 2, &rq, err, sizeof err) == SRV_CODEC_ETOOBIG);
+    srv_request_clear(&rq);
+
+    /* replies, checked through their JSON form */
+    srv_energy_sample es = {.step = 10, .t = 0.01, .dim = 2, .seq = 3,
+                            .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2, .momentum = {1, -1, 9}}};
+    double x[4] = {0.1, 0.2, 0.3, 0.4}, p[2] = {-1, 1};
+    srv_snapshot snap = {.step = 10, .t = 0.01, .n = 2, .dim = 2, .x = x, .pressure = p};
+    int64_t ssteps[2] = {0, 100};
+    uint8_t *cb = NULL;
+    size_t cn = 0;
+    {
+        Mpmd__Case *cpb = NULL;
+        const char *cj = "{\"name\": \"c\", \"steps\": 3}";
+        CHECK(srv_case_from_json(cj, strlen(cj), &cpb, err, sizeof err) == 0);
+        CHECK(srv_case_pack(cpb, &cb, &cn) == 0);
+        srv_case_pb_free(&cpb);
+    }
+    srv_run_info ri = {.run_id = 5, .job_id = 6, .name = "bar", .status = SRV_STATUS_RUNNING,
+                       .submitted_at = 1700000000.5, .steps = 10, .steps_total = 100, .t = 0.01, .dim = 2,
+                       .last_energy = &es, .n_snapshot_steps = 2, .snapshot_steps = ssteps,
+                       .case_bytes = cb, .case_len = cn};
+    srv_run_info two[2] = {ri, ri};
+    two[1].run_id = 9;
+    two[1].case_bytes = NULL;
+    two[1].error = "particle left the grid";
+    two[1].status = SRV_STATUS_FAILED;
+    const char *names[2] = {"protobuf-c", "jansson"}, *versions[2] = {"1.4.1", "2.14"};
+    srv_progress pr = {.step = 5, .steps_total = 50, .t = 0.5, .dt = 0.1, .wall_s = 0.25};
+    srv_finished fin = {.status = SRV_STATUS_FINISHED, .steps = 50, .t = 5, .wall_s = 1, .energy = &es};
+
+    static const char *const want[] = {
+        "{\"schemaVersion\":1,\"error\":{\"code\":\"INVALID_CASE\",\"message\":\"must be > 0\",\"field\":\"bodies[0].sphere.radius\"}}",
+        "{\"schemaVersion\":1,\"submitOk\":{\"jobId\":\"12\",\"runId\":\"13\"}}",
+        "{\"schemaVersion\":1,\"run\":{\"runId\":\"5\",\"jobId\":\"6\",\"name\":\"bar\",\"status\":\"RUNNING\","
+        "\"submittedAt\":1700000000.5,\"steps\":\"10\",\"stepsTotal\":\"100\",\"t\":0.01,\"wallS\":0,"
+        "\"particles\":\"0\",\"nodes\":\"0\",\"dim\":2,\"lastEnergy\":{\"step\":\"10\",\"t\":0.01,\"kinetic\":0.5,"
+        "\"strain\":0.25,\"potential\":0,\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,"
+        "\"seq\":\"3\"},\"energySamples\":\"0\",\"snapshotSteps\":[\"0\",\"100\"],\"case\":{\"name\":\"c\","
+        "\"steps\":\"3\"}}}",
+        "\"runId\":\"9\",\"jobId\":\"6\",\"name\":\"bar\",\"status\":\"FAILED\",\"error\":\"particle left the grid\"",
+        "{\"schemaVersion\":1,\"energy\":{\"runId\":\"5\",\"samples\":[{\"step\":\"10\"",
+        "{\"schemaVersion\":1,\"snapshot\":{\"step\":\"10\",\"t\":0.01,\"n\":\"2\",\"dim\":2,\"x\":[0.1,0.2,0.3,0.4],"
+        "\"pressure\":[-1,1]}}",
+        "{\"schemaVersion\":1,\"pong\":{\"serverVersion\":\"0.1\",\"schemaVersion\":1}}",
+        "{\"schemaVersion\":1,\"version\":{\"serverVersion\":\"0.1\",\"schemaVersion\":1,\"components\":[{\"name\":"
+        "\"protobuf-c\",\"version\":\"1.4.1\"},{\"name\":\"jansson\",\"version\":\"2.14\"}]}}",
+        "{\"jobId\":\"12\",\"seq\":\"0\",\"progress\":{\"step\":\"5\",\"t\":0.5,\"dt\":0.1,\"stepsTotal\":\"50\",\"wallS\":0.25}}",
+        "{\"jobId\":\"12\",\"seq\":\"1\",\"energy\":{\"step\":\"10\",",
+        "{\"jobId\":\"12\",\"seq\":\"2\",\"snapshot\":{\"step\":\"10\"",
+        "{\"jobId\":\"12\",\"seq\":\"3\",\"finished\":{\"status\":\"FINISHED\",\"steps\":\"50\",\"t\":5,\"wallS\":1,\"energy\":{",
+    };
+    for (size_t i = 0; i < sizeof want / sizeof want[0]; i++) {
+        srv_msg_kind kind = i < 8 ? SRV_MSG_REPLY : SRV_MSG_STREAM;
+        switch (i) {
+        case 0: rc = srv_reply_error(SRV_ERR_INVALID_CASE, "must be > 0", "bodies[0].sphere.radius", &buf, &n); break;
+        case 1: rc = srv_reply_submit_ok(12, 13, &buf, &n); break;
+        case 2: rc = srv_reply_run(&ri, &buf, &n); break;
+        case 3: rc = srv_reply_runs(two, 2, &buf, &n); break;
+        case 4: rc = srv_reply_energy(5, &es, 1, 0, &buf, &n); break;
+        case 5: rc = srv_reply_snapshot(&snap, &buf, &n); break;
+        case 6: rc = srv_reply_pong("0.1", &buf, &n); break;
+        case 7: rc = srv_reply_version("0.1", names, versions, 2, &buf, &n); break;
+        case 8: rc = srv_stream_progress(12, 0, &pr, &buf, &n); break;
+        case 9: rc = srv_stream_energy(12, 1, &es, &buf, &n); break;
+        case 10: rc = srv_stream_snapshot(12, 2, &snap, &buf, &n); break;
+        default: rc = srv_stream_finished(12, 3, &fin, &buf, &n); break;
+        }
+        CHECKF(rc == 0, "encoder %zu: rc %d", i, rc);
+        rc = srv_msg_bytes_to_json(kind, buf, n, 0, 0, &json, err, sizeof err);
+        free(buf);
+        CHECKF(rc == 0, "encoder %zu: %s", i, err);
+        int ok = strstr(json, want[i]) != NULL;
+        if (i == 3) ok = ok && strstr(json, "\"runs\":{\"runs\":[{\"runId\":\"5\"");
+        if (!ok) TLOG("got  %s\nwant %s", json, want[i]);
+        free(json);
+        CHECKF(ok, "encoder %zu", i);
+    }
+    free(cb);
+    /* case bytes that are not a Case */
+    ri.case_bytes = junk;
+    ri.case_len = sizeof junk;
+    CHECK(srv_reply_run(&ri, &buf, &n) == SRV_CODEC_ESYNTAX && buf == NULL);
+
+    CHECK(!strcmp(srv_status_name(SRV_STATUS_INTERRUPTED), "INTERRUPTED") && !srv_status_name(0));
+    CHECK(srv_status_from_name("CANCELLED") == SRV_STATUS_CANCELLED && srv_status_from_name("x") == 0);
+}
