@@ -963,11 +963,13 @@ int srv_reply_snapshot(const srv_snapshot *s, uint8_t **buf, size_t *len)
     return pack_reply(&r, buf, len);
 }
 
-int srv_reply_pong(const char *server_version, uint8_t **buf, size_t *len)
+int srv_reply_pong(const char *server_version, const char *stream_endpoint, uint8_t **buf,
+                   size_t *len)
 {
     Mpmd__Reply r = MPMD__REPLY__INIT;
     Mpmd__Pong p = MPMD__PONG__INIT;
     p.server_version = (char *)server_version;
+    p.stream_endpoint = (char *)stream_endpoint;
     p.has_schema_version = 1;
     p.schema_version = SRV_SCHEMA_VERSION;
     r.body_case = MPMD__REPLY__BODY_PONG;

@@ -214,7 +214,7 @@ typedef struct {
     double t;
     int dim;              /* momentum has dim entries */
     mpm_energy e;
-    uint64_t seq;         /* the StreamMsg.seq that carried it (always sent) */
+    uint64_t seq;         /* index of the sample in its run: 0, 1, 2, ... (always sent) */
 } srv_energy_sample;
 
 /* Particle fields at one step (Snapshot); NULL arrays are left out. */
@@ -274,7 +274,8 @@ int srv_reply_runs(const srv_run_info *ri, size_t n, uint8_t **buf,
 int srv_reply_energy(uint64_t run_id, const srv_energy_sample *s, size_t n,
                      int more, uint8_t **buf, size_t *len);
 int srv_reply_snapshot(const srv_snapshot *s, uint8_t **buf, size_t *len);
-int srv_reply_pong(const char *server_version, uint8_t **buf, size_t *len);
+int srv_reply_pong(const char *server_version, const char *stream_endpoint, uint8_t **buf,
+                   size_t *len);
 /* names[i] / versions[i]: the n linked components */
 int srv_reply_version(const char *server_version, const char *const *names,
                       const char *const *versions, size_t n, uint8_t **buf,

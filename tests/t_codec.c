@@ -739,7 +739,7 @@ TEST(codec_envelopes)
         case 3: rc = srv_reply_runs(two, 2, &buf, &n); break;
         case 4: rc = srv_reply_energy(5, &es, 1, 0, &buf, &n); break;
         case 5: rc = srv_reply_snapshot(&snap, &buf, &n); break;
-        case 6: rc = srv_reply_pong("0.1", &buf, &n); break;
+        case 6: rc = srv_reply_pong("0.1", "tcp://127.0.0.1:5556", &buf, &n); break;
         case 7: rc = srv_reply_version("0.1", names, versions, 2, &buf, &n); break;
         case 8: rc = srv_stream_progress(12, 0, &pr, &buf, &n); break;
         case 9: rc = srv_stream_energy(12, 1, &es, &buf, &n); break;
