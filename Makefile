@@ -14,6 +14,10 @@ SRVLIBS := -lzmq -lsqlite3 -lprotobuf-c -ljansson
 
 MPM_SRCS  := $(wildcard server/mpm/mpm_*.c)
 SRV_SRCS  := $(filter-out server/main.c,$(wildcard server/*.c))
+CODEC_SRCS := server/srv_codec.c server/srv_json.c
+CLI_SRCS  := $(wildcard clients/*.c)
+# binaries whose sources exist (the daemon and the client arrive with issue #3)
+PROGS     := $(if $(wildcard server/main.c),mpmd) $(if $(wildcard clients/mpmctl.c),mpmctl)
 TEST_SRCS := $(wildcard tests/t_*.c) tests/runner.c
 PROTOS    := $(wildcard proto/*.proto)
 GEN_C     := $(patsubst proto/%.proto,build/gen/%.pb-c.c,$(PROTOS))
@@ -25,7 +29,7 @@ REL  := build/rel
 ASAN := build/asan
 
 .PHONY: all deps test test-quick bench demo clean
-all: bin/mpmtest bin/mpmrun
+all: bin/mpmtest bin/mpmrun $(addprefix bin/,$(PROGS))
 
 deps:
 	@bash deploy/install-deps.sh
@@ -49,6 +53,22 @@ $(eval $(call objs,$(ASAN),$(SAN)))
 mpm_objs  = $(patsubst %.c,$(1)/%.o,$(MPM_SRCS))
 srv_objs  = $(patsubst %.c,$(1)/%.o,$(SRV_SRCS)) $(patsubst build/gen/%.c,$(1)/gen/%.o,$(GEN_C))
 test_objs = $(patsubst %.c,$(1)/%.o,$(TEST_SRCS))
+codec_objs = $(patsubst %.c,$(1)/%.o,$(CODEC_SRCS)) $(patsubst build/gen/%.c,$(1)/gen/%.o,$(GEN_C))
+cli_objs  = $(patsubst %.c,$(1)/%.o,$(CLI_SRCS))
+
+# The daemon: server/main.c + the daemon library + the solver.
+bin/mpmd: $(REL)/server/main.o $(call srv_objs,$(REL)) $(call mpm_objs,$(REL))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+$(ASAN)/mpmd: $(ASAN)/server/main.o $(call srv_objs,$(ASAN)) $(call mpm_objs,$(ASAN))
+	$(CC) $(SAN) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+
+# The client: clients/*.c + the codec (it checks cases before sending).
+bin/mpmctl: $(call cli_objs,$(REL)) $(call codec_objs,$(REL)) $(call mpm_objs,$(REL))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ -lzmq -lprotobuf-c -ljansson $(LDLIBS)
+$(ASAN)/mpmctl: $(call cli_objs,$(ASAN)) $(call codec_objs,$(ASAN)) $(call mpm_objs,$(ASAN))
+	$(CC) $(SAN) -o $@ $^ -lzmq -lprotobuf-c -ljansson $(LDLIBS)
 
 bin/mpmtest: $(call test_objs,$(REL)) $(call srv_objs,$(REL)) $(call mpm_objs,$(REL))
 	@mkdir -p bin
@@ -68,14 +88,16 @@ demo: deps
 	bin/mpmrun --case disks-fine --every 250
 
 # make test: every test under ASan+UBSan.  T=name runs one test.
+# Tests that need the daemon and the client find them through MPMD_BIN and
+# MPMCTL_BIN (the sanitizer builds here).
 test: deps
-	@$(MAKE) --no-print-directory $(ASAN)/mpmtest
+	@$(MAKE) --no-print-directory $(ASAN)/mpmtest $(addprefix $(ASAN)/,$(PROGS))
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
-	  $(ASAN)/mpmtest $(T)
+	  MPMD_BIN=$(ASAN)/mpmd MPMCTL_BIN=$(ASAN)/mpmctl $(ASAN)/mpmtest $(T)
 
 # Release build, no sanitizers: quick local iteration.
-test-quick: bin/mpmtest
-	bin/mpmtest $(T)
+test-quick: bin/mpmtest $(addprefix bin/,$(PROGS))
+	MPMD_BIN=bin/mpmd MPMCTL_BIN=bin/mpmctl bin/mpmtest $(T)
 
 clean:
 	rm -rf build bin
