@@ -1077,3 +1077,103 @@ int srv_stream_finished(uint64_t job_id, uint64_t seq, const srv_finished *f, ui
     m.finished = &pf;
     return pack_stream(&m, job_id, seq, buf, len);
 }
+
+/* ------------------------------------------------------------------------ */
+/* Request encoder (clients: mpmctl and the daemon tests)                   */
+
+int srv_request_encode(const srv_request *rq, uint8_t **buf, size_t *len)
+{
+    Mpmd__Request r = MPMD__REQUEST__INIT;
+    Mpmd__Request__Submit sub = MPMD__REQUEST__SUBMIT__INIT;
+    Mpmd__Request__Cancel can = MPMD__REQUEST__CANCEL__INIT;
+    Mpmd__Request__Status sta = MPMD__REQUEST__STATUS__INIT;
+    Mpmd__Request__ListRuns lr = MPMD__REQUEST__LIST_RUNS__INIT;
+    Mpmd__Request__GetRun gr = MPMD__REQUEST__GET_RUN__INIT;
+    Mpmd__Request__GetEnergy ge = MPMD__REQUEST__GET_ENERGY__INIT;
+    Mpmd__Request__GetSnapshot gs = MPMD__REQUEST__GET_SNAPSHOT__INIT;
+    Mpmd__Request__Ping pi = MPMD__REQUEST__PING__INIT;
+    Mpmd__Request__Version ve = MPMD__REQUEST__VERSION__INIT;
+    *buf = NULL;
+    *len = 0;
+    r.has_schema_version = 1;
+    r.schema_version = rq->schema_version ? rq->schema_version : SRV_SCHEMA_VERSION;
+    switch (rq->kind) {
+    case SRV_REQ_SUBMIT:
+        if (!rq->case_pb) return SRV_CODEC_EINVAL;
+        sub.case_ = rq->case_pb;
+        r.body_case = MPMD__REQUEST__BODY_SUBMIT;
+        r.submit = &sub;
+        break;
+    case SRV_REQ_CANCEL:
+        can.has_job_id = 1;
+        can.job_id = rq->id;
+        r.body_case = MPMD__REQUEST__BODY_CANCEL;
+        r.cancel = &can;
+        break;
+    case SRV_REQ_STATUS:
+        sta.has_job_id = 1;
+        sta.job_id = rq->id;
+        r.body_case = MPMD__REQUEST__BODY_STATUS;
+        r.status = &sta;
+        break;
+    case SRV_REQ_LIST_RUNS:
+        if (rq->status) {
+            lr.has_status = 1;
+            lr.status = (Mpmd__RunStatus)rq->status;
+        }
+        if (rq->limit) {
+            lr.has_limit = 1;
+            lr.limit = rq->limit;
+        }
+        r.body_case = MPMD__REQUEST__BODY_LIST_RUNS;
+        r.list_runs = &lr;
+        break;
+    case SRV_REQ_GET_RUN:
+        gr.has_run_id = 1;
+        gr.run_id = rq->id;
+        if (rq->with_case) gr.has_with_case = gr.with_case = 1;
+        r.body_case = MPMD__REQUEST__BODY_GET_RUN;
+        r.get_run = &gr;
+        break;
+    case SRV_REQ_GET_ENERGY:
+        ge.has_run_id = 1;
+        ge.run_id = rq->id;
+        if (rq->from_seq) {
+            ge.has_from_seq = 1;
+            ge.from_seq = rq->from_seq;
+        }
+        if (rq->limit) {
+            ge.has_limit = 1;
+            ge.limit = rq->limit;
+        }
+        r.body_case = MPMD__REQUEST__BODY_GET_ENERGY;
+        r.get_energy = &ge;
+        break;
+    case SRV_REQ_GET_SNAPSHOT:
+        gs.has_run_id = 1;
+        gs.run_id = rq->id;
+        if (rq->has_step) {
+            gs.has_step = 1;
+            gs.step = rq->step;
+        }
+        r.body_case = MPMD__REQUEST__BODY_GET_SNAPSHOT;
+        r.get_snapshot = &gs;
+        break;
+    case SRV_REQ_PING:
+        r.body_case = MPMD__REQUEST__BODY_PING;
+        r.ping = &pi;
+        break;
+    case SRV_REQ_VERSION:
+        r.body_case = MPMD__REQUEST__BODY_VERSION;
+        r.version = &ve;
+        break;
+    default:
+        return SRV_CODEC_EINVAL;
+    }
+    return pack_msg(&r.base, buf, len);
+}
+
+const char *srv_codec_protobuf_c_version(void)
+{
+    return protobuf_c_version();
+}

@@ -124,6 +124,9 @@ int srv_case_load(const char *json, size_t len, srv_case **out, char *err,
 /* Frees a srv_case and nulls the pointer (NULL is fine). */
 void srv_case_destroy(srv_case **sc);
 
+/* The protobuf-c runtime version, e.g. "1.4.1". */
+const char *srv_codec_protobuf_c_version(void);
+
 /* ---- any schema message as JSON <-> bytes --------------------------- */
 
 typedef enum {
@@ -207,6 +210,14 @@ typedef struct {
 int srv_request_decode(const void *buf, size_t len, size_t max,
                        srv_request *rq, char *err, size_t errlen);
 void srv_request_clear(srv_request *rq);
+
+/* The reverse, for clients: packs a Request from the fields of rq that its
+ * kind uses (schema_version 0 means SRV_SCHEMA_VERSION; GetEnergy.fromSeq,
+ * the limits and ListRuns.status are sent only when non-zero, GetSnapshot
+ * .step only with has_step; Submit sends rq->case_pb, which stays the
+ * caller's).  Returns 0, SRV_CODEC_EINVAL (unknown kind, Submit without a
+ * case) or SRV_CODEC_ENOMEM. */
+int srv_request_encode(const srv_request *rq, uint8_t **buf, size_t *len);
 
 /* Energies at one step (EnergySample). */
 typedef struct {

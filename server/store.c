@@ -392,6 +392,11 @@ const char *store_method_name(store_method m)
 {
     return method_ok(m) ? method_names[m] : "?";
 }
+const char *store_sqlite_version(void)
+{
+    return sqlite3_libversion();
+}
+
 const char *store_update_name(store_update u)
 {
     return update_ok(u) ? update_names[u] : "?";

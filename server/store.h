@@ -274,6 +274,8 @@ const char *store_status_name(store_status st);   /* "queued", ... */
 int store_status_parse(const char *name, store_status *st);
 const char *store_method_name(store_method m);    /* "mpm", "gimp" */
 const char *store_update_name(store_update u);    /* "usf", "usl", "musl" */
+/* The SQLite library version in use, e.g. "3.40.1". */
+const char *store_sqlite_version(void);
 
 /* Hex SHA-256 (FIPS 180-4) of len bytes into out (64 digits + NUL). */
 void store_sha256_hex(const void *data, size_t len, char out[65]);

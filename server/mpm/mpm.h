@@ -165,6 +165,10 @@ void mpm_sim_destroy(mpm_sim **sim);
  * Returns 0 or MPM_EINVAL / MPM_ECFL with a message in err. */
 int mpm_case_check(const mpm_case *c, char *err, size_t errlen);
 
+/* Checks a case like mpm_case_check() and returns its particle count, or a
+ * negative code with a message in err.  Allocates nothing. */
+long mpm_case_count(const mpm_case *c, char *err, size_t errlen);
+
 /* Advances one step.  Returns 0, or MPM_ELEFTGRID / MPM_EDIVERGED (after
  * which the state is frozen and every further step returns MPM_ESTATE). */
 int mpm_sim_step(mpm_sim *sim);

@@ -318,6 +318,12 @@ static int check_bc(const mpm_case *c, char *err, size_t errlen)
 
 int mpm_case_check(const mpm_case *c, char *err, size_t errlen)
 {
+    long n = mpm_case_count(c, err, errlen);
+    return n < 0 ? (int)n : 0;
+}
+
+long mpm_case_count(const mpm_case *c, char *err, size_t errlen)
+{
     int rc = check_grid(c, err, errlen);
     if (rc) return rc;
     int dim = c->grid.dim;
@@ -418,7 +424,7 @@ int mpm_case_check(const mpm_case *c, char *err, size_t errlen)
             return MPM_ECFL;
         }
     }
-    return 0;
+    return n;
 }
 
 long mpm_case_particles(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats,

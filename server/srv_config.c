@@ -1,0 +1,262 @@
+/*
+ * srv_config.c - parses the daemon's settings (see srv_config.h).  One table
+ * lists every setting with its type and limits; the command line, the
+ * config file ("key = value" lines, '#' comments, keys as the long flags
+ * without dashes) and the environment all go through it.
+ */
+#include "srv_config.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { T_STR, T_INT, T_LL, T_DBL, T_FLAG };
+
+typedef struct {
+    const char *key;   /* long flag without "--", config key */
+    const char *env;   /* environment variable or NULL */
+    int type;
+    size_t off, size;  /* field in srv_config; size for strings */
+    double lo, hi;
+    const char *help;
+} setting;
+
+#define F(field) offsetof(srv_config, field), sizeof(((srv_config *)0)->field)
+static const setting settings[] = {
+    {"endpoint", "MPMD_ENDPOINT", T_STR, F(endpoint), 0, 0,
+     "control socket (default tcp://127.0.0.1:5555)"},
+    {"stream-endpoint", "MPMD_STREAM_ENDPOINT", T_STR, F(stream_endpoint), 0, 0,
+     "job stream socket (default: tcp port + 1, or ipc path + .stream)"},
+    {"db", "MPMD_DB", T_STR, F(db), 0, 0, "SQLite file of run records (default mpmd.db)"},
+    {"workers", NULL, T_INT, F(workers), 1, 256, "jobs that run at once (default 2)"},
+    {"solver-threads", NULL, T_INT, F(solver_threads), 1, 64, "solver threads per job (default 1)"},
+    {"queue-max", NULL, T_INT, F(queue_max), 0, 1000000, "queued jobs beyond the running ones (default 16)"},
+    {"max-particles", NULL, T_LL, F(max_particles), 1, 1e10, "particles per job (default 10000000)"},
+    {"max-steps", NULL, T_LL, F(max_steps), 1, 1e15, "steps per job (default 100000000)"},
+    {"max-wall-s", NULL, T_DBL, F(max_wall_s), 0, 1e9, "wall seconds per job, 0 = no limit (default 0)"},
+    {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30,
+     "largest request accepted (default 67108864)"},
+    {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1, "allow binding on non-loopback addresses"},
+    {"verbose", NULL, T_FLAG, F(verbose), 0, 1, "debug log lines"},
+};
+#define NSET (sizeof settings / sizeof settings[0])
+
+static void defaults(srv_config *c)
+{
+    memset(c, 0, sizeof *c);
+    snprintf(c->endpoint, sizeof c->endpoint, "tcp://127.0.0.1:5555");
+    snprintf(c->db, sizeof c->db, "mpmd.db");
+    c->workers = 2;
+    c->solver_threads = 1;
+    c->queue_max = 16;
+    c->max_particles = 10000000;
+    c->max_steps = 100000000;
+    c->max_wall_s = 0;
+    c->max_request_bytes = 64LL << 20;
+}
+
+static const setting *find(const char *key)
+{
+    for (size_t i = 0; i < NSET; i++)
+        if (!strcmp(settings[i].key, key)) return &settings[i];
+    return NULL;
+}
+
+/* Sets one value; `src` names where it came from, for the message. */
+static int set(srv_config *c, const setting *s, const char *val, const char *src, char *err,
+               size_t errlen)
+{
+    char *p = (char *)c + s->off, *end;
+    if (s->type == T_STR) {
+        if (strlen(val) >= s->size || !*val) {
+            snprintf(err, errlen, "%s: %s must be 1 to %zu characters", src, s->key, s->size - 1);
+            return -1;
+        }
+        memcpy(p, val, strlen(val) + 1);
+        return 0;
+    }
+    if (s->type == T_FLAG) {
+        int v;
+        if (!strcmp(val, "1") || !strcmp(val, "true") || !strcmp(val, "yes")) v = 1;
+        else if (!strcmp(val, "0") || !strcmp(val, "false") || !strcmp(val, "no")) v = 0;
+        else {
+            snprintf(err, errlen, "%s: %s expects true or false, got '%s'", src, s->key, val);
+            return -1;
+        }
+        memcpy(p, &v, sizeof v);
+        return 0;
+    }
+    errno = 0;
+    double d = strtod(val, &end);
+    if (errno || end == val || *end || !isfinite(d) || d < s->lo || d > s->hi ||
+        (s->type != T_DBL && d != floor(d))) {
+        snprintf(err, errlen, "%s: %s expects %s in [%g, %g], got '%s'", src, s->key,
+                 s->type == T_DBL ? "a number" : "a whole number", s->lo, s->hi, val);
+        return -1;
+    }
+    if (s->type == T_INT) {
+        int v = (int)d;
+        memcpy(p, &v, sizeof v);
+    } else if (s->type == T_LL) {
+        long long v = (long long)d;
+        memcpy(p, &v, sizeof v);
+    } else {
+        memcpy(p, &d, sizeof d);
+    }
+    return 0;
+}
+
+static char *trim(char *s)
+{
+    while (*s == ' ' || *s == '\t') s++;
+    size_t n = strlen(s);
+    while (n && (s[n - 1] == ' ' || s[n - 1] == '\t' || s[n - 1] == '\n' || s[n - 1] == '\r'))
+        s[--n] = 0;
+    return s;
+}
+
+static int load_file(srv_config *c, const char *path, char *err, size_t errlen)
+{
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        snprintf(err, errlen, "--config: cannot open %s: %s", path, strerror(errno));
+        return -1;
+    }
+    char line[2048], src[1200];
+    int ln = 0, rc = 0;
+    while (!rc && fgets(line, sizeof line, f)) {
+        ln++;
+        char *s = trim(line);
+        if (!*s || *s == '#') continue;
+        char *eq = strchr(s, '=');
+        snprintf(src, sizeof src, "%s:%d", path, ln);
+        if (!eq) {
+            snprintf(err, errlen, "%s: expected 'key = value', got '%s'", src, s);
+            rc = -1;
+            break;
+        }
+        *eq = 0;
+        char *key = trim(s), *val = trim(eq + 1);
+        const setting *st = find(key);
+        if (!st) {
+            snprintf(err, errlen, "%s: unknown key '%s' (see mpmd --help)", src, key);
+            rc = -1;
+            break;
+        }
+        rc = set(c, st, val, src, err, errlen);
+    }
+    fclose(f);
+    return rc;
+}
+
+static void usage(void)
+{
+    printf("usage: mpmd [options]\n"
+           "The mpmd simulation daemon: accepts MPM/GMPM jobs over ZeroMQ, runs them in worker\n"
+           "threads, streams energies and snapshots, and records every run in SQLite.\n\n");
+    for (size_t i = 0; i < NSET; i++) {
+        char flag[64];
+        snprintf(flag, sizeof flag, "--%s%s", settings[i].key, settings[i].type == T_FLAG ? "" : " V");
+        printf("  %-24s %s%s%s%s\n", flag, settings[i].help, settings[i].env ? " [env " : "",
+               settings[i].env ? settings[i].env : "", settings[i].env ? "]" : "");
+    }
+    printf("  %-24s %s\n  %-24s %s\n  %-24s %s\n\n", "--config FILE",
+           "read settings from FILE (key = value lines)", "--version", "print the version",
+           "-h, --help", "this text");
+    printf("Order: defaults < --config file < environment < flags.  Binding anywhere but\n"
+           "loopback, ipc:// or inproc:// is refused without --allow-remote (there is no\n"
+           "authentication yet).\n");
+}
+
+int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errlen)
+{
+    defaults(c);
+    /* pass 1: --help, --version, --config */
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
+            usage();
+            return 1;
+        }
+        if (!strcmp(argv[i], "--version")) {
+            printf("mpmd %s\n", SRV_VERSION);
+            return 1;
+        }
+    }
+    for (int i = 1; i < argc; i++)
+        if (!strcmp(argv[i], "--config")) {
+            if (i + 1 >= argc) {
+                snprintf(err, errlen, "--config needs a file name");
+                return -1;
+            }
+            if (load_file(c, argv[i + 1], err, errlen)) return -1;
+        }
+    for (size_t i = 0; i < NSET; i++) {
+        const char *v = settings[i].env ? getenv(settings[i].env) : NULL;
+        if (v && *v && set(c, &settings[i], v, settings[i].env, err, errlen)) return -1;
+    }
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (!strcmp(a, "--config")) {
+            i++;
+            continue;
+        }
+        if (strncmp(a, "--", 2) || !find(a + 2)) {
+            snprintf(err, errlen, "unknown option '%s' (see mpmd --help)", a);
+            return -1;
+        }
+        const setting *s = find(a + 2);
+        if (s->type == T_FLAG) {
+            if (set(c, s, "1", a, err, errlen)) return -1;
+            continue;
+        }
+        if (i + 1 >= argc) {
+            snprintf(err, errlen, "%s needs a value", a);
+            return -1;
+        }
+        if (set(c, s, argv[++i], a, err, errlen)) return -1;
+    }
+    if (!c->stream_endpoint[0] &&
+        srv_stream_endpoint_derive(c->endpoint, c->stream_endpoint, sizeof c->stream_endpoint)) {
+        snprintf(err, errlen, "--endpoint %s: cannot derive the stream endpoint (tcp://HOST:PORT "
+                 "or ipc://PATH); give --stream-endpoint", c->endpoint);
+        return -1;
+    }
+    const char *eps[2] = {c->endpoint, c->stream_endpoint};
+    for (int i = 0; i < 2; i++)
+        if (!srv_endpoint_is_local(eps[i]) && !c->allow_remote) {
+            snprintf(err, errlen, "%s %s: refusing to bind a non-loopback address (there is no "
+                     "authentication yet); use tcp://127.0.0.1:PORT or ipc://, or pass "
+                     "--allow-remote", i ? "--stream-endpoint" : "--endpoint", eps[i]);
+            return -1;
+        }
+    if (!strcmp(c->endpoint, c->stream_endpoint)) {
+        snprintf(err, errlen, "--stream-endpoint: must differ from --endpoint (%s)", c->endpoint);
+        return -1;
+    }
+    return 0;
+}
+
+int srv_endpoint_is_local(const char *ep)
+{
+    if (!strncmp(ep, "ipc://", 6) || !strncmp(ep, "inproc://", 9)) return 1;
+    if (strncmp(ep, "tcp://", 6)) return 0;
+    const char *h = ep + 6;
+    return !strncmp(h, "127.", 4) || !strncmp(h, "localhost:", 10) || !strncmp(h, "[::1]:", 6);
+}
+
+int srv_stream_endpoint_derive(const char *ep, char *out, size_t n)
+{
+    if (!strncmp(ep, "ipc://", 6)) {
+        int w = snprintf(out, n, "%s.stream", ep);
+        return w > 0 && (size_t)w < n ? 0 : -1;
+    }
+    if (strncmp(ep, "tcp://", 6)) return -1;
+    const char *colon = strrchr(ep, ':');
+    char *end;
+    long port = colon ? strtol(colon + 1, &end, 10) : -1;
+    if (!colon || colon < ep + 6 || *end || port < 1 || port >= 65535) return -1;
+    int w = snprintf(out, n, "%.*s:%ld", (int)(colon - ep), ep, port + 1);
+    return w > 0 && (size_t)w < n ? 0 : -1;
+}

@@ -1,0 +1,42 @@
+/*
+ * srv_config.h - the daemon's settings: defaults, then a config file, then
+ * the environment, then the command line, each overriding the one before.
+ * Every value is range-checked and an error names the source (flag, file
+ * and line, or variable) and the limit.
+ */
+#ifndef SRV_CONFIG_H
+#define SRV_CONFIG_H
+
+#include <stddef.h>
+
+#define SRV_VERSION "0.2.0"
+
+typedef struct {
+    char endpoint[256];          /* control socket (ROUTER) */
+    char stream_endpoint[256];   /* job streams (XPUB); "" = derived */
+    char db[1024];               /* SQLite file */
+    int workers;                 /* jobs run at once */
+    int solver_threads;          /* threads per job (a case may ask for fewer) */
+    int queue_max;               /* queued jobs beyond the running ones */
+    long long max_particles;     /* per job */
+    long long max_steps;         /* per job */
+    double max_wall_s;           /* per job, 0 = none */
+    long long max_request_bytes; /* largest request accepted */
+    int allow_remote;            /* allow non-loopback binds */
+    int verbose;
+} srv_config;
+
+/* Fills c from defaults, --config FILE, MPMD_* variables and argv.
+ * Returns 0 to run, 1 when --help or --version was printed (exit 0), or -1
+ * with a message in err (exit 2). */
+int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errlen);
+
+/* 1 if a ZeroMQ endpoint binds only on this machine (loopback tcp, ipc,
+ * inproc), else 0. */
+int srv_endpoint_is_local(const char *ep);
+
+/* The stream endpoint that goes with a control endpoint: tcp port + 1, or
+ * ipc path + ".stream".  Returns 0, or -1 if ep has neither form. */
+int srv_stream_endpoint_derive(const char *ep, char *out, size_t n);
+
+#endif

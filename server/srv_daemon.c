@@ -1,0 +1,711 @@
+/*
+ * srv_daemon.c - the daemon's main thread: sockets, requests, the stream.
+ *
+ * Design.  The main thread owns every socket it polls: a ROUTER for
+ * requests (ZMQ_ROUTER_MANDATORY, replies sent with ZMQ_DONTWAIT so a
+ * vanished client never blocks it), an XPUB for job streams (its
+ * subscription messages tell which jobs are watched, so snapshots are only
+ * packed for watched jobs), and an inproc PULL that collects the workers'
+ * stream messages and forwards them to the XPUB unchanged.  A request is
+ * answered completely before the next one is read; reads of the store go
+ * through the store's own read connections.
+ *
+ * Frames on the ROUTER: [identity][empty][Request], answered with
+ * [identity][empty][Reply] (a DEALER client sends [empty][Request]; a REQ
+ * client does so by itself).  Anything else is logged and dropped, or
+ * answered BAD_REQUEST when the identity and delimiter are right.
+ */
+#include "srv_daemon.h"
+
+#include "srv_codec.h"
+#include "srv_log.h"
+#include "srv_pool.h"
+#include "store.h"
+
+#include <errno.h>
+#include <math.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <zmq.h>
+
+#define EVENTS_EP "inproc://mpmd-events"
+#define ENERGY_PAGE_DEFAULT 10000u
+#define ENERGY_PAGE_MAX 100000u
+#define LIST_DEFAULT 100u
+
+static volatile sig_atomic_t stop_signal;
+
+static void on_signal(int sig)
+{
+    stop_signal = sig;
+}
+
+typedef struct {
+    const srv_config *cfg;
+    void *zctx, *router, *xpub, *pull;
+    store *st;
+    srv_pool *pool;
+    uint64_t requests, bad_requests;
+} daemon_t;
+
+static double wall_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+/* ---- replies ---- */
+
+static void send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len)
+{
+    if (!buf) {
+        srv_warn(0, "out of memory encoding a reply");
+        return;
+    }
+    if (zmq_send(d->router, zmq_msg_data(id), zmq_msg_size(id), ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
+        zmq_send(d->router, "", 0, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
+        zmq_send(d->router, buf, len, ZMQ_DONTWAIT) < 0)
+        srv_warn(0, "reply not sent: %s", zmq_strerror(errno));
+    free(buf);
+}
+
+static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
+{
+    char msg[1024];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    srv_reply_error(code, msg, field, &buf, &len);
+    send_reply(d, id, buf, len);
+}
+
+/* The JSON path a case error starts with ("materials[0].density: ..."). */
+static void error_field(const char *msg, char *field, size_t n)
+{
+    const char *c = strstr(msg, ": ");
+    size_t k = c ? (size_t)(c - msg) : 0;
+    if (k >= n || strchr(msg, ' ') < c) k = 0;
+    memcpy(field, msg, k);
+    field[k] = 0;
+}
+
+static int status_to_srv(store_status s)
+{
+    static const int map[] = {SRV_STATUS_QUEUED, SRV_STATUS_RUNNING, SRV_STATUS_FINISHED,
+                              SRV_STATUS_FAILED, SRV_STATUS_CANCELLED, SRV_STATUS_INTERRUPTED};
+    return (unsigned)s < 6 ? map[s] : SRV_STATUS_FAILED;
+}
+
+static int status_to_store(int s, store_status *out)
+{
+    if (s < SRV_STATUS_QUEUED || s > SRV_STATUS_INTERRUPTED) return -1;
+    *out = (store_status)(s - 1);
+    return 0;
+}
+
+/* RunInfo from a stored run, with the live figures of a running job. */
+static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_energy_sample *e)
+{
+    memset(ri, 0, sizeof *ri);
+    ri->run_id = ri->job_id = (uint64_t)r->id;
+    ri->name = r->name;
+    ri->status = status_to_srv(r->status);
+    ri->error = r->error;
+    ri->submitted_at = r->submitted_at;
+    ri->started_at = r->started_at;
+    ri->finished_at = r->ended_at;
+    ri->steps = r->steps_done;
+    if (r->status >= STORE_FINISHED) ri->steps_total = r->steps_done;
+    ri->wall_s = r->wall_s;
+    ri->particles = (uint64_t)r->particles;
+    ri->nodes = (uint64_t)r->nodes;
+    ri->dim = r->dim;
+    if (!isnan(r->energy.total)) {
+        memset(e, 0, sizeof *e);
+        e->step = r->steps_done;
+        e->dim = r->dim;
+        e->e.kinetic = r->energy.kinetic;
+        e->e.strain = r->energy.strain;
+        e->e.potential = r->energy.potential;
+        e->e.external_work = r->energy.external_work;
+        e->e.total = r->energy.total;
+        ri->last_energy = e;
+    }
+    srv_job_info ji;
+    if (d && srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
+        ri->status = ji.status;
+        ri->steps = ji.steps;
+        ri->steps_total = ji.steps_total;
+        ri->t = ji.t;
+        ri->wall_s = ji.wall_s;
+        if (ji.particles) ri->particles = ji.particles;
+        if (ji.nodes) ri->nodes = ji.nodes;
+    }
+}
+
+static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case)
+{
+    store_run r;
+    int rc = store_run_get(d->st, (int64_t)run, &r);
+    if (rc == STORE_ENOTFOUND) {
+        reply_error(d, id, SRV_ERR_NOT_FOUND, "", "no run %llu", (unsigned long long)run);
+        return;
+    }
+    if (rc) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading run %llu: %s", (unsigned long long)run,
+                    store_errmsg());
+        return;
+    }
+    srv_run_info ri;
+    srv_energy_sample e;
+    run_info(d, &r, &ri, &e);
+    if (with_case) {
+        ri.case_bytes = r.case_pb;
+        ri.case_len = r.case_len;
+    }
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    if (srv_reply_run(&ri, &buf, &len))
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
+    else send_reply(d, id, buf, len);
+    store_run_clear(&r);
+}
+
+/* ---- requests ---- */
+
+static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+{
+    char err[1024], field[256];
+    if (stop_signal) {
+        reply_error(d, id, SRV_ERR_UNAVAILABLE, "", "mpmd is shutting down");
+        return;
+    }
+    srv_case *sc = NULL;
+    int rc = srv_case_from_pb(rq->case_pb, &sc, err, sizeof err);
+    if (rc) {
+        error_field(err, field, sizeof field);
+        reply_error(d, id, rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_INVALID_CASE,
+                    field, "%s", err);
+        return;
+    }
+    long nparticles = mpm_case_count(&sc->c, err, sizeof err);
+    if (nparticles < 0) {
+        error_field(err, field, sizeof field);
+        reply_error(d, id, SRV_ERR_INVALID_CASE, field, "%s", err);
+        srv_case_destroy(&sc);
+        return;
+    }
+    if (nparticles > d->cfg->max_particles) {
+        reply_error(d, id, SRV_ERR_TOO_LARGE, "bodies",
+                    "bodies: the case has %ld particles, above this server's limit %lld "
+                    "(--max-particles)", nparticles, d->cfg->max_particles);
+        srv_case_destroy(&sc);
+        return;
+    }
+    long long steps = !sc->has_end_time ? sc->steps
+                      : sc->c.dt > 0 ? (long long)ceil(sc->end_time / sc->c.dt - 0.5) : 0;
+    if (steps > d->cfg->max_steps) {
+        reply_error(d, id, SRV_ERR_TOO_LARGE, sc->has_end_time ? "endTime" : "steps",
+                    "%s: the case asks for %lld steps, above this server's limit %lld "
+                    "(--max-steps)", sc->has_end_time ? "endTime" : "steps", steps,
+                    d->cfg->max_steps);
+        srv_case_destroy(&sc);
+        return;
+    }
+    if (!srv_pool_has_room(d->pool)) {
+        reply_error(d, id, SRV_ERR_QUEUE_FULL, "",
+                    "the job queue is full (%d running, %d queued at most); retry later",
+                    d->cfg->workers, d->cfg->queue_max);
+        srv_case_destroy(&sc);
+        return;
+    }
+    uint8_t *pb = NULL;
+    size_t pblen = 0;
+    if (srv_case_pack(rq->case_pb, &pb, &pblen)) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
+        srv_case_destroy(&sc);
+        return;
+    }
+    size_t nodes = 1;
+    for (int k = 0; k < sc->c.grid.dim; k++) nodes *= (size_t)sc->c.grid.nodes[k];
+    store_run r = {0};
+    r.name = sc->name;
+    r.case_pb = pb;
+    r.case_len = pblen;
+    r.method = sc->c.method == MPM_METHOD_GIMP ? STORE_METHOD_GIMP : STORE_METHOD_MPM;
+    r.update = (store_update)sc->c.update;
+    r.dim = sc->c.grid.dim;
+    r.particles = nparticles;
+    r.nodes = (int64_t)nodes;
+    r.status = STORE_QUEUED;
+    r.submitted_at = wall_now();
+    r.server_version = SRV_VERSION;
+    int64_t run = 0;
+    rc = store_run_insert(d->st, &r, &run);
+    free(pb);
+    if (rc) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot record the run: %s", store_errmsg());
+        srv_case_destroy(&sc);
+        return;
+    }
+    const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
+    char namebuf[128];
+    snprintf(namebuf, sizeof namebuf, "%s", name);
+    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, (size_t)nparticles, nodes);
+    if (rc) {
+        store_run_end end = {0};
+        end.status = rc == SRV_POOL_ESTOPPED ? STORE_INTERRUPTED : STORE_FAILED;
+        end.error = rc == SRV_POOL_EFULL ? "job queue full" : rc == SRV_POOL_ESTOPPED
+                    ? STORE_INTERRUPTED_QUEUED : "out of memory";
+        store_run_finish(d->st, run, &end);
+        reply_error(d, id, rc == SRV_POOL_EFULL ? SRV_ERR_QUEUE_FULL : rc == SRV_POOL_ESTOPPED
+                    ? SRV_ERR_UNAVAILABLE : SRV_ERR_INTERNAL, "", "%s", end.error);
+        srv_case_destroy(&sc);
+        return;
+    }
+    srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %ld particles", namebuf, (long)r.dim,
+            r.method == STORE_METHOD_GIMP ? "GMPM" : "MPM", store_update_name(r.update), nparticles);
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    srv_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
+    send_reply(d, id, buf, len);
+}
+
+static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
+{
+    uint8_t *msg = NULL;
+    size_t len = 0;
+    int rc = srv_pool_cancel(d->pool, job, &msg, &len);
+    if (rc == SRV_CANCEL_QUEUED && msg) {
+        char topic[SRV_TOPIC_LEN + 1];
+        srv_topic(job, topic);
+        if (zmq_send(d->xpub, topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) >= 0)
+            zmq_send(d->xpub, msg, len, ZMQ_DONTWAIT);
+    }
+    free(msg);
+    if (rc == SRV_CANCEL_NONE) {
+        store_run r;
+        int src = store_run_get(d->st, (int64_t)job, &r);
+        if (src == STORE_ENOTFOUND) {
+            reply_error(d, id, SRV_ERR_NOT_FOUND, "jobId", "no job %llu", (unsigned long long)job);
+            return;
+        }
+        if (!src) {
+            reply_error(d, id, SRV_ERR_CONFLICT, "jobId", "job %llu already ended (%s)",
+                        (unsigned long long)job, srv_status_name(status_to_srv(r.status)));
+            store_run_clear(&r);
+            return;
+        }
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
+                    store_errmsg());
+        return;
+    }
+    if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested");
+    store_flush(d->st);
+    reply_run(d, id, job, 0);
+}
+
+static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+{
+    size_t limit = rq->limit ? rq->limit : ENERGY_PAGE_DEFAULT;
+    if (limit > ENERGY_PAGE_MAX) limit = ENERGY_PAGE_MAX;
+    store_run r;
+    int rc = store_run_get(d->st, (int64_t)rq->id, &r);
+    if (rc == STORE_ENOTFOUND) {
+        reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu", (unsigned long long)rq->id);
+        return;
+    }
+    int dim = rc ? 3 : r.dim;
+    if (!rc) store_run_clear(&r);
+    /* what the workers published so far is in the store once flushed */
+    store_flush(d->st);
+    store_energy_series es;
+    rc = store_energy_read(d->st, (int64_t)rq->id, (int64_t)rq->from_seq, limit + 1, &es);
+    if (rc) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading energies of run %llu: %s",
+                    (unsigned long long)rq->id, store_errmsg());
+        return;
+    }
+    int more = es.n > limit;
+    size_t n = more ? limit : es.n;
+    srv_energy_sample *s = calloc(n ? n : 1, sizeof *s);
+    if (!s) {
+        store_energy_series_free(&es);
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
+        return;
+    }
+    for (size_t i = 0; i < n; i++) {
+        s[i].step = es.step[i];
+        s[i].t = es.t[i];
+        s[i].seq = (uint64_t)es.seq[i];
+        s[i].dim = dim;
+        s[i].e.kinetic = es.kinetic[i];
+        s[i].e.strain = es.strain[i];
+        s[i].e.potential = es.potential[i];
+        s[i].e.external_work = es.external_work[i];
+        s[i].e.total = es.total[i];
+        s[i].e.momentum[0] = es.momentum_x[i];
+        s[i].e.momentum[1] = es.momentum_y[i];
+        s[i].e.momentum[2] = es.momentum_z[i];
+        s[i].e.mass = es.mass[i];
+    }
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    if (srv_reply_energy(rq->id, s, n, more, &buf, &len))
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu energy samples", n);
+    else send_reply(d, id, buf, len);
+    free(s);
+    store_energy_series_free(&es);
+}
+
+static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+{
+    store_flush(d->st);
+    store_snapshot ss;
+    int rc = store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
+    if (rc == STORE_ENOTFOUND) {
+        if (rq->has_step)
+            reply_error(d, id, SRV_ERR_NOT_FOUND, "step", "run %llu has no stored snapshot at "
+                        "step %lld", (unsigned long long)rq->id, (long long)rq->step);
+        else
+            reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "run %llu has no stored snapshot "
+                        "(the case must set output.recordSnapshots)", (unsigned long long)rq->id);
+        return;
+    }
+    if (rc) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading a snapshot: %s", store_errmsg());
+        return;
+    }
+    size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
+    const double *data = ss.data;
+    const double *arr[5] = {0};
+    size_t cnt[5] = {n * dim, n * dim, n * 6, n, n};
+    for (int i = 0; i < 5; i++)
+        if (ss.fields & (1u << i)) {
+            arr[i] = data + off;
+            off += cnt[i];
+        }
+    if (off * sizeof(double) != ss.size) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "stored snapshot of run %llu at step %lld is "
+                    "corrupt (%zu bytes, expected %zu)", (unsigned long long)rq->id,
+                    (long long)ss.step, ss.size, off * sizeof(double));
+        store_snapshot_clear(&ss);
+        return;
+    }
+    srv_snapshot s = {ss.step, ss.t, n, (int)dim, arr[0], arr[1], arr[2], arr[3], arr[4]};
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    if (srv_reply_snapshot(&s, &buf, &len))
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode the snapshot");
+    else send_reply(d, id, buf, len);
+    store_snapshot_clear(&ss);
+}
+
+static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+{
+    store_run_filter f = {0};
+    store_status st;
+    if (rq->status) {
+        if (status_to_store(rq->status, &st)) {
+            reply_error(d, id, SRV_ERR_BAD_REQUEST, "status", "status: unknown value %d", rq->status);
+            return;
+        }
+        f.status_mask = STORE_STATUS_BIT(st);
+    }
+    f.limit = rq->limit ? rq->limit : LIST_DEFAULT;
+    store_run *runs = NULL;
+    size_t n = 0;
+    if (store_run_list(d->st, &f, &runs, &n)) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "listing runs: %s", store_errmsg());
+        return;
+    }
+    srv_run_info *ri = calloc(n ? n : 1, sizeof *ri);
+    srv_energy_sample *es = calloc(n ? n : 1, sizeof *es);
+    if (!ri || !es) {
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
+    } else {
+        for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i]);
+        uint8_t *buf = NULL;
+        size_t len = 0;
+        if (srv_reply_runs(ri, n, &buf, &len))
+            reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu runs", n);
+        else send_reply(d, id, buf, len);
+    }
+    free(ri);
+    free(es);
+    store_run_list_free(runs, n);
+}
+
+static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t size)
+{
+    char err[512];
+    srv_request rq;
+    d->requests++;
+    if (size > (size_t)d->cfg->max_request_bytes) {
+        d->bad_requests++;
+        srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
+        reply_error(d, id, SRV_ERR_TOO_LARGE, "", "request of %zu bytes is above this server's "
+                    "limit of %lld bytes (--max-request-bytes)", size, d->cfg->max_request_bytes);
+        return;
+    }
+    int rc = srv_request_decode(data, size, (size_t)d->cfg->max_request_bytes, &rq, err, sizeof err);
+    if (rc) {
+        d->bad_requests++;
+        srv_debug(0, "bad request: %s", err);
+        reply_error(d, id, rc == SRV_CODEC_EVERSION ? SRV_ERR_BAD_SCHEMA
+                    : rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_BAD_REQUEST, "",
+                    "%s", err);
+        srv_request_clear(&rq);
+        return;
+    }
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    switch (rq.kind) {
+    case SRV_REQ_SUBMIT: do_submit(d, id, &rq); break;
+    case SRV_REQ_CANCEL: do_cancel(d, id, rq.id); break;
+    case SRV_REQ_STATUS:
+        store_flush(d->st);
+        reply_run(d, id, rq.id, 0);
+        break;
+    case SRV_REQ_GET_RUN:
+        store_flush(d->st);
+        reply_run(d, id, rq.id, rq.with_case);
+        break;
+    case SRV_REQ_LIST_RUNS:
+        store_flush(d->st);
+        do_list(d, id, &rq);
+        break;
+    case SRV_REQ_GET_ENERGY: do_energy(d, id, &rq); break;
+    case SRV_REQ_GET_SNAPSHOT: do_snapshot(d, id, &rq); break;
+    case SRV_REQ_PING:
+        srv_reply_pong(SRV_VERSION, d->cfg->stream_endpoint, &buf, &len);
+        send_reply(d, id, buf, len);
+        break;
+    case SRV_REQ_VERSION: {
+        int maj, min, pat;
+        zmq_version(&maj, &min, &pat);
+        char zv[32];
+        snprintf(zv, sizeof zv, "%d.%d.%d", maj, min, pat);
+        const char *names[] = {"libzmq", "sqlite", "protobuf-c", "schema"};
+        char sv[8];
+        snprintf(sv, sizeof sv, "%d", SRV_SCHEMA_VERSION);
+        const char *vers[] = {zv, store_sqlite_version(), srv_codec_protobuf_c_version(), sv};
+        srv_reply_version(SRV_VERSION, names, vers, 4, &buf, &len);
+        send_reply(d, id, buf, len);
+        break;
+    }
+    default:
+        reply_error(d, id, SRV_ERR_BAD_REQUEST, "", "unknown request kind %d", (int)rq.kind);
+    }
+    srv_request_clear(&rq);
+}
+
+/* Reads one multipart message from the ROUTER and answers it. */
+static void on_router(daemon_t *d)
+{
+    zmq_msg_t part[4];
+    int nparts = 0, more = 1;
+    size_t extra = 0;
+    while (more) {
+        zmq_msg_t m;
+        zmq_msg_init(&m);
+        if (zmq_msg_recv(&m, d->router, ZMQ_DONTWAIT) < 0) {
+            zmq_msg_close(&m);
+            if (errno != EAGAIN) srv_warn(0, "receive: %s", zmq_strerror(errno));
+            break;
+        }
+        more = zmq_msg_more(&m);
+        if (nparts < 4) part[nparts++] = m;
+        else {
+            extra++;
+            zmq_msg_close(&m);
+        }
+    }
+    if (nparts == 3 && !extra && zmq_msg_size(&part[1]) == 0) {
+        handle_request(d, &part[0], zmq_msg_data(&part[2]), zmq_msg_size(&part[2]));
+    } else if (nparts >= 1) {
+        d->bad_requests++;
+        size_t total = (size_t)nparts + extra;
+        srv_warn(0, "malformed request: %zu frames (expected identity, empty delimiter, "
+                 "request)", total);
+        /* answerable when the delimiter is there: the peer speaks the protocol */
+        if (nparts >= 2 && zmq_msg_size(&part[1]) == 0)
+            reply_error(d, &part[0], SRV_ERR_BAD_REQUEST, "",
+                        "expected 1 request frame after the empty delimiter, got %zu", total - 2);
+    }
+    for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
+}
+
+/* Subscription changes on the stream socket: byte 1 = subscribe, 0 = leave. */
+static void on_xpub(daemon_t *d)
+{
+    for (;;) {
+        zmq_msg_t m;
+        zmq_msg_init(&m);
+        if (zmq_msg_recv(&m, d->xpub, ZMQ_DONTWAIT) < 0) {
+            zmq_msg_close(&m);
+            break;
+        }
+        const char *b = zmq_msg_data(&m);
+        size_t n = zmq_msg_size(&m);
+        uint64_t job;
+        if (n == SRV_TOPIC_LEN + 1 && (b[0] == 0 || b[0] == 1) &&
+            srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0) {
+            srv_debug(job, "stream %s", b[0] ? "watched" : "no longer watched");
+            srv_pool_watch(d->pool, job, b[0]);
+        }
+        zmq_msg_close(&m);
+    }
+}
+
+/* Forwards the workers' stream messages to the XPUB. */
+static void on_pull(daemon_t *d)
+{
+    for (int budget = 0; budget < 10000; budget++) {
+        zmq_msg_t m;
+        zmq_msg_init(&m);
+        if (zmq_msg_recv(&m, d->pull, ZMQ_DONTWAIT) < 0) {
+            zmq_msg_close(&m);
+            return;
+        }
+        int more = zmq_msg_more(&m);
+        /* an XPUB drops for subscribers at their high-water mark: a slow
+         * watcher never slows anyone */
+        if (zmq_msg_send(&m, d->xpub, (more ? ZMQ_SNDMORE : 0) | ZMQ_DONTWAIT) < 0)
+            zmq_msg_close(&m);
+    }
+}
+
+static int open_socket(void *zctx, int type, const char *ep, int allow_remote, void **out,
+                       char *err, size_t errlen)
+{
+    *out = NULL;
+    if (!srv_endpoint_is_local(ep)) {
+        if (!allow_remote) {
+            snprintf(err, errlen, "refusing to bind %s: not loopback, ipc:// or inproc:// "
+                     "(mpmd has no authentication yet; pass --allow-remote to bind anyway)", ep);
+            return -1;
+        }
+        srv_warn(0, "!!! binding %s on a non-loopback address: ANYONE WHO CAN REACH IT CAN "
+                 "SUBMIT JOBS AND READ RUNS (no authentication yet) !!!", ep);
+    }
+    void *s = zmq_socket(zctx, type);
+    int zero = 0, one = 1, hwm = 10000;
+    if (!s) {
+        snprintf(err, errlen, "zmq_socket: %s", zmq_strerror(errno));
+        return -1;
+    }
+    if (zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) ||
+        (type == ZMQ_ROUTER && zmq_setsockopt(s, ZMQ_ROUTER_MANDATORY, &one, sizeof one)) ||
+        (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_SNDHWM, &hwm, sizeof hwm)) ||
+        (type == ZMQ_PULL && zmq_setsockopt(s, ZMQ_RCVHWM, &hwm, sizeof hwm))) {
+        snprintf(err, errlen, "setting options on %s: %s", ep, zmq_strerror(errno));
+        zmq_close(s);
+        return -1;
+    }
+    if (type == ZMQ_ROUTER) {
+        /* a hard cap well above the soft limit: larger frames cost the
+         * sender its connection; smaller ones over the soft limit get an
+         * error reply */
+        int64_t cap = 2 * (int64_t)(1u << 30);
+        if (zmq_setsockopt(s, ZMQ_MAXMSGSIZE, &cap, sizeof cap)) {
+            snprintf(err, errlen, "ZMQ_MAXMSGSIZE: %s", zmq_strerror(errno));
+            zmq_close(s);
+            return -1;
+        }
+    }
+    if (zmq_bind(s, ep)) {
+        snprintf(err, errlen, "cannot bind %s: %s", ep, zmq_strerror(errno));
+        zmq_close(s);
+        return -1;
+    }
+    *out = s;
+    return 0;
+}
+
+int srv_daemon_run(const srv_config *cfg)
+{
+    daemon_t d = {0};
+    char err[1024];
+    int rc = 1;
+    d.cfg = cfg;
+    srv_log_set_verbose(cfg->verbose);
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+
+    store_options so = {0};
+    so.log = srv_log_store;
+    if (store_open(cfg->db, &so, &d.st, err, sizeof err)) {
+        srv_warn(0, "%s", err);
+        return 1;
+    }
+    store_stats ss;
+    store_get_stats(d.st, &ss);
+    if (ss.recovered_running || ss.recovered_queued)
+        srv_log(0, "%lld run(s) left running and %lld left queued by an earlier mpmd are now "
+                "interrupted", (long long)ss.recovered_running, (long long)ss.recovered_queued);
+    d.zctx = zmq_ctx_new();
+    if (!d.zctx) {
+        srv_warn(0, "zmq_ctx_new: %s", zmq_strerror(errno));
+        goto out;
+    }
+    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg->allow_remote, &d.router, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg->allow_remote, &d.xpub, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, 0, &d.pull, err, sizeof err)) {
+        srv_warn(0, "%s", err);
+        goto out;
+    }
+    d.pool = srv_pool_new(d.zctx, cfg, d.st, EVENTS_EP, err, sizeof err);
+    if (!d.pool) {
+        srv_warn(0, "%s", err);
+        goto out;
+    }
+    srv_log(0, "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
+            "queue %d", SRV_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
+            cfg->queue_max);
+    while (!stop_signal) {
+        zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},
+                                  {d.xpub, 0, ZMQ_POLLIN, 0},
+                                  {d.pull, 0, ZMQ_POLLIN, 0}};
+        int n = zmq_poll(items, 3, 250);
+        if (n < 0) {
+            if (errno == EINTR) continue;
+            srv_warn(0, "zmq_poll: %s", zmq_strerror(errno));
+            break;
+        }
+        if (items[2].revents & ZMQ_POLLIN) on_pull(&d);
+        if (items[1].revents & ZMQ_POLLIN) on_xpub(&d);
+        if (items[0].revents & ZMQ_POLLIN) on_router(&d);
+    }
+    srv_log(0, "%s: shutting down", stop_signal == SIGINT ? "SIGINT" : stop_signal == SIGTERM
+            ? "SIGTERM" : "stopping");
+    rc = 0;
+out:
+    srv_pool_destroy(&d.pool);
+    if (d.pull) {
+        on_pull(&d); /* last words of the interrupted jobs */
+        zmq_close(d.pull);
+    }
+    if (d.xpub) zmq_close(d.xpub);
+    if (d.router) zmq_close(d.router);
+    if (d.zctx) zmq_ctx_term(d.zctx);
+    store_close(&d.st);
+    srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,
+            (unsigned long long)d.bad_requests);
+    return rc;
+}

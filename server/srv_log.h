@@ -1,0 +1,20 @@
+/*
+ * srv_log.h - the daemon's log: one line per event on stderr, with a UTC
+ * timestamp, the level and the job id when there is one.  Safe to call from
+ * any thread (one write per line).
+ */
+#ifndef SRV_LOG_H
+#define SRV_LOG_H
+
+#include <stdint.h>
+
+/* Logs a line; job 0 means "no job".  Debug lines show only when verbose. */
+void srv_log(uint64_t job, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+void srv_warn(uint64_t job, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+void srv_debug(uint64_t job, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+void srv_log_set_verbose(int verbose);
+
+/* A store_log_fn-compatible sink (user data unused). */
+void srv_log_store(void *ud, const char *msg);
+
+#endif

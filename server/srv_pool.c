@@ -1,0 +1,625 @@
+/*
+ * srv_pool.c - job queue and worker threads (see srv_pool.h).
+ *
+ * Design.  One mutex guards the pool: the FIFO of queued jobs, the table of
+ * running jobs (one slot per worker) and the fields of a job that Status
+ * reads.  The main thread only ever holds it briefly (submit, info,
+ * cancel, watch); a worker takes it to dequeue, to publish progress
+ * figures, and to retire its job.  The per-step loop itself runs without
+ * the lock: it reads the job's `cancel` and `watched` flags, which are
+ * atomics.
+ *
+ * Each worker owns a PUSH socket connected to the main thread's PULL; it
+ * sends with ZMQ_DONTWAIT, so a main thread that falls behind costs the
+ * simulation nothing: the message is dropped, its seq number is still used,
+ * and the gap is visible to watchers (who refetch energies from the store,
+ * where every sample is recorded regardless).
+ */
+#include "srv_pool.h"
+
+#include "mpm.h"
+#include "srv_log.h"
+
+#include <errno.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <zmq.h>
+
+enum { CANCEL_USER = 1, CANCEL_SHUTDOWN = 2 };
+
+typedef struct srv_job {
+    uint64_t id;
+    srv_case *sc;
+    atomic_int cancel;      /* 0, CANCEL_USER, CANCEL_SHUTDOWN */
+    atomic_int watched;     /* someone subscribes to the job's stream */
+    /* guarded by the pool mutex */
+    int status;
+    int64_t steps, steps_total;
+    double t, wall_s, submitted_at, started_at;
+    size_t particles, nodes;
+    struct srv_job *next;   /* FIFO link */
+    /* worker-private */
+    uint64_t msg_seq, energy_seq;
+} srv_job;
+
+typedef struct {
+    srv_pool *pool;
+    int index;
+    pthread_t thread;
+    int started;
+} worker;
+
+struct srv_pool {
+    void *zctx;
+    const srv_config *cfg;
+    store *st;
+    char events_ep[128];
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    srv_job *head, *tail;   /* queued */
+    size_t nqueued;
+    srv_job **running;      /* one slot per worker */
+    worker *workers;
+    int nworkers;
+    int stopping;
+    int joined;
+};
+
+static double wall_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static double mono_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+void srv_topic(uint64_t job, char *buf)
+{
+    snprintf(buf, SRV_TOPIC_LEN + 1, "job:%016llx:", (unsigned long long)job);
+}
+
+int srv_topic_parse(const char *buf, size_t len, uint64_t *job)
+{
+    if (len != SRV_TOPIC_LEN || memcmp(buf, "job:", 4) || buf[SRV_TOPIC_LEN - 1] != ':') return -1;
+    uint64_t v = 0;
+    for (int i = 4; i < 20; i++) {
+        char c = buf[i];
+        int d = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+        if (d < 0) return -1;
+        v = v << 4 | (uint64_t)d;
+    }
+    *job = v;
+    return 0;
+}
+
+static void job_free(srv_job *j)
+{
+    if (!j) return;
+    srv_case_destroy(&j->sc);
+    free(j);
+}
+
+/* ---- the stream, from a worker ---- */
+
+typedef struct {
+    srv_pool *p;
+    void *push;
+    srv_job *j;
+    char topic[SRV_TOPIC_LEN + 1];
+} ctx;
+
+static void publish(ctx *c, uint8_t *buf, size_t len)
+{
+    if (!buf) return;
+    if (zmq_send(c->push, c->topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
+        zmq_send(c->push, buf, len, ZMQ_DONTWAIT) < 0) {
+        if (errno != EAGAIN) srv_warn(c->j->id, "stream send: %s", zmq_strerror(errno));
+        else srv_debug(c->j->id, "stream message dropped (main thread behind)");
+    }
+    free(buf);
+}
+
+static void energy_sample(ctx *c, mpm_sim *sim, srv_energy_sample *out)
+{
+    srv_job *j = c->j;
+    srv_energy_sample s = {0};
+    s.step = mpm_sim_steps(sim);
+    s.t = mpm_sim_time(sim);
+    s.dim = mpm_sim_dim(sim);
+    mpm_sim_energy(sim, &s.e);
+    s.seq = j->energy_seq++;
+    store_energy_sample r = {0};
+    r.run_id = (int64_t)j->id;
+    r.seq = (int64_t)s.seq;
+    r.step = s.step;
+    r.t = s.t;
+    r.kinetic = s.e.kinetic;
+    r.strain = s.e.strain;
+    r.potential = s.e.potential;
+    r.external_work = s.e.external_work;
+    r.total = s.e.total;
+    for (int d = 0; d < 3; d++) r.momentum[d] = s.e.momentum[d];
+    r.mass = s.e.mass;
+    int rc = store_energy_append(c->p->st, &r);
+    if (rc) srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
+                     store_strerror(rc));
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    if (srv_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
+        srv_warn(j->id, "out of memory encoding an energy sample");
+    publish(c, buf, len);
+    if (out) *out = s;
+}
+
+/* Snapshot buffers are allocated on first use, once per job. */
+typedef struct {
+    double *x, *v, *stress, *pressure, *volume, *packed;
+    size_t n;
+} snapbuf;
+
+static void snapbuf_free(snapbuf *b)
+{
+    free(b->x);
+    free(b->v);
+    free(b->stress);
+    free(b->pressure);
+    free(b->volume);
+    free(b->packed);
+    memset(b, 0, sizeof *b);
+}
+
+static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
+{
+    srv_job *j = c->j;
+    unsigned f = j->sc->snapshot_fields;
+    size_t n = mpm_sim_particles(sim);
+    int dim = mpm_sim_dim(sim);
+    size_t per = 0;
+    if (!b->n) {
+        b->n = n;
+        if (f & SRV_SNAP_X) per += (size_t)dim;
+        if (f & SRV_SNAP_V) per += (size_t)dim;
+        if (f & SRV_SNAP_STRESS) per += 6;
+        if (f & SRV_SNAP_PRESSURE) per += 1;
+        if (f & SRV_SNAP_VOLUME) per += 1;
+        if (((f & SRV_SNAP_X) && !(b->x = malloc(n * dim * sizeof(double)))) ||
+            ((f & SRV_SNAP_V) && !(b->v = malloc(n * dim * sizeof(double)))) ||
+            ((f & SRV_SNAP_STRESS) && !(b->stress = malloc(n * 6 * sizeof(double)))) ||
+            ((f & SRV_SNAP_PRESSURE) && !(b->pressure = malloc(n * sizeof(double)))) ||
+            ((f & SRV_SNAP_VOLUME) && !(b->volume = malloc(n * sizeof(double)))) ||
+            (record && !(b->packed = malloc(n * per * sizeof(double) + 1)))) {
+            srv_warn(j->id, "out of memory for snapshots of %zu particles; snapshots off", n);
+            snapbuf_free(b);
+            return -1;
+        }
+    }
+    mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
+    srv_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n, dim,
+                      b->x, b->v, b->stress, b->pressure, b->volume};
+    if (record && b->packed) {
+        /* stored layout: the requested arrays back to back, in field-bit order */
+        size_t off = 0;
+        const double *arr[5] = {b->x, b->v, b->stress, b->pressure, b->volume};
+        size_t cnt[5] = {n * dim, n * dim, n * 6, n, n};
+        for (int i = 0; i < 5; i++)
+            if (arr[i]) {
+                memcpy(b->packed + off, arr[i], cnt[i] * sizeof(double));
+                off += cnt[i];
+            }
+        store_snapshot ss = {(int64_t)j->id, s.step, s.t, (int64_t)n, dim, f, b->packed,
+                             off * sizeof(double)};
+        int rc = store_snapshot_put(c->p->st, &ss);
+        if (rc) srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
+                         store_strerror(rc));
+    }
+    if (stream) {
+        uint8_t *buf = NULL;
+        size_t len = 0;
+        if (srv_stream_snapshot(j->id, j->msg_seq++, &s, &buf, &len))
+            srv_warn(j->id, "out of memory encoding a snapshot");
+        publish(c, buf, len);
+    }
+    return 0;
+}
+
+static void progress(ctx *c, mpm_sim *sim, double wall)
+{
+    srv_job *j = c->j;
+    int64_t k = mpm_sim_steps(sim);
+    double t = mpm_sim_time(sim), dt = mpm_sim_dt(sim);
+    int64_t total = j->sc->has_end_time ? k + (int64_t)ceil((j->sc->end_time - t) / dt - 0.5)
+                                        : (int64_t)j->sc->steps;
+    pthread_mutex_lock(&c->p->mu);
+    j->steps = k;
+    j->steps_total = total;
+    j->t = t;
+    j->wall_s = wall;
+    pthread_mutex_unlock(&c->p->mu);
+    store_run_progress(c->p->st, (int64_t)j->id, k, wall,
+                       wall > 0 ? (double)k * (double)mpm_sim_particles(sim) / wall : 0);
+    srv_progress pr = {k, total, t, dt, wall};
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    if (srv_stream_progress(j->id, j->msg_seq++, &pr, &buf, &len))
+        srv_warn(j->id, "out of memory encoding progress");
+    publish(c, buf, len);
+}
+
+/* Records the end and publishes Finished. */
+static void finish(ctx *c, int status, const char *error, int64_t steps, double t, double wall,
+                   size_t particles, const srv_energy_sample *last)
+{
+    srv_job *j = c->j;
+    store_run_end end = {0};
+    static const store_status map[] = {[SRV_STATUS_FINISHED] = STORE_FINISHED,
+                                       [SRV_STATUS_FAILED] = STORE_FAILED,
+                                       [SRV_STATUS_CANCELLED] = STORE_CANCELLED,
+                                       [SRV_STATUS_INTERRUPTED] = STORE_INTERRUPTED};
+    end.status = map[status];
+    end.steps_done = steps;
+    end.wall_s = wall;
+    end.psteps_per_s = wall > 0 ? (double)steps * (double)particles / wall : 0;
+    end.error = error;
+    if (last) {
+        end.has_energy = 1;
+        end.energy = (store_energies){last->e.kinetic, last->e.strain, last->e.potential,
+                                      last->e.external_work, last->e.total};
+    }
+    int rc = store_run_finish(c->p->st, (int64_t)j->id, &end);
+    if (rc) srv_warn(j->id, "end of run not recorded: %s", store_strerror(rc));
+    srv_finished f = {status, error, steps, t, wall, last};
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    if (srv_stream_finished(j->id, j->msg_seq++, &f, &buf, &len))
+        srv_warn(j->id, "out of memory encoding the end of the stream");
+    publish(c, buf, len);
+    srv_log(j->id, "%s after %lld steps, t = %g, %.3f s%s%s", srv_status_name(status),
+            (long long)steps, t, wall, error ? ": " : "", error ? error : "");
+}
+
+static void run_job(srv_pool *p, void *push, srv_job *j)
+{
+    ctx c = {p, push, j, ""};
+    srv_topic(j->id, c.topic);
+    srv_case *sc = j->sc;
+    const srv_config *cfg = p->cfg;
+    double start = wall_now(), t0 = mono_now();
+    store_run_set_status(p->st, (int64_t)j->id, STORE_RUNNING, start, NULL);
+    int threads = sc->c.threads > 0 && sc->c.threads < cfg->solver_threads ? sc->c.threads
+                                                                            : cfg->solver_threads;
+    sc->c.threads = threads;
+    char err[512];
+    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    if (!sim) {
+        finish(&c, SRV_STATUS_FAILED, err[0] ? err : "out of memory", 0, 0, 0, 0, NULL);
+        return;
+    }
+    size_t n = mpm_sim_particles(sim);
+    pthread_mutex_lock(&p->mu);
+    j->started_at = start;
+    j->particles = n;
+    j->nodes = mpm_sim_nodes(sim);
+    pthread_mutex_unlock(&p->mu);
+    srv_log(j->id, "running: %zu particles, %zu nodes, %d thread%s", n, mpm_sim_nodes(sim),
+            threads, threads > 1 ? "s" : "");
+
+    srv_energy_sample last;
+    snapbuf sb = {0};
+    int snaps_ok = 1, status = SRV_STATUS_FINISHED;
+    char why[512] = "";
+    energy_sample(&c, sim, &last);
+    progress(&c, sim, 0);
+    double next_progress = 0.2;
+    unsigned every = sc->energy_every, severy = sc->snapshot_every;
+    for (;;) {
+        int cancel = atomic_load_explicit(&j->cancel, memory_order_relaxed);
+        if (cancel) {
+            status = cancel == CANCEL_USER ? SRV_STATUS_CANCELLED : SRV_STATUS_INTERRUPTED;
+            snprintf(why, sizeof why, "%s at step %ld",
+                     cancel == CANCEL_USER ? "cancelled by a client" : "daemon shutting down",
+                     mpm_sim_steps(sim));
+            break;
+        }
+        int64_t k = mpm_sim_steps(sim);
+        if (sc->has_end_time ? mpm_sim_time(sim) >= sc->end_time - 0.5 * mpm_sim_dt(sim)
+                             : k >= (int64_t)sc->steps)
+            break;
+        if (k >= cfg->max_steps) {
+            status = SRV_STATUS_FAILED;
+            snprintf(why, sizeof why, "step limit %lld of this server reached (--max-steps)",
+                     cfg->max_steps);
+            break;
+        }
+        if (mpm_sim_step(sim)) {
+            status = SRV_STATUS_FAILED;
+            snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+            break;
+        }
+        k++;
+        if (every && k % every == 0) energy_sample(&c, sim, &last);
+        if (severy && snaps_ok && k % severy == 0) {
+            int watched = atomic_load_explicit(&j->watched, memory_order_relaxed);
+            if (watched || sc->record_snapshots)
+                snaps_ok = snapshot(&c, sim, &sb, watched, sc->record_snapshots) == 0;
+        }
+        if ((k & 31) == 0) {
+            double w = mono_now() - t0;
+            if (w >= next_progress) {
+                progress(&c, sim, w);
+                next_progress = w + 0.2;
+            }
+            if (cfg->max_wall_s > 0 && w > cfg->max_wall_s) {
+                status = SRV_STATUS_FAILED;
+                snprintf(why, sizeof why, "wall-time limit %g s of this server reached "
+                         "(--max-wall-s)", cfg->max_wall_s);
+                break;
+            }
+        }
+    }
+    double wall = mono_now() - t0;
+    if (last.step != mpm_sim_steps(sim) && status != SRV_STATUS_FAILED)
+        energy_sample(&c, sim, &last);
+    else if (status == SRV_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
+        /* a diverged state has no meaningful energies; keep the last good one */
+    }
+    progress(&c, sim, wall);
+    finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last);
+    snapbuf_free(&sb);
+    mpm_sim_destroy(&sim);
+}
+
+static void *worker_main(void *arg)
+{
+    worker *w = arg;
+    srv_pool *p = w->pool;
+    void *push = zmq_socket(p->zctx, ZMQ_PUSH);
+    int hwm = 100000, linger = 2000;
+    if (!push || zmq_setsockopt(push, ZMQ_SNDHWM, &hwm, sizeof hwm) ||
+        zmq_setsockopt(push, ZMQ_LINGER, &linger, sizeof linger) ||
+        zmq_connect(push, p->events_ep)) {
+        srv_warn(0, "worker %d: cannot connect to %s: %s; worker not started", w->index,
+                 p->events_ep, zmq_strerror(errno));
+        if (push) zmq_close(push);
+        return NULL;
+    }
+    for (;;) {
+        pthread_mutex_lock(&p->mu);
+        while (!p->head && !p->stopping) pthread_cond_wait(&p->cv, &p->mu);
+        if (p->stopping) {
+            pthread_mutex_unlock(&p->mu);
+            break;
+        }
+        srv_job *j = p->head;
+        p->head = j->next;
+        if (!p->head) p->tail = NULL;
+        p->nqueued--;
+        j->next = NULL;
+        j->status = SRV_STATUS_RUNNING;
+        p->running[w->index] = j;
+        pthread_mutex_unlock(&p->mu);
+
+        run_job(p, push, j);
+
+        pthread_mutex_lock(&p->mu);
+        p->running[w->index] = NULL;
+        pthread_mutex_unlock(&p->mu);
+        job_free(j);
+    }
+    zmq_close(push);
+    return NULL;
+}
+
+srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char *events_ep,
+                       char *err, size_t errlen)
+{
+    srv_pool *p = calloc(1, sizeof *p);
+    if (!p) {
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    p->zctx = zctx;
+    p->cfg = cfg;
+    p->st = st;
+    snprintf(p->events_ep, sizeof p->events_ep, "%s", events_ep);
+    p->nworkers = cfg->workers;
+    if (pthread_mutex_init(&p->mu, NULL)) {
+        free(p);
+        snprintf(err, errlen, "cannot create a mutex");
+        return NULL;
+    }
+    if (pthread_cond_init(&p->cv, NULL)) {
+        pthread_mutex_destroy(&p->mu);
+        free(p);
+        snprintf(err, errlen, "cannot create a condition variable");
+        return NULL;
+    }
+    p->running = calloc((size_t)p->nworkers, sizeof *p->running);
+    p->workers = calloc((size_t)p->nworkers, sizeof *p->workers);
+    if (!p->running || !p->workers) {
+        snprintf(err, errlen, "out of memory");
+        srv_pool_destroy(&p);
+        return NULL;
+    }
+    for (int i = 0; i < p->nworkers; i++) {
+        p->workers[i].pool = p;
+        p->workers[i].index = i;
+        if (pthread_create(&p->workers[i].thread, NULL, worker_main, &p->workers[i])) {
+            snprintf(err, errlen, "cannot start worker thread %d of %d", i + 1, p->nworkers);
+            srv_pool_destroy(&p);
+            return NULL;
+        }
+        p->workers[i].started = 1;
+    }
+    return p;
+}
+
+int srv_pool_has_room(srv_pool *p)
+{
+    pthread_mutex_lock(&p->mu);
+    int busy = 0;
+    for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
+    /* a job goes straight to an idle worker, or waits in the queue */
+    int room = !p->stopping && p->nqueued + (size_t)busy < (size_t)p->nworkers + (size_t)p->cfg->queue_max;
+    pthread_mutex_unlock(&p->mu);
+    return room;
+}
+
+int srv_pool_submit(srv_pool *p, uint64_t id, srv_case **sc, double submitted_at,
+                    size_t particles, size_t nodes)
+{
+    srv_job *j = calloc(1, sizeof *j);
+    if (!j) return SRV_POOL_ENOMEM;
+    j->id = id;
+    atomic_init(&j->cancel, 0);
+    atomic_init(&j->watched, 0);
+    j->status = SRV_STATUS_QUEUED;
+    j->submitted_at = submitted_at;
+    j->particles = particles;
+    j->nodes = nodes;
+    pthread_mutex_lock(&p->mu);
+    int busy = 0;
+    for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
+    int rc = p->stopping ? SRV_POOL_ESTOPPED
+             : p->nqueued + (size_t)busy >= (size_t)p->nworkers + (size_t)p->cfg->queue_max
+                 ? SRV_POOL_EFULL
+                 : 0;
+    if (!rc) {
+        j->sc = *sc;
+        *sc = NULL;
+        j->steps_total = j->sc->has_end_time ? 0 : (int64_t)j->sc->steps;
+        if (p->tail) p->tail->next = j;
+        else p->head = j;
+        p->tail = j;
+        p->nqueued++;
+        pthread_cond_signal(&p->cv);
+    }
+    pthread_mutex_unlock(&p->mu);
+    if (rc) free(j);
+    return rc;
+}
+
+static srv_job *find_locked(srv_pool *p, uint64_t id, srv_job **prev)
+{
+    if (prev) *prev = NULL;
+    for (srv_job *j = p->head, *pv = NULL; j; pv = j, j = j->next)
+        if (j->id == id) {
+            if (prev) *prev = pv;
+            return j;
+        }
+    for (int i = 0; i < p->nworkers; i++)
+        if (p->running[i] && p->running[i]->id == id) return p->running[i];
+    return NULL;
+}
+
+int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out)
+{
+    pthread_mutex_lock(&p->mu);
+    srv_job *j = find_locked(p, id, NULL);
+    if (j) {
+        out->status = j->status;
+        out->steps = j->steps;
+        out->steps_total = j->steps_total;
+        out->t = j->t;
+        out->wall_s = j->wall_s;
+        out->submitted_at = j->submitted_at;
+        out->started_at = j->started_at;
+        out->particles = j->particles;
+        out->nodes = j->nodes;
+        out->dim = j->sc ? j->sc->c.grid.dim : 0;
+        out->name = j->sc ? j->sc->name : "";
+    }
+    pthread_mutex_unlock(&p->mu);
+    return j ? 0 : -1;
+}
+
+int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
+{
+    *msg = NULL;
+    *len = 0;
+    pthread_mutex_lock(&p->mu);
+    srv_job *prev, *j = find_locked(p, id, &prev);
+    int rc = SRV_CANCEL_NONE;
+    if (j && j->status == SRV_STATUS_QUEUED) {
+        if (prev) prev->next = j->next;
+        else p->head = j->next;
+        if (p->tail == j) p->tail = prev;
+        p->nqueued--;
+        rc = SRV_CANCEL_QUEUED;
+    } else if (j) {
+        atomic_store(&j->cancel, CANCEL_USER);
+        rc = SRV_CANCEL_RUNNING;
+    }
+    pthread_mutex_unlock(&p->mu);
+    if (rc == SRV_CANCEL_QUEUED) {
+        store_run_end end = {0};
+        end.status = STORE_CANCELLED;
+        end.error = "cancelled by a client before it started";
+        int src = store_run_finish(p->st, (int64_t)id, &end);
+        if (src) srv_warn(id, "cancellation not recorded: %s", store_strerror(src));
+        srv_finished f = {SRV_STATUS_CANCELLED, end.error, 0, 0, 0, NULL};
+        if (srv_stream_finished(id, j->msg_seq++, &f, msg, len))
+            srv_warn(id, "out of memory encoding the end of the stream");
+        srv_log(id, "cancelled while queued");
+        job_free(j);
+    }
+    return rc;
+}
+
+void srv_pool_watch(srv_pool *p, uint64_t id, int on)
+{
+    pthread_mutex_lock(&p->mu);
+    srv_job *j = find_locked(p, id, NULL);
+    if (j) atomic_store(&j->watched, on);
+    pthread_mutex_unlock(&p->mu);
+}
+
+void srv_pool_shutdown(srv_pool *p)
+{
+    if (p->joined) return;
+    pthread_mutex_lock(&p->mu);
+    p->stopping = 1;
+    for (int i = 0; i < p->nworkers; i++)
+        if (p->running[i]) atomic_store(&p->running[i]->cancel, CANCEL_SHUTDOWN);
+    srv_job *q = p->head;
+    p->head = p->tail = NULL;
+    p->nqueued = 0;
+    pthread_cond_broadcast(&p->cv);
+    pthread_mutex_unlock(&p->mu);
+    while (q) {
+        srv_job *nx = q->next;
+        store_run_end end = {0};
+        end.status = STORE_INTERRUPTED;
+        end.error = STORE_INTERRUPTED_QUEUED;
+        store_run_finish(p->st, (int64_t)q->id, &end);
+        srv_log(q->id, "interrupted while queued");
+        job_free(q);
+        q = nx;
+    }
+    for (int i = 0; i < p->nworkers; i++)
+        if (p->workers[i].started) pthread_join(p->workers[i].thread, NULL);
+    p->joined = 1;
+}
+
+void srv_pool_destroy(srv_pool **pp)
+{
+    srv_pool *p = pp ? *pp : NULL;
+    if (!p) return;
+    if (p->workers) srv_pool_shutdown(p);
+    pthread_cond_destroy(&p->cv);
+    pthread_mutex_destroy(&p->mu);
+    free(p->running);
+    free(p->workers);
+    free(p);
+    *pp = NULL;
+}

@@ -1,0 +1,83 @@
+/*
+ * srv_pool.h - the job queue and the worker threads that run jobs.
+ *
+ * The main thread submits checked cases; a bounded FIFO holds them until a
+ * worker is free.  Each worker runs one job at a time with the solver,
+ * records its energies, progress, snapshots and end in the store, and
+ * publishes its stream messages to the main thread over an inproc PUSH
+ * socket of its own (frames: topic, StreamMsg bytes); the main thread
+ * forwards them to the stream socket.  No ZeroMQ socket is shared between
+ * threads.  A job is cancelled between two steps.
+ */
+#ifndef SRV_POOL_H
+#define SRV_POOL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "srv_codec.h"
+#include "srv_config.h"
+#include "store.h"
+
+/* Length of a stream topic: "job:%016llx:" */
+#define SRV_TOPIC_LEN 21
+/* Writes the topic of a job into buf (SRV_TOPIC_LEN + 1 bytes). */
+void srv_topic(uint64_t job, char *buf);
+/* Parses a topic prefix of exactly SRV_TOPIC_LEN bytes; 0 if it is one. */
+int srv_topic_parse(const char *buf, size_t len, uint64_t *job);
+
+enum {
+    SRV_POOL_EFULL = -1,    /* the queue is full */
+    SRV_POOL_ESTOPPED = -2, /* shutting down */
+    SRV_POOL_ENOMEM = -3
+};
+
+/* What Cancel found. */
+enum { SRV_CANCEL_NONE = 0, SRV_CANCEL_QUEUED = 1, SRV_CANCEL_RUNNING = 2 };
+
+/* A live job's state, for Status replies. */
+typedef struct {
+    int status;               /* srv_status: QUEUED or RUNNING */
+    int64_t steps, steps_total;
+    double t, wall_s, submitted_at, started_at;
+    size_t particles, nodes;
+    int dim;
+    const char *name;         /* valid until the next pool call */
+} srv_job_info;
+
+typedef struct srv_pool srv_pool;
+
+/* Starts cfg->workers threads whose PUSH sockets connect to events_ep
+ * (bound by the caller).  Returns NULL with a message on failure. */
+srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char *events_ep,
+                       char *err, size_t errlen);
+
+/* Queues job `id` (its run record already inserted).  Takes ownership of
+ * *sc (set to NULL) on success.  Returns 0, SRV_POOL_EFULL or
+ * SRV_POOL_ESTOPPED. */
+int srv_pool_submit(srv_pool *p, uint64_t id, srv_case **sc, double submitted_at,
+                    size_t particles, size_t nodes);
+
+/* 1 if the queue has room for another job. */
+int srv_pool_has_room(srv_pool *p);
+
+/* State of a queued or running job: 0, or -1 if it is not live. */
+int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out);
+
+/* Cancels a live job.  A queued one is removed and recorded CANCELLED at
+ * once, and *msg / *len get its Finished stream message for the caller to
+ * publish (free() it); a running one stops before its next step.  Returns
+ * SRV_CANCEL_NONE, SRV_CANCEL_QUEUED or SRV_CANCEL_RUNNING. */
+int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len);
+
+/* Somebody subscribed to (on = 1) or left (on = 0) the job's stream. */
+void srv_pool_watch(srv_pool *p, uint64_t id, int on);
+
+/* Stops: running jobs end INTERRUPTED before their next step, queued ones
+ * are recorded INTERRUPTED, and the workers are joined. */
+void srv_pool_shutdown(srv_pool *p);
+
+/* Shuts down if needed and frees the pool; nulls the pointer. */
+void srv_pool_destroy(srv_pool **p);
+
+#endif
