@@ -113,8 +113,11 @@ static int status_to_store(int s, store_status *out)
     return 0;
 }
 
-/* RunInfo from a stored run, with the live figures of a running job. */
-static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_energy_sample *e)
+/* RunInfo from a stored run, with its last energy sample and stored
+ * snapshots (x, cleared by the caller after encoding) and the live figures
+ * of a running job. */
+static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_energy_sample *e,
+                     store_run_extra *x)
 {
     memset(ri, 0, sizeof *ri);
     ri->run_id = ri->job_id = (uint64_t)r->id;
@@ -141,8 +144,29 @@ static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_ener
         e->e.total = r->energy.total;
         ri->last_energy = e;
     }
+    if (store_run_extras(d->st, r->id, x) == 0) {
+        ri->energy_samples = (uint64_t)x->energy_count;
+        ri->snapshot_steps = x->snapshot_steps;
+        ri->n_snapshot_steps = x->n_snapshots;
+        store_energy_series es;
+        if (x->last_seq >= 0 && store_energy_read(d->st, r->id, x->last_seq, 1, &es) == 0) {
+            if (es.n == 1) {
+                memset(e, 0, sizeof *e);
+                e->step = es.step[0];
+                e->t = es.t[0];
+                e->seq = (uint64_t)es.seq[0];
+                e->dim = r->dim;
+                e->e = (mpm_energy){es.kinetic[0], es.strain[0], es.potential[0],
+                                    es.external_work[0], es.total[0], es.mass[0],
+                                    {es.momentum_x[0], es.momentum_y[0], es.momentum_z[0]}};
+                ri->last_energy = e;
+                ri->t = e->t;
+            }
+            store_energy_series_free(&es);
+        }
+    }
     srv_job_info ji;
-    if (d && srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
+    if (srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
         ri->status = ji.status;
         ri->steps = ji.steps;
         ri->steps_total = ji.steps_total;
@@ -168,7 +192,8 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case)
     }
     srv_run_info ri;
     srv_energy_sample e;
-    run_info(d, &r, &ri, &e);
+    store_run_extra x;
+    run_info(d, &r, &ri, &e, &x);
     if (with_case) {
         ri.case_bytes = r.case_pb;
         ri.case_len = r.case_len;
@@ -178,6 +203,7 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case)
     if (srv_reply_run(&ri, &buf, &len))
         reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
     else send_reply(d, id, buf, len);
+    store_run_extra_clear(&x);
     store_run_clear(&r);
 }
 
@@ -431,16 +457,20 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     }
     srv_run_info *ri = calloc(n ? n : 1, sizeof *ri);
     srv_energy_sample *es = calloc(n ? n : 1, sizeof *es);
-    if (!ri || !es) {
+    store_run_extra *xs = calloc(n ? n : 1, sizeof *xs);
+    if (!ri || !es || !xs) {
         reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
     } else {
-        for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i]);
+        for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
         uint8_t *buf = NULL;
         size_t len = 0;
         if (srv_reply_runs(ri, n, &buf, &len))
             reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu runs", n);
         else send_reply(d, id, buf, len);
     }
+    if (xs)
+        for (size_t i = 0; i < n; i++) store_run_extra_clear(&xs[i]);
+    free(xs);
     free(ri);
     free(es);
     store_run_list_free(runs, n);

@@ -1715,6 +1715,70 @@ out:
     return r;
 }
 
+int store_run_extras(store *s, int64_t run_id, store_run_extra *out)
+{
+    if (!s || !out) return fail(STORE_EINVAL, "store_run_extras: NULL argument");
+    memset(out, 0, sizeof *out);
+    out->last_seq = -1;
+    sqlite3 *db;
+    int r = reader_get(s, &db);
+    if (r) return r;
+    sqlite3_stmt *st = NULL;
+    int rc;
+    size_t cap = 0;
+    if ((r = db_exec(db, "BEGIN", "reading a run's extras"))) goto out;
+    rc = sqlite3_prepare_v2(db, "SELECT count(*), max(seq) FROM energy WHERE run_id = ?1", -1,
+                            &st, NULL);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, run_id);
+    if (rc == SQLITE_OK) rc = sqlite3_step(st);
+    if (rc != SQLITE_ROW) {
+        r = sql_fail(db, rc, "counting energy samples");
+        goto out;
+    }
+    out->energy_count = sqlite3_column_int64(st, 0);
+    if (sqlite3_column_type(st, 1) != SQLITE_NULL) out->last_seq = sqlite3_column_int64(st, 1);
+    sqlite3_finalize(st);
+    st = NULL;
+    rc = sqlite3_prepare_v2(db, "SELECT step FROM snapshots WHERE run_id = ?1 ORDER BY step", -1,
+                            &st, NULL);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, run_id);
+    if (rc != SQLITE_OK) {
+        r = sql_fail(db, rc, "listing snapshots");
+        goto out;
+    }
+    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+        if (out->n_snapshots == cap) {
+            size_t ncap = cap ? 2 * cap : 16;
+            int64_t *nb = realloc(out->snapshot_steps, ncap * sizeof *nb);
+            if (!nb) {
+                r = fail(STORE_ENOMEM, "out of memory listing snapshots");
+                goto out;
+            }
+            out->snapshot_steps = nb;
+            cap = ncap;
+        }
+        out->snapshot_steps[out->n_snapshots++] = sqlite3_column_int64(st, 0);
+    }
+    if (rc != SQLITE_DONE) r = sql_fail(db, rc, "listing snapshots");
+out:
+    if (st) sqlite3_finalize(st);
+    if (!sqlite3_get_autocommit(db)) {
+        int r2 = db_exec(db, "COMMIT", "ending the read transaction");
+        if (!r) r = r2;
+    }
+    reader_put(s, db);
+    if (r) store_run_extra_clear(out);
+    return r;
+}
+
+void store_run_extra_clear(store_run_extra *x)
+{
+    if (!x) return;
+    free(x->snapshot_steps);
+    memset(x, 0, sizeof *x);
+    x->last_seq = -1;
+}
+
 void store_snapshot_clear(store_snapshot *snap)
 {
     if (!snap) return;

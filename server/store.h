@@ -251,6 +251,19 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
                       store_energy_series *out);
 void store_energy_series_free(store_energy_series *es);
 
+/* A run's energy-sample count, the seq of its last sample (-1: none) and
+ * the steps of its stored snapshots (ascending). */
+typedef struct {
+    int64_t energy_count, last_seq;
+    int64_t *snapshot_steps;
+    size_t n_snapshots;
+} store_run_extra;
+
+/* Fills *out (free it with store_run_extra_clear()); 0 or a negative
+ * code. */
+int store_run_extras(store *s, int64_t run_id, store_run_extra *out);
+void store_run_extra_clear(store_run_extra *x);
+
 /* Reads the snapshot of a run at step (step < 0: the one with the highest
  * step).  STORE_ENOTFOUND if none. */
 int store_snapshot_get(store *s, int64_t run_id, int64_t step,
