@@ -235,7 +235,7 @@ static void check_disks(const char *name, int nodes, double h, int per_disk)
         CHECK(cnt == per_disk);
     }
     CHECK(sc->has_end_time);
-    CHECK_NEAR(sc->end_time, 3.5, 0);
+    CHECK_NEAR(sc->end_time, 4.0, 0);
     CHECK(sc->snapshot_every == 100);
     CHECK(sc->snapshot_fields == (SRV_SNAP_X | SRV_SNAP_V | SRV_SNAP_PRESSURE));
     CHECK(sc->explicit_points == 0 && sc->est_particles >= (size_t)(2 * per_disk));
