@@ -82,10 +82,11 @@ bin/%: $(REL)/server/tools/%.o $(call mpm_objs,$(REL))
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
-# make demo: the paper's fine bouncing disks, in-process, with a live view.
+# make demo: mpmd on loopback with its default database, the paper's fine
+# bouncing disks submitted and watched live with mpmctl, then stopped.
 demo: deps
-	@$(MAKE) --no-print-directory bin/mpmrun
-	bin/mpmrun --case disks-fine --every 250
+	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl
+	bash deploy/demo.sh
 
 # make test: every test under ASan+UBSan.  T=name runs one test.
 # Tests that need the daemon and the client find them through MPMD_BIN and
