@@ -62,7 +62,8 @@ typedef struct {
 typedef struct {
     /* face_mask[2*d + s]: fixed directions on the face of the grid box with
      * normal axis d, s = 0 the low face, s = 1 the high face.  A wall is
-     * all directions (7), a roller only the normal one (1 << d). */
+     * all directions (7), a roller only the normal one (1 << d).  Bits of
+     * axes the grid lacks are ignored; faces of such axes must be 0. */
     unsigned face_mask[2 * MPM_MAX_DIM];
     /* An explicit node set: node_ijk[3*i + d] is the grid index of node i
      * along axis d; node_mask[i] its fixed directions. */

@@ -353,14 +353,15 @@ static int build_fixed(mpm_sim *s, const mpm_bc_desc *bc)
     for (int f = 0; f < 2 * s->dim; f++) any |= bc->face_mask[f] != 0;
     if (!any) return 0;
     unsigned char *mask = calloc(s->nn, 1);
+    unsigned all = (1u << s->dim) - 1;
     if (!mask) return MPM_ENOMEM;
     for (size_t n = 0; n < s->nn; n++) {
         size_t rest = n;
         for (int d = 0; d < s->dim; d++) {
             int r = (int)(rest % (size_t)s->np[d]) - s->pad; /* real index along d */
             rest /= (size_t)s->np[d];
-            if (r <= 0) mask[n] |= bc->face_mask[2 * d];
-            if (r >= s->nreal[d] - 1) mask[n] |= bc->face_mask[2 * d + 1];
+            if (r <= 0) mask[n] |= bc->face_mask[2 * d] & all;
+            if (r >= s->nreal[d] - 1) mask[n] |= bc->face_mask[2 * d + 1] & all;
         }
     }
     for (size_t i = 0; i < bc->n_nodes; i++) {
