@@ -29,6 +29,7 @@ REL  := build/rel
 ASAN := build/asan
 
 .PHONY: all deps test test-quick bench demo clean
+.SECONDARY: $(GEN_C) $(GEN_H)
 all: bin/mpmtest bin/mpmrun $(addprefix bin/,$(PROGS))
 
 deps:
@@ -40,7 +41,7 @@ build/gen/%.pb-c.c build/gen/%.pb-c.h: proto/%.proto
 
 # Objects: $(1) build dir, $(2) flags
 define objs
-$(1)/%.o: %.c $(GEN_H) $(wildcard server/mpm/*.h server/*.h tests/*.h)
+$(1)/%.o: %.c $(GEN_H) $(wildcard server/mpm/*.h server/*.h tests/*.h clients/*.h)
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(CSTD) $$(WARN) $(2) $$(INC) -c $$< -o $$@
 $(1)/gen/%.o: build/gen/%.c $(GEN_H)
@@ -102,3 +103,36 @@ test-quick: bin/mpmtest $(addprefix bin/,$(PROGS))
 
 clean:
 	rm -rf build bin
+
+# ---- Issue #4: accuracy benchmark and stability stress suite ----------------
+# make bench-accuracy  runs bin/mpmbench-accuracy (tests/bench/): method, update,
+#                      cells, particles per cell and dt/CFL swept on problems with
+#                      known answers; table on the terminal, build/bench/accuracy.csv,
+#                      and build/bench/accuracy_{time,space,dt}.png when gnuplot is
+#                      there (the target installs gnuplot-nox through
+#                      `deploy/install-deps.sh bench`, or skips the plots with a
+#                      message).  BENCH_ARGS=--quick for a short run.
+# make stress          the full stability suite: the stress_* tests of
+#                      tests/t_stress.c with MPM_STRESS=full (CFL sweep, 10^6-step
+#                      bar, 10^5-step disks, cell-crossing noise, extremes in-process
+#                      and through a real bin/mpmd) on the release build.  `make test`
+#                      runs the same tests in their quick form.
+.PHONY: bench-accuracy stress
+BENCH_SRCS := $(wildcard tests/bench/*.c)
+BENCH_OBJS := $(patsubst %.c,$(REL)/%.o,$(BENCH_SRCS))
+$(BENCH_OBJS): tests/bench/bench.h
+bin/mpmbench-accuracy: $(BENCH_OBJS) $(call mpm_objs,$(REL))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
+
+bench-accuracy: deps
+	@bash deploy/install-deps.sh bench || echo "bench-accuracy: could not install gnuplot-nox; the plots will be skipped"
+	@$(MAKE) --no-print-directory bin/mpmbench-accuracy
+	bin/mpmbench-accuracy $(BENCH_ARGS)
+	@if command -v gnuplot >/dev/null 2>&1; then \
+	  gnuplot build/bench/accuracy.gp && echo "plots: build/bench/accuracy_time.png accuracy_space.png accuracy_dt.png"; \
+	else echo "bench-accuracy: gnuplot not found, plots skipped (bash deploy/install-deps.sh bench installs it)"; fi
+
+stress: deps
+	@$(MAKE) --no-print-directory bin/mpmtest bin/mpmd
+	MPM_STRESS=full MPMD_BIN=bin/mpmd bin/mpmtest stress_

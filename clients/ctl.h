@@ -1,0 +1,151 @@
+/*
+ * ctl.h - the parts of mpmctl shared between its files: the connection to
+ * mpmd (a DEALER on the control socket, requests encoded with srv_codec,
+ * replies decoded through the JSON bridge into jansson values), the JSON
+ * helpers (field access that understands the protobuf JSON mapping, and a
+ * printer that writes doubles in their shortest exact form), the output
+ * formats and the live view of a job (`watch`).
+ *
+ * Every function returns 0 or a negative CTL_E* code and has already
+ * written its diagnostic to stderr ("mpmctl: ...") when it fails, so
+ * callers only map the code to an exit status.
+ */
+#ifndef CTL_H
+#define CTL_H
+
+#include <signal.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include <jansson.h>
+
+#include "srv_codec.h"
+
+/* Return codes (negative). */
+enum {
+    CTL_OK = 0,
+    CTL_EUSAGE = -1,    /* bad command line */
+    CTL_ESERVER = -2,   /* the server answered with Reply.error */
+    CTL_ETIMEOUT = -3,  /* no reply within the timeout */
+    CTL_EPROTO = -4,    /* a reply that is not what was asked for */
+    CTL_ESYS = -5,      /* zmq, file or allocation failure */
+    CTL_ECASE = -6,     /* the case file is unreadable or invalid */
+    CTL_EINTR = -7      /* interrupted by a signal */
+};
+
+/* Exit statuses of mpmctl. */
+enum {
+    CTL_EXIT_OK = 0,
+    CTL_EXIT_ERROR = 1,        /* any error */
+    CTL_EXIT_USAGE = 2,        /* bad command line */
+    CTL_EXIT_FAILED = 3,       /* watched run ended FAILED */
+    CTL_EXIT_CANCELLED = 4,    /* ... CANCELLED */
+    CTL_EXIT_INTERRUPTED = 5,  /* ... INTERRUPTED (or still not finished) */
+    CTL_EXIT_SIGNAL = 130      /* watch stopped by Ctrl-C */
+};
+
+/* Set by the SIGINT/SIGTERM handler of `watch`; a wait interrupted by a
+ * signal returns CTL_EINTR once it is set. */
+extern volatile sig_atomic_t ctl_interrupted;
+
+#define CTL_DEFAULT_ENDPOINT "tcp://127.0.0.1:5555"
+#define CTL_DEFAULT_TIMEOUT 10.0
+
+/* Output format of listings. */
+typedef enum { CTL_OUT_TEXT = 0, CTL_OUT_CSV = 1, CTL_OUT_JSON = 2 } ctl_out;
+
+/* ---- connection (ctl_conn.c) --------------------------------------- */
+
+typedef struct {
+    const char *endpoint;   /* control socket */
+    const char *stream;     /* stream socket override (--stream / MPMD_STREAM) or NULL */
+    double timeout_s;       /* per request */
+    void *zctx;             /* zmq context, NULL until ctl_conn_open */
+    void *dealer;           /* control socket */
+} ctl_conn;
+
+/* Creates the context and connects the DEALER (linger 0). */
+int ctl_conn_open(ctl_conn *c);
+/* Closes the sockets and terminates the context (safe on a closed one). */
+void ctl_conn_close(ctl_conn *c);
+
+/* Sends rq, waits up to timeout_s for the reply and decodes it.  On
+ * success *reply owns the decoded Reply object and *body borrows its member
+ * `want` ("run", "energy", ...).  A Reply.error is printed ("mpmctl: CODE:
+ * message (field F)") and gives CTL_ESERVER; if err_code is not NULL it
+ * receives the error's code name (static storage, "" otherwise). */
+int ctl_call(ctl_conn *c, const srv_request *rq, const char *want, json_t **reply,
+             json_t **body);
+/* As ctl_call(), without printing a server error: *err_code gets the code
+ * name and *err_msg the message (both owned by *reply, which is set). */
+int ctl_call_quiet(ctl_conn *c, const srv_request *rq, const char *want, json_t **reply,
+                   json_t **body, const char **err_code, const char **err_msg);
+
+/* The stream endpoint to subscribe to: the --stream override, else the one
+ * Pong reports (for tcp with a wildcard or loopback host, derived from the
+ * control endpoint instead: port + 1), else the derivation (tcp port + 1,
+ * ipc path + ".stream"). */
+int ctl_stream_endpoint(ctl_conn *c, char *out, size_t n);
+/* tcp://host:port -> tcp://host:port+1, ipc://path -> ipc://path.stream. */
+int ctl_derive_stream(const char *ep, char *out, size_t n);
+
+/* Fetches every energy sample of a run with seq >= from (paging while the
+ * server says `more`) and calls fn for each in order; fn returns 0 to go
+ * on, negative to stop with that code. */
+typedef int (*ctl_sample_fn)(json_t *sample, void *arg);
+int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, ctl_sample_fn fn, void *arg);
+
+/* ---- JSON helpers (ctl_json.c) -------------------------------------- */
+
+/* Member key of o as a number: JSON numbers, and strings holding a number,
+ * "NaN", "Infinity" or "-Infinity" (the protobuf JSON mapping); dflt when
+ * absent or not numeric. */
+double cj_num(const json_t *o, const char *key, double dflt);
+/* ... as a 64-bit integer (numbers or decimal strings). */
+long long cj_int(const json_t *o, const char *key, long long dflt);
+uint64_t cj_u64(const json_t *o, const char *key, uint64_t dflt);
+/* ... as a string (dflt when absent or not a string). */
+const char *cj_str(const json_t *o, const char *key, const char *dflt);
+/* Element i of the array member key as a number (dflt when absent). */
+double cj_at(const json_t *o, const char *key, size_t i, double dflt);
+/* Length of the array member key (0 when absent). */
+size_t cj_len(const json_t *o, const char *key);
+
+/* Shortest text that reads back as exactly v ("NaN", "Infinity" and
+ * "-Infinity" for the non-finite values); buf of at least 32 bytes. */
+void cj_fmt_double(char *buf, size_t n, double v);
+/* Writes v as JSON with doubles in their shortest exact form; pretty:
+ * indented, arrays of scalars kept on one line.  No newline at the end. */
+int cj_print(FILE *f, const json_t *v, int pretty);
+
+/* Status value of a RunInfo/Finished "status" member (RunStatus name). */
+int cj_status(const json_t *o, const char *key);
+
+/* ---- output helpers (ctl_out.c) ------------------------------------- */
+
+/* Energy sample writers: a header (text table / CSV), then one row per
+ * sample.  dim: number of momentum components in CSV (0: from the sample). */
+typedef struct {
+    ctl_out fmt;
+    int dim;
+    int header_done;
+    FILE *f;
+} ctl_energy_out;
+void ctl_energy_out_init(ctl_energy_out *o, ctl_out fmt, int dim, FILE *f);
+int ctl_energy_out_row(ctl_energy_out *o, const json_t *sample);
+
+/* Local time of a Unix time as "YYYY-MM-DD HH:MM:SS" ("-" when <= 0). */
+void ctl_fmt_time(char *buf, size_t n, double unix_s);
+/* A duration as "12.3 s", "4m05s", "2h03m". */
+void ctl_fmt_duration(char *buf, size_t n, double s);
+
+/* ---- watch (ctl_watch.c) -------------------------------------------- */
+
+/* The live view of a job until it ends (see mpmctl watch --help); stores
+ * the run's final status (srv_status, 0 if unknown) in *final_status.
+ * Returns 0 when the job ended (whatever its status), negative on error or
+ * CTL_EINTR when interrupted. */
+int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status);
+
+#endif

@@ -1,0 +1,572 @@
+/*
+ * ctl_watch.c - `mpmctl watch`: the live view of a job, and the complete
+ * energy series of a job however late the watcher arrives.
+ *
+ * The stream (an XPUB on the daemon) loses what was published before a
+ * subscription took effect and may drop messages for a slow reader, so the
+ * series is merged from two sources by the sample's own index
+ * (EnergySample.seq, 0, 1, 2, ... without gaps in the store):
+ *   1. subscribe to the job's topic first ("job:%016llx:");
+ *   2. fetch the stored history with GetEnergy from seq 0, paging;
+ *   3. consume live messages: a sample below the next expected seq is
+ *      already known and skipped; one above it means samples were missed,
+ *      so GetEnergy from the next expected seq fills the gap first (the
+ *      daemon flushes its store before answering, so the gap is there);
+ *   4. when nothing arrives for a second, ask Status: a terminal job (its
+ *      Finished message may have gone out before the subscription took)
+ *      gets the rest of its history from GetEnergy and the view ends.
+ * After Finished the tail is fetched the same way.  Every sample is written
+ * exactly once, in seq order.  The closing summary comes from Status.
+ *
+ * For the tests, MPMCTL_TEST_DROP_EVERY=N discards every Nth energy message
+ * of the stream and MPMCTL_TEST_DROP_FINISHED=1 the Finished message, as a
+ * lossy stream would; the series must come out complete all the same.
+ *
+ * Text mode on a terminal redraws one status line in place (step, t,
+ * energies, a progress bar with ETA); elsewhere it writes one line per
+ * sample.  CSV / JSON modes write only the series on stdout (the summary
+ * goes to stderr).
+ */
+#include "ctl.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/ioctl.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <zmq.h>
+
+#define WATCH_IDLE_S 1.0        /* quiet this long: ask Status */
+#define WATCH_REDRAW_S 0.1      /* terminal line at most this often */
+#define WATCH_SUB_HWM 100000    /* stream messages buffered before dropping */
+
+typedef struct {
+    ctl_conn *c;
+    uint64_t job;
+    ctl_out fmt;
+    int tty;                    /* text mode on a terminal: one line redrawn */
+    ctl_energy_out eo;
+    FILE *info;                 /* where the summary goes */
+
+    uint64_t next;              /* next energy seq expected */
+    uint64_t samples;           /* samples written */
+    uint64_t gaps_filled;       /* times the stream skipped samples */
+    double first_total, last_total;
+    double kinetic, strain;
+    int have_first;
+
+    int status;                 /* srv_status as last known */
+    char name[128];
+    long long step, steps_total;
+    double t, wall_s, dt;
+    int have_progress;
+    double last_draw;
+    int line_shown;
+
+    int have_stream_seq;
+    uint64_t stream_seq;        /* last StreamMsg.seq seen */
+    uint64_t stream_lost;       /* messages the stream dropped */
+
+    int finished;               /* Finished seen */
+    char error[512];            /* Finished.error */
+    json_t *fin_energy;         /* Finished.energy (a reference), or NULL */
+
+    /* Fault injection for the tests (environment, see ctl_watch()):
+     * discard every drop_every-th energy message, and/or the Finished
+     * message, as if the stream had lost them. */
+    unsigned drop_every, energy_seen;
+    int drop_finished;
+} watch_t;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static int terminal_status(int st)
+{
+    return st == SRV_STATUS_FINISHED || st == SRV_STATUS_FAILED || st == SRV_STATUS_CANCELLED ||
+           st == SRV_STATUS_INTERRUPTED;
+}
+
+static int term_cols(void)
+{
+    struct winsize ws;
+    if (!ioctl(STDOUT_FILENO, TIOCGWINSZ, &ws) && ws.ws_col >= 20) return ws.ws_col;
+    return 80;
+}
+
+/* Appends to a bounded line (silently truncated). */
+__attribute__((format(printf, 4, 5)))
+static void append(char *line, size_t cap, size_t *n, const char *fmt, ...)
+{
+    va_list ap;
+    int k;
+    if (*n + 1 >= cap) return;
+    va_start(ap, fmt);
+    k = vsnprintf(line + *n, cap - *n, fmt, ap);
+    va_end(ap);
+    if (k > 0) *n = *n + (size_t)k < cap ? *n + (size_t)k : cap - 1;
+}
+
+/* The status line (terminal text mode). */
+static void draw(watch_t *w, int force)
+{
+    char line[512], bar[32];
+    size_t n = 0, cols;
+    double t = now_s();
+    const char *st = srv_status_name(w->status);
+    if (!w->tty || (!force && t - w->last_draw < WATCH_REDRAW_S)) return;
+    w->last_draw = t;
+    line[0] = 0;
+    append(line, sizeof line, &n, "job %llu %s  step %lld", (unsigned long long)w->job,
+           st ? st : "?", w->step);
+    if (w->steps_total > 0) append(line, sizeof line, &n, "/%lld", w->steps_total);
+    append(line, sizeof line, &n, "  t %.6g", w->t);
+    if (w->have_first)
+        append(line, sizeof line, &n, "  K %.4e  S %.4e  E %.6e", w->kinetic, w->strain,
+               w->last_total);
+    if (w->steps_total > 0) {
+        double frac = (double)w->step / (double)w->steps_total;
+        int fill;
+        if (frac < 0) frac = 0;
+        if (frac > 1) frac = 1;
+        fill = (int)(frac * 20 + 0.5);
+        for (int i = 0; i < 20; i++) bar[i] = i < fill ? '#' : '.';
+        bar[20] = 0;
+        append(line, sizeof line, &n, "  [%s] %3.0f%%", bar, 100 * frac);
+        if (w->have_progress && w->wall_s > 0 && w->step > 0 && w->step < w->steps_total) {
+            char eta[32];
+            double rate = (double)w->step / w->wall_s;
+            ctl_fmt_duration(eta, sizeof eta, (double)(w->steps_total - w->step) / rate);
+            append(line, sizeof line, &n, " ETA %s", eta);
+        }
+    }
+    cols = (size_t)term_cols();
+    if (n >= cols) line[cols - 1] = 0;
+    printf("\r\033[K%s", line);
+    fflush(stdout);
+    w->line_shown = 1;
+}
+
+/* Writes one accepted sample. */
+static int emit(watch_t *w, const json_t *s)
+{
+    double total = cj_num(s, "total", NAN);
+    if (!w->have_first) {
+        w->first_total = total;
+        w->have_first = 1;
+    }
+    w->last_total = total;
+    w->kinetic = cj_num(s, "kinetic", NAN);
+    w->strain = cj_num(s, "strain", NAN);
+    if (!w->have_progress || cj_int(s, "step", 0) > w->step) {
+        w->step = cj_int(s, "step", w->step);
+        w->t = cj_num(s, "t", w->t);
+    }
+    w->samples++;
+    w->next++;
+    if (w->fmt == CTL_OUT_TEXT && w->tty) {
+        draw(w, 0);
+        return 0;
+    }
+    int rc = ctl_energy_out_row(&w->eo, s);
+    if (!rc && fflush(stdout)) rc = CTL_ESYS;
+    if (rc) fprintf(stderr, "mpmctl: cannot write the energy series: %s\n", strerror(errno));
+    return rc;
+}
+
+/* A sample from the stored history: in order by construction. */
+static int take_history(json_t *s, void *arg)
+{
+    watch_t *w = arg;
+    uint64_t seq = cj_u64(s, "seq", UINT64_MAX);
+    if (seq < w->next) return 0;
+    if (seq > w->next) {
+        /* the store itself has a hole: report it, keep going */
+        fprintf(stderr, "mpmctl: warning: energy history of job %llu jumps from seq %llu to %llu\n",
+                (unsigned long long)w->job, (unsigned long long)w->next, (unsigned long long)seq);
+        w->next = seq;
+    }
+    return emit(w, s);
+}
+
+static int fetch_rest(watch_t *w)
+{
+    return ctl_fetch_energy(w->c, w->job, w->next, take_history, w);
+}
+
+/* A sample from the live stream. */
+static int take_live(watch_t *w, const json_t *s)
+{
+    uint64_t seq = cj_u64(s, "seq", UINT64_MAX);
+    int rc;
+    if (seq < w->next) return 0;
+    if (seq > w->next) {
+        w->gaps_filled++;
+        if ((rc = fetch_rest(w))) return rc;
+        if (seq < w->next) return 0;
+        if (seq > w->next) {
+            fprintf(stderr, "mpmctl: warning: job %llu: sample seq %llu streamed but the history "
+                            "ends at %llu\n",
+                    (unsigned long long)w->job, (unsigned long long)seq,
+                    (unsigned long long)w->next);
+            w->next = seq;
+        }
+    }
+    return emit(w, s);
+}
+
+/* Applies a RunInfo (Status reply) to the view. */
+static void apply_run(watch_t *w, const json_t *run)
+{
+    w->status = cj_status(run, "status");
+    if (cj_int(run, "stepsTotal", 0) > 0) w->steps_total = cj_int(run, "stepsTotal", 0);
+    if (cj_int(run, "steps", 0) > w->step) {
+        w->step = cj_int(run, "steps", 0);
+        w->t = cj_num(run, "t", w->t);
+    }
+    if (!w->name[0]) snprintf(w->name, sizeof w->name, "%s", cj_str(run, "name", ""));
+}
+
+/* Status(job); *run is the RunInfo (owned by *reply). */
+static int status(watch_t *w, json_t **reply, json_t **run)
+{
+    srv_request rq = {.kind = SRV_REQ_STATUS, .id = w->job};
+    int rc = ctl_call(w->c, &rq, "run", reply, run);
+    if (!rc) apply_run(w, *run);
+    return rc;
+}
+
+/* Reads a varint at b[*i]; 0, or -1 past the end. */
+static int varint(const uint8_t *b, size_t n, size_t *i, uint64_t *v)
+{
+    *v = 0;
+    for (int shift = 0; *i < n && shift < 64; shift += 7) {
+        uint8_t c = b[(*i)++];
+        *v |= (uint64_t)(c & 0x7f) << shift;
+        if (!(c & 0x80)) return 0;
+    }
+    return -1;
+}
+
+/* Whether a packed StreamMsg carries a snapshot, read from its first tags
+ * (protobuf-c writes fields in number order: job_id = 1, seq = 2, then the
+ * body, snapshot = 5), with its job id and seq.  Saves decoding big
+ * snapshots the view ignores. */
+static int is_snapshot(const uint8_t *b, size_t n, uint64_t *job, uint64_t *seq)
+{
+    size_t i = 0;
+    *job = *seq = UINT64_MAX;
+    while (i < n) {
+        uint8_t tag = b[i++];
+        if (tag == 0x2a) return 1;
+        if (tag != 0x08 && tag != 0x10) return 0;
+        if (varint(b, n, &i, tag == 0x08 ? job : seq)) return 0;
+    }
+    return 0;
+}
+
+/* Counts what the stream lost from the gaps in StreamMsg.seq. */
+static void stream_seq(watch_t *w, uint64_t seq)
+{
+    if (w->have_stream_seq && seq > w->stream_seq + 1) w->stream_lost += seq - w->stream_seq - 1;
+    if (!w->have_stream_seq || seq > w->stream_seq) w->stream_seq = seq;
+    w->have_stream_seq = 1;
+}
+
+/* After Finished: the samples still missing.  Finished carries the final
+ * sample (with its seq), which is the last of the series: when it is the
+ * next one expected it completes the series, when it is older nothing is
+ * missing; otherwise the tail comes from the history.  A job INTERRUPTED
+ * by a daemon shutting down may leave nobody to ask: then a short wait,
+ * and what we have. */
+static int finish_tail(watch_t *w)
+{
+    double saved = w->c->timeout_s;
+    int rc;
+    if (w->fin_energy) {
+        uint64_t seq = cj_u64(w->fin_energy, "seq", UINT64_MAX);
+        if (seq != UINT64_MAX && seq < w->next) return 0;
+        if (seq == w->next) return emit(w, w->fin_energy);
+    }
+    if (w->status == SRV_STATUS_INTERRUPTED && saved > 3) w->c->timeout_s = 3;
+    rc = fetch_rest(w);
+    w->c->timeout_s = saved;
+    if (rc == CTL_ETIMEOUT && w->status == SRV_STATUS_INTERRUPTED) {
+        fprintf(stderr, "mpmctl: warning: the daemon stopped; the series may lack its last "
+                        "samples\n");
+        return 0;
+    }
+    return rc;
+}
+
+/* Handles one stream message; sets w->finished on Finished. */
+static int on_message(watch_t *w, const void *data, size_t len)
+{
+    char *text = NULL, err[256];
+    json_t *m, *b;
+    json_error_t je;
+    int rc = 0;
+    {
+        uint64_t job, seq;
+        if (is_snapshot(data, len, &job, &seq)) {
+            if (job == w->job && seq != UINT64_MAX) stream_seq(w, seq);
+            return 0;
+        }
+    }
+    if (srv_msg_bytes_to_json(SRV_MSG_STREAM, data, len, 0, 0, &text, err, sizeof err)) {
+        fprintf(stderr, "mpmctl: warning: undecodable stream message: %s\n", err);
+        return 0;
+    }
+    m = json_loads(text, 0, &je);
+    free(text);
+    if (!m) {
+        fprintf(stderr, "mpmctl: stream message: %s\n", je.text);
+        return CTL_ESYS;
+    }
+    if (cj_u64(m, "jobId", w->job) != w->job) goto out;
+    if ((w->drop_every && json_object_get(m, "energy") && ++w->energy_seen % w->drop_every == 0) ||
+        (w->drop_finished && json_object_get(m, "finished")))
+        goto out;  /* injected loss: as if the stream never delivered it */
+    stream_seq(w, cj_u64(m, "seq", 0));
+    if ((b = json_object_get(m, "energy"))) {
+        if (w->status != SRV_STATUS_RUNNING && !terminal_status(w->status))
+            w->status = SRV_STATUS_RUNNING;
+        rc = take_live(w, b);
+    } else if ((b = json_object_get(m, "progress"))) {
+        w->status = SRV_STATUS_RUNNING;
+        w->have_progress = 1;
+        w->step = cj_int(b, "step", w->step);
+        w->t = cj_num(b, "t", w->t);
+        w->dt = cj_num(b, "dt", w->dt);
+        w->wall_s = cj_num(b, "wallS", w->wall_s);
+        if (cj_int(b, "stepsTotal", 0) > 0) w->steps_total = cj_int(b, "stepsTotal", 0);
+        draw(w, 0);
+    } else if ((b = json_object_get(m, "finished"))) {
+        w->finished = 1;
+        w->status = cj_status(b, "status");
+        snprintf(w->error, sizeof w->error, "%s", cj_str(b, "error", ""));
+        w->step = cj_int(b, "steps", w->step);
+        w->t = cj_num(b, "t", w->t);
+        w->wall_s = cj_num(b, "wallS", w->wall_s);
+        json_decref(w->fin_energy);
+        w->fin_energy = json_incref(json_object_get(b, "energy"));
+    }
+out:
+    json_decref(m);
+    return rc;
+}
+
+/* Receives one [topic][StreamMsg] message and handles it. */
+static int recv_stream(watch_t *w, void *sub)
+{
+    zmq_msg_t topic, body;
+    int more = 0, rc = 0;
+    size_t ml = sizeof more;
+    if (zmq_msg_init(&topic) || zmq_msg_init(&body)) return CTL_ESYS;
+    if (zmq_msg_recv(&topic, sub, ZMQ_DONTWAIT) < 0) {
+        zmq_msg_close(&topic);
+        zmq_msg_close(&body);
+        return (errno == EAGAIN || errno == EINTR) ? 0 : CTL_ESYS;
+    }
+    if (zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml) || !more) goto out;  /* malformed: drop */
+    if (zmq_msg_recv(&body, sub, 0) < 0) {
+        rc = CTL_ESYS;
+        goto out;
+    }
+    if (zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml)) more = 0;
+    if (more) {
+        /* more than two frames: drain and drop */
+        while (more) {
+            zmq_msg_t x;
+            if (zmq_msg_init(&x)) break;
+            if (zmq_msg_recv(&x, sub, 0) < 0 ||
+                zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml))
+                more = 0;
+            zmq_msg_close(&x);
+        }
+        goto out;
+    }
+    rc = on_message(w, zmq_msg_data(&body), zmq_msg_size(&body));
+out:
+    zmq_msg_close(&topic);
+    zmq_msg_close(&body);
+    if (rc == CTL_ESYS && errno) fprintf(stderr, "mpmctl: stream: %s\n", zmq_strerror(errno));
+    return rc;
+}
+
+static void summary(watch_t *w, const json_t *run)
+{
+    FILE *f = w->info;
+    char wall[32];
+    const char *st = srv_status_name(w->status);
+    const char *error = run ? cj_str(run, "error", "") : "";
+    const json_t *le = run ? json_object_get(run, "lastEnergy") : w->fin_energy;
+    if (!*error) error = w->error;
+    if (w->tty && w->line_shown) {
+        draw(w, 1);
+        fputc('\n', stdout);
+        fflush(stdout);
+    }
+    fprintf(f, "job %llu%s%s%s: %s\n", (unsigned long long)w->job, w->name[0] ? " (" : "", w->name,
+            w->name[0] ? ")" : "", st ? st : "unknown status");
+    ctl_fmt_duration(wall, sizeof wall, run ? cj_num(run, "wallS", 0) : w->wall_s);
+    fprintf(f, "  steps %lld, t %.10g, wall %s\n", run ? cj_int(run, "steps", w->step) : w->step,
+            run ? cj_num(run, "t", w->t) : w->t, wall);
+    if (le)
+        fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n",
+                cj_num(le, "kinetic", NAN), cj_num(le, "strain", NAN), cj_num(le, "total", NAN));
+    else if (w->have_first)
+        fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n", w->kinetic,
+                w->strain, w->last_total);
+    if (w->have_first) {
+        double d = w->last_total - w->first_total;
+        if (w->first_total != 0)
+            fprintf(f, "  energy drift: %+.3e relative (%+.3e absolute) over %llu samples\n",
+                    d / fabs(w->first_total), d, (unsigned long long)w->samples);
+        else
+            fprintf(f, "  energy drift: %+.3e absolute over %llu samples\n", d,
+                    (unsigned long long)w->samples);
+    }
+    if (w->gaps_filled || w->stream_lost)
+        fprintf(f, "  stream: %llu messages dropped, %llu gaps filled from the history\n",
+                (unsigned long long)w->stream_lost, (unsigned long long)w->gaps_filled);
+    if (*error) fprintf(f, "  error: %s\n", error);
+    fflush(f);
+}
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    ctl_interrupted = 1;
+}
+
+/* The live phase: stream messages until the job ends. */
+static int live(watch_t *w, void *sub)
+{
+    double last_msg = now_s();
+    for (;;) {
+        zmq_pollitem_t it = {sub, 0, ZMQ_POLLIN, 0};
+        double idle = now_s() - last_msg;
+        long wait_ms = (long)((WATCH_IDLE_S - idle) * 1000.0);
+        int rc;
+        if (ctl_interrupted) return CTL_EINTR;
+        if (wait_ms < 0) wait_ms = 0;
+        rc = zmq_poll(&it, 1, wait_ms);
+        if (rc < 0) {
+            if (errno == EINTR) continue;
+            fprintf(stderr, "mpmctl: zmq_poll: %s\n", zmq_strerror(errno));
+            return CTL_ESYS;
+        }
+        if (rc > 0) {
+            /* drain what is there, then look at the clock again */
+            for (int k = 0; k < 1000 && !w->finished; k++) {
+                zmq_pollitem_t it2 = {sub, 0, ZMQ_POLLIN, 0};
+                if ((rc = recv_stream(w, sub))) return rc;
+                if (zmq_poll(&it2, 1, 0) <= 0) break;
+            }
+            last_msg = now_s();
+            if (w->finished) return finish_tail(w);
+            continue;
+        }
+        if (now_s() - last_msg >= WATCH_IDLE_S) {
+            json_t *reply = NULL, *run = NULL;
+            rc = status(w, &reply, &run);
+            json_decref(reply);
+            if (rc) return rc;
+            draw(w, 1);
+            if (terminal_status(w->status)) return fetch_rest(w);
+            last_msg = now_s();
+        }
+    }
+}
+
+int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
+{
+    watch_t w;
+    char ep[512], topic[32];
+    void *sub = NULL;
+    json_t *reply = NULL, *run = NULL;
+    int rc, hwm = WATCH_SUB_HWM, linger = 0;
+    struct sigaction sa, old_int, old_term;
+
+    memset(&w, 0, sizeof w);
+    w.c = c;
+    w.job = job;
+    w.fmt = fmt;
+    w.tty = fmt == CTL_OUT_TEXT && isatty(STDOUT_FILENO);
+    w.info = fmt == CTL_OUT_TEXT ? stdout : stderr;
+    *final_status = 0;
+    {
+        const char *de = getenv("MPMCTL_TEST_DROP_EVERY");
+        const char *df = getenv("MPMCTL_TEST_DROP_FINISHED");
+        w.drop_every = de ? (unsigned)strtoul(de, NULL, 10) : 0;
+        w.drop_finished = df && *df && strcmp(df, "0");
+    }
+
+    if ((rc = ctl_stream_endpoint(c, ep, sizeof ep))) return rc;
+    if (!c->zctx && (rc = ctl_conn_open(c))) return rc;
+    sub = zmq_socket(c->zctx, ZMQ_SUB);
+    snprintf(topic, sizeof topic, "job:%016llx:", (unsigned long long)job);
+    if (!sub || zmq_setsockopt(sub, ZMQ_LINGER, &linger, sizeof linger) ||
+        zmq_setsockopt(sub, ZMQ_RCVHWM, &hwm, sizeof hwm) ||
+        zmq_setsockopt(sub, ZMQ_SUBSCRIBE, topic, strlen(topic))) {
+        fprintf(stderr, "mpmctl: stream socket: %s\n", zmq_strerror(errno));
+        if (sub) zmq_close(sub);
+        return CTL_ESYS;
+    }
+    if (zmq_connect(sub, ep)) {
+        fprintf(stderr, "mpmctl: cannot connect to the stream at %s: %s\n", ep, zmq_strerror(errno));
+        zmq_close(sub);
+        return CTL_ESYS;
+    }
+
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, &old_int);
+    sigaction(SIGTERM, &sa, &old_term);
+
+    /* where the job stands (and whether it exists) */
+    rc = status(&w, &reply, &run);
+    json_decref(reply);
+    reply = NULL;
+    if (rc) goto out;
+    ctl_energy_out_init(&w.eo, fmt, (int)cj_int(run ? run : NULL, "dim", 0), stdout);
+    if (w.fmt == CTL_OUT_TEXT && !w.tty)
+        fprintf(stdout, "job %llu%s%s%s: %s\n", (unsigned long long)job, w.name[0] ? " (" : "",
+                w.name, w.name[0] ? ")" : "", srv_status_name(w.status) ? srv_status_name(w.status) : "?");
+    draw(&w, 1);
+    {
+        int was_terminal = terminal_status(w.status);
+        if ((rc = fetch_rest(&w))) goto out;
+        if (!was_terminal && (rc = live(&w, sub))) goto out;
+    }
+    /* the summary: Finished says all it needs (and the daemon may be gone
+     * after an INTERRUPTED job); otherwise the daemon's record of the job */
+    run = NULL;
+    if (!w.finished && (rc = status(&w, &reply, &run))) goto out;
+    summary(&w, run);
+    *final_status = w.status;
+out:
+    if (rc == CTL_EINTR) {
+        if (w.line_shown) fputc('\n', stdout);
+        fflush(stdout);
+        fprintf(stderr, "mpmctl: stopped watching job %llu; it keeps running (mpmctl cancel %llu "
+                        "stops it)\n",
+                (unsigned long long)job, (unsigned long long)job);
+    }
+    json_decref(reply);
+    json_decref(w.fin_energy);
+    zmq_close(sub);
+    sigaction(SIGINT, &old_int, NULL);
+    sigaction(SIGTERM, &old_term, NULL);
+    return rc;
+}

@@ -1,0 +1,802 @@
+/*
+ * mpmctl.c - the command-line client of mpmd: submit cases, watch jobs
+ * live, list and inspect runs, export energy series and snapshots, cancel
+ * jobs, check the server.  This file holds the command line (global
+ * options anywhere, per-command options checked against the command, every
+ * error naming the option) and one function per command; the connection,
+ * the JSON helpers, the output formats and the live view are in ctl_*.c
+ * (ctl.h).  A case is loaded and checked with the daemon's own codec before
+ * it is sent, so a bad case is reported with the JSON path of the field
+ * without a round trip (the server checks it again).
+ */
+#include "ctl.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "srv_config.h"  /* SRV_VERSION: mpmctl and mpmd share the version */
+
+volatile sig_atomic_t ctl_interrupted;
+
+/* ---- command line ------------------------------------------------------- */
+
+enum {
+    C_SUBMIT = 1u << 0,
+    C_WATCH = 1u << 1,
+    C_RUNS = 1u << 2,
+    C_SHOW = 1u << 3,
+    C_ENERGY = 1u << 4,
+    C_SNAPSHOT = 1u << 5,
+    C_CANCEL = 1u << 6,
+    C_PING = 1u << 7,
+    C_VERSION = 1u << 8,
+    C_GLOBAL = 0x1ffu
+};
+
+typedef struct {
+    const char *name;   /* e.g. "submit" */
+    unsigned bit;
+    const char *args;   /* synopsis */
+    const char *help;   /* one line */
+    const char *more;   /* details for `mpmctl CMD --help` */
+} command;
+
+static const command commands[] = {
+    {"submit", C_SUBMIT, "CASE.json [--watch] [--csv|--json]", "queue a simulation case",
+     "Loads CASE.json (\"-\": standard input) and checks it locally with the daemon's codec:\n"
+     "a bad case is reported with the JSON path of the field and nothing is sent.\n"
+     "Prints \"job N\" (--json: the SubmitOk object).  --watch continues as `watch N`\n"
+     "(with --csv/--json the job line goes to stderr and stdout carries the series).\n"},
+    {"watch", C_WATCH, "ID [--csv|--json]", "live view of a job until it ends",
+     "Subscribes to the job's stream, fetches the energy history, then follows the\n"
+     "live samples; the series is complete and in order however late you start.\n"
+     "On a terminal one status line (step, t, energies, progress bar, ETA) is redrawn;\n"
+     "otherwise one line per energy sample.  A summary ends the view (stderr with\n"
+     "--csv/--json, which print only the series: CSV rows / JSON lines).\n"
+     "Exit status: 0 FINISHED, 3 FAILED, 4 CANCELLED, 5 INTERRUPTED, 1 error,\n"
+     "130 stopped by Ctrl-C (the job keeps running).\n"},
+    {"runs", C_RUNS, "[--status S] [--limit N] [--json]", "list runs, newest first",
+     "Columns: id, name, status, method, dim, particles, steps, wall seconds,\n"
+     "submission time.  --status: QUEUED, RUNNING, FINISHED, FAILED, CANCELLED or\n"
+     "INTERRUPTED.  --limit: at most N runs (default: the server's).  --json: one\n"
+     "RunInfo object per line.\n"},
+    {"show", C_SHOW, "ID [--json] [--case]", "one run in detail",
+     "--json prints the RunInfo object; --case prints the run's case as JSON (alone:\n"
+     "pretty, ready to submit again; with --json: inside the RunInfo).\n"},
+    {"energy", C_ENERGY, "ID [--csv|--json]", "the complete energy series of a run",
+     "Pages through GetEnergy.  Default: a table; --csv: a header and one row per\n"
+     "sample (exact doubles); --json: one EnergySample object per line.\n"},
+    {"snapshot", C_SNAPSHOT, "ID [--step N] -o FILE", "a stored snapshot to a file",
+     "Only snapshots the run recorded (output.recordSnapshots).  Without --step, the\n"
+     "latest.  FILE ending in .json gets the Snapshot object; anything else CSV with a\n"
+     "header (one row per particle); \"-o -\" writes CSV to stdout.\n"},
+    {"cancel", C_CANCEL, "ID [--json]", "stop a queued or running job",
+     "Prints the job's status after the request; a running job stops within one step.\n"},
+    {"ping", C_PING, "[--json]", "check the server",
+     "Prints the server version, schema version, stream endpoint and round-trip time.\n"},
+    {"version", C_VERSION, "[--json]", "versions of mpmctl and of the server", ""},
+};
+#define NCOMMANDS (sizeof commands / sizeof commands[0])
+
+typedef enum {
+    O_ENDPOINT, O_STREAM, O_TIMEOUT, O_HELP, O_WATCH, O_CSV, O_JSON, O_STATUS, O_LIMIT, O_CASE,
+    O_STEP, O_OUT, O_COUNT
+} opt_id;
+
+typedef struct {
+    const char *name;   /* long name */
+    char shortname;     /* 0: none */
+    int has_arg;
+    unsigned cmds;      /* commands that take it (C_GLOBAL: all) */
+} option;
+
+static const option options[O_COUNT] = {
+    [O_ENDPOINT] = {"endpoint", 0, 1, C_GLOBAL},
+    [O_STREAM] = {"stream", 0, 1, C_GLOBAL},
+    [O_TIMEOUT] = {"timeout", 0, 1, C_GLOBAL},
+    [O_HELP] = {"help", 'h', 0, C_GLOBAL},
+    [O_WATCH] = {"watch", 0, 0, C_SUBMIT},
+    [O_CSV] = {"csv", 0, 0, C_SUBMIT | C_WATCH | C_ENERGY},
+    [O_JSON] = {"json", 0, 0, C_GLOBAL & ~C_SNAPSHOT},
+    [O_STATUS] = {"status", 0, 1, C_RUNS},
+    [O_LIMIT] = {"limit", 0, 1, C_RUNS},
+    [O_CASE] = {"case", 0, 0, C_SHOW},
+    [O_STEP] = {"step", 0, 1, C_SNAPSHOT},
+    [O_OUT] = {"out", 'o', 1, C_SNAPSHOT},
+};
+
+typedef struct {
+    const command *cmd;
+    int given[O_COUNT];
+    const char *val[O_COUNT];
+    const char *pos[8];
+    int npos;
+    /* parsed values */
+    double timeout;
+    ctl_out fmt;
+    int status;
+    unsigned limit;
+    long long step;
+} cli;
+
+static void usage(FILE *f)
+{
+    fprintf(f, "usage: mpmctl [OPTIONS] COMMAND [ARGS] [OPTIONS]\n\nCommands:\n");
+    for (size_t i = 0; i < NCOMMANDS; i++) {
+        char syn[96];
+        snprintf(syn, sizeof syn, "%s %s", commands[i].name, commands[i].args);
+        fprintf(f, "  %-48s %s\n", syn, commands[i].help);
+    }
+    fprintf(f,
+            "\nOptions (anywhere on the line):\n"
+            "  --endpoint EP   control socket (env MPMD_ENDPOINT; default %s)\n"
+            "  --stream EP     stream socket (env MPMD_STREAM; default: as the server reports,\n"
+            "                  or derived from the endpoint: tcp port + 1, ipc path + .stream)\n"
+            "  --timeout S     seconds to wait for each reply (default %g)\n"
+            "  -h, --help      this help; `mpmctl COMMAND --help` for one command\n"
+            "\nExit status: 0 success, 1 error, 2 bad command line; watch and submit --watch:\n"
+            "3 FAILED, 4 CANCELLED, 5 INTERRUPTED.\n",
+            CTL_DEFAULT_ENDPOINT, CTL_DEFAULT_TIMEOUT);
+}
+
+static void command_usage(const command *c)
+{
+    printf("usage: mpmctl %s %s\n  %s\n\n%s", c->name, c->args, c->help, c->more);
+    printf("\nGlobal options: --endpoint EP, --stream EP, --timeout S (see mpmctl --help).\n");
+}
+
+__attribute__((format(printf, 1, 2)))
+static int bad_usage(const char *fmt, ...)
+{
+    va_list ap;
+    fputs("mpmctl: ", stderr);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fputc('\n', stderr);
+    return CTL_EUSAGE;
+}
+
+static const option *find_long(const char *name, size_t len, opt_id *id)
+{
+    for (int i = 0; i < O_COUNT; i++)
+        if (strlen(options[i].name) == len && !strncmp(options[i].name, name, len)) {
+            *id = (opt_id)i;
+            return &options[i];
+        }
+    return NULL;
+}
+
+static const option *find_short(char c, opt_id *id)
+{
+    for (int i = 0; i < O_COUNT; i++)
+        if (options[i].shortname == c) {
+            *id = (opt_id)i;
+            return &options[i];
+        }
+    return NULL;
+}
+
+/* A positive decimal id. */
+static int parse_id(const char *s, const char *what, uint64_t *id)
+{
+    char *end;
+    unsigned long long v;
+    errno = 0;
+    if (*s < '0' || *s > '9') goto bad;
+    v = strtoull(s, &end, 10);
+    if (errno || *end || v == 0) goto bad;
+    *id = v;
+    return 0;
+bad:
+    return bad_usage("%s: '%s' is not a %s (a positive integer)", what, s, "job id");
+}
+
+static int parse_args(int argc, char **argv, cli *a)
+{
+    int only_pos = 0;
+    memset(a, 0, sizeof *a);
+    for (int i = 1; i < argc; i++) {
+        const char *s = argv[i];
+        const option *o = NULL;
+        opt_id id = O_HELP;
+        const char *val = NULL;
+        if (!only_pos && !strcmp(s, "--")) {
+            only_pos = 1;
+            continue;
+        }
+        if (!only_pos && s[0] == '-' && s[1]) {
+            if (s[1] == '-') {
+                const char *eq = strchr(s + 2, '=');
+                size_t len = eq ? (size_t)(eq - s - 2) : strlen(s + 2);
+                o = find_long(s + 2, len, &id);
+                if (!o) return bad_usage("unknown option '%.*s' (see mpmctl --help)", (int)(len + 2), s);
+                if (eq && !o->has_arg) return bad_usage("option --%s takes no value", o->name);
+                if (eq) val = eq + 1;
+            } else {
+                o = s[2] ? NULL : find_short(s[1], &id);
+                if (!o) return bad_usage("unknown option '%s' (see mpmctl --help)", s);
+            }
+            if (o->has_arg && !val) {
+                if (i + 1 >= argc) return bad_usage("option --%s needs a value", o->name);
+                val = argv[++i];
+            }
+            /* given twice: the last one counts (scripts may append overrides) */
+            a->given[id] = 1;
+            a->val[id] = val;
+            continue;
+        }
+        if (!a->cmd) {
+            for (size_t k = 0; k < NCOMMANDS; k++)
+                if (!strcmp(commands[k].name, s)) a->cmd = &commands[k];
+            if (!a->cmd) return bad_usage("unknown command '%s' (see mpmctl --help)", s);
+            continue;
+        }
+        if (a->npos == (int)(sizeof a->pos / sizeof a->pos[0]))
+            return bad_usage("%s: too many arguments", a->cmd->name);
+        a->pos[a->npos++] = s;
+    }
+    if (a->given[O_HELP]) return 0;
+    if (!a->cmd) return bad_usage("no command given (see mpmctl --help)");
+    for (int i = 0; i < O_COUNT; i++)
+        if (a->given[i] && !(options[i].cmds & a->cmd->bit))
+            return bad_usage("option --%s does not apply to '%s' (see mpmctl %s --help)",
+                             options[i].name, a->cmd->name, a->cmd->name);
+
+    /* values */
+    a->timeout = CTL_DEFAULT_TIMEOUT;
+    if (a->given[O_TIMEOUT]) {
+        char *end;
+        errno = 0;
+        a->timeout = strtod(a->val[O_TIMEOUT], &end);
+        if (errno || end == a->val[O_TIMEOUT] || *end || !(a->timeout > 0) || a->timeout > 86400)
+            return bad_usage("--timeout: expected seconds in (0, 86400], got '%s'", a->val[O_TIMEOUT]);
+    }
+    if (a->given[O_CSV] && a->given[O_JSON]) return bad_usage("--csv and --json exclude each other");
+    a->fmt = a->given[O_CSV] ? CTL_OUT_CSV : a->given[O_JSON] ? CTL_OUT_JSON : CTL_OUT_TEXT;
+    if (a->cmd->bit == C_SUBMIT && a->given[O_CSV] && !a->given[O_WATCH])
+        return bad_usage("submit: --csv needs --watch");
+    if (a->given[O_STATUS]) {
+        char up[32];
+        size_t k;
+        for (k = 0; k + 1 < sizeof up && a->val[O_STATUS][k]; k++) {
+            char ch = a->val[O_STATUS][k];
+            up[k] = (ch >= 'a' && ch <= 'z') ? (char)(ch - 32) : ch;
+        }
+        up[k] = 0;
+        a->status = srv_status_from_name(up);
+        if (!a->status)
+            return bad_usage("--status: '%s' is not one of QUEUED, RUNNING, FINISHED, FAILED, "
+                             "CANCELLED, INTERRUPTED",
+                             a->val[O_STATUS]);
+    }
+    if (a->given[O_LIMIT]) {
+        char *end;
+        unsigned long v;
+        errno = 0;
+        v = strtoul(a->val[O_LIMIT], &end, 10);
+        if (errno || end == a->val[O_LIMIT] || *end || v == 0 || v > 1000000 ||
+            a->val[O_LIMIT][0] == '-')
+            return bad_usage("--limit: expected a positive integer up to 1000000, got '%s'",
+                             a->val[O_LIMIT]);
+        a->limit = (unsigned)v;
+    }
+    if (a->given[O_STEP]) {
+        char *end;
+        errno = 0;
+        a->step = strtoll(a->val[O_STEP], &end, 10);
+        if (errno || end == a->val[O_STEP] || *end || a->step < 0)
+            return bad_usage("--step: expected a step number (>= 0), got '%s'", a->val[O_STEP]);
+    }
+    if (a->cmd->bit == C_SNAPSHOT && !a->given[O_OUT])
+        return bad_usage("snapshot: -o FILE is required (\"-o -\": CSV to stdout)");
+
+    /* positional arguments */
+    {
+        int want = (a->cmd->bit & (C_RUNS | C_PING | C_VERSION)) ? 0 : 1;
+        if (a->npos < want)
+            return bad_usage("%s needs %s (see mpmctl %s --help)", a->cmd->name,
+                             a->cmd->bit == C_SUBMIT ? "a case file" : "a job id", a->cmd->name);
+        if (a->npos > want)
+            return bad_usage("%s: unexpected argument '%s'", a->cmd->name, a->pos[want]);
+    }
+    return 0;
+}
+
+/* ---- helpers ---------------------------------------------------------------- */
+
+static char *slurp(const char *path, size_t *len)
+{
+    FILE *f = strcmp(path, "-") ? fopen(path, "rb") : stdin;
+    char *buf = NULL;
+    size_t cap = 0, n = 0;
+    if (!f) return NULL;
+    for (;;) {
+        if (n + 65536 + 1 > cap) {
+            size_t nc = cap ? cap * 2 : 131072;
+            char *nb = realloc(buf, nc);
+            if (!nb) {
+                free(buf);
+                buf = NULL;
+                errno = ENOMEM;
+                break;
+            }
+            buf = nb;
+            cap = nc;
+        }
+        size_t r = fread(buf + n, 1, cap - n - 1, f);
+        n += r;
+        if (r == 0) {
+            if (ferror(f)) {
+                free(buf);
+                buf = NULL;
+            }
+            break;
+        }
+    }
+    if (f != stdin) fclose(f);
+    if (buf) {
+        buf[n] = 0;
+        *len = n;
+    }
+    return buf;
+}
+
+static int out_json_line(const json_t *v)
+{
+    if (cj_print(stdout, v, 0)) return CTL_ESYS;
+    fputc('\n', stdout);
+    return 0;
+}
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+/* Exit status for a watched run's final status. */
+static int exit_for_status(int st)
+{
+    switch (st) {
+    case SRV_STATUS_FINISHED: return CTL_EXIT_OK;
+    case SRV_STATUS_FAILED: return CTL_EXIT_FAILED;
+    case SRV_STATUS_CANCELLED: return CTL_EXIT_CANCELLED;
+    default: return CTL_EXIT_INTERRUPTED;
+    }
+}
+
+static int exit_for_rc(int rc)
+{
+    if (rc == CTL_EUSAGE) return CTL_EXIT_USAGE;
+    if (rc == CTL_EINTR) return CTL_EXIT_SIGNAL;
+    return rc ? CTL_EXIT_ERROR : CTL_EXIT_OK;
+}
+
+/* ---- commands ------------------------------------------------------------------ */
+
+static int do_watch(ctl_conn *c, uint64_t job, ctl_out fmt)
+{
+    int st = 0, rc = ctl_watch(c, job, fmt, &st);
+    if (rc) return exit_for_rc(rc);
+    return exit_for_status(st);
+}
+
+static int cmd_submit(ctl_conn *c, const cli *a)
+{
+    const char *path = a->pos[0];
+    size_t len = 0;
+    char err[1024];
+    char *text = slurp(path, &len);
+    Mpmd__Case *pb = NULL;
+    srv_case *sc = NULL;
+    srv_request rq = {.kind = SRV_REQ_SUBMIT};
+    json_t *reply = NULL, *ok = NULL;
+    uint64_t job;
+    int rc;
+    if (!text) {
+        fprintf(stderr, "mpmctl: cannot read %s: %s\n", path, strerror(errno));
+        return CTL_EXIT_ERROR;
+    }
+    rc = srv_case_from_json(text, len, &pb, err, sizeof err);
+    free(text);
+    if (!rc) rc = srv_case_from_pb(pb, &sc, err, sizeof err);
+    srv_case_destroy(&sc);
+    if (rc) {
+        fprintf(stderr, "mpmctl: %s: %s\n", path, err);
+        srv_case_pb_free(&pb);
+        return CTL_EXIT_ERROR;
+    }
+    rq.case_pb = pb;
+    rc = ctl_call(c, &rq, "submitOk", &reply, &ok);
+    srv_case_pb_free(&pb);
+    if (rc) {
+        json_decref(reply);
+        return exit_for_rc(rc);
+    }
+    job = cj_u64(ok, "jobId", 0);
+    if (!job) {
+        fprintf(stderr, "mpmctl: the server's SubmitOk has no job id\n");
+        json_decref(reply);
+        return CTL_EXIT_ERROR;
+    }
+    if (a->given[O_WATCH] && a->fmt != CTL_OUT_TEXT) {
+        fprintf(stderr, "job %llu\n", (unsigned long long)job);
+    } else if (a->fmt == CTL_OUT_JSON) {
+        rc = out_json_line(ok);
+    } else {
+        printf("job %llu\n", (unsigned long long)job);
+    }
+    fflush(stdout);
+    json_decref(reply);
+    if (rc) return CTL_EXIT_ERROR;
+    if (a->given[O_WATCH]) return do_watch(c, job, a->fmt);
+    return CTL_EXIT_OK;
+}
+
+static int cmd_watch(ctl_conn *c, const cli *a)
+{
+    uint64_t job;
+    if (parse_id(a->pos[0], "watch", &job)) return CTL_EXIT_USAGE;
+    return do_watch(c, job, a->fmt);
+}
+
+/* Method name of a run, from its case (one GetRun with the case): RunInfo
+ * has no method field, so the table asks for each listed run's case. */
+static void run_method(ctl_conn *c, uint64_t id, char *buf, size_t n)
+{
+    srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = id, .with_case = 1};
+    json_t *reply = NULL, *run = NULL;
+    const char *err_code, *err_msg;
+    snprintf(buf, n, "?");
+    if (!ctl_call_quiet(c, &rq, "run", &reply, &run, &err_code, &err_msg)) {
+        json_t *cs = json_object_get(run, "case");
+        if (cs) snprintf(buf, n, "%s", cj_str(cs, "method", "MPM"));
+    }
+    json_decref(reply);
+}
+
+static int cmd_runs(ctl_conn *c, const cli *a)
+{
+    srv_request rq = {.kind = SRV_REQ_LIST_RUNS, .status = a->status, .limit = a->limit};
+    json_t *reply = NULL, *list = NULL, *runs;
+    int rc = ctl_call(c, &rq, "runs", &reply, &list);
+    size_t i, n;
+    if (rc) {
+        json_decref(reply);
+        return exit_for_rc(rc);
+    }
+    runs = json_object_get(list, "runs");
+    n = json_is_array(runs) ? json_array_size(runs) : 0;
+    if (a->fmt == CTL_OUT_JSON) {
+        for (i = 0; i < n && !rc; i++) rc = out_json_line(json_array_get(runs, i));
+    } else if (!n) {
+        printf("no runs%s%s\n", a->status ? " with status " : "",
+               a->status ? srv_status_name(a->status) : "");
+    } else {
+        printf("%6s  %-20s %-11s %-6s %3s %10s %12s %9s  %s\n", "ID", "NAME", "STATUS", "METHOD",
+               "DIM", "PARTICLES", "STEPS", "WALL S", "SUBMITTED");
+        for (i = 0; i < n; i++) {
+            json_t *r = json_array_get(runs, i);
+            char when[32], method[16];
+            uint64_t id = cj_u64(r, "runId", 0);
+            if (cj_str(r, "method", NULL)) snprintf(method, sizeof method, "%s", cj_str(r, "method", ""));
+            else run_method(c, id, method, sizeof method);  /* RunInfo lacks it: ask the case */
+            ctl_fmt_time(when, sizeof when, cj_num(r, "submittedAt", 0));
+            printf("%6llu  %-20.20s %-11s %-6s %3lld %10llu %12lld %9.2f  %s\n",
+                   (unsigned long long)id, cj_str(r, "name", ""), cj_str(r, "status", "?"), method,
+                   cj_int(r, "dim", 0), (unsigned long long)cj_u64(r, "particles", 0),
+                   cj_int(r, "steps", 0), cj_num(r, "wallS", 0), when);
+        }
+    }
+    json_decref(reply);
+    return rc ? CTL_EXIT_ERROR : CTL_EXIT_OK;
+}
+
+static void show_text(const json_t *r)
+{
+    char b[64];
+    const json_t *cs = json_object_get(r, "case");
+    const json_t *le = json_object_get(r, "lastEnergy");
+    const json_t *snaps = json_object_get(r, "snapshotSteps");
+    const char *err = cj_str(r, "error", "");
+    printf("run %llu (job %llu)%s%s\n", (unsigned long long)cj_u64(r, "runId", 0),
+           (unsigned long long)cj_u64(r, "jobId", 0), *cj_str(r, "name", "") ? ": " : "",
+           cj_str(r, "name", ""));
+    printf("  status      %s\n", cj_str(r, "status", "?"));
+    if (*err) printf("  error       %s\n", err);
+    ctl_fmt_time(b, sizeof b, cj_num(r, "submittedAt", 0));
+    printf("  submitted   %s\n", b);
+    ctl_fmt_time(b, sizeof b, cj_num(r, "startedAt", 0));
+    printf("  started     %s\n", b);
+    ctl_fmt_time(b, sizeof b, cj_num(r, "finishedAt", 0));
+    printf("  finished    %s\n", b);
+    printf("  steps       %lld", cj_int(r, "steps", 0));
+    if (cj_int(r, "stepsTotal", 0) > 0) printf(" of %lld", cj_int(r, "stepsTotal", 0));
+    printf("\n  t           %.10g\n", cj_num(r, "t", 0));
+    ctl_fmt_duration(b, sizeof b, cj_num(r, "wallS", 0));
+    printf("  wall        %s\n", b);
+    printf("  particles   %llu\n  nodes       %llu\n  dim         %lld\n",
+           (unsigned long long)cj_u64(r, "particles", 0), (unsigned long long)cj_u64(r, "nodes", 0),
+           cj_int(r, "dim", 0));
+    if (cs) {
+        double dt = cj_num(cs, "dt", 0);
+        printf("  method      %s, %s, ", cj_str(cs, "method", "MPM"), cj_str(cs, "update", "USF"));
+        if (dt > 0) printf("dt %.10g%s\n", dt, json_is_true(json_object_get(cs, "allowUnstableDt")) ? " (unstable allowed)" : "");
+        else printf("automatic dt (CFL %g)\n", cj_num(cs, "cfl", 0) > 0 ? cj_num(cs, "cfl", 0) : 0.5);
+        if (json_object_get(cs, "endTime")) printf("  stop        at t = %.10g\n", cj_num(cs, "endTime", 0));
+        else printf("  stop        after %lld steps\n", cj_int(cs, "steps", 0));
+    }
+    printf("  energy      %llu samples\n", (unsigned long long)cj_u64(r, "energySamples", 0));
+    if (le)
+        printf("  last energy step %lld, t %.10g: kinetic %.10e, strain %.10e, potential %.10e, "
+               "external work %.10e, total %.10e\n",
+               cj_int(le, "step", 0), cj_num(le, "t", 0), cj_num(le, "kinetic", NAN),
+               cj_num(le, "strain", NAN), cj_num(le, "potential", NAN),
+               cj_num(le, "externalWork", NAN), cj_num(le, "total", NAN));
+    if (json_is_array(snaps) && json_array_size(snaps)) {
+        size_t n = json_array_size(snaps);
+        printf("  snapshots   %zu stored, steps", n);
+        for (size_t i = 0; i < n && i < 20; i++) printf(" %lld", (long long)cj_at(r, "snapshotSteps", i, 0));
+        printf("%s\n", n > 20 ? " ..." : "");
+    } else {
+        printf("  snapshots   none stored\n");
+    }
+}
+
+static int cmd_show(ctl_conn *c, const cli *a)
+{
+    srv_request rq = {.kind = SRV_REQ_GET_RUN};
+    json_t *reply = NULL, *run = NULL;
+    uint64_t id;
+    int rc;
+    if (parse_id(a->pos[0], "show", &id)) return CTL_EXIT_USAGE;
+    rq.id = id;
+    rq.with_case = a->given[O_CASE] || a->fmt == CTL_OUT_TEXT;
+    rc = ctl_call(c, &rq, "run", &reply, &run);
+    if (rc) {
+        json_decref(reply);
+        return exit_for_rc(rc);
+    }
+    if (a->fmt == CTL_OUT_JSON) {
+        rc = out_json_line(run);
+    } else if (a->given[O_CASE]) {
+        json_t *cs = json_object_get(run, "case");
+        if (!cs) {
+            fprintf(stderr, "mpmctl: the server sent run %llu without its case\n", (unsigned long long)id);
+            rc = CTL_EPROTO;
+        } else if (!(rc = cj_print(stdout, cs, 1))) {
+            fputc('\n', stdout);
+        }
+    } else {
+        show_text(run);
+    }
+    json_decref(reply);
+    return rc ? CTL_EXIT_ERROR : CTL_EXIT_OK;
+}
+
+static int energy_row(json_t *s, void *arg)
+{
+    return ctl_energy_out_row(arg, s);
+}
+
+static int cmd_energy(ctl_conn *c, const cli *a)
+{
+    ctl_energy_out eo;
+    uint64_t id;
+    int rc;
+    if (parse_id(a->pos[0], "energy", &id)) return CTL_EXIT_USAGE;
+    ctl_energy_out_init(&eo, a->fmt, 0, stdout);
+    rc = ctl_fetch_energy(c, id, 0, energy_row, &eo);
+    if (!rc && !eo.header_done && a->fmt == CTL_OUT_TEXT)
+        fprintf(stderr, "run %llu has no energy samples\n", (unsigned long long)id);
+    if (fflush(stdout) || ferror(stdout)) {
+        fprintf(stderr, "mpmctl: cannot write the series: %s\n", strerror(errno));
+        rc = CTL_ESYS;
+    }
+    return exit_for_rc(rc);
+}
+
+/* CSV of a snapshot: a header naming the fields present, a row per particle. */
+static int snapshot_csv(FILE *f, const json_t *s)
+{
+    static const char *const ax[3] = {"x", "y", "z"};
+    static const char *const voigt[6] = {"sxx", "syy", "szz", "sxy", "syz", "sxz"};
+    size_t n = cj_u64(s, "n", 0), dim = cj_u64(s, "dim", 0);
+    size_t nx = cj_len(s, "x"), nv = cj_len(s, "v"), ns = cj_len(s, "stress");
+    size_t np = cj_len(s, "pressure"), nvol = cj_len(s, "volume");
+    const json_t *x = json_object_get(s, "x"), *v = json_object_get(s, "v");
+    const json_t *st = json_object_get(s, "stress"), *p = json_object_get(s, "pressure");
+    const json_t *vol = json_object_get(s, "volume");
+    char b[40];
+    if (dim < 1 || dim > 3 || (nx && nx != n * dim) || (nv && nv != n * dim) || (ns && ns != 6 * n) ||
+        (np && np != n) || (nvol && nvol != n)) {
+        fprintf(stderr, "mpmctl: the snapshot's arrays do not match n = %zu, dim = %zu\n", n, dim);
+        return CTL_EPROTO;
+    }
+    fputs("i", f);
+    if (nx) for (size_t d = 0; d < dim; d++) fprintf(f, ",%s", ax[d]);
+    if (nv) for (size_t d = 0; d < dim; d++) fprintf(f, ",v%s", ax[d]);
+    if (ns) for (int k = 0; k < 6; k++) fprintf(f, ",%s", voigt[k]);
+    if (np) fputs(",pressure", f);
+    if (nvol) fputs(",volume", f);
+    fputc('\n', f);
+#define CELL(arr, idx)                                                     \
+    do {                                                                   \
+        const json_t *e_ = json_array_get(arr, idx);                       \
+        double d_ = json_is_number(e_) ? json_number_value(e_) : NAN;      \
+        if (json_is_string(e_)) d_ = strtod(json_string_value(e_), NULL);  \
+        cj_fmt_double(b, sizeof b, d_);                                    \
+        fputc(',', f);                                                     \
+        fputs(b, f);                                                       \
+    } while (0)
+    for (size_t i = 0; i < n; i++) {
+        fprintf(f, "%zu", i);
+        if (nx) for (size_t d = 0; d < dim; d++) CELL(x, i * dim + d);
+        if (nv) for (size_t d = 0; d < dim; d++) CELL(v, i * dim + d);
+        if (ns) for (size_t k = 0; k < 6; k++) CELL(st, i * 6 + k);
+        if (np) CELL(p, i);
+        if (nvol) CELL(vol, i);
+        fputc('\n', f);
+    }
+#undef CELL
+    return ferror(f) ? CTL_ESYS : 0;
+}
+
+static int cmd_snapshot(ctl_conn *c, const cli *a)
+{
+    srv_request rq = {.kind = SRV_REQ_GET_SNAPSHOT, .has_step = a->given[O_STEP], .step = a->step};
+    json_t *reply = NULL, *snap = NULL;
+    const char *path = a->val[O_OUT];
+    size_t pl = strlen(path);
+    int as_json = pl > 5 && !strcmp(path + pl - 5, ".json");
+    uint64_t id;
+    FILE *f;
+    int rc;
+    if (parse_id(a->pos[0], "snapshot", &id)) return CTL_EXIT_USAGE;
+    rq.id = id;
+    rc = ctl_call(c, &rq, "snapshot", &reply, &snap);
+    if (rc) {
+        json_decref(reply);
+        return exit_for_rc(rc);
+    }
+    f = strcmp(path, "-") ? fopen(path, "w") : stdout;
+    if (!f) {
+        fprintf(stderr, "mpmctl: cannot write %s: %s\n", path, strerror(errno));
+        json_decref(reply);
+        return CTL_EXIT_ERROR;
+    }
+    if (as_json) {
+        rc = cj_print(f, snap, 0);
+        fputc('\n', f);
+    } else {
+        rc = snapshot_csv(f, snap);
+    }
+    if ((f == stdout ? fflush(f) : fclose(f)) || rc) {
+        if (!rc) fprintf(stderr, "mpmctl: cannot write %s: %s\n", path, strerror(errno));
+        if (f != stdout) remove(path);
+        json_decref(reply);
+        return CTL_EXIT_ERROR;
+    }
+    if (f != stdout)
+        fprintf(stderr, "run %llu: snapshot at step %lld (t %.10g, %llu particles) -> %s\n",
+                (unsigned long long)id, cj_int(snap, "step", 0), cj_num(snap, "t", 0),
+                (unsigned long long)cj_u64(snap, "n", 0), path);
+    json_decref(reply);
+    return CTL_EXIT_OK;
+}
+
+static int cmd_cancel(ctl_conn *c, const cli *a)
+{
+    srv_request rq = {.kind = SRV_REQ_CANCEL};
+    json_t *reply = NULL, *run = NULL;
+    uint64_t id;
+    int rc;
+    if (parse_id(a->pos[0], "cancel", &id)) return CTL_EXIT_USAGE;
+    rq.id = id;
+    rc = ctl_call(c, &rq, "run", &reply, &run);
+    if (!rc) {
+        if (a->fmt == CTL_OUT_JSON) {
+            rc = out_json_line(run);
+        } else {
+            int st = cj_status(run, "status");
+            printf("job %llu: %s%s\n", (unsigned long long)id, cj_str(run, "status", "?"),
+                   st == SRV_STATUS_RUNNING ? " (cancel requested: it stops within one step)" : "");
+        }
+    }
+    json_decref(reply);
+    return exit_for_rc(rc);
+}
+
+static int cmd_ping(ctl_conn *c, const cli *a)
+{
+    srv_request rq = {.kind = SRV_REQ_PING};
+    json_t *reply = NULL, *pong = NULL;
+    double t0 = now_s(), ms;
+    int rc = ctl_call(c, &rq, "pong", &reply, &pong);
+    ms = 1e3 * (now_s() - t0);
+    if (!rc) {
+        if (a->fmt == CTL_OUT_JSON) {
+            json_t *rt = json_real(ms);
+            if (!rt || json_object_set_new(pong, "roundTripMs", rt)) rc = CTL_ESYS;
+            else rc = out_json_line(pong);
+        } else {
+            printf("mpmd %s at %s: schema %lld, stream %s, round trip %.2f ms\n",
+                   cj_str(pong, "serverVersion", "?"), c->endpoint, cj_int(pong, "schemaVersion", 0),
+                   cj_str(pong, "streamEndpoint", "?"), ms);
+        }
+    }
+    json_decref(reply);
+    return exit_for_rc(rc);
+}
+
+static int cmd_version(ctl_conn *c, const cli *a)
+{
+    srv_request rq = {.kind = SRV_REQ_VERSION};
+    json_t *reply = NULL, *vi = NULL;
+    int rc;
+    if (a->fmt != CTL_OUT_JSON) {
+        printf("mpmctl %s (schema %d)\n", SRV_VERSION, SRV_SCHEMA_VERSION);
+        fflush(stdout);
+    }
+    rc = ctl_call(c, &rq, "version", &reply, &vi);
+    if (!rc) {
+        if (a->fmt == CTL_OUT_JSON) {
+            json_t *o = json_pack("{s:{s:s,s:i},s:O}", "client", "version", SRV_VERSION,
+                                  "schemaVersion", SRV_SCHEMA_VERSION, "server", vi);
+            rc = o ? out_json_line(o) : CTL_ESYS;
+            json_decref(o);
+        } else {
+            json_t *comps = json_object_get(vi, "components");
+            printf("mpmd %s (schema %lld) at %s\n", cj_str(vi, "serverVersion", "?"),
+                   cj_int(vi, "schemaVersion", 0), c->endpoint);
+            for (size_t i = 0; json_is_array(comps) && i < json_array_size(comps); i++) {
+                json_t *k = json_array_get(comps, i);
+                printf("  %-12s %s\n", cj_str(k, "name", "?"), cj_str(k, "version", "?"));
+            }
+        }
+    }
+    json_decref(reply);
+    return exit_for_rc(rc);
+}
+
+int main(int argc, char **argv)
+{
+    cli a;
+    ctl_conn c;
+    int rc;
+    if (parse_args(argc, argv, &a)) return CTL_EXIT_USAGE;
+    if (a.given[O_HELP]) {
+        if (a.cmd) command_usage(a.cmd);
+        else usage(stdout);
+        return CTL_EXIT_OK;
+    }
+    memset(&c, 0, sizeof c);
+    c.endpoint = a.given[O_ENDPOINT] ? a.val[O_ENDPOINT] : getenv("MPMD_ENDPOINT");
+    if (!c.endpoint || !*c.endpoint) c.endpoint = CTL_DEFAULT_ENDPOINT;
+    c.stream = a.given[O_STREAM] ? a.val[O_STREAM] : getenv("MPMD_STREAM");
+    c.timeout_s = a.timeout;
+    switch (a.cmd->bit) {
+    case C_SUBMIT: rc = cmd_submit(&c, &a); break;
+    case C_WATCH: rc = cmd_watch(&c, &a); break;
+    case C_RUNS: rc = cmd_runs(&c, &a); break;
+    case C_SHOW: rc = cmd_show(&c, &a); break;
+    case C_ENERGY: rc = cmd_energy(&c, &a); break;
+    case C_SNAPSHOT: rc = cmd_snapshot(&c, &a); break;
+    case C_CANCEL: rc = cmd_cancel(&c, &a); break;
+    case C_PING: rc = cmd_ping(&c, &a); break;
+    default: rc = cmd_version(&c, &a); break;
+    }
+    ctl_conn_close(&c);
+    if (fflush(stdout) && !rc) {
+        fprintf(stderr, "mpmctl: cannot write the output: %s\n", strerror(errno));
+        rc = CTL_EXIT_ERROR;
+    }
+    return rc;
+}

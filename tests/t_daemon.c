@@ -1,0 +1,1244 @@
+/*
+ * t_daemon.c - integration tests of mpmd and mpmctl: real daemons on ipc://
+ * endpoints in the test's temporary directory with a real SQLite file, the
+ * real client run as a process, raw requests on a DEALER for what the
+ * client refuses to send.  Scenarios: the client's command line offline; a
+ * basic run watched live and compared number for number with the in-process
+ * solver; two jobs at once and a full queue; cancel; late watchers that
+ * must still get every energy sample once and in order; restart on the same
+ * database (and the one-daemon lock); a hard kill mid-run; bad cases and
+ * bad frames, after which the daemon still answers.  Cases are shortened
+ * copies of proto/examples (read relative to the repository root) so the
+ * file stays within about two minutes under the sanitizers.
+ */
+#define _GNU_SOURCE
+#include "t_daemon.h"
+
+#include <math.h>
+#include <signal.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "mpm.h"
+
+#define ERRLEN 1024
+
+/* ---- helpers ---------------------------------------------------------------- */
+
+/* An energy series read back from CSV. */
+typedef struct {
+    size_t n;
+    long long *seq, *step;
+    double *t, *kinetic, *strain, *total;
+} series;
+
+static void series_free(series *s)
+{
+    free(s->seq);
+    free(s->step);
+    free(s->t);
+    free(s->kinetic);
+    free(s->strain);
+    free(s->total);
+    memset(s, 0, sizeof *s);
+}
+
+/* Parses mpmctl's energy CSV (header + rows); 0 or -1 with the reason. */
+static int parse_csv(const char *text, series *s)
+{
+    char *copy = strdup(text), **lines = NULL;
+    size_t n = copy ? td_lines(copy, &lines) : 0;
+    int rc = -1;
+    memset(s, 0, sizeof *s);
+    if (n < 1 || strncmp(lines[0], "seq,step,t,kinetic,strain,potential,external_work,total,mass,"
+                                   "momentum_x", 71)) {
+        TLOG("not an energy CSV: first line \"%.80s\"", n ? lines[0] : "");
+        goto out;
+    }
+    s->seq = calloc(n, sizeof *s->seq);
+    s->step = calloc(n, sizeof *s->step);
+    s->t = calloc(n, sizeof *s->t);
+    s->kinetic = calloc(n, sizeof *s->kinetic);
+    s->strain = calloc(n, sizeof *s->strain);
+    s->total = calloc(n, sizeof *s->total);
+    if (!s->seq || !s->step || !s->t || !s->kinetic || !s->strain || !s->total) goto out;
+    for (size_t i = 1; i < n; i++) {
+        double pot, work;
+        if (sscanf(lines[i], "%lld,%lld,%lf,%lf,%lf,%lf,%lf,%lf", &s->seq[s->n], &s->step[s->n],
+                   &s->t[s->n], &s->kinetic[s->n], &s->strain[s->n], &pot, &work,
+                   &s->total[s->n]) != 8) {
+            TLOG("bad CSV row %zu: \"%.80s\"", i, lines[i]);
+            goto out;
+        }
+        s->n++;
+    }
+    rc = 0;
+out:
+    free(lines);
+    free(copy);
+    if (rc) series_free(s);
+    return rc;
+}
+
+/* seq[i] == i for every row (complete, ordered, no duplicate). */
+static int consecutive(const series *s)
+{
+    for (size_t i = 0; i < s->n; i++)
+        if (s->seq[i] != (long long)i) {
+            TLOG("row %zu has seq %lld", i, s->seq[i]);
+            return 0;
+        }
+    return 1;
+}
+
+static double rel_diff(double a, double b)
+{
+    double m = fmax(fabs(a), fabs(b));
+    return m > 0 ? fabs(a - b) / m : 0;
+}
+
+/* Case files: an example with a few members replaced. */
+static json_t *example(const char *name)
+{
+    char path[128];
+    snprintf(path, sizeof path, "proto/examples/%s.json", name);
+    return td_json_file(path);
+}
+
+/* Sets output.<key> = v (creating output). */
+static void set_output(json_t *c, const char *key, json_t *v)
+{
+    json_t *out = json_object_get(c, "output");
+    if (!out) {
+        out = json_object();
+        json_object_set_new(c, "output", out);
+    }
+    json_object_set_new(out, key, v);
+}
+
+/* The 1D bar running `steps` steps (not endTime), energy every `every`. */
+static json_t *bar_steps(long long steps, int every)
+{
+    json_t *c = example("bar1d_mpm");
+    if (!c) return NULL;
+    json_object_del(c, "endTime");
+    json_object_set_new(c, "steps", json_integer(steps));
+    set_output(c, "energyEvery", json_integer(every));
+    return c;
+}
+
+/* A job that runs until cancelled: the bar at rest (nothing moves, so
+ * nothing drifts out of the grid however long it runs), 99 million steps. */
+#define LONG_STEPS 99000000LL
+static json_t *long_case(int every)
+{
+    json_t *c = bar_steps(LONG_STEPS, every);
+    if (c) json_object_del(json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "points"), "v");
+    return c;
+}
+
+/* A 2D elastic block drifting in a box: 256 particles. */
+static json_t *block2d(long long steps, int every, const char *name)
+{
+    json_error_t je;
+    json_t *c = json_loads(
+        "{\"grid\": {\"dim\": 2, \"spacing\": [0.05, 0.05], \"nodes\": [21, 21]},"
+        " \"method\": \"MPM\", \"update\": \"USF\", \"dt\": 0.001,"
+        " \"materials\": [{\"youngsModulus\": 1, \"poissonRatio\": 0.2, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.3, 0.3], \"hi\": [0.7, 0.7]},"
+        "               \"velocity\": [0.01, 0.005], \"ppc\": 2}]}",
+        0, &je);
+    if (!c) return NULL;
+    json_object_set_new(c, "name", json_string(name));
+    json_object_set_new(c, "steps", json_integer(steps));
+    set_output(c, "energyEvery", json_integer(every));
+    return c;
+}
+
+/* Writes case c (consumed) to dir/file; path out. */
+static int write_case(json_t *c, const char *dir, const char *file, char *path, size_t n)
+{
+    int rc;
+    if (!c) return -1;
+    snprintf(path, n, "%s/%s", dir, file);
+    rc = td_json_write(path, c);
+    json_decref(c);
+    return rc;
+}
+
+/* "job N" in text -> N (0 if absent). */
+static unsigned long long job_of(const char *text)
+{
+    const char *p = text ? strstr(text, "job ") : NULL;
+    return p ? strtoull(p + 4, NULL, 10) : 0;
+}
+
+/* A member of a JSON text line (parsed), as text: string value or number. */
+static json_t *parse_line(const char *line)
+{
+    return json_loads(line, 0, NULL);
+}
+
+static long long jint(const json_t *o, const char *key)
+{
+    const json_t *v = json_object_get(o, key);
+    if (json_is_integer(v)) return json_integer_value(v);
+    if (json_is_string(v)) return atoll(json_string_value(v));
+    return -1;
+}
+
+static const char *jstr(const json_t *o, const char *key)
+{
+    const json_t *v = json_object_get(o, key);
+    return json_is_string(v) ? json_string_value(v) : "";
+}
+
+static double jnum(const json_t *o, const char *key)
+{
+    const json_t *v = json_object_get(o, key);
+    if (json_is_number(v)) return json_number_value(v);
+    if (json_is_string(v)) return strtod(json_string_value(v), NULL);
+    return NAN;
+}
+
+/* Number of lines of a text. */
+static size_t count_lines(const char *t)
+{
+    size_t n = 0;
+    for (; t && *t; t++) n += *t == '\n';
+    return n;
+}
+
+/* mpmctl show ID --json, parsed (NULL on failure). */
+static json_t *show_json(const td_daemon *d, unsigned long long id)
+{
+    char ids[32];
+    td_out o;
+    json_t *r = NULL;
+    snprintf(ids, sizeof ids, "%llu", id);
+    if (td_ctl(d, 30, &o, "show", ids, "--json", NULL) == 0 && o.status == 0) r = parse_line(o.out);
+    else TLOG("show %s --json: exit %d, stderr %s", ids, o.status, o.err ? o.err : "");
+    td_out_free(&o);
+    return r;
+}
+
+/* ---- the client alone --------------------------------------------------------- */
+
+/* Expects mpmctl ARGS to exit with `status` and its stdout (or, for a
+ * non-zero status, its stdout or stderr) to contain want. */
+static int expect_ctl(const td_daemon *d, int status, const char *want, const char *const *args)
+{
+    td_out o;
+    int ok;
+    if (td_ctlv(d, 30, &o, args)) {
+        t_fail(__FILE__, __LINE__, "cannot run mpmctl %s", args[0]);
+        td_out_free(&o);
+        return 0;
+    }
+    ok = o.status == status && (strstr(o.out, want) || (status && strstr(o.err, want)));
+    if (!ok) {
+        char line[256] = "";
+        for (int i = 0; args[i]; i++)
+            snprintf(line + strlen(line), sizeof line - strlen(line), " %s", args[i]);
+        t_fail(__FILE__, __LINE__, "mpmctl%s: exit %d (want %d), stdout \"%.300s\", stderr \"%.300s\" "
+               "(want \"%s\")", line, o.status, status, o.out, o.err, want);
+    } else {
+        const char *msg = status && o.err[0] ? o.err : o.out;
+        const char *nl = strchr(msg, '\n');
+        TLOG("%-34.34s exit %d: %.*s", args[0] ? args[0] : "", o.status,
+             (int)(nl ? nl - msg : (long)strlen(msg)), msg);
+    }
+    td_out_free(&o);
+    return ok;
+}
+
+#define EXPECT_CTL(d, st, want, ...)                                      \
+    do {                                                                  \
+        const char *a_[] = {__VA_ARGS__, NULL};                           \
+        if (!expect_ctl(d, st, want, a_)) return;                         \
+    } while (0)
+
+DTEST(daemon_cli_offline)
+{
+    const char *tmp = t_tmpdir();
+    char dead[300], bad[300], envep[320];
+    td_out o;
+    if (!td_bin("MPMCTL_BIN")) return;
+    snprintf(dead, sizeof dead, "ipc://%s/nobody", tmp);
+    EXPECT_CTL(NULL, 0, "usage: mpmctl", "--help");
+    EXPECT_CTL(NULL, 0, "usage: mpmctl watch", "watch", "--help");
+    EXPECT_CTL(NULL, 2, "no command", "--timeout", "3");
+    EXPECT_CTL(NULL, 2, "unknown command 'frobnicate'", "frobnicate");
+    EXPECT_CTL(NULL, 2, "unknown option '--bogus'", "runs", "--bogus");
+    EXPECT_CTL(NULL, 2, "option --limit needs a value", "runs", "--limit");
+    EXPECT_CTL(NULL, 2, "--limit: expected a positive integer", "runs", "--limit", "abc");
+    EXPECT_CTL(NULL, 2, "--status: 'BOGUS' is not one of", "runs", "--status", "BOGUS");
+    EXPECT_CTL(NULL, 2, "option --csv does not apply to 'runs'", "runs", "--csv");
+    EXPECT_CTL(NULL, 2, "--csv and --json exclude each other", "energy", "1", "--csv", "--json");
+    EXPECT_CTL(NULL, 2, "'abc' is not a job id", "watch", "abc");
+    EXPECT_CTL(NULL, 2, "watch needs a job id", "watch");
+    EXPECT_CTL(NULL, 2, "unexpected argument '2'", "cancel", "1", "2");
+    EXPECT_CTL(NULL, 2, "-o FILE is required", "snapshot", "1");
+    EXPECT_CTL(NULL, 2, "--timeout: expected seconds", "--timeout", "0", "ping");
+    EXPECT_CTL(NULL, 2, "option --watch takes no value", "submit", "x.json", "--watch=1");
+
+    /* no daemon: a bounded wait and the message the issue asks for */
+    {
+        const char *a[] = {"--endpoint", dead, "--timeout", "1", "ping", NULL};
+        char want[400];
+        CHECK(td_ctlv(NULL, 30, &o, a) == 0);
+        snprintf(want, sizeof want, "no reply from %s within 1 s (is mpmd running?)", dead);
+        CHECKF(o.status == 1 && strstr(o.err, want), "exit %d, stderr %s", o.status, o.err);
+        CHECK_LT(o.secs, 6);
+        TLOG("dead endpoint: exit 1 after %.2f s: %s", o.secs, o.err);
+        td_out_free(&o);
+    }
+    /* MPMD_ENDPOINT is the default endpoint */
+    snprintf(envep, sizeof envep, "ipc://%s/from-env", tmp);
+    setenv("MPMD_ENDPOINT", envep, 1);
+    {
+        const char *a[] = {"--timeout", "0.5", "runs", NULL};
+        int rc = td_ctlv(NULL, 30, &o, a);
+        unsetenv("MPMD_ENDPOINT");
+        CHECK(rc == 0);
+        CHECKF(o.status == 1 && strstr(o.err, envep), "exit %d, stderr %s", o.status, o.err);
+        td_out_free(&o);
+    }
+    /* a bad case is reported locally with the field's path; nothing is sent
+     * (the endpoint is dead, yet the answer is immediate and names the field) */
+    snprintf(bad, sizeof bad, "%s/bad.json", tmp);
+    CHECK(td_write(bad, "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+                        " \"materials\": [{\"youngsModulus\": -1, \"density\": 1}],"
+                        " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.4]}}], \"endTime\": 1}") == 0);
+    {
+        const char *a[] = {"--endpoint", dead, "--timeout", "5", "submit", bad, NULL};
+        CHECK(td_ctlv(NULL, 30, &o, a) == 0);
+        CHECKF(o.status == 1 && strstr(o.err, "materials[0].youngsModulus: must be > 0 (got -1)") &&
+                   !strstr(o.err, "no reply"),
+               "exit %d, stderr %s", o.status, o.err);
+        CHECK_LT(o.secs, 4);
+        TLOG("local case check: %s", o.err);
+        td_out_free(&o);
+    }
+    CHECK(td_write(bad, "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]}, \"method\": \"FOO\"}") == 0);
+    {
+        const char *a[] = {"--endpoint", dead, "--timeout", "5", "submit", bad, NULL};
+        CHECK(td_ctlv(NULL, 30, &o, a) == 0);
+        CHECKF(o.status == 1 && strstr(o.err, "method: unknown value"), "exit %d, stderr %s", o.status,
+               o.err);
+        td_out_free(&o);
+    }
+    {
+        const char *a[] = {"--endpoint", dead, "submit", "/nonexistent/case.json", NULL};
+        CHECK(td_ctlv(NULL, 30, &o, a) == 0);
+        CHECKF(o.status == 1 && strstr(o.err, "cannot read /nonexistent/case.json"), "exit %d, stderr %s",
+               o.status, o.err);
+        td_out_free(&o);
+    }
+}
+
+/* ---- a basic run ---------------------------------------------------------------- */
+
+DTEST(daemon_basic_run)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--workers", "2", "--solver-threads", "1", NULL};
+    char dir[300], path[400], snap_csv[400], snap_json[400], err[ERRLEN], want[400];
+    td_daemon d;
+    td_out o, e;
+    series s;
+    json_t *c, *r;
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+
+    /* the paper's MPM bar, until t = 0.5, energies every 10 steps, snapshots recorded */
+    c = example("bar1d_mpm");
+    CHECK(c);
+    json_object_set_new(c, "endTime", json_real(0.5));
+    set_output(c, "snapshotEvery", json_integer(100));
+    set_output(c, "recordSnapshots", json_true());
+    set_output(c, "snapshotFields", json_pack("[s,s]", "X", "V"));
+    CHECK(write_case(c, dir, "bar.json", path, sizeof path) == 0);
+
+    CHECK(td_ctl(&d, 120, &o, "submit", path, "--watch", "--csv", NULL) == 0);
+    CHECKF(o.status == 0, "submit --watch --csv: exit %d, stderr: %s", o.status, o.err);
+    CHECKF(job_of(o.err) == 1 && strstr(o.err, "FINISHED"), "stderr: %s", o.err);
+    CHECK(parse_csv(o.out, &s) == 0);
+    TLOG("watched job 1: %zu samples, steps %lld..%lld, total %.17g -> %.17g", s.n, s.step[0],
+         s.step[s.n - 1], s.total[0], s.total[s.n - 1]);
+    CHECK(consecutive(&s));
+    CHECK(s.n >= 51 && s.step[0] == 0 && s.step[s.n - 1] == 500);
+    for (size_t i = 1; i < s.n; i++) CHECK(s.step[i] > s.step[i - 1]);
+
+    /* the same numbers as the solver in-process, to 1e-12 */
+    {
+        size_t len = 0;
+        char *text = td_slurp(path, &len);
+        srv_case *sc = NULL;
+        mpm_sim *sim = NULL;
+        double worst = 0, worst_t = 0;
+        CHECK(text);
+        CHECKF(srv_case_load(text, len, &sc, err, sizeof err) == 0, "%s", err);
+        free(text);
+        sim = mpm_sim_new(&sc->c, err, sizeof err);
+        CHECKF(sim, "%s", err);
+        for (size_t i = 0; i < s.n; i++) {
+            mpm_energy en;
+            while (mpm_sim_steps(sim) < s.step[i]) CHECK(mpm_sim_step(sim) == 0);
+            mpm_sim_energy(sim, &en);
+            worst = fmax(worst, rel_diff(en.total, s.total[i]));
+            worst = fmax(worst, rel_diff(en.kinetic, s.kinetic[i]));
+            worst_t = fmax(worst_t, rel_diff(mpm_sim_time(sim), s.t[i]));
+        }
+        TLOG("daemon vs in-process over %zu samples: max relative difference %.3g (energies), "
+             "%.3g (t)", s.n, worst, worst_t);
+        CHECK_LT(worst, 1e-12);
+        CHECK_LT(worst_t, 1e-12);
+
+        /* the stored snapshot at the last step: positions and velocities */
+        CHECK(td_ctl(&d, 30, &e, "snapshot", "1", "-o", (snprintf(snap_csv, sizeof snap_csv,
+                                                                  "%s/snap.csv", dir), snap_csv),
+                     NULL) == 0);
+        CHECKF(e.status == 0, "snapshot: exit %d: %s", e.status, e.err);
+        td_out_free(&e);
+        {
+            size_t sl = 0, np = mpm_sim_particles(sim);
+            char *st = td_slurp(snap_csv, &sl), **lines = NULL;
+            double x[16], v[16], dmax = 0;
+            size_t nl = st ? td_lines(st, &lines) : 0;
+            mpm_snapshot ms = {x, v, NULL, NULL, NULL};
+            CHECK(np == 7);
+            mpm_sim_snapshot(sim, &ms);
+            CHECKF(nl == np + 1 && !strcmp(lines[0], "i,x,vx"), "snapshot CSV: %zu lines, header %s",
+                   nl, nl ? lines[0] : "");
+            for (size_t i = 0; i < np; i++) {
+                size_t k;
+                double xi, vi;
+                CHECK(sscanf(lines[i + 1], "%zu,%lf,%lf", &k, &xi, &vi) == 3 && k == i);
+                dmax = fmax(dmax, fmax(rel_diff(xi, x[i]), rel_diff(vi, v[i])));
+            }
+            TLOG("snapshot at step 500 vs in-process: max relative difference %.3g", dmax);
+            CHECK_LT(dmax, 1e-12);
+            free(lines);
+            free(st);
+        }
+        mpm_sim_destroy(&sim);
+        srv_case_destroy(&sc);
+    }
+    {
+        json_t *sn;
+        snprintf(snap_json, sizeof snap_json, "%s/snap100.json", dir);
+        CHECK(td_ctl(&d, 30, &e, "snapshot", "1", "--step", "100", "-o", snap_json, NULL) == 0);
+        CHECKF(e.status == 0, "snapshot --step 100: exit %d: %s", e.status, e.err);
+        td_out_free(&e);
+        sn = td_json_file(snap_json);
+        CHECK(sn);
+        CHECKF(jint(sn, "step") == 100 && jint(sn, "n") == 7 && json_array_size(json_object_get(sn, "x")) == 7 &&
+                   json_array_size(json_object_get(sn, "v")) == 7 && !json_object_get(sn, "stress"),
+               "snapshot JSON: step %lld, n %lld", jint(sn, "step"), jint(sn, "n"));
+        json_decref(sn);
+    }
+    EXPECT_CTL(&d, 1, "NOT_FOUND", "snapshot", "1", "--step", "7", "-o", snap_json);
+
+    /* energy --csv gives the very series the watcher printed */
+    CHECK(td_ctl(&d, 30, &e, "energy", "1", "--csv", NULL) == 0);
+    CHECKF(e.status == 0 && !strcmp(e.out, o.out), "energy --csv differs from the watched series "
+           "(exit %d, %zu vs %zu bytes)", e.status, strlen(e.out), strlen(o.out));
+    td_out_free(&e);
+    CHECK(td_ctl(&d, 30, &e, "energy", "1", "--json", NULL) == 0);
+    CHECK(e.status == 0 && count_lines(e.out) == s.n);
+    {
+        char *nl = strrchr(e.out, '\n');
+        json_t *last;
+        *nl = 0;
+        nl = strrchr(e.out, '\n');
+        last = parse_line(nl ? nl + 1 : e.out);
+        CHECK(last);
+        CHECKF(jnum(last, "total") == s.total[s.n - 1] && jint(last, "seq") == (long long)s.n - 1,
+               "last JSON sample: total %.17g, seq %lld", jnum(last, "total"), jint(last, "seq"));
+        json_decref(last);
+    }
+    td_out_free(&e);
+    CHECK(td_ctl(&d, 30, &e, "energy", "1", NULL) == 0);
+    CHECK(e.status == 0 && count_lines(e.out) == s.n + 1);
+    td_out_free(&e);
+
+    /* a watcher arriving after the end gets the whole series too */
+    CHECK(td_ctl(&d, 60, &e, "watch", "1", "--csv", NULL) == 0);
+    CHECKF(e.status == 0 && !strcmp(e.out, o.out), "late watch --csv: exit %d, %zu bytes, stderr %s",
+           e.status, strlen(e.out), e.err);
+    td_out_free(&e);
+    CHECK(td_ctl(&d, 60, &e, "watch", "1", NULL) == 0);
+    CHECKF(e.status == 0 && strstr(e.out, "FINISHED") && strstr(e.out, "energy drift"),
+           "watch (text): exit %d, stdout %s", e.status, e.out);
+    td_out_free(&e);
+
+    /* the same case again with --watch --json: bitwise the same energies */
+    CHECK(td_ctl(&d, 120, &e, "submit", path, "--watch", "--json", NULL) == 0);
+    CHECKF(e.status == 0 && job_of(e.err) == 2, "submit --watch --json: exit %d, stderr %s", e.status,
+           e.err);
+    {
+        char **lines = NULL;
+        size_t nl = td_lines(e.out, &lines);
+        int same = nl == s.n;
+        for (size_t i = 0; same && i < nl; i++) {
+            json_t *j = parse_line(lines[i]);
+            same = j && jint(j, "seq") == (long long)i && jnum(j, "total") == s.total[i] &&
+                   jint(j, "step") == s.step[i];
+            json_decref(j);
+        }
+        free(lines);
+        CHECKF(same, "job 2's JSON series (%zu lines) differs from job 1's (%zu samples)", nl, s.n);
+    }
+    td_out_free(&e);
+
+    /* listings */
+    CHECK(td_ctl(&d, 30, &e, "runs", "--json", NULL) == 0);
+    CHECK(e.status == 0 && count_lines(e.out) == 2);
+    {
+        char **lines = NULL;
+        size_t nl = td_lines(e.out, &lines);
+        json_t *r0 = nl == 2 ? parse_line(lines[0]) : NULL, *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
+        free(lines);
+        CHECKF(r0 && r1 && jint(r0, "runId") == 2 && jint(r1, "runId") == 1 &&
+                   !strcmp(jstr(r0, "status"), "FINISHED") && !strcmp(jstr(r1, "status"), "FINISHED") &&
+                   !strcmp(jstr(r1, "name"), "bar1d_mpm") && jint(r1, "particles") == 7,
+               "runs --json: %s", e.out);
+        json_decref(r0);
+        json_decref(r1);
+    }
+    td_out_free(&e);
+    CHECK(td_ctl(&d, 30, &e, "runs", NULL) == 0);
+    CHECKF(e.status == 0 && strstr(e.out, "METHOD") && strstr(e.out, "bar1d_mpm") &&
+               strstr(e.out, "FINISHED    MPM"), "runs: %s", e.out);
+    TLOG("runs:\n%s", e.out);
+    td_out_free(&e);
+    CHECK(td_ctl(&d, 30, &e, "runs", "--status", "failed", "--json", NULL) == 0);
+    CHECK(e.status == 0 && !e.out[0]);
+    td_out_free(&e);
+    CHECK(td_ctl(&d, 30, &e, "runs", "--limit", "1", "--json", NULL) == 0);
+    CHECK(e.status == 0 && count_lines(e.out) == 1);
+    td_out_free(&e);
+
+    r = show_json(&d, 1);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "FINISHED") && jint(r, "steps") == 500 &&
+               jint(r, "energySamples") == (long long)s.n && jint(r, "jobId") == 1 &&
+               json_object_get(r, "finishedAt") && !json_object_get(r, "case"),
+           "show 1 --json: status %s, steps %lld, samples %lld", jstr(r, "status"), jint(r, "steps"),
+           jint(r, "energySamples"));
+    {
+        json_t *ss = json_object_get(r, "snapshotSteps");
+        size_t ns = json_array_size(ss);
+        json_t *last = ns ? json_array_get(ss, ns - 1) : NULL;
+        long long ls = json_is_string(last) ? atoll(json_string_value(last))
+                       : json_is_integer(last) ? json_integer_value(last) : -1;
+        CHECKF(ns >= 5 && ls == 500, "snapshotSteps: %zu entries, last %lld", ns, ls);
+    }
+    json_decref(r);
+    CHECK(td_ctl(&d, 30, &e, "show", "1", NULL) == 0);
+    CHECKF(e.status == 0 && strstr(e.out, "status      FINISHED") && strstr(e.out, "method      MPM, USF"),
+           "show 1: %s", e.out);
+    td_out_free(&e);
+    CHECK(td_ctl(&d, 30, &e, "show", "1", "--case", NULL) == 0);
+    CHECK(e.status == 0);
+    {
+        srv_case *sc = NULL;
+        CHECKF(srv_case_load(e.out, strlen(e.out), &sc, err, sizeof err) == 0, "show --case: %s", err);
+        CHECK(!strcmp(sc->name, "bar1d_mpm") && sc->has_end_time && sc->end_time == 0.5 &&
+              sc->record_snapshots);
+        srv_case_destroy(&sc);
+    }
+    td_out_free(&e);
+
+    /* ping and version */
+    snprintf(want, sizeof want, "stream %s.stream", d.ep);
+    EXPECT_CTL(&d, 0, want, "ping");
+    EXPECT_CTL(&d, 0, "protobuf-c", "version");
+    EXPECT_CTL(&d, 1, "NOT_FOUND", "energy", "99");
+    EXPECT_CTL(&d, 1, "NOT_FOUND", "show", "99");
+    EXPECT_CTL(&d, 1, "NOT_FOUND", "watch", "99");
+
+    /* a run that fails: the block leaves the grid; watch exits 3 with the error */
+    CHECK(write_case(block2d(1000, 10, "runaway"), dir, "runaway.json", path, sizeof path) == 0);
+    c = td_json_file(path);
+    CHECK(c);
+    json_array_set_new(json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "velocity"), 0,
+                       json_real(5.0));
+    CHECK(td_json_write(path, c) == 0);
+    json_decref(c);
+    CHECK(td_ctl(&d, 60, &e, "submit", path, "--watch", NULL) == 0);
+    CHECKF(e.status == 3 && strstr(e.out, "FAILED") && strstr(e.out, "error: ") &&
+               strstr(e.out, "left the grid"),
+           "runaway block: exit %d, stdout %s, stderr %s", e.status, e.out, e.err);
+    TLOG("failed run: %s", strstr(e.out, "error: "));
+    td_out_free(&e);
+    r = show_json(&d, 3);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "FAILED") && strstr(jstr(r, "error"), "left the grid"),
+           "show 3: %s, error \"%s\"", jstr(r, "status"), jstr(r, "error"));
+    json_decref(r);
+
+    td_out_free(&o);
+    series_free(&s);
+    CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM (see its log)");
+}
+
+/* ---- concurrency and a full queue ------------------------------------------------ */
+
+DTEST(daemon_concurrency)
+{
+    const char *tmp = t_tmpdir();
+    const char *two[] = {"--workers", "2", "--solver-threads", "1", NULL};
+    const char *one[] = {"--workers", "1", "--queue-max", "1", "--solver-threads", "1", NULL};
+    char dir[300], path[400], longp[400], st[32];
+    td_daemon d;
+    td_out o;
+    td_bg w1, w2;
+    td_out o1, o2;
+    json_t *r1, *r2;
+
+    snprintf(dir, sizeof dir, "%s/two", tmp);
+    if (td_start(&d, dir, two)) return;
+    CHECK(write_case(block2d(4000, 100, "block"), dir, "block.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
+    CHECKF(o.status == 0 && !strcmp(o.out, "job 1\n"), "submit: exit %d, %s%s", o.status, o.out, o.err);
+    td_out_free(&o);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, "--json", NULL) == 0);
+    {
+        json_t *j = parse_line(o.out);
+        CHECKF(o.status == 0 && j && jint(j, "jobId") == 2 && jint(j, "runId") == 2, "submit --json: %s",
+               o.out);
+        json_decref(j);
+    }
+    td_out_free(&o);
+    CHECK(td_ctl_bg(&d, &w1, "w1", "watch", "1", "--csv", NULL) == 0);
+    CHECK(td_ctl_bg(&d, &w2, "w2", "watch", "2", "--csv", NULL) == 0);
+    CHECK(td_bg_wait(&w1, 120, &o1) == 0);
+    CHECK(td_bg_wait(&w2, 120, &o2) == 0);
+    CHECKF(o1.status == 0 && o2.status == 0, "watchers: exit %d / %d: %s / %s", o1.status, o2.status,
+           o1.err, o2.err);
+    /* same case, same code: identical series; both complete */
+    CHECK(count_lines(o1.out) == 42 && !strcmp(o1.out, o2.out));
+    td_out_free(&o1);
+    td_out_free(&o2);
+    r1 = show_json(&d, 1);
+    r2 = show_json(&d, 2);
+    CHECK(r1 && r2);
+    {
+        double s1 = jnum(r1, "startedAt"), f1 = jnum(r1, "finishedAt");
+        double s2 = jnum(r2, "startedAt"), f2 = jnum(r2, "finishedAt");
+        TLOG("job 1 ran %.3f..%.3f s, job 2 %.3f..%.3f s (relative to job 1's start)", 0.0, f1 - s1,
+             s2 - s1, f2 - s1);
+        CHECKF(!strcmp(jstr(r1, "status"), "FINISHED") && !strcmp(jstr(r2, "status"), "FINISHED"),
+               "statuses %s, %s", jstr(r1, "status"), jstr(r2, "status"));
+        CHECKF(s2 < f1 && s1 < f2, "the two jobs did not overlap in time");
+    }
+    json_decref(r1);
+    json_decref(r2);
+    CHECK(td_stop(&d) == 0);
+
+    /* one worker, one queue slot: a third job is refused with QUEUE_FULL */
+    snprintf(dir, sizeof dir, "%s/one", tmp);
+    if (td_start(&d, dir, one)) return;
+    CHECK(write_case(long_case(100000), dir, "long.json", longp, sizeof longp) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0);
+    CHECK(o.status == 0 && job_of(o.out) == 1);
+    td_out_free(&o);
+    CHECK(td_wait_status(&d, 1, "RUNNING", 20, st, sizeof st) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0);
+    CHECK(o.status == 0 && job_of(o.out) == 2);
+    td_out_free(&o);
+    CHECK(td_job_status(&d, 2, st, sizeof st, NULL) == 0);
+    CHECKF(!strcmp(st, "QUEUED"), "job 2 is %s, not QUEUED", st);
+    CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0);
+    CHECKF(o.status == 1 && strstr(o.err, "QUEUE_FULL"), "third submit: exit %d, stderr %s", o.status,
+           o.err);
+    TLOG("third submit: %s", o.err);
+    td_out_free(&o);
+    {
+        /* the same through a raw request: the decoded code */
+        size_t len = 0;
+        char *text = td_slurp(longp, &len), err[ERRLEN];
+        Mpmd__Case *pb = NULL;
+        json_t *reply = NULL;
+        CHECK(text && srv_case_from_json(text, len, &pb, err, sizeof err) == 0);
+        free(text);
+        srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
+        CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+        srv_case_pb_free(&pb);
+        CHECKF(!strcmp(td_err_code(reply), "QUEUE_FULL"), "raw submit: code %s", td_err_code(reply));
+        json_decref(reply);
+    }
+    /* cancelling the queued job frees the slot at once; then the running one */
+    CHECK(td_ctl(&d, 30, &o, "cancel", "2", NULL) == 0);
+    CHECKF(o.status == 0 && strstr(o.out, "job 2: CANCELLED"), "cancel 2: %s%s", o.out, o.err);
+    td_out_free(&o);
+    CHECK(td_ctl(&d, 30, &o, "cancel", "1", NULL) == 0);
+    CHECK(o.status == 0);
+    td_out_free(&o);
+    CHECK(td_wait_status(&d, 1, "CANCELLED", 10, st, sizeof st) == 0);
+    /* refused submissions left no record and used no id */
+    CHECK(write_case(bar_steps(100, 10), dir, "short.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && job_of(o.out) == 3, "submit after the queue emptied: exit %d, %s%s", o.status,
+           o.out, o.err);
+    td_out_free(&o);
+    CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
+    CHECKF(o.status == 0 && count_lines(o.out) == 3, "runs --json: %s", o.out);
+    td_out_free(&o);
+    CHECK(td_stop(&d) == 0);
+}
+
+/* ---- cancel ------------------------------------------------------------------------ */
+
+DTEST(daemon_cancel)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--solver-threads", "1", NULL};
+    char dir[300], path[400], st[32];
+    td_daemon d;
+    td_out o, e;
+    td_bg w;
+    series s;
+    double t0, dt;
+    json_t *r;
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(long_case(1000), dir, "long.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
+    CHECK(o.status == 0 && job_of(o.out) == 1);
+    td_out_free(&o);
+    CHECK(td_ctl_bg(&d, &w, "watch", "watch", "1", "--csv", NULL) == 0);
+    CHECK(td_wait_steps(&d, 1, 20000, 30) == 0);
+    CHECK(td_ctl(&d, 30, &o, "cancel", "1", NULL) == 0);
+    t0 = td_now();
+    CHECKF(o.status == 0 && (strstr(o.out, "job 1: RUNNING (cancel requested") ||
+                             strstr(o.out, "job 1: CANCELLED")),
+           "cancel: exit %d, %s%s", o.status, o.out, o.err);
+    TLOG("cancel: %s", o.out);
+    td_out_free(&o);
+    CHECK(td_wait_status(&d, 1, "CANCELLED|FINISHED|FAILED|INTERRUPTED", 5, st, sizeof st) == 0);
+    dt = td_now() - t0;
+    CHECKF(!strcmp(st, "CANCELLED"), "status after cancel: %s", st);
+    TLOG("CANCELLED %.3f s after the cancel reply", dt);
+
+    /* the watcher ends with the run, exit status 4, the series complete */
+    CHECK(td_bg_wait(&w, 30, &o) == 0);
+    CHECKF(o.status == 4 && strstr(o.err, "CANCELLED"), "watcher: exit %d, stderr %s", o.status, o.err);
+    CHECK(parse_csv(o.out, &s) == 0);
+    CHECK(consecutive(&s) && s.n >= 2);
+    CHECK(td_ctl(&d, 30, &e, "energy", "1", "--csv", NULL) == 0);
+    CHECKF(e.status == 0 && !strcmp(e.out, o.out), "energy --csv differs from the watcher's series");
+    TLOG("cancelled at step %lld, %zu samples", s.step[s.n - 1], s.n);
+    td_out_free(&e);
+    td_out_free(&o);
+
+    r = show_json(&d, 1);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "CANCELLED") && jint(r, "steps") < LONG_STEPS &&
+               jint(r, "steps") == s.step[s.n - 1] && json_object_get(r, "finishedAt"),
+           "show 1: status %s, steps %lld", jstr(r, "status"), jint(r, "steps"));
+    json_decref(r);
+    series_free(&s);
+    CHECK(td_ctl(&d, 30, &o, "runs", "--status", "CANCELLED", "--json", NULL) == 0);
+    CHECK(o.status == 0 && count_lines(o.out) == 1);
+    td_out_free(&o);
+    EXPECT_CTL(&d, 4, "CANCELLED", "watch", "1");  /* exit status of a cancelled run */
+    EXPECT_CTL(&d, 1, "CONFLICT", "cancel", "1");
+    EXPECT_CTL(&d, 1, "NOT_FOUND", "cancel", "42");
+    CHECK(td_stop(&d) == 0);
+}
+
+/* ---- late watchers --------------------------------------------------------------- */
+
+DTEST(daemon_late_watcher)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--solver-threads", "1", NULL};
+    /* more samples than one GetEnergy page (10000 by default): paging too */
+    enum { NSTEPS = 12000, NW = 4 };
+    const long long start_at[NW] = {0, 0, 3000, 8000};  /* watcher 0 loses messages */
+    char dir[300], path[400], tag[16], st[32];
+    long long started[NW];
+    td_daemon d;
+    td_out o, e;
+    td_bg w[NW];
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(block2d(NSTEPS, 1, "late"), dir, "late.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
+    CHECK(o.status == 0 && job_of(o.out) == 1);
+    td_out_free(&o);
+    for (int i = 0; i < NW; i++) {
+        if (start_at[i]) CHECK(td_wait_steps(&d, 1, start_at[i], 60) == 0);
+        CHECK(td_job_status(&d, 1, st, sizeof st, &started[i]) == 0);
+        snprintf(tag, sizeof tag, "w%d", i);
+        if (i == 0) {
+            /* a lossy stream: every 7th energy message and Finished lost */
+            setenv("MPMCTL_TEST_DROP_EVERY", "7", 1);
+            setenv("MPMCTL_TEST_DROP_FINISHED", "1", 1);
+        }
+        int rc = td_ctl_bg(&d, &w[i], tag, "watch", "1", "--csv", NULL);
+        unsetenv("MPMCTL_TEST_DROP_EVERY");
+        unsetenv("MPMCTL_TEST_DROP_FINISHED");
+        CHECK(rc == 0);
+        TLOG("watcher %d started at step %lld (%s)%s", i, started[i], st,
+             i == 0 ? ", losing every 7th energy message and Finished" : "");
+    }
+    memset(&e, 0, sizeof e);
+    for (int i = 0; i < NW; i++) {
+        series s;
+        const char *gaps;
+        CHECK(td_bg_wait(&w[i], 120, &o) == 0);
+        CHECKF(o.status == 0, "watcher %d: exit %d, stderr %s", i, o.status, o.err);
+        CHECK(parse_csv(o.out, &s) == 0);
+        CHECKF(s.n == NSTEPS + 1 && consecutive(&s), "watcher %d: %zu samples", i, s.n);
+        for (size_t k = 0; k < s.n; k++) CHECK(s.step[k] == (long long)k);
+        series_free(&s);
+        if (i == 0) {
+            CHECK(td_ctl(&d, 30, &e, "energy", "1", "--csv", NULL) == 0);
+            CHECK(e.status == 0);
+        }
+        CHECKF(!strcmp(o.out, e.out), "watcher %d's series differs from energy --csv", i);
+        gaps = strstr(o.err, "stream:");
+        if (i == 0 && started[i] < NSTEPS / 2) {
+            unsigned long long lost = 0, filled = 0;
+            CHECKF(gaps && sscanf(gaps, "stream: %llu messages dropped, %llu gaps filled", &lost,
+                                  &filled) == 2 && lost > 0 && filled > 0,
+                   "lossy watcher: %s", o.err);
+        }
+        TLOG("watcher %d: %zu samples in order, %.2f s%s%.*s", i, (size_t)NSTEPS + 1, o.secs,
+             gaps ? "; " : "", gaps ? (int)strcspn(gaps, "\n") : 0, gaps ? gaps : "");
+        td_out_free(&o);
+    }
+    td_out_free(&e);
+    CHECK(td_stop(&d) == 0);
+}
+
+/* ---- restart on the same database --------------------------------------------------- */
+
+DTEST(daemon_restart)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--solver-threads", "1", NULL};
+    char dir[300], path[400], longp[400], st[32], ep2[400], pid[32];
+    td_daemon d;
+    td_out o, before;
+    td_bg w;
+    json_t *r;
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(bar_steps(305, 10), dir, "short.json", path, sizeof path) == 0);
+    CHECK(write_case(long_case(10000), dir, "long.json", longp, sizeof longp) == 0);
+    for (int i = 1; i <= 2; i++) {
+        CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+        CHECKF(o.status == 0 && job_of(o.out) == (unsigned long long)i, "submit %d: %s%s", i, o.out, o.err);
+        td_out_free(&o);
+    }
+    CHECK(td_ctl(&d, 30, &before, "energy", "1", "--csv", NULL) == 0 && before.status == 0);
+    {
+        /* samples at step 0, every 10 steps, and the final step (305) */
+        series s;
+        int ok;
+        CHECK(parse_csv(before.out, &s) == 0);
+        ok = s.n == 32 && consecutive(&s) && s.step[0] == 0 && s.step[30] == 300 && s.step[31] == 305;
+        series_free(&s);
+        CHECKF(ok, "energy of a 305-step run, energyEvery 10: %s", before.out);
+    }
+
+    /* a second daemon on the same database is refused and names the holder */
+    snprintf(ep2, sizeof ep2, "ipc://%s/ctl2", dir);
+    snprintf(pid, sizeof pid, "%d", (int)d.pid);
+    {
+        const char *a[] = {"--endpoint", ep2, "--db", d.db, NULL};
+        CHECK(td_run_mpmd(a, 30, &o) == 0);
+        CHECKF(o.status != 0 && o.status < 128 && strstr(o.err, pid),
+               "second mpmd: exit %d, stderr %s (want the holder's pid %s)", o.status, o.err, pid);
+        TLOG("second mpmd refused (exit %d): %.*s", o.status, (int)strcspn(strstr(o.err, "mpmd") ?
+             strstr(o.err, "mpmd") : o.err, "\n"), strstr(o.err, "mpmd") ? strstr(o.err, "mpmd") : o.err);
+        td_out_free(&o);
+    }
+    /* the first one is unharmed */
+    EXPECT_CTL(&d, 0, "mpmd", "ping");
+
+    /* a running job at SIGTERM becomes INTERRUPTED; mpmd exits 0 promptly */
+    CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0);
+    CHECK(o.status == 0 && job_of(o.out) == 3);
+    td_out_free(&o);
+    CHECK(td_wait_status(&d, 3, "RUNNING", 20, st, sizeof st) == 0);
+    CHECK(td_ctl_bg(&d, &w, "watch3", "watch", "3", "--csv", "--timeout", "3", NULL) == 0);
+    CHECK(td_wait_steps(&d, 3, 30000, 30) == 0);
+    {
+        double t0 = td_now();
+        CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM with a job running");
+        TLOG("SIGTERM with a job running: stopped in %.2f s", td_now() - t0);
+    }
+    /* its watcher learns it from the stream: INTERRUPTED, exit status 5, the
+     * series complete up to the end.  The daemon closes its stream socket
+     * without lingering, so under load the last messages can be lost; the
+     * watcher then finds nobody to ask and says so (exit 1) - noted here. */
+    CHECK(td_bg_wait(&w, 30, &o) == 0);
+    if (o.status == 1 && strstr(o.err, "no reply from")) {
+        TLOG("NOTE: the watcher did not get Finished(INTERRUPTED) before mpmd closed its stream "
+             "socket; it ended with: %.*s", (int)strcspn(o.err, "\n"), o.err);
+    } else {
+        series s;
+        CHECKF(o.status == 5 && strstr(o.err, "INTERRUPTED"), "watcher at shutdown: exit %d, stderr %s",
+               o.status, o.err);
+        CHECK(parse_csv(o.out, &s) == 0);
+        int ok = s.n >= 2 && consecutive(&s);
+        TLOG("watcher at shutdown: exit 5 after %.2f s, %zu samples up to step %lld", o.secs, s.n,
+             s.n ? s.step[s.n - 1] : -1LL);
+        series_free(&s);
+        CHECK(ok);
+    }
+    td_out_free(&o);
+
+    if (td_start(&d, dir, extra)) return;
+    CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
+    {
+        char **lines = NULL;
+        size_t n = td_lines(o.out, &lines);
+        json_t *j0 = n == 3 ? parse_line(lines[0]) : NULL, *j2 = n == 3 ? parse_line(lines[2]) : NULL;
+        free(lines);
+        CHECKF(j0 && j2 && jint(j0, "runId") == 3 && !strcmp(jstr(j0, "status"), "INTERRUPTED") &&
+                   jint(j2, "runId") == 1 && !strcmp(jstr(j2, "status"), "FINISHED"),
+               "runs after restart: %zu lines", n);
+        json_decref(j0);
+        json_decref(j2);
+    }
+    td_out_free(&o);
+    r = show_json(&d, 3);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0], "job 3: %s, error \"%s\"",
+           jstr(r, "status"), jstr(r, "error"));
+    TLOG("job 3 after restart: INTERRUPTED, \"%s\"", jstr(r, "error"));
+    json_decref(r);
+    CHECK(td_ctl(&d, 30, &o, "energy", "1", "--csv", NULL) == 0);
+    CHECKF(o.status == 0 && !strcmp(o.out, before.out), "job 1's energies changed across the restart");
+    td_out_free(&o);
+    td_out_free(&before);
+    /* ids continue */
+    CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && job_of(o.out) == 4, "submit after restart: %s%s", o.out, o.err);
+    td_out_free(&o);
+    CHECK(td_stop(&d) == 0);
+}
+
+/* ---- hard kill --------------------------------------------------------------------- */
+
+DTEST(daemon_hard_kill)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--workers", "1", "--solver-threads", "1", NULL};
+    char dir[300], path[400], longp[400], st[32];
+    td_daemon d;
+    td_out o;
+    series s;
+    json_t *r;
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(long_case(1000), dir, "long.json", longp, sizeof longp) == 0);
+    CHECK(write_case(bar_steps(200, 10), dir, "short.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0 && o.status == 0 && job_of(o.out) == 1);
+    td_out_free(&o);
+    CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0 && o.status == 0 && job_of(o.out) == 2);
+    td_out_free(&o);
+    CHECK(td_wait_steps(&d, 1, 20000, 30) == 0);
+    CHECK(td_job_status(&d, 2, st, sizeof st, NULL) == 0 && !strcmp(st, "QUEUED"));
+    td_kill9(&d);
+
+    if (td_start(&d, dir, extra)) return;
+    r = show_json(&d, 1);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0], "job 1: %s, error \"%s\"",
+           jstr(r, "status"), jstr(r, "error"));
+    TLOG("job 1 after kill -9 and restart: INTERRUPTED at step %lld, \"%s\"", jint(r, "steps"),
+         jstr(r, "error"));
+    json_decref(r);
+    r = show_json(&d, 2);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED"), "job 2 (queued at the kill): %s", jstr(r, "status"));
+    json_decref(r);
+    CHECK(td_ctl(&d, 30, &o, "runs", "--status", "INTERRUPTED", "--json", NULL) == 0);
+    CHECK(o.status == 0 && count_lines(o.out) == 2);
+    td_out_free(&o);
+    /* what was stored before the kill is readable and consecutive */
+    CHECK(td_ctl(&d, 30, &o, "energy", "1", "--csv", NULL) == 0 && o.status == 0);
+    CHECK(parse_csv(o.out, &s) == 0);
+    CHECK(s.n >= 1 && consecutive(&s));
+    TLOG("job 1 kept %zu energy samples (up to step %lld)", s.n, s.step[s.n - 1]);
+    series_free(&s);
+    td_out_free(&o);
+    EXPECT_CTL(&d, 5, "INTERRUPTED", "watch", "1");
+    CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && job_of(o.out) == 3, "submit after restart: %s%s", o.out, o.err);
+    td_out_free(&o);
+    CHECK(td_stop(&d) == 0);
+}
+
+/* ---- bad input ----------------------------------------------------------------------- */
+
+/* A valid 2D case; the bad ones are patches of it. */
+static const char *const good2d =
+    "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
+    " \"materials\": [{\"youngsModulus\": 1, \"poissonRatio\": 0.2, \"density\": 1}],"
+    " \"bodies\": [{\"sphere\": {\"center\": [0.3, 0.3], \"radius\": 0.1}},"
+    "              {\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, \"velocity\": [-0.1, 0]}],"
+    " \"endTime\": 1}";
+
+static char *patch(const char *from, const char *to)
+{
+    const char *p = strstr(good2d, from);
+    size_t n = strlen(good2d) - strlen(from) + strlen(to) + 1;
+    char *s = malloc(n);
+    if (!p || !s) {
+        free(s);
+        return NULL;
+    }
+    snprintf(s, n, "%.*s%s%s", (int)(p - good2d), good2d, to, p + strlen(from));
+    return s;
+}
+
+/* Sends Submit(case) raw and checks code and field (field exact, or a
+ * prefix when it ends with '*'); the message must start with the field. */
+static int submit_expect(const td_daemon *d, Mpmd__Case *pb, const char *what, const char *code,
+                         const char *field)
+{
+    srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
+    json_t *reply = NULL;
+    int ok = 0;
+    size_t fl = strlen(field);
+    int prefix = fl && field[fl - 1] == '*';
+    if (td_request(d->ep, &rq, 20, &reply) != 0) {
+        t_fail(__FILE__, __LINE__, "%s: no reply", what);
+    } else {
+        const char *f = td_err_field(reply), *m = td_err_msg(reply);
+        size_t n = prefix ? fl - 1 : fl;
+        ok = !strcmp(td_err_code(reply), code) && !strncmp(f, field, n) && (prefix || !f[n]) &&
+             !strncmp(m, f, strlen(f)) && m[strlen(f)] == ':';
+        if (!ok)
+            t_fail(__FILE__, __LINE__, "%s: got %s, field \"%s\", message \"%s\" (want %s, field %s)",
+                   what, td_err_code(reply), f, m, code, field);
+        else
+            TLOG("%-28.28s %s %s", what, td_err_code(reply), m);
+    }
+    json_decref(reply);
+    return ok;
+}
+
+/* The good case patched, checked through the daemon only. */
+static int bad_case(const td_daemon *d, const char *from, const char *to, const char *code,
+                    const char *field)
+{
+    char err[ERRLEN], what[64];
+    char *json = patch(from, to);
+    Mpmd__Case *pb = NULL;
+    int ok;
+    if (!json || srv_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
+        t_fail(__FILE__, __LINE__, "patch %s -> %s: %s", from, to, json ? err : "not in the case");
+        free(json);
+        return 0;
+    }
+    snprintf(what, sizeof what, "%s", to);
+    ok = submit_expect(d, pb, what, code, field);
+    srv_case_pb_free(&pb);
+    free(json);
+    return ok;
+}
+
+/* Expects a raw message to get `code` (or, if may_drop, no reply). */
+static int frames_expect(const td_daemon *d, const char *what, const void *const *f, const size_t *l,
+                         int n, const char *code, int may_drop)
+{
+    json_t *reply = NULL;
+    int rc = td_frames(d->ep, f, l, n, may_drop ? 1.5 : 10, &reply), ok;
+    ok = rc == 0 ? !strcmp(td_err_code(reply), code) : (rc == 1 && may_drop);
+    if (!ok)
+        t_fail(__FILE__, __LINE__, "%s: %s%s (want %s%s)", what, rc == 0 ? "error code " : "no reply",
+               rc == 0 ? td_err_code(reply) : "", code, may_drop ? " or no reply" : "");
+    else
+        TLOG("%-28.28s %s %s", what, rc == 0 ? td_err_code(reply) : "dropped (no reply)",
+             rc == 0 ? td_err_msg(reply) : "");
+    json_decref(reply);
+    return ok;
+}
+
+DTEST(daemon_bad_input)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--max-request-bytes", "100000", "--max-particles", "5000", NULL};
+    char dir[300], path[400], err[ERRLEN];
+    td_daemon d;
+    td_out o;
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+
+    /* cases the schema accepts but the checks refuse, each naming its field */
+    CHECK(bad_case(&d, "\"youngsModulus\": 1", "\"youngsModulus\": -1", "INVALID_CASE",
+                   "materials[0].youngsModulus"));
+    CHECK(bad_case(&d, "\"youngsModulus\": 1", "\"youngsModulus\": 0", "INVALID_CASE",
+                   "materials[0].youngsModulus"));
+    CHECK(bad_case(&d, "\"density\": 1", "\"density\": 0", "INVALID_CASE", "materials[0].density"));
+    CHECK(bad_case(&d, "\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, -0.1]", "INVALID_CASE",
+                   "grid.spacing[1]"));
+    CHECK(bad_case(&d, "\"poissonRatio\": 0.2", "\"poissonRatio\": 0.5", "INVALID_CASE",
+                   "materials[0].poissonRatio"));
+    CHECK(bad_case(&d, "\"poissonRatio\": 0.2", "\"poissonRatio\": -1.5", "INVALID_CASE",
+                   "materials[0].poissonRatio"));
+    CHECK(bad_case(&d, "\"center\": [0.3, 0.3]", "\"center\": [3.3, 0.3]", "INVALID_CASE", "bodies[0]*"));
+    CHECK(bad_case(&d, "\"radius\": 0.1", "\"radius\": 0.001", "INVALID_CASE", "bodies[0]*"));
+    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1, \"dt\": 0.5", "INVALID_CASE", "dt"));
+    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 0", "INVALID_CASE", "endTime"));
+    CHECK(bad_case(&d, ", \"endTime\": 1", "", "INVALID_CASE", "endTime"));
+    CHECK(bad_case(&d, "\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"ppc\": 9", "INVALID_CASE",
+                   "bodies[1].ppc"));
+    CHECK(bad_case(&d, "\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, 0.1, 0.1]", "INVALID_CASE",
+                   "grid.spacing"));
+    CHECK(bad_case(&d, "\"dim\": 2", "\"dim\": 4", "INVALID_CASE", "grid.dim"));
+    /* too large: the codec's node limit, and this server's --max-particles */
+    CHECK(bad_case(&d, "\"nodes\": [11, 11]", "\"nodes\": [5001, 5001]", "TOO_LARGE", "grid.nodes"));
+    {
+        /* 6000 explicit points in 1D: 96 KB, under the request limit, over --max-particles */
+        json_t *c = json_pack("{s:{s:i,s:[f],s:[i]},s:[{s:f,s:f}],s:[{s:{s:[],s:[]}}],s:i}", "grid",
+                              "dim", 1, "spacing", 0.001, "nodes", 7001, "materials", "youngsModulus",
+                              1.0, "density", 1.0, "bodies", "points", "x", "volume", "steps", 10);
+        json_t *pts = json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "points");
+        char *text;
+        Mpmd__Case *pb = NULL;
+        for (int i = 0; i < 6000; i++) {
+            json_array_append_new(json_object_get(pts, "x"), json_real(0.0005 + 0.001 * i));
+            json_array_append_new(json_object_get(pts, "volume"), json_real(0.001));
+        }
+        text = json_dumps(c, 0);
+        json_decref(c);
+        CHECK(text && srv_case_from_json(text, strlen(text), &pb, err, sizeof err) == 0);
+        free(text);
+        int ok = submit_expect(&d, pb, "6000 points > --max-particles", "TOO_LARGE", "bodies*");
+        srv_case_pb_free(&pb);
+        CHECK(ok);
+    }
+    {
+        /* an enum value the schema does not know: only possible as bytes
+         * (the JSON reader refuses it); Case.method = field 3, varint 7 */
+        char *json = patch("\"endTime\": 1", "\"endTime\": 1");
+        Mpmd__Case *pb = NULL, *bad = NULL;
+        uint8_t *buf = NULL, *b2;
+        size_t len = 0;
+        int ok;
+        CHECK(json && srv_case_from_json(json, strlen(json), &pb, err, sizeof err) == 0);
+        free(json);
+        CHECK(srv_case_pack(pb, &buf, &len) == 0);
+        srv_case_pb_free(&pb);
+        b2 = realloc(buf, len + 2);
+        CHECK(b2);
+        b2[len] = 0x18;
+        b2[len + 1] = 0x07;
+        CHECKF(srv_case_unpack(b2, len + 2, 0, &bad, err, sizeof err) == 0, "%s", err);
+        free(b2);
+        ok = submit_expect(&d, bad, "method = 7 (unknown enum)", "INVALID_CASE", "method");
+        srv_case_pb_free(&bad);
+        CHECK(ok);
+    }
+
+    /* the client checks locally first, the server's limits come back with the field */
+    CHECK(td_write((snprintf(path, sizeof path, "%s/bad.json", dir), path),
+                   "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+                   " \"materials\": [{\"youngsModulus\": 1, \"density\": -2}],"
+                   " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.4]}}], \"endTime\": 1}") == 0);
+    EXPECT_CTL(&d, 1, "materials[0].density: must be > 0 (got -2)", "submit", path);
+    CHECK(td_write(path, "{\"grid\": {\"dim\": 2, \"spacing\": [0.01, 0.01], \"nodes\": [101, 101]},"
+                         " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+                         " \"bodies\": [{\"box\": {\"lo\": [0, 0], \"hi\": [1, 1]}}], \"steps\": 1}") == 0);
+    EXPECT_CTL(&d, 1, "TOO_LARGE: bodies: the case has 40000 particles", "submit", path);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
+    CHECKF(strstr(o.err, "(field bodies)"), "mpmctl does not name the field: %s", o.err);
+    td_out_free(&o);
+
+    /* damaged requests and frames */
+    {
+        static const uint8_t garbage[] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
+        static const uint8_t no_body[] = {0x08, 0x01};
+        static const uint8_t v2_ping[] = {0x08, 0x02, 0x4a, 0x00};
+        static const uint8_t ping[] = {0x08, 0x01, 0x4a, 0x00};
+        static const uint8_t status_no_id[] = {0x08, 0x01, 0x22, 0x00};
+        static const uint8_t list_bad_status[] = {0x08, 0x01, 0x2a, 0x02, 0x08, 0x63};
+        static const uint8_t truncated[] = {0x08, 0x01, 0x12, 0x40, 0x0a};
+        uint8_t *big = calloc(150000, 1);
+        CHECK(big);
+        {
+            const void *f[] = {"", garbage};
+            size_t l[] = {0, sizeof garbage};
+            CHECK(frames_expect(&d, "garbage bytes", f, l, 2, "BAD_REQUEST", 0));
+        }
+        {
+            const void *f[] = {"", truncated};
+            size_t l[] = {0, sizeof truncated};
+            CHECK(frames_expect(&d, "truncated request", f, l, 2, "BAD_REQUEST", 0));
+        }
+        {
+            const void *f[] = {"", no_body};
+            size_t l[] = {0, sizeof no_body};
+            CHECK(frames_expect(&d, "request without a body", f, l, 2, "BAD_REQUEST", 0));
+        }
+        {
+            const void *f[] = {"", status_no_id};
+            size_t l[] = {0, sizeof status_no_id};
+            CHECK(frames_expect(&d, "status without jobId", f, l, 2, "BAD_REQUEST", 0));
+        }
+        {
+            const void *f[] = {"", list_bad_status};
+            size_t l[] = {0, sizeof list_bad_status};
+            CHECK(frames_expect(&d, "listRuns status 99", f, l, 2, "BAD_REQUEST", 0));
+        }
+        {
+            const void *f[] = {"", v2_ping};
+            size_t l[] = {0, sizeof v2_ping};
+            CHECK(frames_expect(&d, "schemaVersion 2", f, l, 2, "BAD_SCHEMA", 0));
+        }
+        {
+            const void *f[] = {"", ping, ping};
+            size_t l[] = {0, sizeof ping, sizeof ping};
+            CHECK(frames_expect(&d, "two request frames", f, l, 3, "BAD_REQUEST", 1));
+        }
+        {
+            const void *f[] = {ping};
+            size_t l[] = {sizeof ping};
+            CHECK(frames_expect(&d, "no empty delimiter", f, l, 1, "BAD_REQUEST", 1));
+        }
+        {
+            const void *f[] = {"", big};
+            size_t l[] = {0, 150000};
+            int ok = frames_expect(&d, "150000-byte request", f, l, 2, "TOO_LARGE", 0);
+            free(big);
+            CHECK(ok);
+        }
+    }
+    /* unknown ids */
+    {
+        const srv_req_kind kinds[] = {SRV_REQ_STATUS, SRV_REQ_GET_RUN, SRV_REQ_GET_ENERGY,
+                                      SRV_REQ_GET_SNAPSHOT, SRV_REQ_CANCEL};
+        for (size_t i = 0; i < sizeof kinds / sizeof kinds[0]; i++) {
+            srv_request rq = {.kind = kinds[i], .id = 4242};
+            json_t *reply = NULL;
+            CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+            CHECKF(!strcmp(td_err_code(reply), "NOT_FOUND"), "request kind %d for id 4242: %s",
+                   (int)kinds[i], td_err_code(reply));
+            json_decref(reply);
+        }
+    }
+
+    /* still serving; nothing was recorded for the refused submissions */
+    EXPECT_CTL(&d, 0, "schema 1", "ping");
+    CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
+    CHECKF(o.status == 0 && !o.out[0], "runs after refused submissions: %s", o.out);
+    td_out_free(&o);
+    CHECK(td_stop(&d) == 0);
+}
