@@ -3,6 +3,7 @@
 # those that are missing. Safe to run again: with everything present it does
 # nothing and prints nothing. Called by `make deps` (and so by `make test` and
 # `make demo`); needs root (or sudo) only when something must be installed.
+# `install-deps.sh bench` also installs the benchmark's plotting tool.
 set -euo pipefail
 
 pkgs=(
@@ -13,6 +14,11 @@ pkgs=(
   protobuf-c-compiler  # protoc-c, generates proto/*.pb-c.[ch]
   libjansson-dev       # JSON case files
 )
+# Optional group: `install-deps.sh bench` adds what `make bench-accuracy` uses
+# for its plots (gnuplot-nox), unless some gnuplot is already there.
+if [ "${1:-}" = bench ] && ! command -v gnuplot >/dev/null 2>&1; then
+  pkgs+=(gnuplot-nox)
+fi
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,0 +1,115 @@
+/*
+ * bench.h - the accuracy benchmark's problems with known answers, run
+ * in-process with the solver library (bin/mpmbench-accuracy, see
+ * accuracy.c).  One call runs one configuration (problem, method, update,
+ * cells per unit length, particles per cell per axis, time step as a
+ * fraction of the CFL limit) and returns its errors and the time spent
+ * stepping.  The problems and their error measures:
+ *
+ *  point  the paper's single material point (Eqs. 32-33), 3 periods.
+ *         err: max over time of Eq. 38, |va - v| / (1 + |va|).
+ *         err2: |E_end - E0| / E0.
+ *  bar    the bar's first mode (Eqs. 34-35), v0 = 1e-3 (small strain, so
+ *         the linear solution is the limit), 2 periods.
+ *         err: max over time of the RMS over particles of |u - Eq. 35|,
+ *              divided by the amplitude v0 / omega_1.
+ *         err2: max over time of |vcm - Eq. 34| / (2 v0 / pi).
+ *  mms1/2/3  a manufactured solution in the manner of Wallstedt & Guilkey
+ *         (2008): u_i = A sin(2 pi X_i) sin(pi c t + phi_i) on the unit
+ *         line/square/cube, rollers on every face, A = 0.02 (strains up to
+ *         13%, particles cross cells), one period, with the body force that
+ *         makes it an exact solution of the solver's continuum model (see
+ *         problems.c).
+ *         err: max over time of the RMS position error / A.
+ *         err2: max over time and particles of the position error / A.
+ *  disks  the paper's two bouncing disks (Section 5.6) until t = 4, after
+ *         they separate; the known answers are E = E0 and p = 0.
+ *         err: the mean over the run of |E(t) - E0| / E0 (a mean of
+ *              absolute values: an end value alone can cross zero by
+ *              chance, a dissipative USL run meeting an energy-gaining
+ *              contact);
+ *         err2: |E(4) - E0| / E0;  err3: max |p| / (M v0).
+ *
+ * dt is fixed: dt = T / ceil(T / (cfl * h / c)) with T the end time and c
+ * the p-wave speed, so every run ends exactly at T; allow_unstable_dt is
+ * set, since sweeping past the limit is the point.
+ */
+#ifndef BENCH_H
+#define BENCH_H
+
+#include "mpm.h"
+
+#include <stddef.h>
+
+typedef enum { BP_POINT, BP_BAR, BP_MMS1, BP_MMS2, BP_MMS3, BP_DISKS, BP_COUNT } bench_problem;
+
+typedef struct {
+    bench_problem pb;
+    mpm_method method;
+    mpm_update update;
+    int cells;   /* cells per unit length (point: 1; disks: 1/h) */
+    int ppc;     /* particles per cell per axis (point: 1) */
+    double cfl;  /* dt as a fraction of h / c */
+} bench_cfg;
+
+typedef struct {
+    int rc;             /* 0, or the MPM_E* code that stopped the run */
+    char msg[256];      /* the solver's message when rc != 0 */
+    double err, err2;   /* see above; INFINITY when the run failed */
+    double err3;        /* disks: the momentum error; 0 otherwise */
+    double wall;        /* seconds spent stepping (wall clock) */
+    long steps;
+    size_t particles;
+    double dt;
+    double *xf;         /* final positions (particles * dim) when asked */
+    int dim;
+} bench_res;
+
+const char *bench_problem_name(bench_problem pb);
+const char *bench_method_name(mpm_method m);
+const char *bench_update_name(mpm_update u);
+int bench_problem_dim(bench_problem pb);
+
+/* The length that position differences are divided by when two runs of the
+ * problem are compared (time self-convergence): the displacement amplitude
+ * (point, bar, mms) or the disk radius. */
+double bench_scale(bench_problem pb);
+
+/* Runs one configuration.  keep_final: also return the final positions in
+ * r->xf (free with bench_res_free).  Returns 0 when the run could be set
+ * up (r->rc tells whether it finished), -1 on a setup error (message in
+ * r->msg). */
+int bench_run(const bench_cfg *c, int keep_final, bench_res *r);
+void bench_res_free(bench_res *r);
+
+/* RMS over particles of |a - b| / scale (n particles, dim components). */
+double bench_rms_diff(const double *a, const double *b, size_t n, int dim, double scale);
+
+/* Monotonic seconds. */
+double bench_now(void);
+
+/* ---- per-particle body force (bench_force.c) ----
+ * The solver's public API has only uniform gravity and point forces fixed
+ * at creation; the manufactured solution needs a force per particle that
+ * changes every step.  bench_force_attach() adds to a case one point-force
+ * region of zero force holding every particle, so that the solver keeps a
+ * force slot per particle; bench_force_set() then writes the forces for the
+ * next step into those slots.  This reaches into the solver's private state
+ * (mpm_internal.h) and stands in for the public call the report asks for
+ * (mpm_sim_set_particle_forces); bench_force_selftest() checks, bitwise,
+ * that it does exactly what rebuilding the case every step with one public
+ * point force per particle does. */
+typedef struct {
+    mpm_traction_desc tr;
+} bench_force_slot;
+
+void bench_force_attach(mpm_case *c, bench_force_slot *slot);
+/* f: particles * dim forces in particle order.  Returns 0, or -1 if the
+ * simulation does not hold one slot per particle in order. */
+int bench_force_set(mpm_sim *s, const double *f);
+/* Returns 0 when the attach/set path and the public rebuild path agree
+ * bitwise on a small 1D manufactured problem for every method and update;
+ * writes a one-line summary into msg. */
+int bench_force_selftest(char *msg, size_t n);
+
+#endif

@@ -1,0 +1,179 @@
+/*
+ * bench_force.c - per-particle, time-varying forces for the manufactured
+ * solution, and the proof that they mean what a public API would mean.
+ *
+ * The solver's public API (mpm.h) offers uniform gravity and point forces
+ * fixed when the simulation is created; a manufactured solution needs
+ * m_p b(X_p, t) on every particle, new every step.  This file is the only
+ * one of the benchmark that includes the solver's private header: it gives
+ * the case one zero point-force region holding every particle (the solver
+ * then keeps one force slot per particle, load_p[i] = i, scattered with
+ * the particle's weights as f_n += S_np f_p, Eq. 14, and counted in the
+ * external work), and overwrites those slots between steps.  It reads and
+ * writes nothing else.  bench_force_selftest() runs a small 1D problem two
+ * ways, through these slots and by rebuilding the case every step from a
+ * snapshot with one public point force per particle, and requires the two
+ * to agree bit for bit.  When the solver gains a public per-particle force
+ * call, bench_force_set() becomes a one-line wrapper around it.
+ */
+#include "mpm_internal.h"
+#include "bench.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void bench_force_attach(mpm_case *c, bench_force_slot *slot)
+{
+    memset(slot, 0, sizeof *slot);
+    for (int d = 0; d < c->grid.dim; d++) {
+        /* the whole grid and its ghost cells: every particle centre */
+        slot->tr.lo[d] = c->grid.origin[d] - 4 * c->grid.h[d];
+        slot->tr.hi[d] = c->grid.origin[d] + (c->grid.nodes[d] + 3) * c->grid.h[d];
+    }
+    slot->tr.normal = 0;
+    slot->tr.is_force = 1; /* value 0: a zero force, shared by all */
+    c->tractions = &slot->tr;
+    c->n_tractions = 1;
+}
+
+int bench_force_set(mpm_sim *s, const double *f)
+{
+    if (s->nload != s->P.n) return -1;
+    for (size_t i = 0; i < s->nload; i++) {
+        size_t p = s->load_p[i];
+        if (p != i) return -1;
+        for (int d = 0; d < s->dim; d++) s->load_f[d][i] = f[p * (size_t)s->dim + d];
+    }
+    return 0;
+}
+
+/* ---- self-test ---- */
+
+#define ST_CELLS 8
+#define ST_PPC 3
+#define ST_N (ST_CELLS * ST_PPC)
+#define ST_STEPS 60
+
+static void st_case(mpm_case *c, mpm_material_desc *mat, mpm_body_desc *b, mpm_method m,
+                    mpm_update up)
+{
+    memset(c, 0, sizeof *c);
+    *mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
+    c->grid = (mpm_grid_desc){1, {0}, {1.0 / ST_CELLS}, {ST_CELLS + 1}};
+    c->method = m;
+    c->update = up;
+    c->dt = 0.4 / ST_CELLS;
+    c->allow_unstable_dt = 1;
+    c->n_materials = 1;
+    c->materials = mat;
+    c->n_bodies = 1;
+    c->bodies = b;
+    c->bc.face_mask[0] = c->bc.face_mask[1] = 1;
+}
+
+static void st_forces(const double *X, const double *m, double t, double *f)
+{
+    for (int p = 0; p < ST_N; p++) f[p] = 0.3 * m[p] * sin(2 * M_PI * X[p]) * cos(5 * t);
+}
+
+/* One run of ST_STEPS steps; rebuild = 0: one simulation with force slots;
+ * 1: a new simulation every step with one public point force per particle. */
+static int st_run(mpm_method meth, mpm_update up, int rebuild, double *xo, double *vo)
+{
+    double X[ST_N], x[ST_N], v[ST_N], vol[ST_N], m[ST_N], hl[ST_N], sig[ST_N * 6], f[ST_N];
+    double h = 1.0 / ST_CELLS;
+    for (int p = 0; p < ST_N; p++) {
+        X[p] = x[p] = (p + 0.5) * h / ST_PPC;
+        v[p] = 0.05 * sin(2 * M_PI * X[p]);
+        vol[p] = h / ST_PPC;
+        m[p] = vol[p];
+        hl[p] = 0.5 * h / ST_PPC;
+    }
+    memset(sig, 0, sizeof sig);
+    mpm_material_desc mat;
+    mpm_body_desc b;
+    mpm_case c;
+    char err[256];
+    if (!rebuild) {
+        memset(&b, 0, sizeof b);
+        b.n_points = ST_N;
+        b.x = x;
+        b.volume = vol;
+        b.mass = m;
+        b.v = v;
+        b.half_length = hl;
+        st_case(&c, &mat, &b, meth, up);
+        bench_force_slot slot;
+        bench_force_attach(&c, &slot);
+        mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+        if (!s) return -1;
+        double t = 0;
+        for (int k = 0; k < ST_STEPS; k++) {
+            st_forces(X, m, t, f);
+            if (bench_force_set(s, f) || mpm_sim_step(s)) {
+                mpm_sim_destroy(&s);
+                return -1;
+            }
+            t = mpm_sim_time(s);
+        }
+        mpm_sim_snapshot(s, &(mpm_snapshot){.x = xo, .v = vo});
+        mpm_sim_destroy(&s);
+        return 0;
+    }
+    double t = 0;
+    for (int k = 0; k < ST_STEPS; k++) {
+        mpm_traction_desc tr[ST_N];
+        st_forces(X, m, t, f);
+        for (int p = 0; p < ST_N; p++) {
+            memset(&tr[p], 0, sizeof tr[p]);
+            tr[p].lo[0] = x[p] - 1e-9;
+            tr[p].hi[0] = x[p] + 1e-9;
+            tr[p].is_force = 1;
+            tr[p].value[0] = f[p];
+        }
+        memset(&b, 0, sizeof b);
+        b.n_points = ST_N;
+        b.x = x;
+        b.volume = vol;
+        b.mass = m;
+        b.v = v;
+        b.stress = sig;
+        b.half_length = hl;
+        st_case(&c, &mat, &b, meth, up);
+        c.tractions = tr;
+        c.n_tractions = ST_N;
+        mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+        if (!s) return -1;
+        int rc = mpm_sim_step(s);
+        mpm_sim_snapshot(s, &(mpm_snapshot){.x = x, .v = v, .stress = sig, .volume = vol});
+        mpm_sim_destroy(&s);
+        if (rc) return -1;
+        t += c.dt;
+    }
+    memcpy(xo, x, sizeof x);
+    memcpy(vo, v, sizeof v);
+    return 0;
+}
+
+int bench_force_selftest(char *msg, size_t n)
+{
+    double worst = 0;
+    for (int m = 0; m < 2; m++)
+        for (int u = 0; u < 3; u++) {
+            double xa[ST_N], va[ST_N], xb[ST_N], vb[ST_N];
+            mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+            if (st_run(meth, (mpm_update)u, 0, xa, va) || st_run(meth, (mpm_update)u, 1, xb, vb)) {
+                snprintf(msg, n, "force slots: the self-test run failed (%s %s)",
+                         bench_method_name(meth), bench_update_name((mpm_update)u));
+                return -1;
+            }
+            for (int p = 0; p < ST_N; p++)
+                worst = fmax(worst, fmax(fabs(xa[p] - xb[p]), fabs(va[p] - vb[p])));
+        }
+    snprintf(msg, n, "force slots vs public point forces rebuilt every step: max |difference| "
+             "%.3g over %d steps, 6 method/update pairs (%s)", worst, ST_STEPS,
+             worst == 0 ? "bitwise equal" : "DIFFERENT");
+    return worst == 0 ? 0 : -1;
+}
