@@ -264,6 +264,67 @@ TEST(inv_gravity_free_fall)
     CHECK(fabs(e1.total - e0.total) < 2e-3 * e1.kinetic);
 }
 
+/* Per-particle forces (mpm_sim_set_particle_forces): f_p = m_p g on every
+ * particle moves the body as gravity does (gravity is applied at the nodes
+ * as m_n g = sum_p S_np m_p g, the forces are scattered as sum_p S_np f_p:
+ * equal up to rounding), their work is the external work, NULL clears them,
+ * and a non-finite force is refused with its index named. */
+TEST(inv_particle_forces_match_gravity)
+{
+    mpm_paper t;
+    double v[3] = {0, 0, 0};
+    char err[256];
+    block_case(&t, 2, MPM_METHOD_GIMP, MPM_MUSL, v);
+    t.c.dt = 1e-4;
+    t.c.gravity[1] = -9.81;
+    mpm_sim *a = mpm_sim_new(&t.c, err, sizeof err);
+    t.c.gravity[1] = 0;
+    mpm_sim *b = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_paper_free(&t);
+    CHECKF(a && b, "%s", err);
+    size_t n = mpm_sim_particles(b);
+    mpm_energy e0, ea0;
+    mpm_sim_energy(b, &e0);
+    mpm_sim_energy(a, &ea0);
+    double *f = calloc(2 * n, sizeof *f), *xa = calloc(2 * n, sizeof *xa), *xb = calloc(2 * n, sizeof *xb);
+    CHECK(f && xa && xb);
+    for (size_t p = 0; p < n; p++) f[2 * p + 1] = -9.81 * e0.mass / (double)n; /* equal masses */
+    CHECK(mpm_sim_set_particle_forces(b, f) == 0);
+    CHECK(mpm_sim_run(a, 500) == 0);
+    CHECK(mpm_sim_run(b, 500) == 0);
+    mpm_sim_snapshot(a, &(mpm_snapshot){.x = xa});
+    mpm_sim_snapshot(b, &(mpm_snapshot){.x = xb});
+    double worst = 0, T = mpm_sim_time(b);
+    for (size_t i = 0; i < 2 * n; i++) worst = fmax(worst, fabs(xa[i] - xb[i]));
+    mpm_energy ea, eb;
+    mpm_sim_energy(a, &ea);
+    mpm_sim_energy(b, &eb);
+    double drop = 0.5 * 9.81 * T * T; /* the fall */
+    TLOG("500 steps: max |x_gravity - x_forces| = %.3g (fall %.4f); work of the forces %.9g, "
+         "gravity's potential energy change %.9g; total drifts %.2e / %.2e of KE",
+         worst, drop, eb.external_work, -(ea.potential - ea0.potential), (ea.total - ea0.total) / ea.kinetic,
+         (eb.total - e0.total) / eb.kinetic);
+    CHECK(worst < 1e-12 * drop + 1e-15);
+    CHECK_NEAR(eb.external_work, -(ea.potential - ea0.potential), 1e-9 * eb.external_work);
+    CHECK(fabs(eb.total - e0.total) < 2e-3 * eb.kinetic);
+    /* NULL: no force any more, the momentum stays */
+    CHECK(mpm_sim_set_particle_forces(b, NULL) == 0);
+    CHECK(mpm_sim_run(b, 100) == 0);
+    mpm_energy e2;
+    mpm_sim_energy(b, &e2);
+    CHECK_NEAR(e2.momentum[1], eb.momentum[1], 1e-12 * fabs(eb.momentum[1]));
+    /* a NaN is refused, named, and changes nothing */
+    f[7] = NAN;
+    CHECK(mpm_sim_set_particle_forces(b, f) == MPM_EINVAL);
+    CHECKF(strstr(mpm_sim_error(b), "particle_forces[7]: must be finite"), "%s", mpm_sim_error(b));
+    CHECK(mpm_sim_step(b) == 0);
+    free(f);
+    free(xa);
+    free(xb);
+    mpm_sim_destroy(&a);
+    mpm_sim_destroy(&b);
+}
+
 /* Tractions: a free body under a traction on one face gains momentum
  * F t exactly (sum of internal forces is zero), and energy balances the
  * work done (KE + SE - W stays near 0). */
@@ -389,7 +450,7 @@ TEST(inv_case_errors_name_the_field)
         {"materials[0].poisson_ratio: must be in (-1, 0.5) (got 0.5)", 2},
         {"grid.spacing[1]: must be finite and > 0 (got 0)", 3},
         {"grid.nodes[0]: must be >= 2 (got 1)", 4},
-        {"bodies[0].center/radius: the body spans x in [0.86, 1.14], outside the grid [0, 1]", 5},
+        {"bodies[0].sphere: the body spans x in [0.86, 1.14], outside the grid [0, 1]", 5},
         {"bodies[1]: the sphere holds no particle", 6},
         {"method: unknown value 7", 7},
         {"bodies[1].material: index 3 out of range (1 materials)", 8},

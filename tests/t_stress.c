@@ -229,8 +229,8 @@ TEST(stress_cfl_sweep)
     TLOG("Courant factor C of the automatic dt = C h / (c + |v|max) over 10 periods.  Stable "
          "(the issue's definition): finished, mean energy of the last period <= 1.01 x that of "
          "the first.  '.' stable; 'g' finished, grew by more than 1%% but stayed below 2 E0 "
-         "(drift); 'X' finished above 2 E0 (a blow-up the solver did not flag); 'D' diverged or "
-         "its dt collapsed; 'L' a particle left the grid");
+         "(drift); 'X' finished above 2 E0 (a blow-up the solver did not flag: asserted never); "
+         "'D' diverged (the divergence guard or a NaN) or its dt collapsed; 'L' a particle left the grid");
     char hdr[256] = "", *hp = hdr;
     for (int k = 0; k < nc; k++) hp += snprintf(hp, sizeof hdr - (size_t)(hp - hdr), "%5g", cs[k]);
     for (int big = 0; big <= full; big++) {
@@ -255,6 +255,9 @@ TEST(stress_cfl_sweep)
                     char mark = o.stable ? '.' : o.rc == MPM_ELEFTGRID ? 'L' : o.rc ? 'D'
                                 : o.bounded ? 'g' : 'X';
                     rp += snprintf(rp, sizeof row - (size_t)(rp - row), "%5c", mark);
+                    /* the divergence guard: a blow-up is a recorded failure */
+                    CHECKF(mark != 'X', "%dD %s %s C=%g finished above 2 E0 without a failure",
+                           dim, mname(meth), upd_name((mpm_update)u), cs[k]);
                     if (o.stable && all_stable_so_far) largest = cs[k];
                     if (o.bounded && all_bounded_so_far) largest_b = cs[k];
                     all_bounded_so_far &= o.bounded;
@@ -299,6 +302,35 @@ TEST(stress_cfl_sweep)
              "dt = 1.01 x limit -> \"%.60s...\"", dim, err);
         w.c.dt = 0.99 * lim;
         CHECK(mpm_case_check(&w.c, err, sizeof err) == 0);
+        wave_free(&w);
+    }
+    /* USL: the sweep finds it unstable from C = 0.6, so the refusal starts
+     * above MPM_USL_MAX_CFL = 0.5, for a Courant factor and a given dt */
+    {
+        wave w;
+        char err[256] = "";
+        CHECK(wave_case(&w, 1, MPM_METHOD_GIMP, MPM_USL, 0.6, 0, 1e-3) == 0);
+        int rc = mpm_case_check(&w.c, err, sizeof err);
+        CHECKF(rc == MPM_ECFL && strstr(err, "cfl: 0.6 is above the stability limit 0.5 of USL"),
+               "rc %d: %s", rc, err);
+        w.c.cfl = 0.5;
+        CHECKF(mpm_case_check(&w.c, err, sizeof err) == 0, "%s", err);
+        mpm_sim *s = mpm_sim_new(&w.c, err, sizeof err);
+        CHECKF(s, "%s", err);
+        double lim = mpm_sim_dt_limit(s);
+        mpm_sim_destroy(&s);
+        w.c.cfl = 0;
+        w.c.dt = 0.51 * lim;
+        rc = mpm_case_check(&w.c, err, sizeof err);
+        CHECKF(rc == MPM_ECFL && strstr(err, "(USL)"), "rc %d: %s", rc, err);
+        TLOG("USL refusal: cfl 0.6 -> \"cfl: 0.6 is above the stability limit 0.5 of USL; ...\"; "
+             "dt = 0.51 x h/(c+|v|) -> \"%.80s...\"", err);
+        w.c.dt = 0.49 * lim;
+        CHECKF(mpm_case_check(&w.c, err, sizeof err) == 0, "%s", err);
+        w.c.allow_unstable_dt = 1;
+        w.c.dt = 0;
+        w.c.cfl = 0.9;
+        CHECKF(mpm_case_check(&w.c, err, sizeof err) == 0, "%s", err);
         wave_free(&w);
     }
 }

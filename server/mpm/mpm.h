@@ -131,6 +131,12 @@ typedef struct {
 } mpm_case;
 
 #define MPM_DEFAULT_CFL 0.5
+/* Largest Courant factor accepted without allow_unstable_dt: 1 for USF and
+ * MUSL; 0.5 for USL, which the CFL sweep (make stress) finds blowing up from
+ * C = 0.6 (GIMP 1D) and 0.8 (MPM 1D, MPM and GIMP 2D).  A given dt is held
+ * to the same fraction of h_min / (c + |v|max). */
+#define MPM_MAX_CFL 1.0
+#define MPM_USL_MAX_CFL 0.5
 #define MPM_DEFAULT_MASS_TOL 1e-12
 #define MPM_MAX_PARTICLES ((size_t)1 << 31)
 #define MPM_MAX_NODES ((size_t)1 << 31)
@@ -185,6 +191,16 @@ long mpm_sim_steps(const mpm_sim *sim);
 double mpm_sim_time(const mpm_sim *sim);
 double mpm_sim_dt(const mpm_sim *sim);          /* dt of the next step */
 double mpm_sim_dt_limit(const mpm_sim *sim);    /* CFL limit (C = 1) now */
+
+/* Per-particle external forces for the following steps: f[p*dim + d] is the
+ * force (not per unit mass) on particle p, in the order the particles were
+ * created (bodies in order; explicit points in order, generated ones in the
+ * generator's order).  Scattered like a point load, f_n += S_np f_p (Eq. 14),
+ * added to the tractions, counted in the external work, and kept until the
+ * next call; NULL sets them to zero.  The array is copied.  Returns 0, or
+ * MPM_EINVAL (a non-finite value; mpm_sim_error() names it), MPM_ENOMEM.
+ * Not to be called while mpm_sim_run() runs. */
+int mpm_sim_set_particle_forces(mpm_sim *sim, const double *f);
 size_t mpm_sim_particles(const mpm_sim *sim);
 size_t mpm_sim_nodes(const mpm_sim *sim);       /* real grid nodes */
 int mpm_sim_dim(const mpm_sim *sim);

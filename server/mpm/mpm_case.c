@@ -2,7 +2,7 @@
  * mpm_case.c - checks a case and generates its particles.
  *
  * Every field of an mpm_case is checked here, before anything is allocated,
- * and each error names the field and the limit ("bodies[1].radius: must be
+ * and each error names the field and the limit ("bodies[1].sphere.radius: must be
  * > 0 (got -0.1)").  Particles are produced by one iterator that either
  * only counts them (for the check: particle count, the largest initial
  * speed for the CFL test, and which traction regions hold particles) or
@@ -128,7 +128,7 @@ static int gen_points(gen_ctx *g, const mpm_body_desc *b, size_t bi, char *err, 
     const mpm_grid_desc *gr = &g->c->grid;
     int dim = gr->dim;
     if (!b->x || !b->volume) {
-        snprintf(err, errlen, "bodies[%zu].%s: required with %zu explicit points", bi,
+        snprintf(err, errlen, "bodies[%zu].points.%s: required with %zu explicit points", bi,
                  b->x ? "volume" : "x", b->n_points);
         return MPM_EINVAL;
     }
@@ -137,37 +137,37 @@ static int gen_points(gen_ctx *g, const mpm_body_desc *b, size_t bi, char *err, 
         double lp[3] = {0, 0, 0}, vol = b->volume[p], mass = b->mass ? b->mass[p] : 0;
         int d = check_inside(gr, x, dim);
         if (d >= 0) {
-            snprintf(err, errlen, "bodies[%zu].x[%zu]: point at %c = %g is outside the grid "
+            snprintf(err, errlen, "bodies[%zu].points.x[%zu]: point at %c = %g is outside the grid "
                      "[%g, %g)", bi, p * dim + d, "xyz"[d], x[d], gr->origin[d],
                      gr->origin[d] + (gr->nodes[d] - 1) * gr->h[d]);
             return MPM_EINVAL;
         }
         if (!(vol > 0) || !isfinite(vol)) {
-            snprintf(err, errlen, "bodies[%zu].volume[%zu]: must be finite and > 0 (got %g)",
+            snprintf(err, errlen, "bodies[%zu].points.volume[%zu]: must be finite and > 0 (got %g)",
                      bi, p, vol);
             return MPM_EINVAL;
         }
         if (b->mass && (!(mass > 0) || !isfinite(mass))) {
-            snprintf(err, errlen, "bodies[%zu].mass[%zu]: must be finite and > 0 (got %g)",
+            snprintf(err, errlen, "bodies[%zu].points.mass[%zu]: must be finite and > 0 (got %g)",
                      bi, p, mass);
             return MPM_EINVAL;
         }
         const double *v = b->v ? b->v + p * dim : b->velocity;
         for (int e = 0; e < dim; e++)
             if (!isfinite(v[e])) {
-                snprintf(err, errlen, "bodies[%zu].v[%zu]: must be finite", bi, p * dim + e);
+                snprintf(err, errlen, "bodies[%zu].points.v[%zu]: must be finite", bi, p * dim + e);
                 return MPM_EINVAL;
             }
         if (b->stress)
             for (int e = 0; e < 6; e++)
                 if (!isfinite(b->stress[p * 6 + e])) {
-                    snprintf(err, errlen, "bodies[%zu].stress[%zu]: must be finite", bi, p * 6 + e);
+                    snprintf(err, errlen, "bodies[%zu].points.stress[%zu]: must be finite", bi, p * 6 + e);
                     return MPM_EINVAL;
                 }
         for (int e = 0; e < dim; e++) {
             lp[e] = b->half_length ? b->half_length[p * dim + e] : 0.5 * pow(vol, 1.0 / dim);
             if (g->c->method == MPM_METHOD_GIMP && !(lp[e] > 0 && lp[e] <= gr->h[e])) {
-                snprintf(err, errlen, "bodies[%zu].half_length[%zu]: the GMPM half-width must be "
+                snprintf(err, errlen, "bodies[%zu].points.half_length[%zu]: the GMPM half-width must be "
                          "in (0, h] = (0, %g] (got %g)", bi, p * dim + e, gr->h[e], lp[e]);
                 return MPM_EINVAL;
             }
@@ -202,7 +202,7 @@ static int check_body(const mpm_case *c, const mpm_body_desc *b, size_t bi, char
         return MPM_EINVAL;
     }
     if (b->shape == MPM_SHAPE_SPHERE && (!(b->radius > 0) || !isfinite(b->radius))) {
-        snprintf(err, errlen, "bodies[%zu].radius: must be finite and > 0 (got %g)", bi, b->radius);
+        snprintf(err, errlen, "bodies[%zu].sphere.radius: must be finite and > 0 (got %g)", bi, b->radius);
         return MPM_EINVAL;
     }
     for (int d = 0; d < dim; d++) {
@@ -212,16 +212,16 @@ static int check_body(const mpm_case *c, const mpm_body_desc *b, size_t bi, char
         if (b->shape == MPM_SHAPE_BOX) {
             lo = b->lo[d];
             hi = b->hi[d];
-            what = "lo/hi";
+            what = "box";
             if (!(lo < hi)) {
-                snprintf(err, errlen, "bodies[%zu].hi[%d]: must be > lo[%d] (got %g <= %g)",
+                snprintf(err, errlen, "bodies[%zu].box.hi[%d]: must be > lo[%d] (got %g <= %g)",
                          bi, d, d, hi, lo);
                 return MPM_EINVAL;
             }
         } else {
             lo = b->center[d] - b->radius;
             hi = b->center[d] + b->radius;
-            what = "center/radius";
+            what = "sphere";
         }
         if (!(lo >= glo && hi <= ghi)) {
             snprintf(err, errlen, "bodies[%zu].%s: the body spans %c in [%g, %g], outside the "
@@ -345,9 +345,10 @@ long mpm_case_count(const mpm_case *c, char *err, size_t errlen)
                  MPM_DEFAULT_CFL, c->cfl);
         return MPM_EINVAL;
     }
-    if (c->cfl > 1 && !c->allow_unstable_dt) {
-        snprintf(err, errlen, "cfl: %g is above the stability limit 1; set allow_unstable_dt "
-                 "to run anyway", c->cfl);
+    double cmaxf = c->update == MPM_USL ? MPM_USL_MAX_CFL : MPM_MAX_CFL;
+    if (c->cfl > cmaxf && !c->allow_unstable_dt) {
+        snprintf(err, errlen, "cfl: %g is above the stability limit %g%s; set allow_unstable_dt "
+                 "to run anyway", c->cfl, cmaxf, c->update == MPM_USL ? " of USL" : "");
         return MPM_ECFL;
     }
     if (!(c->mass_tol >= 0) || !isfinite(c->mass_tol)) {
@@ -417,11 +418,12 @@ long mpm_case_count(const mpm_case *c, char *err, size_t errlen)
     if (c->dt > 0) {
         double hmin = c->grid.h[0];
         for (int d = 1; d < dim; d++) hmin = fmin(hmin, c->grid.h[d]);
-        double lim = hmin / (cmax + g.vmax);
+        double f = c->update == MPM_USL ? MPM_USL_MAX_CFL : MPM_MAX_CFL;
+        double lim = f * hmin / (cmax + g.vmax);
         if (c->dt > lim && !c->allow_unstable_dt) {
-            snprintf(err, errlen, "dt: %g is above the CFL limit %g = h_min / (c + |v|max) = "
-                     "%g / (%g + %g); set allow_unstable_dt to run anyway",
-                     c->dt, lim, hmin, cmax, g.vmax);
+            snprintf(err, errlen, "dt: %g is above the CFL limit %g = %g h_min / (c + |v|max) = "
+                     "%g x %g / (%g + %g)%s; set allow_unstable_dt to run anyway",
+                     c->dt, lim, f, f, hmin, cmax, g.vmax, f < 1 ? " (USL)" : "");
             return MPM_ECFL;
         }
     }

@@ -90,6 +90,10 @@ struct mpm_sim {
     double *load_f[3];
     double *load_xold[3];
     double external_work;
+    /* mpm_sim_set_particle_forces(): once called, one load slot per
+     * particle (load_p[i] = i) and trac_f keeps the tractions' shares */
+    int pforces;
+    double *trac_f[3];
 
     /* particles and materials */
     mpm_particles P;
@@ -105,6 +109,10 @@ struct mpm_sim {
     double t;
     long steps;
     double vmax;                   /* max particle speed after the last step */
+
+    /* divergence guard (finish_step): total energy at creation, and the
+     * floor below which an energy is noise */
+    double e_total0, e_floor;
 
     /* kernels chosen once per job */
     const mpm_kernels *k;

@@ -663,7 +663,7 @@ int main(int argc, char **argv)
     int st = bench_force_selftest(msg, sizeof msg);
     printf("%s\n", msg);
     if (st) {
-        fprintf(stderr, "mpmbench-accuracy: the force slots do not match the public API; the "
+        fprintf(stderr, "mpmbench-accuracy: mpm_sim_set_particle_forces does not match public point loads; the "
                         "manufactured solutions would be wrong\n");
         free(E);
         return 1;

@@ -89,26 +89,12 @@ double bench_rms_diff(const double *a, const double *b, size_t n, int dim, doubl
 double bench_now(void);
 
 /* ---- per-particle body force (bench_force.c) ----
- * The solver's public API has only uniform gravity and point forces fixed
- * at creation; the manufactured solution needs a force per particle that
- * changes every step.  bench_force_attach() adds to a case one point-force
- * region of zero force holding every particle, so that the solver keeps a
- * force slot per particle; bench_force_set() then writes the forces for the
- * next step into those slots.  This reaches into the solver's private state
- * (mpm_internal.h) and stands in for the public call the report asks for
- * (mpm_sim_set_particle_forces); bench_force_selftest() checks, bitwise,
- * that it does exactly what rebuilding the case every step with one public
- * point force per particle does. */
-typedef struct {
-    mpm_traction_desc tr;
-} bench_force_slot;
-
-void bench_force_attach(mpm_case *c, bench_force_slot *slot);
-/* f: particles * dim forces in particle order.  Returns 0, or -1 if the
- * simulation does not hold one slot per particle in order. */
+ * f: particles * dim forces in creation order, for the following steps
+ * (mpm_sim_set_particle_forces).  Returns 0 or the solver's error code. */
 int bench_force_set(mpm_sim *s, const double *f);
-/* Returns 0 when the attach/set path and the public rebuild path agree
- * bitwise on a small 1D manufactured problem for every method and update;
+/* Returns 0 when mpm_sim_set_particle_forces() and rebuilding the case every
+ * step with one public point force per particle agree bitwise on a small 1D
+ * manufactured problem for every method and update;
  * writes a one-line summary into msg. */
 int bench_force_selftest(char *msg, size_t n);
 

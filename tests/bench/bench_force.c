@@ -1,22 +1,14 @@
 /*
  * bench_force.c - per-particle, time-varying forces for the manufactured
- * solution, and the proof that they mean what a public API would mean.
+ * solution, and the check that they mean what point loads mean.
  *
- * The solver's public API (mpm.h) offers uniform gravity and point forces
- * fixed when the simulation is created; a manufactured solution needs
- * m_p b(X_p, t) on every particle, new every step.  This file is the only
- * one of the benchmark that includes the solver's private header: it gives
- * the case one zero point-force region holding every particle (the solver
- * then keeps one force slot per particle, load_p[i] = i, scattered with
- * the particle's weights as f_n += S_np f_p, Eq. 14, and counted in the
- * external work), and overwrites those slots between steps.  It reads and
- * writes nothing else.  bench_force_selftest() runs a small 1D problem two
- * ways, through these slots and by rebuilding the case every step from a
- * snapshot with one public point force per particle, and requires the two
- * to agree bit for bit.  When the solver gains a public per-particle force
- * call, bench_force_set() becomes a one-line wrapper around it.
+ * The manufactured solution needs m_p b(X_p, t) on every particle, new every
+ * step.  The solver's public mpm_sim_set_particle_forces() (mpm.h) takes
+ * them; bench_force_set() is a thin wrapper.  bench_force_selftest() runs a
+ * small 1D problem two ways, through mpm_sim_set_particle_forces() and by
+ * rebuilding the case every step from a snapshot with one public point
+ * force per particle, and requires the two to agree bit for bit.
  */
-#include "mpm_internal.h"
 #include "bench.h"
 
 #include <math.h>
@@ -24,29 +16,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-void bench_force_attach(mpm_case *c, bench_force_slot *slot)
-{
-    memset(slot, 0, sizeof *slot);
-    for (int d = 0; d < c->grid.dim; d++) {
-        /* the whole grid and its ghost cells: every particle centre */
-        slot->tr.lo[d] = c->grid.origin[d] - 4 * c->grid.h[d];
-        slot->tr.hi[d] = c->grid.origin[d] + (c->grid.nodes[d] + 3) * c->grid.h[d];
-    }
-    slot->tr.normal = 0;
-    slot->tr.is_force = 1; /* value 0: a zero force, shared by all */
-    c->tractions = &slot->tr;
-    c->n_tractions = 1;
-}
-
 int bench_force_set(mpm_sim *s, const double *f)
 {
-    if (s->nload != s->P.n) return -1;
-    for (size_t i = 0; i < s->nload; i++) {
-        size_t p = s->load_p[i];
-        if (p != i) return -1;
-        for (int d = 0; d < s->dim; d++) s->load_f[d][i] = f[p * (size_t)s->dim + d];
-    }
-    return 0;
+    return mpm_sim_set_particle_forces(s, f);
 }
 
 /* ---- self-test ---- */
@@ -78,7 +50,7 @@ static void st_forces(const double *X, const double *m, double t, double *f)
     for (int p = 0; p < ST_N; p++) f[p] = 0.3 * m[p] * sin(2 * M_PI * X[p]) * cos(5 * t);
 }
 
-/* One run of ST_STEPS steps; rebuild = 0: one simulation with force slots;
+/* One run of ST_STEPS steps; rebuild = 0: one simulation with mpm_sim_set_particle_forces;
  * 1: a new simulation every step with one public point force per particle. */
 static int st_run(mpm_method meth, mpm_update up, int rebuild, double *xo, double *vo)
 {
@@ -105,8 +77,6 @@ static int st_run(mpm_method meth, mpm_update up, int rebuild, double *xo, doubl
         b.v = v;
         b.half_length = hl;
         st_case(&c, &mat, &b, meth, up);
-        bench_force_slot slot;
-        bench_force_attach(&c, &slot);
         mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
         if (!s) return -1;
         double t = 0;
@@ -165,14 +135,14 @@ int bench_force_selftest(char *msg, size_t n)
             double xa[ST_N], va[ST_N], xb[ST_N], vb[ST_N];
             mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
             if (st_run(meth, (mpm_update)u, 0, xa, va) || st_run(meth, (mpm_update)u, 1, xb, vb)) {
-                snprintf(msg, n, "force slots: the self-test run failed (%s %s)",
+                snprintf(msg, n, "particle forces: the self-test run failed (%s %s)",
                          bench_method_name(meth), bench_update_name((mpm_update)u));
                 return -1;
             }
             for (int p = 0; p < ST_N; p++)
                 worst = fmax(worst, fmax(fabs(xa[p] - xb[p]), fabs(va[p] - vb[p])));
         }
-    snprintf(msg, n, "force slots vs public point forces rebuilt every step: max |difference| "
+    snprintf(msg, n, "mpm_sim_set_particle_forces vs point forces rebuilt every step: max |difference| "
              "%.3g over %d steps, 6 method/update pairs (%s)", worst, ST_STEPS,
              worst == 0 ? "bitwise equal" : "DIFFERENT");
     return worst == 0 ? 0 : -1;

@@ -21,7 +21,7 @@
  * Wallstedt & Guilkey 2008 choose it) this is
  *     b_i = A sin(2 pi X_i) s_i(t) pi^2 c^2 (4 prod_{j != i} F_j / F_i - 1).
  * The force m_p b(X_p, t_n) is given to every particle before each step
- * through bench_force_set().  u = 0 on every face, where rollers hold the
+ * through bench_force_set() (mpm_sim_set_particle_forces).  u = 0 on every face, where rollers hold the
  * normal velocity; initial u = 0, v_i = A omega sin(2 pi X_i) (+-1),
  * stress 0.
  */
@@ -350,8 +350,6 @@ static int run_mms(const bench_cfg *cf, int keep, bench_res *r)
     cs.materials = &mat;
     cs.n_bodies = 1;
     cs.bodies = &b;
-    bench_force_slot slot;
-    bench_force_attach(&cs, &slot);
     if (!(s = make_sim(&cs, r))) goto out;
     r->dt = dt;
     long every = n / SAMPLES > 1 ? n / SAMPLES : 1;
@@ -360,8 +358,8 @@ static int run_mms(const bench_cfg *cf, int keep, bench_res *r)
         double t0 = bench_now();
         for (long j = 0; j < k; j++) {
             mms_forces(&p, mpm_sim_time(s));
-            if (bench_force_set(s, p.f)) {
-                snprintf(r->msg, sizeof r->msg, "force slots missing");
+            if ((r->rc = bench_force_set(s, p.f))) {
+                snprintf(r->msg, sizeof r->msg, "%s", mpm_sim_error(s));
                 goto out;
             }
             if ((r->rc = mpm_sim_step(s))) {
