@@ -183,6 +183,13 @@ int mpm_sim_step(mpm_sim *sim);
 /* Advances up to nsteps steps, stopping early on error or cancellation. */
 int mpm_sim_run(mpm_sim *sim, long nsteps);
 
+/* Runs the divergence guard now (the steps run it every 16 steps and when
+ * the largest speed jumps): returns 0, or MPM_EDIVERGED with the reason in
+ * mpm_sim_error() and the simulation frozen, when the kinetic + strain
+ * energy exceeds twice what the initial state, the loads and gravity can
+ * supply.  Call it before reporting a run as finished. */
+int mpm_sim_check(mpm_sim *sim);
+
 /* Asks a running mpm_sim_run() to stop before its next step.  Safe to call
  * from any thread. */
 void mpm_sim_cancel(mpm_sim *sim);

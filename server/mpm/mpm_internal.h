@@ -113,6 +113,7 @@ struct mpm_sim {
     /* divergence guard (finish_step): total energy at creation, and the
      * floor below which an energy is noise */
     double e_total0, e_floor;
+    double guard_v2;               /* max |v|^2 at the last check */
 
     /* kernels chosen once per job */
     const mpm_kernels *k;

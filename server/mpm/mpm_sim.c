@@ -576,6 +576,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     mpm_sim_energy(s, &e0);
     s->e_total0 = e0.total;
     s->e_floor = 1e-9 * 0.5 * e0.mass * s->cmax * s->cmax;
+    s->guard_v2 = s->vmax * s->vmax;
     if (start_threads(s)) goto nomem;
     return s;
 
@@ -644,7 +645,10 @@ static void loads_and_bc2(mpm_sim *s)
  * per cent of it on every problem of the stress suite (make stress), the
  * worst +29 % (MPM USF, one particle per cell).  Twice the available energy
  * is a blow-up, recorded as MPM_EDIVERGED.  Cost: one pass over the
- * particles every MPM_GUARD_EVERY steps. */
+ * particles every MPM_GUARD_EVERY steps, and whenever the largest particle
+ * speed (known every step) has doubled its square since the last check, so
+ * a fast blow-up is caught within a step or two; mpm_sim_check() runs it on
+ * demand (at the end of a run). */
 #define MPM_GUARD_EVERY 16
 #define MPM_GUARD_FACTOR 2.0
 
@@ -653,6 +657,7 @@ static int guard(mpm_sim *s)
     mpm_energy e;
     mpm_sim_energy(s, &e);
     double have = e.kinetic + e.strain;
+    s->guard_v2 = s->vmax * s->vmax;
     double avail = s->e_total0 - e.potential + e.external_work;
     if (isfinite(have) && have <= MPM_GUARD_FACTOR * fmax(avail, 0) + s->e_floor) return 0;
     snprintf(s->err, sizeof s->err, "diverged at step %ld, time %.9g: kinetic + strain energy "
@@ -699,7 +704,9 @@ static int finish_step(mpm_sim *s)
     s->vmax = sqrt(v2);
     s->t = t;
     s->steps = step;
-    if (step % MPM_GUARD_EVERY == 0 && guard(s)) return s->failed;
+    /* every MPM_GUARD_EVERY steps, and at once when the largest speed
+     * has grown by sqrt(2) since the last check (a fast blow-up) */
+    if ((step % MPM_GUARD_EVERY == 0 || v2 > 2 * s->guard_v2) && guard(s)) return s->failed;
     next_dt(s);
     return 0;
 }
@@ -739,6 +746,12 @@ int mpm_sim_step(mpm_sim *s)
         break;
     }
     return finish_step(s);
+}
+
+int mpm_sim_check(mpm_sim *s)
+{
+    if (s->failed) return s->failed;
+    return guard(s);
 }
 
 int mpm_sim_run(mpm_sim *s, long nsteps)
