@@ -284,7 +284,8 @@ static void stream_seq(watch_t *w, uint64_t seq)
 /* After Finished: the samples still missing.  Finished carries the final
  * sample (with its seq), which is the last of the series: when it is the
  * next one expected it completes the series, when it is older nothing is
- * missing; otherwise the tail comes from the history.  A job INTERRUPTED
+ * missing; otherwise the tail comes from the history.  Without a final
+ * sample at step 0 the job never ran and has no samples.  A job INTERRUPTED
  * by a daemon shutting down may leave nobody to ask: then a short wait,
  * and what we have. */
 static int finish_tail(watch_t *w)
@@ -295,6 +296,10 @@ static int finish_tail(watch_t *w)
         uint64_t seq = cj_u64(w->fin_energy, "seq", UINT64_MAX);
         if (seq != UINT64_MAX && seq < w->next) return 0;
         if (seq == w->next) return emit(w, w->fin_energy);
+    } else if (w->step == 0 && w->next == 0) {
+        /* it ended before its first step (cancelled or interrupted while
+         * queued, or refused by the solver): it has no samples at all */
+        return 0;
     }
     if (w->status == SRV_STATUS_INTERRUPTED && saved > 3) w->c->timeout_s = 3;
     rc = fetch_rest(w);
@@ -536,10 +541,11 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
 
     /* where the job stands (and whether it exists) */
     rc = status(&w, &reply, &run);
-    json_decref(reply);
+    if (!rc) ctl_energy_out_init(&w.eo, fmt, (int)cj_int(run, "dim", 0), stdout);
+    json_decref(reply);  /* run belonged to it */
     reply = NULL;
+    run = NULL;
     if (rc) goto out;
-    ctl_energy_out_init(&w.eo, fmt, (int)cj_int(run ? run : NULL, "dim", 0), stdout);
     if (w.fmt == CTL_OUT_TEXT && !w.tty)
         fprintf(stdout, "job %llu%s%s%s: %s\n", (unsigned long long)job, w.name[0] ? " (" : "",
                 w.name, w.name[0] ? ")" : "", srv_status_name(w.status) ? srv_status_name(w.status) : "?");

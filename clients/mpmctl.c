@@ -50,6 +50,8 @@ static const command commands[] = {
     {"submit", C_SUBMIT, "CASE.json [--watch] [--csv|--json]", "queue a simulation case",
      "Loads CASE.json (\"-\": standard input) and checks it locally with the daemon's codec:\n"
      "a bad case is reported with the JSON path of the field and nothing is sent.\n"
+     "A case without \"method\" / \"update\" runs GIMP (uGIMP) with MUSL, the schema's\n"
+     "defaults (docs/accuracy.md); both are sent explicitly, so any mpmd runs the same.\n"
      "Prints \"job N\" (--json: the SubmitOk object).  --watch continues as `watch N`\n"
      "(with --csv/--json the job line goes to stderr and stdout carries the series).\n"},
     {"watch", C_WATCH, "ID [--csv|--json]", "live view of a job until it ends",
@@ -61,8 +63,8 @@ static const command commands[] = {
      "Exit status: 0 FINISHED, 3 FAILED, 4 CANCELLED, 5 INTERRUPTED, 1 error,\n"
      "130 stopped by Ctrl-C (the job keeps running).\n"},
     {"runs", C_RUNS, "[--status S] [--limit N] [--json]", "list runs, newest first",
-     "Columns: id, name, status, method, dim, particles, steps, wall seconds,\n"
-     "submission time.  --status: QUEUED, RUNNING, FINISHED, FAILED, CANCELLED or\n"
+     "Columns: id, name, status, method, stress update, dim, particles, steps, wall\n"
+     "seconds, submission time.  --status: QUEUED, RUNNING, FINISHED, FAILED, CANCELLED or\n"
      "INTERRUPTED.  --limit: at most N runs (default: the server's).  --json: one\n"
      "RunInfo object per line.\n"},
     {"show", C_SHOW, "ID [--json] [--case]", "one run in detail",
@@ -413,6 +415,9 @@ static int cmd_submit(ctl_conn *c, const cli *a)
         srv_case_pb_free(&pb);
         return CTL_EXIT_ERROR;
     }
+    /* the case means what this client's schema says, whatever the server's
+     * defaults */
+    srv_case_pin_defaults(pb);
     rq.case_pb = pb;
     rc = ctl_call(c, &rq, "submitOk", &reply, &ok);
     srv_case_pb_free(&pb);
@@ -447,21 +452,6 @@ static int cmd_watch(ctl_conn *c, const cli *a)
     return do_watch(c, job, a->fmt);
 }
 
-/* Method name of a run, from its case (one GetRun with the case): RunInfo
- * has no method field, so the table asks for each listed run's case. */
-static void run_method(ctl_conn *c, uint64_t id, char *buf, size_t n)
-{
-    srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = id, .with_case = 1};
-    json_t *reply = NULL, *run = NULL;
-    const char *err_code, *err_msg;
-    snprintf(buf, n, "?");
-    if (!ctl_call_quiet(c, &rq, "run", &reply, &run, &err_code, &err_msg)) {
-        json_t *cs = json_object_get(run, "case");
-        if (cs) snprintf(buf, n, "%s", cj_str(cs, "method", "MPM"));
-    }
-    json_decref(reply);
-}
-
 static int cmd_runs(ctl_conn *c, const cli *a)
 {
     srv_request rq = {.kind = SRV_REQ_LIST_RUNS, .status = a->status, .limit = a->limit};
@@ -480,17 +470,15 @@ static int cmd_runs(ctl_conn *c, const cli *a)
         printf("no runs%s%s\n", a->status ? " with status " : "",
                a->status ? srv_status_name(a->status) : "");
     } else {
-        printf("%6s  %-20s %-11s %-6s %3s %10s %12s %9s  %s\n", "ID", "NAME", "STATUS", "METHOD",
-               "DIM", "PARTICLES", "STEPS", "WALL S", "SUBMITTED");
+        printf("%6s  %-20s %-11s %-6s %-6s %3s %10s %12s %9s  %s\n", "ID", "NAME", "STATUS",
+               "METHOD", "UPDATE", "DIM", "PARTICLES", "STEPS", "WALL S", "SUBMITTED");
         for (i = 0; i < n; i++) {
             json_t *r = json_array_get(runs, i);
-            char when[32], method[16];
-            uint64_t id = cj_u64(r, "runId", 0);
-            if (cj_str(r, "method", NULL)) snprintf(method, sizeof method, "%s", cj_str(r, "method", ""));
-            else run_method(c, id, method, sizeof method);  /* RunInfo lacks it: ask the case */
+            char when[32];
             ctl_fmt_time(when, sizeof when, cj_num(r, "submittedAt", 0));
-            printf("%6llu  %-20.20s %-11s %-6s %3lld %10llu %12lld %9.2f  %s\n",
-                   (unsigned long long)id, cj_str(r, "name", ""), cj_str(r, "status", "?"), method,
+            printf("%6llu  %-20.20s %-11s %-6s %-6s %3lld %10llu %12lld %9.2f  %s\n",
+                   (unsigned long long)cj_u64(r, "runId", 0), cj_str(r, "name", ""),
+                   cj_str(r, "status", "?"), cj_str(r, "method", "?"), cj_str(r, "update", "?"),
                    cj_int(r, "dim", 0), (unsigned long long)cj_u64(r, "particles", 0),
                    cj_int(r, "steps", 0), cj_num(r, "wallS", 0), when);
         }
@@ -525,13 +513,15 @@ static void show_text(const json_t *r)
     printf("  particles   %llu\n  nodes       %llu\n  dim         %lld\n",
            (unsigned long long)cj_u64(r, "particles", 0), (unsigned long long)cj_u64(r, "nodes", 0),
            cj_int(r, "dim", 0));
+    printf("  method      %s, %s", cj_str(r, "method", "?"), cj_str(r, "update", "?"));
     if (cs) {
         double dt = cj_num(cs, "dt", 0);
-        printf("  method      %s, %s, ", cj_str(cs, "method", "MPM"), cj_str(cs, "update", "USF"));
-        if (dt > 0) printf("dt %.10g%s\n", dt, json_is_true(json_object_get(cs, "allowUnstableDt")) ? " (unstable allowed)" : "");
-        else printf("automatic dt (CFL %g)\n", cj_num(cs, "cfl", 0) > 0 ? cj_num(cs, "cfl", 0) : 0.5);
+        if (dt > 0) printf(", dt %.10g%s\n", dt, json_is_true(json_object_get(cs, "allowUnstableDt")) ? " (unstable allowed)" : "");
+        else printf(", automatic dt (CFL %g)\n", cj_num(cs, "cfl", 0) > 0 ? cj_num(cs, "cfl", 0) : 0.5);
         if (json_object_get(cs, "endTime")) printf("  stop        at t = %.10g\n", cj_num(cs, "endTime", 0));
         else printf("  stop        after %lld steps\n", cj_int(cs, "steps", 0));
+    } else {
+        putchar('\n');
     }
     printf("  energy      %llu samples\n", (unsigned long long)cj_u64(r, "energySamples", 0));
     if (le)

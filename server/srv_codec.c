@@ -41,6 +41,11 @@ _Static_assert(SAME(SRV_ERR_INTERNAL, MPMD__ERROR__CODE__INTERNAL) &&
                SAME(SRV_ERR_CONFLICT, MPMD__ERROR__CODE__CONFLICT) &&
                SAME(SRV_ERR_UNAVAILABLE, MPMD__ERROR__CODE__UNAVAILABLE),
                "srv_err_code must match mpmd.Error.Code");
+_Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
+               SAME(MPM_METHOD_GIMP, MPMD__CASE__METHOD__GIMP) &&
+               SAME(MPM_USF, MPMD__CASE__UPDATE__USF) && SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
+               SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),
+               "mpm_method / mpm_update must match mpmd.Case.Method / Update");
 #undef SAME
 
 #define PI_ 3.14159265358979323846
@@ -185,6 +190,32 @@ void srv_case_pb_free(Mpmd__Case **pb)
     if (!pb || !*pb) return;
     protobuf_c_message_free_unpacked(&(*pb)->base, NULL);
     *pb = NULL;
+}
+
+void srv_case_pin_defaults(Mpmd__Case *pb)
+{
+    if (!pb) return;
+    pb->has_method = 1;  /* an absent field holds the schema's default */
+    pb->has_update = 1;
+}
+
+/* The solver's checks name fields by their C names (snake_case): turns the
+ * path an error message starts with ("bodies[0].points.half_length[3]: ...")
+ * into the JSON mapping's lowerCamelCase, as the codec's own errors are. */
+static void camel_error_path(char *err)
+{
+    char *end = err ? strstr(err, ": ") : NULL, *w = err;
+    if (!end || memchr(err, ' ', (size_t)(end - err))) return;
+    for (char *r = err; r < end; r++) {
+        if (r[0] == '_' && r + 1 < end && r[1] >= 'a' && r[1] <= 'z' && r > err && r[-1] != '.' &&
+            r[-1] != '[') {
+            *w++ = (char)(r[1] - 'a' + 'A');
+            r++;
+        } else {
+            *w++ = *r;
+        }
+    }
+    if (w != end) memmove(w, end, strlen(end) + 1);
 }
 
 /* ------------------------------------------------------------------------ */
@@ -609,6 +640,7 @@ int srv_case_from_pb(const Mpmd__Case *pb, srv_case **out, char *err, size_t err
         case MPM_ENOMEM: rc = SRV_CODEC_ENOMEM; break;
         default: rc = SRV_CODEC_EINVAL; break;
         }
+        if (rc && err && errlen) camel_error_path(err);
     }
     if (rc) {
         srv_case_destroy(&sc);
@@ -832,11 +864,19 @@ static int fill_run(Mpmd__RunInfo *pi, Mpmd__EnergySample *es, const srv_run_inf
     pi->energy_samples = ri->energy_samples;
     pi->n_snapshot_steps = ri->snapshot_steps ? ri->n_snapshot_steps : 0;
     pi->snapshot_steps = (int64_t *)ri->snapshot_steps;
+    pi->has_method = pi->has_update = 1;
+    pi->method = (Mpmd__Case__Method)ri->method;
+    pi->update = (Mpmd__Case__Update)ri->update;
     if (ri->case_bytes) {
         ProtobufCMessage *cm;
         if (unpack_msg(&mpmd__case__descriptor, ri->case_bytes, ri->case_len, (size_t)-1, &cm, NULL, 0))
             return SRV_CODEC_ESYNTAX;
         pi->case_ = (Mpmd__Case *)cm;
+        /* what the run used, also for a case stored without the two fields
+         * under other defaults */
+        pi->case_->has_method = pi->case_->has_update = 1;
+        pi->case_->method = pi->method;
+        pi->case_->update = pi->update;
     }
     return 0;
 }

@@ -12,8 +12,8 @@
  *    bytes.
  * Every function returns 0 or a negative SRV_CODEC_* code and, where it has
  * an err buffer, writes a message there; case errors start with the JSON
- * path of the field (lowerCamelCase), e.g. "bodies[0].sphere.radius: must
- * be > 0".  Packed buffers and strings returned are malloc'd: free() them.
+ * path of the field (lowerCamelCase, also for the solver's own checks), e.g.
+ * "bodies[0].sphere.radius: must be > 0".  Packed buffers and strings returned are malloc'd: free() them.
  */
 #ifndef SRV_CODEC_H
 #define SRV_CODEC_H
@@ -109,6 +109,11 @@ int srv_case_to_json(const Mpmd__Case *pb, unsigned flags, char **json,
 
 /* Frees a case message and nulls the pointer (NULL is fine). */
 void srv_case_pb_free(Mpmd__Case **pb);
+
+/* Marks Case.method and Case.update present (with their current values,
+ * the schema's defaults when they were absent), so the packed case says
+ * which method and update it means to any peer, whatever its defaults. */
+void srv_case_pin_defaults(Mpmd__Case *pb);
 
 /* Case message -> srv_case: validates what the schema cannot express
  * (dimensions, array lengths, indices, enum values, ranges, limits), then
@@ -253,7 +258,11 @@ typedef struct {
     uint64_t energy_samples;
     size_t n_snapshot_steps;
     const int64_t *snapshot_steps;
-    const void *case_bytes;       /* packed Case to include, or NULL */
+    mpm_method method;            /* always sent (RunInfo.method) */
+    mpm_update update;            /* always sent (RunInfo.update) */
+    const void *case_bytes;       /* packed Case to include, or NULL; its
+                                     method and update are sent as the two
+                                     fields above say */
     size_t case_len;
 } srv_run_info;
 

@@ -14,6 +14,13 @@
  * [identity][empty][Reply] (a DEALER client sends [empty][Request]; a REQ
  * client does so by itself).  Anything else is logged and dropped, or
  * answered BAD_REQUEST when the identity and delimiter are right.
+ *
+ * Shutdown (SIGINT, SIGTERM): running jobs are told to stop before their
+ * next step and queued ones end INTERRUPTED at once; until the workers are
+ * done the main thread keeps relaying their stream messages and answering
+ * requests (Submit gets UNAVAILABLE), then relays whatever is left, and
+ * closes the XPUB and the ROUTER with a linger of SHUTDOWN_LINGER_MS, so
+ * the Finished(INTERRUPTED) of every job still reaches its watchers.
  */
 #include "srv_daemon.h"
 
@@ -36,6 +43,10 @@
 #define ENERGY_PAGE_DEFAULT 10000u
 #define ENERGY_PAGE_MAX 100000u
 #define LIST_DEFAULT 100u
+#define LIST_MAX 10000u       /* a RunInfo costs a few store reads on the main thread */
+/* How long the last stream messages and replies may take to leave at
+ * shutdown (a vanished peer holds the exit up this long, no longer). */
+#define SHUTDOWN_LINGER_MS 1000
 
 static volatile sig_atomic_t stop_signal;
 
@@ -49,6 +60,7 @@ typedef struct {
     void *zctx, *router, *xpub, *pull;
     store *st;
     srv_pool *pool;
+    int stopping;           /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
 } daemon_t;
 
@@ -133,6 +145,8 @@ static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_ener
     ri->particles = (uint64_t)r->particles;
     ri->nodes = (uint64_t)r->nodes;
     ri->dim = r->dim;
+    ri->method = r->method == STORE_METHOD_GIMP ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+    ri->update = r->update == STORE_MUSL ? MPM_MUSL : r->update == STORE_USL ? MPM_USL : MPM_USF;
     if (!isnan(r->energy.total)) {
         memset(e, 0, sizeof *e);
         e->step = r->steps_done;
@@ -177,17 +191,20 @@ static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_ener
     }
 }
 
-static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case)
+/* Answers with the RunInfo of a run; field names the request's id field
+ * ("jobId" or "runId") for NOT_FOUND. */
+static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, const char *field)
 {
     store_run r;
     int rc = store_run_get(d->st, (int64_t)run, &r);
+    const char *what = strcmp(field, "jobId") ? "run" : "job";
     if (rc == STORE_ENOTFOUND) {
-        reply_error(d, id, SRV_ERR_NOT_FOUND, "", "no run %llu", (unsigned long long)run);
+        reply_error(d, id, SRV_ERR_NOT_FOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
     }
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading run %llu: %s", (unsigned long long)run,
-                    store_errmsg());
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading %s %llu: %s", what,
+                    (unsigned long long)run, store_errmsg());
         return;
     }
     srv_run_info ri;
@@ -207,12 +224,25 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case)
     store_run_clear(&r);
 }
 
+/* Publishes a stream message of a job that the main thread made itself
+ * (the Finished of a job cancelled or interrupted while queued); frees it. */
+static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
+{
+    daemon_t *d = arg;
+    char topic[SRV_TOPIC_LEN + 1];
+    srv_topic(job, topic);
+    if (msg && (zmq_send(d->xpub, topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
+                zmq_send(d->xpub, msg, len, ZMQ_DONTWAIT) < 0))
+        srv_warn(job, "stream message not published: %s", zmq_strerror(errno));
+    free(msg);
+}
+
 /* ---- requests ---- */
 
 static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 {
     char err[1024], field[256];
-    if (stop_signal) {
+    if (stop_signal || d->stopping) {
         reply_error(d, id, SRV_ERR_UNAVAILABLE, "", "mpmd is shutting down");
         return;
     }
@@ -238,13 +268,14 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
         srv_case_destroy(&sc);
         return;
     }
-    long long steps = !sc->has_end_time ? sc->steps
-                      : sc->c.dt > 0 ? (long long)ceil(sc->end_time / sc->c.dt - 0.5) : 0;
-    if (steps > d->cfg->max_steps) {
+    /* in floating point: endTime / dt can be far beyond any integer type */
+    double steps = !sc->has_end_time ? (double)sc->steps
+                   : sc->c.dt > 0 ? ceil(sc->end_time / sc->c.dt - 0.5) : 0;
+    if (!(steps <= (double)d->cfg->max_steps)) {
         reply_error(d, id, SRV_ERR_TOO_LARGE, sc->has_end_time ? "endTime" : "steps",
-                    "%s: the case asks for %lld steps, above this server's limit %lld "
+                    "%s: the case asks for %.15g steps%s, above this server's limit %lld "
                     "(--max-steps)", sc->has_end_time ? "endTime" : "steps", steps,
-                    d->cfg->max_steps);
+                    sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
         srv_case_destroy(&sc);
         return;
     }
@@ -257,6 +288,9 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     }
     uint8_t *pb = NULL;
     size_t pblen = 0;
+    /* the stored case names its method and update: it keeps its meaning
+     * whatever later defaults say */
+    srv_case_pin_defaults(rq->case_pb);
     if (srv_case_pack(rq->case_pb, &pb, &pblen)) {
         reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
         srv_case_destroy(&sc);
@@ -312,13 +346,7 @@ static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
     uint8_t *msg = NULL;
     size_t len = 0;
     int rc = srv_pool_cancel(d->pool, job, &msg, &len);
-    if (rc == SRV_CANCEL_QUEUED && msg) {
-        char topic[SRV_TOPIC_LEN + 1];
-        srv_topic(job, topic);
-        if (zmq_send(d->xpub, topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) >= 0)
-            zmq_send(d->xpub, msg, len, ZMQ_DONTWAIT);
-    }
-    free(msg);
+    publish(d, job, msg, len);
     if (rc == SRV_CANCEL_NONE) {
         store_run r;
         int src = store_run_get(d->st, (int64_t)job, &r);
@@ -338,7 +366,7 @@ static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
     }
     if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested");
     store_flush(d->st);
-    reply_run(d, id, job, 0);
+    reply_run(d, id, job, 0, "jobId");
 }
 
 static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
@@ -356,7 +384,8 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     /* what the workers published so far is in the store once flushed */
     store_flush(d->st);
     store_energy_series es;
-    rc = store_energy_read(d->st, (int64_t)rq->id, (int64_t)rq->from_seq, limit + 1, &es);
+    int64_t from = rq->from_seq > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)rq->from_seq;
+    rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es);
     if (rc) {
         reply_error(d, id, SRV_ERR_INTERNAL, "", "reading energies of run %llu: %s",
                     (unsigned long long)rq->id, store_errmsg());
@@ -397,8 +426,18 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 {
     store_flush(d->st);
+    store_run r;
+    int rc = store_run_get(d->st, (int64_t)rq->id, &r);
+    if (rc == STORE_ENOTFOUND) {
+        reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu",
+                    (unsigned long long)rq->id);
+        return;
+    }
+    if (!rc) store_run_clear(&r);  /* else the snapshot read reports it */
     store_snapshot ss;
-    int rc = store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
+    /* a negative step is no step (the store would read it as "latest") */
+    rc = rq->has_step && rq->step < 0 ? STORE_ENOTFOUND
+         : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
     if (rc == STORE_ENOTFOUND) {
         if (rq->has_step)
             reply_error(d, id, SRV_ERR_NOT_FOUND, "step", "run %llu has no stored snapshot at "
@@ -443,10 +482,16 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     store_status st;
     if (rq->status) {
         if (status_to_store(rq->status, &st)) {
-            reply_error(d, id, SRV_ERR_BAD_REQUEST, "status", "status: unknown value %d", rq->status);
+            reply_error(d, id, SRV_ERR_BAD_REQUEST, "listRuns.status", "listRuns.status: unknown "
+                        "value %d", rq->status);
             return;
         }
         f.status_mask = STORE_STATUS_BIT(st);
+    }
+    if (rq->limit > LIST_MAX) {
+        reply_error(d, id, SRV_ERR_TOO_LARGE, "listRuns.limit", "listRuns.limit: %u is above this "
+                    "server's maximum of %u runs per listing", rq->limit, LIST_MAX);
+        return;
     }
     f.limit = rq->limit ? rq->limit : LIST_DEFAULT;
     store_run *runs = NULL;
@@ -490,10 +535,13 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t 
     }
     int rc = srv_request_decode(data, size, (size_t)d->cfg->max_request_bytes, &rq, err, sizeof err);
     if (rc) {
+        char field[128];
         d->bad_requests++;
         srv_debug(0, "bad request: %s", err);
+        error_field(err, field, sizeof field);  /* "status.jobId: missing" */
+        if (!strcmp(field, "request")) field[0] = 0;  /* no body: no one field */
         reply_error(d, id, rc == SRV_CODEC_EVERSION ? SRV_ERR_BAD_SCHEMA
-                    : rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_BAD_REQUEST, "",
+                    : rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_BAD_REQUEST, field,
                     "%s", err);
         srv_request_clear(&rq);
         return;
@@ -505,11 +553,11 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t 
     case SRV_REQ_CANCEL: do_cancel(d, id, rq.id); break;
     case SRV_REQ_STATUS:
         store_flush(d->st);
-        reply_run(d, id, rq.id, 0);
+        reply_run(d, id, rq.id, 0, "jobId");
         break;
     case SRV_REQ_GET_RUN:
         store_flush(d->st);
-        reply_run(d, id, rq.id, rq.with_case);
+        reply_run(d, id, rq.id, rq.with_case, "runId");
         break;
     case SRV_REQ_LIST_RUNS:
         store_flush(d->st);
@@ -598,14 +646,16 @@ static void on_xpub(daemon_t *d)
     }
 }
 
-/* Forwards the workers' stream messages to the XPUB. */
-static void on_pull(daemon_t *d)
+/* Forwards the workers' stream messages to the XPUB: at most budget
+ * frames, or (budget 0) until none is left. */
+static void on_pull(daemon_t *d, long budget)
 {
-    for (int budget = 0; budget < 10000; budget++) {
+    for (long k = 0; !budget || k < budget; k++) {
         zmq_msg_t m;
         zmq_msg_init(&m);
         if (zmq_msg_recv(&m, d->pull, ZMQ_DONTWAIT) < 0) {
             zmq_msg_close(&m);
+            if (errno != EAGAIN) srv_warn(0, "stream relay: %s", zmq_strerror(errno));
             return;
         }
         int more = zmq_msg_more(&m);
@@ -614,6 +664,40 @@ static void on_pull(daemon_t *d)
         if (zmq_msg_send(&m, d->xpub, (more ? ZMQ_SNDMORE : 0) | ZMQ_DONTWAIT) < 0)
             zmq_msg_close(&m);
     }
+}
+
+/* Closes a socket after giving what it still holds to send (the last stream
+ * messages, the last replies) up to linger_ms to leave. */
+static void close_socket(void **s, int linger_ms, const char *what)
+{
+    if (!*s) return;
+    if (zmq_setsockopt(*s, ZMQ_LINGER, &linger_ms, sizeof linger_ms))
+        srv_warn(0, "%s: ZMQ_LINGER: %s", what, zmq_strerror(errno));
+    if (zmq_close(*s)) srv_warn(0, "closing the %s socket: %s", what, zmq_strerror(errno));
+    *s = NULL;
+}
+
+/* The shutdown of the jobs: no new ones; running ones end INTERRUPTED
+ * before their next step while their stream messages are still relayed and
+ * requests still answered (a watcher asking Status gets its answer); queued
+ * ones end INTERRUPTED with a Finished message of their own; then the
+ * workers are joined and every message they sent is relayed. */
+static void stop_jobs(daemon_t *d)
+{
+    d->stopping = 1;
+    srv_pool_stop(d->pool, publish, d);
+    while (srv_pool_busy(d->pool)) {
+        zmq_pollitem_t items[] = {{d->router, 0, ZMQ_POLLIN, 0}, {d->pull, 0, ZMQ_POLLIN, 0}};
+        int n = zmq_poll(items, 2, 50);
+        if (n < 0 && errno != EINTR) {
+            srv_warn(0, "zmq_poll while stopping: %s", zmq_strerror(errno));
+            break;
+        }
+        if (n > 0 && (items[1].revents & ZMQ_POLLIN)) on_pull(d, 10000);
+        if (n > 0 && (items[0].revents & ZMQ_POLLIN)) on_router(d);
+    }
+    srv_pool_destroy(&d->pool);
+    on_pull(d, 0);
 }
 
 static int open_socket(void *zctx, int type, const char *ep, int allow_remote, void **out,
@@ -718,7 +802,7 @@ int srv_daemon_run(const srv_config *cfg)
             srv_warn(0, "zmq_poll: %s", zmq_strerror(errno));
             break;
         }
-        if (items[2].revents & ZMQ_POLLIN) on_pull(&d);
+        if (items[2].revents & ZMQ_POLLIN) on_pull(&d, 10000);
         if (items[1].revents & ZMQ_POLLIN) on_xpub(&d);
         if (items[0].revents & ZMQ_POLLIN) on_router(&d);
     }
@@ -726,14 +810,13 @@ int srv_daemon_run(const srv_config *cfg)
             ? "SIGTERM" : "stopping");
     rc = 0;
 out:
-    srv_pool_destroy(&d.pool);
-    if (d.pull) {
-        on_pull(&d); /* last words of the interrupted jobs */
-        zmq_close(d.pull);
+    if (d.pool) stop_jobs(&d);  /* the pool exists only with all three sockets */
+    close_socket(&d.pull, 0, "inproc");
+    close_socket(&d.xpub, SHUTDOWN_LINGER_MS, "stream");
+    close_socket(&d.router, SHUTDOWN_LINGER_MS, "request");
+    if (d.zctx) {
+        while (zmq_ctx_term(d.zctx) && errno == EINTR) {}
     }
-    if (d.xpub) zmq_close(d.xpub);
-    if (d.router) zmq_close(d.router);
-    if (d.zctx) zmq_ctx_term(d.zctx);
     store_close(&d.st);
     srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,
             (unsigned long long)d.bad_requests);

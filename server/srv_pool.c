@@ -238,8 +238,11 @@ static void progress(ctx *c, mpm_sim *sim, double wall)
     srv_job *j = c->j;
     int64_t k = mpm_sim_steps(sim);
     double t = mpm_sim_time(sim), dt = mpm_sim_dt(sim);
-    int64_t total = j->sc->has_end_time ? k + (int64_t)ceil((j->sc->end_time - t) / dt - 0.5)
-                                        : (int64_t)j->sc->steps;
+    /* steps still to go, in floating point first (end_time / dt may
+     * exceed any integer: the step limit stops such a run, not this) */
+    double left = j->sc->has_end_time && dt > 0 ? ceil((j->sc->end_time - t) / dt - 0.5) : 0;
+    if (!(left < 9e18 - (double)k)) left = 9e18 - (double)k;
+    int64_t total = j->sc->has_end_time ? k + (int64_t)(left > 0 ? left : 0) : (int64_t)j->sc->steps;
     pthread_mutex_lock(&c->p->mu);
     j->steps = k;
     j->steps_total = total;
@@ -368,6 +371,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         }
     }
     double wall = mono_now() - t0;
+    /* the divergence guard once more before a run is called finished: a
+     * blow-up in the last steps must not be recorded as a result */
+    if (status == SRV_STATUS_FINISHED && mpm_sim_check(sim)) {
+        status = SRV_STATUS_FAILED;
+        snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+    }
     if (last.step != mpm_sim_steps(sim) && status != SRV_STATUS_FAILED)
         energy_sample(&c, sim, &last);
     else if (status == SRV_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
@@ -557,7 +566,9 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         p->nqueued--;
         rc = SRV_CANCEL_QUEUED;
     } else if (j) {
-        atomic_store(&j->cancel, CANCEL_USER);
+        /* a shutdown already under way keeps its INTERRUPTED */
+        int none = 0;
+        atomic_compare_exchange_strong(&j->cancel, &none, CANCEL_USER);
         rc = SRV_CANCEL_RUNNING;
     }
     pthread_mutex_unlock(&p->mu);
@@ -584,13 +595,16 @@ void srv_pool_watch(srv_pool *p, uint64_t id, int on)
     pthread_mutex_unlock(&p->mu);
 }
 
-void srv_pool_shutdown(srv_pool *p)
+void srv_pool_stop(srv_pool *p, srv_pool_publish_fn pub, void *arg)
 {
-    if (p->joined) return;
     pthread_mutex_lock(&p->mu);
     p->stopping = 1;
     for (int i = 0; i < p->nworkers; i++)
-        if (p->running[i]) atomic_store(&p->running[i]->cancel, CANCEL_SHUTDOWN);
+        if (p->running[i]) {
+            /* a user's cancel already under way stays CANCELLED */
+            int none = 0;
+            atomic_compare_exchange_strong(&p->running[i]->cancel, &none, CANCEL_SHUTDOWN);
+        }
     srv_job *q = p->head;
     p->head = p->tail = NULL;
     p->nqueued = 0;
@@ -601,11 +615,35 @@ void srv_pool_shutdown(srv_pool *p)
         store_run_end end = {0};
         end.status = STORE_INTERRUPTED;
         end.error = STORE_INTERRUPTED_QUEUED;
-        store_run_finish(p->st, (int64_t)q->id, &end);
+        int rc = store_run_finish(p->st, (int64_t)q->id, &end);
+        if (rc) srv_warn(q->id, "interruption not recorded: %s", store_strerror(rc));
         srv_log(q->id, "interrupted while queued");
+        if (pub) {
+            srv_finished f = {SRV_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL};
+            uint8_t *msg = NULL;
+            size_t len = 0;
+            if (srv_stream_finished(q->id, q->msg_seq++, &f, &msg, &len))
+                srv_warn(q->id, "out of memory encoding the end of the stream");
+            else pub(arg, q->id, msg, len);
+        }
         job_free(q);
         q = nx;
     }
+}
+
+int srv_pool_busy(srv_pool *p)
+{
+    int busy = 0;
+    pthread_mutex_lock(&p->mu);
+    for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
+    pthread_mutex_unlock(&p->mu);
+    return busy;
+}
+
+void srv_pool_shutdown(srv_pool *p)
+{
+    if (p->joined) return;
+    srv_pool_stop(p, NULL, NULL);
     for (int i = 0; i < p->nworkers; i++)
         if (p->workers[i].started) pthread_join(p->workers[i].thread, NULL);
     p->joined = 1;
@@ -615,7 +653,7 @@ void srv_pool_destroy(srv_pool **pp)
 {
     srv_pool *p = pp ? *pp : NULL;
     if (!p) return;
-    if (p->workers) srv_pool_shutdown(p);
+    if (p->workers && p->running) srv_pool_shutdown(p);
     pthread_cond_destroy(&p->cv);
     pthread_mutex_destroy(&p->mu);
     free(p->running);

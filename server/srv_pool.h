@@ -73,8 +73,23 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len);
 /* Somebody subscribed to (on = 1) or left (on = 0) the job's stream. */
 void srv_pool_watch(srv_pool *p, uint64_t id, int on);
 
-/* Stops: running jobs end INTERRUPTED before their next step, queued ones
- * are recorded INTERRUPTED, and the workers are joined. */
+/* Called for each stream message the pool hands back to the main thread
+ * (topic of job `id`): publish msg (len bytes), then free() it. */
+typedef void (*srv_pool_publish_fn)(void *arg, uint64_t id, uint8_t *msg, size_t len);
+
+/* Begins the shutdown without waiting: no job is accepted any more,
+ * running jobs are told to end INTERRUPTED before their next step (their
+ * workers publish Finished as usual), and queued ones are recorded
+ * INTERRUPTED at once, each with its Finished message passed to publish
+ * (may be NULL: dropped).  Idempotent. */
+void srv_pool_stop(srv_pool *p, srv_pool_publish_fn publish, void *arg);
+
+/* Number of jobs still running (0 once every worker is done with its
+ * job, so its last stream message has been sent). */
+int srv_pool_busy(srv_pool *p);
+
+/* Stops (srv_pool_stop without publishing) if not done yet and joins the
+ * workers. */
 void srv_pool_shutdown(srv_pool *p);
 
 /* Shuts down if needed and frees the pool; nulls the pointer. */

@@ -66,10 +66,11 @@
  * Open.  store_open: flock(<path>.lock) (non-blocking; one daemon per
  * database), then WAL, busy_timeout, foreign keys, schema migrations (the
  * table of steps `migrations[]`, the pending ones applied in order in one
- * transaction, the version recorded in PRAGMA user_version), crash recovery (runs left 'running' or 'queued'
- * become 'interrupted'; queued ones too, because the daemon's job queue
- * lives in memory and nothing would ever start them), the next run id, and
- * the writer thread.
+ * transaction, the version recorded in PRAGMA user_version), crash
+ * recovery (runs left 'running' or 'queued' become 'interrupted'; queued
+ * ones too, because the daemon's job queue lives in memory and nothing would
+ * ever start them; steps and final energies become those of the run's last
+ * energy sample), the next run id, and the writer thread.
  */
 #define _GNU_SOURCE
 #include "store.h"
@@ -846,11 +847,23 @@ rollback:
     return r;
 }
 
-/* Runs `UPDATE ... SET status='interrupted', error=?1 WHERE status=?2`. */
+/* Runs `UPDATE ... SET status='interrupted', error=?1 WHERE status=?2`.
+ * The steps done and the final energies become those of the run's last
+ * stored energy sample: the progress figures in the row lag behind it or
+ * run ahead of it by whatever the crash left, while the sample is a
+ * consistent state (its step, t and energies belong together, and RunInfo
+ * takes t and the last energies from it). */
 static int recover_status(store *s, const char *from, const char *error, int64_t *count)
 {
     sqlite3_stmt *st = NULL;
-    const char *sql = "UPDATE runs SET status = 'interrupted', error = ?1 WHERE status = ?2";
+#define LAST_SAMPLE(cols) "(SELECT " cols " FROM energy WHERE run_id = runs.id ORDER BY seq DESC LIMIT 1)"
+    const char *sql =
+        "UPDATE runs SET status = 'interrupted', error = ?1,"
+        " steps_done = COALESCE(" LAST_SAMPLE("step") ", steps_done),"
+        " (kinetic, strain, potential, external_work, total) ="
+        " " LAST_SAMPLE("kinetic, strain, potential, external_work, total")
+        " WHERE status = ?2";
+#undef LAST_SAMPLE
     int rc = sqlite3_prepare_v2(s->wdb, sql, -1, &st, NULL);
     if (rc != SQLITE_OK) return sql_fail(s->wdb, rc, "crash recovery");
     rc = sqlite3_bind_text(st, 1, error, -1, SQLITE_STATIC);

@@ -178,7 +178,8 @@ typedef struct store store;
  * foreign keys, applies the pending schema migrations in one transaction,
  * marks runs left 'running' or 'queued' by a previous daemon 'interrupted'
  * (error STORE_INTERRUPTED_RUNNING / STORE_INTERRUPTED_QUEUED, ended_at left
- * unset since the time of the stop is unknown), loads the next run id and
+ * unset since the time of the stop is unknown, steps_done and the final
+ * energies taken from the run's last energy sample when it has one), loads the next run id and
  * starts the writer thread.  opt may be NULL.  On failure returns a negative
  * code, sets *out to NULL and writes a message into err (errlen bytes), e.g.
  * "database X is in use by another mpmd (pid N)" with STORE_ELOCKED. */

@@ -508,6 +508,67 @@ TEST(codec_bad_case)
 }
 
 /* Damaged protobuf bytes: errors, never crashes (ASan watches). */
+/* The schema's defaults (GIMP with MUSL), made explicit by
+ * srv_case_pin_defaults(), and the solver's own checks reported with
+ * lowerCamelCase paths like the codec's. */
+TEST(codec_defaults)
+{
+    char err[ERRLEN], *json = NULL;
+    Mpmd__Case *pb = NULL, *back = NULL;
+    srv_case *sc = NULL;
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    CHECKF(srv_case_load(good2d, strlen(good2d), &sc, err, sizeof err) == 0, "%s", err);
+    CHECKF(sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL,
+           "a case without method/update: method %d, update %d (want GIMP, MUSL)", (int)sc->c.method,
+           (int)sc->c.update);
+    srv_case_destroy(&sc);
+
+    /* absent stays absent in JSON until pinned; pinned, the bytes say it */
+    CHECK(srv_case_from_json(good2d, strlen(good2d), &pb, err, sizeof err) == 0);
+    CHECK(srv_case_to_json(pb, 0, &json, err, sizeof err) == 0);
+    CHECKF(!strstr(json, "\"method\"") && !strstr(json, "\"update\""), "unpinned: %s", json);
+    free(json);
+    json = NULL;
+    srv_case_pin_defaults(pb);
+    CHECK(srv_case_pack(pb, &buf, &n) == 0);
+    srv_case_pb_free(&pb);
+    CHECK(srv_case_unpack(buf, n, 0, &back, err, sizeof err) == 0);
+    free(buf);
+    CHECK(srv_case_to_json(back, 0, &json, err, sizeof err) == 0);
+    srv_case_pb_free(&back);
+    TLOG("pinned: %.90s...", json);
+    CHECKF(strstr(json, "\"method\":\"GIMP\",\"update\":\"MUSL\""), "pinned: %s", json);
+    free(json);
+    json = NULL;
+    {
+        char *mpm = patch("\"endTime\": 1", "\"endTime\": 1, \"method\": \"MPM\", \"update\": \"USL\"");
+        CHECK(mpm);
+        int rc = srv_case_from_json(mpm, strlen(mpm), &pb, err, sizeof err);
+        free(mpm);
+        CHECK(rc == 0);
+        srv_case_pin_defaults(pb);
+        rc = srv_case_to_json(pb, 0, &json, err, sizeof err);
+        srv_case_pb_free(&pb);
+        CHECK(rc == 0);
+        CHECKF(strstr(json, "\"method\":\"MPM\",\"update\":\"USL\""), "explicit MPM USL pinned: %s", json);
+        free(json);
+    }
+    /* a solver check (GMPM half-width above h) names the field as JSON does */
+    {
+        const char *wide = "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+                           " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+                           " \"bodies\": [{\"points\": {\"x\": [0.45, 0.55], \"volume\": [0.1, 0.1],"
+                           " \"halfLength\": [0.05, 0.2]}}], \"steps\": 1}";
+        int rc = load_text(wide, err);
+        TLOG("half-width above h: %s", err);
+        const char *colon = strstr(err, ": ");
+        CHECKF(rc == SRV_CODEC_EINVAL && !strncmp(err, "bodies[0].", 10) && colon &&
+                   colon - err >= 13 && !strncmp(colon - 13, "halfLength[1]", 13),
+               "rc %d: %s (want the path bodies[0]...halfLength[1] first)", rc, err);
+    }
+}
+
 TEST(codec_bad_bytes)
 {
     char err[ERRLEN];
@@ -699,7 +760,7 @@ TEST(codec_envelopes)
     srv_run_info ri = {.run_id = 5, .job_id = 6, .name = "bar", .status = SRV_STATUS_RUNNING,
                        .submitted_at = 1700000000.5, .steps = 10, .steps_total = 100, .t = 0.01, .dim = 2,
                        .last_energy = &es, .n_snapshot_steps = 2, .snapshot_steps = ssteps,
-                       .case_bytes = cb, .case_len = cn};
+                       .method = MPM_METHOD_GIMP, .update = MPM_USL, .case_bytes = cb, .case_len = cn};
     srv_run_info two[2] = {ri, ri};
     two[1].run_id = 9;
     two[1].case_bytes = NULL;
@@ -717,7 +778,7 @@ TEST(codec_envelopes)
         "\"particles\":\"0\",\"nodes\":\"0\",\"dim\":2,\"lastEnergy\":{\"step\":\"10\",\"t\":0.01,\"kinetic\":0.5,"
         "\"strain\":0.25,\"potential\":0,\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,"
         "\"seq\":\"3\"},\"energySamples\":\"0\",\"snapshotSteps\":[\"0\",\"100\"],\"case\":{\"name\":\"c\","
-        "\"steps\":\"3\"}}}",
+        "\"method\":\"GIMP\",\"update\":\"USL\",\"steps\":\"3\"},\"method\":\"GIMP\",\"update\":\"USL\"}}",
         "\"runId\":\"9\",\"jobId\":\"6\",\"name\":\"bar\",\"status\":\"FAILED\",\"error\":\"particle left the grid\"",
         "{\"schemaVersion\":1,\"energy\":{\"runId\":\"5\",\"samples\":[{\"step\":\"10\"",
         "{\"schemaVersion\":1,\"snapshot\":{\"step\":\"10\",\"t\":0.01,\"n\":\"2\",\"dim\":2,\"x\":[0.1,0.2,0.3,0.4],"

@@ -223,6 +223,66 @@ static json_t *show_json(const td_daemon *d, unsigned long long id)
     return r;
 }
 
+/* Waits up to timeout s until the daemon's log (mpmd --verbose) shows that
+ * job's stream subscribed ("job N: stream watched"); 0 or -1. */
+static int wait_watched(const td_daemon *d, unsigned long long job, double timeout)
+{
+    char want[64];
+    double end = td_now() + timeout;
+    snprintf(want, sizeof want, "job %llu: stream watched", job);
+    do {
+        size_t len = 0;
+        char *log = td_slurp(d->log, &len);
+        int found = log && strstr(log, want);
+        free(log);
+        if (found) return 0;
+        td_msleep(20);
+    } while (td_now() < end);
+    TLOG("no \"%s\" in %s after %.0f s", want, d->log, timeout);
+    return -1;
+}
+
+/* Waits up to timeout s until a background client's output file has at
+ * least n lines; 0 or -1. */
+static int wait_lines(const td_bg *b, size_t n, double timeout)
+{
+    double end = td_now() + timeout;
+    do {
+        size_t len = 0;
+        char *out = td_slurp(b->out_path, &len);
+        size_t have = count_lines(out);
+        free(out);
+        if (have >= n) return 0;
+        td_msleep(20);
+    } while (td_now() < end);
+    return -1;
+}
+
+/* The error of a raw request for id: 0 if it is NOT_FOUND naming `field`,
+ * with a message naming the id; else fails the test. */
+static int expect_not_found(const td_daemon *d, srv_request rq, const char *what, const char *field)
+{
+    json_t *reply = NULL;
+    char id[32];
+    int ok;
+    snprintf(id, sizeof id, "%llu", (unsigned long long)rq.id);
+    if (td_request(d->ep, &rq, 10, &reply) != 0) {
+        t_fail(__FILE__, __LINE__, "%s: no reply", what);
+        json_decref(reply);
+        return -1;
+    }
+    ok = !strcmp(td_err_code(reply), "NOT_FOUND") && !strcmp(td_err_field(reply), field) &&
+         strstr(td_err_msg(reply), id);
+    if (!ok)
+        t_fail(__FILE__, __LINE__, "%s: %s, field \"%s\", message \"%s\" (want NOT_FOUND, field %s, "
+               "the id %s in the message)", what, td_err_code(reply), td_err_field(reply),
+               td_err_msg(reply), field, id);
+    else
+        TLOG("%-30s NOT_FOUND, field %-6s %s", what, field, td_err_msg(reply));
+    json_decref(reply);
+    return ok ? 0 : -1;
+}
+
 /* ---- the client alone --------------------------------------------------------- */
 
 /* Expects mpmctl ARGS to exit with `status` and its stdout (or, for a
@@ -440,6 +500,39 @@ DTEST(daemon_basic_run)
         json_decref(sn);
     }
     EXPECT_CTL(&d, 1, "NOT_FOUND", "snapshot", "1", "--step", "7", "-o", snap_json);
+    for (int k = 0; k < 2; k++) {
+        /* the run exists, the step does not (7, or -1, which is no step
+         * rather than "the latest"): the field is the step */
+        srv_request rq = {.kind = SRV_REQ_GET_SNAPSHOT, .id = 1, .has_step = 1, .step = k ? -1 : 7};
+        json_t *reply = NULL;
+        CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+        CHECKF(!strcmp(td_err_code(reply), "NOT_FOUND") && !strcmp(td_err_field(reply), "step"),
+               "getSnapshot{runId: 1, step: %lld}: %s, field \"%s\"", (long long)rq.step, td_err_code(reply),
+               td_err_field(reply));
+        json_decref(reply);
+    }
+    {
+        /* energies from a seq beyond the end (even past INT64_MAX): none */
+        srv_request rq = {.kind = SRV_REQ_GET_ENERGY, .id = 1, .from_seq = UINT64_MAX};
+        json_t *reply = NULL, *en;
+        CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+        en = json_object_get(reply, "energy");
+        CHECKF(en && json_array_size(json_object_get(en, "samples")) == 0 &&
+                   !json_is_true(json_object_get(en, "more")),
+               "getEnergy{runId: 1, fromSeq: 2^64-1}: %zu samples", json_array_size(json_object_get(en, "samples")));
+        json_decref(reply);
+    }
+    {
+        /* RunInfo carries the method and update (decoded reply, raw request) */
+        srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = 1};
+        json_t *reply = NULL, *run;
+        CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+        run = json_object_get(reply, "run");
+        CHECKF(run && !strcmp(jstr(run, "method"), "MPM") && !strcmp(jstr(run, "update"), "USF"),
+               "getRun 1: method \"%s\", update \"%s\" (want MPM, USF as bar1d_mpm.json says)",
+               jstr(run, "method"), jstr(run, "update"));
+        json_decref(reply);
+    }
 
     /* energy --csv gives the very series the watcher printed */
     CHECK(td_ctl(&d, 30, &e, "energy", "1", "--csv", NULL) == 0);
@@ -510,8 +603,8 @@ DTEST(daemon_basic_run)
     }
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "runs", NULL) == 0);
-    CHECKF(e.status == 0 && strstr(e.out, "METHOD") && strstr(e.out, "bar1d_mpm") &&
-               strstr(e.out, "FINISHED    MPM"), "runs: %s", e.out);
+    CHECKF(e.status == 0 && strstr(e.out, "METHOD UPDATE") && strstr(e.out, "bar1d_mpm") &&
+               strstr(e.out, "FINISHED    MPM    USF"), "runs: %s", e.out);
     TLOG("runs:\n%s", e.out);
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "runs", "--status", "failed", "--json", NULL) == 0);
@@ -583,6 +676,97 @@ DTEST(daemon_basic_run)
     td_out_free(&o);
     series_free(&s);
     CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM (see its log)");
+}
+
+/* ---- method and update: the schema's defaults, RunInfo ------------------------- */
+
+DTEST(daemon_method_defaults)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--solver-threads", "1", NULL};
+    char dir[300], path[400], err[ERRLEN];
+    td_daemon d;
+    td_out o;
+    json_t *c, *r;
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    /* the block without method and update: GIMP with MUSL, the defaults */
+    c = block2d(40, 10, "defaults");
+    CHECK(c);
+    json_object_del(c, "method");
+    json_object_del(c, "update");
+    CHECK(write_case(c, dir, "defaults.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && job_of(o.out) == 1, "submit --watch: exit %d, %s%s", o.status, o.out, o.err);
+    td_out_free(&o);
+    /* and one that names MPM with USL */
+    c = block2d(40, 10, "explicit");
+    CHECK(c);
+    json_object_set_new(c, "update", json_string("USL"));
+    CHECK(write_case(c, dir, "explicit.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && job_of(o.out) == 2, "submit --watch: exit %d, %s%s", o.status, o.out, o.err);
+    td_out_free(&o);
+
+    /* decoded replies: RunInfo.method / update, from the run record */
+    {
+        static const char *const want[3][2] = {{"", ""}, {"GIMP", "MUSL"}, {"MPM", "USL"}};
+        for (unsigned long long id = 1; id <= 2; id++) {
+            srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = id, .with_case = 1};
+            json_t *reply = NULL, *run, *cs;
+            CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+            run = json_object_get(reply, "run");
+            cs = json_object_get(run, "case");
+            /* the stored case names them too: resubmitted anywhere, it runs the same */
+            int ok = run && !strcmp(jstr(run, "method"), want[id][0]) &&
+                     !strcmp(jstr(run, "update"), want[id][1]) && cs &&
+                     !strcmp(jstr(cs, "method"), want[id][0]) && !strcmp(jstr(cs, "update"), want[id][1]);
+            TLOG("run %llu: RunInfo method %s, update %s; its stored case: %s, %s", id, jstr(run, "method"),
+                 jstr(run, "update"), jstr(cs, "method"), jstr(cs, "update"));
+            json_decref(reply);
+            CHECKF(ok, "run %llu: want %s, %s", id, want[id][0], want[id][1]);
+        }
+    }
+    /* mpmctl runs (table and --json) and show print them */
+    CHECK(td_ctl(&d, 30, &o, "runs", NULL) == 0);
+    CHECKF(o.status == 0 && strstr(o.out, "METHOD UPDATE") && strstr(o.out, "FINISHED    GIMP   MUSL") &&
+               strstr(o.out, "FINISHED    MPM    USL"), "runs: %s", o.out);
+    TLOG("runs:\n%s", o.out);
+    td_out_free(&o);
+    CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
+    {
+        char **lines = NULL;
+        size_t nl = td_lines(o.out, &lines);
+        json_t *r2 = nl == 2 ? parse_line(lines[0]) : NULL, *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
+        free(lines);
+        int ok = r1 && r2 && !strcmp(jstr(r1, "method"), "GIMP") && !strcmp(jstr(r1, "update"), "MUSL") &&
+                 !strcmp(jstr(r2, "method"), "MPM") && !strcmp(jstr(r2, "update"), "USL");
+        json_decref(r1);
+        json_decref(r2);
+        CHECKF(ok, "runs --json: %s", o.out);
+    }
+    td_out_free(&o);
+    CHECK(td_ctl(&d, 30, &o, "show", "1", NULL) == 0);
+    CHECKF(o.status == 0 && strstr(o.out, "method      GIMP, MUSL, dt 0.001"), "show 1: %s", o.out);
+    td_out_free(&o);
+    r = show_json(&d, 2);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "method"), "MPM") && !strcmp(jstr(r, "update"), "USL"), "show 2 --json: %s, %s",
+           jstr(r, "method"), jstr(r, "update"));
+    json_decref(r);
+    /* show --case gives a case that loads as GIMP + MUSL */
+    CHECK(td_ctl(&d, 30, &o, "show", "1", "--case", NULL) == 0);
+    {
+        srv_case *sc = NULL;
+        CHECKF(o.status == 0 && srv_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
+               "show 1 --case: %s", err);
+        int ok = sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL && strstr(o.out, "\"GIMP\"");
+        srv_case_destroy(&sc);
+        CHECKF(ok, "show 1 --case: %s", o.out);
+    }
+    td_out_free(&o);
+    CHECK(td_stop(&d) == 0);
 }
 
 /* ---- concurrency and a full queue ------------------------------------------------ */
@@ -824,12 +1008,13 @@ DTEST(daemon_late_watcher)
 DTEST(daemon_restart)
 {
     const char *tmp = t_tmpdir();
-    const char *extra[] = {"--solver-threads", "1", NULL};
+    const char *extra[] = {"--solver-threads", "1", "--verbose", NULL};
     char dir[300], path[400], longp[400], st[32], ep2[400], pid[32];
     td_daemon d;
-    td_out o, before;
+    td_out o, before, watched3;
     td_bg w;
     json_t *r;
+    long long last3 = -1;
 
     snprintf(dir, sizeof dir, "%s/d", tmp);
     if (td_start(&d, dir, extra)) return;
@@ -873,31 +1058,35 @@ DTEST(daemon_restart)
     CHECK(td_wait_status(&d, 3, "RUNNING", 20, st, sizeof st) == 0);
     CHECK(td_ctl_bg(&d, &w, "watch3", "watch", "3", "--csv", "--timeout", "3", NULL) == 0);
     CHECK(td_wait_steps(&d, 3, 30000, 30) == 0);
+    /* the watcher is subscribed and past the history: what it gets from
+     * now on comes from the stream */
+    CHECK(wait_watched(&d, 3, 20) == 0);
+    CHECK(wait_lines(&w, 2, 20) == 0);
+    td_msleep(300);
     {
         double t0 = td_now();
         CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM with a job running");
         TLOG("SIGTERM with a job running: stopped in %.2f s", td_now() - t0);
     }
-    /* its watcher learns it from the stream: INTERRUPTED, exit status 5, the
-     * series complete up to the end.  The daemon closes its stream socket
-     * without lingering, so under load the last messages can be lost; the
-     * watcher then finds nobody to ask and says so (exit 1) - noted here. */
+    /* its watcher learns it from the stream: Finished(INTERRUPTED) reaches
+     * it although mpmd exits right after sending it (the stream socket
+     * lingers), so it ends with exit status 5 and the series complete up to
+     * the run's last step, the final sample included */
     CHECK(td_bg_wait(&w, 30, &o) == 0);
-    if (o.status == 1 && strstr(o.err, "no reply from")) {
-        TLOG("NOTE: the watcher did not get Finished(INTERRUPTED) before mpmd closed its stream "
-             "socket; it ended with: %.*s", (int)strcspn(o.err, "\n"), o.err);
-    } else {
+    CHECKF(o.status == 5 && strstr(o.err, "INTERRUPTED") && !strstr(o.err, "no reply") &&
+               !strstr(o.err, "may lack"),
+           "watcher at shutdown: exit %d, stderr %s", o.status, o.err);
+    {
         series s;
-        CHECKF(o.status == 5 && strstr(o.err, "INTERRUPTED"), "watcher at shutdown: exit %d, stderr %s",
-               o.status, o.err);
         CHECK(parse_csv(o.out, &s) == 0);
         int ok = s.n >= 2 && consecutive(&s);
+        last3 = s.n ? s.step[s.n - 1] : -1;
         TLOG("watcher at shutdown: exit 5 after %.2f s, %zu samples up to step %lld", o.secs, s.n,
-             s.n ? s.step[s.n - 1] : -1LL);
+             last3);
         series_free(&s);
         CHECK(ok);
     }
-    td_out_free(&o);
+    watched3 = o;
 
     if (td_start(&d, dir, extra)) return;
     CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
@@ -915,10 +1104,17 @@ DTEST(daemon_restart)
     td_out_free(&o);
     r = show_json(&d, 3);
     CHECK(r);
-    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0], "job 3: %s, error \"%s\"",
-           jstr(r, "status"), jstr(r, "error"));
-    TLOG("job 3 after restart: INTERRUPTED, \"%s\"", jstr(r, "error"));
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0] && jint(r, "steps") == last3,
+           "job 3: %s at step %lld (the watcher's last sample: %lld), error \"%s\"", jstr(r, "status"),
+           jint(r, "steps"), last3, jstr(r, "error"));
+    TLOG("job 3 after restart: INTERRUPTED at step %lld, \"%s\"", last3, jstr(r, "error"));
     json_decref(r);
+    /* the watcher's series is the stored one */
+    CHECK(td_ctl(&d, 30, &o, "energy", "3", "--csv", NULL) == 0);
+    CHECKF(o.status == 0 && !strcmp(o.out, watched3.out), "job 3: the watcher's series differs from "
+           "the stored one");
+    td_out_free(&o);
+    td_out_free(&watched3);
     CHECK(td_ctl(&d, 30, &o, "energy", "1", "--csv", NULL) == 0);
     CHECKF(o.status == 0 && !strcmp(o.out, before.out), "job 1's energies changed across the restart");
     td_out_free(&o);
@@ -927,6 +1123,76 @@ DTEST(daemon_restart)
     CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
     CHECKF(o.status == 0 && job_of(o.out) == 4, "submit after restart: %s%s", o.out, o.err);
     td_out_free(&o);
+    CHECK(td_stop(&d) == 0);
+}
+
+/* ---- the end of the streams at shutdown --------------------------------------------- */
+
+/* SIGTERM with one job running and one queued, both watched: each watcher
+ * gets its Finished(INTERRUPTED) from the stream before mpmd is gone. */
+DTEST(daemon_shutdown_streams)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--workers", "1", "--solver-threads", "1", "--verbose", NULL};
+    char dir[300], longp[400], st[32];
+    td_daemon d;
+    td_out o;
+    td_bg w1, w2;
+    series s;
+    json_t *r;
+    long long last1;
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(long_case(5000), dir, "long.json", longp, sizeof longp) == 0);
+    for (unsigned long long i = 1; i <= 2; i++) {
+        CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0);
+        CHECKF(o.status == 0 && job_of(o.out) == i, "submit %llu: %s%s", i, o.out, o.err);
+        td_out_free(&o);
+    }
+    CHECK(td_wait_status(&d, 1, "RUNNING", 20, st, sizeof st) == 0);
+    CHECK(td_job_status(&d, 2, st, sizeof st, NULL) == 0 && !strcmp(st, "QUEUED"));
+    CHECK(td_ctl_bg(&d, &w1, "w1", "watch", "1", "--csv", "--timeout", "3", NULL) == 0);
+    CHECK(td_ctl_bg(&d, &w2, "w2", "watch", "2", "--csv", "--timeout", "3", NULL) == 0);
+    CHECK(wait_watched(&d, 1, 20) == 0 && wait_watched(&d, 2, 20) == 0);
+    CHECK(td_wait_steps(&d, 1, 20000, 30) == 0);
+    CHECK(wait_lines(&w1, 3, 20) == 0);  /* header and two samples: job 1's watcher is live */
+    td_msleep(300);
+    CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM");
+
+    CHECK(td_bg_wait(&w1, 30, &o) == 0);
+    CHECKF(o.status == 5 && strstr(o.err, "INTERRUPTED") && !strstr(o.err, "no reply") &&
+               !strstr(o.err, "may lack"),
+           "job 1's watcher: exit %d, stderr %s", o.status, o.err);
+    CHECK(parse_csv(o.out, &s) == 0);
+    last1 = s.n ? s.step[s.n - 1] : -1;
+    {
+        int ok = s.n >= 3 && consecutive(&s);
+        series_free(&s);
+        CHECK(ok);
+    }
+    TLOG("running job's watcher: exit 5 after %.2f s, last sample at step %lld", o.secs, last1);
+    td_out_free(&o);
+    CHECK(td_bg_wait(&w2, 30, &o) == 0);
+    CHECKF(o.status == 5 && strstr(o.err, "INTERRUPTED") && !strstr(o.err, "no reply") && !o.out[0],
+           "queued job's watcher: exit %d, stdout %s, stderr %s", o.status, o.out, o.err);
+    TLOG("queued job's watcher: exit 5 after %.2f s: %.*s", o.secs, (int)strcspn(o.err, "\n"), o.err);
+    td_out_free(&o);
+
+    /* the record agrees with what the watchers were told */
+    if (td_start(&d, dir, extra)) return;
+    r = show_json(&d, 1);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jint(r, "steps") == last1,
+           "job 1: %s at step %lld (its watcher's last sample: %lld)", jstr(r, "status"), jint(r, "steps"),
+           last1);
+    json_decref(r);
+    r = show_json(&d, 2);
+    CHECK(r);
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jint(r, "steps") == 0 &&
+               strstr(jstr(r, "error"), "before the run started"),
+           "job 2: %s at step %lld, error \"%s\"", jstr(r, "status"), jint(r, "steps"), jstr(r, "error"));
+    json_decref(r);
     CHECK(td_stop(&d) == 0);
 }
 
@@ -955,26 +1221,49 @@ DTEST(daemon_hard_kill)
     td_kill9(&d);
 
     if (td_start(&d, dir, extra)) return;
+    /* what was stored before the kill is readable and consecutive */
+    CHECK(td_ctl(&d, 30, &o, "energy", "1", "--csv", NULL) == 0 && o.status == 0);
+    CHECK(parse_csv(o.out, &s) == 0);
+    td_out_free(&o);
+    CHECK(s.n >= 1 && consecutive(&s));
+    TLOG("job 1 kept %zu energy samples (up to step %lld)", s.n, s.step[s.n - 1]);
+    /* the run stands where its last stored sample does: steps, t and the
+     * last energies belong together (the row's progress figures lagged or
+     * led them when the process died) */
     r = show_json(&d, 1);
     CHECK(r);
-    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0], "job 1: %s, error \"%s\"",
-           jstr(r, "status"), jstr(r, "error"));
-    TLOG("job 1 after kill -9 and restart: INTERRUPTED at step %lld, \"%s\"", jint(r, "steps"),
-         jstr(r, "error"));
+    {
+        json_t *le = json_object_get(r, "lastEnergy");
+        long long steps = jint(r, "steps"), last = s.step[s.n - 1];
+        double t = jnum(r, "t"), tl = s.t[s.n - 1], total = s.total[s.n - 1];
+        series_free(&s);
+        CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0], "job 1: %s, error \"%s\"",
+               jstr(r, "status"), jstr(r, "error"));
+        CHECKF(steps == last && steps > 0 && t == tl && le && jint(le, "step") == steps &&
+                   jnum(le, "total") == total,
+               "job 1 after kill -9: steps %lld, t %.17g, lastEnergy.step %lld (want the last stored "
+               "sample's step %lld > 0, t %.17g)", steps, t, le ? jint(le, "step") : -1, last, tl);
+        TLOG("job 1 after kill -9 and restart: INTERRUPTED at step %lld (its last sample), t %.6g, \"%s\"",
+             steps, t, jstr(r, "error"));
+    }
     json_decref(r);
+    /* Status (by job id) says the same */
+    {
+        char buf[32];
+        long long steps = -1;
+        CHECK(td_job_status(&d, 1, buf, sizeof buf, &steps) == 0);
+        r = show_json(&d, 1);
+        CHECK(r);
+        CHECKF(!strcmp(buf, "INTERRUPTED") && steps == jint(r, "steps"), "Status: %s, steps %lld", buf,
+               steps);
+        json_decref(r);
+    }
     r = show_json(&d, 2);
     CHECK(r);
     CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED"), "job 2 (queued at the kill): %s", jstr(r, "status"));
     json_decref(r);
     CHECK(td_ctl(&d, 30, &o, "runs", "--status", "INTERRUPTED", "--json", NULL) == 0);
     CHECK(o.status == 0 && count_lines(o.out) == 2);
-    td_out_free(&o);
-    /* what was stored before the kill is readable and consecutive */
-    CHECK(td_ctl(&d, 30, &o, "energy", "1", "--csv", NULL) == 0 && o.status == 0);
-    CHECK(parse_csv(o.out, &s) == 0);
-    CHECK(s.n >= 1 && consecutive(&s));
-    TLOG("job 1 kept %zu energy samples (up to step %lld)", s.n, s.step[s.n - 1]);
-    series_free(&s);
     td_out_free(&o);
     EXPECT_CTL(&d, 5, "INTERRUPTED", "watch", "1");
     CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
@@ -1103,6 +1392,11 @@ DTEST(daemon_bad_input)
     CHECK(bad_case(&d, "\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, 0.1, 0.1]", "INVALID_CASE",
                    "grid.spacing"));
     CHECK(bad_case(&d, "\"dim\": 2", "\"dim\": 4", "INVALID_CASE", "grid.dim"));
+    /* too many steps: endTime / dt far beyond any integer is refused, not
+     * wrapped into a negative count that passes the limit */
+    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1e300, \"dt\": 0.001", "TOO_LARGE", "endTime"));
+    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1e6, \"dt\": 0.001", "TOO_LARGE", "endTime"));
+    CHECK(bad_case(&d, "\"endTime\": 1", "\"steps\": 200000000", "TOO_LARGE", "steps"));
     /* too large: the codec's node limit, and this server's --max-particles */
     CHECK(bad_case(&d, "\"nodes\": [11, 11]", "\"nodes\": [5001, 5001]", "TOO_LARGE", "grid.nodes"));
     {
@@ -1221,18 +1515,59 @@ DTEST(daemon_bad_input)
             CHECK(ok);
         }
     }
-    /* unknown ids */
+    /* unknown ids: NOT_FOUND naming the request's id field as the JSON
+     * mapping spells it (as case errors name theirs), the id in the message */
     {
-        const srv_req_kind kinds[] = {SRV_REQ_STATUS, SRV_REQ_GET_RUN, SRV_REQ_GET_ENERGY,
-                                      SRV_REQ_GET_SNAPSHOT, SRV_REQ_CANCEL};
-        for (size_t i = 0; i < sizeof kinds / sizeof kinds[0]; i++) {
-            srv_request rq = {.kind = kinds[i], .id = 4242};
-            json_t *reply = NULL;
-            CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
-            CHECKF(!strcmp(td_err_code(reply), "NOT_FOUND"), "request kind %d for id 4242: %s",
-                   (int)kinds[i], td_err_code(reply));
-            json_decref(reply);
+        static const struct {
+            srv_req_kind kind;
+            int has_step;
+            const char *what, *field;
+        } unknown[] = {
+            {SRV_REQ_STATUS, 0, "status{jobId: 4242}", "jobId"},
+            {SRV_REQ_GET_RUN, 0, "getRun{runId: 4242}", "runId"},
+            {SRV_REQ_GET_ENERGY, 0, "getEnergy{runId: 4242}", "runId"},
+            {SRV_REQ_GET_SNAPSHOT, 0, "getSnapshot{runId: 4242}", "runId"},
+            {SRV_REQ_GET_SNAPSHOT, 1, "getSnapshot{runId: 4242, step}", "runId"},
+            {SRV_REQ_CANCEL, 0, "cancel{jobId: 4242}", "jobId"},
+        };
+        for (size_t i = 0; i < sizeof unknown / sizeof unknown[0]; i++) {
+            srv_request rq = {.kind = unknown[i].kind, .id = 4242, .has_step = unknown[i].has_step,
+                              .step = 10};
+            CHECK(expect_not_found(&d, rq, unknown[i].what, unknown[i].field) == 0);
         }
+        /* mpmctl shows the field */
+        CHECK(td_ctl(&d, 30, &o, "show", "4242", NULL) == 0);
+        CHECKF(o.status == 1 && strstr(o.err, "NOT_FOUND: no run 4242 (field runId)"), "show 4242: %s",
+               o.err);
+        td_out_free(&o);
+        CHECK(td_ctl(&d, 30, &o, "cancel", "4242", NULL) == 0);
+        CHECKF(o.status == 1 && strstr(o.err, "NOT_FOUND: no job 4242 (field jobId)"), "cancel 4242: %s",
+               o.err);
+        td_out_free(&o);
+    }
+    /* a listing above the server's maximum says so, naming the field and the limit */
+    {
+        srv_request rq = {.kind = SRV_REQ_LIST_RUNS, .limit = 20000};
+        json_t *reply = NULL;
+        CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+        CHECKF(!strcmp(td_err_code(reply), "TOO_LARGE") && !strcmp(td_err_field(reply), "listRuns.limit") &&
+                   strstr(td_err_msg(reply), "10000"),
+               "listRuns{limit: 20000}: %s, field \"%s\", %s", td_err_code(reply), td_err_field(reply),
+               td_err_msg(reply));
+        TLOG("listRuns{limit: 20000}         %s, field %s: %s", td_err_code(reply), td_err_field(reply),
+             td_err_msg(reply));
+        json_decref(reply);
+    }
+    /* a request that cannot be decoded names its missing field too */
+    {
+        static const uint8_t status_no_id[] = {0x08, 0x01, 0x22, 0x00};
+        const void *f[] = {"", status_no_id};
+        size_t l[] = {0, sizeof status_no_id};
+        json_t *reply = NULL;
+        CHECK(td_frames(d.ep, f, l, 2, 10, &reply) == 0);
+        CHECKF(!strcmp(td_err_code(reply), "BAD_REQUEST") && !strcmp(td_err_field(reply), "status.jobId"),
+               "status without jobId: %s, field \"%s\"", td_err_code(reply), td_err_field(reply));
+        json_decref(reply);
     }
 
     /* still serving; nothing was recorded for the refused submissions */

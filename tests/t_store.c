@@ -542,6 +542,8 @@ TEST(store_crash_recovery)
             store_energy_sample e = make_sample(ia, i);
             if (store_energy_append(s, &e)) _exit(13);
         }
+        /* progress recorded past the last sample (step 993) */
+        if (store_run_progress(s, ia, 1234, 2.5, 1e6)) _exit(16);
         store_run_end end = { .status = STORE_FINISHED, .steps_done = 5 };
         if (store_run_finish(s, ic, &end)) _exit(14);
         if (store_flush(s)) _exit(15);
@@ -566,13 +568,22 @@ TEST(store_crash_recovery)
     int ok = r.status == STORE_INTERRUPTED && r.error &&
              !strcmp(r.error, "daemon stopped before the run ended") &&
              r.started_at == 1700000100.0 && !strcmp(r.name, "was running");
+    /* it stands at its last energy sample (seq 99, step 993), energies included */
+    store_energy_sample last = make_sample(1, 99);
+    int at_last = r.steps_done == last.step && r.energy.kinetic == last.kinetic &&
+                  r.energy.strain == last.strain && r.energy.potential == last.potential &&
+                  r.energy.external_work == last.external_work && r.energy.total == last.total;
+    long long steps_done = (long long)r.steps_done;
     store_run_clear(&r);
     CHECKF(ok, "running run not marked interrupted");
+    CHECKF(at_last, "interrupted run: steps_done %lld and final energies, want those of its last "
+           "sample (step %lld)", steps_done, (long long)last.step);
     CHECK(store_run_get(s, 2, &r) == 0);
     ok = r.status == STORE_INTERRUPTED && r.error &&
-         !strcmp(r.error, STORE_INTERRUPTED_QUEUED) && r.started_at == 0;
+         !strcmp(r.error, STORE_INTERRUPTED_QUEUED) && r.started_at == 0 && r.steps_done == 0 &&
+         isnan(r.energy.total);
     store_run_clear(&r);
-    CHECKF(ok, "queued run not marked interrupted");
+    CHECKF(ok, "queued run not marked interrupted (or given energies it never had)");
     CHECK(store_run_get(s, 3, &r) == 0);
     ok = r.status == STORE_FINISHED && r.error == NULL && r.steps_done == 5;
     store_run_clear(&r);
