@@ -898,7 +898,7 @@ TEST(stress_extremes)
     char first_bad[2048] = "";
     for (int m = 0; m < 2; m++)
         for (int u = 0; u < 3; u++) {
-            /* quick: the daemon's defaults (MPM, USF) and GIMP + MUSL */
+            /* quick: MPM + USF (the cheapest) and GIMP + MUSL (the daemon's defaults) */
             if (!full && !((m == 0 && u == 0) || (m == 1 && u == 2))) continue;
             xcase xs[24];
             int n = extreme_cases(xs, 24, me[m], up[u], full);

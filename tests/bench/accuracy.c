@@ -11,7 +11,7 @@
  *     in time (distance to a run with a 4x smaller dt on the same grid,
  *     against dt),
  *   - the Pareto front of each problem (the fastest configuration at each
- *     error level), where the daemon's defaults (MPM, USF, C = 0.5,
+ *     error level), where the daemon's defaults (GIMP, MUSL, C = 0.5,
  *     2 particles per cell per axis) stand against it at each resolution,
  *     and a table of every method/update pair at ppc 2, C = 0.5 against the
  *     fronts (how much slower than the front at the same error),
@@ -358,7 +358,7 @@ static void print_orders(const int *only)
 
 static int is_default(const bench_cfg *c)
 {
-    return c->method == MPM_METHOD_MPM && c->update == MPM_USF && c->cfl == DEF_CFL &&
+    return c->method == MPM_METHOD_GIMP && c->update == MPM_MUSL && c->cfl == DEF_CFL &&
            (c->ppc == DEF_PPC || c->pb == BP_POINT);
 }
 
@@ -430,7 +430,7 @@ static double front_factor(const entry *d)
 }
 
 /* Every method/update pair at ppc 2 and C = 0.5 (the daemon's defaults are
- * MPM + USF there) against the fronts: the geometric mean over the
+ * GIMP + MUSL there) against the fronts: the geometric mean over the
  * resolutions of front_factor(), and how many runs failed. */
 static void print_candidates(const int *only)
 {
