@@ -32,6 +32,7 @@ typedef struct {
     double *lp[3];           /* GMPM half-width per axis (NULL for MPM) */
     double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays) */
     uint16_t *mat;           /* material index */
+    uint32_t *id;            /* creation index (particles are kept sorted by cell) */
 } mpm_particles;
 
 /* Per-material constants for the constitutive models. */
@@ -56,6 +57,9 @@ typedef struct {
     double vmax2;          /* max |v|^2 seen */
     size_t bad;            /* first particle that left the grid or blew up */
     double *deps[6];       /* MPM_BLOCK strain increments (scratch) */
+    void *wblk;            /* MPM_BLOCK per-axis weights (mpm_kernels_scratch bytes) */
+    int blo[3], bhi[3];    /* padded nodes touched by the slice's supports
+                            * (inclusive; empty: blo > bhi) */
     char pad[64];
 } mpm_thread_out;
 
@@ -63,7 +67,7 @@ struct mpm_sim {
     int dim;
     mpm_method method;
     mpm_update update;
-    int ns;                        /* nodes per axis per particle: 2 or 4 */
+    int ns;                        /* nodes per axis per particle: 2 (MPM), 3 or 4 (GMPM) */
 
     /* grid */
     int nreal[3];                  /* real nodes per axis (1 for unused axes) */
@@ -118,6 +122,16 @@ struct mpm_sim {
     /* kernels chosen once per job */
     const mpm_kernels *k;
 
+    /* active box: the padded nodes the particles' supports touch (union of
+     * the threads' boxes, inclusive), and that of the previous step; the
+     * grid outside the box is all zero */
+    int blo[3], bhi[3];
+    int plo[3], phi[3];
+    /* sorting by cell: every MPM_SORT_EVERY steps, stable counting sort
+     * with scratch made at creation */
+    uint32_t *skey, *sperm, *shist;
+    double *sscr;
+
     /* threads */
     int nthreads;
     mpm_gridbuf *tbuf;             /* per-thread scatter buffers (nthreads > 1) */
@@ -153,9 +167,22 @@ struct mpm_kernels {
     void (*g2p_x_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
     /* point forces of the loaded particles, scattered into the main grid */
     void (*scatter_loads)(mpm_sim *);
+    /* support box of particles [p0, p1) into o->blo/bhi, without moving them */
+    void (*bbox)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    /* sort keys: cell of each particle relative to lo, row-major over ext */
+    void (*cell_keys)(const mpm_sim *, uint32_t *key, const int lo[3], const int ext[3],
+                      size_t p0, size_t p1);
 };
 
-const mpm_kernels *mpm_kernels_select(int dim, mpm_method method);
+/* The family of dimension dim with ns nodes per axis: 2 (MPM), 3 (uGIMP,
+ * every lp <= h/2) or 4 (uGIMP, lp up to h). */
+const mpm_kernels *mpm_kernels_select(int dim, int ns);
+/* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
+size_t mpm_kernels_scratch(void);
+/* Tests and benchmarks: switches a GMPM simulation that has not stepped yet
+ * to the ns-node family (3 only if every lp <= h/2).  Returns 0 or
+ * MPM_EINVAL. */
+int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
 
 /* Constitutive model interface.  update() receives the strain increments of
  * particles [p0, p0 + n) in block-local arrays deps[c][0..n) and updates the

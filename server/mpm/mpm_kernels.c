@@ -1,33 +1,56 @@
 /*
  * mpm_kernels.c - the particle loops of one explicit step, specialised by
- * dimension and method.
+ * dimension and nodes per axis.
  *
  * Each loop is written once as an always-inline template taking the
- * dimension D and the nodes per axis NS (2: linear MPM tents; 4: uGIMP) as
- * compile-time constants, and instantiated for the six (D, NS) pairs;
+ * dimension D and the nodes per axis NS as compile-time constants, and
+ * instantiated for the nine (D, NS) pairs:
+ *   NS = 2: linear MPM tents;
+ *   NS = 3: uGIMP when every particle's half-width lp <= h/2 (always true
+ *           for generated particles): the support |x - x_i| < h + lp then
+ *           covers at most 3 nodes per axis;
+ *   NS = 4: uGIMP with wider particles (explicit points, lp up to h).
  * mpm_kernels_select() picks the family once per job, so no particle loop
- * branches on dimension, method or update scheme.  Weights are recomputed
- * from the particle position in each pass instead of being stored (the
- * paper's S_pr and G_pr arrays of Eqs. 23-24 cost up to 2 KB a particle in
- * 3D GMPM).
+ * branches on dimension, method, update scheme or features.  The 3-node
+ * family evaluates the same weights of the same nodes as the 4-node one and
+ * only leaves out a node whose weight and gradient are exactly zero, so
+ * both give the same results.
+ *
+ * Per particle, the weights and gradients of each axis are computed once
+ * into small arrays and the tensor products of Eqs. 19-20 are formed inside
+ * the node loops, row by row, never stored (the paper's S_pr and G_pr
+ * arrays of Eqs. 23-24 cost up to 2 KB a particle in 3D GMPM).  The USF
+ * stress pass keeps the per-axis weights of a block of particles between
+ * the strain gather and the force scatter.
  *
  * Shape functions along one axis, with r = (x - x_min)/h, cell c = trunc(r)
  * and f = r - c:
  *   MPM  (Eq. 21):  nodes c, c+1; S = 1-f, f;  G = -1/h, 1/h.
- *   GMPM (Eq. 22):  nodes c-1 .. c+2; with a = lp/h and s = r - node,
+ *   GMPM (Eq. 22):  nodes c-1 .. c+2 (NS = 4), or the three of them
+ *     starting at c-1 (f < 1/2) or c (f >= 1/2) (NS = 3); with a = lp/h
+ *     and s = r - node,
  *     S_bar = (F(s+a) - F(s-a)) / (2a)      (Eq. 17, exact integral)
  *     G_bar = (N(s+a) - N(s-a)) / (2 lp)    (Eq. 18)
  *   where N is the unit tent and F its antiderivative, so that sum S_bar = 1
- *   and sum G_bar = 0 telescope exactly.  2D and 3D use the products of
- *   Eqs. 19-20.
+ *   and sum G_bar = 0 telescope exactly.
+ *
+ * The passes that move the particles also record, per thread, the box of
+ * padded nodes that the new positions' supports touch; the step zeroes,
+ * reduces and updates only that box (mpm_sim.c).
  */
+/* the fixed-trip node loops want complete unrolling (the -O3 kind) */
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("O3")
+#endif
+
 #include "mpm_internal.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 
 #define INLINE static inline __attribute__((always_inline))
-#define MAXN 64 /* 4^3 nodes */
+#define UNROLL _Pragma("GCC unroll 4")
 
 INLINE double tent(double s)
 {
@@ -41,11 +64,16 @@ INLINE double tent_int(double s)
     return 0.5 + s - 0.5 * s * fabs(s);
 }
 
-/* Weights of one axis; returns the cell index c of x relative to x0.  The
- * weights are those of nodes c, c+1 (NS = 2) or c-1 .. c+2 (NS = 4). */
-INLINE int axis(double x, double x0, double inv_h, double lp, int NS, double *w, double *g)
+/* uGIMP weight and gradient of the node at distance s (in cells) */
+INLINE void gimp_w(double s, double a, double i2a, double i2lp, double *w, double *g)
 {
-    double r = (x - x0) * inv_h;
+    *w = (tent_int(s + a) - tent_int(s - a)) * i2a;
+    *g = (tent(s + a) - tent(s - a)) * i2lp;
+}
+
+/* Weights of one axis for r = (x - x0)/h; returns the first node. */
+INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
+{
     int c = (int)r;
     double f = r - c;
     if (NS == 2) {
@@ -53,143 +81,179 @@ INLINE int axis(double x, double x0, double inv_h, double lp, int NS, double *w,
         w[1] = f;
         g[0] = -inv_h;
         g[1] = inv_h;
-    } else {
-        double a = lp * inv_h, i2a = 0.5 / a, i2lp = 0.5 / lp;
-        for (int k = 0; k < 4; k++) {
-            double s = f + 1.0 - k; /* r - (c - 1 + k) */
-            w[k] = (tent_int(s + a) - tent_int(s - a)) * i2a;
-            g[k] = (tent(s + a) - tent(s - a)) * i2lp;
-        }
+        return c;
     }
-    return c;
+    int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
+    double a = lp * inv_h, i2a = 0.5 / a, i2lp = 0.5 / lp;
+    UNROLL
+    for (int k = 0; k < NS; k++) gimp_w(r - (double)(n0 + k), a, i2a, i2lp, &w[k], &g[k]);
+    return n0;
 }
 
 int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp,
                  double *w, double *g)
 {
-    if (method == MPM_METHOD_GIMP) return axis(x, x0, 1.0 / h, lp, 4, w, g) - 1;
-    return axis(x, x0, 1.0 / h, lp, 2, w, g);
+    double inv_h = 1.0 / h, r = (x - x0) * inv_h;
+    if (method == MPM_METHOD_GIMP) return axis(r, inv_h, lp, 4, w, g);
+    return axis(r, inv_h, lp, 2, w, g);
 }
 
-/* The nodes of particle p: flat padded indices, weights S and gradient
- * weights G[d]. */
+/* Per-axis weights of one particle: w[d][k], g[d][k] belong to node
+ * base + k stride[d] along axis d. */
 typedef struct {
-    size_t idx[MAXN];
-    double S[MAXN];
-    double G[3][MAXN];
-} shp;
-
-INLINE void nodes(const mpm_sim *s, size_t p, int D, int NS, shp *o)
-{
+    size_t base;
     double w[3][4], g[3][4];
+} pw;
+
+size_t mpm_kernels_scratch(void)
+{
+    return MPM_BLOCK * sizeof(pw);
+}
+
+INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, pw *o)
+{
     size_t base = 0;
     for (int d = 0; d < D; d++) {
-        double lp = NS == 4 ? s->P.lp[d][p] : 0;
-        int c = axis(s->P.x[d][p], s->x0[d], s->inv_h[d], lp, NS, w[d], g[d]);
-        /* w[k] belongs to node c + k (MPM) or c - 1 + k (GMPM, Eq. 22) */
-        base += (size_t)(NS == 4 ? c - 1 : c) * s->stride[d];
+        double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+        double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
+        int c = axis(r, s->inv_h[d], lp, NS, o->w[d], o->g[d]);
+        base += (size_t)c * s->stride[d];
     }
-    int r = 0;
-    for (int kz = 0; kz < (D > 2 ? NS : 1); kz++)
-        for (int ky = 0; ky < (D > 1 ? NS : 1); ky++) {
-            double wy = D > 1 ? w[1][ky] : 1.0, wz = D > 2 ? w[2][kz] : 1.0;
-            size_t row = base + (D > 1 ? ky * s->stride[1] : 0) + (D > 2 ? kz * s->stride[2] : 0);
-            for (int kx = 0; kx < NS; kx++, r++) {
-                o->idx[r] = row + kx;
-                o->S[r] = w[0][kx] * wy * wz;
-                o->G[0][r] = g[0][kx] * wy * wz;
-                if (D > 1) o->G[1][r] = w[0][kx] * g[1][ky] * wz;
-                if (D > 2) o->G[2][r] = w[0][kx] * wy * g[2][kz];
-            }
-        }
+    o->base = base;
 }
 
-#define NR(D, NS) ((D) == 1 ? (NS) : (D) == 2 ? (NS) * (NS) : (NS) * (NS) * (NS))
+/* First node of the support along each axis for the current position of
+ * p, merged into the thread's box.  A position outside the grid (the step
+ * then fails) or not finite is clamped, never converted as is. */
+INLINE void box_add(const mpm_sim *s, mpm_thread_out *o, size_t p, int D, int NS)
+{
+    for (int d = 0; d < D; d++) {
+        double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+        double rmax = (double)(s->np[d] - 1);
+        r = r >= 0 ? (r < rmax ? r : rmax) : 0.0;
+        int c = (int)r;
+        int n0 = NS == 2 ? c : NS == 4 ? c - 1 : c - 1 + (r - c >= 0.5);
+        if (n0 < o->blo[d]) o->blo[d] = n0;
+        if (n0 + NS - 1 > o->bhi[d]) o->bhi[d] = n0 + NS - 1;
+    }
+}
+
+/* Gradient weight k of axis d: MPM's are the constants -1/h, 1/h. */
+#define GRAD(s, W, NS, d, k) \
+    ((NS) == 2 ? ((k) ? (s)->inv_h[d] : -(s)->inv_h[d]) : (W).g[d][k])
+
+/* Loop over the support of one particle row by row: for each (ky, kz) the
+ * body sees row (flat index of node kx = 0), A = wy wz, B = gy wz and
+ * C = wy gz (the factors of S, G_y and G_z apart from the x axis). */
+#define ROWS(D, NS, W, s, ...)                                                           \
+    do {                                                                                 \
+        const size_t sy_ = (s)->stride[1], sz_ = (s)->stride[2];                         \
+        for (int kz = 0; kz < ((D) > 2 ? (NS) : 1); kz++)                         \
+        {                                                                                \
+            double wz = (D) > 2 ? (W).w[2][kz] : 1.0, gz = (D) > 2 ? GRAD(s, W, NS, 2, kz) : 0.0; \
+            for (int ky = 0; ky < ((D) > 1 ? (NS) : 1); ky++)                     \
+            {                                                                            \
+                double wy = (D) > 1 ? (W).w[1][ky] : 1.0;                                \
+                double gy = (D) > 1 ? GRAD(s, W, NS, 1, ky) : 0.0;                        \
+                double A = wy * wz, B = gy * wz, C = wy * gz;                            \
+                size_t row = (W).base + (D > 1 ? (size_t)ky * sy_ : 0) +                 \
+                             (D > 2 ? (size_t)kz * sz_ : 0);                             \
+                (void)B;                                                                 \
+                (void)C;                                                                 \
+                __VA_ARGS__                                                              \
+            }                                                                            \
+        }                                                                                \
+    } while (0)
 
 /* Mass and momentum (Eqs. 25-26: momentum extrapolated directly). */
-INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p, int D, int NS)
 {
-    shp sh;
-    for (size_t p = p0; p < p1; p++) {
-        nodes(s, p, D, NS, &sh);
-        double mp = s->P.m[p], mv[3];
-        for (int d = 0; d < D; d++) mv[d] = mp * s->P.v[d][p];
-        for (int r = 0; r < NR(D, NS); r++) {
-            size_t n = sh.idx[r];
-            gb->m[n] += sh.S[r] * mp;
-            for (int d = 0; d < D; d++) gb->q[d][n] += sh.S[r] * mv[d];
+    double *restrict m = gb->m;
+    double *restrict q0 = gb->q[0], *restrict q1 = gb->q[1], *restrict q2 = gb->q[2];
+    double mp = s->P.m[p];
+    double mv0 = mp * s->P.v[0][p];
+    double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
+    ROWS(D, NS, *W, s, {
+        double am = A * mp, a0 = A * mv0, a1 = A * mv1, a2 = A * mv2;
+        UNROLL for (int kx = 0; kx < NS; kx++) {
+            double S = W->w[0][kx];
+            size_t n = row + (size_t)kx;
+            m[n] += S * am;
+            q0[n] += S * a0;
+            if (D > 1) q1[n] += S * a1;
+            if (D > 2) q2[n] += S * a2;
         }
-    }
+    });
 }
 
-/* Full stress tensor row a of particle p. */
-INLINE double sig_ab(const mpm_particles *P, size_t p, int D, int a, int b)
+/* Internal force of particle p onto its nodes: f -= V sigma . G (Eq. 15).
+ * With G = (gx A, wx B, wx C): f_a -= gx (V s_a0 A) + wx (V s_a1 B + V s_a2 C). */
+INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p, int D, int NS)
 {
-    static const int voigt[3][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}};
-    (void)D;
-    return P->sig[voigt[a][b]][p];
-}
-
-/* Internal force of particle p onto its nodes: f -= V sigma . G (Eq. 15). */
-INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, size_t p, const shp *sh, int D, int NS)
-{
-    double vs[3][3];
-    double V = s->P.vol[p];
-    for (int a = 0; a < D; a++)
-        for (int b = 0; b < D; b++) vs[a][b] = V * sig_ab(&s->P, p, D, a, b);
-    for (int r = 0; r < NR(D, NS); r++) {
-        size_t n = sh->idx[r];
-        for (int a = 0; a < D; a++) {
-            double fa = 0;
-            for (int b = 0; b < D; b++) fa += vs[a][b] * sh->G[b][r];
-            gb->f[a][n] -= fa;
+    double *restrict f0 = gb->f[0], *restrict f1 = gb->f[1], *restrict f2 = gb->f[2];
+    const mpm_particles *P = &s->P;
+    double V = P->vol[p];
+    double sxx = V * P->sig[0][p];
+    double syy = D > 1 ? V * P->sig[1][p] : 0.0, sxy = D > 1 ? V * P->sig[3][p] : 0.0;
+    double szz = D > 2 ? V * P->sig[2][p] : 0.0, syz = D > 2 ? V * P->sig[4][p] : 0.0;
+    double sxz = D > 2 ? V * P->sig[5][p] : 0.0;
+    ROWS(D, NS, *W, s, {
+        double P0 = sxx * A, P1 = sxy * A, P2 = sxz * A;
+        double Q0 = sxy * B + sxz * C, Q1 = syy * B + syz * C, Q2 = syz * B + szz * C;
+        UNROLL for (int kx = 0; kx < NS; kx++) {
+            double gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx];
+            size_t n = row + (size_t)kx;
+            if (D == 1)
+                f0[n] -= gx * P0;
+            else
+                f0[n] -= gx * P0 + wx * Q0;
+            if (D > 1) f1[n] -= gx * P1 + wx * Q1;
+            if (D > 2) f2[n] -= gx * P2 + wx * Q2;
         }
-    }
+    });
 }
 
-INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+/* Strain increment (Eq. 29) from grid momenta qg (velocity q/m, zero at
+ * phantom nodes: Fig. 7) into block slot i.  Optionally (DX) also the
+ * position increment sum S q/m from the momenta qx of the same nodes, and
+ * (DV) the velocity increment sum S f/m. */
+INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
+                   double *const deps[6], size_t i, int DS, int DX, double *const qx[3],
+                   double dx[3], int DV, double dv[3])
 {
-    shp sh;
-    for (size_t p = p0; p < p1; p++) {
-        nodes(s, p, D, NS, &sh);
-        double mp = s->P.m[p], mv[3];
-        for (int d = 0; d < D; d++) mv[d] = mp * s->P.v[d][p];
-        for (int r = 0; r < NR(D, NS); r++) {
-            size_t n = sh.idx[r];
-            gb->m[n] += sh.S[r] * mp;
-            for (int d = 0; d < D; d++) gb->q[d][n] += sh.S[r] * mv[d];
-        }
-        scatter_force(s, gb, p, &sh, D, NS);
-    }
-}
-
-/* MUSL: momentum of the updated particle velocities. */
-INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
-{
-    shp sh;
-    for (size_t p = p0; p < p1; p++) {
-        nodes(s, p, D, NS, &sh);
-        double mv[3];
-        for (int d = 0; d < D; d++) mv[d] = s->P.m[p] * s->P.v[d][p];
-        for (int r = 0; r < NR(D, NS); r++)
-            for (int d = 0; d < D; d++) gb->q2[d][sh.idx[r]] += sh.S[r] * mv[d];
-    }
-}
-
-/* Strain increment (Eq. 29) of particle p from grid momenta qg (velocity
- * q/m, zero at phantom nodes: Fig. 7) into block slot i. */
-INLINE void strain_inc(const mpm_sim *s, double *const qg[3], const shp *sh, int D, int NS,
-                       double *const deps[6], size_t i)
-{
+    const double *restrict minv = s->minv;
     double L[3][3] = {{0}};
-    for (int r = 0; r < NR(D, NS); r++) {
-        size_t n = sh->idx[r];
-        double mi = s->minv[n];
-        for (int a = 0; a < D; a++) {
-            double va = qg[a][n] * mi;
-            for (int b = 0; b < D; b++) L[a][b] += va * sh->G[b][r];
+    double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
+    ROWS(D, NS, *W, s, {
+        double r0[3] = {0, 0, 0}, r1[3] = {0, 0, 0}, rx[3] = {0, 0, 0}, rv[3] = {0, 0, 0};
+        UNROLL for (int kx = 0; kx < NS; kx++) {
+            size_t n = row + (size_t)kx;
+            double mi = minv[n], gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx], sm = wx * mi;
+            for (int a = 0; a < D; a++) {
+                if (DS) {
+                    double va = qg[a][n] * mi;
+                    r0[a] += va * gx;
+                    r1[a] += va * wx;
+                }
+                if (DX) rx[a] += sm * qx[a][n];
+                if (DV) rv[a] += sm * s->g.f[a][n];
+            }
         }
+        for (int a = 0; a < D; a++) {
+            if (DS) {
+                L[a][0] += A * r0[a];
+                if (D > 1) L[a][1] += B * r1[a];
+                if (D > 2) L[a][2] += C * r1[a];
+            }
+            if (DX) X[a] += A * rx[a];
+            if (DV) Vv[a] += A * rv[a];
+        }
+    });
+    for (int a = 0; a < D; a++) {
+        if (DX) dx[a] = X[a];
+        if (DV) dv[a] = Vv[a];
     }
+    if (!DS) return;
     double dt = s->dt;
     deps[0][i] = L[0][0] * dt;
     if (D > 1) {
@@ -207,30 +271,70 @@ INLINE void strain_inc(const mpm_sim *s, double *const qg[3], const shp *sh, int
 INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6], int D)
 {
     s->model->update[D - 1](s->mats, &s->P, b0, nb, deps);
+    double *restrict vol = s->P.vol + b0;
     for (size_t i = 0; i < nb; i++) {
         double tr = deps[0][i];
         if (D > 1) tr += deps[1][i] + deps[2][i];
-        s->P.vol[b0 + i] *= 1.0 + tr;
+        vol[i] *= 1.0 + tr;
+    }
+}
+
+INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+{
+    pw W;
+    for (size_t p = p0; p < p1; p++) {
+        weights(s, p, D, NS, &W);
+        scatter_mq(s, gb, &W, p, D, NS);
+    }
+}
+
+INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+{
+    pw W;
+    for (size_t p = p0; p < p1; p++) {
+        weights(s, p, D, NS, &W);
+        scatter_mq(s, gb, &W, p, D, NS);
+        scatter_force(s, gb, &W, p, D, NS);
+    }
+}
+
+/* MUSL: momentum of the updated particle velocities. */
+INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+{
+    pw W;
+    double *restrict q0 = gb->q2[0], *restrict q1 = gb->q2[1], *restrict q2 = gb->q2[2];
+    for (size_t p = p0; p < p1; p++) {
+        weights(s, p, D, NS, &W);
+        double mp = s->P.m[p];
+        double mv0 = mp * s->P.v[0][p];
+        double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
+        ROWS(D, NS, W, s, {
+            double a0 = A * mv0, a1 = A * mv1, a2 = A * mv2;
+            UNROLL for (int kx = 0; kx < NS; kx++) {
+                double S = W.w[0][kx];
+                size_t n = row + (size_t)kx;
+                q0[n] += S * a0;
+                if (D > 1) q1[n] += S * a1;
+                if (D > 2) q2[n] += S * a2;
+            }
+        });
     }
 }
 
 /* USF: strain and stress from the grid velocity, then internal forces with
- * the new stress. */
+ * the new stress; the weights of the block are kept between the two. */
 INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0,
                            size_t p1, int D, int NS)
 {
-    shp sh;
+    pw *Wb = o->wblk;
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
-            nodes(s, b0 + i, D, NS, &sh);
-            strain_inc(s, s->g.q, &sh, D, NS, o->deps, i);
+            weights(s, b0 + i, D, NS, &Wb[i]);
+            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL);
         }
         block_update(s, b0, nb, o->deps, D);
-        for (size_t i = 0; i < nb; i++) {
-            nodes(s, b0 + i, D, NS, &sh);
-            scatter_force(s, gb, b0 + i, &sh, D, NS);
-        }
+        for (size_t i = 0; i < nb; i++) scatter_force(s, gb, &Wb[i], b0 + i, D, NS);
     }
 }
 
@@ -249,47 +353,54 @@ INLINE void check_particle(const mpm_sim *s, mpm_thread_out *o, size_t p, int D)
     if (!ok && o->bad == SIZE_MAX) o->bad = p;
 }
 
-/* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0). */
-INLINE void g2p_xv_one(mpm_sim *s, const shp *sh, size_t p, int D, int NS, int do_x, int do_v)
+/* Empty box (axes the grid lacks: node 0) */
+INLINE void box_reset(mpm_thread_out *o, int D)
 {
-    double dx[3] = {0, 0, 0}, dv[3] = {0, 0, 0};
-    for (int r = 0; r < NR(D, NS); r++) {
-        size_t n = sh->idx[r];
-        double sm = sh->S[r] * s->minv[n];
-        for (int d = 0; d < D; d++) {
-            if (do_x) dx[d] += sm * s->g.q[d][n];
-            if (do_v) dv[d] += sm * s->g.f[d][n];
-        }
-    }
-    for (int d = 0; d < D; d++) {
-        if (do_x) s->P.x[d][p] += s->dt * dx[d];
-        if (do_v) s->P.v[d][p] += s->dt * dv[d];
+    for (int d = 0; d < 3; d++) {
+        o->blo[d] = d < D ? INT_MAX : 0;
+        o->bhi[d] = d < D ? -1 : 0;
     }
 }
 
+/* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0). */
 INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
-    shp sh;
+    pw W;
+    double dt = s->dt;
+    box_reset(o, D);
     for (size_t p = p0; p < p1; p++) {
-        nodes(s, p, D, NS, &sh);
-        g2p_xv_one(s, &sh, p, D, NS, 1, 1);
+        double dx[3], dv[3];
+        weights(s, p, D, NS, &W);
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv);
+        for (int d = 0; d < D; d++) {
+            s->P.x[d][p] += dt * dx[d];
+            s->P.v[d][p] += dt * dv[d];
+        }
         check_particle(s, o, p, D);
+        box_add(s, o, p, D, NS);
     }
 }
 
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
- * weights of the step's start positions serve both. */
+ * weights of the step's start positions serve both, in one gather. */
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
-    shp sh;
+    pw W;
+    double dt = s->dt;
+    box_reset(o, D);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
-            nodes(s, p, D, NS, &sh);
-            strain_inc(s, s->g.q, &sh, D, NS, o->deps, i);
-            g2p_xv_one(s, &sh, p, D, NS, 1, 1);
+            double dx[3], dv[3];
+            weights(s, p, D, NS, &W);
+            gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv);
+            for (int d = 0; d < D; d++) {
+                s->P.x[d][p] += dt * dx[d];
+                s->P.v[d][p] += dt * dv[d];
+            }
             check_particle(s, o, p, D);
+            box_add(s, o, p, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
     }
@@ -297,11 +408,14 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
 
 INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
-    shp sh;
+    pw W;
+    double dt = s->dt;
     (void)o;
     for (size_t p = p0; p < p1; p++) {
-        nodes(s, p, D, NS, &sh);
-        g2p_xv_one(s, &sh, p, D, NS, 0, 1);
+        double dv[3];
+        weights(s, p, D, NS, &W);
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, 0, NULL, NULL, 1, dv);
+        for (int d = 0; d < D; d++) s->P.v[d][p] += dt * dv[d];
     }
 }
 
@@ -309,30 +423,74 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, 
  * of the updated particle velocities (q2). */
 INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
-    shp sh;
+    pw W;
+    double dt = s->dt;
+    box_reset(o, D);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
-            nodes(s, p, D, NS, &sh);
-            strain_inc(s, s->g.q2, &sh, D, NS, o->deps, i);
-            g2p_xv_one(s, &sh, p, D, NS, 1, 0);
+            double dx[3];
+            weights(s, p, D, NS, &W);
+            gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL);
+            for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
             check_particle(s, o, p, D);
+            box_add(s, o, p, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
     }
 }
 
+/* The support box of particles [p0, p1) without moving them. */
+INLINE void bbox_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
+{
+    box_reset(o, D);
+    for (size_t p = p0; p < p1; p++) box_add(s, o, p, D, NS);
+}
+
+/* Sort key of particle p: its cell (trunc of r) relative to the box lo,
+ * row-major over the box extents ext. */
+INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, const int lo[3], const int ext[3],
+                        size_t p0, size_t p1, int D)
+{
+    for (size_t p = p0; p < p1; p++) {
+        size_t k = 0;
+        for (int d = D - 1; d >= 0; d--) {
+            double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+            int c = (int)r - lo[d];
+            c = c < 0 ? 0 : c >= ext[d] ? ext[d] - 1 : c;
+            k = k * (size_t)ext[d] + (size_t)c;
+        }
+        key[p] = (uint32_t)k;
+    }
+}
+
+#ifndef MPM_LEAN
 /* Point forces of the loaded particles (tractions), f += S f_p (Eq. 14). */
 INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
 {
-    shp sh;
+    pw W;
     for (size_t i = 0; i < s->nload; i++) {
-        nodes(s, s->load_p[i], D, NS, &sh);
-        for (int r = 0; r < NR(D, NS); r++)
-            for (int d = 0; d < D; d++) s->g.f[d][sh.idx[r]] += sh.S[r] * s->load_f[d][i];
+        weights(s, s->load_p[i], D, NS, &W);
+        double l0 = s->load_f[0][i], l1 = D > 1 ? s->load_f[1][i] : 0.0;
+        double l2 = D > 2 ? s->load_f[2][i] : 0.0;
+        ROWS(D, NS, W, s, {
+            UNROLL for (int kx = 0; kx < NS; kx++) {
+                double S = W.w[0][kx] * A;
+                size_t n = row + (size_t)kx;
+                s->g.f[0][n] += S * l0;
+                if (D > 1) s->g.f[1][n] += S * l1;
+                if (D > 2) s->g.f[2][n] += S * l2;
+            }
+        });
     }
 }
+#define LOADS(D, NS) \
+    static void scatter_loads_##D##_##NS(mpm_sim *s) { scatter_loads_t(s, D, NS); }
+#else
+#define LOADS(D, NS) \
+    static void scatter_loads_##D##_##NS(mpm_sim *s) { (void)s; }
+#endif
 
 #define FAMILY(D, NS)                                                                          \
     static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)             \
@@ -352,22 +510,33 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     { g2p_v_t(s, o, a, b, D, NS); }                                                            \
     static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)     \
     { g2p_x_stress_t(s, o, a, b, D, NS); }                                                     \
-    static void scatter_loads_##D##_##NS(mpm_sim *s) { scatter_loads_t(s, D, NS); }            \
+    LOADS(D, NS)                                                                               \
+    static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)             \
+    { bbox_t(s, o, a, b, D, NS); }                                                             \
+    static void cell_keys_##D##_##NS(const mpm_sim *s, uint32_t *key, const int lo[3],         \
+                                     const int ext[3], size_t a, size_t b)                     \
+    { cell_keys_t(s, key, lo, ext, a, b, D); }                                                 \
     static const mpm_kernels family_##D##_##NS = {                                             \
         p2g_mq_##D##_##NS, p2g_mqf_##D##_##NS, p2g_q2_##D##_##NS, stress_force_##D##_##NS,     \
         g2p_xv_##D##_##NS, g2p_xv_stress_##D##_##NS, g2p_v_##D##_##NS,                         \
-        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS};
+        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS, bbox_##D##_##NS,                    \
+        cell_keys_##D##_##NS};
 
 FAMILY(1, 2)
+FAMILY(1, 3)
 FAMILY(1, 4)
 FAMILY(2, 2)
+FAMILY(2, 3)
 FAMILY(2, 4)
 FAMILY(3, 2)
+FAMILY(3, 3)
 FAMILY(3, 4)
 
-const mpm_kernels *mpm_kernels_select(int dim, mpm_method method)
+const mpm_kernels *mpm_kernels_select(int dim, int ns)
 {
-    static const mpm_kernels *const table[3][2] = {
-        {&family_1_2, &family_1_4}, {&family_2_2, &family_2_4}, {&family_3_2, &family_3_4}};
-    return table[dim - 1][method == MPM_METHOD_GIMP];
+    static const mpm_kernels *const table[3][3] = {
+        {&family_1_2, &family_1_3, &family_1_4},
+        {&family_2_2, &family_2_3, &family_2_4},
+        {&family_3_2, &family_3_3, &family_3_4}};
+    return table[dim - 1][ns - 2];
 }

@@ -50,18 +50,30 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
                        size_t n, double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
+    double *restrict s[6], *restrict e[6];
+    const double *restrict de[6];
+    for (int c = 0; c < 6; c++) {
+        s[c] = P->sig[c] + p0;
+        e[c] = P->eps[c] + p0;
+        de[c] = deps[c];
+    }
     for (size_t i = 0; i < n; i++) {
         const mpm_mat_params *mp = &mats[mat[i]];
-        size_t p = p0 + i;
-        double lt = mp->lambda * (deps[0][i] + deps[1][i] + deps[2][i]), m2 = 2.0 * mp->mu;
-        for (int c = 0; c < 3; c++) {
-            P->eps[c][p] += deps[c][i];
-            P->sig[c][p] += lt + m2 * deps[c][i];
-        }
-        for (int c = 3; c < 6; c++) {
-            P->eps[c][p] += deps[c][i];
-            P->sig[c][p] += m2 * deps[c][i];
-        }
+        double d0 = de[0][i], d1 = de[1][i], d2 = de[2][i], d3 = de[3][i], d4 = de[4][i],
+               d5 = de[5][i];
+        double lt = mp->lambda * (d0 + d1 + d2), m2 = 2.0 * mp->mu;
+        e[0][i] += d0;
+        e[1][i] += d1;
+        e[2][i] += d2;
+        e[3][i] += d3;
+        e[4][i] += d4;
+        e[5][i] += d5;
+        s[0][i] += lt + m2 * d0;
+        s[1][i] += lt + m2 * d1;
+        s[2][i] += lt + m2 * d2;
+        s[3][i] += m2 * d3;
+        s[4][i] += m2 * d4;
+        s[5][i] += m2 * d5;
     }
 }
 

@@ -24,9 +24,18 @@
  * thread order.  The same case with the same thread count is therefore
  * bitwise reproducible; a different thread count changes the order of the
  * sums and so the last bits.  Nothing is allocated inside a step.
+ *
+ * Cost follows the particles, not the grid: the particle passes record the
+ * box of nodes their supports touch, and zeroing, reduction, node updates
+ * and boundary conditions run over that box only (the grid outside it stays
+ * zero).  Particles are kept sorted by cell (every MPM_SORT_EVERY steps, a
+ * stable counting sort), with P.id mapping storage slots to creation order
+ * for everything public.  Built with -DMPM_LEAN, gravity, loads and fixed
+ * boundaries are compiled out and cases using them are refused.
  */
 #include "mpm_internal.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -75,6 +84,7 @@ static void free_particles(mpm_particles *P)
     free(P->m);
     free(P->vol);
     free(P->mat);
+    free(P->id);
     memset(P, 0, sizeof *P);
 }
 
@@ -90,6 +100,8 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int gimp)
         if (!(P->sig[c] = dalloc(n)) || !(P->eps[c] = dalloc(n))) return MPM_ENOMEM;
     if (!(P->m = dalloc(n)) || !(P->vol = dalloc(n))) return MPM_ENOMEM;
     if (!(P->mat = calloc(n ? n : 1, sizeof *P->mat))) return MPM_ENOMEM;
+    if (!(P->id = malloc((n ? n : 1) * sizeof *P->id))) return MPM_ENOMEM;
+    for (size_t p = 0; p < n; p++) P->id[p] = (uint32_t)p;
     return 0;
 }
 
@@ -140,55 +152,164 @@ static void run(mpm_sim *s, phase_fn fn)
     pthread_barrier_wait(&s->bar_end);
 }
 
-/* The scatter target of thread tid, zeroed for the fields named. */
+/* ---- the active box ----
+ *
+ * Particle passes scatter only into the box of nodes their supports touch:
+ * each thread zeroes its private grid over its own box before scattering,
+ * node passes run over the rows of the union box G (split among the
+ * threads by rows), and the grid outside G is kept all zero, so the cost of
+ * a step follows the particles, not the grid. */
+
+/* rows (y, z) of box lo..hi (inclusive); 0 when empty */
+static size_t box_rows(const int lo[3], const int hi[3])
+{
+    if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return 0;
+    return (size_t)(hi[1] - lo[1] + 1) * (size_t)(hi[2] - lo[2] + 1);
+}
+
+/* flat index of node (lo[0], y, z) of row r of the box */
+static size_t box_row(const mpm_sim *s, const int lo[3], const int hi[3], size_t r, int *y, int *z)
+{
+    size_t ny = (size_t)(hi[1] - lo[1] + 1);
+    *y = lo[1] + (int)(r % ny);
+    *z = lo[2] + (int)(r / ny);
+    return (size_t)*y * s->stride[1] + (size_t)*z * s->stride[2] + (size_t)lo[0];
+}
+
+static void zero_box(const mpm_sim *s, double *a, const int lo[3], const int hi[3])
+{
+    size_t nr = box_rows(lo, hi), w = (size_t)(hi[0] - lo[0] + 1);
+    for (size_t r = 0; r < nr; r++) {
+        int y, z;
+        memset(a + box_row(s, lo, hi, r, &y, &z), 0, w * sizeof *a);
+    }
+}
+
+/* the grid fields in use, as a list */
+static int grid_fields(const mpm_sim *s, const mpm_gridbuf *b, double **out)
+{
+    int k = 0;
+    out[k++] = b->m;
+    for (int d = 0; d < s->dim; d++) {
+        out[k++] = b->q[d];
+        out[k++] = b->f[d];
+        if (b->q2[d]) out[k++] = b->q2[d];
+    }
+    return k;
+}
+
+/* Zeroes the nodes of box o (the previous step's) outside box n in every
+ * field of the main grid. */
+static void zero_outside(mpm_sim *s, const int olo[3], const int ohi[3], const int nlo[3],
+                         const int nhi[3])
+{
+    int inside = 1;
+    for (int d = 0; d < 3; d++) inside &= olo[d] >= nlo[d] && ohi[d] <= nhi[d];
+    if (inside || !box_rows(olo, ohi)) return;
+    double *f[10];
+    int nf = grid_fields(s, &s->g, f);
+    size_t nr = box_rows(olo, ohi);
+    int empty = !box_rows(nlo, nhi);
+    for (size_t r = 0; r < nr; r++) {
+        int y, z;
+        size_t b = box_row(s, olo, ohi, r, &y, &z) - (size_t)olo[0];
+        int in = !empty && y >= nlo[1] && y <= nhi[1] && z >= nlo[2] && z <= nhi[2];
+        for (int x = olo[0]; x <= ohi[0]; x++) {
+            if (in && x >= nlo[0] && x <= nhi[0]) continue;
+            for (int i = 0; i < nf; i++) f[i][b + (size_t)x] = 0.0;
+        }
+    }
+}
+
+/* G = the union of the threads' boxes, clamped to the padded grid */
+static void union_box(mpm_sim *s, int lo[3], int hi[3])
+{
+    for (int d = 0; d < 3; d++) {
+        lo[d] = d < s->dim ? INT_MAX : 0;
+        hi[d] = d < s->dim ? -1 : 0;
+    }
+    for (int t = 0; t < s->nthreads; t++) {
+        const mpm_thread_out *o = &s->tout[t];
+        if (o->blo[0] > o->bhi[0]) continue;
+        for (int d = 0; d < s->dim; d++) {
+            if (o->blo[d] < lo[d]) lo[d] = o->blo[d];
+            if (o->bhi[d] > hi[d]) hi[d] = o->bhi[d];
+        }
+    }
+    for (int d = 0; d < s->dim; d++) {
+        if (lo[d] > hi[d]) continue;
+        if (lo[d] < 0) lo[d] = 0;
+        if (hi[d] > s->np[d] - 1) hi[d] = s->np[d] - 1;
+    }
+}
+
+/* The scatter target of thread tid, zeroed over the thread's box for the
+ * fields named. */
 enum { F_M = 1, F_Q = 2, F_F = 4, F_Q2 = 8 };
 
 static mpm_gridbuf *scatter_buf(mpm_sim *s, int tid, int fields)
 {
     mpm_gridbuf *b = s->nthreads == 1 ? &s->g : &s->tbuf[tid];
-    size_t bytes = s->nn * sizeof(double);
-    if (fields & F_M) memset(b->m, 0, bytes);
+    const int *lo = s->tout[tid].blo, *hi = s->tout[tid].bhi;
+    if (fields & F_M) zero_box(s, b->m, lo, hi);
     for (int d = 0; d < s->dim; d++) {
-        if (fields & F_Q) memset(b->q[d], 0, bytes);
-        if (fields & F_F) memset(b->f[d], 0, bytes);
-        if (fields & F_Q2) memset(b->q2[d], 0, bytes);
+        if (fields & F_Q) zero_box(s, b->q[d], lo, hi);
+        if (fields & F_F) zero_box(s, b->f[d], lo, hi);
+        if (fields & F_Q2) zero_box(s, b->q2[d], lo, hi);
     }
     return b;
 }
 
-/* Sums the private grids of the fields named into the grid (node slice of
- * thread tid), in thread order. */
-static void reduce(mpm_sim *s, int tid, int fields, size_t n0, size_t n1)
+static void row_slice(mpm_sim *s, int tid, size_t *a, size_t *b)
+{
+    slice(box_rows(s->blo, s->bhi), s->nthreads, tid, a, b);
+}
+
+/* Sums the private grids of the fields named into the grid over the rows
+ * [r0, r1) of G, in thread order (each thread adds only over its box; the
+ * rest of its grid is zero there). */
+static void reduce(mpm_sim *s, int fields, size_t r0, size_t r1)
 {
     if (s->nthreads == 1) return;
     int T = s->nthreads;
-    for (int pass = 0; pass < 4; pass++) {
-        int fl = 1 << pass;
-        if (!(fields & fl)) continue;
-        for (int d = 0; d < (fl == F_M ? 1 : s->dim); d++) {
-            double *dst = fl == F_M ? s->g.m : fl == F_Q ? s->g.q[d] : fl == F_F ? s->g.f[d] : s->g.q2[d];
-            for (size_t n = n0; n < n1; n++) {
-                double acc = 0;
+    size_t w = (size_t)(s->bhi[0] - s->blo[0] + 1);
+    for (size_t r = r0; r < r1; r++) {
+        int y, z;
+        size_t base = box_row(s, s->blo, s->bhi, r, &y, &z);
+        for (int pass = 0; pass < 4; pass++) {
+            int fl = 1 << pass;
+            if (!(fields & fl)) continue;
+            for (int d = 0; d < (fl == F_M ? 1 : s->dim); d++) {
+                double *dst = fl == F_M ? s->g.m : fl == F_Q ? s->g.q[d] : fl == F_F ? s->g.f[d] : s->g.q2[d];
+                int first = 1;
                 for (int t = 0; t < T; t++) {
+                    const mpm_thread_out *o = &s->tout[t];
+                    if (o->blo[0] > o->bhi[0] || y < o->blo[1] || y > o->bhi[1] || z < o->blo[2] ||
+                        z > o->bhi[2])
+                        continue;
                     mpm_gridbuf *b = &s->tbuf[t];
                     const double *src = fl == F_M ? b->m : fl == F_Q ? b->q[d] : fl == F_F ? b->f[d] : b->q2[d];
-                    acc += src[n];
+                    size_t x0 = base - (size_t)s->blo[0] + (size_t)o->blo[0];
+                    size_t x1 = base - (size_t)s->blo[0] + (size_t)o->bhi[0];
+                    if (first) {
+                        /* 0 + a = a: the same sums as adding every thread */
+                        for (size_t n = base; n < x0; n++) dst[n] = 0.0;
+                        for (size_t n = x0; n <= x1; n++) dst[n] = src[n];
+                        for (size_t n = x1 + 1; n < base + w; n++) dst[n] = 0.0;
+                        first = 0;
+                    } else {
+                        for (size_t n = x0; n <= x1; n++) dst[n] += src[n];
+                    }
                 }
-                dst[n] = acc;
+                if (first) memset(dst + base, 0, w * sizeof *dst);
             }
         }
     }
-    (void)tid;
 }
 
 static void particle_slice(mpm_sim *s, int tid, size_t *a, size_t *b)
 {
     slice(s->P.n, s->nthreads, tid, a, b);
-}
-
-static void node_slice(mpm_sim *s, int tid, size_t *a, size_t *b)
-{
-    slice(s->nn, s->nthreads, tid, a, b);
 }
 
 static void reset_out(mpm_thread_out *o)
@@ -258,77 +379,197 @@ static void ph_g2p_x_stress(mpm_sim *s, int tid)
     s->k->g2p_x_stress(s, &s->tout[tid], a, b);
 }
 
-/* inverse mass with phantom nodes (m <= M_TOL) at 0 */
-static void inv_mass(mpm_sim *s, size_t a, size_t b)
+static void ph_bbox(mpm_sim *s, int tid)
 {
-    for (size_t n = a; n < b; n++) {
-        double m = s->g.m[n];
-        s->minv[n] = m > s->mtol ? 1.0 / m : 0.0;
-    }
+    size_t a, b;
+    particle_slice(s, tid, &a, &b);
+    s->k->bbox(s, &s->tout[tid], a, b);
 }
 
-static void gravity(mpm_sim *s, size_t a, size_t b)
+/* Node passes: one function per combination, over the rows [r0, r1) of G:
+ * reduce the fields named, then inverse mass with phantom nodes
+ * (m <= M_TOL) at 0 (MINV), gravity f += m g (GRAV, sum_p m_p b S_np). */
+static void node_rows(mpm_sim *s, int tid, int fields, int minv, int grav)
 {
-    if (!s->has_gravity) return;
-    for (int d = 0; d < s->dim; d++) {
-        double gd = s->gravity[d];
-        if (gd == 0) continue;
-        for (size_t n = a; n < b; n++) s->g.f[d][n] += gd * s->g.m[n]; /* sum_p m_p b S_np */
+    size_t r0, r1;
+    row_slice(s, tid, &r0, &r1);
+    reduce(s, fields, r0, r1);
+    size_t w = (size_t)(s->bhi[0] - s->blo[0] + 1);
+    double mtol = s->mtol;
+#ifdef MPM_LEAN
+    grav = 0;
+#endif
+    for (size_t r = r0; r < r1; r++) {
+        int y, z;
+        size_t base = box_row(s, s->blo, s->bhi, r, &y, &z);
+        if (minv) {
+            const double *restrict m = s->g.m + base;
+            double *restrict mi = s->minv + base;
+            for (size_t i = 0; i < w; i++) mi[i] = m[i] > mtol ? 1.0 / m[i] : 0.0;
+        }
+        if (grav)
+            for (int d = 0; d < s->dim; d++) {
+                double gd = s->gravity[d];
+                if (gd == 0) continue;
+                const double *restrict m = s->g.m + base;
+                double *restrict f = s->g.f[d] + base;
+                for (size_t i = 0; i < w; i++) f[i] += gd * m[i];
+            }
     }
 }
 
 static void ph_node_mq(mpm_sim *s, int tid)
 {
-    size_t a, b;
-    node_slice(s, tid, &a, &b);
-    reduce(s, tid, F_M | F_Q, a, b);
-    inv_mass(s, a, b);
+    node_rows(s, tid, F_M | F_Q, 1, 0);
 }
 
 static void ph_node_f(mpm_sim *s, int tid)
 {
-    size_t a, b;
-    node_slice(s, tid, &a, &b);
-    reduce(s, tid, F_F, a, b);
-    gravity(s, a, b);
+    node_rows(s, tid, F_F, 0, s->has_gravity);
 }
 
 static void ph_node_mqf(mpm_sim *s, int tid)
 {
-    size_t a, b;
-    node_slice(s, tid, &a, &b);
-    reduce(s, tid, F_M | F_Q | F_F, a, b);
-    inv_mass(s, a, b);
-    gravity(s, a, b);
+    node_rows(s, tid, F_M | F_Q | F_F, 1, s->has_gravity);
 }
 
 static void ph_node_q2(mpm_sim *s, int tid)
 {
-    size_t a, b;
-    node_slice(s, tid, &a, &b);
-    reduce(s, tid, F_Q2, a, b);
+    node_rows(s, tid, F_Q2, 0, 0);
 }
 
 /* q += f dt (Eq. 13 integrated; Fig. 6 step 6) */
 static void ph_node_update(mpm_sim *s, int tid)
 {
-    size_t a, b;
-    node_slice(s, tid, &a, &b);
-    for (int d = 0; d < s->dim; d++) {
-        double *q = s->g.q[d];
-        const double *f = s->g.f[d];
-        for (size_t n = a; n < b; n++) q[n] += f[n] * s->dt;
+    size_t r0, r1;
+    row_slice(s, tid, &r0, &r1);
+    size_t w = (size_t)(s->bhi[0] - s->blo[0] + 1);
+    double dt = s->dt;
+    for (size_t r = r0; r < r1; r++) {
+        int y, z;
+        size_t base = box_row(s, s->blo, s->bhi, r, &y, &z);
+        for (int d = 0; d < s->dim; d++) {
+            double *restrict q = s->g.q[d] + base;
+            const double *restrict f = s->g.f[d] + base;
+            for (size_t i = 0; i < w; i++) q[i] += f[i] * dt;
+        }
     }
 }
 
-/* BC1 (Eq. 27) on a momentum field, BC2 (Eq. 28) on the rate of momentum. */
+/* BC1 (Eq. 27) on a momentum field, BC2 (Eq. 28) on the rate of momentum:
+ * only the fixed nodes inside G (the field is zero elsewhere).  The list is
+ * in increasing node order. */
 static void zero_fixed(mpm_sim *s, double *const field[3])
 {
-    for (size_t i = 0; i < s->nfixed; i++) {
+#ifndef MPM_LEAN
+    if (!s->nfixed || !box_rows(s->blo, s->bhi)) return;
+    size_t first = (size_t)s->blo[0] + (size_t)s->blo[1] * s->stride[1] + (size_t)s->blo[2] * s->stride[2];
+    size_t last = (size_t)s->bhi[0] + (size_t)s->bhi[1] * s->stride[1] + (size_t)s->bhi[2] * s->stride[2];
+    size_t a = 0, b = s->nfixed;
+    while (a < b) { /* first entry >= first */
+        size_t mid = a + (b - a) / 2;
+        if (s->fixed_node[mid] < first) a = mid + 1;
+        else b = mid;
+    }
+    for (size_t i = a; i < s->nfixed && s->fixed_node[i] <= last; i++) {
         size_t n = s->fixed_node[i];
+        int x = (int)(n % (size_t)s->np[0]), y = (int)(n / s->stride[1] % (size_t)s->np[1]);
+        int z = (int)(n / s->stride[2]);
+        if (x < s->blo[0] || x > s->bhi[0] || y < s->blo[1] || y > s->bhi[1] || z < s->blo[2] ||
+            z > s->bhi[2])
+            continue;
         unsigned m = s->fixed_mask[i];
         for (int d = 0; d < s->dim; d++)
             if (m & (1u << d)) field[d][n] = 0.0;
+    }
+#else
+    (void)s;
+    (void)field;
+#endif
+}
+
+/* ---- sorting by cell ----
+ *
+ * Every MPM_SORT_EVERY steps (and at creation) the particles are put in the
+ * order of their cells, row-major over G, by a stable counting sort, so
+ * that consecutive particles share nodes and each thread's slice covers a
+ * compact region.  P.id keeps each particle's creation index: everything
+ * public (snapshots, error messages, per-particle inputs) speaks creation
+ * order.  The scratch is made at creation. */
+#define MPM_SORT_EVERY 16
+
+static void ph_keys(mpm_sim *s, int tid)
+{
+    size_t a, b;
+    particle_slice(s, tid, &a, &b);
+    int ext[3];
+    for (int d = 0; d < 3; d++) ext[d] = s->bhi[d] - s->blo[d] + 1;
+    s->k->cell_keys(s, s->skey, s->blo, ext, a, b);
+}
+
+static void sort_particles(mpm_sim *s)
+{
+    mpm_particles *P = &s->P;
+    size_t n = P->n;
+    if (n < 2 || !box_rows(s->blo, s->bhi)) return;
+    run(s, ph_keys);
+    uint32_t *key = s->skey, *perm = s->sperm, *h = s->shist;
+    size_t nk = 1;
+    for (int d = 0; d < s->dim; d++) nk *= (size_t)(s->bhi[d] - s->blo[d] + 1);
+    int sorted = 1;
+    for (size_t p = 1; p < n && sorted; p++) sorted = key[p] >= key[p - 1];
+    if (sorted) return;
+    memset(h, 0, (nk + 1) * sizeof *h);
+    for (size_t p = 0; p < n; p++) h[key[p] + 1]++;
+    for (size_t k = 0; k < nk; k++) h[k + 1] += h[k];
+    for (size_t p = 0; p < n; p++) perm[h[key[p]]++] = (uint32_t)p;
+    /* the double fields, through one scratch array */
+    double **arr[3 * 3 + 2 * 6 + 2];
+    int na = 0;
+    for (int d = 0; d < s->dim; d++) {
+        arr[na++] = &P->x[d];
+        arr[na++] = &P->v[d];
+        if (P->lp[d]) arr[na++] = &P->lp[d];
+    }
+    for (int c = 0; c < MPM_NCOMP(s->dim); c++) {
+        arr[na++] = &P->sig[c];
+        arr[na++] = &P->eps[c];
+    }
+    arr[na++] = &P->m;
+    arr[na++] = &P->vol;
+    for (int i = 0; i < na; i++) {
+        const double *restrict src = *arr[i];
+        double *restrict dst = s->sscr;
+        for (size_t p = 0; p < n; p++) dst[p] = src[perm[p]];
+        s->sscr = *arr[i];
+        *arr[i] = dst;
+    }
+    /* the integer fields through the key array, then the inverse map for
+     * the loaded particles */
+    uint16_t *m16 = (uint16_t *)(void *)key;
+    for (size_t p = 0; p < n; p++) m16[p] = P->mat[perm[p]];
+    memcpy(P->mat, m16, n * sizeof *P->mat);
+    for (size_t p = 0; p < n; p++) key[p] = P->id[perm[p]];
+    memcpy(P->id, key, n * sizeof *P->id);
+    if (s->nload) {
+        for (size_t p = 0; p < n; p++) key[perm[p]] = (uint32_t)p;
+        for (size_t i = 0; i < s->nload; i++) s->load_p[i] = key[s->load_p[i]];
+    }
+}
+
+/* Before a step: sort when due, and make G the union of the boxes the last
+ * particle pass recorded; the main grid's nodes of the old G outside the new
+ * one are zeroed. */
+static void begin_step(mpm_sim *s)
+{
+    int lo[3], hi[3];
+    union_box(s, lo, hi);
+    zero_outside(s, s->blo, s->bhi, lo, hi);
+    memcpy(s->blo, lo, sizeof lo);
+    memcpy(s->bhi, hi, sizeof hi);
+    if (s->steps > 0 && s->steps % MPM_SORT_EVERY == 0) {
+        sort_particles(s); /* G stays: it does not depend on the order */
+        run(s, ph_bbox);
     }
 }
 
@@ -501,6 +742,58 @@ static void next_dt(mpm_sim *s)
     s->dt = s->dt_fixed > 0 ? s->dt_fixed : s->cfl * mpm_sim_dt_limit(s);
 }
 
+/* uGIMP: 3 nodes per axis suffice when every a = lp/h <= 1/2 (the same
+ * product the kernels form); lp never changes during a run. */
+static int gimp_fits3(const mpm_sim *s)
+{
+    for (int d = 0; d < s->dim; d++) {
+        const double *lp = s->P.lp[d];
+        double ih = s->inv_h[d];
+        for (size_t p = 0; p < s->P.n; p++)
+            if (!(lp[p] * ih <= 0.5)) return 0;
+    }
+    return 1;
+}
+
+/* The first box and the first sort, once the team runs. */
+static void init_order(mpm_sim *s)
+{
+    run(s, ph_bbox);
+    union_box(s, s->blo, s->bhi);
+    sort_particles(s);
+    run(s, ph_bbox);
+}
+
+int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
+{
+    if (s->method != MPM_METHOD_GIMP || s->steps > 0 || (ns != 3 && ns != 4) ||
+        (ns == 3 && !gimp_fits3(s)))
+        return MPM_EINVAL;
+    s->ns = ns;
+    s->k = mpm_kernels_select(s->dim, ns);
+    init_order(s);
+    return 0;
+}
+
+#ifdef MPM_LEAN
+/* A build without gravity, loads and fixed boundaries refuses cases that
+ * use them. */
+static int lean_check(const mpm_case *c, char *err, size_t errlen)
+{
+    const char *what = NULL;
+    for (int d = 0; d < c->grid.dim; d++)
+        if (c->gravity[d] != 0) what = "gravity";
+    if (c->n_tractions) what = "tractions";
+    for (int f = 0; f < 2 * c->grid.dim; f++)
+        if (c->bc.face_mask[f]) what = "bc.face_mask";
+    if (c->bc.n_nodes) what = "bc.node_ijk";
+    if (!what) return 0;
+    snprintf(err, errlen, "%s: this solver was built with MPM_LEAN (no gravity, loads or fixed "
+             "boundaries)", what);
+    return MPM_EINVAL;
+}
+#endif
+
 mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
 {
     char dummy[8];
@@ -512,6 +805,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     if (mpm_case_check(c, err, errlen)) return NULL;
     long np = mpm_case_particles(c, NULL, NULL, NULL, err, errlen);
     if (np < 0) return NULL;
+#ifdef MPM_LEAN
+    if (lean_check(c, err, errlen)) return NULL;
+#endif
 
     mpm_sim *s = calloc(1, sizeof *s);
     if (!s) goto nomem;
@@ -536,7 +832,6 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
         s->lo[d] = d < dim ? c->grid.origin[d] - (s->pad / 2) * s->h[d] : 0;
         s->hi[d] = d < dim ? c->grid.origin[d] + (c->grid.nodes[d] - 1 + s->pad / 2) * s->h[d] : 0;
     }
-    s->k = mpm_kernels_select(dim, c->method);
     s->model = mpm_model_get(c->materials[0].model);
     s->nmat = c->n_materials;
     if (!(s->mats = calloc(s->nmat, sizeof *s->mats))) goto nomem;
@@ -548,6 +843,12 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     int musl = c->update == MPM_MUSL;
     if (alloc_particles(&s->P, (size_t)np, dim, c->method == MPM_METHOD_GIMP)) goto nomem;
     if (mpm_case_particles(c, &s->P, s->mats, &s->vmax, err, errlen) != np) goto fail;
+    if (s->ns == 4 && gimp_fits3(s)) s->ns = 3;
+    s->k = mpm_kernels_select(dim, s->ns);
+    if (!(s->skey = malloc((size_t)np * sizeof *s->skey)) ||
+        !(s->sperm = malloc((size_t)np * sizeof *s->sperm)) ||
+        !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = dalloc((size_t)np)))
+        goto nomem;
     if (alloc_gridbuf(&s->g, s->nn, dim, musl)) goto nomem;
     if (!(s->minv = dalloc(s->nn))) goto nomem;
     if (s->nthreads > 1) {
@@ -559,6 +860,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     for (int t = 0; t < s->nthreads; t++)
         for (int cc = 0; cc < 6; cc++)
             if (!(s->tout[t].deps[cc] = dalloc(MPM_BLOCK))) goto nomem;
+    for (int t = 0; t < s->nthreads; t++)
+        if (!(s->tout[t].wblk = malloc(mpm_kernels_scratch()))) goto nomem;
 
     if (build_fixed(s, &c->bc)) goto nomem;
     if (build_loads(s, c)) goto nomem;
@@ -578,6 +881,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     s->e_floor = 1e-9 * 0.5 * e0.mass * s->cmax * s->cmax;
     s->guard_v2 = s->vmax * s->vmax;
     if (start_threads(s)) goto nomem;
+    init_order(s);
     return s;
 
 nomem:
@@ -613,6 +917,12 @@ void mpm_sim_destroy(mpm_sim **sp)
     if (s->tout)
         for (int t = 0; t < s->nthreads; t++)
             for (int c = 0; c < 6; c++) free(s->tout[t].deps[c]);
+    if (s->tout)
+        for (int t = 0; t < s->nthreads; t++) free(s->tout[t].wblk);
+    free(s->skey);
+    free(s->sperm);
+    free(s->shist);
+    free(s->sscr);
     free(s->tout);
     free(s->minv);
     free(s->mats);
@@ -688,11 +998,11 @@ static int finish_step(mpm_sim *s)
         }
         if (!finite) {
             snprintf(s->err, sizeof s->err, "diverged at step %ld, time %.9g: particle %zu has a "
-                     "non-finite position or velocity", step, t, bad);
+                     "non-finite position or velocity", step, t, (size_t)s->P.id[bad]);
             s->failed = MPM_EDIVERGED;
         } else {
             snprintf(s->err, sizeof s->err, "particle %zu left the grid at step %ld, time %.9g: "
-                     "position (%s), %c outside [%g, %g)", bad, step, t, pos, "xyz"[axis],
+                     "position (%s), %c outside [%g, %g)", (size_t)s->P.id[bad], step, t, pos, "xyz"[axis],
                      s->lo[axis], s->hi[axis]);
             s->failed = MPM_ELEFTGRID;
         }
@@ -714,6 +1024,7 @@ static int finish_step(mpm_sim *s)
 int mpm_sim_step(mpm_sim *s)
 {
     if (s->failed) return MPM_ESTATE;
+    begin_step(s);
     for (size_t i = 0; i < s->nload; i++)
         for (int d = 0; d < s->dim; d++) s->load_xold[d][i] = s->P.x[d][s->load_p[i]];
     switch (s->update) {
@@ -770,6 +1081,13 @@ int mpm_sim_run(mpm_sim *s, long nsteps)
 
 int mpm_sim_set_particle_forces(mpm_sim *s, const double *f)
 {
+#ifdef MPM_LEAN
+    if (f) {
+        snprintf(s->err, sizeof s->err, "particle_forces: this solver was built with MPM_LEAN "
+                 "(no gravity, loads or fixed boundaries)");
+        return MPM_EINVAL;
+    }
+#endif
     size_t n = s->P.n;
     int dim = s->dim;
     if (f)
@@ -818,7 +1136,8 @@ int mpm_sim_set_particle_forces(mpm_sim *s, const double *f)
     }
     for (size_t i = 0; i < n; i++)
         for (int d = 0; d < dim; d++)
-            s->load_f[d][i] = s->trac_f[d][i] + (f ? f[i * (size_t)dim + d] : 0);
+            s->load_f[d][i] = s->trac_f[d][i] +
+                              (f ? f[(size_t)s->P.id[s->load_p[i]] * (size_t)dim + d] : 0);
     return 0;
 }
 
@@ -868,19 +1187,21 @@ void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
 {
     const mpm_particles *P = &s->P;
     int dim = s->dim, nc = MPM_NCOMP(dim);
+    /* slot p holds the particle created as number P->id[p] */
     for (size_t p = 0; p < P->n; p++) {
+        size_t q = P->id[p];
         for (int d = 0; d < dim; d++) {
-            if (o->x) o->x[p * dim + d] = P->x[d][p];
-            if (o->v) o->v[p * dim + d] = P->v[d][p];
+            if (o->x) o->x[q * dim + d] = P->x[d][p];
+            if (o->v) o->v[q * dim + d] = P->v[d][p];
         }
         if (o->stress)
-            for (int c = 0; c < 6; c++) o->stress[p * 6 + c] = c < nc ? P->sig[c][p] : 0.0;
+            for (int c = 0; c < 6; c++) o->stress[q * 6 + c] = c < nc ? P->sig[c][p] : 0.0;
         if (o->pressure) {
             double tr = P->sig[0][p];
             if (dim > 1) tr += P->sig[1][p] + P->sig[2][p];
-            o->pressure[p] = tr / 3.0;
+            o->pressure[q] = tr / 3.0;
         }
-        if (o->volume) o->volume[p] = P->vol[p];
+        if (o->volume) o->volume[q] = P->vol[p];
     }
 }
 

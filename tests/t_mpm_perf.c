@@ -1,0 +1,265 @@
+/*
+ * t_mpm_perf.c - the throughput machinery must not change results: the
+ * 3-node uGIMP kernels equal the 4-node ones (the node they leave out has
+ * weight and gradient exactly zero when lp <= h/2), the family is chosen
+ * from the half-widths, sorting particles by cell keeps every public
+ * per-particle output in creation order, and the active box leaves the
+ * grid outside the particles all zero.  No timings here: bin/mpmbench
+ * measures those.
+ */
+#include "mpm.h"
+#include "mpm_internal.h"
+#include "t.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* A box of material falling onto a wall at y = 0 (gravity, a wall face,
+ * an impact that loads the stress), in a grid of 21^dim nodes, h = 0.05. */
+static void falling_box(mpm_case *c, mpm_material_desc *mat, mpm_body_desc *b, int dim,
+                        mpm_update up)
+{
+    memset(c, 0, sizeof *c);
+    memset(b, 0, sizeof *b);
+    *mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    b->shape = MPM_SHAPE_BOX;
+    b->ppc = 2;
+    double v[3] = {0.3, -0.8, 0.2};
+    for (int d = 0; d < dim; d++) {
+        b->lo[d] = d == 1 ? 0.02 : 0.31 + 0.02 * d;
+        b->hi[d] = b->lo[d] + (dim > 2 ? 0.2 : 0.33);
+        b->velocity[d] = v[d];
+        c->grid.h[d] = 0.05;
+        c->grid.nodes[d] = 21;
+    }
+    c->grid.dim = dim;
+    c->method = MPM_METHOD_GIMP;
+    c->update = up;
+    c->gravity[1] = -9.81;
+    c->bc.face_mask[2] = 7; /* wall at y = 0 */
+    c->dt = 2e-4;
+    c->n_materials = 1;
+    c->materials = mat;
+    c->n_bodies = 1;
+    c->bodies = b;
+}
+
+/* max |a - b| / max(max |a|, tiny) over n values */
+static double rel_diff(const double *a, const double *b, size_t n)
+{
+    double d = 0, m = 1e-300;
+    for (size_t i = 0; i < n; i++) {
+        d = fmax(d, fabs(a[i] - b[i]));
+        m = fmax(m, fabs(a[i]));
+    }
+    return d / m;
+}
+
+TEST(perf_gimp_3_nodes_equal_4_nodes)
+{
+    static const mpm_update ups[3] = {MPM_USF, MPM_USL, MPM_MUSL};
+    for (int dim = 2; dim <= 3; dim++)
+        for (int u = 0; u < 3; u++)
+            for (int T = 1; T <= 2; T++) {
+                mpm_case c;
+                mpm_material_desc mat;
+                mpm_body_desc b;
+                falling_box(&c, &mat, &b, dim, ups[u]);
+                c.threads = T;
+                char err[256];
+                mpm_sim *s3 = mpm_sim_new(&c, err, sizeof err);
+                CHECKF(s3, "%s", err);
+                mpm_sim *s4 = mpm_sim_new(&c, err, sizeof err);
+                CHECKF(s4, "%s", err);
+                CHECK(s3->ns == 3); /* generated particles: lp = h/4 */
+                CHECK(mpm_sim_set_gimp_nodes(s4, 4) == 0);
+                CHECK(s4->ns == 4);
+                int rc3 = mpm_sim_run(s3, 40), rc4 = mpm_sim_run(s4, 40);
+                CHECKF(rc3 == 0 && rc4 == 0, "%s / %s", mpm_sim_error(s3), mpm_sim_error(s4));
+                size_t n = mpm_sim_particles(s3);
+                double *buf = malloc(2 * n * (2 * 3 + 6) * sizeof *buf);
+                CHECK(buf);
+                double *x3 = buf, *x4 = x3 + n * 3, *v3 = x4 + n * 3, *v4 = v3 + n * 3;
+                double *s3g = v4 + n * 3, *s4g = s3g + n * 6;
+                mpm_sim_snapshot(s3, &(mpm_snapshot){.x = x3, .v = v3, .stress = s3g});
+                mpm_sim_snapshot(s4, &(mpm_snapshot){.x = x4, .v = v4, .stress = s4g});
+                double dx = rel_diff(x3, x4, n * (size_t)dim), dv = rel_diff(v3, v4, n * (size_t)dim);
+                double ds = rel_diff(s3g, s4g, n * 6), smax = 0;
+                for (size_t i = 0; i < n * 6; i++) smax = fmax(smax, fabs(s3g[i]));
+                mpm_energy e3, e4;
+                mpm_sim_energy(s3, &e3);
+                mpm_sim_energy(s4, &e4);
+                TLOG("GIMP %dD %s T=%d, %zu points, 40 steps: 3 vs 4 nodes: rel |dx| %.1e, |dv| "
+                     "%.1e, |dsigma| %.1e (max |sigma| %.3g), energy %.17g vs %.17g", dim,
+                     u == 0 ? "USF" : u == 1 ? "USL" : "MUSL", T, n, dx, dv, ds, smax, e3.total,
+                     e4.total);
+                free(buf);
+                mpm_sim_destroy(&s3);
+                mpm_sim_destroy(&s4);
+                CHECK(smax > 1.0); /* the impact loaded the body */
+                CHECK(dx <= 1e-12 && dv <= 1e-12 && ds <= 1e-12);
+                CHECK_NEAR(e3.total, e4.total, 1e-12 * fabs(e4.total));
+            }
+}
+
+/* Explicit points: the half-widths choose the family. */
+TEST(perf_gimp_family_follows_half_width)
+{
+    double x[4] = {0.4, 0.4, 0.6, 0.45}, vol[2] = {0.0025, 0.0025};
+    double hl[2][4] = {{0.025, 0.025, 0.025, 0.025}, {0.025, 0.025, 0.025, 0.0251}};
+    for (int k = 0; k < 2; k++) {
+        mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+        mpm_body_desc b = {0};
+        b.n_points = 2;
+        b.x = x;
+        b.volume = vol;
+        b.half_length = hl[k];
+        mpm_case c = {0};
+        c.grid = (mpm_grid_desc){2, {0, 0, 0}, {0.05, 0.05, 0}, {21, 21, 0}};
+        c.method = MPM_METHOD_GIMP;
+        c.n_materials = 1;
+        c.materials = &mat;
+        c.n_bodies = 1;
+        c.bodies = &b;
+        char err[256];
+        mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+        CHECKF(s, "%s", err);
+        int ns = s->ns, rc3 = mpm_sim_set_gimp_nodes(s, 3);
+        CHECK(mpm_sim_step(s) == 0);
+        int late = mpm_sim_set_gimp_nodes(s, 4);
+        mpm_sim_destroy(&s);
+        TLOG("half-widths up to %g (h/2 = 0.025): %d nodes per axis", hl[k][3], ns);
+        CHECK(ns == (k == 0 ? 3 : 4));
+        CHECK(rc3 == (k == 0 ? 0 : MPM_EINVAL));
+        CHECK(late == MPM_EINVAL); /* only before the first step */
+    }
+}
+
+/* Explicit points given in an order far from the cells' (reversed): the
+ * solver sorts them, yet snapshots and per-particle forces speak creation
+ * order.  Runs points in natural (rev 0) or reversed (rev 1) order, 50 steps
+ * of rigid translation then 20 steps with a force on the point at grid
+ * position 560; v gets the final velocities in natural order.  Returns the
+ * worst |x - (x0 + v t)| after the translation, or -1 on failure. */
+enum { NX = 24, NPTS = NX * NX, PUSHED = 560 };
+
+static double sorted_run(int rev, int T, double *vout, int *sorted)
+{
+    static double x[2 * NPTS], vol[NPTS], v[2 * NPTS], f[2 * NPTS], xs[2 * NPTS], vs[2 * NPTS];
+    for (int i = 0; i < NPTS; i++) {
+        int k = rev ? NPTS - 1 - i : i;
+        x[2 * i] = 0.3 + 0.0125 * (k % NX + 0.5);
+        x[2 * i + 1] = 0.3 + 0.0125 * (k / NX + 0.5);
+        vol[i] = 0.0125 * 0.0125;
+        v[2 * i] = 0.5;
+        v[2 * i + 1] = -0.25;
+        f[2 * i] = 0;
+        f[2 * i + 1] = k == PUSHED ? 1e-3 : 0;
+    }
+    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    mpm_body_desc b = {0};
+    b.n_points = NPTS;
+    b.x = x;
+    b.volume = vol;
+    b.v = v;
+    mpm_case c = {0};
+    c.grid = (mpm_grid_desc){2, {0, 0, 0}, {0.025, 0.025, 0}, {41, 41, 0}};
+    c.method = MPM_METHOD_MPM;
+    c.dt = 1e-4;
+    c.threads = T;
+    c.n_materials = 1;
+    c.materials = &mat;
+    c.n_bodies = 1;
+    c.bodies = &b;
+    mpm_sim *s = mpm_sim_new(&c, NULL, 0);
+    if (!s) return -1;
+    mpm_sim_snapshot(s, &(mpm_snapshot){.x = xs, .v = vs});
+    int same = 1;
+    for (int i = 0; i < 2 * NPTS; i++) same &= xs[i] == x[i] && vs[i] == v[i];
+    *sorted = s->P.id[0] != 0;
+    double worst = -1;
+    if (same && mpm_sim_run(s, 50) == 0) {
+        mpm_sim_snapshot(s, &(mpm_snapshot){.x = xs});
+        double t = mpm_sim_time(s);
+        worst = 0;
+        for (int i = 0; i < 2 * NPTS; i++) worst = fmax(worst, fabs(xs[i] - (x[i] + v[i] * t)));
+        if (mpm_sim_set_particle_forces(s, f) || mpm_sim_run(s, 20)) worst = -1;
+        mpm_sim_snapshot(s, &(mpm_snapshot){.v = vs});
+        for (int i = 0; i < NPTS; i++) {
+            int k = rev ? NPTS - 1 - i : i;
+            vout[2 * k] = vs[2 * i];
+            vout[2 * k + 1] = vs[2 * i + 1];
+        }
+    }
+    mpm_sim_destroy(&s);
+    return worst;
+}
+
+TEST(perf_sorting_keeps_creation_order)
+{
+    static double va[2 * NPTS], vb[2 * NPTS];
+    for (int T = 1; T <= 2; T++) {
+        int sa, sb;
+        double wa = sorted_run(0, T, va, &sa), wb = sorted_run(1, T, vb, &sb);
+        double dv = rel_diff(va, vb, 2 * NPTS), push = 0;
+        for (int i = 0; i < NPTS; i++) push = fmax(push, fabs(va[2 * i + 1] + 0.25));
+        TLOG("T=%d: %d points in natural / reversed order, 50 steps of rigid translation: max "
+             "|x - (x0 + v t)| = %.1e / %.1e; then a force on one point: velocities differ by "
+             "%.1e (relative), largest push %.2e", T, NPTS, wa, wb, dv, push);
+        CHECK(wa >= 0 && wb >= 0);
+        CHECK(sb);  /* the reversed points were sorted */
+        CHECK(!sa); /* the natural ones were in cell order already */
+        CHECK(wa < 1e-12 && wb < 1e-12);
+        CHECK(push > 1e-6);
+        CHECK(dv < 1e-12);
+    }
+}
+
+/* A body crossing a large grid: after every step the node masses sum to
+ * the particles' mass (nothing stale is left behind the active box). */
+TEST(perf_active_box_leaves_no_stale_nodes)
+{
+    for (int T = 1; T <= 2; T++)
+        for (int m = 0; m < 2; m++) {
+            mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+            mpm_body_desc b = {0};
+            b.shape = MPM_SHAPE_BOX;
+            b.ppc = 2;
+            b.lo[0] = 0.1;
+            b.hi[0] = 0.2;
+            b.lo[1] = 0.3;
+            b.hi[1] = 0.4;
+            b.velocity[0] = 20.0;
+            b.velocity[1] = 5.0;
+            mpm_case c = {0};
+            c.grid = (mpm_grid_desc){2, {0, 0, 0}, {0.02, 0.02, 0}, {51, 51, 0}};
+            c.method = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+            c.dt = 2e-4;
+            c.threads = T;
+            c.n_materials = 1;
+            c.materials = &mat;
+            c.n_bodies = 1;
+            c.bodies = &b;
+            char err[256];
+            mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+            CHECKF(s, "%s", err);
+            mpm_energy e;
+            mpm_sim_energy(s, &e);
+            double worst = 0;
+            for (int step = 0; step < 150; step++) {
+                CHECKF(mpm_sim_step(s) == 0, "%s", mpm_sim_error(s));
+                double mg = 0, q[3];
+                for (int j = 0; j < 51; j++)
+                    for (int i = 0; i < 51; i++) {
+                        double mn;
+                        mpm_sim_node(s, (int[3]){i, j, 0}, &mn, q);
+                        mg += mn;
+                    }
+                worst = fmax(worst, fabs(mg - e.mass) / e.mass);
+            }
+            TLOG("%s T=%d: body moved %.2f cells; worst |sum node mass - mass| / mass = %.1e",
+                 m ? "GIMP" : "MPM", T, 20.0 * mpm_sim_time(s) / 0.02, worst);
+            mpm_sim_destroy(&s);
+            CHECK(worst < 1e-12);
+        }
+}
