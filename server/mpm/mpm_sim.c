@@ -794,6 +794,32 @@ static int lean_check(const mpm_case *c, char *err, size_t errlen)
 }
 #endif
 
+/* The elastic energy stored by the initial stress, sum 1/2 sigma0 : C^-1 :
+ * sigma0 V0 (isotropic linear elasticity; 2D is plane strain with sigma_zz
+ * stored).  The reported strain energy 1/2 sigma : eps counts strain from
+ * the initial state, so a body released from an initial stress shows
+ * kinetic + strain energy up to 2 U0 with E0 = 0; the divergence guard
+ * counts 2 U0 as available (see guard()). */
+static double initial_stress_energy(const mpm_sim *s)
+{
+    const mpm_particles *P = &s->P;
+    int dim = s->dim;
+    double u = 0;
+    for (size_t p = 0; p < P->n; p++) {
+        const mpm_mat_params *mp = &s->mats[P->mat[p]];
+        double E = mp->E, nu = mp->nu, w;
+        if (dim == 1) {
+            w = P->sig[0][p] * P->sig[0][p] / E;
+        } else {
+            double xx = P->sig[0][p], yy = P->sig[1][p], zz = P->sig[2][p], sh = P->sig[3][p] * P->sig[3][p];
+            if (dim == 3) sh += P->sig[4][p] * P->sig[4][p] + P->sig[5][p] * P->sig[5][p];
+            w = (xx * xx + yy * yy + zz * zz - 2 * nu * (xx * yy + yy * zz + zz * xx) + 2 * (1 + nu) * sh) / E;
+        }
+        u += 0.5 * w * P->vol[p];
+    }
+    return u;
+}
+
 mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
 {
     char dummy[8];
@@ -877,7 +903,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     next_dt(s);
     mpm_energy e0;
     mpm_sim_energy(s, &e0);
-    s->e_total0 = e0.total;
+    s->e_total0 = e0.total + 2 * initial_stress_energy(s);
     s->e_floor = 1e-9 * 0.5 * e0.mass * s->cmax * s->cmax;
     s->guard_v2 = s->vmax * s->vmax;
     if (start_threads(s)) goto nomem;
@@ -950,7 +976,9 @@ static void loads_and_bc2(mpm_sim *s)
  * scheme (USL above C = 0.5, MPM when points cross cells) can multiply the
  * energy by 1e4 and still finish.  Every MPM_GUARD_EVERY steps the kinetic
  * plus strain energy is compared with what the loads can have supplied,
- * E0 + (work of the loads) - (change of gravity's potential); it never
+ * E0 + 2 U0 (U0: the energy stored by an initial stress, see
+ * initial_stress_energy()) + (work of the loads) - (change of gravity's
+ * potential); it never
  * exceeds that in the continuum, and the discrete schemes stay within a few
  * per cent of it on every problem of the stress suite (make stress), the
  * worst +29 % (MPM USF, one particle per cell).  Twice the available energy
