@@ -136,3 +136,29 @@ bench-accuracy: deps
 stress: deps
 	@$(MAKE) --no-print-directory bin/mpmtest bin/mpmd
 	MPM_STRESS=full MPMD_BIN=bin/mpmd bin/mpmtest stress_
+
+# ---- Issue #5: throughput benchmark ------------------------------------------
+# make bench  runs bin/mpmbench --all (tests/perf/): disks2d, cube3d and bar1d at
+#             ~10^6 particles and sparse2d (10^4 particles in a 4096^2 grid against
+#             a tight grid), MPM and GIMP, 1 and 2 threads; disks2d against
+#             bin/mpmbench-lean (the same sources on a solver compiled with
+#             -DMPM_LEAN, objects in build/lean); disks2d through a real bin/mpmd.
+#             Table on the terminal, rows appended to build/bench/throughput.csv.
+#             One scene: bin/mpmbench --scene NAME [...] (bin/mpmbench --help).
+LEAN := build/lean
+$(eval $(call objs,$(LEAN),$(OPT) -DMPM_LEAN))
+PERF_SRCS := $(wildcard tests/perf/*.c)
+$(patsubst %.c,$(REL)/%.o,$(PERF_SRCS)) $(patsubst %.c,$(LEAN)/%.o,$(PERF_SRCS)): tests/perf/perf.h
+bin/mpmbench: $(patsubst %.c,$(REL)/%.o,$(PERF_SRCS)) $(call codec_objs,$(REL)) $(call mpm_objs,$(REL))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ -lzmq -lprotobuf-c -ljansson $(LDLIBS)
+# the lean binary has no daemon scene, so it needs only the solver
+bin/mpmbench-lean: $(patsubst %.c,$(LEAN)/%.o,$(PERF_SRCS)) $(call mpm_objs,$(LEAN))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
+
+bench: deps
+	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmd
+	@grep -q MPM_LEAN $(MPM_SRCS) server/mpm/*.h || echo "bench: note: server/mpm does not use MPM_LEAN yet, so bin/mpmbench-lean is the normal solver"
+	bin/mpmbench --all
+	@echo "bench: rows appended to build/bench/throughput.csv"

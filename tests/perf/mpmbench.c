@@ -1,0 +1,631 @@
+/*
+ * mpmbench.c - bin/mpmbench, the throughput benchmark of issue #5: the
+ * command line, the report (an aligned table on the terminal, or CSV with
+ * --csv; every row also appended to build/bench/throughput.csv) and
+ * `--all`, which is what `make bench` runs: every in-process scene with MPM
+ * and GIMP at 1 and 2 threads, the sparse-grid pairs, the lean build
+ * against the normal one on disks2d (through bin/mpmbench-lean), and the
+ * daemon scene; then the ratios and a summary against the issue's targets.
+ * Timing assertions do not exist here: it measures and reports.
+ */
+#include "perf.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#define MAX_SUMMARY 96
+
+static int csv_mode;
+static int header_done;
+static int collecting;            /* --all: keep result lines for the summary */
+static char *summary[MAX_SUMMARY];
+static int nsummary;
+static int progress_shown;
+
+static const char usage[] =
+    "usage: mpmbench --scene NAME [--particles N] [--steps S] [--threads T]\n"
+    "                [--method mpm|gimp] [--update usf|usl|musl] [--csv]\n"
+    "       mpmbench --all [--particles N] [--steps S] [--csv]\n"
+    "Throughput of the mpmd solver (issue #5): millions of particle-steps per second,\n"
+    "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
+    "Scenes:\n"
+    "  disks2d   the paper's two elastic disks, grid refined to ~N particles (2x2 per cell)\n"
+    "  cube3d    an elastic cube of ~N particles (2x2x2 per cell) falling onto a fixed floor\n"
+    "  bar1d     the paper's bar with N particles (2 per cell)\n"
+    "  sparse2d  a spinning disk of N particles (default 10^4) in a 4096x4096 grid and in a\n"
+    "            grid just large enough for it: both rows and the ratio\n"
+    "  daemon    disks2d through a real bin/mpmd (ipc://, temporary database): no watcher,\n"
+    "            and a watcher taking energies every step and snapshots every 100 steps,\n"
+    "            against the same case in-process (default 100 steps, 2 threads)\n"
+    "Options:\n"
+    "  --particles N  particles to aim for (default 10^6; sparse2d 10^4), 1000..10^8\n"
+    "  --steps S      steps per run, 1..10^9 (default: ~2 s at the issue's target speed,\n"
+    "                 capped by the simulated time a scene stays valid for, and cut to ~2 s\n"
+    "                 when the warm-up shows the solver 2x slower than the target)\n"
+    "  --threads T    solver threads (default 2), 1..64\n"
+    "  --method M     mpm | gimp (default mpm)\n"
+    "  --update U     usf | usl | musl (default usf)\n"
+    "  --csv          print CSV rows instead of the table\n"
+    "  --all          every scene, MPM and GIMP, 1 and 2 threads; the lean build; the daemon\n"
+    "  -h, --help     this text\n"
+    "Rows are appended to build/bench/throughput.csv:\n  " PB_CSV_HEADER "\n"
+    "bytes_per_particle is the peak RSS of a forked child that builds and runs the one\n"
+    "configuration (ru_maxrss from wait4), over the particle count; for daemon rows, the\n"
+    "peak RSS of that row's mpmd process.  Environment: MPMD_BIN (default: mpmd next to\n"
+    "this program), MPMBENCH_LEAN (default: mpmbench-lean next to it).\n";
+
+/* ---- output ---- */
+
+static void vline(FILE *f, const char *fmt, va_list ap)
+{
+    if (progress_shown) {
+        fputs("\r\033[K", stderr);
+        progress_shown = 0;
+    }
+    vfprintf(f, fmt, ap);
+    fputc('\n', f);
+    fflush(f);
+}
+
+void pb_note(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vline(csv_mode ? stderr : stdout, fmt, ap);
+    va_end(ap);
+}
+
+void pb_result(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vline(csv_mode ? stderr : stdout, fmt, ap);
+    va_end(ap);
+    if (collecting && nsummary < MAX_SUMMARY) {
+        char buf[512];
+        va_start(ap, fmt);
+        vsnprintf(buf, sizeof buf, fmt, ap);
+        va_end(ap);
+        summary[nsummary] = strdup(buf);
+        if (summary[nsummary]) nsummary++;
+    }
+}
+
+void pb_progress(const char *fmt, ...)
+{
+    if (!isatty(STDERR_FILENO)) return;
+    va_list ap;
+    va_start(ap, fmt);
+    fputs("\r\033[K  ... ", stderr);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fflush(stderr);
+    progress_shown = 1;
+}
+
+static void csv_line(FILE *f, const pb_row *r)
+{
+    fprintf(f, "%s,%s,%s,%d,%zu,%zu,%ld,%d,%.4f,%.3f,%.1f\n", r->scene, pb_method_name(r->method),
+            pb_update_name(r->update), r->dim, r->particles, r->nodes, r->steps, r->threads,
+            r->wall_s, r->mpsteps, r->bytes_pp);
+}
+
+static void append_csv(const pb_row *r)
+{
+    static int warned;
+    if ((mkdir("build", 0777) && errno != EEXIST) || (mkdir(PB_CSV_DIR, 0777) && errno != EEXIST)) {
+        if (!warned++) fprintf(stderr, "mpmbench: cannot create %s: %s\n", PB_CSV_DIR, strerror(errno));
+        return;
+    }
+    FILE *f = fopen(PB_CSV_PATH, "a");
+    if (!f) {
+        if (!warned++) fprintf(stderr, "mpmbench: cannot open %s: %s\n", PB_CSV_PATH, strerror(errno));
+        return;
+    }
+    if (ftell(f) == 0) fprintf(f, "%s\n", PB_CSV_HEADER);
+    csv_line(f, r);
+    if (fclose(f) && !warned++)
+        fprintf(stderr, "mpmbench: writing %s: %s\n", PB_CSV_PATH, strerror(errno));
+}
+
+/* A row already written to the CSV file by another process (the lean
+ * binary): printed only. */
+static void show_row(const pb_row *r)
+{
+    if (csv_mode) {
+        if (!header_done++) printf("%s\n", PB_CSV_HEADER);
+        csv_line(stdout, r);
+        fflush(stdout);
+        return;
+    }
+    if (!header_done++)
+        pb_note("%-15s %-4s %-4s %3s %9s %9s %6s %3s %8s %10s %8s  %s", "scene", "meth", "upd",
+                "dim", "particles", "nodes", "steps", "thr", "wall_s", "Mpsteps/s", "B/part",
+                "runs (Mpsteps/s), notes");
+    char notes[200] = "";
+    if (r->runs > 1)
+        snprintf(notes, sizeof notes, "%.3g..%.3g", r->rate_lo, r->rate_hi);
+    if (r->cpus > 0) {
+        size_t k = strlen(notes);
+        snprintf(notes + k, sizeof notes - k, "%scpu %.2f", k ? "; " : "", r->cpus);
+    }
+    if (r->tcapped) {
+        size_t k = strlen(notes);
+        snprintf(notes + k, sizeof notes - k, "%ssteps capped by the scene's simulated time",
+                 k ? "; " : "");
+    }
+    if (r->reduced) {
+        size_t k = strlen(notes);
+        snprintf(notes + k, sizeof notes - k, "%ssteps cut from %ld (slow warm-up)", k ? "; " : "",
+                 r->default_steps);
+    }
+    pb_note("%-15s %-4s %-4s %3d %9zu %9zu %6ld %3d %8.3f %10.3f %8.1f  %s", r->scene,
+            pb_method_name(r->method), pb_update_name(r->update), r->dim, r->particles, r->nodes,
+            r->steps, r->threads, r->wall_s, r->mpsteps, r->bytes_pp, notes);
+}
+
+void pb_emit(const pb_row *r)
+{
+    show_row(r);
+    append_csv(r);
+}
+
+static void row_failed(const pb_row *r)
+{
+    if (progress_shown) {
+        fputs("\r\033[K", stderr);
+        progress_shown = 0;
+    }
+    fprintf(stderr, "mpmbench: %s %s %s, %d thread%s: %s\n", r->scene, pb_method_name(r->method),
+            pb_update_name(r->update), r->threads, r->threads > 1 ? "s" : "", r->msg);
+}
+
+const char *pb_exe_dir(void)
+{
+    static char dir[PATH_MAX];
+    if (!dir[0]) {
+        ssize_t n = readlink("/proc/self/exe", dir, sizeof dir - 1);
+        if (n <= 0) {
+            snprintf(dir, sizeof dir, ".");
+        } else {
+            dir[n] = 0;
+            char *s = strrchr(dir, '/');
+            if (s && s != dir) *s = 0;
+            else snprintf(dir, sizeof dir, "%s", s ? "/" : ".");
+        }
+    }
+    return dir;
+}
+
+/* ---- the command line ---- */
+
+typedef struct {
+    int all, csv, have_scene;
+    const char *scene;
+    long particles, steps;
+    int threads, have_threads, have_method, have_update;
+    mpm_method method;
+    mpm_update update;
+} opts;
+
+static int parse_long(const char *flag, const char *s, long lo, long hi, long *out)
+{
+    char *end;
+    errno = 0;
+    double d = strtod(s, &end); /* accepts 1e6 */
+    if (errno || end == s || *end || d < (double)lo || d > (double)hi || d != (double)(long)d) {
+        fprintf(stderr, "mpmbench: %s: expected a whole number in [%ld, %ld], got '%s'\n", flag,
+                lo, hi, s);
+        return -1;
+    }
+    *out = (long)d;
+    return 0;
+}
+
+static int parse_args(int argc, char **argv, opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->threads = 2;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+            fputs(usage, stdout);
+            return 1;
+        }
+        if (!strcmp(a, "--csv")) {
+            o->csv = 1;
+            continue;
+        }
+        if (!strcmp(a, "--all")) {
+            o->all = 1;
+            continue;
+        }
+        int known = !strcmp(a, "--scene") || !strcmp(a, "--particles") || !strcmp(a, "--steps") ||
+                    !strcmp(a, "--threads") || !strcmp(a, "--method") || !strcmp(a, "--update");
+        if (!known) {
+            fprintf(stderr, "mpmbench: unknown option '%s' (see --help)\n", a);
+            return -1;
+        }
+        if (i + 1 >= argc) {
+            fprintf(stderr, "mpmbench: %s needs a value (see --help)\n", a);
+            return -1;
+        }
+        const char *v = argv[++i];
+        long x;
+        if (!strcmp(a, "--scene")) {
+            static const char *const names[] = {"disks2d", "cube3d", "bar1d", "sparse2d", "daemon"};
+            int ok = 0;
+            for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) ok |= !strcmp(v, names[k]);
+            if (!ok) {
+                fprintf(stderr, "mpmbench: --scene: expected disks2d, cube3d, bar1d, sparse2d or "
+                        "daemon, got '%s'\n", v);
+                return -1;
+            }
+            o->scene = v;
+            o->have_scene = 1;
+        } else if (!strcmp(a, "--particles")) {
+            if (parse_long(a, v, PB_MIN_PARTICLES, PB_MAX_PARTICLES, &o->particles)) return -1;
+        } else if (!strcmp(a, "--steps")) {
+            if (parse_long(a, v, 1, PB_MAX_STEPS, &o->steps)) return -1;
+        } else if (!strcmp(a, "--threads")) {
+            if (parse_long(a, v, 1, MPM_MAX_THREADS, &x)) return -1;
+            o->threads = (int)x;
+            o->have_threads = 1;
+        } else if (!strcmp(a, "--method")) {
+            if (!strcmp(v, "mpm")) o->method = MPM_METHOD_MPM;
+            else if (!strcmp(v, "gimp")) o->method = MPM_METHOD_GIMP;
+            else {
+                fprintf(stderr, "mpmbench: --method: expected mpm or gimp, got '%s'\n", v);
+                return -1;
+            }
+            o->have_method = 1;
+        } else {
+            if (!strcmp(v, "usf")) o->update = MPM_USF;
+            else if (!strcmp(v, "usl")) o->update = MPM_USL;
+            else if (!strcmp(v, "musl")) o->update = MPM_MUSL;
+            else {
+                fprintf(stderr, "mpmbench: --update: expected usf, usl or musl, got '%s'\n", v);
+                return -1;
+            }
+            o->have_update = 1;
+        }
+    }
+    if (o->all && (o->have_scene || o->have_threads || o->have_method || o->have_update)) {
+        fprintf(stderr, "mpmbench: --all runs every scene, method and thread count; it takes "
+                "only --particles, --steps and --csv\n");
+        return -1;
+    }
+    if (!o->all && !o->have_scene) {
+        fprintf(stderr, "mpmbench: give --scene NAME or --all (see --help)\n");
+        return -1;
+    }
+    if (o->have_scene && !strcmp(o->scene, "daemon") && o->particles > 10000000L) {
+        fprintf(stderr, "mpmbench: --particles: the daemon scene takes at most 10000000 "
+                "(the daemon's case limit), got %ld\n", o->particles);
+        return -1;
+    }
+    return 0;
+}
+
+/* ---- running ---- */
+
+static int measure(const pb_cfg *c, pb_row *r)
+{
+    pb_progress("%s%s %s %s, %d thread%s", pb_scene_name(c->scene), PB_SUFFIX,
+                pb_method_name(c->method), pb_update_name(c->update), c->threads,
+                c->threads > 1 ? "s" : "");
+    if (pb_measure(c, r)) {
+        row_failed(r);
+        return -1;
+    }
+    pb_emit(r);
+    return 0;
+}
+
+static const char *verdict(int ok)
+{
+    return ok ? "ok" : "MISSED";
+}
+
+static void sparse_ratio(const pb_row *wide, const pb_row *tight)
+{
+    double q = tight->mpsteps > 0 ? wide->mpsteps / tight->mpsteps : 0;
+    pb_result("sparse2d %s %s, %d thread%s: 4096^2 grid / tight grid = %.3f (target >= 0.8): %s",
+              pb_method_name(wide->method), pb_update_name(wide->update), wide->threads,
+              wide->threads > 1 ? "s" : "", q, verdict(q >= 0.8));
+}
+
+static int run_one(const opts *o)
+{
+    pb_cfg c = {PB_DISKS2D, o->method, o->update, o->particles, o->steps, o->threads};
+    pb_row r, r2;
+    if (!strcmp(o->scene, "daemon")) {
+#if PB_LEAN
+        fprintf(stderr, "mpmbench: the daemon scene is not in the lean build (bin/mpmbench has it)\n");
+        return 1;
+#else
+        return pb_daemon_scene(o->method, o->update, o->particles, o->steps, o->threads) ? 1 : 0;
+#endif
+    }
+    if (!strcmp(o->scene, "sparse2d")) {
+        c.scene = PB_SPARSE_WIDE;
+        if (measure(&c, &r)) return 1;
+        c.scene = PB_SPARSE_TIGHT;
+        c.steps = r.steps; /* the same work in both */
+        if (measure(&c, &r2)) return 1;
+        sparse_ratio(&r, &r2);
+        return 0;
+    }
+    c.scene = !strcmp(o->scene, "cube3d") ? PB_CUBE3D : !strcmp(o->scene, "bar1d") ? PB_BAR1D
+                                                                                   : PB_DISKS2D;
+    return measure(&c, &r) ? 1 : 0;
+}
+
+/* Runs bin/mpmbench-lean on one disks2d configuration and reads its CSV
+ * row (it appends the row to the CSV file itself).  Returns 0, -1 on
+ * failure, 1 when the lean binary is not there. */
+static int run_lean(const pb_cfg *c, long steps, pb_row *r)
+{
+    char path[PATH_MAX + 32];
+    const char *env = getenv("MPMBENCH_LEAN");
+    if (env && *env) snprintf(path, sizeof path, "%s", env);
+    else snprintf(path, sizeof path, "%s/mpmbench-lean", pb_exe_dir());
+    if (access(path, X_OK)) return 1;
+    char sthreads[16], ssteps[32], sparts[32];
+    snprintf(sthreads, sizeof sthreads, "%d", c->threads);
+    snprintf(ssteps, sizeof ssteps, "%ld", steps);
+    snprintf(sparts, sizeof sparts, "%ld", c->particles ? c->particles : 1000000L);
+    char *argv[] = {path, "--scene", "disks2d", "--method",
+                    c->method == MPM_METHOD_GIMP ? "gimp" : "mpm", "--update",
+                    c->update == MPM_USL ? "usl" : c->update == MPM_MUSL ? "musl" : "usf",
+                    "--threads", sthreads, "--steps", ssteps, "--particles", sparts, "--csv", NULL};
+    int fds[2];
+    if (pipe(fds)) {
+        snprintf(r->msg, sizeof r->msg, "pipe: %.200s", strerror(errno));
+        return -1;
+    }
+    fflush(NULL);
+    pid_t pid = fork();
+    if (pid < 0) {
+        snprintf(r->msg, sizeof r->msg, "fork: %.200s", strerror(errno));
+        close(fds[0]);
+        close(fds[1]);
+        return -1;
+    }
+    if (pid == 0) {
+        close(fds[0]);
+        if (dup2(fds[1], STDOUT_FILENO) < 0) _exit(127);
+        close(fds[1]);
+        execv(path, argv);
+        fprintf(stderr, "mpmbench: cannot run %s: %s\n", path, strerror(errno));
+        _exit(127);
+    }
+    close(fds[1]);
+    char out[4096];
+    size_t n = 0;
+    for (;;) {
+        ssize_t k = read(fds[0], out + n, sizeof out - 1 - n);
+        if (k < 0 && errno == EINTR) continue;
+        if (k <= 0) break;
+        n += (size_t)k;
+        if (n == sizeof out - 1) break;
+    }
+    out[n] = 0;
+    close(fds[0]);
+    int st = 0;
+    while (waitpid(pid, &st, 0) < 0 && errno == EINTR) {}
+    if (!WIFEXITED(st) || WEXITSTATUS(st)) {
+        snprintf(r->msg, sizeof r->msg, "%.200s failed (status %d)", path,
+                 WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st));
+        return -1;
+    }
+    for (char *line = strtok(out, "\n"); line; line = strtok(NULL, "\n")) {
+        char scene[40], meth[8], upd[8];
+        memset(r, 0, sizeof *r);
+        if (sscanf(line, "%39[^,],%7[^,],%7[^,],%d,%zu,%zu,%ld,%d,%lf,%lf,%lf", scene, meth, upd,
+                   &r->dim, &r->particles, &r->nodes, &r->steps, &r->threads, &r->wall_s,
+                   &r->mpsteps, &r->bytes_pp) == 11 &&
+            strcmp(scene, "scene")) {
+            snprintf(r->scene, sizeof r->scene, "%s", scene);
+            r->method = strcmp(meth, "GIMP") ? MPM_METHOD_MPM : MPM_METHOD_GIMP;
+            r->update = !strcmp(upd, "USL") ? MPM_USL : !strcmp(upd, "MUSL") ? MPM_MUSL : MPM_USF;
+            r->runs = 1; /* the spread is not in the CSV */
+            return 0;
+        }
+    }
+    snprintf(r->msg, sizeof r->msg, "%.200s printed no CSV row", path);
+    return -1;
+}
+
+static double load_avg(void)
+{
+    double l = -1;
+    FILE *f = fopen("/proc/loadavg", "r");
+    if (f) {
+        if (fscanf(f, "%lf", &l) != 1) l = -1;
+        fclose(f);
+    }
+    return l;
+}
+
+static void machine_info(void)
+{
+    char model[256] = "unknown CPU", line[512];
+    FILE *f = fopen("/proc/cpuinfo", "r");
+    if (f) {
+        while (fgets(line, sizeof line, f))
+            if (!strncmp(line, "model name", 10)) {
+                char *c = strchr(line, ':');
+                if (c) {
+                    c++;
+                    while (*c == ' ') c++;
+                    c[strcspn(c, "\n")] = 0;
+                    snprintf(model, sizeof model, "%s", c);
+                }
+                break;
+            }
+        fclose(f);
+    }
+    long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+    time_t now = time(NULL);
+    char when[64];
+    strftime(when, sizeof when, "%Y-%m-%d %H:%M", localtime(&now));
+    pb_note("mpmbench%s: %s, %ld CPU(s) online, load average %.2f, %s", PB_SUFFIX, model, ncpu,
+            load_avg(), when);
+}
+
+static void preamble(void)
+{
+    machine_info();
+    long base = pb_baseline_rss_kb();
+    pb_note("Mpsteps/s: millions of particle-steps per second, the median of %d timed runs after a "
+            "warm-up run of", PB_RUNS);
+    pb_note("  the same length (the range of the timed runs follows the row); steps default to "
+            "~%.0f s per run at", PB_RUN_S);
+    pb_note("  the issue's target speed (2D MPM 30, GIMP 12; 3D MPM 16, GIMP 3; 1D assumed 60/30).");
+    pb_note("B/part: peak RSS of a forked child that builds and runs only that configuration "
+            "(ru_maxrss via");
+    pb_note("  wait4), divided by the particles; a child that exits at once peaks at %ld KB. "
+            "Daemon rows: the peak", base);
+    pb_note("  RSS of that row's own mpmd process.");
+    pb_note("cpu: CPU time over wall time of the timed runs (all threads; daemon rows: the whole "
+            "mpmd), i.e. the");
+    pb_note("  CPUs kept busy: below the thread count when the solver waits in serial parts, or "
+            "when other");
+    pb_note("  processes take the CPUs (the load average above counts them).");
+}
+
+static int run_all(const opts *o)
+{
+    static const pb_scene scenes[] = {PB_DISKS2D, PB_CUBE3D, PB_BAR1D};
+    static const mpm_method methods[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP};
+    int failures = 0;
+    pb_row rows[3][2][2]; /* scene, method, threads-1 */
+    int ok[3][2][2];
+    memset(ok, 0, sizeof ok);
+    collecting = 1;
+    preamble();
+    for (int s = 0; s < 3; s++)
+        for (int m = 0; m < 2; m++)
+            for (int t = 0; t < 2; t++) {
+                pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles, o->steps, t + 1};
+                ok[s][m][t] = measure(&c, &rows[s][m][t]) == 0;
+                failures += !ok[s][m][t];
+            }
+    pb_note("%s", "");
+    for (int s = 0; s < 3; s++)
+        for (int m = 0; m < 2; m++) {
+            if (!ok[s][m][0] || !ok[s][m][1]) continue;
+            double q = rows[s][m][0].mpsteps > 0 ? rows[s][m][1].mpsteps / rows[s][m][0].mpsteps : 0;
+            pb_result("%s %s: 1 -> 2 threads %.2fx (target >= 1.7x): %s", pb_scene_name(scenes[s]),
+                      pb_method_name(methods[m]), q, verdict(q >= 1.7));
+        }
+    for (int s = 0; s < 2; s++) /* disks2d, cube3d: speed and memory targets */
+        for (int m = 0; m < 2; m++) {
+            int dim = pb_scene_dim(scenes[s]);
+            double target = pb_target_rate(dim, methods[m]), limit = dim == 3 ? 300 : 200;
+            if (ok[s][m][1]) {
+                const pb_row *r = &rows[s][m][1];
+                pb_result("%s %s, 2 threads: %.2f M particle-steps/s (target >= %.0f): %s (%.2f of "
+                          "target)", pb_scene_name(scenes[s]), pb_method_name(methods[m]),
+                          r->mpsteps, target, verdict(r->mpsteps >= target), r->mpsteps / target);
+            }
+            double worst = 0;
+            for (int t = 0; t < 2; t++)
+                if (ok[s][m][t] && rows[s][m][t].bytes_pp > worst) worst = rows[s][m][t].bytes_pp;
+            if (worst > 0)
+                pb_result("%s %s: %.0f bytes/particle at most (limit %.0f in %dD): %s",
+                          pb_scene_name(scenes[s]), pb_method_name(methods[m]), worst, limit, dim,
+                          verdict(worst <= limit));
+        }
+    pb_note("%s", "");
+
+    /* sparse2d: the wide grid, then the tight one with the same steps */
+    for (int m = 0; m < 2; m++)
+        for (int t = 1; t <= 2; t++) {
+            pb_row w, ti;
+            pb_cfg c = {PB_SPARSE_WIDE, methods[m], MPM_USF, 0, o->steps, t};
+            if (o->particles && o->particles <= 1000000L) c.particles = o->particles;
+            if (measure(&c, &w)) {
+                failures++;
+                continue;
+            }
+            c.scene = PB_SPARSE_TIGHT;
+            c.steps = w.steps;
+            if (measure(&c, &ti)) {
+                failures++;
+                continue;
+            }
+            sparse_ratio(&w, &ti);
+        }
+    pb_note("%s", "");
+
+    /* the lean build on disks2d, next to a fresh normal run of the same steps */
+    for (int m = 0; m < 2; m++) {
+        pb_row nr, lr;
+        pb_cfg c = {PB_DISKS2D, methods[m], MPM_USF, o->particles, o->steps, 1};
+        if (measure(&c, &nr)) {
+            failures++;
+            continue;
+        }
+        pb_progress("disks2d-lean %s USF, 1 thread", pb_method_name(methods[m]));
+        int rc = run_lean(&c, nr.steps, &lr);
+        if (rc == 1) {
+            pb_result("lean build: bin/mpmbench-lean not found next to this program (or in "
+                      "MPMBENCH_LEAN); `make bin/mpmbench-lean` builds it");
+            break;
+        }
+        if (rc) {
+            fprintf(stderr, "mpmbench: lean run: %s\n", lr.msg);
+            failures++;
+            continue;
+        }
+        show_row(&lr);
+        pb_result("disks2d %s, 1 thread: lean / normal = %.3f (a feature unused should cost "
+                  "nothing: ~1.0)", pb_method_name(methods[m]),
+                  nr.mpsteps > 0 ? lr.mpsteps / nr.mpsteps : 0);
+    }
+    pb_note("%s", "");
+
+    /* the daemon */
+#if PB_LEAN
+    pb_note("daemon scene: not in the lean build");
+#else
+    if (pb_daemon_scene(MPM_METHOD_MPM, MPM_USF, o->particles > 10000000L ? 10000000L : o->particles,
+                        o->steps, 2))
+        failures++;
+#endif
+
+    pb_note("%s", "");
+    pb_note("Summary against the issue's targets (load average now %.2f on %ld CPUs):", load_avg(),
+            sysconf(_SC_NPROCESSORS_ONLN));
+    for (int i = 0; i < nsummary; i++) pb_note("  %s", summary[i]);
+    if (failures) pb_note("  %d configuration(s) failed (see the messages above)", failures);
+    return failures ? 1 : 0;
+}
+
+int main(int argc, char **argv)
+{
+    opts o;
+    signal(SIGPIPE, SIG_IGN); /* a dead child's pipe is an error, not a death */
+    int rc = parse_args(argc, argv, &o);
+    if (rc) return rc > 0 ? 0 : 2;
+    csv_mode = o.csv;
+    if (o.all) {
+        rc = run_all(&o);
+    } else {
+        if (!csv_mode) preamble();
+        rc = run_one(&o);
+    }
+    for (int i = 0; i < nsummary; i++) free(summary[i]);
+    return rc;
+}
