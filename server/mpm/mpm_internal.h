@@ -94,6 +94,7 @@ struct mpm_sim {
     double *load_f[3];
     double *load_xold[3];
     double external_work;
+    double external_work_abs;      /* sum of |f . dx|: the guard's bound */
     /* mpm_sim_set_particle_forces(): once called, one load slot per
      * particle (load_p[i] = i) and trac_f keeps the tractions' shares */
     int pforces;

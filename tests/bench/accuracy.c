@@ -444,7 +444,7 @@ static void print_candidates(const int *only)
         for (int u = 0; u < 3; u++) {
             char lab[32];
             snprintf(lab, sizeof lab, "%s %s%s", bench_method_name((mpm_method)m),
-                     bench_update_name((mpm_update)u), m == 0 && u == 0 ? " (now)" : "");
+                     bench_update_name((mpm_update)u), m == 1 && u == 2 ? " (dflt)" : "");
             printf("%-16s", lab);
             for (int pb = 0; pb < BP_COUNT; pb++) {
                 if (only && !only[pb]) continue;
