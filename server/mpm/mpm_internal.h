@@ -19,7 +19,9 @@
 #include <stdatomic.h>
 
 /* Stress and strain components stored per dimension: 1D xx; 2D plane strain
- * xx yy zz xy; 3D xx yy zz xy yz xz.  Component c is the Voigt index c. */
+ * xx yy zz xy; 3D xx yy zz xy yz xz.  Component c is the Voigt index c.  In
+ * 2D plane strain eps_zz is identically zero and nothing reads it, so
+ * P.eps[2] is not allocated (NULL); sigma_zz is kept for the pressure. */
 #define MPM_NCOMP(dim) ((dim) == 1 ? 1 : (dim) == 2 ? 4 : 6)
 
 /* Particle block size for the constitutive update (scratch per thread). */
@@ -30,7 +32,7 @@ typedef struct {
     double *x[3], *v[3];     /* position, velocity (dim arrays) */
     double *m, *vol;         /* mass, current volume */
     double *lp[3];           /* GMPM half-width per axis (NULL for MPM) */
-    double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays) */
+    double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL) */
     uint16_t *mat;           /* material index */
     uint32_t *id;            /* creation index (particles are kept sorted by cell) */
 } mpm_particles;
@@ -60,6 +62,10 @@ typedef struct {
     void *wblk;            /* MPM_BLOCK per-axis weights (mpm_kernels_scratch bytes) */
     int blo[3], bhi[3];    /* padded nodes touched by the slice's supports
                             * (inclusive; empty: blo > bhi) */
+    int *rlo, *rhi;        /* per row (y + z np[1]): first and last x node
+                            * touched (empty: rlo > rhi); rows outside the
+                            * box blo..bhi are always empty */
+    double ekin, estr, epot; /* the divergence guard's partial energies */
     char pad[64];
 } mpm_thread_out;
 
@@ -123,19 +129,27 @@ struct mpm_sim {
     /* kernels chosen once per job */
     const mpm_kernels *k;
 
-    /* active box: the padded nodes the particles' supports touch (union of
-     * the threads' boxes, inclusive), and that of the previous step; the
-     * grid outside the box is all zero */
+    /* active region: the padded nodes the particles' supports touch.  A row
+     * is the run of nodes along x at fixed (y, z), row index y + z np[1],
+     * first node row * np[0].  ulo/uhi[row] are the first and last x node
+     * the union of the threads' supports touches in that row (empty:
+     * ulo > uhi), and blo..bhi (inclusive) the box of the rows in use; the
+     * main grid is all zero outside the rows' extents */
     int blo[3], bhi[3];
-    int plo[3], phi[3];
+    size_t nrows;                  /* np[1] np[2] */
+    int *ulo, *uhi;
     /* sorting by cell: every MPM_SORT_EVERY steps, stable counting sort
-     * with scratch made at creation */
-    uint32_t *skey, *sperm, *shist;
+     * with scratch made at creation (the keys live in sscr, the cells are
+     * numbered over the rows' extents only: rowoff[row] is the first key of
+     * a row) */
+    uint32_t *sperm, *shist;
+    size_t *rowoff;
     double *sscr;
 
     /* threads */
     int nthreads;
-    mpm_gridbuf *tbuf;             /* per-thread scatter buffers (nthreads > 1) */
+    mpm_gridbuf *tbuf;             /* per-thread scatter buffers (nthreads > 1; thread
+                                    * 0 scatters into g, tbuf[0] stays empty) */
     mpm_thread_out *tout;
     pthread_t *threads;
     pthread_barrier_t bar_start, bar_end;
@@ -168,11 +182,12 @@ struct mpm_kernels {
     void (*g2p_x_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
     /* point forces of the loaded particles, scattered into the main grid */
     void (*scatter_loads)(mpm_sim *);
-    /* support box of particles [p0, p1) into o->blo/bhi, without moving them */
+    /* support box and row extents of particles [p0, p1) into o->blo/bhi
+     * and o->rlo/rhi, without moving them */
     void (*bbox)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
-    /* sort keys: cell of each particle relative to lo, row-major over ext */
-    void (*cell_keys)(const mpm_sim *, uint32_t *key, const int lo[3], const int ext[3],
-                      size_t p0, size_t p1);
+    /* sort keys: cell (x, row) of each particle numbered row-major over
+     * the rows' extents, rowoff[row] + x - ulo[row] */
+    void (*cell_keys)(const mpm_sim *, uint32_t *key, size_t p0, size_t p1);
 };
 
 /* The family of dimension dim with ns nodes per axis: 2 (MPM), 3 (uGIMP,

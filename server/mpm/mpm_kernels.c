@@ -35,8 +35,9 @@
  *   and sum G_bar = 0 telescope exactly.
  *
  * The passes that move the particles also record, per thread, the box of
- * padded nodes that the new positions' supports touch; the step zeroes,
- * reduces and updates only that box (mpm_sim.c).
+ * padded nodes that the new positions' supports touch and, for each row of
+ * nodes along x, the first and last node touched; the step zeroes, reduces
+ * and updates only those rows' extents (mpm_sim.c).
  */
 /* the fixed-trip node loops want complete unrolling (the -O3 kind) */
 #if defined(__GNUC__) && !defined(__clang__)
@@ -122,19 +123,105 @@ INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, pw *o)
     o->base = base;
 }
 
-/* First node of the support along each axis for the current position of
- * p, merged into the thread's box.  A position outside the grid (the step
- * then fails) or not finite is clamped, never converted as is. */
-INLINE void box_add(const mpm_sim *s, mpm_thread_out *o, size_t p, int D, int NS)
+/* Cell of p along axis d (trunc of r), clamped to the padded grid: a
+ * position outside the grid (the step then fails) or not finite is
+ * clamped, never converted as is. */
+INLINE int cell_of(const mpm_sim *s, size_t p, int d, double *rr)
 {
+    double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+    double rmax = (double)(s->np[d] - 1);
+    r = r >= 0 ? (r < rmax ? r : rmax) : 0.0;
+    *rr = r;
+    return (int)r;
+}
+
+/* The supports of the particles a pass moves, recorded as runs: sorted
+ * particles come row of cells by row of cells, so consecutive particles in
+ * the same row of cells (cy, cz) share a run whose node box (x: extent,
+ * y and z: rows) grows in registers, and only a finished run is merged
+ * into the thread's box and row extents.  A run's rows get the run's whole
+ * x extent: with 3-node uGIMP this can add a node row's worth of extent
+ * to a neighbouring row (a superset is harmless: the extents only say what
+ * to zero, reduce and update). */
+typedef struct {
+    int cy, cz;          /* row of cells of the run (cy = INT_MIN: none) */
+    int lo[3], hi[3];    /* its node box, clamped to the padded grid */
+} rowrun;
+
+INLINE void run_init(rowrun *a)
+{
+    a->cy = INT_MIN;
+    a->cz = 0;
+    for (int d = 0; d < 3; d++) a->lo[d] = a->hi[d] = 0;
+}
+
+INLINE void run_flush(const mpm_sim *s, mpm_thread_out *o, rowrun *a, int D)
+{
+    if (a->cy == INT_MIN) return;
+    /* clamped here, once per run: the cells are, the supports may reach a
+     * node beyond the padded grid only when the step fails */
     for (int d = 0; d < D; d++) {
-        double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
-        double rmax = (double)(s->np[d] - 1);
-        r = r >= 0 ? (r < rmax ? r : rmax) : 0.0;
-        int c = (int)r;
-        int n0 = NS == 2 ? c : NS == 4 ? c - 1 : c - 1 + (r - c >= 0.5);
-        if (n0 < o->blo[d]) o->blo[d] = n0;
-        if (n0 + NS - 1 > o->bhi[d]) o->bhi[d] = n0 + NS - 1;
+        if (a->lo[d] < 0) a->lo[d] = 0;
+        if (a->hi[d] > s->np[d] - 1) a->hi[d] = s->np[d] - 1;
+        if (a->lo[d] < o->blo[d]) o->blo[d] = a->lo[d];
+        if (a->hi[d] > o->bhi[d]) o->bhi[d] = a->hi[d];
+    }
+    int *restrict rlo = o->rlo, *restrict rhi = o->rhi;
+    size_t ny = (size_t)s->np[1];
+    int z0 = D > 2 ? a->lo[2] : 0, z1 = D > 2 ? a->hi[2] : 0;
+    int y0 = D > 1 ? a->lo[1] : 0, y1 = D > 1 ? a->hi[1] : 0;
+    for (int z = z0; z <= z1; z++)
+        for (int y = y0; y <= y1; y++) {
+            size_t r = (size_t)y + (size_t)z * ny;
+            if (a->lo[0] < rlo[r]) rlo[r] = a->lo[0];
+            if (a->hi[0] > rhi[r]) rhi[r] = a->hi[0];
+        }
+    a->cy = INT_MIN;
+}
+
+/* Constants of box_add(), in locals so that the stores to the particles
+ * do not make the loop reload them. */
+typedef struct {
+    double x0[3], ih[3], rmax[3];
+} boxc;
+
+INLINE void boxc_init(const mpm_sim *s, boxc *b)
+{
+    for (int d = 0; d < 3; d++) {
+        b->x0[d] = s->x0[d];
+        b->ih[d] = s->inv_h[d];
+        b->rmax[d] = (double)(s->np[d] - 1);
+    }
+}
+
+/* The support of a particle at x, added to the current run (or starting a
+ * new one).  The cell is clamped to the padded grid as in cell_of(); the
+ * support's first and last nodes (n0 - 1 .. n0 + 2 at most) are clamped
+ * when the run is flushed.  Within a run the rows of the support change
+ * only with 3-node uGIMP. */
+INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *a,
+                    const double x[3], int D, int NS)
+{
+    int c[3] = {0, 0, 0}, n0[3] = {0, 0, 0};
+    for (int d = 0; d < D; d++) {
+        double r = (x[d] - b->x0[d]) * b->ih[d];
+        r = r >= 0 ? (r < b->rmax[d] ? r : b->rmax[d]) : 0.0;
+        c[d] = (int)r;
+        n0[d] = NS == 2 ? c[d] : NS == 4 ? c[d] - 1 : c[d] - 1 + (r - c[d] >= 0.5);
+    }
+    if (c[1] != a->cy || (D > 2 && c[2] != a->cz)) {
+        run_flush(s, o, a, D);
+        a->cy = c[1];
+        a->cz = c[2];
+        for (int d = 0; d < D; d++) {
+            a->lo[d] = n0[d];
+            a->hi[d] = n0[d] + NS - 1;
+        }
+        return;
+    }
+    for (int d = 0; d < (NS == 3 ? D : 1); d++) {
+        a->lo[d] = n0[d] < a->lo[d] ? n0[d] : a->lo[d];
+        a->hi[d] = n0[d] + NS - 1 > a->hi[d] ? n0[d] + NS - 1 : a->hi[d];
     }
 }
 
@@ -353,9 +440,19 @@ INLINE void check_particle(const mpm_sim *s, mpm_thread_out *o, size_t p, int D)
     if (!ok && o->bad == SIZE_MAX) o->bad = p;
 }
 
-/* Empty box (axes the grid lacks: node 0) */
-INLINE void box_reset(mpm_thread_out *o, int D)
+/* Empty box (axes the grid lacks: node 0), and empty rows: only those of
+ * the previous box can be non-empty. */
+INLINE void box_reset(const mpm_sim *s, mpm_thread_out *o, int D)
 {
+    if (o->blo[0] <= o->bhi[0]) {
+        size_t ny = (size_t)s->np[1];
+        for (int z = o->blo[2]; z <= o->bhi[2]; z++)
+            for (int y = o->blo[1]; y <= o->bhi[1]; y++) {
+                size_t r = (size_t)y + (size_t)z * ny;
+                o->rlo[r] = INT_MAX;
+                o->rhi[r] = -1;
+            }
+    }
     for (int d = 0; d < 3; d++) {
         o->blo[d] = d < D ? INT_MAX : 0;
         o->bhi[d] = d < D ? -1 : 0;
@@ -366,19 +463,25 @@ INLINE void box_reset(mpm_thread_out *o, int D)
 INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
     pw W;
+    rowrun a;
+    boxc bc;
     double dt = s->dt;
-    box_reset(o, D);
+    box_reset(s, o, D);
+    run_init(&a);
+    boxc_init(s, &bc);
     for (size_t p = p0; p < p1; p++) {
-        double dx[3], dv[3];
+        double dx[3], dv[3], xn[3];
         weights(s, p, D, NS, &W);
         gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv);
         for (int d = 0; d < D; d++) {
-            s->P.x[d][p] += dt * dx[d];
+            xn[d] = s->P.x[d][p] + dt * dx[d];
+            s->P.x[d][p] = xn[d];
             s->P.v[d][p] += dt * dv[d];
         }
         check_particle(s, o, p, D);
-        box_add(s, o, p, D, NS);
+        box_add(s, &bc, o, &a, xn, D, NS);
     }
+    run_flush(s, o, &a, D);
 }
 
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
@@ -386,24 +489,30 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
     pw W;
+    rowrun a;
+    boxc bc;
     double dt = s->dt;
-    box_reset(o, D);
+    box_reset(s, o, D);
+    run_init(&a);
+    boxc_init(s, &bc);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
-            double dx[3], dv[3];
+            double dx[3], dv[3], xn[3];
             weights(s, p, D, NS, &W);
             gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv);
             for (int d = 0; d < D; d++) {
-                s->P.x[d][p] += dt * dx[d];
+                xn[d] = s->P.x[d][p] + dt * dx[d];
+                s->P.x[d][p] = xn[d];
                 s->P.v[d][p] += dt * dv[d];
             }
             check_particle(s, o, p, D);
-            box_add(s, o, p, D, NS);
+            box_add(s, &bc, o, &a, xn, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
     }
+    run_flush(s, o, &a, D);
 }
 
 INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
@@ -424,44 +533,66 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, 
 INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
     pw W;
+    rowrun a;
+    boxc bc;
     double dt = s->dt;
-    box_reset(o, D);
+    box_reset(s, o, D);
+    run_init(&a);
+    boxc_init(s, &bc);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
-            double dx[3];
+            double dx[3], xn[3];
             weights(s, p, D, NS, &W);
             gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL);
-            for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
+            for (int d = 0; d < D; d++) {
+                xn[d] = s->P.x[d][p] + dt * dx[d];
+                s->P.x[d][p] = xn[d];
+            }
             check_particle(s, o, p, D);
-            box_add(s, o, p, D, NS);
+            box_add(s, &bc, o, &a, xn, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
     }
+    run_flush(s, o, &a, D);
 }
 
 /* The support box of particles [p0, p1) without moving them. */
 INLINE void bbox_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
 {
-    box_reset(o, D);
-    for (size_t p = p0; p < p1; p++) box_add(s, o, p, D, NS);
+    rowrun a;
+    boxc bc;
+    box_reset(s, o, D);
+    run_init(&a);
+    boxc_init(s, &bc);
+    for (size_t p = p0; p < p1; p++) {
+        double x[3] = {0, 0, 0};
+        for (int d = 0; d < D; d++) x[d] = s->P.x[d][p];
+        box_add(s, &bc, o, &a, x, D, NS);
+    }
+    run_flush(s, o, &a, D);
 }
 
-/* Sort key of particle p: its cell (trunc of r) relative to the box lo,
- * row-major over the box extents ext. */
-INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, const int lo[3], const int ext[3],
-                        size_t p0, size_t p1, int D)
+/* Sort key of particle p: its cell (x, row) numbered row-major over the
+ * rows' extents, rowoff[row] + x - ulo[row] (a cell's first node lies in
+ * the extents of its row; clamped all the same). */
+INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, size_t p0, size_t p1, int D)
 {
+    size_t ny = (size_t)s->np[1], nk = s->rowoff[s->nrows];
     for (size_t p = p0; p < p1; p++) {
-        size_t k = 0;
-        for (int d = D - 1; d >= 0; d--) {
-            double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
-            int c = (int)r - lo[d];
-            c = c < 0 ? 0 : c >= ext[d] ? ext[d] - 1 : c;
-            k = k * (size_t)ext[d] + (size_t)c;
+        int c[3] = {0, 0, 0};
+        for (int d = 0; d < D; d++) {
+            double r;
+            c[d] = cell_of(s, p, d, &r);
         }
-        key[p] = (uint32_t)k;
+        for (int d = 1; d < 3; d++) c[d] = c[d] < s->blo[d] ? s->blo[d] : c[d] > s->bhi[d] ? s->bhi[d] : c[d];
+        size_t row = (size_t)c[1] + (size_t)c[2] * ny;
+        int lo = s->ulo[row], w = s->uhi[row] - lo;
+        int x = c[0] - lo;
+        x = x < 0 ? 0 : x > w ? (w > 0 ? w : 0) : x;
+        size_t k = s->rowoff[row] + (size_t)x;
+        key[p] = (uint32_t)(k < nk ? k : nk - 1);
     }
 }
 
@@ -513,9 +644,8 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     LOADS(D, NS)                                                                               \
     static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)             \
     { bbox_t(s, o, a, b, D, NS); }                                                             \
-    static void cell_keys_##D##_##NS(const mpm_sim *s, uint32_t *key, const int lo[3],         \
-                                     const int ext[3], size_t a, size_t b)                     \
-    { cell_keys_t(s, key, lo, ext, a, b, D); }                                                 \
+    static void cell_keys_##D##_##NS(const mpm_sim *s, uint32_t *key, size_t a, size_t b)      \
+    { cell_keys_t(s, key, a, b, D); }                                                          \
     static const mpm_kernels family_##D##_##NS = {                                             \
         p2g_mq_##D##_##NS, p2g_mqf_##D##_##NS, p2g_q2_##D##_##NS, stress_force_##D##_##NS,     \
         g2p_xv_##D##_##NS, g2p_xv_stress_##D##_##NS, g2p_v_##D##_##NS,                         \

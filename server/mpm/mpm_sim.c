@@ -19,16 +19,20 @@
  * give no velocity (Fig. 7) and no update (Fig. 6).
  *
  * Threads: a team of nthreads (the caller's thread is thread 0) runs each
- * particle pass on a fixed contiguous slice of the particles, scattering
- * into a private grid per thread; node passes then sum the private grids in
- * thread order.  The same case with the same thread count is therefore
- * bitwise reproducible; a different thread count changes the order of the
- * sums and so the last bits.  Nothing is allocated inside a step.
+ * particle pass on a fixed contiguous slice of the particles, thread 0
+ * scattering into the grid and the others into a private grid each; node
+ * passes then sum the private grids in thread order.  The divergence
+ * guard's energy sums run on the team too, combined in thread order.  The
+ * same case with the same thread count is therefore bitwise reproducible;
+ * a different thread count changes the order of the sums and so the last
+ * bits.  Nothing is allocated inside a step.
  *
- * Cost follows the particles, not the grid: the particle passes record the
- * box of nodes their supports touch, and zeroing, reduction, node updates
- * and boundary conditions run over that box only (the grid outside it stays
- * zero).  Particles are kept sorted by cell (every MPM_SORT_EVERY steps, a
+ * Cost and memory follow the particles, not the grid: the particle passes
+ * record, row by row (a row: the nodes along x at fixed y, z), the extent
+ * of nodes their supports touch, and zeroing, reduction, node updates and
+ * boundary conditions run over those extents only (the grid outside them
+ * stays zero, and pages of the grids that no particle reaches are never
+ * touched).  Particles are kept sorted by cell (every MPM_SORT_EVERY steps, a
  * stable counting sort), with P.id mapping storage slots to creation order
  * for everything public.  Built with -DMPM_LEAN, gravity, loads and fixed
  * boundaries are compiled out and cases using them are refused.
@@ -96,8 +100,10 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int gimp)
         if (!(P->x[d] = dalloc(n)) || !(P->v[d] = dalloc(n))) return MPM_ENOMEM;
         if (gimp && !(P->lp[d] = dalloc(n))) return MPM_ENOMEM;
     }
-    for (int c = 0; c < MPM_NCOMP(dim); c++)
-        if (!(P->sig[c] = dalloc(n)) || !(P->eps[c] = dalloc(n))) return MPM_ENOMEM;
+    for (int c = 0; c < MPM_NCOMP(dim); c++) {
+        if (!(P->sig[c] = dalloc(n))) return MPM_ENOMEM;
+        if (!(dim == 2 && c == 2) && !(P->eps[c] = dalloc(n))) return MPM_ENOMEM; /* eps_zz = 0 */
+    }
     if (!(P->m = dalloc(n)) || !(P->vol = dalloc(n))) return MPM_ENOMEM;
     if (!(P->mat = calloc(n ? n : 1, sizeof *P->mat))) return MPM_ENOMEM;
     if (!(P->id = malloc((n ? n : 1) * sizeof *P->id))) return MPM_ENOMEM;
@@ -152,13 +158,15 @@ static void run(mpm_sim *s, phase_fn fn)
     pthread_barrier_wait(&s->bar_end);
 }
 
-/* ---- the active box ----
+/* ---- the active rows ----
  *
- * Particle passes scatter only into the box of nodes their supports touch:
- * each thread zeroes its private grid over its own box before scattering,
- * node passes run over the rows of the union box G (split among the
- * threads by rows), and the grid outside G is kept all zero, so the cost of
- * a step follows the particles, not the grid. */
+ * Particle passes scatter only into the nodes their supports touch, and
+ * record them row by row (a row: the nodes along x at fixed y, z): each
+ * thread zeroes its private grid over its own rows' extents before
+ * scattering, node passes run over the extents of the union (the rows of
+ * the union box split among the threads), and the main grid outside the
+ * union's extents is kept all zero.  The cost of a step, and the pages of
+ * the grids ever touched, follow the particles, not the grid. */
 
 /* rows (y, z) of box lo..hi (inclusive); 0 when empty */
 static size_t box_rows(const int lo[3], const int hi[3])
@@ -167,21 +175,28 @@ static size_t box_rows(const int lo[3], const int hi[3])
     return (size_t)(hi[1] - lo[1] + 1) * (size_t)(hi[2] - lo[2] + 1);
 }
 
-/* flat index of node (lo[0], y, z) of row r of the box */
-static size_t box_row(const mpm_sim *s, const int lo[3], const int hi[3], size_t r, int *y, int *z)
+/* row index (y + z np[1]) of row r of box lo..hi */
+static size_t box_row(const mpm_sim *s, const int lo[3], const int hi[3], size_t r)
 {
     size_t ny = (size_t)(hi[1] - lo[1] + 1);
-    *y = lo[1] + (int)(r % ny);
-    *z = lo[2] + (int)(r / ny);
-    return (size_t)*y * s->stride[1] + (size_t)*z * s->stride[2] + (size_t)lo[0];
+    size_t y = (size_t)lo[1] + r % ny, z = (size_t)lo[2] + r / ny;
+    return y + z * (size_t)s->np[1];
 }
 
-static void zero_box(const mpm_sim *s, double *a, const int lo[3], const int hi[3])
+/* flat index of node x of row `row` */
+static size_t row_node(const mpm_sim *s, size_t row, int x)
 {
-    size_t nr = box_rows(lo, hi), w = (size_t)(hi[0] - lo[0] + 1);
+    return row * (size_t)s->np[0] + (size_t)x;
+}
+
+/* Zeroes a thread's private field over the extents of its rows. */
+static void zero_rows(const mpm_sim *s, double *a, const mpm_thread_out *o)
+{
+    size_t nr = box_rows(o->blo, o->bhi);
     for (size_t r = 0; r < nr; r++) {
-        int y, z;
-        memset(a + box_row(s, lo, hi, r, &y, &z), 0, w * sizeof *a);
+        size_t row = box_row(s, o->blo, o->bhi, r);
+        int lo = o->rlo[row], hi = o->rhi[row];
+        if (lo <= hi) memset(a + row_node(s, row, lo), 0, (size_t)(hi - lo + 1) * sizeof *a);
     }
 }
 
@@ -198,31 +213,8 @@ static int grid_fields(const mpm_sim *s, const mpm_gridbuf *b, double **out)
     return k;
 }
 
-/* Zeroes the nodes of box o (the previous step's) outside box n in every
- * field of the main grid. */
-static void zero_outside(mpm_sim *s, const int olo[3], const int ohi[3], const int nlo[3],
-                         const int nhi[3])
-{
-    int inside = 1;
-    for (int d = 0; d < 3; d++) inside &= olo[d] >= nlo[d] && ohi[d] <= nhi[d];
-    if (inside || !box_rows(olo, ohi)) return;
-    double *f[10];
-    int nf = grid_fields(s, &s->g, f);
-    size_t nr = box_rows(olo, ohi);
-    int empty = !box_rows(nlo, nhi);
-    for (size_t r = 0; r < nr; r++) {
-        int y, z;
-        size_t b = box_row(s, olo, ohi, r, &y, &z) - (size_t)olo[0];
-        int in = !empty && y >= nlo[1] && y <= nhi[1] && z >= nlo[2] && z <= nhi[2];
-        for (int x = olo[0]; x <= ohi[0]; x++) {
-            if (in && x >= nlo[0] && x <= nhi[0]) continue;
-            for (int i = 0; i < nf; i++) f[i][b + (size_t)x] = 0.0;
-        }
-    }
-}
-
-/* G = the union of the threads' boxes, clamped to the padded grid */
-static void union_box(mpm_sim *s, int lo[3], int hi[3])
+/* box lo..hi = the union of the threads' boxes (clamped when recorded) */
+static void union_box(const mpm_sim *s, int lo[3], int hi[3])
 {
     for (int d = 0; d < 3; d++) {
         lo[d] = d < s->dim ? INT_MAX : 0;
@@ -236,26 +228,69 @@ static void union_box(mpm_sim *s, int lo[3], int hi[3])
             if (o->bhi[d] > hi[d]) hi[d] = o->bhi[d];
         }
     }
-    for (int d = 0; d < s->dim; d++) {
-        if (lo[d] > hi[d]) continue;
-        if (lo[d] < 0) lo[d] = 0;
-        if (hi[d] > s->np[d] - 1) hi[d] = s->np[d] - 1;
-    }
 }
 
-/* The scatter target of thread tid, zeroed over the thread's box for the
- * fields named. */
+/* zeroes nodes a..b (inclusive, possibly none) of a row in the fields f */
+static void zero_span(const mpm_sim *s, double *const *f, int nf, size_t row, int a, int b)
+{
+    if (a > b) return;
+    for (int i = 0; i < nf; i++) memset(f[i] + row_node(s, row, a), 0, (size_t)(b - a + 1) * sizeof(double));
+}
+
+/* Makes the active rows the union of the threads' rows as the last
+ * particle pass recorded them, and zeroes, in every field of the main
+ * grid, the nodes of the old extents outside the new ones (which keeps the
+ * main grid zero outside the active rows).  Serial; the rows visited are
+ * those of the old and the new box. */
+static void update_rows(mpm_sim *s)
+{
+    int lo[3], hi[3], alo[3], ahi[3];
+    union_box(s, lo, hi);
+    int has_old = box_rows(s->blo, s->bhi) > 0, has_new = box_rows(lo, hi) > 0;
+    for (int d = 0; d < 3; d++) {
+        alo[d] = has_old && (!has_new || s->blo[d] < lo[d]) ? s->blo[d] : lo[d];
+        ahi[d] = has_old && (!has_new || s->bhi[d] > hi[d]) ? s->bhi[d] : hi[d];
+    }
+    double *f[10];
+    int nf = grid_fields(s, &s->g, f);
+    size_t nr = has_old || has_new ? box_rows(alo, ahi) : 0;
+    for (size_t r = 0; r < nr; r++) {
+        size_t row = box_row(s, alo, ahi, r);
+        int nlo = INT_MAX, nhi = -1;
+        for (int t = 0; t < s->nthreads; t++) {
+            const mpm_thread_out *o = &s->tout[t];
+            if (o->rlo[row] < nlo) nlo = o->rlo[row];
+            if (o->rhi[row] > nhi) nhi = o->rhi[row];
+        }
+        int olo = s->ulo[row], ohi = s->uhi[row];
+        if (nlo > nhi) {
+            zero_span(s, f, nf, row, olo, ohi);
+        } else {
+            zero_span(s, f, nf, row, olo, ohi < nlo - 1 ? ohi : nlo - 1);
+            zero_span(s, f, nf, row, olo > nhi + 1 ? olo : nhi + 1, ohi);
+        }
+        s->ulo[row] = nlo;
+        s->uhi[row] = nhi;
+    }
+    memcpy(s->blo, lo, sizeof lo);
+    memcpy(s->bhi, hi, sizeof hi);
+}
+
+/* The scatter target of thread tid, zeroed over the thread's rows for the
+ * fields named: thread 0 scatters straight into the main grid (its sums
+ * come first in the reduction anyway), the others into private grids.
+ * While a pass scatters, nobody reads the fields it scatters into. */
 enum { F_M = 1, F_Q = 2, F_F = 4, F_Q2 = 8 };
 
 static mpm_gridbuf *scatter_buf(mpm_sim *s, int tid, int fields)
 {
-    mpm_gridbuf *b = s->nthreads == 1 ? &s->g : &s->tbuf[tid];
-    const int *lo = s->tout[tid].blo, *hi = s->tout[tid].bhi;
-    if (fields & F_M) zero_box(s, b->m, lo, hi);
+    mpm_gridbuf *b = tid == 0 ? &s->g : &s->tbuf[tid];
+    const mpm_thread_out *o = &s->tout[tid];
+    if (fields & F_M) zero_rows(s, b->m, o);
     for (int d = 0; d < s->dim; d++) {
-        if (fields & F_Q) zero_box(s, b->q[d], lo, hi);
-        if (fields & F_F) zero_box(s, b->f[d], lo, hi);
-        if (fields & F_Q2) zero_box(s, b->q2[d], lo, hi);
+        if (fields & F_Q) zero_rows(s, b->q[d], o);
+        if (fields & F_F) zero_rows(s, b->f[d], o);
+        if (fields & F_Q2) zero_rows(s, b->q2[d], o);
     }
     return b;
 }
@@ -266,42 +301,42 @@ static void row_slice(mpm_sim *s, int tid, size_t *a, size_t *b)
 }
 
 /* Sums the private grids of the fields named into the grid over the rows
- * [r0, r1) of G, in thread order (each thread adds only over its box; the
- * rest of its grid is zero there). */
+ * [r0, r1) of the union box, in thread order: the first thread that
+ * touched a row copies its extent (0 + a = a: the same sums as adding
+ * every thread; thread 0's values are in place already) and zeroes the
+ * rest of the row's union extent, the others add theirs (their grids are
+ * zero elsewhere in the row). */
 static void reduce(mpm_sim *s, int fields, size_t r0, size_t r1)
 {
     if (s->nthreads == 1) return;
     int T = s->nthreads;
-    size_t w = (size_t)(s->bhi[0] - s->blo[0] + 1);
     for (size_t r = r0; r < r1; r++) {
-        int y, z;
-        size_t base = box_row(s, s->blo, s->bhi, r, &y, &z);
+        size_t row = box_row(s, s->blo, s->bhi, r);
+        int ulo = s->ulo[row], uhi = s->uhi[row];
+        if (ulo > uhi) continue;
+        size_t base = row_node(s, row, 0), u0 = base + (size_t)ulo, u1 = base + (size_t)uhi;
         for (int pass = 0; pass < 4; pass++) {
             int fl = 1 << pass;
             if (!(fields & fl)) continue;
             for (int d = 0; d < (fl == F_M ? 1 : s->dim); d++) {
-                double *dst = fl == F_M ? s->g.m : fl == F_Q ? s->g.q[d] : fl == F_F ? s->g.f[d] : s->g.q2[d];
+                double *restrict dst = fl == F_M ? s->g.m : fl == F_Q ? s->g.q[d] : fl == F_F ? s->g.f[d] : s->g.q2[d];
                 int first = 1;
                 for (int t = 0; t < T; t++) {
                     const mpm_thread_out *o = &s->tout[t];
-                    if (o->blo[0] > o->bhi[0] || y < o->blo[1] || y > o->bhi[1] || z < o->blo[2] ||
-                        z > o->bhi[2])
-                        continue;
-                    mpm_gridbuf *b = &s->tbuf[t];
-                    const double *src = fl == F_M ? b->m : fl == F_Q ? b->q[d] : fl == F_F ? b->f[d] : b->q2[d];
-                    size_t x0 = base - (size_t)s->blo[0] + (size_t)o->blo[0];
-                    size_t x1 = base - (size_t)s->blo[0] + (size_t)o->bhi[0];
+                    if (o->rlo[row] > o->rhi[row]) continue;
+                    const mpm_gridbuf *b = &s->tbuf[t];
+                    const double *restrict src = fl == F_M ? b->m : fl == F_Q ? b->q[d] : fl == F_F ? b->f[d] : b->q2[d];
+                    size_t x0 = base + (size_t)o->rlo[row], x1 = base + (size_t)o->rhi[row];
                     if (first) {
-                        /* 0 + a = a: the same sums as adding every thread */
-                        for (size_t n = base; n < x0; n++) dst[n] = 0.0;
-                        for (size_t n = x0; n <= x1; n++) dst[n] = src[n];
-                        for (size_t n = x1 + 1; n < base + w; n++) dst[n] = 0.0;
+                        for (size_t n = u0; n < x0; n++) dst[n] = 0.0;
+                        if (t > 0)
+                            for (size_t n = x0; n <= x1; n++) dst[n] = src[n];
+                        for (size_t n = x1 + 1; n <= u1; n++) dst[n] = 0.0;
                         first = 0;
                     } else {
                         for (size_t n = x0; n <= x1; n++) dst[n] += src[n];
                     }
                 }
-                if (first) memset(dst + base, 0, w * sizeof *dst);
             }
         }
     }
@@ -386,22 +421,24 @@ static void ph_bbox(mpm_sim *s, int tid)
     s->k->bbox(s, &s->tout[tid], a, b);
 }
 
-/* Node passes: one function per combination, over the rows [r0, r1) of G:
- * reduce the fields named, then inverse mass with phantom nodes
- * (m <= M_TOL) at 0 (MINV), gravity f += m g (GRAV, sum_p m_p b S_np). */
+/* Node passes: one function per combination, over the extents of the
+ * rows [r0, r1) of the union box: reduce the fields named, then inverse
+ * mass with phantom nodes (m <= M_TOL) at 0 (MINV), gravity f += m g
+ * (GRAV, sum_p m_p b S_np). */
 static void node_rows(mpm_sim *s, int tid, int fields, int minv, int grav)
 {
     size_t r0, r1;
     row_slice(s, tid, &r0, &r1);
     reduce(s, fields, r0, r1);
-    size_t w = (size_t)(s->bhi[0] - s->blo[0] + 1);
     double mtol = s->mtol;
 #ifdef MPM_LEAN
     grav = 0;
 #endif
     for (size_t r = r0; r < r1; r++) {
-        int y, z;
-        size_t base = box_row(s, s->blo, s->bhi, r, &y, &z);
+        size_t row = box_row(s, s->blo, s->bhi, r);
+        int lo = s->ulo[row], hi = s->uhi[row];
+        if (lo > hi) continue;
+        size_t base = row_node(s, row, lo), w = (size_t)(hi - lo + 1);
         if (minv) {
             const double *restrict m = s->g.m + base;
             double *restrict mi = s->minv + base;
@@ -443,11 +480,12 @@ static void ph_node_update(mpm_sim *s, int tid)
 {
     size_t r0, r1;
     row_slice(s, tid, &r0, &r1);
-    size_t w = (size_t)(s->bhi[0] - s->blo[0] + 1);
     double dt = s->dt;
     for (size_t r = r0; r < r1; r++) {
-        int y, z;
-        size_t base = box_row(s, s->blo, s->bhi, r, &y, &z);
+        size_t row = box_row(s, s->blo, s->bhi, r);
+        int lo = s->ulo[row], hi = s->uhi[row];
+        if (lo > hi) continue;
+        size_t base = row_node(s, row, lo), w = (size_t)(hi - lo + 1);
         for (int d = 0; d < s->dim; d++) {
             double *restrict q = s->g.q[d] + base;
             const double *restrict f = s->g.f[d] + base;
@@ -457,7 +495,8 @@ static void ph_node_update(mpm_sim *s, int tid)
 }
 
 /* BC1 (Eq. 27) on a momentum field, BC2 (Eq. 28) on the rate of momentum:
- * only the fixed nodes inside G (the field is zero elsewhere).  The list is
+ * only the fixed nodes inside the active rows' extents (the field is zero
+ * elsewhere, and its untouched pages stay so).  The list is
  * in increasing node order. */
 static void zero_fixed(mpm_sim *s, double *const field[3])
 {
@@ -472,12 +511,9 @@ static void zero_fixed(mpm_sim *s, double *const field[3])
         else b = mid;
     }
     for (size_t i = a; i < s->nfixed && s->fixed_node[i] <= last; i++) {
-        size_t n = s->fixed_node[i];
-        int x = (int)(n % (size_t)s->np[0]), y = (int)(n / s->stride[1] % (size_t)s->np[1]);
-        int z = (int)(n / s->stride[2]);
-        if (x < s->blo[0] || x > s->bhi[0] || y < s->blo[1] || y > s->bhi[1] || z < s->blo[2] ||
-            z > s->bhi[2])
-            continue;
+        size_t n = s->fixed_node[i], row = n / (size_t)s->np[0];
+        int x = (int)(n % (size_t)s->np[0]);
+        if (x < s->ulo[row] || x > s->uhi[row]) continue; /* rows outside the box: empty */
         unsigned m = s->fixed_mask[i];
         for (int d = 0; d < s->dim; d++)
             if (m & (1u << d)) field[d][n] = 0.0;
@@ -491,31 +527,38 @@ static void zero_fixed(mpm_sim *s, double *const field[3])
 /* ---- sorting by cell ----
  *
  * Every MPM_SORT_EVERY steps (and at creation) the particles are put in the
- * order of their cells, row-major over G, by a stable counting sort, so
- * that consecutive particles share nodes and each thread's slice covers a
- * compact region.  P.id keeps each particle's creation index: everything
- * public (snapshots, error messages, per-particle inputs) speaks creation
- * order.  The scratch is made at creation. */
+ * order of their cells, row-major over the active rows, by a stable
+ * counting sort, so that consecutive particles share nodes and each
+ * thread's slice covers a compact region.  The cells are numbered over the
+ * rows' extents only (the histogram follows the particles, not the box).
+ * P.id keeps each particle's creation index: everything public (snapshots,
+ * error messages, per-particle inputs) speaks creation order.  The scratch
+ * is made at creation: the keys and the integer fields go through the
+ * double scratch array. */
 #define MPM_SORT_EVERY 16
 
 static void ph_keys(mpm_sim *s, int tid)
 {
     size_t a, b;
     particle_slice(s, tid, &a, &b);
-    int ext[3];
-    for (int d = 0; d < 3; d++) ext[d] = s->bhi[d] - s->blo[d] + 1;
-    s->k->cell_keys(s, s->skey, s->blo, ext, a, b);
+    s->k->cell_keys(s, (uint32_t *)(void *)s->sscr, a, b);
 }
 
 static void sort_particles(mpm_sim *s)
 {
     mpm_particles *P = &s->P;
     size_t n = P->n;
-    if (n < 2 || !box_rows(s->blo, s->bhi)) return;
+    size_t nr = box_rows(s->blo, s->bhi);
+    if (n < 2 || !nr) return;
+    size_t nk = 0;
+    for (size_t r = 0; r < nr; r++) {
+        size_t row = box_row(s, s->blo, s->bhi, r);
+        s->rowoff[row] = nk;
+        if (s->ulo[row] <= s->uhi[row]) nk += (size_t)(s->uhi[row] - s->ulo[row] + 1);
+    }
+    s->rowoff[s->nrows] = nk;
     run(s, ph_keys);
-    uint32_t *key = s->skey, *perm = s->sperm, *h = s->shist;
-    size_t nk = 1;
-    for (int d = 0; d < s->dim; d++) nk *= (size_t)(s->bhi[d] - s->blo[d] + 1);
+    uint32_t *key = (uint32_t *)(void *)s->sscr, *perm = s->sperm, *h = s->shist;
     int sorted = 1;
     for (size_t p = 1; p < n && sorted; p++) sorted = key[p] >= key[p - 1];
     if (sorted) return;
@@ -523,7 +566,20 @@ static void sort_particles(mpm_sim *s)
     for (size_t p = 0; p < n; p++) h[key[p] + 1]++;
     for (size_t k = 0; k < nk; k++) h[k + 1] += h[k];
     for (size_t p = 0; p < n; p++) perm[h[key[p]]++] = (uint32_t)p;
-    /* the double fields, through one scratch array */
+    /* the keys are spent: the integer fields through the scratch, then
+     * the inverse map for the loaded particles */
+    uint16_t *m16 = (uint16_t *)(void *)s->sscr;
+    for (size_t p = 0; p < n; p++) m16[p] = P->mat[perm[p]];
+    memcpy(P->mat, m16, n * sizeof *P->mat);
+    uint32_t *u32 = (uint32_t *)(void *)s->sscr;
+    for (size_t p = 0; p < n; p++) u32[p] = P->id[perm[p]];
+    memcpy(P->id, u32, n * sizeof *P->id);
+    if (s->nload) {
+        for (size_t p = 0; p < n; p++) u32[perm[p]] = (uint32_t)p;
+        for (size_t i = 0; i < s->nload; i++) s->load_p[i] = u32[s->load_p[i]];
+    }
+    /* the double fields, each through the scratch, which then takes the
+     * old array's place */
     double **arr[3 * 3 + 2 * 6 + 2];
     int na = 0;
     for (int d = 0; d < s->dim; d++) {
@@ -533,7 +589,7 @@ static void sort_particles(mpm_sim *s)
     }
     for (int c = 0; c < MPM_NCOMP(s->dim); c++) {
         arr[na++] = &P->sig[c];
-        arr[na++] = &P->eps[c];
+        if (P->eps[c]) arr[na++] = &P->eps[c];
     }
     arr[na++] = &P->m;
     arr[na++] = &P->vol;
@@ -544,31 +600,15 @@ static void sort_particles(mpm_sim *s)
         s->sscr = *arr[i];
         *arr[i] = dst;
     }
-    /* the integer fields through the key array, then the inverse map for
-     * the loaded particles */
-    uint16_t *m16 = (uint16_t *)(void *)key;
-    for (size_t p = 0; p < n; p++) m16[p] = P->mat[perm[p]];
-    memcpy(P->mat, m16, n * sizeof *P->mat);
-    for (size_t p = 0; p < n; p++) key[p] = P->id[perm[p]];
-    memcpy(P->id, key, n * sizeof *P->id);
-    if (s->nload) {
-        for (size_t p = 0; p < n; p++) key[perm[p]] = (uint32_t)p;
-        for (size_t i = 0; i < s->nload; i++) s->load_p[i] = key[s->load_p[i]];
-    }
 }
 
-/* Before a step: sort when due, and make G the union of the boxes the last
- * particle pass recorded; the main grid's nodes of the old G outside the new
- * one are zeroed. */
+/* Before a step: the active rows become those the last particle pass
+ * recorded (update_rows), then the particles are sorted when due. */
 static void begin_step(mpm_sim *s)
 {
-    int lo[3], hi[3];
-    union_box(s, lo, hi);
-    zero_outside(s, s->blo, s->bhi, lo, hi);
-    memcpy(s->blo, lo, sizeof lo);
-    memcpy(s->bhi, hi, sizeof hi);
+    update_rows(s);
     if (s->steps > 0 && s->steps % MPM_SORT_EVERY == 0) {
-        sort_particles(s); /* G stays: it does not depend on the order */
+        sort_particles(s); /* the rows stay: they do not depend on the order */
         run(s, ph_bbox);
     }
 }
@@ -759,7 +799,7 @@ static int gimp_fits3(const mpm_sim *s)
 static void init_order(mpm_sim *s)
 {
     run(s, ph_bbox);
-    union_box(s, s->blo, s->bhi);
+    update_rows(s);
     sort_particles(s);
     run(s, ph_bbox);
 }
@@ -871,15 +911,14 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     if (mpm_case_particles(c, &s->P, s->mats, &s->vmax, err, errlen) != np) goto fail;
     if (s->ns == 4 && gimp_fits3(s)) s->ns = 3;
     s->k = mpm_kernels_select(dim, s->ns);
-    if (!(s->skey = malloc((size_t)np * sizeof *s->skey)) ||
-        !(s->sperm = malloc((size_t)np * sizeof *s->sperm)) ||
+    if (!(s->sperm = malloc((size_t)np * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = dalloc((size_t)np)))
         goto nomem;
     if (alloc_gridbuf(&s->g, s->nn, dim, musl)) goto nomem;
     if (!(s->minv = dalloc(s->nn))) goto nomem;
     if (s->nthreads > 1) {
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
-        for (int t = 0; t < s->nthreads; t++)
+        for (int t = 1; t < s->nthreads; t++) /* thread 0 scatters into the grid */
             if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, musl)) goto nomem;
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
@@ -888,6 +927,23 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
             if (!(s->tout[t].deps[cc] = dalloc(MPM_BLOCK))) goto nomem;
     for (int t = 0; t < s->nthreads; t++)
         if (!(s->tout[t].wblk = malloc(mpm_kernels_scratch()))) goto nomem;
+    /* row extents, all empty */
+    s->nrows = (size_t)s->np[1] * (size_t)s->np[2];
+    if (!(s->ulo = malloc(s->nrows * sizeof *s->ulo)) || !(s->uhi = malloc(s->nrows * sizeof *s->uhi)) ||
+        !(s->rowoff = malloc((s->nrows + 1) * sizeof *s->rowoff)))
+        goto nomem;
+    for (int t = 0; t < s->nthreads; t++)
+        if (!(s->tout[t].rlo = malloc(s->nrows * sizeof(int))) ||
+            !(s->tout[t].rhi = malloc(s->nrows * sizeof(int))))
+            goto nomem;
+    for (size_t r = 0; r < s->nrows; r++) {
+        s->ulo[r] = INT_MAX;
+        s->uhi[r] = -1;
+        for (int t = 0; t < s->nthreads; t++) {
+            s->tout[t].rlo[r] = INT_MAX;
+            s->tout[t].rhi[r] = -1;
+        }
+    }
 
     if (build_fixed(s, &c->bc)) goto nomem;
     if (build_loads(s, c)) goto nomem;
@@ -944,8 +1000,14 @@ void mpm_sim_destroy(mpm_sim **sp)
         for (int t = 0; t < s->nthreads; t++)
             for (int c = 0; c < 6; c++) free(s->tout[t].deps[c]);
     if (s->tout)
-        for (int t = 0; t < s->nthreads; t++) free(s->tout[t].wblk);
-    free(s->skey);
+        for (int t = 0; t < s->nthreads; t++) {
+            free(s->tout[t].wblk);
+            free(s->tout[t].rlo);
+            free(s->tout[t].rhi);
+        }
+    free(s->ulo);
+    free(s->uhi);
+    free(s->rowoff);
     free(s->sperm);
     free(s->shist);
     free(s->sscr);
@@ -965,6 +1027,16 @@ void mpm_sim_destroy(mpm_sim **sp)
 }
 
 /* ---- the step ---- */
+
+/* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
+ * eps_zz array, its term is zero) */
+static inline double strain_density(const mpm_particles *P, int dim, size_t p)
+{
+    double se = 0;
+    for (int c = 0; c < MPM_NCOMP(dim); c++)
+        if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];
+    return se;
+}
 
 static void loads_and_bc2(mpm_sim *s)
 {
@@ -990,10 +1062,42 @@ static void loads_and_bc2(mpm_sim *s)
 #define MPM_GUARD_EVERY 16
 #define MPM_GUARD_FACTOR 2.0
 
+/* The guard's energies on the team: each thread sums its slice exactly as
+ * mpm_sim_energy() does, and the partial sums are added in thread order,
+ * so the result is reproducible for a given thread count (and with one
+ * thread equals mpm_sim_energy()'s). */
+static void ph_energy(mpm_sim *s, int tid)
+{
+    const mpm_particles *P = &s->P;
+    int dim = s->dim;
+    size_t a, b;
+    particle_slice(s, tid, &a, &b);
+    double ek = 0, es = 0, ep = 0;
+    for (size_t p = a; p < b; p++) {
+        double m = P->m[p], v2 = 0;
+        for (int d = 0; d < dim; d++) {
+            v2 += P->v[d][p] * P->v[d][p];
+            ep -= m * s->gravity[d] * P->x[d][p];
+        }
+        ek += 0.5 * m * v2;
+        es += 0.5 * strain_density(P, dim, p) * P->vol[p];
+    }
+    mpm_thread_out *o = &s->tout[tid];
+    o->ekin = ek;
+    o->estr = es;
+    o->epot = ep;
+}
+
 static int guard(mpm_sim *s)
 {
-    mpm_energy e;
-    mpm_sim_energy(s, &e);
+    mpm_energy e = {0};
+    run(s, ph_energy);
+    for (int t = 0; t < s->nthreads; t++) {
+        e.kinetic += s->tout[t].ekin;
+        e.strain += s->tout[t].estr;
+        e.potential += s->tout[t].epot;
+    }
+    e.external_work = s->external_work;
     double have = e.kinetic + e.strain;
     s->guard_v2 = s->vmax * s->vmax;
     /* the loads' work counted as its absolute value: a bound that holds
@@ -1199,18 +1303,17 @@ size_t mpm_sim_nodes(const mpm_sim *s)
 void mpm_sim_energy(const mpm_sim *s, mpm_energy *e)
 {
     const mpm_particles *P = &s->P;
-    int dim = s->dim, nc = MPM_NCOMP(dim);
+    int dim = s->dim;
     memset(e, 0, sizeof *e);
     for (size_t p = 0; p < P->n; p++) {
-        double m = P->m[p], v2 = 0, se = 0;
+        double m = P->m[p], v2 = 0;
         for (int d = 0; d < dim; d++) {
             v2 += P->v[d][p] * P->v[d][p];
             e->momentum[d] += m * P->v[d][p];
             e->potential -= m * s->gravity[d] * P->x[d][p];
         }
-        for (int c = 0; c < nc; c++) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];
         e->kinetic += 0.5 * m * v2;
-        e->strain += 0.5 * se * P->vol[p];
+        e->strain += 0.5 * strain_density(P, dim, p) * P->vol[p];
         e->mass += m;
     }
     e->external_work = s->external_work;
