@@ -213,7 +213,9 @@ size_t mpm_sim_nodes(const mpm_sim *sim);       /* real grid nodes */
 int mpm_sim_dim(const mpm_sim *sim);
 const char *mpm_sim_error(const mpm_sim *sim);  /* "" when none */
 
-/* Computes energies (one pass over the particles, only when called). */
+/* Computes energies (one pass over the particles, only when called, on the
+ * simulation's threads; the sums are reproducible for a given thread count).
+ * Not to be called while a step runs. */
 void mpm_sim_energy(const mpm_sim *sim, mpm_energy *e);
 
 /* Copies the requested particle fields into caller arrays. */

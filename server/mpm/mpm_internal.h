@@ -65,7 +65,8 @@ typedef struct {
     int *rlo, *rhi;        /* per row (y + z np[1]): first and last x node
                             * touched (empty: rlo > rhi); rows outside the
                             * box blo..bhi are always empty */
-    double ekin, estr, epot; /* the divergence guard's partial energies */
+    double ekin, estr, epot; /* partial energies (guard, mpm_sim_energy) */
+    double emom[3], emass;   /* partial momentum and mass (mpm_sim_energy) */
     char pad[64];
 } mpm_thread_out;
 

@@ -1072,20 +1072,24 @@ static void ph_energy(mpm_sim *s, int tid)
     int dim = s->dim;
     size_t a, b;
     particle_slice(s, tid, &a, &b);
-    double ek = 0, es = 0, ep = 0;
+    double ek = 0, es = 0, ep = 0, mom[3] = {0, 0, 0}, ms = 0;
     for (size_t p = a; p < b; p++) {
         double m = P->m[p], v2 = 0;
         for (int d = 0; d < dim; d++) {
             v2 += P->v[d][p] * P->v[d][p];
+            mom[d] += m * P->v[d][p];
             ep -= m * s->gravity[d] * P->x[d][p];
         }
         ek += 0.5 * m * v2;
         es += 0.5 * strain_density(P, dim, p) * P->vol[p];
+        ms += m;
     }
     mpm_thread_out *o = &s->tout[tid];
     o->ekin = ek;
     o->estr = es;
     o->epot = ep;
+    o->emass = ms;
+    for (int d = 0; d < 3; d++) o->emom[d] = mom[d];
 }
 
 static int guard(mpm_sim *s)
@@ -1300,21 +1304,26 @@ size_t mpm_sim_nodes(const mpm_sim *s)
     return n;
 }
 
-void mpm_sim_energy(const mpm_sim *s, mpm_energy *e)
+/* On the thread team (ph_energy), partial sums combined in thread order:
+ * reproducible for a given thread count.  The team's scratch (tout) is
+ * written, nothing of the simulation's state; the object was not defined
+ * const, so the cast is sound, and the team is idle between steps. */
+void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
 {
-    const mpm_particles *P = &s->P;
-    int dim = s->dim;
+    mpm_sim *s = (mpm_sim *)cs;
     memset(e, 0, sizeof *e);
-    for (size_t p = 0; p < P->n; p++) {
-        double m = P->m[p], v2 = 0;
-        for (int d = 0; d < dim; d++) {
-            v2 += P->v[d][p] * P->v[d][p];
-            e->momentum[d] += m * P->v[d][p];
-            e->potential -= m * s->gravity[d] * P->x[d][p];
-        }
-        e->kinetic += 0.5 * m * v2;
-        e->strain += 0.5 * strain_density(P, dim, p) * P->vol[p];
-        e->mass += m;
+    if (s->threads) {
+        run(s, ph_energy);
+    } else { /* during creation, before the team starts: the same slices */
+        for (int t = 0; t < s->nthreads; t++) ph_energy(s, t);
+    }
+    for (int t = 0; t < s->nthreads; t++) {
+        const mpm_thread_out *o = &s->tout[t];
+        e->kinetic += o->ekin;
+        e->strain += o->estr;
+        e->potential += o->epot;
+        e->mass += o->emass;
+        for (int d = 0; d < s->dim; d++) e->momentum[d] += o->emom[d];
     }
     e->external_work = s->external_work;
     e->total = e->kinetic + e->strain + e->potential - e->external_work;
