@@ -1,7 +1,8 @@
 /*
  * ctl.h - the parts of mpmctl shared between its files: the connection to
  * mpmd (a DEALER on the control socket, requests encoded with srv_codec,
- * replies decoded through the JSON bridge into jansson values), the JSON
+ * replies decoded through the JSON bridge into jansson values; energy
+ * samples and stream messages also straight into srv_codec's structs), the JSON
  * helpers (field access that understands the protobuf JSON mapping, and a
  * printer that writes doubles in their shortest exact form), the output
  * formats and the live view of a job (`watch`).
@@ -91,10 +92,13 @@ int ctl_stream_endpoint(ctl_conn *c, char *out, size_t n);
 int ctl_derive_stream(const char *ep, char *out, size_t n);
 
 /* Fetches every energy sample of a run with seq >= from (paging while the
- * server says `more`) and calls fn for each in order; fn returns 0 to go
- * on, negative to stop with that code. */
-typedef int (*ctl_sample_fn)(json_t *sample, void *arg);
-int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, ctl_sample_fn fn, void *arg);
+ * server says `more`) and calls fn for each in order with the decoded
+ * sample, and with want_json also its JSON object (else NULL; --json
+ * output prints it as the server's JSON mapping gives it); fn returns 0 to
+ * go on, negative to stop with that code. */
+typedef int (*ctl_sample_fn)(const srv_energy_sample *s, const json_t *js, void *arg);
+int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, int want_json, ctl_sample_fn fn,
+                     void *arg);
 
 /* ---- JSON helpers (ctl_json.c) -------------------------------------- */
 
@@ -112,6 +116,9 @@ double cj_at(const json_t *o, const char *key, size_t i, double dflt);
 /* Length of the array member key (0 when absent). */
 size_t cj_len(const json_t *o, const char *key);
 
+/* v as it reads back from the daemon's JSON form: a zero without its sign
+ * ("-0" parses as the integer 0), NaN as the unsigned NaN "NaN" gives. */
+double cj_norm(double v);
 /* Shortest text that reads back as exactly v ("NaN", "Infinity" and
  * "-Infinity" for the non-finite values); buf of at least 32 bytes. */
 void cj_fmt_double(char *buf, size_t n, double v);
@@ -125,7 +132,8 @@ int cj_status(const json_t *o, const char *key);
 /* ---- output helpers (ctl_out.c) ------------------------------------- */
 
 /* Energy sample writers: a header (text table / CSV), then one row per
- * sample.  dim: number of momentum components in CSV (0: from the sample). */
+ * sample.  dim: number of momentum components in CSV (0: from the sample).
+ * A row is written from s (text, CSV) or js (JSON: required then). */
 typedef struct {
     ctl_out fmt;
     int dim;
@@ -133,7 +141,7 @@ typedef struct {
     FILE *f;
 } ctl_energy_out;
 void ctl_energy_out_init(ctl_energy_out *o, ctl_out fmt, int dim, FILE *f);
-int ctl_energy_out_row(ctl_energy_out *o, const json_t *sample);
+int ctl_energy_out_row(ctl_energy_out *o, const srv_energy_sample *s, const json_t *js);
 
 /* Local time of a Unix time as "YYYY-MM-DD HH:MM:SS" ("-" when <= 0). */
 void ctl_fmt_time(char *buf, size_t n, double unix_s);

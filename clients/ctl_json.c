@@ -100,6 +100,11 @@ int cj_status(const json_t *o, const char *key)
     return 0;
 }
 
+double cj_norm(double v)
+{
+    return v == 0 ? 0.0 : isnan(v) ? NAN : v;
+}
+
 void cj_fmt_double(char *buf, size_t n, double v)
 {
     if (isnan(v)) { snprintf(buf, n, "NaN"); return; }

@@ -27,17 +27,14 @@ static void csv_num(FILE *f, double v)
     fputs(b, f);
 }
 
-int ctl_energy_out_row(ctl_energy_out *o, const json_t *s)
+int ctl_energy_out_row(ctl_energy_out *o, const srv_energy_sample *s, const json_t *js)
 {
     static const char axis[3] = {'x', 'y', 'z'};
     FILE *f = o->f;
-    if (o->dim <= 0) {
-        size_t n = cj_len(s, "momentum");
-        o->dim = n < 1 ? 1 : n > 3 ? 3 : (int)n;
-    }
+    if (o->dim <= 0) o->dim = s->dim < 1 ? 1 : s->dim > 3 ? 3 : s->dim;
     switch (o->fmt) {
     case CTL_OUT_JSON:
-        if (cj_print(f, s, 0)) return CTL_ESYS;
+        if (!js || cj_print(f, js, 0)) return CTL_ESYS;
         fputc('\n', f);
         break;
     case CTL_OUT_CSV:
@@ -46,25 +43,25 @@ int ctl_energy_out_row(ctl_energy_out *o, const json_t *s)
             for (int d = 0; d < o->dim; d++) fprintf(f, ",momentum_%c", axis[d]);
             fputc('\n', f);
         }
-        fprintf(f, "%llu,%lld", (unsigned long long)cj_u64(s, "seq", 0), cj_int(s, "step", 0));
-        csv_num(f, cj_num(s, "t", 0));
-        csv_num(f, cj_num(s, "kinetic", 0));
-        csv_num(f, cj_num(s, "strain", 0));
-        csv_num(f, cj_num(s, "potential", 0));
-        csv_num(f, cj_num(s, "externalWork", 0));
-        csv_num(f, cj_num(s, "total", 0));
-        csv_num(f, cj_num(s, "mass", 0));
-        for (int d = 0; d < o->dim; d++) csv_num(f, cj_at(s, "momentum", (size_t)d, 0));
+        fprintf(f, "%llu,%lld", (unsigned long long)s->seq, (long long)s->step);
+        csv_num(f, cj_norm(s->t));
+        csv_num(f, cj_norm(s->e.kinetic));
+        csv_num(f, cj_norm(s->e.strain));
+        csv_num(f, cj_norm(s->e.potential));
+        csv_num(f, cj_norm(s->e.external_work));
+        csv_num(f, cj_norm(s->e.total));
+        csv_num(f, cj_norm(s->e.mass));
+        for (int d = 0; d < o->dim; d++) csv_num(f, d < s->dim ? cj_norm(s->e.momentum[d]) : 0);
         fputc('\n', f);
         break;
     case CTL_OUT_TEXT:
         if (!o->header_done)
             fprintf(f, "%8s %10s %14s %15s %15s %15s %15s\n", "seq", "step", "t", "kinetic",
                     "strain", "potential-work", "total");
-        fprintf(f, "%8llu %10lld %14.6g %15.8e %15.8e %15.8e %15.8e\n",
-                (unsigned long long)cj_u64(s, "seq", 0), cj_int(s, "step", 0), cj_num(s, "t", 0),
-                cj_num(s, "kinetic", 0), cj_num(s, "strain", 0),
-                cj_num(s, "potential", 0) - cj_num(s, "externalWork", 0), cj_num(s, "total", 0));
+        fprintf(f, "%8llu %10lld %14.6g %15.8e %15.8e %15.8e %15.8e\n", (unsigned long long)s->seq,
+                (long long)s->step, cj_norm(s->t), cj_norm(s->e.kinetic), cj_norm(s->e.strain),
+                cj_norm(s->e.potential) - cj_norm(s->e.external_work),
+                cj_norm(s->e.total));
         break;
     }
     o->header_done = 1;

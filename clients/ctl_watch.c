@@ -74,6 +74,8 @@ typedef struct {
     int finished;               /* Finished seen */
     char error[512];            /* Finished.error */
     json_t *fin_energy;         /* Finished.energy (a reference), or NULL */
+    int has_fin;                /* Finished carried a final sample: */
+    srv_energy_sample fin;      /* that sample, decoded */
 
     /* Fault injection for the tests (environment, see ctl_watch()):
      * discard every drop_every-th energy message, and/or the Finished
@@ -155,20 +157,20 @@ static void draw(watch_t *w, int force)
     w->line_shown = 1;
 }
 
-/* Writes one accepted sample. */
-static int emit(watch_t *w, const json_t *s)
+/* Writes one accepted sample (js: its JSON form, needed for --json). */
+static int emit(watch_t *w, const srv_energy_sample *s, const json_t *js)
 {
-    double total = cj_num(s, "total", NAN);
+    double total = cj_norm(s->e.total);
     if (!w->have_first) {
         w->first_total = total;
         w->have_first = 1;
     }
     w->last_total = total;
-    w->kinetic = cj_num(s, "kinetic", NAN);
-    w->strain = cj_num(s, "strain", NAN);
-    if (!w->have_progress || cj_int(s, "step", 0) > w->step) {
-        w->step = cj_int(s, "step", w->step);
-        w->t = cj_num(s, "t", w->t);
+    w->kinetic = cj_norm(s->e.kinetic);
+    w->strain = cj_norm(s->e.strain);
+    if (!w->have_progress || s->step > w->step) {
+        w->step = s->step;
+        w->t = cj_norm(s->t);
     }
     w->samples++;
     w->next++;
@@ -176,17 +178,17 @@ static int emit(watch_t *w, const json_t *s)
         draw(w, 0);
         return 0;
     }
-    int rc = ctl_energy_out_row(&w->eo, s);
+    int rc = ctl_energy_out_row(&w->eo, s, js);
     if (!rc && fflush(stdout)) rc = CTL_ESYS;
     if (rc) fprintf(stderr, "mpmctl: cannot write the energy series: %s\n", strerror(errno));
     return rc;
 }
 
 /* A sample from the stored history: in order by construction. */
-static int take_history(json_t *s, void *arg)
+static int take_history(const srv_energy_sample *s, const json_t *js, void *arg)
 {
     watch_t *w = arg;
-    uint64_t seq = cj_u64(s, "seq", UINT64_MAX);
+    uint64_t seq = s->seq;
     if (seq < w->next) return 0;
     if (seq > w->next) {
         /* the store itself has a hole: report it, keep going */
@@ -194,18 +196,18 @@ static int take_history(json_t *s, void *arg)
                 (unsigned long long)w->job, (unsigned long long)w->next, (unsigned long long)seq);
         w->next = seq;
     }
-    return emit(w, s);
+    return emit(w, s, js);
 }
 
 static int fetch_rest(watch_t *w)
 {
-    return ctl_fetch_energy(w->c, w->job, w->next, take_history, w);
+    return ctl_fetch_energy(w->c, w->job, w->next, w->fmt == CTL_OUT_JSON, take_history, w);
 }
 
 /* A sample from the live stream. */
-static int take_live(watch_t *w, const json_t *s)
+static int take_live(watch_t *w, const srv_energy_sample *s, const json_t *js)
 {
-    uint64_t seq = cj_u64(s, "seq", UINT64_MAX);
+    uint64_t seq = s->seq;
     int rc;
     if (seq < w->next) return 0;
     if (seq > w->next) {
@@ -220,7 +222,7 @@ static int take_live(watch_t *w, const json_t *s)
             w->next = seq;
         }
     }
-    return emit(w, s);
+    return emit(w, s, js);
 }
 
 /* Applies a RunInfo (Status reply) to the view. */
@@ -244,35 +246,6 @@ static int status(watch_t *w, json_t **reply, json_t **run)
     return rc;
 }
 
-/* Reads a varint at b[*i]; 0, or -1 past the end. */
-static int varint(const uint8_t *b, size_t n, size_t *i, uint64_t *v)
-{
-    *v = 0;
-    for (int shift = 0; *i < n && shift < 64; shift += 7) {
-        uint8_t c = b[(*i)++];
-        *v |= (uint64_t)(c & 0x7f) << shift;
-        if (!(c & 0x80)) return 0;
-    }
-    return -1;
-}
-
-/* Whether a packed StreamMsg carries a snapshot, read from its first tags
- * (protobuf-c writes fields in number order: job_id = 1, seq = 2, then the
- * body, snapshot = 5), with its job id and seq.  Saves decoding big
- * snapshots the view ignores. */
-static int is_snapshot(const uint8_t *b, size_t n, uint64_t *job, uint64_t *seq)
-{
-    size_t i = 0;
-    *job = *seq = UINT64_MAX;
-    while (i < n) {
-        uint8_t tag = b[i++];
-        if (tag == 0x2a) return 1;
-        if (tag != 0x08 && tag != 0x10) return 0;
-        if (varint(b, n, &i, tag == 0x08 ? job : seq)) return 0;
-    }
-    return 0;
-}
-
 /* Counts what the stream lost from the gaps in StreamMsg.seq. */
 static void stream_seq(watch_t *w, uint64_t seq)
 {
@@ -292,10 +265,10 @@ static int finish_tail(watch_t *w)
 {
     double saved = w->c->timeout_s;
     int rc;
-    if (w->fin_energy) {
-        uint64_t seq = cj_u64(w->fin_energy, "seq", UINT64_MAX);
-        if (seq != UINT64_MAX && seq < w->next) return 0;
-        if (seq == w->next) return emit(w, w->fin_energy);
+    if (w->has_fin) {
+        uint64_t seq = w->fin.seq;
+        if (seq < w->next) return 0;
+        if (seq == w->next) return emit(w, &w->fin, w->fin_energy);
     } else if (w->step == 0 && w->next == 0) {
         /* it ended before its first step (cancelled or interrupted while
          * queued, or refused by the solver): it has no samples at all */
@@ -319,12 +292,19 @@ static int on_message(watch_t *w, const void *data, size_t len)
     json_t *m, *b;
     json_error_t je;
     int rc = 0;
-    {
-        uint64_t job, seq;
-        if (is_snapshot(data, len, &job, &seq)) {
-            if (job == w->job && seq != UINT64_MAX) stream_seq(w, seq);
-            return 0;
-        }
+    /* srv_stream_peek first: it reads a snapshot's header without copying
+     * its arrays (tens of MB the view ignores; through JSON one of 10^6
+     * particles would cost about a second), and gives the samples decoded;
+     * the JSON form of the rest is for the fields the view shows */
+    srv_stream_info si;
+    if (srv_stream_peek(data, len, &si, err, sizeof err)) {
+        fprintf(stderr, "mpmctl: warning: undecodable stream message: %s\n", err);
+        return 0;
+    }
+    if (si.has_job_id && si.job_id != w->job) return 0;
+    if (si.kind == SRV_STREAM_SNAPSHOT) {
+        if (si.has_seq) stream_seq(w, si.seq);
+        return 0;
     }
     if (srv_msg_bytes_to_json(SRV_MSG_STREAM, data, len, 0, 0, &text, err, sizeof err)) {
         fprintf(stderr, "mpmctl: warning: undecodable stream message: %s\n", err);
@@ -341,10 +321,10 @@ static int on_message(watch_t *w, const void *data, size_t len)
         (w->drop_finished && json_object_get(m, "finished")))
         goto out;  /* injected loss: as if the stream never delivered it */
     stream_seq(w, cj_u64(m, "seq", 0));
-    if ((b = json_object_get(m, "energy"))) {
+    if ((b = json_object_get(m, "energy")) && si.kind == SRV_STREAM_ENERGY) {
         if (w->status != SRV_STATUS_RUNNING && !terminal_status(w->status))
             w->status = SRV_STATUS_RUNNING;
-        rc = take_live(w, b);
+        rc = take_live(w, &si.energy, b);
     } else if ((b = json_object_get(m, "progress"))) {
         w->status = SRV_STATUS_RUNNING;
         w->have_progress = 1;
@@ -363,6 +343,8 @@ static int on_message(watch_t *w, const void *data, size_t len)
         w->wall_s = cj_num(b, "wallS", w->wall_s);
         json_decref(w->fin_energy);
         w->fin_energy = json_incref(json_object_get(b, "energy"));
+        w->has_fin = si.kind == SRV_STREAM_FINISHED && si.has_energy;
+        w->fin = si.energy;
     }
 out:
     json_decref(m);

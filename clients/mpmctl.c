@@ -571,9 +571,9 @@ static int cmd_show(ctl_conn *c, const cli *a)
     return rc ? CTL_EXIT_ERROR : CTL_EXIT_OK;
 }
 
-static int energy_row(json_t *s, void *arg)
+static int energy_row(const srv_energy_sample *s, const json_t *js, void *arg)
 {
-    return ctl_energy_out_row(arg, s);
+    return ctl_energy_out_row(arg, s, js);
 }
 
 static int cmd_energy(ctl_conn *c, const cli *a)
@@ -583,7 +583,7 @@ static int cmd_energy(ctl_conn *c, const cli *a)
     int rc;
     if (parse_id(a->pos[0], "energy", &id)) return CTL_EXIT_USAGE;
     ctl_energy_out_init(&eo, a->fmt, 0, stdout);
-    rc = ctl_fetch_energy(c, id, 0, energy_row, &eo);
+    rc = ctl_fetch_energy(c, id, 0, a->fmt == CTL_OUT_JSON, energy_row, &eo);
     if (!rc && !eo.header_done && a->fmt == CTL_OUT_TEXT)
         fprintf(stderr, "run %llu has no energy samples\n", (unsigned long long)id);
     if (fflush(stdout) || ferror(stdout)) {

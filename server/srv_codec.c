@@ -50,6 +50,10 @@ _Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
 
 #define PI_ 3.14159265358979323846
 
+/* Protobuf wire types: varint, 64-bit, length-delimited, 32-bit (3 and 4,
+ * groups, are not in this schema). */
+enum { WT_VARINT = 0, WT_I64 = 1, WT_LEN = 2, WT_I32 = 5 };
+
 /* Writes a formatted message into err and returns code. */
 __attribute__((format(printf, 4, 5)))
 static int bad(char *err, size_t errlen, int code, const char *fmt, ...)
@@ -1121,6 +1125,48 @@ int srv_stream_finished(uint64_t job_id, uint64_t seq, const srv_finished *f, ui
 /* ------------------------------------------------------------------------ */
 /* Request encoder (clients: mpmctl and the daemon tests)                   */
 
+/* Appends a varint; returns the bytes written (at most 10). */
+static size_t put_varint(uint8_t *p, uint64_t v)
+{
+    size_t k = 0;
+    do {
+        p[k++] = (uint8_t)((v & 0x7f) | (v > 0x7f ? 0x80 : 0));
+        v >>= 7;
+    } while (v);
+    return k;
+}
+
+/* A Submit request around case bytes packed beforehand: Request {
+ * schema_version, submit = Submit { case = <the bytes> } }, written
+ * directly (the bytes are copied, not decoded). */
+static int submit_bytes(uint32_t version, const void *cb, size_t cn, uint8_t **buf, size_t *len)
+{
+    const ProtobufCFieldDescriptor *fv =
+        protobuf_c_message_descriptor_get_field_by_name(&mpmd__request__descriptor, "schema_version");
+    const ProtobufCFieldDescriptor *fs =
+        protobuf_c_message_descriptor_get_field_by_name(&mpmd__request__descriptor, "submit");
+    const ProtobufCFieldDescriptor *fc =
+        protobuf_c_message_descriptor_get_field_by_name(&mpmd__request__submit__descriptor, "case");
+    uint8_t head[64], tmp[10];
+    size_t h = 0, inner;
+    if (!fv || !fs || !fc) return SRV_CODEC_EINVAL;
+    h += put_varint(head + h, (uint64_t)fv->id << 3 | WT_VARINT);
+    h += put_varint(head + h, version);
+    inner = put_varint(tmp, (uint64_t)fc->id << 3 | WT_LEN) + put_varint(tmp, cn) + cn;
+    h += put_varint(head + h, (uint64_t)fs->id << 3 | WT_LEN);
+    h += put_varint(head + h, inner);
+    h += put_varint(head + h, (uint64_t)fc->id << 3 | WT_LEN);
+    h += put_varint(head + h, cn);
+    if (cn > SIZE_MAX - h) return SRV_CODEC_ENOMEM;
+    uint8_t *b = malloc(h + cn);
+    if (!b) return SRV_CODEC_ENOMEM;
+    memcpy(b, head, h);
+    if (cn) memcpy(b + h, cb, cn);
+    *buf = b;
+    *len = h + cn;
+    return 0;
+}
+
 int srv_request_encode(const srv_request *rq, uint8_t **buf, size_t *len)
 {
     Mpmd__Request r = MPMD__REQUEST__INIT;
@@ -1139,6 +1185,8 @@ int srv_request_encode(const srv_request *rq, uint8_t **buf, size_t *len)
     r.schema_version = rq->schema_version ? rq->schema_version : SRV_SCHEMA_VERSION;
     switch (rq->kind) {
     case SRV_REQ_SUBMIT:
+        if (!rq->case_pb && rq->case_bytes)
+            return submit_bytes(r.schema_version, rq->case_bytes, rq->case_len, buf, len);
         if (!rq->case_pb) return SRV_CODEC_EINVAL;
         sub.case_ = rq->case_pb;
         r.body_case = MPMD__REQUEST__BODY_SUBMIT;
@@ -1216,4 +1264,355 @@ int srv_request_encode(const srv_request *rq, uint8_t **buf, size_t *len)
 const char *srv_codec_protobuf_c_version(void)
 {
     return protobuf_c_version();
+}
+
+/* ------------------------------------------------------------------------ */
+/* Decoding for clients: replies and stream messages into plain structs     */
+
+_Static_assert((int)SRV_STREAM_PROGRESS == (int)MPMD__STREAM_MSG__BODY_PROGRESS &&
+               (int)SRV_STREAM_ENERGY == (int)MPMD__STREAM_MSG__BODY_ENERGY &&
+               (int)SRV_STREAM_SNAPSHOT == (int)MPMD__STREAM_MSG__BODY_SNAPSHOT &&
+               (int)SRV_STREAM_FINISHED == (int)MPMD__STREAM_MSG__BODY_FINISHED,
+               "srv_stream_kind must match the StreamMsg.body field numbers");
+_Static_assert((int)SRV_REPLY_ERROR == (int)MPMD__REPLY__BODY_ERROR &&
+               (int)SRV_REPLY_SUBMIT_OK == (int)MPMD__REPLY__BODY_SUBMIT_OK &&
+               (int)SRV_REPLY_RUN == (int)MPMD__REPLY__BODY_RUN && (int)SRV_REPLY_RUNS == (int)MPMD__REPLY__BODY_RUNS &&
+               (int)SRV_REPLY_ENERGY == (int)MPMD__REPLY__BODY_ENERGY &&
+               (int)SRV_REPLY_SNAPSHOT == (int)MPMD__REPLY__BODY_SNAPSHOT &&
+               (int)SRV_REPLY_PONG == (int)MPMD__REPLY__BODY_PONG &&
+               (int)SRV_REPLY_VERSION == (int)MPMD__REPLY__BODY_VERSION,
+               "srv_reply_kind must match the Reply.body field numbers");
+
+/* The protobuf wire format, read just enough to find the fields of a
+ * message without decoding its big arrays (wire types: WT_* above). */
+
+typedef struct {
+    uint32_t num;           /* field number */
+    int wt;                 /* wire type */
+    uint64_t v;             /* WT_VARINT, WT_I64, WT_I32: the value */
+    const uint8_t *data;    /* WT_LEN: the payload */
+    size_t len;
+} wire_field;
+
+static int wire_varint(const uint8_t **p, const uint8_t *end, uint64_t *v)
+{
+    uint64_t x = 0;
+    for (int shift = 0; shift < 70; shift += 7) {
+        if (*p >= end) return -1;
+        uint8_t c = *(*p)++;
+        if (shift == 63 && c > 1) return -1;  /* beyond 64 bits */
+        x |= (uint64_t)(c & 0x7f) << shift;
+        if (!(c & 0x80)) {
+            *v = x;
+            return 0;
+        }
+    }
+    return -1;
+}
+
+/* The next field at *p (which must be < end); -1 when it is malformed. */
+static int wire_next(const uint8_t **p, const uint8_t *end, wire_field *f)
+{
+    uint64_t tag, v = 0;
+    if (wire_varint(p, end, &tag) || tag >> 3 == 0 || tag >> 3 > 0x1fffffff) return -1;
+    f->num = (uint32_t)(tag >> 3);
+    f->wt = (int)(tag & 7);
+    f->data = NULL;
+    f->len = 0;
+    switch (f->wt) {
+    case WT_VARINT:
+        return wire_varint(p, end, &f->v);
+    case WT_I64:
+    case WT_I32: {
+        size_t k = f->wt == WT_I64 ? 8 : 4;
+        if ((size_t)(end - *p) < k) return -1;
+        for (size_t i = 0; i < k; i++) v |= (uint64_t)(*p)[i] << (8 * i);
+        *p += k;
+        f->v = v;
+        return 0;
+    }
+    case WT_LEN:
+        if (wire_varint(p, end, &v) || v > (uint64_t)(end - *p)) return -1;
+        f->data = *p;
+        f->len = (size_t)v;
+        *p += v;
+        return 0;
+    default:
+        return -1;
+    }
+}
+
+static double wire_double(uint64_t v)
+{
+    double d;
+    memcpy(&d, &v, sizeof d);
+    return d;
+}
+
+/* Adds the fields of one occurrence of a Snapshot message to *s (fields
+ * that occur again override, arrays add up, as protobuf merges them). */
+static int peek_snapshot(const uint8_t *p, size_t n, srv_snapshot_info *s)
+{
+    const uint8_t *end = p + n;
+    size_t *count[10] = {[5] = &s->n_x, [6] = &s->n_v, [7] = &s->n_stress, [8] = &s->n_pressure,
+                         [9] = &s->n_volume};
+    wire_field f;
+    while (p < end) {
+        if (wire_next(&p, end, &f)) return -1;
+        switch (f.num) {
+        case 1:
+        case 3:
+        case 4:
+            if (f.wt != WT_VARINT) return -1;
+            if (f.num == 1) s->step = (int64_t)f.v;
+            else if (f.num == 3) s->n = f.v;
+            else s->dim = (uint32_t)f.v;
+            break;
+        case 2:
+            if (f.wt != WT_I64) return -1;
+            s->t = wire_double(f.v);
+            break;
+        case 5: case 6: case 7: case 8: case 9:
+            if (f.wt == WT_LEN && f.len % 8 == 0) *count[f.num] += f.len / 8;  /* packed */
+            else if (f.wt == WT_I64) *count[f.num] += 1;                          /* unpacked */
+            else return -1;
+            break;
+        default:
+            break;  /* unknown: skipped */
+        }
+    }
+    return 0;
+}
+
+/* Walks the top level of a StreamMsg or Reply: ids (StreamMsg) or the
+ * schema version (Reply), and which body comes last (the one a oneof
+ * keeps).  A Snapshot body (snap_num) is read on the way: a run of its
+ * occurrences merges, another body in between starts it afresh. */
+static int peek_top(const uint8_t *p, size_t n, int stream, uint32_t snap_num, uint32_t *body,
+                    uint64_t ids[2], int has[2], srv_snapshot_info *snap)
+{
+    const uint8_t *end = p + n;
+    wire_field f;
+    *body = 0;
+    while (p < end) {
+        if (wire_next(&p, end, &f)) return -1;
+        if (stream ? f.num <= 2 : f.num == 1) {
+            if (f.wt != WT_VARINT) return -1;
+            ids[f.num - 1] = f.v;
+            has[f.num - 1] = 1;
+        } else if (f.num >= (stream ? 3u : 2u) && f.num <= (stream ? 6u : 9u)) {
+            if (f.wt != WT_LEN) return -1;
+            if (f.num == snap_num) {
+                if (*body != snap_num) memset(snap, 0, sizeof *snap);
+                if (peek_snapshot(f.data, f.len, snap)) return -1;
+            }
+            *body = f.num;
+        }
+    }
+    return 0;
+}
+
+/* Copies a string into a fixed buffer (cut to fit). */
+static void copy_str(char *dst, size_t cap, const char *src)
+{
+    snprintf(dst, cap, "%s", src ? src : "");
+}
+
+static void take_energy(srv_energy_sample *s, const Mpmd__EnergySample *e)
+{
+    memset(s, 0, sizeof *s);
+    if (!e) return;
+    s->step = e->step;
+    s->t = e->t;
+    s->e.kinetic = e->kinetic;
+    s->e.strain = e->strain;
+    s->e.potential = e->potential;
+    s->e.external_work = e->external_work;
+    s->e.total = e->total;
+    s->e.mass = e->mass;
+    s->dim = e->n_momentum > MPM_MAX_DIM ? MPM_MAX_DIM : (int)e->n_momentum;
+    for (int d = 0; d < s->dim; d++) s->e.momentum[d] = e->momentum[d];
+    s->seq = e->seq;
+}
+
+int srv_stream_peek(const void *buf, size_t len, srv_stream_info *out, char *err, size_t errlen)
+{
+    static const uint8_t empty[1];
+    const uint8_t *b = buf ? buf : empty;
+    uint64_t ids[2] = {0, 0};
+    int has[2] = {0, 0};
+    uint32_t body;
+    memset(out, 0, sizeof *out);
+    if (!buf) len = 0;
+    if (peek_top(b, len, 1, MPMD__STREAM_MSG__BODY_SNAPSHOT, &body, ids, has, &out->snapshot))
+        return bad(err, errlen, SRV_CODEC_ESYNTAX, "not a valid mpmd.StreamMsg message (%zu bytes)",
+                   len);
+    out->has_job_id = has[0];
+    out->job_id = ids[0];
+    out->has_seq = has[1];
+    out->seq = ids[1];
+    out->kind = (srv_stream_kind)body;
+    if (body == 0 || body == MPMD__STREAM_MSG__BODY_SNAPSHOT) return 0;
+    /* a small body: decoded in full, with protobuf-c's own checks */
+    ProtobufCMessage *m;
+    int rc = unpack_msg(&mpmd__stream_msg__descriptor, b, len, (size_t)-1, &m, err, errlen);
+    if (rc) {
+        memset(out, 0, sizeof *out);
+        return rc;
+    }
+    const Mpmd__StreamMsg *sm = (const Mpmd__StreamMsg *)m;
+    switch (sm->body_case) {
+    case MPMD__STREAM_MSG__BODY_PROGRESS:
+        out->progress.step = sm->progress->step;
+        out->progress.t = sm->progress->t;
+        out->progress.dt = sm->progress->dt;
+        out->progress.steps_total = sm->progress->steps_total;
+        out->progress.wall_s = sm->progress->wall_s;
+        break;
+    case MPMD__STREAM_MSG__BODY_ENERGY:
+        take_energy(&out->energy, sm->energy);
+        break;
+    case MPMD__STREAM_MSG__BODY_FINISHED: {
+        const Mpmd__Finished *f = sm->finished;
+        out->status = f->has_status ? (int)f->status : 0;
+        copy_str(out->error, sizeof out->error, f->error);
+        out->steps = f->steps;
+        out->t = f->t;
+        out->wall_s = f->wall_s;
+        out->has_energy = f->energy != NULL;
+        take_energy(&out->energy, f->energy);
+        break;
+    }
+    default:
+        break;
+    }
+    protobuf_c_message_free_unpacked(m, NULL);
+    return 0;
+}
+
+int srv_reply_peek(const void *buf, size_t len, srv_reply_info *out, char *err, size_t errlen)
+{
+    static const uint8_t empty[1];
+    const uint8_t *b = buf ? buf : empty;
+    uint64_t ids[2] = {0, 0};
+    int has[2] = {0, 0};
+    uint32_t body;
+    memset(out, 0, sizeof *out);
+    if (!buf) len = 0;
+    if (peek_top(b, len, 0, MPMD__REPLY__BODY_SNAPSHOT, &body, ids, has, &out->snapshot))
+        return bad(err, errlen, SRV_CODEC_ESYNTAX, "not a valid mpmd.Reply message (%zu bytes)", len);
+    out->schema_version = (uint32_t)ids[0];
+    out->kind = (srv_reply_kind)body;
+    if (body == 0 || body == MPMD__REPLY__BODY_SNAPSHOT) return 0;
+    ProtobufCMessage *m;
+    int rc = unpack_msg(&mpmd__reply__descriptor, b, len, 0, &m, err, errlen);
+    if (rc) {
+        memset(out, 0, sizeof *out);
+        return rc;
+    }
+    const Mpmd__Reply *r = (const Mpmd__Reply *)m;
+    switch (r->body_case) {
+    case MPMD__REPLY__BODY_ERROR:
+        out->err_code = (int)r->error->code;  /* the schema's default when absent */
+        copy_str(out->err_message, sizeof out->err_message, r->error->message);
+        copy_str(out->err_field, sizeof out->err_field, r->error->field);
+        break;
+    case MPMD__REPLY__BODY_SUBMIT_OK:
+        out->has_job_id = r->submit_ok->has_job_id;
+        out->job_id = r->submit_ok->job_id;
+        out->has_run_id = r->submit_ok->has_run_id;
+        out->run_id = r->submit_ok->run_id;
+        break;
+    case MPMD__REPLY__BODY_RUN: {
+        const Mpmd__RunInfo *ri = r->run;
+        out->has_job_id = ri->has_job_id;
+        out->job_id = ri->job_id;
+        out->has_run_id = ri->has_run_id;
+        out->run_id = ri->run_id;
+        copy_str(out->name, sizeof out->name, ri->name);
+        copy_str(out->run_error, sizeof out->run_error, ri->error);
+        out->status = ri->has_status ? (int)ri->status : 0;
+        out->steps = ri->steps;
+        out->steps_total = ri->steps_total;
+        out->t = ri->t;
+        out->wall_s = ri->wall_s;
+        out->particles = ri->particles;
+        out->nodes = ri->nodes;
+        out->energy_samples = ri->energy_samples;
+        out->dim = (int)ri->dim;
+        break;
+    }
+    case MPMD__REPLY__BODY_RUNS:
+        out->n_runs = r->runs->n_runs;
+        break;
+    case MPMD__REPLY__BODY_ENERGY:
+        out->has_run_id = r->energy->has_run_id;
+        out->run_id = r->energy->run_id;
+        out->n_samples = r->energy->n_samples;
+        out->more = r->energy->has_more && r->energy->more;
+        break;
+    case MPMD__REPLY__BODY_PONG:
+        copy_str(out->server_version, sizeof out->server_version, r->pong->server_version);
+        copy_str(out->stream_endpoint, sizeof out->stream_endpoint, r->pong->stream_endpoint);
+        out->server_schema = r->pong->schema_version;
+        break;
+    case MPMD__REPLY__BODY_VERSION:
+        copy_str(out->server_version, sizeof out->server_version, r->version->server_version);
+        out->server_schema = r->version->schema_version;
+        out->n_components = r->version->n_components;
+        break;
+    default:
+        break;
+    }
+    protobuf_c_message_free_unpacked(m, NULL);
+    return 0;
+}
+
+int srv_reply_energy_decode(const void *buf, size_t len, size_t max, uint64_t *run_id,
+                            srv_energy_sample **samples, size_t *n, int *more, char *err,
+                            size_t errlen)
+{
+    ProtobufCMessage *m;
+    *samples = NULL;
+    *n = 0;
+    *run_id = 0;
+    *more = 0;
+    int rc = unpack_msg(&mpmd__reply__descriptor, buf, len, max, &m, err, errlen);
+    if (rc) return rc;
+    const Mpmd__Reply *r = (const Mpmd__Reply *)m;
+    if (r->body_case != MPMD__REPLY__BODY_ENERGY) {
+        rc = EINV("not an energy series (reply body %d)", (int)r->body_case);
+    } else {
+        const Mpmd__EnergySeries *es = r->energy;
+        *run_id = es->run_id;
+        *more = es->has_more && es->more;
+        if (es->n_samples) {
+            *samples = malloc(es->n_samples * sizeof **samples);
+            if (!*samples) {
+                rc = ENOMEM_();
+            } else {
+                for (size_t i = 0; i < es->n_samples; i++) take_energy(&(*samples)[i], es->samples[i]);
+                *n = es->n_samples;
+            }
+        }
+    }
+    protobuf_c_message_free_unpacked(m, NULL);
+    return rc;
+}
+
+int srv_stream_snapshot_into(uint64_t job_id, uint64_t seq, const srv_snapshot *s, uint8_t *buf,
+                             size_t cap, size_t *len)
+{
+    Mpmd__StreamMsg m = MPMD__STREAM_MSG__INIT;
+    Mpmd__Snapshot ps;
+    fill_snapshot(&ps, s);
+    m.body_case = MPMD__STREAM_MSG__BODY_SNAPSHOT;
+    m.snapshot = &ps;
+    m.has_job_id = m.has_seq = 1;
+    m.job_id = job_id;
+    m.seq = seq;
+    *len = protobuf_c_message_get_packed_size(&m.base);
+    if (!buf || cap < *len) return SRV_CODEC_ETOOBIG;
+    if (protobuf_c_message_pack(&m.base, buf) != *len) return SRV_CODEC_ENOMEM;
+    return 0;
 }

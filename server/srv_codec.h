@@ -9,7 +9,13 @@
  *  - any schema message as JSON <-> bytes (for mpmctl and exports);
  *  - the control envelopes: a Request decoded into a plain struct, and
  *    Reply / StreamMsg encoders that take plain structs and return packed
- *    bytes.
+ *    bytes;
+ *  - for clients (mpmctl, the benches): the Request encoder, and Reply /
+ *    StreamMsg decoders into plain structs (srv_reply_peek,
+ *    srv_stream_peek, srv_reply_energy_decode) that read a snapshot's
+ *    header without copying its arrays.  A client keeps a case as JSON or
+ *    as packed bytes (srv_request.case_bytes) and needs no generated
+ *    header.
  * Every function returns 0 or a negative SRV_CODEC_* code and, where it has
  * an err buffer, writes a message there; case errors start with the JSON
  * path of the field (lowerCamelCase, also for the solver's own checks), e.g.
@@ -205,6 +211,8 @@ typedef struct {
     int has_step;         /* GetSnapshot: 0 = the latest */
     int64_t step;
     Mpmd__Case *case_pb;  /* Submit: the case (owned; convert with srv_case_from_pb) */
+    const void *case_bytes; /* Submit, srv_request_encode() only: a packed Case sent */
+    size_t case_len;        /* as it is when case_pb is NULL (never set by decode) */
 } srv_request;
 
 /* Decodes a packed Request (max as in srv_case_unpack()).  Fails with
@@ -220,8 +228,12 @@ void srv_request_clear(srv_request *rq);
  * kind uses (schema_version 0 means SRV_SCHEMA_VERSION; GetEnergy.fromSeq,
  * the limits and ListRuns.status are sent only when non-zero, GetSnapshot
  * .step only with has_step; Submit sends rq->case_pb, which stays the
- * caller's).  Returns 0, SRV_CODEC_EINVAL (unknown kind, Submit without a
- * case) or SRV_CODEC_ENOMEM. */
+ * caller's, or when that is NULL the packed Case rq->case_bytes (case_len
+ * bytes, from srv_case_pack() or srv_msg_json_to_bytes(SRV_MSG_CASE)),
+ * copied in without being decoded: a client can keep a case as bytes and
+ * submit it again and again; the daemon checks it as any other).  Returns
+ * 0, SRV_CODEC_EINVAL (unknown kind, Submit without a case) or
+ * SRV_CODEC_ENOMEM. */
 int srv_request_encode(const srv_request *rq, uint8_t **buf, size_t *len);
 
 /* Energies at one step (EnergySample). */
@@ -310,5 +322,122 @@ int srv_stream_snapshot(uint64_t job_id, uint64_t seq, const srv_snapshot *s,
                         uint8_t **buf, size_t *len);
 int srv_stream_finished(uint64_t job_id, uint64_t seq, const srv_finished *f,
                         uint8_t **buf, size_t *len);
+
+/* ---- decoding replies and stream messages (clients) ------------------ */
+
+/* What the daemon answers or streams, decoded into plain structs, so that
+ * a client needs neither the generated header nor the JSON bridge.  The
+ * *_peek() functions never copy or allocate for the particle arrays of a
+ * Snapshot (one of tens of MB): they only count its values, walking the
+ * protobuf wire format; every other body is decoded in full.  Strings are
+ * copied into the struct's own buffers (cut to fit, always NUL-terminated),
+ * so a struct owns nothing and needs no release.  Absent fields read 0 (or
+ * ""); the has_* members say which of the ids were present.  Undecodable
+ * bytes (garbage, truncation, a wrong wire type for a known field) give
+ * SRV_CODEC_ESYNTAX with a message in err; a message without a body is not
+ * an error: its kind is the *_NONE value. */
+
+/* A snapshot's header: the values (doubles) each array holds, not the
+ * values themselves. */
+typedef struct {
+    int64_t step;
+    double t;
+    uint64_t n;           /* particles */
+    uint32_t dim;
+    size_t n_x, n_v, n_stress, n_pressure, n_volume;
+} srv_snapshot_info;
+
+/* The body of a StreamMsg (values as the oneof's field numbers). */
+typedef enum {
+    SRV_STREAM_NONE = 0,
+    SRV_STREAM_PROGRESS = 3,
+    SRV_STREAM_ENERGY = 4,
+    SRV_STREAM_SNAPSHOT = 5,
+    SRV_STREAM_FINISHED = 6
+} srv_stream_kind;
+
+typedef struct {
+    srv_stream_kind kind;
+    int has_job_id, has_seq;
+    uint64_t job_id;
+    uint64_t seq;                 /* StreamMsg.seq */
+    srv_progress progress;        /* PROGRESS */
+    srv_energy_sample energy;     /* ENERGY; FINISHED: its final sample, if has_energy */
+    srv_snapshot_info snapshot;   /* SNAPSHOT */
+    /* FINISHED */
+    int status;                   /* srv_status; 0 when absent */
+    int64_t steps;
+    double t, wall_s;
+    int has_energy;
+    char error[512];              /* Finished.error, "" when none */
+} srv_stream_info;
+
+/* Decodes a packed StreamMsg into *out (cleared first).  Returns 0 or
+ * SRV_CODEC_ESYNTAX. */
+int srv_stream_peek(const void *buf, size_t len, srv_stream_info *out, char *err,
+                    size_t errlen);
+
+/* The body of a Reply (values as the oneof's field numbers). */
+typedef enum {
+    SRV_REPLY_NONE = 0,
+    SRV_REPLY_ERROR = 2,
+    SRV_REPLY_SUBMIT_OK = 3,
+    SRV_REPLY_RUN = 4,
+    SRV_REPLY_RUNS = 5,
+    SRV_REPLY_ENERGY = 6,
+    SRV_REPLY_SNAPSHOT = 7,
+    SRV_REPLY_PONG = 8,
+    SRV_REPLY_VERSION = 9
+} srv_reply_kind;
+
+typedef struct {
+    srv_reply_kind kind;
+    uint32_t schema_version;      /* Reply.schema_version, 0 when absent */
+    /* ERROR */
+    int err_code;                 /* srv_err_code (INTERNAL when absent) */
+    char err_message[512], err_field[256];
+    /* SUBMIT_OK: the new job and run; RUN: the run's; ENERGY: run_id */
+    int has_job_id, has_run_id;
+    uint64_t job_id, run_id;
+    /* RUN */
+    char name[256], run_error[512];
+    int status;                   /* srv_status; 0 when absent */
+    int64_t steps, steps_total;
+    double t, wall_s;
+    uint64_t particles, nodes, energy_samples;
+    int dim;
+    /* RUNS: how many; ENERGY: samples in this page and whether more follow */
+    size_t n_runs, n_samples;
+    int more;
+    /* SNAPSHOT */
+    srv_snapshot_info snapshot;
+    /* PONG, VERSION (server_schema: their schema_version) */
+    char server_version[128], stream_endpoint[256];
+    uint32_t server_schema;
+    size_t n_components;          /* VERSION */
+} srv_reply_info;
+
+/* Decodes a packed Reply into *out (cleared first).  Returns 0,
+ * SRV_CODEC_ESYNTAX, or SRV_CODEC_ETOOBIG for a body other than a Snapshot
+ * in a message above SRV_MSG_MAX. */
+int srv_reply_peek(const void *buf, size_t len, srv_reply_info *out, char *err,
+                   size_t errlen);
+
+/* The samples of an EnergySeries reply (GetEnergy) as a malloc'd array of
+ * *n entries (*samples NULL when there are none; free() it), with the
+ * series' run_id and `more`.  max as in srv_case_unpack().  A reply that is
+ * not an EnergySeries gives SRV_CODEC_EINVAL (srv_reply_peek() tells what
+ * it is); otherwise 0, SRV_CODEC_ESYNTAX, SRV_CODEC_ETOOBIG or
+ * SRV_CODEC_ENOMEM. */
+int srv_reply_energy_decode(const void *buf, size_t len, size_t max, uint64_t *run_id,
+                            srv_energy_sample **samples, size_t *n, int *more, char *err,
+                            size_t errlen);
+
+/* srv_stream_snapshot() into the caller's buffer: packs the StreamMsg into
+ * buf when it fits in cap bytes.  *len is always set to the packed size;
+ * returns 0, or SRV_CODEC_ETOOBIG (nothing written) when cap is smaller.
+ * Lets a publisher reuse one buffer for every snapshot of a job. */
+int srv_stream_snapshot_into(uint64_t job_id, uint64_t seq, const srv_snapshot *s,
+                             uint8_t *buf, size_t cap, size_t *len);
 
 #endif

@@ -13,7 +13,11 @@
  * sends with ZMQ_DONTWAIT, so a main thread that falls behind costs the
  * simulation nothing: the message is dropped, its seq number is still used,
  * and the gap is visible to watchers (who refetch energies from the store,
- * where every sample is recorded regardless).
+ * where every sample is recorded regardless).  Energy samples reach the
+ * store and the stream in small batches (at most ~FLUSH_S late), so a job
+ * sampling every step does not wake the other threads at every step;
+ * snapshots are packed into one buffer per job and handed to zmq without
+ * a copy (see publish_snapshot()).
  */
 #include "srv_pool.h"
 
@@ -112,11 +116,33 @@ static void job_free(srv_job *j)
 
 /* ---- the stream, from a worker ---- */
 
+/* Energy samples are handed on in batches: each goes to the store and the
+ * stream in order, but a worker taking one every step of a fast job would
+ * otherwise wake the store's writer and the main thread (which relays to
+ * the XPUB) at every step, and on a machine whose cores the solver keeps
+ * busy each wake-up preempts the solver.  A sample is held only while the
+ * next one is expected within FLUSH_S of the last hand-over, so none waits
+ * much longer than FLUSH_S (progress, snapshots and the end hand the
+ * batch on first: stream messages keep their seq order); the store gets a
+ * batch before the stream sees any of it, so a watcher that finds a gap
+ * and asks GetEnergy finds the samples there. */
+#define FLUSH_S 0.1
+#define FLUSH_MAX 256
+
+typedef struct {
+    store_energy_sample rec[FLUSH_MAX];
+    uint8_t *msg[FLUSH_MAX];        /* packed StreamMsg or NULL (encoding failed) */
+    size_t len[FLUSH_MAX];
+    size_t n;
+    double last_flush, last_sample;  /* mono_now() */
+} pending;
+
 typedef struct {
     srv_pool *p;
     void *push;
     srv_job *j;
     char topic[SRV_TOPIC_LEN + 1];
+    pending *pe;    /* NULL: every sample handed on at once */
 } ctx;
 
 static void publish(ctx *c, uint8_t *buf, size_t len)
@@ -128,6 +154,21 @@ static void publish(ctx *c, uint8_t *buf, size_t len)
         else srv_debug(c->j->id, "stream message dropped (main thread behind)");
     }
     free(buf);
+}
+
+/* Hands the held samples on: the store first, then the stream. */
+static void flush_samples(ctx *c)
+{
+    pending *pe = c->pe;
+    if (!pe) return;
+    pe->last_flush = mono_now();
+    if (!pe->n) return;
+    int rc = store_energy_append_n(c->p->st, pe->rec, pe->n);
+    if (rc)
+        srv_warn(c->j->id, "energy samples %lld..%lld not recorded: %s", (long long)pe->rec[0].seq,
+                 (long long)pe->rec[pe->n - 1].seq, store_strerror(rc));
+    for (size_t i = 0; i < pe->n; i++) publish(c, pe->msg[i], pe->len[i]);
+    pe->n = 0;
 }
 
 static void energy_sample(ctx *c, mpm_sim *sim, srv_energy_sample *out)
@@ -151,21 +192,60 @@ static void energy_sample(ctx *c, mpm_sim *sim, srv_energy_sample *out)
     r.total = s.e.total;
     for (int d = 0; d < 3; d++) r.momentum[d] = s.e.momentum[d];
     r.mass = s.e.mass;
-    int rc = store_energy_append(c->p->st, &r);
-    if (rc) srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
-                     store_strerror(rc));
     uint8_t *buf = NULL;
     size_t len = 0;
     if (srv_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
         srv_warn(j->id, "out of memory encoding an energy sample");
-    publish(c, buf, len);
     if (out) *out = s;
+    pending *pe = c->pe;
+    if (!pe) {
+        int rc = store_energy_append(c->p->st, &r);
+        if (rc) srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
+                         store_strerror(rc));
+        publish(c, buf, len);
+        return;
+    }
+    pe->rec[pe->n] = r;
+    pe->msg[pe->n] = buf;
+    pe->len[pe->n] = len;
+    pe->n++;
+    /* hold it only if the next sample (as far as the last interval
+     * tells) comes before this batch is FLUSH_S old */
+    double now = mono_now(), gap = now - pe->last_sample;
+    pe->last_sample = now;
+    if (pe->n == FLUSH_MAX || now + gap - pe->last_flush >= FLUSH_S) flush_samples(c);
+}
+
+/* A packed snapshot StreamMsg handed to zmq without a copy
+ * (zmq_msg_init_data): zmq drops its reference once the message has left
+ * (the XPUB keeps it until the last subscriber's pipe has sent it), from
+ * whichever thread that happens on; the worker keeps one of its own and
+ * packs the next snapshot into the same buffer when zmq is done with it -
+ * so a watched job allocates its (tens of MB) message buffer once, not
+ * twice per snapshot (protobuf buffer + zmq's copy), and faults no fresh
+ * pages in while the solver waits. */
+typedef struct {
+    atomic_int refs;
+    size_t cap;
+    uint8_t data[];
+} snapmsg;
+
+static void snapmsg_unref(snapmsg *m)
+{
+    if (m && atomic_fetch_sub(&m->refs, 1) == 1) free(m);
+}
+
+static void snapmsg_zmq_free(void *data, void *hint)
+{
+    (void)data;
+    snapmsg_unref(hint);
 }
 
 /* Snapshot buffers are allocated on first use, once per job. */
 typedef struct {
     double *x, *v, *stress, *pressure, *volume, *packed;
     size_t n;
+    snapmsg *msg;   /* the last streamed message's buffer, or NULL */
 } snapbuf;
 
 static void snapbuf_free(snapbuf *b)
@@ -176,12 +256,53 @@ static void snapbuf_free(snapbuf *b)
     free(b->pressure);
     free(b->volume);
     free(b->packed);
+    snapmsg_unref(b->msg);
     memset(b, 0, sizeof *b);
+}
+
+/* Packs a snapshot into the job's message buffer (a fresh one only when
+ * zmq still holds the last, or it is too small) and sends it without a
+ * copy. */
+static void publish_snapshot(ctx *c, snapbuf *b, const srv_snapshot *s)
+{
+    srv_job *j = c->j;
+    uint64_t seq = j->msg_seq++;
+    size_t need = 0, len = 0;
+    srv_stream_snapshot_into(j->id, seq, s, NULL, 0, &need);  /* the size only */
+    snapmsg *m = b->msg;
+    if (!m || m->cap < need || atomic_load(&m->refs) != 1) {
+        snapmsg_unref(m);
+        b->msg = m = malloc(sizeof *m + need);
+        if (!m) {
+            srv_warn(j->id, "out of memory for a snapshot message of %zu bytes", need);
+            return;
+        }
+        atomic_init(&m->refs, 1);
+        m->cap = need;
+    }
+    if (srv_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
+        srv_warn(j->id, "cannot encode a snapshot");
+        return;
+    }
+    zmq_msg_t msg;
+    atomic_fetch_add(&m->refs, 1);  /* zmq's, dropped by snapmsg_zmq_free */
+    if (zmq_msg_init_data(&msg, m->data, len, snapmsg_zmq_free, m)) {
+        atomic_fetch_sub(&m->refs, 1);
+        srv_warn(j->id, "stream send: %s", zmq_strerror(errno));
+        return;
+    }
+    if (zmq_send(c->push, c->topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
+        zmq_msg_send(&msg, c->push, ZMQ_DONTWAIT) < 0) {
+        if (errno != EAGAIN) srv_warn(j->id, "stream send: %s", zmq_strerror(errno));
+        else srv_debug(j->id, "stream message dropped (main thread behind)");
+        zmq_msg_close(&msg);  /* not sent: zmq_msg_send left it to us */
+    }
 }
 
 static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
 {
     srv_job *j = c->j;
+    flush_samples(c);  /* the samples before it go out (and in) first */
     unsigned f = j->sc->snapshot_fields;
     size_t n = mpm_sim_particles(sim);
     int dim = mpm_sim_dim(sim);
@@ -223,13 +344,7 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
         if (rc) srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
                          store_strerror(rc));
     }
-    if (stream) {
-        uint8_t *buf = NULL;
-        size_t len = 0;
-        if (srv_stream_snapshot(j->id, j->msg_seq++, &s, &buf, &len))
-            srv_warn(j->id, "out of memory encoding a snapshot");
-        publish(c, buf, len);
-    }
+    if (stream) publish_snapshot(c, b, &s);
     return 0;
 }
 
@@ -243,6 +358,7 @@ static void progress(ctx *c, mpm_sim *sim, double wall)
     double left = j->sc->has_end_time && dt > 0 ? ceil((j->sc->end_time - t) / dt - 0.5) : 0;
     if (!(left < 9e18 - (double)k)) left = 9e18 - (double)k;
     int64_t total = j->sc->has_end_time ? k + (int64_t)(left > 0 ? left : 0) : (int64_t)j->sc->steps;
+    flush_samples(c);
     pthread_mutex_lock(&c->p->mu);
     j->steps = k;
     j->steps_total = total;
@@ -264,6 +380,7 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
                    size_t particles, const srv_energy_sample *last)
 {
     srv_job *j = c->j;
+    flush_samples(c);
     store_run_end end = {0};
     static const store_status map[] = {[SRV_STATUS_FINISHED] = STORE_FINISHED,
                                        [SRV_STATUS_FAILED] = STORE_FAILED,
@@ -293,7 +410,7 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
 
 static void run_job(srv_pool *p, void *push, srv_job *j)
 {
-    ctx c = {p, push, j, ""};
+    ctx c = {p, push, j, "", NULL};
     srv_topic(j->id, c.topic);
     srv_case *sc = j->sc;
     const srv_config *cfg = p->cfg;
@@ -319,6 +436,9 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
 
     srv_energy_sample last;
     snapbuf sb = {0};
+    /* without it (out of memory) samples go out one by one */
+    c.pe = sc->energy_every ? calloc(1, sizeof *c.pe) : NULL;
+    if (c.pe) c.pe->last_flush = c.pe->last_sample = mono_now();
     int snaps_ok = 1, status = SRV_STATUS_FINISHED;
     char why[512] = "";
     energy_sample(&c, sim, &last);
@@ -385,6 +505,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     progress(&c, sim, wall);
     finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last);
     snapbuf_free(&sb);
+    free(c.pe);  /* empty: finish() handed everything on */
     mpm_sim_destroy(&sim);
 }
 

@@ -827,3 +827,400 @@ TEST(codec_envelopes)
     CHECK(!strcmp(srv_status_name(SRV_STATUS_INTERRUPTED), "INTERRUPTED") && !srv_status_name(0));
     CHECK(srv_status_from_name("CANCELLED") == SRV_STATUS_CANCELLED && srv_status_from_name("x") == 0);
 }
+
+/* ---- the client decoders: srv_stream_peek, srv_reply_peek, ... ---- */
+
+static int same_energy(const srv_energy_sample *a, const srv_energy_sample *b)
+{
+    if (a->step != b->step || a->t != b->t || a->dim != b->dim || a->seq != b->seq ||
+        a->e.kinetic != b->e.kinetic || a->e.strain != b->e.strain ||
+        a->e.potential != b->e.potential || a->e.external_work != b->e.external_work ||
+        a->e.total != b->e.total || a->e.mass != b->e.mass)
+        return 0;
+    for (int d = 0; d < a->dim; d++)
+        if (a->e.momentum[d] != b->e.momentum[d]) return 0;
+    return 1;
+}
+
+/* Every prefix and every single-byte corruption of a message, and random
+ * bytes: the decoder returns 0 or SRV_CODEC_ESYNTAX (ASan/UBSan watch the
+ * rest).  Returns how many were rejected, or -1 on another return code. */
+static int peek_abuse(const uint8_t *msg, size_t n, int reply)
+{
+    uint8_t *b = malloc(n ? n : 1);
+    int rejected = 0;
+    if (!b) return -1;
+    memcpy(b, msg, n);
+    for (size_t k = 0; k <= n; k++) {
+        for (int v = -1; v < 4; v++) {
+            static const uint8_t vals[4] = {0x00, 0xff, 0x80, 0x2a};
+            size_t len = v < 0 ? k : n;
+            uint8_t save = 0;
+            if (v >= 0) {
+                if (k == n) break;
+                save = b[k];
+                b[k] = vals[v];
+            }
+            /* a copy of exactly len bytes, so ASan sees any overread */
+            uint8_t *c = malloc(len ? len : 1);
+            if (!c) {
+                free(b);
+                return -1;
+            }
+            memcpy(c, b, len);
+            srv_stream_info si;
+            srv_reply_info ri;
+            char err[ERRLEN];
+            int rc = reply ? srv_reply_peek(c, len, &ri, err, sizeof err)
+                           : srv_stream_peek(c, len, &si, err, sizeof err);
+            free(c);
+            if (v >= 0) b[k] = save;
+            if (rc == SRV_CODEC_ESYNTAX) rejected++;
+            else if (rc) {
+                free(b);
+                return -1;
+            }
+        }
+    }
+    free(b);
+    return rejected;
+}
+
+TEST(codec_stream_peek)
+{
+    char err[ERRLEN];
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    srv_stream_info si;
+    int rc;
+
+    srv_progress pr = {.step = 5, .steps_total = 50, .t = 0.5, .dt = 0.1, .wall_s = 0.25};
+    CHECK(srv_stream_progress(0x1234567890abcdefULL, 7, &pr, &buf, &n) == 0);
+    rc = srv_stream_peek(buf, n, &si, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(si.kind == SRV_STREAM_PROGRESS && si.has_job_id && si.job_id == 0x1234567890abcdefULL &&
+          si.has_seq && si.seq == 7);
+    CHECK(si.progress.step == 5 && si.progress.steps_total == 50 && si.progress.t == 0.5 &&
+          si.progress.dt == 0.1 && si.progress.wall_s == 0.25);
+    CHECK(peek_abuse(buf, n, 0) > 0);
+    free(buf);
+
+    srv_energy_sample es = {.step = -3, .t = 0.01, .dim = 3, .seq = UINT64_MAX,
+                            .e = {.kinetic = 0.5, .strain = 0.25, .potential = -1e300,
+                                  .external_work = 1e-300, .total = 0.75, .mass = 2,
+                                  .momentum = {1, -1, 9}}};
+    CHECK(srv_stream_energy(12, 0, &es, &buf, &n) == 0);
+    rc = srv_stream_peek(buf, n, &si, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(si.kind == SRV_STREAM_ENERGY && si.job_id == 12 && si.has_seq && si.seq == 0);
+    CHECK(same_energy(&si.energy, &es));
+    CHECK(si.status == 0 && !si.has_energy && si.error[0] == 0);
+    CHECK(peek_abuse(buf, n, 0) > 0);
+    free(buf);
+
+    /* a snapshot: arrays counted, all five and some absent */
+    enum { NP = 3 };
+    double x[2 * NP] = {1, 2, 3, 4, 5, 6}, v[2 * NP] = {0}, st[6 * NP] = {0}, p[NP] = {-1, 0, 1},
+           vol[NP] = {1, 1, 1};
+    srv_snapshot snap = {.step = 100, .t = 0.125, .n = NP, .dim = 2, .x = x, .v = v, .stress = st,
+                         .pressure = p, .volume = vol};
+    CHECK(srv_stream_snapshot(99, 4, &snap, &buf, &n) == 0);
+    rc = srv_stream_peek(buf, n, &si, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(si.kind == SRV_STREAM_SNAPSHOT && si.job_id == 99 && si.seq == 4);
+    CHECK(si.snapshot.step == 100 && si.snapshot.t == 0.125 && si.snapshot.n == NP &&
+          si.snapshot.dim == 2);
+    CHECK(si.snapshot.n_x == 2 * NP && si.snapshot.n_v == 2 * NP && si.snapshot.n_stress == 6 * NP &&
+          si.snapshot.n_pressure == NP && si.snapshot.n_volume == NP);
+    {
+        /* the same bytes through the caller's buffer */
+        uint8_t small[8], *big = malloc(n);
+        size_t m = 0;
+        CHECK(big);
+        CHECK(srv_stream_snapshot_into(99, 4, &snap, small, sizeof small, &m) == SRV_CODEC_ETOOBIG &&
+              m == n);
+        m = 0;
+        rc = srv_stream_snapshot_into(99, 4, &snap, big, n, &m);
+        int same = rc == 0 && m == n && !memcmp(big, buf, n);
+        free(big);
+        CHECK(same);
+    }
+    CHECK(peek_abuse(buf, n, 0) > 0);
+    free(buf);
+    snap.v = snap.stress = snap.volume = NULL;
+    CHECK(srv_stream_snapshot(99, 5, &snap, &buf, &n) == 0);
+    rc = srv_stream_peek(buf, n, &si, err, sizeof err);
+    free(buf);
+    CHECK(rc == 0 && si.kind == SRV_STREAM_SNAPSHOT && si.snapshot.n_x == 2 * NP &&
+          si.snapshot.n_v == 0 && si.snapshot.n_stress == 0 && si.snapshot.n_pressure == NP &&
+          si.snapshot.n_volume == 0);
+    {
+        /* 10^6 particles: counted without copying 40 MB */
+        size_t big = 1000000;
+        double *a = calloc(2 * big, sizeof *a);
+        CHECK(a);
+        srv_snapshot s2 = {.step = 1, .t = 1, .n = big, .dim = 2, .x = a, .v = a, .pressure = a};
+        rc = srv_stream_snapshot(1, 1, &s2, &buf, &n);
+        free(a);
+        CHECK(rc == 0);
+        rc = srv_stream_peek(buf, n, &si, err, sizeof err);
+        free(buf);
+        CHECK(rc == 0 && si.snapshot.n == big && si.snapshot.n_x == 2 * big &&
+              si.snapshot.n_v == 2 * big && si.snapshot.n_pressure == big);
+    }
+
+    srv_finished fin = {.status = SRV_STATUS_FAILED, .error = "particle left the grid", .steps = 50,
+                        .t = 5, .wall_s = 1.5, .energy = &es};
+    CHECK(srv_stream_finished(12, 3, &fin, &buf, &n) == 0);
+    rc = srv_stream_peek(buf, n, &si, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(si.kind == SRV_STREAM_FINISHED && si.job_id == 12 && si.seq == 3);
+    CHECK(si.status == SRV_STATUS_FAILED && !strcmp(si.error, "particle left the grid") &&
+          si.steps == 50 && si.t == 5 && si.wall_s == 1.5 && si.has_energy &&
+          same_energy(&si.energy, &es));
+    CHECK(peek_abuse(buf, n, 0) > 0);
+    free(buf);
+    fin = (srv_finished){.status = SRV_STATUS_CANCELLED};
+    CHECK(srv_stream_finished(13, 0, &fin, &buf, &n) == 0);
+    rc = srv_stream_peek(buf, n, &si, err, sizeof err);
+    free(buf);
+    CHECK(rc == 0 && si.kind == SRV_STREAM_FINISHED && si.status == SRV_STATUS_CANCELLED &&
+          !si.has_energy && si.error[0] == 0 && si.steps == 0);
+
+    /* no body; no ids */
+    CHECK(srv_stream_peek(NULL, 0, &si, err, sizeof err) == 0 && si.kind == SRV_STREAM_NONE &&
+          !si.has_job_id && !si.has_seq);
+    /* garbage */
+    static const struct { uint8_t b[12]; size_t n; } bad[] = {
+        {{0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff}, 11}, /* endless varint */
+        {{0x08}, 1},                                  /* job_id without its value */
+        {{0x09, 1, 2, 3, 4, 5, 6, 7, 8}, 9},          /* job_id as a 64-bit field */
+        {{0x2a, 100, 0x08, 0x01}, 4},                 /* snapshot claiming 100 bytes */
+        {{0x2a, 3, 0x2a, 1, 0}, 5},                   /* snapshot.x of 1 byte */
+        {{0x2a, 2, 0x10, 1}, 4},                      /* snapshot.t as a varint */
+        {{0x22, 2, 0x11, 1}, 4},                      /* energy.t cut short */
+        {{0x00}, 1},                                  /* field 0 */
+        {{0x0b}, 1},                                  /* a group */
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        err[0] = 0;
+        rc = srv_stream_peek(bad[i].b, bad[i].n, &si, err, sizeof err);
+        CHECKF(rc == SRV_CODEC_ESYNTAX && strstr(err, "not a valid mpmd.StreamMsg") &&
+               si.kind == SRV_STREAM_NONE, "garbage %zu: rc %d, %s", i, rc, err);
+    }
+    /* random bytes */
+    uint32_t seed = 12345;
+    int rejected = 0;
+    for (int it = 0; it < 2000; it++) {
+        uint8_t r[64];
+        size_t len = (size_t)(it % 64);
+        for (size_t k = 0; k < len; k++) {
+            seed = seed * 1103515245u + 12345u;
+            r[k] = (uint8_t)(seed >> 16);
+        }
+        uint8_t *c = malloc(len ? len : 1);
+        CHECK(c);
+        memcpy(c, r, len);
+        rc = srv_stream_peek(c, len, &si, err, sizeof err);
+        int rc2 = srv_reply_peek(c, len, &(srv_reply_info){0}, err, sizeof err);
+        free(c);
+        CHECKF((rc == 0 || rc == SRV_CODEC_ESYNTAX) && (rc2 == 0 || rc2 == SRV_CODEC_ESYNTAX),
+               "random %d: %d %d", it, rc, rc2);
+        rejected += rc != 0;
+    }
+    TLOG("random bytes: %d of 2000 rejected as StreamMsg", rejected);
+    CHECK(rejected > 1000);
+}
+
+TEST(codec_reply_peek)
+{
+    char err[ERRLEN];
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    srv_reply_info ri;
+    int rc;
+
+    CHECK(srv_reply_error(SRV_ERR_INVALID_CASE, "must be > 0", "bodies[0].sphere.radius", &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(ri.kind == SRV_REPLY_ERROR && ri.schema_version == SRV_SCHEMA_VERSION &&
+          ri.err_code == SRV_ERR_INVALID_CASE && !strcmp(ri.err_message, "must be > 0") &&
+          !strcmp(ri.err_field, "bodies[0].sphere.radius"));
+    CHECK(peek_abuse(buf, n, 1) > 0);
+    free(buf);
+    CHECK(srv_reply_error(SRV_ERR_QUEUE_FULL, NULL, NULL, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    free(buf);
+    CHECK(rc == 0 && ri.kind == SRV_REPLY_ERROR && ri.err_code == SRV_ERR_QUEUE_FULL &&
+          !ri.err_message[0] && !ri.err_field[0]);
+
+    CHECK(srv_reply_submit_ok(UINT64_MAX, 13, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    CHECK(rc == 0 && ri.kind == SRV_REPLY_SUBMIT_OK && ri.has_job_id && ri.job_id == UINT64_MAX &&
+          ri.has_run_id && ri.run_id == 13);
+    CHECK(peek_abuse(buf, n, 1) > 0);
+    free(buf);
+
+    srv_energy_sample es[2] = {{.step = 10, .t = 0.01, .dim = 2, .seq = 3,
+                                .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2,
+                                      .momentum = {1, -1}}},
+                               {.step = 11, .t = 0.011, .dim = 2, .seq = 4,
+                                .e = {.kinetic = 0.4, .potential = -2, .external_work = 3,
+                                      .total = -4.6, .mass = 2, .momentum = {0.5, 7}}}};
+    int64_t ssteps[2] = {0, 100};
+    srv_run_info run = {.run_id = 5, .job_id = 6, .name = "bar", .status = SRV_STATUS_FAILED,
+                        .error = "diverged", .submitted_at = 1700000000.5, .steps = 10,
+                        .steps_total = 100, .t = 0.01, .wall_s = 2.5, .particles = 1000,
+                        .nodes = 121, .dim = 2, .last_energy = &es[1], .energy_samples = 11,
+                        .n_snapshot_steps = 2, .snapshot_steps = ssteps};
+    CHECK(srv_reply_run(&run, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(ri.kind == SRV_REPLY_RUN && ri.run_id == 5 && ri.job_id == 6 && !strcmp(ri.name, "bar") &&
+          ri.status == SRV_STATUS_FAILED && !strcmp(ri.run_error, "diverged") && ri.steps == 10 &&
+          ri.steps_total == 100 && ri.t == 0.01 && ri.wall_s == 2.5 && ri.particles == 1000 &&
+          ri.nodes == 121 && ri.dim == 2 && ri.energy_samples == 11);
+    CHECK(peek_abuse(buf, n, 1) > 0);
+    free(buf);
+    srv_run_info two[2] = {run, run};
+    CHECK(srv_reply_runs(two, 2, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    free(buf);
+    CHECK(rc == 0 && ri.kind == SRV_REPLY_RUNS && ri.n_runs == 2);
+
+    /* an energy page: peeked, and decoded in full */
+    CHECK(srv_reply_energy(5, es, 2, 1, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    CHECK(rc == 0 && ri.kind == SRV_REPLY_ENERGY && ri.has_run_id && ri.run_id == 5 &&
+          ri.n_samples == 2 && ri.more == 1);
+    {
+        srv_energy_sample *got = NULL;
+        size_t ns = 0;
+        uint64_t run_id = 0;
+        int more = 0;
+        rc = srv_reply_energy_decode(buf, n, 0, &run_id, &got, &ns, &more, err, sizeof err);
+        int ok = rc == 0 && run_id == 5 && more == 1 && ns == 2 && got &&
+                 same_energy(&got[0], &es[0]) && same_energy(&got[1], &es[1]);
+        free(got);
+        CHECKF(ok, "rc %d: %s", rc, err);
+        rc = srv_reply_energy_decode(buf, n, n - 1, &run_id, &got, &ns, &more, err, sizeof err);
+        CHECK(rc == SRV_CODEC_ETOOBIG && !got && ns == 0);
+        rc = srv_reply_energy_decode(buf, n - 1, 0, &run_id, &got, &ns, &more, err, sizeof err);
+        CHECK(rc == SRV_CODEC_ESYNTAX && !got && ns == 0);
+    }
+    CHECK(peek_abuse(buf, n, 1) > 0);
+    free(buf);
+    CHECK(srv_reply_energy(8, NULL, 0, 0, &buf, &n) == 0);
+    {
+        srv_energy_sample *got = NULL;
+        size_t ns = 1;
+        uint64_t run_id = 0;
+        int more = 1;
+        rc = srv_reply_energy_decode(buf, n, 0, &run_id, &got, &ns, &more, err, sizeof err);
+        CHECK(rc == 0 && run_id == 8 && !got && ns == 0 && more == 0);
+    }
+    free(buf);
+
+    double x[4] = {0.1, 0.2, 0.3, 0.4}, p[2] = {-1, 1};
+    srv_snapshot snap = {.step = 10, .t = 0.01, .n = 2, .dim = 2, .x = x, .pressure = p};
+    CHECK(srv_reply_snapshot(&snap, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    CHECK(rc == 0 && ri.kind == SRV_REPLY_SNAPSHOT && ri.schema_version == SRV_SCHEMA_VERSION &&
+          ri.snapshot.step == 10 && ri.snapshot.t == 0.01 && ri.snapshot.n == 2 &&
+          ri.snapshot.dim == 2 && ri.snapshot.n_x == 4 && ri.snapshot.n_v == 0 &&
+          ri.snapshot.n_stress == 0 && ri.snapshot.n_pressure == 2 && ri.snapshot.n_volume == 0);
+    {
+        /* not an energy series */
+        srv_energy_sample *got = NULL;
+        size_t ns = 0;
+        uint64_t run_id = 0;
+        int more = 0;
+        rc = srv_reply_energy_decode(buf, n, 0, &run_id, &got, &ns, &more, err, sizeof err);
+        CHECK(rc == SRV_CODEC_EINVAL && !got);
+    }
+    CHECK(peek_abuse(buf, n, 1) > 0);
+    free(buf);
+
+    CHECK(srv_reply_pong("0.1", "tcp://127.0.0.1:5556", &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    free(buf);
+    CHECK(rc == 0 && ri.kind == SRV_REPLY_PONG && !strcmp(ri.server_version, "0.1") &&
+          !strcmp(ri.stream_endpoint, "tcp://127.0.0.1:5556") &&
+          ri.server_schema == SRV_SCHEMA_VERSION);
+    const char *names[2] = {"protobuf-c", "jansson"}, *versions[2] = {"1.4.1", "2.14"};
+    CHECK(srv_reply_version("0.2", names, versions, 2, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    free(buf);
+    CHECK(rc == 0 && ri.kind == SRV_REPLY_VERSION && !strcmp(ri.server_version, "0.2") &&
+          ri.server_schema == SRV_SCHEMA_VERSION && ri.n_components == 2);
+
+    /* a long string is cut to fit, NUL-terminated */
+    char longmsg[2000];
+    memset(longmsg, 'a', sizeof longmsg - 1);
+    longmsg[sizeof longmsg - 1] = 0;
+    CHECK(srv_reply_error(SRV_ERR_INTERNAL, longmsg, longmsg, &buf, &n) == 0);
+    rc = srv_reply_peek(buf, n, &ri, err, sizeof err);
+    free(buf);
+    CHECK(rc == 0 && strlen(ri.err_message) == sizeof ri.err_message - 1 &&
+          strlen(ri.err_field) == sizeof ri.err_field - 1);
+
+    static const uint8_t junk[] = {0x12, 0x05, 0x08};
+    CHECK(srv_reply_peek(junk, sizeof junk, &ri, err, sizeof err) == SRV_CODEC_ESYNTAX &&
+          ri.kind == SRV_REPLY_NONE && strstr(err, "not a valid mpmd.Reply"));
+    CHECK(srv_reply_peek(NULL, 0, &ri, err, sizeof err) == 0 && ri.kind == SRV_REPLY_NONE);
+}
+
+/* A Submit around case bytes packed beforehand is the very Request the
+ * case message would give. */
+TEST(codec_submit_bytes)
+{
+    char err[ERRLEN];
+    size_t len = 0, cn = 0, n1 = 0, n2 = 0;
+    uint8_t *cb = NULL, *b1 = NULL, *b2 = NULL;
+    Mpmd__Case *pb = NULL;
+    char *text = slurp("proto/examples/disks2d_coarse.json", &len);
+    CHECK(text);
+    int rc = srv_case_from_json(text, len, &pb, err, sizeof err);
+    free(text);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(srv_case_pack(pb, &cb, &cn) == 0 && cn > 127); /* a two-byte length */
+    srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
+    rc = srv_request_encode(&rq, &b1, &n1);
+    srv_case_pb_free(&pb);
+    CHECK(rc == 0);
+    srv_request rb = {.kind = SRV_REQ_SUBMIT, .case_bytes = cb, .case_len = cn};
+    rc = srv_request_encode(&rb, &b2, &n2);
+    int same = rc == 0 && n1 == n2 && !memcmp(b1, b2, n1);
+    free(b1);
+    CHECK(same);
+    /* and it decodes back to the same case */
+    srv_request got;
+    rc = srv_request_decode(b2, n2, 0, &got, err, sizeof err);
+    free(b2);
+    CHECKF(rc == 0 && got.kind == SRV_REQ_SUBMIT && got.case_pb, "%s", err);
+    uint8_t *again = NULL;
+    size_t an = 0;
+    rc = srv_case_pack(got.case_pb, &again, &an);
+    srv_request_clear(&got);
+    same = rc == 0 && an == cn && !memcmp(again, cb, cn);
+    free(again);
+    CHECK(same);
+    /* an empty case, another schema version */
+    rb.case_len = 0;
+    rb.schema_version = 300;
+    CHECK(srv_request_encode(&rb, &b2, &n2) == 0);
+    rc = srv_request_decode(b2, n2, 0, &got, err, sizeof err);
+    free(b2);
+    CHECK(rc == SRV_CODEC_EVERSION && got.schema_version == 300);
+    srv_request_clear(&got);
+    rb.schema_version = 0;
+    CHECK(srv_request_encode(&rb, &b2, &n2) == 0);
+    rc = srv_request_decode(b2, n2, 0, &got, err, sizeof err);
+    free(b2);
+    CHECK(rc == 0 && got.kind == SRV_REQ_SUBMIT && got.case_pb);
+    srv_request_clear(&got);
+    /* no case at all */
+    rb.case_bytes = NULL;
+    CHECK(srv_request_encode(&rb, &b2, &n2) == SRV_CODEC_EINVAL && !b2);
+    free(cb);
+}

@@ -14,11 +14,13 @@
 #define _GNU_SOURCE
 #include "t_daemon.h"
 
+#include <errno.h>
 #include <math.h>
 #include <signal.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
+#include <zmq.h>
 
 #include "mpm.h"
 
@@ -1576,4 +1578,182 @@ DTEST(daemon_bad_input)
     CHECKF(o.status == 0 && !o.out[0], "runs after refused submissions: %s", o.out);
     td_out_free(&o);
     CHECK(td_stop(&d) == 0);
+}
+
+/* A watched job's stream read with srv_stream_peek: every message in seq
+ * order (energies batched by the worker lose none and keep their order),
+ * every energy sample once, and the snapshots - packed into one reused
+ * buffer and handed to zmq without a copy - each holding the state of its
+ * own step, as the solver in-process has it.  The watcher reads nothing
+ * until the job has ended, so the snapshots (~0.8 MB each, more than the
+ * socket buffers take) wait in zmq's queues while the next ones are
+ * packed: a buffer reused while zmq still held it would show here. */
+DTEST(daemon_stream_snapshots)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--workers", "1", "--solver-threads", "1", "--verbose", NULL};
+    char dir[300], longp[400], path[400], sep[420], topic[32], err[ERRLEN], st[32];
+    td_daemon d;
+    td_out o;
+    void *zctx = NULL, *sub = NULL;
+    srv_case *sc = NULL;
+    mpm_sim *sim = NULL;
+    double *x = NULL, *v = NULL;
+    /* a receive queue of one message: what the watcher has not read stays
+     * queued in mpmd (its XPUB keeps up to 10000 messages per watcher) */
+    int hwm = 1, linger = 0, rc = -1;
+    enum { STEPS = 120, SNAP_EVERY = 20 };
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    /* job 1 keeps the one worker busy while job 2 waits, watched */
+    CHECK(write_case(long_case(5000), dir, "long.json", longp, sizeof longp) == 0);
+    json_t *c = block2d(STEPS, 1, "snapshots");
+    CHECK(c);
+    /* 25600 particles: h = 0.005 */
+    json_object_set_new(json_object_get(c, "grid"), "spacing", json_pack("[f,f]", 0.005, 0.005));
+    json_object_set_new(json_object_get(c, "grid"), "nodes", json_pack("[i,i]", 201, 201));
+    set_output(c, "snapshotEvery", json_integer(SNAP_EVERY));
+    set_output(c, "snapshotFields", json_pack("[s,s]", "X", "V"));
+    CHECK(write_case(c, dir, "snap.json", path, sizeof path) == 0);
+    for (unsigned long long i = 1; i <= 2; i++) {
+        CHECK(td_ctl(&d, 30, &o, "submit", i == 1 ? longp : path, NULL) == 0);
+        CHECKF(o.status == 0 && job_of(o.out) == i, "submit %llu: %s%s", i, o.out, o.err);
+        td_out_free(&o);
+    }
+    CHECK(td_wait_status(&d, 1, "RUNNING", 20, st, sizeof st) == 0);
+
+    snprintf(sep, sizeof sep, "%s.stream", d.ep);
+    snprintf(topic, sizeof topic, "job:%016llx:", 2ULL);
+    zctx = zmq_ctx_new();
+    CHECK(zctx);
+    sub = zmq_socket(zctx, ZMQ_SUB);
+    if (!sub || zmq_setsockopt(sub, ZMQ_LINGER, &linger, sizeof linger) ||
+        zmq_setsockopt(sub, ZMQ_RCVHWM, &hwm, sizeof hwm) ||
+        zmq_setsockopt(sub, ZMQ_SUBSCRIBE, topic, strlen(topic)) || zmq_connect(sub, sep)) {
+        t_fail(__FILE__, __LINE__, "SUB on %s: %s", sep, zmq_strerror(errno));
+        goto out;
+    }
+    if (wait_watched(&d, 2, 20)) {
+        t_fail(__FILE__, __LINE__, "job 2 never watched");
+        goto out;
+    }
+    if (td_ctl(&d, 30, &o, "cancel", "1", NULL)) {
+        t_fail(__FILE__, __LINE__, "mpmctl cancel 1 failed");
+        goto out;
+    }
+    td_out_free(&o);
+    if (td_wait_status(&d, 2, "FINISHED|FAILED|CANCELLED|INTERRUPTED", 120, st, sizeof st) ||
+        strcmp(st, "FINISHED")) {
+        t_fail(__FILE__, __LINE__, "job 2: %s", st);
+        goto out;
+    }
+
+    /* the same case in-process, stepped along with the snapshots */
+    {
+        size_t len = 0;
+        char *text = td_slurp(path, &len);
+        int lrc = text ? srv_case_load(text, len, &sc, err, sizeof err) : -1;
+        free(text);
+        if (lrc || !(sim = mpm_sim_new(&sc->c, err, sizeof err))) {
+            t_fail(__FILE__, __LINE__, "in-process case: %s", err);
+            goto out;
+        }
+    }
+    size_t np = mpm_sim_particles(sim);
+    x = malloc(2 * np * sizeof *x);
+    v = malloc(2 * np * sizeof *v);
+    if (!x || !v) {
+        t_fail(__FILE__, __LINE__, "out of memory");
+        goto out;
+    }
+
+    uint64_t next_seq = 0, next_sample = 0;
+    long snaps = 0;
+    double worst = 0, end = td_now() + 120;
+    int finished = 0;
+    while (!finished) {
+        zmq_pollitem_t it = {sub, 0, ZMQ_POLLIN, 0};
+        if (td_now() > end) {
+            t_fail(__FILE__, __LINE__, "no Finished within 120 s (seq %llu)",
+                   (unsigned long long)next_seq);
+            goto out;
+        }
+        if (zmq_poll(&it, 1, 200) <= 0) continue;
+        zmq_msg_t part[2];
+        int nparts = 0, more = 1;
+        while (more) {
+            zmq_msg_t m;
+            zmq_msg_init(&m);
+            if (zmq_msg_recv(&m, sub, 0) < 0) {
+                zmq_msg_close(&m);
+                break;
+            }
+            more = zmq_msg_more(&m);
+            if (nparts < 2) part[nparts++] = m;
+            else zmq_msg_close(&m);
+        }
+        srv_stream_info si;
+        int prc = nparts == 2 ? srv_stream_peek(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), &si,
+                                                err, sizeof err)
+                              : -1;
+        int ok = prc == 0 && si.job_id == 2 && si.seq == next_seq;
+        if (ok && si.kind == SRV_STREAM_ENERGY) {
+            ok = si.energy.seq == next_sample && si.energy.step == (int64_t)next_sample;
+            next_sample++;
+        } else if (ok && si.kind == SRV_STREAM_SNAPSHOT) {
+            const srv_snapshot_info *s = &si.snapshot;
+            ok = s->n == np && s->dim == 2 && s->n_x == 2 * np && s->n_v == 2 * np &&
+                 s->n_stress == 0 && s->n_pressure == 0 && s->n_volume == 0 &&
+                 s->step == (int64_t)(snaps + 1) * SNAP_EVERY;
+            /* its values: through the JSON bridge, against the solver */
+            char *text = NULL;
+            json_t *j = NULL, *sn;
+            if (ok) {
+                while (mpm_sim_steps(sim) < s->step) ok = ok && mpm_sim_step(sim) == 0;
+                mpm_sim_snapshot(sim, &(mpm_snapshot){x, v, NULL, NULL, NULL});
+                ok = ok && !srv_msg_bytes_to_json(SRV_MSG_STREAM, zmq_msg_data(&part[1]),
+                                                  zmq_msg_size(&part[1]), 0, 0, &text, err,
+                                                  sizeof err) &&
+                     (j = json_loads(text, 0, NULL)) && (sn = json_object_get(j, "snapshot"));
+                for (size_t i = 0; ok && i < 2 * np; i++) {
+                    double gx = json_number_value(json_array_get(json_object_get(sn, "x"), i));
+                    double gv = json_number_value(json_array_get(json_object_get(sn, "v"), i));
+                    worst = fmax(worst, fmax(rel_diff(gx, x[i]), rel_diff(gv, v[i])));
+                }
+            }
+            free(text);
+            json_decref(j);
+            snaps++;
+        } else if (ok && si.kind == SRV_STREAM_FINISHED) {
+            ok = si.status == SRV_STATUS_FINISHED && si.steps == STEPS && si.has_energy &&
+                 si.energy.seq == STEPS && next_sample == STEPS + 1;
+            finished = 1;
+        }
+        for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
+        if (!ok) {
+            t_fail(__FILE__, __LINE__, "stream message seq %llu (expected %llu), kind %d, peek %d "
+                   "%s, samples %llu, snapshots %ld", (unsigned long long)si.seq,
+                   (unsigned long long)next_seq, (int)si.kind, prc, prc ? err : "",
+                   (unsigned long long)next_sample, snaps);
+            goto out;
+        }
+        next_seq++;
+    }
+    TLOG("job 2: %llu stream messages, %llu energy samples, %ld snapshots of %zu particles; "
+         "snapshots vs in-process: max relative difference %.3g", (unsigned long long)next_seq,
+         (unsigned long long)next_sample, snaps, np, worst);
+    if (snaps != STEPS / SNAP_EVERY || worst > 1e-12) {
+        t_fail(__FILE__, __LINE__, "%ld snapshots, max difference %.3g", snaps, worst);
+        goto out;
+    }
+    rc = 0;
+out:
+    free(x);
+    free(v);
+    mpm_sim_destroy(&sim);
+    srv_case_destroy(&sc);
+    if (sub) zmq_close(sub);
+    if (zctx) zmq_ctx_term(zctx);
+    if (!rc) CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM");
 }

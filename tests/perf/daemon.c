@@ -25,8 +25,12 @@
  *  - daemon-watch: the output section asks for energies every step and
  *    snapshots (X, V, PRESSURE) every 100 steps, and the client also
  *    subscribes to the job's exact topic right after SubmitOk (the daemon
- *    packs snapshots only for watched jobs); it unpacks every stream
- *    message of the job and counts energies, snapshots and seq gaps.
+ *    packs snapshots only for watched jobs); it decodes every stream
+ *    message of the job with srv_stream_peek() (a snapshot's arrays are
+ *    counted, not copied) and counts energies, snapshots and seq gaps.
+ * The bench goes through srv_codec.h only: replies are read with
+ * srv_reply_peek(), and each case is kept as packed Case bytes, submitted
+ * as they are (srv_request.case_bytes).
  * Time per job: from just before the Submit is sent to the arrival of the
  * job's Finished message, on the client.  Finished.wall_s (the worker's own
  * loop, from before mpm_sim_new) splits it into daemon work around the
@@ -51,7 +55,6 @@ int pb_daemon_scene(mpm_method m, mpm_update u, long particles, long steps, int 
 
 #else
 
-#include "mpmd.pb-c.h"
 #include "srv_codec.h"
 
 #include <dirent.h>
@@ -177,14 +180,14 @@ static int stop_daemon(dmn *d)
     return rc;
 }
 
-/* One request, one reply (unpacked into *out; free it with
- * mpmd__reply__free_unpacked).  A Reply.error becomes -1 with its text. */
-static int call(dmn *d, const srv_request *rq, Mpmd__Reply **out, double timeout, char *err,
+/* One request, one reply (decoded into *out by srv_reply_peek).  A
+ * Reply.error becomes -1 with its text. */
+static int call(dmn *d, const srv_request *rq, srv_reply_info *out, double timeout, char *err,
                 size_t errlen)
 {
     uint8_t *buf = NULL;
     size_t len = 0;
-    *out = NULL;
+    memset(out, 0, sizeof *out);
     if (srv_request_encode(rq, &buf, &len)) {
         snprintf(err, errlen, "cannot encode a request");
         return -1;
@@ -240,16 +243,13 @@ static int call(dmn *d, const srv_request *rq, Mpmd__Reply **out, double timeout
         snprintf(err, errlen, "malformed reply from mpmd");
         rc = -1;
     } else {
-        *out = mpmd__reply__unpack(NULL, zmq_msg_size(&part[1]), zmq_msg_data(&part[1]));
-        if (!*out) {
-            snprintf(err, errlen, "undecodable reply from mpmd");
+        char why[256];
+        if (srv_reply_peek(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), out, why, sizeof why)) {
+            snprintf(err, errlen, "undecodable reply from mpmd: %s", why);
             rc = -1;
-        } else if ((*out)->body_case == MPMD__REPLY__BODY_ERROR) {
-            const Mpmd__Error *e = (*out)->error;
-            snprintf(err, errlen, "mpmd: error %d: %s%s%s", (int)e->code, e->message ? e->message : "",
-                     e->field && *e->field ? " (field " : "", e->field && *e->field ? ")" : "");
-            mpmd__reply__free_unpacked(*out, NULL);
-            *out = NULL;
+        } else if (out->kind == SRV_REPLY_ERROR) {
+            snprintf(err, errlen, "mpmd: error %d: %.300s%s%.100s%s", out->err_code, out->err_message,
+                     *out->err_field ? " (field " : "", out->err_field, *out->err_field ? ")" : "");
             rc = -1;
         }
     }
@@ -321,15 +321,19 @@ static int start_daemon(dmn *d, const char *bin, int threads)
     }
     /* one Ping, queued until mpmd binds: the DEALER connects by itself */
     srv_request rq = {.kind = SRV_REQ_PING};
-    Mpmd__Reply *rep = NULL;
+    srv_reply_info rep;
     char err[512];
-    if (call(d, &rq, &rep, READY_S, err, sizeof err) || rep->body_case != MPMD__REPLY__BODY_PONG) {
-        fprintf(stderr, "mpmbench: mpmd did not start: %s\n", rep ? "unexpected reply to Ping" : err);
-        if (rep) mpmd__reply__free_unpacked(rep, NULL);
+    if (call(d, &rq, &rep, READY_S, err, sizeof err)) {
+        fprintf(stderr, "mpmbench: mpmd did not start: %s\n", err);
         log_tail(d, 20);
         return -1;
     }
-    mpmd__reply__free_unpacked(rep, NULL);
+    if (rep.kind != SRV_REPLY_PONG) {
+        fprintf(stderr, "mpmbench: mpmd did not start: unexpected reply to Ping (body %d)\n",
+                (int)rep.kind);
+        log_tail(d, 20);
+        return -1;
+    }
     return 0;
 }
 
@@ -356,19 +360,19 @@ static double proc_cpu(pid_t pid)
 static int job_status(dmn *d, uint64_t job, int *status, char *err, size_t errlen)
 {
     srv_request rq = {.kind = SRV_REQ_STATUS, .id = job};
-    Mpmd__Reply *rep = NULL;
+    srv_reply_info rep;
     if (call(d, &rq, &rep, CALL_S, err, errlen)) return -1;
-    *status = rep->body_case == MPMD__REPLY__BODY_RUN && rep->run->has_status ? (int)rep->run->status : 0;
-    mpmd__reply__free_unpacked(rep, NULL);
+    *status = rep.kind == SRV_REPLY_RUN ? rep.status : 0;
     return 0;
 }
 
-/* Receives one [topic][StreamMsg] message; *msg NULL when it is not one. */
-static int recv_stream(void *sub, Mpmd__StreamMsg **msg)
+/* Receives one [topic][StreamMsg] message into *msg (srv_stream_peek: a
+ * snapshot's arrays are counted, not copied); *ok 0 when it is not one. */
+static int recv_stream(void *sub, srv_stream_info *msg, int *ok)
 {
     zmq_msg_t part[2];
     int nparts = 0, more = 1, rc = 0;
-    *msg = NULL;
+    *ok = 0;
     while (more) {
         zmq_msg_t m;
         if (zmq_msg_init(&m)) return -1;
@@ -382,27 +386,26 @@ static int recv_stream(void *sub, Mpmd__StreamMsg **msg)
         else zmq_msg_close(&m);
     }
     if (!rc && nparts == 2 && zmq_msg_size(&part[0]) == TOPIC_LEN)
-        *msg = mpmd__stream_msg__unpack(NULL, zmq_msg_size(&part[1]), zmq_msg_data(&part[1]));
+        *ok = srv_stream_peek(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), msg, NULL, 0) == 0;
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
     return rc;
 }
 
-/* Submits the case and follows the job's stream until its Finished. */
-static int run_job(dmn *d, Mpmd__Case *pb, int watch, int warmup, size_t particles, double cap_s,
-                   job_res *jr, char *err, size_t errlen)
+/* Submits the case (packed bytes) and follows the job's stream until its
+ * Finished. */
+static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch, int warmup,
+                   size_t particles, double cap_s, job_res *jr, char *err, size_t errlen)
 {
     memset(jr, 0, sizeof *jr);
-    srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
-    Mpmd__Reply *rep = NULL;
+    srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_bytes = case_bytes, .case_len = case_len};
+    srv_reply_info rep;
     double t0 = pb_now(), c0 = proc_cpu(d->pid);
     if (call(d, &rq, &rep, CALL_S, err, errlen)) return -1;
-    if (rep->body_case != MPMD__REPLY__BODY_SUBMIT_OK || !rep->submit_ok->has_job_id) {
+    if (rep.kind != SRV_REPLY_SUBMIT_OK || !rep.has_job_id) {
         snprintf(err, errlen, "unexpected reply to Submit");
-        mpmd__reply__free_unpacked(rep, NULL);
         return -1;
     }
-    uint64_t job = rep->submit_ok->job_id;
-    mpmd__reply__free_unpacked(rep, NULL);
+    uint64_t job = rep.job_id;
     char topic[TOPIC_LEN + 1];
     snprintf(topic, sizeof topic, "job:%016llx:", (unsigned long long)job);
     if (watch && zmq_setsockopt(d->sub, ZMQ_SUBSCRIBE, topic, TOPIC_LEN)) {
@@ -444,55 +447,48 @@ static int run_job(dmn *d, Mpmd__Case *pb, int watch, int warmup, size_t particl
             }
             continue;
         }
-        Mpmd__StreamMsg *m = NULL;
-        if (recv_stream(d->sub, &m)) {
+        srv_stream_info m;
+        int ok = 0;
+        if (recv_stream(d->sub, &m, &ok)) {
             snprintf(err, errlen, "stream: %s", zmq_strerror(errno));
             rc = -1;
             break;
         }
         last = pb_now();
-        if (!m) continue;
-        if (m->job_id != job) {
-            mpmd__stream_msg__free_unpacked(m, NULL);
-            continue;
-        }
-        if (m->seq > next) jr->lost += (long)(m->seq - next);
-        if (m->seq >= next) next = m->seq + 1;
-        switch (m->body_case) {
-        case MPMD__STREAM_MSG__BODY_ENERGY:
+        if (!ok || m.job_id != job) continue;
+        if (m.seq > next) jr->lost += (long)(m.seq - next);
+        if (m.seq >= next) next = m.seq + 1;
+        switch (m.kind) {
+        case SRV_STREAM_ENERGY:
             jr->energies++;
             break;
-        case MPMD__STREAM_MSG__BODY_SNAPSHOT: {
-            const Mpmd__Snapshot *s = m->snapshot;
+        case SRV_STREAM_SNAPSHOT: {
+            const srv_snapshot_info *s = &m.snapshot;
             jr->snapshots++;
             if (s->n != particles || s->n_x != 2 * s->n || s->n_v != 2 * s->n ||
                 s->n_pressure != s->n)
                 jr->snap_bad++;
             break;
         }
-        case MPMD__STREAM_MSG__BODY_PROGRESS:
+        case SRV_STREAM_PROGRESS:
             jr->progress++;
             break;
-        case MPMD__STREAM_MSG__BODY_FINISHED: {
-            const Mpmd__Finished *f = m->finished;
+        case SRV_STREAM_FINISHED:
             jr->wall = pb_now() - t0;
             jr->cpu = proc_cpu(d->pid) - c0;
-            jr->worker_wall = f->has_wall_s ? f->wall_s : 0;
-            if (!f->has_status || f->status != MPMD__RUN_STATUS__FINISHED) {
-                snprintf(err, errlen, "job %llu ended %s%s%s", (unsigned long long)job,
-                         srv_status_name(f->has_status ? (int)f->status : 0)
-                             ? srv_status_name((int)f->status) : "without a status",
-                         f->error ? ": " : "", f->error ? f->error : "");
+            jr->worker_wall = m.wall_s;
+            if (m.status != SRV_STATUS_FINISHED) {
+                snprintf(err, errlen, "job %llu ended %s%s%.300s", (unsigned long long)job,
+                         srv_status_name(m.status) ? srv_status_name(m.status) : "without a status",
+                         m.error[0] ? ": " : "", m.error);
                 rc = -1;
             } else {
                 rc = 0;
             }
             break;
-        }
         default:
             break;
         }
-        mpmd__stream_msg__free_unpacked(m, NULL);
     }
     if (watch) zmq_setsockopt(d->sub, ZMQ_UNSUBSCRIBE, topic, TOPIC_LEN);
     return rc;
@@ -565,10 +561,12 @@ static char *case_json(int cells, mpm_method m, mpm_update u, long steps, int th
     return buf;
 }
 
-/* The cases of the scene: [watched][warm-up], as JSON and as messages. */
+/* The cases of the scene: [watched][warm-up], as JSON (the in-process
+ * reference loads it) and as packed Case bytes (submitted as they are). */
 typedef struct {
     char *json[2][2];
-    Mpmd__Case *pb[2][2];
+    uint8_t *bytes[2][2];
+    size_t len[2][2];
 } cases;
 
 static void cases_free(cases *c)
@@ -576,7 +574,9 @@ static void cases_free(cases *c)
     for (int i = 0; i < 2; i++)
         for (int j = 0; j < 2; j++) {
             free(c->json[i][j]);
-            srv_case_pb_free(&c->pb[i][j]);
+            free(c->bytes[i][j]);
+            c->json[i][j] = NULL;
+            c->bytes[i][j] = NULL;
         }
 }
 
@@ -592,7 +592,8 @@ static int cases_make(cases *c, int cells, mpm_method m, mpm_update u, long step
                 fprintf(stderr, "mpmbench: out of memory\n");
                 return -1;
             }
-            if (srv_case_from_json(js, strlen(js), &c->pb[w][j], err, sizeof err)) {
+            if (srv_msg_json_to_bytes(SRV_MSG_CASE, js, strlen(js), &c->bytes[w][j], &c->len[w][j],
+                                      err, sizeof err)) {
                 fprintf(stderr, "mpmbench: the bench's own case: %s\n", err);
                 return -1;
             }
@@ -776,7 +777,8 @@ int pb_daemon_scene(mpm_method m, mpm_update u, long particles, long steps, int 
     double cap = 120.0 + 40.0 * tmp.wall_s * (double)steps / (double)tmp.steps;
     for (int w = 0; w < 2; w++) {
         if (start_daemon(&d[w], bin, threads)) goto out;
-        if (run_job(&d[w], cs.pb[w][1], w, 1, ref.particles, cap, &warm, err, sizeof err)) {
+        if (run_job(&d[w], cs.bytes[w][1], cs.len[w][1], w, 1, ref.particles, cap, &warm, err,
+                    sizeof err)) {
             fprintf(stderr, "mpmbench: %s (warm-up job): %s\n", row_name[w], err);
             log_tail(&d[w], 20);
             goto out;
@@ -791,7 +793,8 @@ int pb_daemon_scene(mpm_method m, mpm_update u, long particles, long steps, int 
         ref_cpu[i] = tmp.cpus;
         for (int w = 0; w < 2; w++) {
             pb_progress("daemon: %s job %d of %d", row_name[w], i + 1, PB_RUNS);
-            if (run_job(&d[w], cs.pb[w][0], w, 0, ref.particles, cap, &jr[w][i], err, sizeof err)) {
+            if (run_job(&d[w], cs.bytes[w][0], cs.len[w][0], w, 0, ref.particles, cap, &jr[w][i],
+                        err, sizeof err)) {
                 fprintf(stderr, "mpmbench: %s: %s\n", row_name[w], err);
                 log_tail(&d[w], 20);
                 goto out;
