@@ -415,3 +415,218 @@ TEST(perf_active_rows_leave_no_stale_nodes)
                         CHECK(frac < (shape == 0 ? 0.75 : 0.9));
                     }
 }
+
+/* 1D: the one row of nodes is split among the threads by node count, not by
+ * rows, so segment boundaries fall inside the threads' extents and inside
+ * the gap between two bodies.  Two bars moving apart across a 1D grid, 1 to
+ * 3 threads: after every step no node outside the supports of the step's
+ * particles holds mass or momentum, and the node masses sum to the
+ * particles' mass. */
+static int split_1d_case(int m, int up, int T, double *worst, long *checked)
+{
+    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    mpm_body_desc b[2];
+    memset(b, 0, sizeof b);
+    /* as many particles in each bar (40): with 2 threads each thread holds
+     * one bar; the short dense bar and the long sparse one put the middle
+     * of the extent, where the node split falls, inside the second bar, so
+     * the first thread's nodes hold both bars and the gap between them
+     * (touched by neither thread, to be zeroed by the reduction) */
+    double lo[2] = {0.2, 0.3}, hi[2] = {0.25, 0.5}, v[2] = {-12.0, 15.0};
+    int ppc[2] = {4, 1};
+    for (int i = 0; i < 2; i++) {
+        b[i].shape = MPM_SHAPE_BOX;
+        b[i].ppc = ppc[i];
+        b[i].lo[0] = lo[i];
+        b[i].hi[0] = hi[i];
+        b[i].velocity[0] = v[i];
+    }
+    mpm_case c = {0};
+    c.grid = (mpm_grid_desc){1, {0, 0, 0}, {0.005, 0, 0}, {201, 0, 0}};
+    c.method = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+    c.update = up ? MPM_MUSL : MPM_USF;
+    c.dt = 5e-5;
+    c.threads = T;
+    c.n_materials = 1;
+    c.materials = &mat;
+    c.n_bodies = 2;
+    c.bodies = b;
+    char err[256];
+    mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+    if (!s) {
+        TLOG("mpm_sim_new: %s", err);
+        return -1;
+    }
+    size_t n = mpm_sim_particles(s), nn = s->nn;
+    double *x = malloc(n * sizeof *x);
+    unsigned char *sup = malloc(nn);
+    int rc = x && sup ? 0 : -1;
+    mpm_energy e;
+    mpm_sim_energy(s, &e);
+    *worst = 0;
+    int lo0 = m ? -1 : 0, cnt = m ? 4 : 2;
+    for (int step = 0; step < 120 && !rc; step++) {
+        mpm_sim_snapshot(s, &(mpm_snapshot){.x = x});
+        if (mpm_sim_step(s)) {
+            TLOG("step %d: %s", step, mpm_sim_error(s));
+            rc = -1;
+            break;
+        }
+        memset(sup, 0, nn);
+        for (size_t p = 0; p < n; p++) {
+            int c0 = (int)((x[p] - s->x0[0]) * s->inv_h[0]) + lo0;
+            for (int i = 0; i < cnt; i++)
+                if (c0 + i >= 0 && c0 + i < s->np[0]) sup[c0 + i] = 1;
+        }
+        double mg = 0;
+        for (size_t node = 0; node < nn; node++) {
+            mg += s->g.m[node];
+            if (!sup[node] && (s->g.m[node] != 0 || s->g.q[0][node] != 0)) {
+                TLOG("step %d: node %zu outside the supports has mass %g, q %g", step, node,
+                     s->g.m[node], s->g.q[0][node]);
+                rc = -1;
+            }
+            (*checked) += !sup[node];
+        }
+        *worst = fmax(*worst, fabs(mg - e.mass) / e.mass);
+    }
+    free(x);
+    free(sup);
+    mpm_sim_destroy(&s);
+    return rc;
+}
+
+TEST(perf_node_split_1d_leaves_no_stale_nodes)
+{
+    for (int m = 0; m < 2; m++)
+        for (int up = 0; up < 2; up++)
+            for (int T = 1; T <= 3; T++) {
+                double worst;
+                long checked = 0;
+                int rc = split_1d_case(m, up, T, &worst, &checked);
+                TLOG("1D two bars, %s %s T=%d, 120 steps: %ld node checks outside the supports "
+                     "all zero: %s; worst |sum node mass - mass| / mass = %.1e",
+                     m ? "GIMP" : "MPM", up ? "MUSL" : "USF", T, checked, rc ? "NO" : "yes", worst);
+                CHECK(rc == 0);
+                CHECK(checked > 0);
+                CHECK(worst < 1e-12);
+            }
+}
+
+/* The step on the team with everything a node pass folds in or splits
+ * around: gravity, a wall (BC1, BC2), a traction (point forces scattered
+ * serially between the two halves of the node pass), particles crossing
+ * cells (the sort moves them), for USF, USL and MUSL.  The same thread
+ * count twice gives bitwise the same state; 2 and 3 threads agree with 1
+ * up to the order of the sums. */
+static int loaded_box(int dim, mpm_update up, int T, double *x, double *v, double *sig, size_t *n)
+{
+    mpm_case c;
+    mpm_material_desc mat;
+    mpm_body_desc b;
+    falling_box(&c, &mat, &b, dim, up);
+    mpm_traction_desc tr;
+    memset(&tr, 0, sizeof tr);
+    for (int d = 0; d < dim; d++) {
+        tr.lo[d] = 0;
+        tr.hi[d] = 1.1;
+    }
+    tr.lo[0] = b.hi[0] - 0.04;
+    tr.normal = 0;
+    tr.value[0] = dim > 2 ? -2.0 : -20.0; /* the 3D box is lighter */
+    tr.value[1] = dim > 2 ? 0.5 : 5.0;
+    c.n_tractions = 1;
+    c.tractions = &tr;
+    c.threads = T;
+    char err[256];
+    mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+    if (!s) {
+        TLOG("mpm_sim_new: %s", err);
+        return -1;
+    }
+    int rc = mpm_sim_run(s, 150);
+    if (rc) TLOG("%s", mpm_sim_error(s));
+    *n = mpm_sim_particles(s);
+    mpm_sim_snapshot(s, &(mpm_snapshot){.x = x, .v = v, .stress = sig});
+    mpm_sim_destroy(&s);
+    return rc;
+}
+
+TEST(perf_team_step_threads_agree_with_loads_and_walls)
+{
+    static const mpm_update ups[3] = {MPM_USF, MPM_USL, MPM_MUSL};
+    static const char *const un[3] = {"USF", "USL", "MUSL"};
+    enum { MAXP = 4096 };
+    static double x[4][MAXP * 3], v[4][MAXP * 3], sg[4][MAXP * 6];
+    for (int dim = 2; dim <= 3; dim++)
+        for (int u = 0; u < 3; u++) {
+            size_t n[4] = {0};
+            int rc = 0;
+            /* 1, 2, 3 threads, then 2 again */
+            for (int k = 0; k < 4; k++) rc |= loaded_box(dim, ups[u], k < 3 ? k + 1 : 2, x[k], v[k], sg[k], &n[k]);
+            CHECK(rc == 0);
+            CHECK(n[0] > 0 && n[0] <= MAXP && n[1] == n[0] && n[2] == n[0] && n[3] == n[0]);
+            if (rc || n[0] == 0 || n[0] > MAXP) continue;
+            size_t nx = n[0] * (size_t)dim;
+            CHECK(memcmp(x[1], x[3], nx * sizeof(double)) == 0);
+            CHECK(memcmp(v[1], v[3], nx * sizeof(double)) == 0);
+            CHECK(memcmp(sg[1], sg[3], n[0] * 6 * sizeof(double)) == 0);
+            for (int k = 1; k < 3; k++) {
+                double dx = rel_diff(x[0], x[k], nx), dv = rel_diff(v[0], v[k], nx);
+                double ds = rel_diff(sg[0], sg[k], n[0] * 6);
+                TLOG("%dD GIMP %s, gravity, wall, traction, 150 steps: %d vs 1 thread: relative "
+                     "differences x %.1e, v %.1e, stress %.1e", dim, un[u], k + 1, dx, dv, ds);
+                CHECK(dx < 1e-12);
+                CHECK(dv < 1e-9);
+                CHECK(ds < 1e-9);
+            }
+        }
+}
+
+/* The sort's keys, order check and permutation run on the team: the order
+ * (and so every later sum) does not depend on the thread count.  Points in
+ * reversed order, sorted at creation by 1, 2 and 3 threads. */
+TEST(perf_sort_order_independent_of_threads)
+{
+    static double x[2 * NPTS], vol[NPTS];
+    for (int i = 0; i < NPTS; i++) {
+        int k = NPTS - 1 - i;
+        x[2 * i] = 0.3 + 0.0125 * (k % NX + 0.5);
+        x[2 * i + 1] = 0.3 + 0.0125 * (k / NX + 0.5);
+        vol[i] = 0.0125 * 0.0125;
+    }
+    static uint32_t id[3][NPTS];
+    static double px[3][NPTS];
+    for (int T = 1; T <= 3; T++) {
+        mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+        mpm_body_desc b = {0};
+        b.n_points = NPTS;
+        b.x = x;
+        b.volume = vol;
+        mpm_case c = {0};
+        c.grid = (mpm_grid_desc){2, {0, 0, 0}, {0.025, 0.025, 0}, {41, 41, 0}};
+        c.method = MPM_METHOD_MPM;
+        c.dt = 1e-4;
+        c.threads = T;
+        c.n_materials = 1;
+        c.materials = &mat;
+        c.n_bodies = 1;
+        c.bodies = &b;
+        mpm_sim *s = mpm_sim_new(&c, NULL, 0);
+        CHECK(s != NULL);
+        if (!s) return;
+        memcpy(id[T - 1], s->P.id, sizeof id[0]);
+        memcpy(px[T - 1], s->P.x[0], sizeof px[0]);
+        mpm_sim_destroy(&s);
+    }
+    int moved = 0;
+    for (int i = 0; i < NPTS; i++) moved |= id[0][i] != (uint32_t)i;
+    TLOG("%d points in reversed order, sorted at creation: moved %s; 2 and 3 threads give the "
+         "order of 1: %s, %s", NPTS, moved ? "yes" : "no",
+         memcmp(id[0], id[1], sizeof id[0]) ? "no" : "yes", memcmp(id[0], id[2], sizeof id[0]) ? "no" : "yes");
+    CHECK(moved);
+    for (int T = 2; T <= 3; T++) {
+        CHECK(memcmp(id[0], id[T - 1], sizeof id[0]) == 0);
+        CHECK(memcmp(px[0], px[T - 1], sizeof px[0]) == 0);
+    }
+}

@@ -67,6 +67,8 @@ typedef struct {
                             * box blo..bhi are always empty */
     double ekin, estr, epot; /* partial energies (guard, mpm_sim_energy) */
     double emom[3], emass;   /* partial momentum and mass (mpm_sim_energy) */
+    int ksorted;             /* sort keys of the slice non-decreasing */
+    uint32_t kfirst, klast;  /* the slice's first and last sort key */
     char pad[64];
 } mpm_thread_out;
 
@@ -139,6 +141,11 @@ struct mpm_sim {
     int blo[3], bhi[3];
     size_t nrows;                  /* np[1] np[2] */
     int *ulo, *uhi;
+    /* node passes split the nodes of the extents evenly among the threads:
+     * acc[r] is the number of nodes in the extents of the rows before row
+     * r of the box blo..bhi (r = 0 .. box rows), nact their total */
+    size_t *acc;
+    size_t nact;
     /* sorting by cell: every MPM_SORT_EVERY steps, stable counting sort
      * with scratch made at creation (the keys live in sscr, the cells are
      * numbered over the rows' extents only: rowoff[row] is the first key of
@@ -153,7 +160,8 @@ struct mpm_sim {
                                     * 0 scatters into g, tbuf[0] stays empty) */
     mpm_thread_out *tout;
     pthread_t *threads;
-    pthread_barrier_t bar_start, bar_end;
+    pthread_barrier_t bar_start, bar_end; /* bar_end also parts the passes
+                                    * of a step (team_sync) */
     void (*phase)(mpm_sim *, int tid);
     int quit;
     pthread_mutex_t gate_mu;       /* start gate for the team */

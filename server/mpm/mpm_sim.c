@@ -18,11 +18,16 @@
  * with mass <= M_TOL are phantom: their inverse mass is stored as 0, so they
  * give no velocity (Fig. 7) and no update (Fig. 6).
  *
- * Threads: a team of nthreads (the caller's thread is thread 0) runs each
- * particle pass on a fixed contiguous slice of the particles, thread 0
+ * Threads: a team of nthreads (the caller's thread is thread 0) runs a
+ * whole step as one team phase, the passes parted by barriers.  Each
+ * particle pass runs on a fixed contiguous slice of the particles, thread 0
  * scattering into the grid and the others into a private grid each; node
- * passes then sum the private grids in thread order.  The divergence
- * guard's energy sums run on the team too, combined in thread order.  The
+ * passes split the active nodes evenly among the threads (one row in 1D is
+ * split too), sum the private grids in thread order and apply everything
+ * node-wise that follows (inverse mass, gravity, BC1, BC2, q += f dt) in
+ * the same pass.  The divergence guard's energy sums, the sort keys and
+ * the sort's permutation run on the team too, sums combined in thread
+ * order.  The
  * same case with the same thread count is therefore bitwise reproducible;
  * a different thread count changes the order of the sums and so the last
  * bits.  Nothing is allocated inside a step.
@@ -33,7 +38,8 @@
  * boundary conditions run over those extents only (the grid outside them
  * stays zero, and pages of the grids that no particle reaches are never
  * touched).  Particles are kept sorted by cell (every MPM_SORT_EVERY steps, a
- * stable counting sort), with P.id mapping storage slots to creation order
+ * stable counting sort, skipped when the keys are in order already), with
+ * P.id mapping storage slots to creation order
  * for everything public.  Built with -DMPM_LEAN, gravity, loads and fixed
  * boundaries are compiled out and cases using them are refused.
  */
@@ -50,6 +56,16 @@
 static double *dalloc(size_t n)
 {
     return calloc(n ? n : 1, sizeof(double));
+}
+
+/* Zeroed scratch of whole cache lines of its own: the threads' scratch
+ * blocks, written all through a pass, share no line (no false sharing). */
+static void *line_alloc(size_t bytes)
+{
+    size_t n = (bytes + 63) / 64 * 64;
+    void *p = aligned_alloc(64, n ? n : 64);
+    if (p) memset(p, 0, n ? n : 64);
+    return p;
 }
 
 static void free_gridbuf(mpm_gridbuf *b)
@@ -240,8 +256,9 @@ static void zero_span(const mpm_sim *s, double *const *f, int nf, size_t row, in
 /* Makes the active rows the union of the threads' rows as the last
  * particle pass recorded them, and zeroes, in every field of the main
  * grid, the nodes of the old extents outside the new ones (which keeps the
- * main grid zero outside the active rows).  Serial; the rows visited are
- * those of the old and the new box. */
+ * main grid zero outside the active rows); then counts the new extents'
+ * nodes row by row (acc, for the node passes' split).  Serial; the rows
+ * visited are those of the old and the new box. */
 static void update_rows(mpm_sim *s)
 {
     int lo[3], hi[3], alo[3], ahi[3];
@@ -274,6 +291,14 @@ static void update_rows(mpm_sim *s)
     }
     memcpy(s->blo, lo, sizeof lo);
     memcpy(s->bhi, hi, sizeof hi);
+    size_t nb = box_rows(lo, hi), n = 0;
+    for (size_t r = 0; r < nb; r++) {
+        size_t row = box_row(s, lo, hi, r);
+        s->acc[r] = n;
+        if (s->ulo[row] <= s->uhi[row]) n += (size_t)(s->uhi[row] - s->ulo[row] + 1);
+    }
+    s->acc[nb] = n;
+    s->nact = n;
 }
 
 /* The scatter target of thread tid, zeroed over the thread's rows for the
@@ -295,48 +320,117 @@ static mpm_gridbuf *scatter_buf(mpm_sim *s, int tid, int fields)
     return b;
 }
 
-static void row_slice(mpm_sim *s, int tid, size_t *a, size_t *b)
+/* ---- node passes split by nodes ----
+ *
+ * The nodes of the active rows' extents, numbered row by row over the box
+ * (acc[r]: those before row r), are split evenly among the threads, so a
+ * node pass is balanced however few the rows (1D has one) or however
+ * uneven their extents.  A thread's share is a run of segments, nodes
+ * a..b of a row.  Every node pass computes each node from that node alone,
+ * so the split changes no result. */
+typedef struct {
+    size_t r, nr, n, n1;
+} seg_iter;
+
+static void seg_begin(const mpm_sim *s, int tid, seg_iter *it)
 {
-    slice(box_rows(s->blo, s->bhi), s->nthreads, tid, a, b);
+    size_t n0, n1, lo = 0, hi = box_rows(s->blo, s->bhi);
+    slice(s->nact, s->nthreads, tid, &n0, &n1);
+    it->nr = hi;
+    while (lo < hi) { /* the first row r with acc[r + 1] > n0 */
+        size_t mid = lo + (hi - lo) / 2;
+        if (s->acc[mid + 1] > n0) hi = mid;
+        else lo = mid + 1;
+    }
+    it->r = lo;
+    it->n = n0;
+    it->n1 = n1;
 }
 
-/* Sums the private grids of the fields named into the grid over the rows
- * [r0, r1) of the union box, in thread order: the first thread that
- * touched a row copies its extent (0 + a = a: the same sums as adding
- * every thread; thread 0's values are in place already) and zeroes the
- * rest of the row's union extent, the others add theirs (their grids are
- * zero elsewhere in the row). */
-static void reduce(mpm_sim *s, int fields, size_t r0, size_t r1)
+static int seg_next(const mpm_sim *s, seg_iter *it, size_t *row, int *a, int *b)
 {
-    if (s->nthreads == 1) return;
+    while (it->n < it->n1 && it->r < it->nr) {
+        size_t r = it->r++, w = s->acc[r + 1] - s->acc[r];
+        if (!w) continue;
+        size_t off = it->n - s->acc[r], take = w - off;
+        if (take > it->n1 - it->n) take = it->n1 - it->n;
+        *row = box_row(s, s->blo, s->bhi, r);
+        *a = s->ulo[*row] + (int)off;
+        *b = *a + (int)take - 1;
+        it->n += take;
+        return 1;
+    }
+    return 0;
+}
+
+static double *field_of(const mpm_gridbuf *b, int fl, int d)
+{
+    return fl == F_M ? b->m : fl == F_Q ? b->q[d] : fl == F_F ? b->f[d] : b->q2[d];
+}
+
+static void span_zero(double *restrict dst, size_t a, size_t b)
+{
+    if (a <= b) memset(dst + a, 0, (b - a + 1) * sizeof *dst);
+}
+
+static void span_copy(double *restrict dst, const double *restrict src, size_t a, size_t b)
+{
+    if (a <= b) memcpy(dst + a, src + a, (b - a + 1) * sizeof *dst);
+}
+
+static void span_add(double *restrict dst, const double *restrict src, size_t a, size_t b)
+{
+    if (a > b) return;
+    for (size_t n = a; n <= b; n++) dst[n] += src[n];
+}
+
+/* Sums the private grids of the fields named into the grid over nodes
+ * a..b of a row, in thread order.  Thread 0's values are in place; each
+ * further thread adds its values where an earlier thread's extent
+ * (within a..b) lies, copies them where none did (0 + v = v), and any gap
+ * between the two is zeroed; what no thread touched is zeroed at the
+ * end.  The extents are intervals, so the nodes already summed always
+ * form one interval ia..ib. */
+static void reduce_seg(mpm_sim *s, int fields, size_t row, int a, int b)
+{
     int T = s->nthreads;
-    for (size_t r = r0; r < r1; r++) {
-        size_t row = box_row(s, s->blo, s->bhi, r);
-        int ulo = s->ulo[row], uhi = s->uhi[row];
-        if (ulo > uhi) continue;
-        size_t base = row_node(s, row, 0), u0 = base + (size_t)ulo, u1 = base + (size_t)uhi;
-        for (int pass = 0; pass < 4; pass++) {
-            int fl = 1 << pass;
-            if (!(fields & fl)) continue;
-            for (int d = 0; d < (fl == F_M ? 1 : s->dim); d++) {
-                double *restrict dst = fl == F_M ? s->g.m : fl == F_Q ? s->g.q[d] : fl == F_F ? s->g.f[d] : s->g.q2[d];
-                int first = 1;
-                for (int t = 0; t < T; t++) {
-                    const mpm_thread_out *o = &s->tout[t];
-                    if (o->rlo[row] > o->rhi[row]) continue;
-                    const mpm_gridbuf *b = &s->tbuf[t];
-                    const double *restrict src = fl == F_M ? b->m : fl == F_Q ? b->q[d] : fl == F_F ? b->f[d] : b->q2[d];
-                    size_t x0 = base + (size_t)o->rlo[row], x1 = base + (size_t)o->rhi[row];
-                    if (first) {
-                        for (size_t n = u0; n < x0; n++) dst[n] = 0.0;
-                        if (t > 0)
-                            for (size_t n = x0; n <= x1; n++) dst[n] = src[n];
-                        for (size_t n = x1 + 1; n <= u1; n++) dst[n] = 0.0;
-                        first = 0;
-                    } else {
-                        for (size_t n = x0; n <= x1; n++) dst[n] += src[n];
-                    }
+    size_t base = row_node(s, row, 0);
+    for (int pass = 0; pass < 4; pass++) {
+        int fl = 1 << pass;
+        if (!(fields & fl)) continue;
+        for (int d = 0; d < (fl == F_M ? 1 : s->dim); d++) {
+            double *dst = field_of(&s->g, fl, d) + base;
+            long ia = 1, ib = 0; /* empty */
+            for (int t = 0; t < T; t++) {
+                const mpm_thread_out *o = &s->tout[t];
+                long lo = o->rlo[row] > a ? o->rlo[row] : a, hi = o->rhi[row] < b ? o->rhi[row] : b;
+                if (lo > hi) continue;
+                if (t == 0) {
+                    ia = lo;
+                    ib = hi;
+                    continue;
                 }
+                const double *src = field_of(&s->tbuf[t], fl, d) + base;
+                if (ia > ib) {
+                    span_copy(dst, src, (size_t)lo, (size_t)hi);
+                    ia = lo;
+                    ib = hi;
+                    continue;
+                }
+                if (hi < ia - 1) span_zero(dst, (size_t)hi + 1, (size_t)ia - 1);
+                if (lo > ib + 1) span_zero(dst, (size_t)ib + 1, (size_t)lo - 1);
+                if (lo < ia) span_copy(dst, src, (size_t)lo, (size_t)(hi < ia - 1 ? hi : ia - 1));
+                if (hi > ib) span_copy(dst, src, (size_t)(lo > ib + 1 ? lo : ib + 1), (size_t)hi);
+                long sa = lo > ia ? lo : ia, sb = hi < ib ? hi : ib;
+                if (sa <= sb) span_add(dst, src, (size_t)sa, (size_t)sb);
+                if (lo < ia) ia = lo;
+                if (hi > ib) ib = hi;
+            }
+            if (ia > ib) {
+                span_zero(dst, (size_t)a, (size_t)b);
+            } else {
+                if (ia > a) span_zero(dst, (size_t)a, (size_t)ia - 1);
+                if (ib < b) span_zero(dst, (size_t)ib + 1, (size_t)b);
             }
         }
     }
@@ -421,99 +515,22 @@ static void ph_bbox(mpm_sim *s, int tid)
     s->k->bbox(s, &s->tout[tid], a, b);
 }
 
-/* Node passes: one function per combination, over the extents of the
- * rows [r0, r1) of the union box: reduce the fields named, then inverse
- * mass with phantom nodes (m <= M_TOL) at 0 (MINV), gravity f += m g
- * (GRAV, sum_p m_p b S_np). */
-static void node_rows(mpm_sim *s, int tid, int fields, int minv, int grav)
-{
-    size_t r0, r1;
-    row_slice(s, tid, &r0, &r1);
-    reduce(s, fields, r0, r1);
-    double mtol = s->mtol;
-#ifdef MPM_LEAN
-    grav = 0;
-#endif
-    for (size_t r = r0; r < r1; r++) {
-        size_t row = box_row(s, s->blo, s->bhi, r);
-        int lo = s->ulo[row], hi = s->uhi[row];
-        if (lo > hi) continue;
-        size_t base = row_node(s, row, lo), w = (size_t)(hi - lo + 1);
-        if (minv) {
-            const double *restrict m = s->g.m + base;
-            double *restrict mi = s->minv + base;
-            for (size_t i = 0; i < w; i++) mi[i] = m[i] > mtol ? 1.0 / m[i] : 0.0;
-        }
-        if (grav)
-            for (int d = 0; d < s->dim; d++) {
-                double gd = s->gravity[d];
-                if (gd == 0) continue;
-                const double *restrict m = s->g.m + base;
-                double *restrict f = s->g.f[d] + base;
-                for (size_t i = 0; i < w; i++) f[i] += gd * m[i];
-            }
-    }
-}
-
-static void ph_node_mq(mpm_sim *s, int tid)
-{
-    node_rows(s, tid, F_M | F_Q, 1, 0);
-}
-
-static void ph_node_f(mpm_sim *s, int tid)
-{
-    node_rows(s, tid, F_F, 0, s->has_gravity);
-}
-
-static void ph_node_mqf(mpm_sim *s, int tid)
-{
-    node_rows(s, tid, F_M | F_Q | F_F, 1, s->has_gravity);
-}
-
-static void ph_node_q2(mpm_sim *s, int tid)
-{
-    node_rows(s, tid, F_Q2, 0, 0);
-}
-
-/* q += f dt (Eq. 13 integrated; Fig. 6 step 6) */
-static void ph_node_update(mpm_sim *s, int tid)
-{
-    size_t r0, r1;
-    row_slice(s, tid, &r0, &r1);
-    double dt = s->dt;
-    for (size_t r = r0; r < r1; r++) {
-        size_t row = box_row(s, s->blo, s->bhi, r);
-        int lo = s->ulo[row], hi = s->uhi[row];
-        if (lo > hi) continue;
-        size_t base = row_node(s, row, lo), w = (size_t)(hi - lo + 1);
-        for (int d = 0; d < s->dim; d++) {
-            double *restrict q = s->g.q[d] + base;
-            const double *restrict f = s->g.f[d] + base;
-            for (size_t i = 0; i < w; i++) q[i] += f[i] * dt;
-        }
-    }
-}
-
-/* BC1 (Eq. 27) on a momentum field, BC2 (Eq. 28) on the rate of momentum:
- * only the fixed nodes inside the active rows' extents (the field is zero
- * elsewhere, and its untouched pages stay so).  The list is
- * in increasing node order. */
-static void zero_fixed(mpm_sim *s, double *const field[3])
+/* BC1 (Eq. 27) on a momentum field, BC2 (Eq. 28) on the rate of momentum,
+ * over the flat nodes first..last (one segment of a row; the field is zero
+ * outside the active rows' extents, and its untouched pages stay so).
+ * The list of fixed nodes is in increasing node order. */
+static void zero_fixed(const mpm_sim *s, double *const field[3], size_t first, size_t last)
 {
 #ifndef MPM_LEAN
-    if (!s->nfixed || !box_rows(s->blo, s->bhi)) return;
-    size_t first = (size_t)s->blo[0] + (size_t)s->blo[1] * s->stride[1] + (size_t)s->blo[2] * s->stride[2];
-    size_t last = (size_t)s->bhi[0] + (size_t)s->bhi[1] * s->stride[1] + (size_t)s->bhi[2] * s->stride[2];
     size_t a = 0, b = s->nfixed;
+    if (!b) return;
     while (a < b) { /* first entry >= first */
         size_t mid = a + (b - a) / 2;
         if (s->fixed_node[mid] < first) a = mid + 1;
         else b = mid;
     }
     for (size_t i = a; i < s->nfixed && s->fixed_node[i] <= last; i++) {
-        size_t n = s->fixed_node[i], row = n / (size_t)s->np[0];
-        int x = (int)(n % (size_t)s->np[0]);
-        if (x < s->ulo[row] || x > s->uhi[row]) continue; /* rows outside the box: empty */
+        size_t n = s->fixed_node[i];
         unsigned m = s->fixed_mask[i];
         for (int d = 0; d < s->dim; d++)
             if (m & (1u << d)) field[d][n] = 0.0;
@@ -521,7 +538,114 @@ static void zero_fixed(mpm_sim *s, double *const field[3])
 #else
     (void)s;
     (void)field;
+    (void)first;
+    (void)last;
 #endif
+}
+
+/* A node pass over the thread's share of the extents' nodes, each node in
+ * the step's order: reduce the fields named (F_*), then inverse mass with
+ * phantom nodes (m <= M_TOL) at 0 (N_MINV), gravity f += m g (N_GRAV,
+ * sum_p m_p b S_np), BC1 on q (N_BC1) or on q2 (N_BC1Q2), BC2 on f
+ * (N_BC2), and q += f dt (N_UPD: Eq. 13 integrated, Fig. 6 step 6). */
+enum { N_MINV = 16, N_GRAV = 32, N_BC1 = 64, N_BC1Q2 = 128, N_BC2 = 256, N_UPD = 512 };
+
+static void node_pass(mpm_sim *s, int tid, int ops)
+{
+    int fields = ops & (F_M | F_Q | F_F | F_Q2);
+    double mtol = s->mtol, dt = s->dt;
+#ifdef MPM_LEAN
+    ops &= ~(N_GRAV | N_BC1 | N_BC1Q2 | N_BC2);
+#endif
+    if (!s->has_gravity) ops &= ~N_GRAV;
+    if (!s->nfixed) ops &= ~(N_BC1 | N_BC1Q2 | N_BC2);
+    seg_iter it;
+    seg_begin(s, tid, &it);
+    size_t row;
+    int lo, hi;
+    while (seg_next(s, &it, &row, &lo, &hi)) {
+        if (fields && s->nthreads > 1) reduce_seg(s, fields, row, lo, hi);
+        size_t base = row_node(s, row, lo), w = (size_t)(hi - lo + 1);
+        if (ops & N_MINV) {
+            const double *restrict m = s->g.m + base;
+            double *restrict mi = s->minv + base;
+            for (size_t i = 0; i < w; i++) mi[i] = m[i] > mtol ? 1.0 / m[i] : 0.0;
+        }
+        if (ops & N_GRAV)
+            for (int d = 0; d < s->dim; d++) {
+                double gd = s->gravity[d];
+                if (gd == 0) continue;
+                const double *restrict m = s->g.m + base;
+                double *restrict f = s->g.f[d] + base;
+                for (size_t i = 0; i < w; i++) f[i] += gd * m[i];
+            }
+        if (ops & N_BC1) zero_fixed(s, s->g.q, base, base + w - 1);
+        if (ops & N_BC1Q2) zero_fixed(s, s->g.q2, base, base + w - 1);
+        if (ops & N_BC2) zero_fixed(s, s->g.f, base, base + w - 1);
+        if (ops & N_UPD)
+            for (int d = 0; d < s->dim; d++) {
+                double *restrict q = s->g.q[d] + base;
+                const double *restrict f = s->g.f[d] + base;
+                for (size_t i = 0; i < w; i++) q[i] += f[i] * dt;
+            }
+    }
+}
+
+/* ---- the step on the team ----
+ *
+ * A step's passes run in one team phase, the threads meeting at a barrier
+ * between passes (team_sync); the point forces (tractions), scattered
+ * serially into the main grid, split the node pass in two. */
+static void team_sync(mpm_sim *s)
+{
+    if (s->nthreads > 1) pthread_barrier_wait(&s->bar_end);
+}
+
+/* the rate of momentum once reduced (gravity included): point forces,
+ * BC2, then q += f dt */
+static void forces_update(mpm_sim *s, int tid, int reduce_ops)
+{
+    if (!s->nload) {
+        node_pass(s, tid, reduce_ops | N_BC2 | N_UPD);
+        return;
+    }
+    node_pass(s, tid, reduce_ops);
+    team_sync(s);
+    if (tid == 0) s->k->scatter_loads(s);
+    team_sync(s);
+    node_pass(s, tid, N_BC2 | N_UPD);
+}
+
+static void ph_step_usf(mpm_sim *s, int tid)
+{
+    ph_p2g_mq(s, tid);
+    team_sync(s);
+    node_pass(s, tid, F_M | F_Q | N_MINV | N_BC1);
+    team_sync(s);
+    ph_stress_force(s, tid);
+    team_sync(s);
+    forces_update(s, tid, F_F | N_GRAV);
+    team_sync(s);
+    ph_g2p_xv(s, tid);
+}
+
+static void ph_step_usl(mpm_sim *s, int tid)
+{
+    ph_p2g_mqf(s, tid);
+    team_sync(s);
+    forces_update(s, tid, F_M | F_Q | F_F | N_MINV | N_GRAV | N_BC1);
+    team_sync(s);
+    if (s->update == MPM_USL) {
+        ph_g2p_xv_stress(s, tid);
+        return;
+    }
+    ph_g2p_v(s, tid);
+    team_sync(s);
+    ph_p2g_q2(s, tid);
+    team_sync(s);
+    node_pass(s, tid, F_Q2 | N_BC1Q2); /* BC1 on the recomputed momentum */
+    team_sync(s);
+    ph_g2p_x_stress(s, tid);
 }
 
 /* ---- sorting by cell ----
@@ -534,14 +658,87 @@ static void zero_fixed(mpm_sim *s, double *const field[3])
  * P.id keeps each particle's creation index: everything public (snapshots,
  * error messages, per-particle inputs) speaks creation order.  The scratch
  * is made at creation: the keys and the integer fields go through the
- * double scratch array. */
+ * double scratch array.  The keys, the check that they are in order
+ * already (then nothing moves: the common case between cell crossings)
+ * and the permutation of the arrays run on the team; the histogram and the
+ * permutation itself are serial.  The order does not depend on the thread
+ * count. */
 #define MPM_SORT_EVERY 16
 
+/* Keys of the thread's slice, and whether the slice is in key order. */
 static void ph_keys(mpm_sim *s, int tid)
 {
     size_t a, b;
     particle_slice(s, tid, &a, &b);
-    s->k->cell_keys(s, (uint32_t *)(void *)s->sscr, a, b);
+    uint32_t *key = (uint32_t *)(void *)s->sscr;
+    s->k->cell_keys(s, key, a, b);
+    mpm_thread_out *o = &s->tout[tid];
+    int sorted = 1;
+    for (size_t p = a + 1; p < b; p++) sorted &= key[p] >= key[p - 1];
+    o->ksorted = sorted;
+    o->kfirst = a < b ? key[a] : 0;
+    o->klast = a < b ? key[b - 1] : 0;
+}
+
+/* The particle arrays of doubles, in a fixed order. */
+static int sort_arrays(mpm_sim *s, double **arr[3 * 3 + 2 * 6 + 2])
+{
+    mpm_particles *P = &s->P;
+    int na = 0;
+    for (int d = 0; d < s->dim; d++) {
+        arr[na++] = &P->x[d];
+        arr[na++] = &P->v[d];
+        if (P->lp[d]) arr[na++] = &P->lp[d];
+    }
+    for (int c = 0; c < MPM_NCOMP(s->dim); c++) {
+        arr[na++] = &P->sig[c];
+        if (P->eps[c]) arr[na++] = &P->eps[c];
+    }
+    arr[na++] = &P->m;
+    arr[na++] = &P->vol;
+    return na;
+}
+
+/* The permutation applied on the team, each thread gathering its slice of
+ * slots (slot p takes particle perm[p]) of one array at a time through the
+ * scratch: the integer fields are copied back, and each double array's
+ * permuted copy goes into the scratch, the old array then being the
+ * scratch of the next (sort_particles() swaps the pointers after).  Only
+ * copies: the result does not depend on the thread count. */
+static void ph_permute(mpm_sim *s, int tid)
+{
+    mpm_particles *P = &s->P;
+    const uint32_t *restrict perm = s->sperm;
+    size_t a, b;
+    particle_slice(s, tid, &a, &b);
+    uint16_t *m16 = (uint16_t *)(void *)s->sscr;
+    for (size_t p = a; p < b; p++) m16[p] = P->mat[perm[p]];
+    team_sync(s);
+    memcpy(P->mat + a, m16 + a, (b - a) * sizeof *P->mat);
+    team_sync(s);
+    uint32_t *u32 = (uint32_t *)(void *)s->sscr;
+    for (size_t p = a; p < b; p++) u32[p] = P->id[perm[p]];
+    team_sync(s);
+    memcpy(P->id + a, u32 + a, (b - a) * sizeof *P->id);
+    team_sync(s);
+    if (s->nload) { /* the inverse map for the loaded particles */
+        for (size_t p = a; p < b; p++) u32[perm[p]] = (uint32_t)p;
+        team_sync(s);
+        size_t i0, i1;
+        slice(s->nload, s->nthreads, tid, &i0, &i1);
+        for (size_t i = i0; i < i1; i++) s->load_p[i] = u32[s->load_p[i]];
+        team_sync(s);
+    }
+    double **arr[3 * 3 + 2 * 6 + 2];
+    int na = sort_arrays(s, arr);
+    double *dst = s->sscr;
+    for (int i = 0; i < na; i++) {
+        const double *restrict src = *arr[i];
+        double *restrict d = dst;
+        for (size_t p = a; p < b; p++) d[p] = src[perm[p]];
+        team_sync(s);
+        dst = *arr[i];
+    }
 }
 
 static void sort_particles(mpm_sim *s)
@@ -558,47 +755,29 @@ static void sort_particles(mpm_sim *s)
     }
     s->rowoff[s->nrows] = nk;
     run(s, ph_keys);
-    uint32_t *key = (uint32_t *)(void *)s->sscr, *perm = s->sperm, *h = s->shist;
     int sorted = 1;
-    for (size_t p = 1; p < n && sorted; p++) sorted = key[p] >= key[p - 1];
+    uint32_t last = 0;
+    for (int t = 0; t < s->nthreads; t++) {
+        size_t a, b;
+        particle_slice(s, t, &a, &b);
+        if (a == b) continue;
+        sorted &= s->tout[t].ksorted && s->tout[t].kfirst >= last;
+        last = s->tout[t].klast;
+    }
     if (sorted) return;
+    uint32_t *key = (uint32_t *)(void *)s->sscr, *perm = s->sperm, *h = s->shist;
     memset(h, 0, (nk + 1) * sizeof *h);
     for (size_t p = 0; p < n; p++) h[key[p] + 1]++;
     for (size_t k = 0; k < nk; k++) h[k + 1] += h[k];
     for (size_t p = 0; p < n; p++) perm[h[key[p]]++] = (uint32_t)p;
-    /* the keys are spent: the integer fields through the scratch, then
-     * the inverse map for the loaded particles */
-    uint16_t *m16 = (uint16_t *)(void *)s->sscr;
-    for (size_t p = 0; p < n; p++) m16[p] = P->mat[perm[p]];
-    memcpy(P->mat, m16, n * sizeof *P->mat);
-    uint32_t *u32 = (uint32_t *)(void *)s->sscr;
-    for (size_t p = 0; p < n; p++) u32[p] = P->id[perm[p]];
-    memcpy(P->id, u32, n * sizeof *P->id);
-    if (s->nload) {
-        for (size_t p = 0; p < n; p++) u32[perm[p]] = (uint32_t)p;
-        for (size_t i = 0; i < s->nload; i++) s->load_p[i] = u32[s->load_p[i]];
-    }
-    /* the double fields, each through the scratch, which then takes the
-     * old array's place */
+    /* the keys are spent: the scratch carries the permuted copies */
+    run(s, ph_permute);
     double **arr[3 * 3 + 2 * 6 + 2];
-    int na = 0;
-    for (int d = 0; d < s->dim; d++) {
-        arr[na++] = &P->x[d];
-        arr[na++] = &P->v[d];
-        if (P->lp[d]) arr[na++] = &P->lp[d];
-    }
-    for (int c = 0; c < MPM_NCOMP(s->dim); c++) {
-        arr[na++] = &P->sig[c];
-        if (P->eps[c]) arr[na++] = &P->eps[c];
-    }
-    arr[na++] = &P->m;
-    arr[na++] = &P->vol;
+    int na = sort_arrays(s, arr);
     for (int i = 0; i < na; i++) {
-        const double *restrict src = *arr[i];
-        double *restrict dst = s->sscr;
-        for (size_t p = 0; p < n; p++) dst[p] = src[perm[p]];
-        s->sscr = *arr[i];
-        *arr[i] = dst;
+        double *old = *arr[i];
+        *arr[i] = s->sscr;
+        s->sscr = old;
     }
 }
 
@@ -924,13 +1103,14 @@ mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen)
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
     for (int t = 0; t < s->nthreads; t++)
         for (int cc = 0; cc < 6; cc++)
-            if (!(s->tout[t].deps[cc] = dalloc(MPM_BLOCK))) goto nomem;
+            if (!(s->tout[t].deps[cc] = line_alloc(MPM_BLOCK * sizeof(double)))) goto nomem;
     for (int t = 0; t < s->nthreads; t++)
-        if (!(s->tout[t].wblk = malloc(mpm_kernels_scratch()))) goto nomem;
+        if (!(s->tout[t].wblk = line_alloc(mpm_kernels_scratch()))) goto nomem;
     /* row extents, all empty */
     s->nrows = (size_t)s->np[1] * (size_t)s->np[2];
     if (!(s->ulo = malloc(s->nrows * sizeof *s->ulo)) || !(s->uhi = malloc(s->nrows * sizeof *s->uhi)) ||
-        !(s->rowoff = malloc((s->nrows + 1) * sizeof *s->rowoff)))
+        !(s->rowoff = malloc((s->nrows + 1) * sizeof *s->rowoff)) ||
+        !(s->acc = calloc(s->nrows + 1, sizeof *s->acc)))
         goto nomem;
     for (int t = 0; t < s->nthreads; t++)
         if (!(s->tout[t].rlo = malloc(s->nrows * sizeof(int))) ||
@@ -1008,6 +1188,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->ulo);
     free(s->uhi);
     free(s->rowoff);
+    free(s->acc);
     free(s->sperm);
     free(s->shist);
     free(s->sscr);
@@ -1036,12 +1217,6 @@ static inline double strain_density(const mpm_particles *P, int dim, size_t p)
     for (int c = 0; c < MPM_NCOMP(dim); c++)
         if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];
     return se;
-}
-
-static void loads_and_bc2(mpm_sim *s)
-{
-    if (s->nload) s->k->scatter_loads(s);
-    zero_fixed(s, s->g.f); /* BC2 */
 }
 
 /* The divergence guard.  A blow-up need not produce a NaN: an unstable
@@ -1169,35 +1344,7 @@ int mpm_sim_step(mpm_sim *s)
     begin_step(s);
     for (size_t i = 0; i < s->nload; i++)
         for (int d = 0; d < s->dim; d++) s->load_xold[d][i] = s->P.x[d][s->load_p[i]];
-    switch (s->update) {
-    case MPM_USF:
-        run(s, ph_p2g_mq);
-        run(s, ph_node_mq);
-        zero_fixed(s, s->g.q); /* BC1 */
-        run(s, ph_stress_force);
-        run(s, ph_node_f);
-        loads_and_bc2(s);
-        run(s, ph_node_update);
-        run(s, ph_g2p_xv);
-        break;
-    case MPM_USL:
-    case MPM_MUSL:
-        run(s, ph_p2g_mqf);
-        run(s, ph_node_mqf);
-        zero_fixed(s, s->g.q); /* BC1 */
-        loads_and_bc2(s);
-        run(s, ph_node_update);
-        if (s->update == MPM_USL) {
-            run(s, ph_g2p_xv_stress);
-        } else {
-            run(s, ph_g2p_v);
-            run(s, ph_p2g_q2);
-            run(s, ph_node_q2);
-            zero_fixed(s, s->g.q2); /* BC1 on the recomputed momentum */
-            run(s, ph_g2p_x_stress);
-        }
-        break;
-    }
+    run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
     return finish_step(s);
 }
 
