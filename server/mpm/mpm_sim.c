@@ -1277,7 +1277,7 @@ static int guard(mpm_sim *s)
         e.potential += s->tout[t].epot;
     }
     e.external_work = s->external_work;
-    double have = e.kinetic + e.strain;
+    double have = e.kinetic + fabs(e.strain); /* a blow-up can drive 1/2 sigma:eps negative */
     s->guard_v2 = s->vmax * s->vmax;
     /* the loads' work counted as its absolute value: a bound that holds
      * however a coarse solution mis-integrates a force that does work
