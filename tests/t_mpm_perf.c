@@ -630,3 +630,99 @@ TEST(perf_sort_order_independent_of_threads)
         CHECK(memcmp(px[0], px[T - 1], sizeof px[0]) == 0);
     }
 }
+
+/* mpm_sim_want_energy(): the step sums the energies inside its own passes.
+ * The same case run twice, once asking for the energies before every step
+ * and once calling mpm_sim_energy() alone (the separate team pass): the
+ * energies agree (the same sums in the same order) and the physics is
+ * untouched (positions, velocities and stresses bitwise equal).  One more
+ * step without the request then falls back to the pass: no stale sums. */
+static double en_diff(const mpm_energy *a, const mpm_energy *b, int dim)
+{
+    double esc = fmax(fabs(a->kinetic) + fabs(a->strain) + fabs(a->potential), 1e-300);
+    double msc = fmax(a->mass, 1e-300);
+    double d = fabs(a->kinetic - b->kinetic) / esc;
+    d = fmax(d, fabs(a->strain - b->strain) / esc);
+    d = fmax(d, fabs(a->potential - b->potential) / esc);
+    d = fmax(d, fabs(a->total - b->total) / esc);
+    d = fmax(d, fabs(a->mass - b->mass) / msc);
+    for (int k = 0; k < dim; k++) d = fmax(d, fabs(a->momentum[k] - b->momentum[k]) / msc);
+    return d;
+}
+
+static void energy_case(mpm_case *c, mpm_material_desc *mat, mpm_body_desc *b, int dim,
+                        mpm_method meth, mpm_update up, int T)
+{
+    falling_box(c, mat, b, dim, up);
+    c->method = meth;
+    c->threads = T;
+    if (dim == 1) { /* falling along x onto a wall at x = 0 */
+        c->gravity[0] = -9.81;
+        c->gravity[1] = 0;
+        c->bc.face_mask[2] = 0;
+        c->bc.face_mask[0] = 1;
+        b->lo[0] = 0.02;
+        b->hi[0] = 0.35;
+        b->velocity[0] = -0.8;
+    }
+}
+
+TEST(perf_step_energies_equal_energy_pass)
+{
+    static const mpm_update ups[3] = {MPM_USF, MPM_USL, MPM_MUSL};
+    static const char *const un[3] = {"USF", "USL", "MUSL"};
+    enum { STEPS = 40, MAXP = 8192 };
+    static double xa[MAXP * 3], xb[MAXP * 3], va[MAXP * 3], vb[MAXP * 3];
+    static double sa[MAXP * 6], sb[MAXP * 6];
+    double worst = 0;
+    int cases = 0;
+    for (int dim = 1; dim <= 3; dim++)
+        for (int m = 0; m < 2; m++)
+            for (int u = 0; u < 3; u++)
+                for (int T = 1; T <= 2; T++) {
+                    mpm_case c;
+                    mpm_material_desc mat;
+                    mpm_body_desc b;
+                    energy_case(&c, &mat, &b, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, ups[u], T);
+                    char err[256];
+                    mpm_sim *sa_ = mpm_sim_new(&c, err, sizeof err);
+                    CHECKF(sa_, "%s", err);
+                    mpm_sim *sb_ = mpm_sim_new(&c, err, sizeof err);
+                    CHECKF(sb_, "%s", err);
+                    size_t n = mpm_sim_particles(sa_);
+                    CHECK(n > 0 && n <= MAXP);
+                    double cw = 0, strain = 0;
+                    for (int k = 0; k <= STEPS; k++) {
+                        int want = k < STEPS; /* the last step: no request */
+                        if (want) mpm_sim_want_energy(sa_);
+                        int ra = mpm_sim_step(sa_), rb = mpm_sim_step(sb_);
+                        CHECKF(ra == 0 && rb == 0, "%s / %s", mpm_sim_error(sa_), mpm_sim_error(sb_));
+                        CHECK(sa_->ecache_ok == want && !sb_->ecache_ok);
+                        mpm_energy ea, eb;
+                        mpm_sim_energy(sa_, &ea);
+                        mpm_sim_energy(sb_, &eb);
+                        double d = en_diff(&eb, &ea, dim);
+                        CHECKF(d <= 1e-12, "%dD %s %s %d thread(s), step %d: energies differ by "
+                               "%.3g relative (kinetic %.17g / %.17g, strain %.17g / %.17g, "
+                               "potential %.17g / %.17g)", dim, m ? "GIMP" : "MPM", un[u], T,
+                               k + 1, d, ea.kinetic, eb.kinetic, ea.strain, eb.strain,
+                               ea.potential, eb.potential);
+                        cw = fmax(cw, d);
+                        strain = fmax(strain, fabs(eb.strain));
+                    }
+                    CHECK(strain > 0); /* the strain term is exercised */
+                    mpm_sim_snapshot(sa_, &(mpm_snapshot){.x = xa, .v = va, .stress = sa});
+                    mpm_sim_snapshot(sb_, &(mpm_snapshot){.x = xb, .v = vb, .stress = sb});
+                    size_t nx = n * (size_t)dim;
+                    CHECK(memcmp(xa, xb, nx * sizeof(double)) == 0);
+                    CHECK(memcmp(va, vb, nx * sizeof(double)) == 0);
+                    CHECK(memcmp(sa, sb, n * 6 * sizeof(double)) == 0);
+                    mpm_sim_destroy(&sa_);
+                    mpm_sim_destroy(&sb_);
+                    worst = fmax(worst, cw);
+                    cases++;
+                }
+    TLOG("%d cases (1D/2D/3D, MPM/GIMP, USF/USL/MUSL, gravity, wall, 1 and 2 threads), %d steps: "
+         "energies summed in the step vs the energy pass: worst relative difference %.3g; "
+         "positions, velocities, stresses bitwise equal", cases, STEPS + 1, worst);
+}

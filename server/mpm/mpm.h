@@ -215,8 +215,17 @@ const char *mpm_sim_error(const mpm_sim *sim);  /* "" when none */
 
 /* Computes energies (one pass over the particles, only when called, on the
  * simulation's threads; the sums are reproducible for a given thread count).
- * Not to be called while a step runs. */
+ * Right after a step that mpm_sim_want_energy() asked for, it returns the
+ * sums that step made instead (the same values), with no pass.  Not to be
+ * called while a step runs. */
 void mpm_sim_energy(const mpm_sim *sim, mpm_energy *e);
+
+/* The next step also computes the energies, summed inside the particle
+ * passes it runs anyway (per thread, combined in thread order: the same
+ * sums as mpm_sim_energy()'s pass); mpm_sim_energy() right after that step
+ * then costs nothing.  The request holds for one step; the physics is
+ * unchanged.  Not to be called while a step runs. */
+void mpm_sim_want_energy(mpm_sim *sim);
 
 /* Copies the requested particle fields into caller arrays. */
 void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *s);

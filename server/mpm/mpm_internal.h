@@ -65,7 +65,8 @@ typedef struct {
     int *rlo, *rhi;        /* per row (y + z np[1]): first and last x node
                             * touched (empty: rlo > rhi); rows outside the
                             * box blo..bhi are always empty */
-    double ekin, estr, epot; /* partial energies (guard, mpm_sim_energy) */
+    double ekin, estr, epot; /* partial energies (guard, mpm_sim_energy, and
+                              * the step's passes when energies are wanted) */
     double emom[3], emass;   /* partial momentum and mass (mpm_sim_energy) */
     int ksorted;             /* sort keys of the slice non-decreasing */
     uint32_t kfirst, klast;  /* the slice's first and last sort key */
@@ -129,6 +130,14 @@ struct mpm_sim {
     double e_total0, e_floor;
     double guard_v2;               /* max |v|^2 at the last check */
 
+    /* energies summed inside the step (mpm_sim_want_energy()): want asks
+     * for them in the next step, step_energy says the running step sums
+     * them, and ecache holds the sums (combined in thread order; external
+     * work and total left out) while ecache_ok says they belong to the
+     * particles as they are (cleared when a step starts) */
+    int want_energy, step_energy, ecache_ok;
+    mpm_energy ecache;
+
     /* kernels chosen once per job */
     const mpm_kernels *k;
 
@@ -175,20 +184,25 @@ struct mpm_sim {
 };
 
 /* Kernel family for one (dimension, method).  Each runs over the particles
- * [p0, p1) with scatter target gb and per-thread output o. */
+ * [p0, p1) with scatter target gb and per-thread output o.  The passes that
+ * write a particle field's last value of the step take en: nonzero, they
+ * also sum the slice's energies into o (the pass writing the final stress,
+ * strain and volume: o->estr; the one writing the final position and
+ * velocity: o->ekin, epot, emom, emass), exactly as the energy pass does.
+ * en is tested once per call (two instantiations), never per particle. */
 struct mpm_kernels {
     void (*p2g_mq)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
     void (*p2g_mqf)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
     void (*p2g_q2)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
     /* USF: strain from grid velocity, stress update, then internal forces */
-    void (*stress_force)(mpm_sim *, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1);
+    void (*stress_force)(mpm_sim *, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1, int en);
     /* position and velocity update (Eqs. 30-31) */
-    void (*g2p_xv)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    void (*g2p_xv)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1, int en);
     /* USL: position and velocity update, then strain and stress */
-    void (*g2p_xv_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    void (*g2p_xv_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1, int en);
     /* MUSL: velocity only, then position + strain from q2 */
     void (*g2p_v)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
-    void (*g2p_x_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
+    void (*g2p_x_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1, int en);
     /* point forces of the loaded particles, scattered into the main grid */
     void (*scatter_loads)(mpm_sim *);
     /* support box and row extents of particles [p0, p1) into o->blo/bhi
@@ -224,6 +238,16 @@ const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
  * materials[i] and the limit. */
 int mpm_model_params(const mpm_material_desc *d, int dim, size_t i,
                      mpm_mat_params *out, char *err, size_t errlen);
+
+/* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
+ * eps_zz array, its term is zero) */
+static inline double mpm_strain_density(const mpm_particles *P, int dim, size_t p)
+{
+    double se = 0;
+    for (int c = 0; c < MPM_NCOMP(dim); c++)
+        if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];
+    return se;
+}
 
 /* Generates the particles of a checked case into P (arrays allocated for the
  * count; P NULL: count only), with material constants mats (may be NULL

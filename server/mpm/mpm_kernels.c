@@ -366,6 +366,57 @@ INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6]
     }
 }
 
+/* Energy sums of a slice (EN: the step wants them), in the order and with
+ * the arithmetic of the energy pass (mpm_sim.c, ph_energy), so that the
+ * sums are the same: kinetic, potential, momentum and mass of particle p
+ * once its position and velocity are final, strain energy of a block once
+ * its stress, strain and volume are. */
+typedef struct {
+    double ek, es, ep, mom[3], ms;
+    double g[3];
+} esum;
+
+INLINE void esum_init(const mpm_sim *s, esum *e)
+{
+    e->ek = e->es = e->ep = e->ms = 0;
+    for (int d = 0; d < 3; d++) {
+        e->mom[d] = 0;
+        e->g[d] = s->gravity[d];
+    }
+}
+
+INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
+{
+    const mpm_particles *P = &s->P;
+    double m = P->m[p], v2 = 0;
+    for (int d = 0; d < D; d++) {
+        double v = P->v[d][p];
+        v2 += v * v;
+        e->mom[d] += m * v;
+        e->ep -= m * e->g[d] * P->x[d][p];
+    }
+    e->ek += 0.5 * m * v2;
+    e->ms += m;
+}
+
+INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
+{
+    const mpm_particles *P = &s->P;
+    for (size_t p = b0; p < b0 + nb; p++) e->es += 0.5 * mpm_strain_density(P, D, p) * P->vol[p];
+}
+
+/* the slice's sums into o: the kinematic ones (XV) and/or the strain (S) */
+INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
+{
+    if (XV) {
+        o->ekin = e->ek;
+        o->epot = e->ep;
+        o->emass = e->ms;
+        for (int d = 0; d < 3; d++) o->emom[d] = e->mom[d];
+    }
+    if (S) o->estr = e->es;
+}
+
 INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
 {
     pw W;
@@ -411,9 +462,11 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
 /* USF: strain and stress from the grid velocity, then internal forces with
  * the new stress; the weights of the block are kept between the two. */
 INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0,
-                           size_t p1, int D, int NS)
+                           size_t p1, int D, int NS, int EN)
 {
     pw *Wb = o->wblk;
+    esum e;
+    if (EN) esum_init(s, &e);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
@@ -421,8 +474,10 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
             gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL);
         }
         block_update(s, b0, nb, o->deps, D);
+        if (EN) esum_strain(s, &e, b0, nb, D);
         for (size_t i = 0; i < nb; i++) scatter_force(s, gb, &Wb[i], b0 + i, D, NS);
     }
+    if (EN) esum_store(&e, o, 0, 1);
 }
 
 /* Checks the updated particle: inside [lo, hi) and finite; the first bad
@@ -460,12 +515,14 @@ INLINE void box_reset(const mpm_sim *s, mpm_thread_out *o, int D)
 }
 
 /* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0). */
-INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
+INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int EN)
 {
     pw W;
     rowrun a;
     boxc bc;
+    esum e;
     double dt = s->dt;
+    if (EN) esum_init(s, &e);
     box_reset(s, o, D);
     run_init(&a);
     boxc_init(s, &bc);
@@ -479,19 +536,24 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
             s->P.v[d][p] += dt * dv[d];
         }
         check_particle(s, o, p, D);
+        if (EN) esum_particle(s, &e, p, D);
         box_add(s, &bc, o, &a, xn, D, NS);
     }
     run_flush(s, o, &a, D);
+    if (EN) esum_store(&e, o, 1, 0);
 }
 
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
  * weights of the step's start positions serve both, in one gather. */
-INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
+INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
+                            int EN)
 {
     pw W;
     rowrun a;
     boxc bc;
+    esum e;
     double dt = s->dt;
+    if (EN) esum_init(s, &e);
     box_reset(s, o, D);
     run_init(&a);
     boxc_init(s, &bc);
@@ -508,11 +570,14 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                 s->P.v[d][p] += dt * dv[d];
             }
             check_particle(s, o, p, D);
+            if (EN) esum_particle(s, &e, p, D);
             box_add(s, &bc, o, &a, xn, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
+        if (EN) esum_strain(s, &e, b0, nb, D);
     }
     run_flush(s, o, &a, D);
+    if (EN) esum_store(&e, o, 1, 1);
 }
 
 INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
@@ -530,12 +595,15 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, 
 
 /* MUSL: positions from the updated grid momentum, strain from the momentum
  * of the updated particle velocities (q2). */
-INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
+INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
+                           int EN)
 {
     pw W;
     rowrun a;
     boxc bc;
+    esum e;
     double dt = s->dt;
+    if (EN) esum_init(s, &e);
     box_reset(s, o, D);
     run_init(&a);
     boxc_init(s, &bc);
@@ -551,11 +619,14 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
                 s->P.x[d][p] = xn[d];
             }
             check_particle(s, o, p, D);
+            if (EN) esum_particle(s, &e, p, D);
             box_add(s, &bc, o, &a, xn, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
+        if (EN) esum_strain(s, &e, b0, nb, D);
     }
     run_flush(s, o, &a, D);
+    if (EN) esum_store(&e, o, 1, 1);
 }
 
 /* The support box of particles [p0, p1) without moving them. */
@@ -631,16 +702,30 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     static void p2g_q2_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)             \
     { p2g_q2_t(s, gb, a, b, D, NS); }                                                          \
     static void stress_force_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o,        \
-                                        size_t a, size_t b)                                    \
-    { stress_force_t(s, gb, o, a, b, D, NS); }                                                 \
-    static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)           \
-    { g2p_xv_t(s, o, a, b, D, NS); }                                                           \
-    static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)    \
-    { g2p_xv_stress_t(s, o, a, b, D, NS); }                                                    \
+                                        size_t a, size_t b, int en)                            \
+    {                                                                                          \
+        if (en) stress_force_t(s, gb, o, a, b, D, NS, 1);                                      \
+        else stress_force_t(s, gb, o, a, b, D, NS, 0);                                         \
+    }                                                                                          \
+    static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)   \
+    {                                                                                          \
+        if (en) g2p_xv_t(s, o, a, b, D, NS, 1);                                                \
+        else g2p_xv_t(s, o, a, b, D, NS, 0);                                                   \
+    }                                                                                          \
+    static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,    \
+                                         int en)                                               \
+    {                                                                                          \
+        if (en) g2p_xv_stress_t(s, o, a, b, D, NS, 1);                                         \
+        else g2p_xv_stress_t(s, o, a, b, D, NS, 0);                                            \
+    }                                                                                          \
     static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)            \
     { g2p_v_t(s, o, a, b, D, NS); }                                                            \
-    static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)     \
-    { g2p_x_stress_t(s, o, a, b, D, NS); }                                                     \
+    static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,     \
+                                        int en)                                                \
+    {                                                                                          \
+        if (en) g2p_x_stress_t(s, o, a, b, D, NS, 1);                                          \
+        else g2p_x_stress_t(s, o, a, b, D, NS, 0);                                             \
+    }                                                                                          \
     LOADS(D, NS)                                                                               \
     static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)             \
     { bbox_t(s, o, a, b, D, NS); }                                                             \

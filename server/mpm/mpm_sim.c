@@ -25,7 +25,9 @@
  * passes split the active nodes evenly among the threads (one row in 1D is
  * split too), sum the private grids in thread order and apply everything
  * node-wise that follows (inverse mass, gravity, BC1, BC2, q += f dt) in
- * the same pass.  The divergence guard's energy sums, the sort keys and
+ * the same pass.  The divergence guard's energy sums (or the step's own,
+ * summed in its last particle passes when mpm_sim_want_energy() asked for
+ * them), the sort keys and
  * the sort's permutation run on the team too, sums combined in thread
  * order.  The
  * same case with the same thread count is therefore bitwise reproducible;
@@ -474,7 +476,7 @@ static void ph_stress_force(mpm_sim *s, int tid)
 {
     size_t a, b;
     particle_slice(s, tid, &a, &b);
-    s->k->stress_force(s, scatter_buf(s, tid, F_F), &s->tout[tid], a, b);
+    s->k->stress_force(s, scatter_buf(s, tid, F_F), &s->tout[tid], a, b, s->step_energy);
 }
 
 static void ph_g2p_xv(mpm_sim *s, int tid)
@@ -482,7 +484,7 @@ static void ph_g2p_xv(mpm_sim *s, int tid)
     size_t a, b;
     particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    s->k->g2p_xv(s, &s->tout[tid], a, b);
+    s->k->g2p_xv(s, &s->tout[tid], a, b, s->step_energy);
 }
 
 static void ph_g2p_xv_stress(mpm_sim *s, int tid)
@@ -490,7 +492,7 @@ static void ph_g2p_xv_stress(mpm_sim *s, int tid)
     size_t a, b;
     particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    s->k->g2p_xv_stress(s, &s->tout[tid], a, b);
+    s->k->g2p_xv_stress(s, &s->tout[tid], a, b, s->step_energy);
 }
 
 static void ph_g2p_v(mpm_sim *s, int tid)
@@ -505,7 +507,7 @@ static void ph_g2p_x_stress(mpm_sim *s, int tid)
     size_t a, b;
     particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    s->k->g2p_x_stress(s, &s->tout[tid], a, b);
+    s->k->g2p_x_stress(s, &s->tout[tid], a, b, s->step_energy);
 }
 
 static void ph_bbox(mpm_sim *s, int tid)
@@ -1209,16 +1211,6 @@ void mpm_sim_destroy(mpm_sim **sp)
 
 /* ---- the step ---- */
 
-/* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
- * eps_zz array, its term is zero) */
-static inline double strain_density(const mpm_particles *P, int dim, size_t p)
-{
-    double se = 0;
-    for (int c = 0; c < MPM_NCOMP(dim); c++)
-        if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];
-    return se;
-}
-
 /* The divergence guard.  A blow-up need not produce a NaN: an unstable
  * scheme (USL above C = 0.5, MPM when points cross cells) can multiply the
  * energy by 1e4 and still finish.  Every MPM_GUARD_EVERY steps the kinetic
@@ -1240,7 +1232,10 @@ static inline double strain_density(const mpm_particles *P, int dim, size_t p)
 /* The guard's energies on the team: each thread sums its slice exactly as
  * mpm_sim_energy() does, and the partial sums are added in thread order,
  * so the result is reproducible for a given thread count (and with one
- * thread equals mpm_sim_energy()'s). */
+ * thread equals mpm_sim_energy()'s).  A step asked for energies
+ * (mpm_sim_want_energy()) makes the same per-thread sums inside its
+ * kernels (mpm_kernels.c, esum_*), in the same particle order and with the
+ * same arithmetic; the guard then uses those. */
 static void ph_energy(mpm_sim *s, int tid)
 {
     const mpm_particles *P = &s->P;
@@ -1256,7 +1251,7 @@ static void ph_energy(mpm_sim *s, int tid)
             ep -= m * s->gravity[d] * P->x[d][p];
         }
         ek += 0.5 * m * v2;
-        es += 0.5 * strain_density(P, dim, p) * P->vol[p];
+        es += 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
         ms += m;
     }
     mpm_thread_out *o = &s->tout[tid];
@@ -1267,14 +1262,29 @@ static void ph_energy(mpm_sim *s, int tid)
     for (int d = 0; d < 3; d++) o->emom[d] = mom[d];
 }
 
+/* The partial sums in tout combined in thread order (external work and
+ * total left out). */
+static void sum_energy(const mpm_sim *s, mpm_energy *e)
+{
+    memset(e, 0, sizeof *e);
+    for (int t = 0; t < s->nthreads; t++) {
+        const mpm_thread_out *o = &s->tout[t];
+        e->kinetic += o->ekin;
+        e->strain += o->estr;
+        e->potential += o->epot;
+        e->mass += o->emass;
+        for (int d = 0; d < s->dim; d++) e->momentum[d] += o->emom[d];
+    }
+}
+
 static int guard(mpm_sim *s)
 {
-    mpm_energy e = {0};
-    run(s, ph_energy);
-    for (int t = 0; t < s->nthreads; t++) {
-        e.kinetic += s->tout[t].ekin;
-        e.strain += s->tout[t].estr;
-        e.potential += s->tout[t].epot;
+    mpm_energy e;
+    if (s->ecache_ok) { /* summed by the step just taken: the same sums */
+        e = s->ecache;
+    } else {
+        run(s, ph_energy);
+        sum_energy(s, &e);
     }
     e.external_work = s->external_work;
     double have = e.kinetic + fabs(e.strain); /* a blow-up can drive 1/2 sigma:eps negative */
@@ -1341,11 +1351,27 @@ static int finish_step(mpm_sim *s)
 int mpm_sim_step(mpm_sim *s)
 {
     if (s->failed) return MPM_ESTATE;
+    s->ecache_ok = 0; /* the particles change (and may be reordered) */
     begin_step(s);
     for (size_t i = 0; i < s->nload; i++)
         for (int d = 0; d < s->dim; d++) s->load_xold[d][i] = s->P.x[d][s->load_p[i]];
+    /* energies wanted: the passes that write each particle field for the
+     * last time in the step sum them (s->step_energy, read once per pass:
+     * USF stress_force and g2p_xv, USL g2p_xv_stress, MUSL g2p_x_stress) */
+    s->step_energy = s->want_energy;
+    s->want_energy = 0;
     run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
+    if (s->step_energy) {
+        s->step_energy = 0;
+        sum_energy(s, &s->ecache);
+        s->ecache_ok = 1; /* the particles as they are now, even if the step failed */
+    }
     return finish_step(s);
+}
+
+void mpm_sim_want_energy(mpm_sim *s)
+{
+    s->want_energy = 1;
 }
 
 int mpm_sim_check(mpm_sim *s)
@@ -1452,25 +1478,22 @@ size_t mpm_sim_nodes(const mpm_sim *s)
 }
 
 /* On the thread team (ph_energy), partial sums combined in thread order:
- * reproducible for a given thread count.  The team's scratch (tout) is
+ * reproducible for a given thread count; or, when the last step was asked
+ * to (mpm_sim_want_energy()), the same sums that step made in its passes.  The team's scratch (tout) is
  * written, nothing of the simulation's state; the object was not defined
  * const, so the cast is sound, and the team is idle between steps. */
 void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
 {
     mpm_sim *s = (mpm_sim *)cs;
-    memset(e, 0, sizeof *e);
-    if (s->threads) {
-        run(s, ph_energy);
-    } else { /* during creation, before the team starts: the same slices */
-        for (int t = 0; t < s->nthreads; t++) ph_energy(s, t);
-    }
-    for (int t = 0; t < s->nthreads; t++) {
-        const mpm_thread_out *o = &s->tout[t];
-        e->kinetic += o->ekin;
-        e->strain += o->estr;
-        e->potential += o->epot;
-        e->mass += o->emass;
-        for (int d = 0; d < s->dim; d++) e->momentum[d] += o->emom[d];
+    if (s->ecache_ok) { /* summed by the last step (mpm_sim_want_energy()) */
+        *e = s->ecache;
+    } else {
+        if (s->threads) {
+            run(s, ph_energy);
+        } else { /* during creation, before the team starts: the same slices */
+            for (int t = 0; t < s->nthreads; t++) ph_energy(s, t);
+        }
+        sum_energy(s, e);
     }
     e->external_work = s->external_work;
     e->total = e->kinetic + e->strain + e->potential - e->external_work;
