@@ -13,6 +13,7 @@ pkgs=(
   libprotobuf-c-dev    # protobuf-c runtime
   protobuf-c-compiler  # protoc-c, generates proto/*.pb-c.[ch]
   libjansson-dev       # JSON case files
+  protobuf-compiler python3-protobuf  # tests: Python's protobuf JSON parser reads the cases too
 )
 # Optional group: `install-deps.sh bench` adds what `make bench-accuracy` uses
 # for its plots (gnuplot-nox), unless some gnuplot is already there.
