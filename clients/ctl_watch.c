@@ -117,40 +117,57 @@ static void append(char *line, size_t cap, size_t *n, const char *fmt, ...)
     if (k > 0) *n = *n + (size_t)k < cap ? *n + (size_t)k : cap - 1;
 }
 
-/* The status line (terminal text mode). */
-static void draw(watch_t *w, int force)
+/* The status line (terminal text mode): status, step, t, the energies, a
+ * progress bar and the ETA.  When the terminal is too narrow for the full
+ * line, a compact one keeps every item (3 digits, a percentage instead of
+ * the bar) before anything is cut. */
+static size_t status_line(const watch_t *w, int compact, char *line, size_t cap)
 {
-    char line[512], bar[32];
-    size_t n = 0, cols;
-    double t = now_s();
+    size_t n = 0;
     const char *st = srv_status_name(w->status);
-    if (!w->tty || (!force && t - w->last_draw < WATCH_REDRAW_S)) return;
-    w->last_draw = t;
     line[0] = 0;
-    append(line, sizeof line, &n, "job %llu %s  step %lld", (unsigned long long)w->job,
-           st ? st : "?", w->step);
-    if (w->steps_total > 0) append(line, sizeof line, &n, "/%lld", w->steps_total);
-    append(line, sizeof line, &n, "  t %.6g", w->t);
+    if (compact)
+        append(line, cap, &n, "%s step %lld", st ? st : "?", w->step);
+    else
+        append(line, cap, &n, "job %llu %s  step %lld", (unsigned long long)w->job, st ? st : "?",
+               w->step);
+    if (w->steps_total > 0) append(line, cap, &n, "/%lld", w->steps_total);
+    append(line, cap, &n, compact ? " t %.4g" : "  t %.6g", w->t);
     if (w->have_first)
-        append(line, sizeof line, &n, "  K %.4e  S %.4e  E %.6e", w->kinetic, w->strain,
-               w->last_total);
+        append(line, cap, &n, compact ? " K %.3e S %.3e E %.3e" : "  K %.4e  S %.4e  E %.6e",
+               w->kinetic, w->strain, w->last_total);
     if (w->steps_total > 0) {
         double frac = (double)w->step / (double)w->steps_total;
-        int fill;
         if (frac < 0) frac = 0;
         if (frac > 1) frac = 1;
-        fill = (int)(frac * 20 + 0.5);
-        for (int i = 0; i < 20; i++) bar[i] = i < fill ? '#' : '.';
-        bar[20] = 0;
-        append(line, sizeof line, &n, "  [%s] %3.0f%%", bar, 100 * frac);
+        if (compact) {
+            append(line, cap, &n, " %.0f%%", 100 * frac);
+        } else {
+            char bar[32];
+            int fill = (int)(frac * 20 + 0.5);
+            for (int i = 0; i < 20; i++) bar[i] = i < fill ? '#' : '.';
+            bar[20] = 0;
+            append(line, cap, &n, "  [%s] %3.0f%%", bar, 100 * frac);
+        }
         if (w->have_progress && w->wall_s > 0 && w->step > 0 && w->step < w->steps_total) {
             char eta[32];
             double rate = (double)w->step / w->wall_s;
             ctl_fmt_duration(eta, sizeof eta, (double)(w->steps_total - w->step) / rate);
-            append(line, sizeof line, &n, " ETA %s", eta);
+            append(line, cap, &n, " ETA %s", eta);
         }
     }
-    cols = (size_t)term_cols();
+    return n;
+}
+
+static void draw(watch_t *w, int force)
+{
+    char line[512];
+    double t = now_s();
+    if (!w->tty || (!force && t - w->last_draw < WATCH_REDRAW_S)) return;
+    w->last_draw = t;
+    size_t cols = (size_t)term_cols();
+    size_t n = status_line(w, 0, line, sizeof line);
+    if (n >= cols) n = status_line(w, 1, line, sizeof line);
     if (n >= cols) line[cols - 1] = 0;
     printf("\r\033[K%s", line);
     fflush(stdout);
