@@ -15,30 +15,10 @@
 
 #include "srv_codec.h"
 #include "srv_json.h"
+#include "t_daemon.h"
 
 #define ERRLEN 512
 
-/* Reads a whole file into a malloc'd NUL-terminated buffer. */
-static char *slurp(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    char *buf = NULL;
-    long n;
-    if (!f) return NULL;
-    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0) {
-        buf = malloc((size_t)n + 1);
-        if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
-            free(buf);
-            buf = NULL;
-        }
-        if (buf) {
-            buf[n] = 0;
-            *len = (size_t)n;
-        }
-    }
-    fclose(f);
-    return buf;
-}
 
 /* Loads proto/examples/<name>.json into a srv_case (NULL on failure, with
  * the reason printed). */
@@ -48,7 +28,7 @@ static srv_case *load_example(const char *name)
     size_t len = 0;
     srv_case *sc = NULL;
     snprintf(path, sizeof path, "proto/examples/%s.json", name);
-    char *text = slurp(path, &len);
+    char *text = td_slurp(path, &len);
     if (!text) {
         TLOG("cannot read %s (run from the repository root)", path);
         return NULL;
@@ -84,34 +64,12 @@ static int load_text(const char *json, char *err)
     return rc;
 }
 
-/* A valid 2D case to break in the error tests. */
-static const char *const good2d =
-    "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
-    " \"materials\": [{\"youngsModulus\": 1, \"poissonRatio\": 0.2, \"density\": 1}],"
-    " \"bodies\": [{\"sphere\": {\"center\": [0.3, 0.3], \"radius\": 0.1}},"
-    "              {\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, \"velocity\": [-0.1, 0]}],"
-    " \"endTime\": 1}";
-
-/* good2d with the first occurrence of `from` replaced by `to`. */
-static char *patch(const char *from, const char *to)
-{
-    const char *p = strstr(good2d, from);
-    size_t n = strlen(good2d) - strlen(from) + strlen(to) + 1;
-    char *s = malloc(n);
-    if (!p || !s) {
-        free(s);
-        return NULL;
-    }
-    snprintf(s, n, "%.*s%s%s", (int)(p - good2d), good2d, to, p + strlen(from));
-    return s;
-}
-
-/* Expects the patched good2d to fail with rc and an error containing
+/* Expects the patched td_good2d to fail with rc and an error containing
  * want; returns 0 or 1 on mismatch (after reporting it). */
 static int expect_bad(const char *from, const char *to, int rc_want, const char *want)
 {
     char err[ERRLEN] = "";
-    char *json = patch(from, to);
+    char *json = td_patch(from, to);
     int rc;
     if (!json) {
         t_fail(__FILE__, __LINE__, "patch: \"%s\" not in the base case", from);
@@ -290,7 +248,7 @@ TEST(codec_roundtrip)
         Mpmd__Case *p1 = NULL, *p2 = NULL, *p3 = NULL, *p4 = NULL;
         int ok = 0;
         snprintf(path, sizeof path, "proto/examples/%s.json", names[k]);
-        char *text = slurp(path, &len);
+        char *text = td_slurp(path, &len);
         if (text && !srv_case_from_json(text, len, &p1, err, sizeof err) && !srv_case_pack(p1, &b1, &n1) &&
             !srv_case_unpack(b1, n1, 0, &p2, err, sizeof err) &&
             !srv_case_to_json(p2, SRV_JSON_PRETTY, &json, err, sizeof err) &&
@@ -428,7 +386,7 @@ TEST(codec_bad_case)
     const int I = SRV_CODEC_EINVAL;
     char err[ERRLEN];
     /* the base case itself is fine */
-    CHECKF(load_text(good2d, err) == 0, "%s", err);
+    CHECKF(load_text(td_good2d, err) == 0, "%s", err);
     if (expect_bad("\"radius\": 0.1", "\"radius\": 0", I, "bodies[0].sphere.radius: must be > 0")) return;
     if (expect_bad("\"radius\": 0.1", "\"radius\": \"NaN\"", I, "bodies[0].sphere.radius: must be > 0")) return;
     if (expect_bad(", \"radius\": 0.1", "", I, "bodies[0].sphere.radius: missing")) return;
@@ -518,14 +476,14 @@ TEST(codec_defaults)
     srv_case *sc = NULL;
     uint8_t *buf = NULL;
     size_t n = 0;
-    CHECKF(srv_case_load(good2d, strlen(good2d), &sc, err, sizeof err) == 0, "%s", err);
+    CHECKF(srv_case_load(td_good2d, strlen(td_good2d), &sc, err, sizeof err) == 0, "%s", err);
     CHECKF(sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL,
            "a case without method/update: method %d, update %d (want GIMP, MUSL)", (int)sc->c.method,
            (int)sc->c.update);
     srv_case_destroy(&sc);
 
     /* absent stays absent in JSON until pinned; pinned, the bytes say it */
-    CHECK(srv_case_from_json(good2d, strlen(good2d), &pb, err, sizeof err) == 0);
+    CHECK(srv_case_from_json(td_good2d, strlen(td_good2d), &pb, err, sizeof err) == 0);
     CHECK(srv_case_to_json(pb, 0, &json, err, sizeof err) == 0);
     CHECKF(!strstr(json, "\"method\"") && !strstr(json, "\"update\""), "unpinned: %s", json);
     free(json);
@@ -542,7 +500,7 @@ TEST(codec_defaults)
     free(json);
     json = NULL;
     {
-        char *mpm = patch("\"endTime\": 1", "\"endTime\": 1, \"method\": \"MPM\", \"update\": \"USL\"");
+        char *mpm = td_patch("\"endTime\": 1", "\"endTime\": 1, \"method\": \"MPM\", \"update\": \"USL\"");
         CHECK(mpm);
         int rc = srv_case_from_json(mpm, strlen(mpm), &pb, err, sizeof err);
         free(mpm);
@@ -575,7 +533,7 @@ TEST(codec_bad_bytes)
     size_t len = 0, n = 0;
     uint8_t *buf = NULL;
     Mpmd__Case *pb = NULL;
-    char *text = slurp("proto/examples/disks2d_coarse.json", &len);
+    char *text = td_slurp("proto/examples/disks2d_coarse.json", &len);
     CHECK(text);
     int rc = srv_case_from_json(text, len, &pb, err, sizeof err);
     free(text);
@@ -675,7 +633,7 @@ TEST(codec_envelopes)
     /* Submit carrying a case */
     char *caseText = NULL;
     size_t clen = 0;
-    caseText = slurp("proto/examples/point1d.json", &clen);
+    caseText = td_slurp("proto/examples/point1d.json", &clen);
     CHECK(caseText);
     size_t rlen = clen + 64;
     char *req = malloc(rlen);
@@ -1178,7 +1136,7 @@ TEST(codec_submit_bytes)
     size_t len = 0, cn = 0, n1 = 0, n2 = 0;
     uint8_t *cb = NULL, *b1 = NULL, *b2 = NULL;
     Mpmd__Case *pb = NULL;
-    char *text = slurp("proto/examples/disks2d_coarse.json", &len);
+    char *text = td_slurp("proto/examples/disks2d_coarse.json", &len);
     CHECK(text);
     int rc = srv_case_from_json(text, len, &pb, err, sizeof err);
     free(text);
@@ -1249,7 +1207,7 @@ TEST(codec_python_json_format)
         size_t len = 0;
         Mpmd__Case *pb = NULL;
         snprintf(path, sizeof path, "proto/examples/%s.json", names[k]);
-        char *text = slurp(path, &len);
+        char *text = td_slurp(path, &len);
         CHECKF(text, "cannot read %s", path);
         CHECKF(!srv_case_from_json(text, len, &pb, err, sizeof err) && !srv_case_pack(pb, &cb[k], &cn[k]),
                "%s: %s", names[k], err);
@@ -1280,7 +1238,7 @@ TEST(codec_python_json_format)
     rc = system(cmd);
     snprintf(path, sizeof path, "%s/out.txt", dir);
     size_t olen = 0;
-    char *out = slurp(path, &olen);
+    char *out = td_slurp(path, &olen);
     CHECKF(rc == 0, "python3 json_format: exit %d: %s", rc, out ? out : "(no output)");
     for (int k = 0; k < NN; k++) {
         char want[128];
@@ -1290,7 +1248,7 @@ TEST(codec_python_json_format)
         /* Python's bytes decode with protobuf-c to the C codec's own bytes */
         size_t pl = 0;
         snprintf(path, sizeof path, "%s/%s.py.bin", dir, names[k]);
-        char *pbytes = slurp(path, &pl);
+        char *pbytes = td_slurp(path, &pl);
         Mpmd__Case *pb = NULL;
         uint8_t *rb = NULL;
         size_t rn = 0;

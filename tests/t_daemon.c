@@ -1276,27 +1276,6 @@ DTEST(daemon_hard_kill)
 
 /* ---- bad input ----------------------------------------------------------------------- */
 
-/* A valid 2D case; the bad ones are patches of it. */
-static const char *const good2d =
-    "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
-    " \"materials\": [{\"youngsModulus\": 1, \"poissonRatio\": 0.2, \"density\": 1}],"
-    " \"bodies\": [{\"sphere\": {\"center\": [0.3, 0.3], \"radius\": 0.1}},"
-    "              {\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, \"velocity\": [-0.1, 0]}],"
-    " \"endTime\": 1}";
-
-static char *patch(const char *from, const char *to)
-{
-    const char *p = strstr(good2d, from);
-    size_t n = strlen(good2d) - strlen(from) + strlen(to) + 1;
-    char *s = malloc(n);
-    if (!p || !s) {
-        free(s);
-        return NULL;
-    }
-    snprintf(s, n, "%.*s%s%s", (int)(p - good2d), good2d, to, p + strlen(from));
-    return s;
-}
-
 /* Sends Submit(case) raw and checks code and field (field exact, or a
  * prefix when it ends with '*'); the message must start with the field. */
 static int submit_expect(const td_daemon *d, Mpmd__Case *pb, const char *what, const char *code,
@@ -1329,7 +1308,7 @@ static int bad_case(const td_daemon *d, const char *from, const char *to, const 
                     const char *field)
 {
     char err[ERRLEN], what[64];
-    char *json = patch(from, to);
+    char *json = td_patch(from, to);
     Mpmd__Case *pb = NULL;
     int ok;
     if (!json || srv_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
@@ -1424,7 +1403,7 @@ DTEST(daemon_bad_input)
     {
         /* an enum value the schema does not know: only possible as bytes
          * (the JSON reader refuses it); Case.method = field 3, varint 7 */
-        char *json = patch("\"endTime\": 1", "\"endTime\": 1");
+        char *json = td_patch("\"endTime\": 1", "\"endTime\": 1");
         Mpmd__Case *pb = NULL, *bad = NULL;
         uint8_t *buf = NULL, *b2;
         size_t len = 0;

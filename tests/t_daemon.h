@@ -109,6 +109,12 @@ int td_wait_steps(const td_daemon *d, unsigned long long job, long long steps, d
 
 /* Files. */
 char *td_slurp(const char *path, size_t *len);
+
+/* A valid 2D case (JSON) that the bad-input tests break by patching. */
+extern const char *const td_good2d;
+/* td_good2d with the first occurrence of `from` replaced by `to` (malloc'd;
+ * NULL when `from` does not occur or memory runs out). */
+char *td_patch(const char *from, const char *to);
 int td_write(const char *path, const char *text);
 /* Loads a JSON file (e.g. proto/examples/x.json) into a jansson object. */
 json_t *td_json_file(const char *path);

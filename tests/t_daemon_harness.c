@@ -720,3 +720,23 @@ size_t td_lines(char *text, char ***lines)
     *lines = v;
     return n;
 }
+
+const char *const td_good2d =
+    "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
+    " \"materials\": [{\"youngsModulus\": 1, \"poissonRatio\": 0.2, \"density\": 1}],"
+    " \"bodies\": [{\"sphere\": {\"center\": [0.3, 0.3], \"radius\": 0.1}},"
+    "              {\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, \"velocity\": [-0.1, 0]}],"
+    " \"endTime\": 1}";
+
+char *td_patch(const char *from, const char *to)
+{
+    const char *p = strstr(td_good2d, from);
+    size_t n = strlen(td_good2d) - strlen(from) + strlen(to) + 1;
+    char *s = malloc(n);
+    if (!p || !s) {
+        free(s);
+        return NULL;
+    }
+    snprintf(s, n, "%.*s%s%s", (int)(p - td_good2d), td_good2d, to, p + strlen(from));
+    return s;
+}

@@ -8,6 +8,7 @@
  */
 #include "store.h"
 #include "t.h"
+#include "t_daemon.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -113,13 +114,6 @@ static void sleep_ms(int ms)
 {
     struct timespec ts = { ms / 1000, (long)(ms % 1000) * 1000000L };
     nanosleep(&ts, NULL);
-}
-
-static double mono(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
 /* Options with logging silenced (tests that check log lines use cap_log). */
@@ -312,13 +306,13 @@ TEST(store_energy_10k)
     store_get_stats(s, &st0);
 
     const int N = 10000;
-    double t0 = mono();
+    double t0 = td_now();
     for (int i = 0; i < N; i++) {
         store_energy_sample e = make_sample(id, i);
         rc = store_energy_append(s, &e);
         if (rc) CHECKF(0, "append %d: %d %s", i, rc, store_errmsg());
     }
-    double t_enq = mono() - t0;
+    double t_enq = td_now() - t0;
     /* and 1000 in one call for the second run */
     store_energy_sample *v = malloc(1000 * sizeof *v);
     CHECK(v);
@@ -328,7 +322,7 @@ TEST(store_energy_10k)
     free(v);
     CHECK(rc == 0);
     CHECK(store_flush(s) == 0);
-    double t_all = mono() - t0;
+    double t_all = td_now() - t0;
     store_stats st;
     store_get_stats(s, &st);
     uint64_t txns = st.transactions - st0.transactions;
@@ -942,13 +936,13 @@ TEST(store_commits_without_flush)
     CHECKF(store_open(db_path("latency.db"), &quiet, &s, err, sizeof err) == 0, "%s", err);
     store_run in = sample_run("latency", STORE_QUEUED);
     int64_t id;
-    double t0 = mono();
+    double t0 = td_now();
     CHECK(store_run_insert(s, &in, &id) == 0);
     store_run r;
     int rc;
-    while ((rc = store_run_get(s, id, &r)) == STORE_ENOTFOUND && mono() - t0 < 5)
+    while ((rc = store_run_get(s, id, &r)) == STORE_ENOTFOUND && td_now() - t0 < 5)
         sleep_ms(2);
-    double dt = mono() - t0;
+    double dt = td_now() - t0;
     CHECKF(rc == 0, "run not committed after %.2f s: %d %s", dt, rc, store_errmsg());
     store_run_clear(&r);
     TLOG("first write visible to readers after %.1f ms (batch window 50 ms)", 1e3 * dt);
@@ -1067,7 +1061,7 @@ TEST(store_concurrent_readers)
     enum { NP = 2, NR = 4 };
     pthread_t prod[NP], rd[NR];
     cr_arg pa[NP], ra[NR];
-    double t0 = mono();
+    double t0 = td_now();
     for (int i = 0; i < NR; i++) {
         ra[i] = (cr_arg){ &c, i };
         CHECK(pthread_create(&rd[i], NULL, cr_reader, &ra[i]) == 0);
@@ -1080,7 +1074,7 @@ TEST(store_concurrent_readers)
     int frc = store_flush(c.s);
     atomic_store(&c.producers_done, 1);
     for (int i = 0; i < NR; i++) pthread_join(rd[i], NULL);
-    double dt = mono() - t0;
+    double dt = td_now() - t0;
     store_stats b;
     store_get_stats(c.s, &b);
     TLOG("%d samples by %d producers while %d readers did %ld reads (%ld saw a partial"

@@ -40,6 +40,7 @@
 #include "mpm_paper.h"
 #include "srv_codec.h"
 #include "t.h"
+#include "t_daemon.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -946,24 +947,6 @@ TEST(stress_extremes)
 
 /* ---- the same through a real daemon ---- */
 
-typedef struct {
-    pid_t pid;
-    char ep[300], log[300];
-} daemon_proc;
-
-static double mono(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-static void msleep(int ms)
-{
-    struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-    while (nanosleep(&ts, &ts) && errno == EINTR) {}
-}
-
 /* One request (JSON) -> reply (jansson object, NULL if none in time). */
 static json_t *request(void *zctx, const char *ep, const char *req, double timeout)
 {
@@ -1015,69 +998,11 @@ static int ping(void *zctx, const char *ep)
     return ok;
 }
 
-static int daemon_start(daemon_proc *d, void *zctx, const char *bin, const char *dir)
-{
-    char db[300];
-    snprintf(d->ep, sizeof d->ep, "ipc://%s/ctl", dir);
-    snprintf(db, sizeof db, "%s/runs.db", dir);
-    snprintf(d->log, sizeof d->log, "%s/mpmd.log", dir);
-    pid_t pid = fork();
-    if (pid < 0) return -1;
-    if (pid == 0) {
-        int fd = open(d->log, O_WRONLY | O_CREAT | O_APPEND, 0644);
-        if (fd >= 0) {
-            dup2(fd, 1);
-            dup2(fd, 2);
-        }
-        execl(bin, bin, "--endpoint", d->ep, "--db", db, "--workers", "2", "--queue-max", "100",
-              "--max-steps", "400000", "--max-wall-s", "120", (char *)NULL);
-        _exit(127);
-    }
-    d->pid = pid;
-    for (double t0 = mono(); mono() - t0 < 20;) {
-        if (ping(zctx, d->ep)) return 0;
-        int ws;
-        if (waitpid(pid, &ws, WNOHANG) == pid) {
-            d->pid = 0;
-            return -1;
-        }
-        msleep(50);
-    }
-    return -1;
-}
-
-/* SIGTERM, then up to 20 s; returns the exit status, or -1 after SIGKILL. */
-static int daemon_stop(daemon_proc *d)
-{
-    if (d->pid <= 0) return -1;
-    kill(d->pid, SIGTERM);
-    for (double t0 = mono(); mono() - t0 < 20; msleep(20)) {
-        int ws;
-        if (waitpid(d->pid, &ws, WNOHANG) == d->pid) {
-            d->pid = 0;
-            return WIFEXITED(ws) ? WEXITSTATUS(ws) : 128 + WTERMSIG(ws);
-        }
-    }
-    kill(d->pid, SIGKILL);
-    waitpid(d->pid, NULL, 0);
-    d->pid = 0;
-    return -1;
-}
-
 static long long json_id(const json_t *v)
 {
     if (json_is_string(v)) return atoll(json_string_value(v));
     if (json_is_integer(v)) return json_integer_value(v);
     return -1;
-}
-
-static void show_log(const daemon_proc *d)
-{
-    FILE *f = fopen(d->log, "r");
-    char line[512];
-    printf("    --- mpmd log (%s) ---\n", d->log);
-    while (f && fgets(line, sizeof line, f)) printf("    %s", line);
-    if (f) fclose(f);
 }
 
 typedef struct {
@@ -1089,7 +1014,7 @@ typedef struct {
 /* Fails the test with a message and jumps to `out` (so replies are freed). */
 #define DFAIL(...) do { t_fail(__FILE__, __LINE__, __VA_ARGS__); goto out; } while (0)
 
-static void daemon_extremes(void *zctx, daemon_proc *d, djob *jobs, int nj)
+static void daemon_extremes(void *zctx, const td_daemon *d, djob *jobs, int nj)
 {
     char req[256], *txt = NULL;
     json_t *r = NULL;
@@ -1112,7 +1037,7 @@ static void daemon_extremes(void *zctx, daemon_proc *d, djob *jobs, int nj)
     /* wait for each to end, with the daemon answering throughout */
     for (int i = 0; i < nj; i++) {
         const char *st = NULL;
-        for (double t0 = mono(); mono() - t0 < 180; msleep(50)) {
+        for (double t0 = td_now(); td_now() - t0 < 180; td_msleep(50)) {
             json_decref(r);
             snprintf(req, sizeof req, "{\"schemaVersion\":1,\"status\":{\"jobId\":\"%lld\"}}",
                      jobs[i].job);
@@ -1164,7 +1089,7 @@ out:
     json_decref(r);
 }
 
-TEST(stress_daemon_extremes)
+DTEST(stress_daemon_extremes)
 {
     const char *bin = getenv("MPMD_BIN");
     CHECKF(bin && access(bin, X_OK) == 0, "MPMD_BIN (%s) is not an executable mpmd; make test "
@@ -1187,8 +1112,10 @@ TEST(stress_daemon_extremes)
         run_case(xs[i].json, &jobs[i].o);
     }
     void *zctx = zmq_ctx_new();
-    daemon_proc d = {0};
-    int started = zctx && daemon_start(&d, zctx, bin, t_tmpdir()) == 0;
+    td_daemon d = {0};
+    static const char *const extra[] = {"--workers", "2", "--queue-max", "100", "--max-steps",
+                                        "400000", "--max-wall-s", "120", NULL};
+    int started = zctx && td_start(&d, t_tmpdir(), extra) == 0;
     if (started) {
         TLOG("mpmd %s; %d cases (MPM USF%s), 2 workers", d.ep, n, full ? "; GIMP MUSL" : "");
         daemon_extremes(zctx, &d, jobs, n);
@@ -1211,14 +1138,11 @@ TEST(stress_daemon_extremes)
             if (!refused) t_fail(__FILE__, __LINE__, "cfl 1.2 was not refused as INVALID_CASE/cfl");
         }
         int alive = ping(zctx, d.ep);
-        int st = daemon_stop(&d);
-        if (t_failed()) show_log(&d);
+        int st = td_stop(&d);
         if (!alive) t_fail(__FILE__, __LINE__, "the daemon does not answer Ping after the cases");
         if (st != 0) t_fail(__FILE__, __LINE__, "mpmd exited with %d on SIGTERM", st);
         else TLOG("  the daemon answered Ping after them and exited 0 on SIGTERM");
     } else {
-        if (d.pid) daemon_stop(&d);
-        show_log(&d);
         t_fail(__FILE__, __LINE__, "mpmd did not start");
     }
     if (zctx) zmq_ctx_term(zctx);
