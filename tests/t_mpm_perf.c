@@ -264,6 +264,54 @@ TEST(perf_active_box_leaves_no_stale_nodes)
         }
 }
 
+/* Marks in sup (one byte per padded node) every node the supports of the
+ * particles at x (creation order, dim per particle) can touch: the 2 (MPM)
+ * or 4 (GMPM, reaching the ghost layers) nodes per axis from the cell. */
+static void mark_supports(const mpm_sim *s, const double *x, size_t n, int dim, int m,
+                          unsigned char *sup)
+{
+    int lo = m ? -1 : 0, cnt = m ? 4 : 2;
+    memset(sup, 0, s->nn);
+    for (size_t p = 0; p < n; p++) {
+        int c0[3] = {0, 0, 0};
+        for (int d = 0; d < dim; d++)
+            c0[d] = (int)((x[p * (size_t)dim + d] - s->x0[d]) * s->inv_h[d]) + lo;
+        for (int k = 0; k < (dim > 2 ? cnt : 1); k++)
+            for (int j = 0; j < (dim > 1 ? cnt : 1); j++)
+                for (int i = 0; i < cnt; i++) {
+                    int ijk[3] = {c0[0] + i, dim > 1 ? c0[1] + j : 0, dim > 2 ? c0[2] + k : 0};
+                    size_t node = 0;
+                    int in = 1;
+                    for (int d = 0; d < 3; d++) {
+                        in &= ijk[d] >= 0 && ijk[d] < s->np[d];
+                        node += (size_t)ijk[d] * s->stride[d];
+                    }
+                    if (in) sup[node] = 1;
+                }
+    }
+}
+
+/* Fails (returns -1, with a line) when a node outside sup holds mass or
+ * momentum; *mg gets the grid's total mass, *checked counts the nodes
+ * outside the supports. */
+static int stale_nodes(const mpm_sim *s, const unsigned char *sup, int dim, int step, double *mg,
+                       long *checked)
+{
+    int rc = 0;
+    *mg = 0;
+    for (size_t node = 0; node < s->nn; node++) {
+        double mn = s->g.m[node], qn = 0;
+        for (int d = 0; d < dim; d++) qn = fmax(qn, fabs(s->g.q[d][node]));
+        *mg += mn;
+        if (!sup[node] && (mn != 0 || qn != 0)) {
+            TLOG("step %d: node %zu outside the supports has mass %g, |q| %g", step, node, mn, qn);
+            rc = -1;
+        }
+        (*checked) += !sup[node];
+    }
+    return rc;
+}
+
 /* Shapes where one box around the particles is much larger than the nodes
  * they touch, so the active rows' extents matter: (0) a disk (sphere) and a
  * smaller box on a diagonal, moving in opposite directions along x (the
@@ -331,8 +379,6 @@ static int rows_case(int dim, int shape, int m, int up, int T, double *worst, do
     mpm_sim_energy(s, &e);
     *worst = 0;
     *frac = 1;
-    /* the padded grid: GMPM supports reach the ghost layers */
-    int lo = m ? -1 : 0, cnt = m ? 4 : 2;
     for (int step = 0; step < 60 && !rc; step++) {
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = x});
         if (mpm_sim_step(s)) {
@@ -340,35 +386,9 @@ static int rows_case(int dim, int shape, int m, int up, int T, double *worst, do
             rc = -1;
             break;
         }
-        memset(sup, 0, nn);
-        for (size_t p = 0; p < n; p++) {
-            int c0[3] = {0, 0, 0};
-            for (int d = 0; d < dim; d++)
-                c0[d] = (int)((x[p * (size_t)dim + d] - s->x0[d]) * s->inv_h[d]) + lo;
-            for (int k = 0; k < (dim > 2 ? cnt : 1); k++)
-                for (int j = 0; j < cnt; j++)
-                    for (int i = 0; i < cnt; i++) {
-                        int ijk[3] = {c0[0] + i, c0[1] + j, dim > 2 ? c0[2] + k : 0};
-                        size_t node = 0;
-                        int in = 1;
-                        for (int d = 0; d < 3; d++) {
-                            in &= ijk[d] >= 0 && ijk[d] < s->np[d];
-                            node += (size_t)ijk[d] * s->stride[d];
-                        }
-                        if (in) sup[node] = 1;
-                    }
-        }
-        double mg = 0;
-        for (size_t node = 0; node < nn; node++) {
-            double mn = s->g.m[node], qn = 0;
-            for (int d = 0; d < dim; d++) qn = fmax(qn, fabs(s->g.q[d][node]));
-            mg += mn;
-            if (!sup[node] && (mn != 0 || qn != 0)) {
-                TLOG("step %d: node %zu outside the supports has mass %g, |q| %g", step, node, mn, qn);
-                rc = -1;
-            }
-            (*checked) += !sup[node];
-        }
+        double mg;
+        mark_supports(s, x, n, dim, m, sup);
+        if (stale_nodes(s, sup, dim, step, &mg, checked)) rc = -1;
         /* the public getter sees the same masses on the real nodes */
         double mr = 0, q[3];
         int nr[3] = {c.grid.nodes[0], c.grid.nodes[1], dim > 2 ? c.grid.nodes[2] : 1};
@@ -464,7 +484,6 @@ static int split_1d_case(int m, int up, int T, double *worst, long *checked)
     mpm_energy e;
     mpm_sim_energy(s, &e);
     *worst = 0;
-    int lo0 = m ? -1 : 0, cnt = m ? 4 : 2;
     for (int step = 0; step < 120 && !rc; step++) {
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = x});
         if (mpm_sim_step(s)) {
@@ -472,22 +491,9 @@ static int split_1d_case(int m, int up, int T, double *worst, long *checked)
             rc = -1;
             break;
         }
-        memset(sup, 0, nn);
-        for (size_t p = 0; p < n; p++) {
-            int c0 = (int)((x[p] - s->x0[0]) * s->inv_h[0]) + lo0;
-            for (int i = 0; i < cnt; i++)
-                if (c0 + i >= 0 && c0 + i < s->np[0]) sup[c0 + i] = 1;
-        }
-        double mg = 0;
-        for (size_t node = 0; node < nn; node++) {
-            mg += s->g.m[node];
-            if (!sup[node] && (s->g.m[node] != 0 || s->g.q[0][node] != 0)) {
-                TLOG("step %d: node %zu outside the supports has mass %g, q %g", step, node,
-                     s->g.m[node], s->g.q[0][node]);
-                rc = -1;
-            }
-            (*checked) += !sup[node];
-        }
+        double mg;
+        mark_supports(s, x, n, 1, m, sup);
+        if (stale_nodes(s, sup, 1, step, &mg, checked)) rc = -1;
         *worst = fmax(*worst, fabs(mg - e.mass) / e.mass);
     }
     free(x);
