@@ -22,7 +22,7 @@ TEST_SRCS := $(wildcard tests/t_*.c) tests/runner.c
 PROTOS    := $(wildcard proto/*.proto)
 GEN_C     := $(patsubst proto/%.proto,build/gen/%.pb-c.c,$(PROTOS))
 GEN_H     := $(GEN_C:.c=.h)
-INC       := -Iserver/mpm -Iserver -Ibuild/gen -Itests
+INC       := -Iserver/mpm -Iserver -Iprotocol -Ibuild/gen -Itests
 
 # Two builds: release (build/rel, bin/) and sanitizers (build/asan).
 REL  := build/rel
@@ -41,7 +41,7 @@ build/gen/%.pb-c.c build/gen/%.pb-c.h: proto/%.proto
 
 # Objects: $(1) build dir, $(2) flags
 define objs
-$(1)/%.o: %.c $(GEN_H) $(wildcard server/mpm/*.h server/*.h tests/*.h clients/*.h)
+$(1)/%.o: %.c $(GEN_H) $(wildcard server/mpm/*.h server/*.h protocol/*.h tests/*.h clients/*.h)
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(CSTD) $$(WARN) $(2) $$(INC) -c $$< -o $$@
 $(1)/gen/%.o: build/gen/%.c $(GEN_H)

@@ -22,19 +22,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "mpm_error.h"
+
 #define MPM_MAX_DIM 3
 
-/* Error codes (negative).  mpm_strerror() names them. */
-enum {
-    MPM_OK = 0,
-    MPM_EINVAL = -1,     /* a case field is invalid (the text names it) */
-    MPM_ENOMEM = -2,     /* allocation failed */
-    MPM_ELEFTGRID = -3,  /* a particle left the grid */
-    MPM_EDIVERGED = -4,  /* NaN or Inf in the state */
-    MPM_ECANCELLED = -5, /* mpm_sim_cancel() was called */
-    MPM_ECFL = -6,       /* given dt above the CFL limit */
-    MPM_ESTATE = -7      /* the simulation already failed; no more steps */
-};
+/* Error codes: the shared MPM_E* codes of mpm_error.h (MPM_EINVAL,
+ * MPM_ENOMEM, MPM_ELEFTGRID, MPM_EDIVERGED, MPM_ECANCELLED, MPM_ECFL,
+ * MPM_ESTATE from the solver). */
 
 typedef enum { MPM_METHOD_MPM = 0, MPM_METHOD_GIMP = 1 } mpm_method;
 typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
@@ -153,6 +147,18 @@ typedef struct {
     double momentum[MPM_MAX_DIM];
 } mpm_energy;
 
+/* One energy sample, the one shape it has from the solver to the store to
+ * the wire (mpmd.EnergySample): the energies at a step and time.  seq
+ * numbers the samples of a run 0, 1, 2, ... (set by whoever records them;
+ * the solver leaves it 0); dim says how many momentum entries count. */
+typedef struct {
+    uint64_t seq;
+    int64_t step;
+    double t;
+    int dim;
+    mpm_energy e;
+} mpm_energy_sample;
+
 /* Snapshot request: the caller passes arrays of n_particles entries
  * (times dim for position and velocity, times 6 for stress); a NULL array
  * is not filled. */
@@ -234,8 +240,6 @@ void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *s);
  * momentum of real node (i, j, k) (unused indices 0). */
 void mpm_sim_node(const mpm_sim *sim, const int ijk[3], double *mass,
                   double q[MPM_MAX_DIM]);
-
-const char *mpm_strerror(int code);
 
 /* p-wave speed of a material: sqrt(E/rho) in 1D, sqrt((lambda+2mu)/rho)
  * otherwise. */

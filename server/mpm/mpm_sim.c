@@ -1527,18 +1527,3 @@ void mpm_sim_node(const mpm_sim *s, const int ijk[3], double *mass, double q[MPM
     if (mass) *mass = s->g.m[n];
     for (int d = 0; d < MPM_MAX_DIM; d++) q[d] = d < s->dim ? s->g.q[d][n] : 0.0;
 }
-
-const char *mpm_strerror(int code)
-{
-    switch (code) {
-    case MPM_OK: return "ok";
-    case MPM_EINVAL: return "invalid case";
-    case MPM_ENOMEM: return "out of memory";
-    case MPM_ELEFTGRID: return "a particle left the grid";
-    case MPM_EDIVERGED: return "diverged (NaN or Inf)";
-    case MPM_ECANCELLED: return "cancelled";
-    case MPM_ECFL: return "time step above the CFL limit";
-    case MPM_ESTATE: return "the simulation already failed";
-    }
-    return "unknown error";
-}
