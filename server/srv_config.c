@@ -202,11 +202,11 @@ int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errl
             i++;
             continue;
         }
-        if (strncmp(a, "--", 2) || !find(a + 2)) {
+        const setting *s = strncmp(a, "--", 2) ? NULL : find(a + 2);
+        if (!s) {
             snprintf(err, errlen, "unknown option '%s' (see mpmd --help)", a);
             return -1;
         }
-        const setting *s = find(a + 2);
         if (s->type == T_FLAG) {
             if (set(c, s, "1", a, err, errlen)) return -1;
             continue;

@@ -89,8 +89,8 @@ int main(int argc, char **argv)
     }
     /* constructor order is link order; run in name order */
     {
-        const char *names[T_MAX];
-        t_fn fns[T_MAX];
+        const char *names[T_MAX] = {0};
+        t_fn fns[T_MAX] = {0};
         for (int i = 0; i < ntests; i++) names[i] = tests[i].name;
         qsort(names, ntests, sizeof names[0], cmp_name);
         for (int i = 0; i < ntests; i++)

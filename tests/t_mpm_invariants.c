@@ -220,7 +220,7 @@ static double phantom_strain(double shift, double mass_tol)
     mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
     if (!s) return NAN;
     mpm_sim_step(s);
-    double sig[6];
+    double sig[6] = {0};
     mpm_sim_snapshot(s, &(mpm_snapshot){.stress = sig});
     mpm_sim_destroy(&s);
     return (sig[0] - 1.0) / 100.0; /* strain increment */

@@ -30,7 +30,7 @@ static int run_point(mpm_update up, double dt, double tend, point_run *o)
         printf("    %s\n", err);
         return -1;
     }
-    double xv, vv;
+    double xv = 0, vv = 0;
     mpm_energy e;
     mpm_sim_energy(s, &e);
     *o = (point_run){0, 0, 0, e.total, e.total, e.total, e.total};

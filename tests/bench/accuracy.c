@@ -100,7 +100,7 @@ static void plan_one(const sweep *s)
     for (int m = 0; m < 2; m++)
         for (int u = 0; u < 3; u++) {
             mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
-            for (int k = 0; s->cfl[k] > 0 && k < 3; k++)
+            for (int k = 0; k < 3 && s->cfl[k] > 0; k++)
                 for (int i = 0; i < s->ncells; i++)
                     for (int j = 0; j < s->nppc; j++) {
                         if (s->ppc[j] != DEF_PPC && s->cells[i] > s->extra_ppc_max_cells) continue;
