@@ -14,6 +14,7 @@ pkgs=(
   protobuf-c-compiler  # protoc-c, generates proto/*.pb-c.[ch]
   libjansson-dev       # JSON case files
   protobuf-compiler python3-protobuf  # tests: Python's protobuf JSON parser reads the cases too
+  clang-format cppcheck  # make format-check, make lint (gcc's -fanalyzer comes with gcc)
 )
 # Optional group: `install-deps.sh bench` adds what `make bench-accuracy` uses
 # for its plots (gnuplot-nox), unless some gnuplot is already there.
