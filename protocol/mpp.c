@@ -231,23 +231,36 @@ void mpp_fill_snapshot(Mpmd__Snapshot *ps, const mpp_snapshot *s)
     ps->volume = (double *)s->volume;
 }
 
-void mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps)
+int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
 {
     memset(s, 0, sizeof *s);
-    if (!ps) return;
+    if (!ps) return 0;
     s->step = ps->step;
     s->t = ps->t;
     s->n = (size_t)ps->n;
-    s->dim = (int)ps->dim;
-#define TAKE(f)                                   \
-    do {                                          \
-        s->n_##f = ps->n_##f;                     \
-        s->f = ps->n_##f ? ps->f : NULL;          \
-    } while (0)
-    TAKE(x);
-    TAKE(v);
-    TAKE(stress);
-    TAKE(pressure);
-    TAKE(volume);
-#undef TAKE
+    s->dim = ps->dim <= MPM_MAX_DIM ? (int)ps->dim : 0;
+    if ((ps->n_x || ps->n_v) && (ps->dim < 1 || ps->dim > MPM_MAX_DIM))
+        return mpm_fail(err, MPM_ESYNTAX, "snapshot.dim", "%u: must be 1, 2 or 3 with positions or velocities",
+                        ps->dim);
+    const struct {
+        const char *name;
+        size_t have;
+        uint64_t width;
+        double *v;
+        const double **dst;
+    } a[] = {{"x", ps->n_x, ps->dim, ps->x, &s->x},
+             {"v", ps->n_v, ps->dim, ps->v, &s->v},
+             {"stress", ps->n_stress, 6, ps->stress, &s->stress},
+             {"pressure", ps->n_pressure, 1, ps->pressure, &s->pressure},
+             {"volume", ps->n_volume, 1, ps->volume, &s->volume}};
+    for (size_t i = 0; i < sizeof a / sizeof a[0]; i++) {
+        if (!a[i].have) continue;
+        /* n * width without overflow: have / width == n exactly */
+        if (a[i].have % a[i].width || a[i].have / a[i].width != ps->n)
+            return mpm_fail(err, MPM_ESYNTAX, NULL,
+                            "snapshot.%s holds %zu values, not n = %llu times %llu", a[i].name, a[i].have,
+                            (unsigned long long)ps->n, (unsigned long long)a[i].width);
+        *a[i].dst = a[i].v;
+    }
+    return 0;
 }

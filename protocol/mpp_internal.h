@@ -34,7 +34,9 @@ void mpp_fill_energy(Mpmd__EnergySample *es, const mpm_energy_sample *s);
 void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e);
 /* A Snapshot message for s (the arrays point into s). */
 void mpp_fill_snapshot(Mpmd__Snapshot *ps, const mpp_snapshot *s);
-/* The snapshot a Snapshot message holds (the arrays point into it). */
-void mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps);
+/* The snapshot a Snapshot message holds (the arrays point into it).
+ * Returns 0, or MPM_ESYNTAX when an array does not hold n times its width
+ * values (or dim is not 1..3 while x or v is present). */
+int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err);
 
 #endif

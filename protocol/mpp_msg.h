@@ -102,16 +102,14 @@ int mpp_request_encode(const mpp_request *rq, uint8_t **buf, size_t *len);
 
 /* ---- the plain structs of replies and stream messages ------------------- */
 
-/* Particle fields at one step (Snapshot); NULL arrays are left out. */
+/* Particle fields at one step (Snapshot); NULL arrays are left out.  A
+ * decoder checks that every array present holds its n*width values. */
 typedef struct {
     int64_t step;
     double t;
     size_t n;
     int dim;
     const double *x, *v, *stress, *pressure, *volume; /* n*dim, n*dim, n*6, n, n */
-    /* decoded only: the values each array holds (0 for a NULL array); a
-     * well-formed snapshot has n*dim, n*dim, 6n, n, n */
-    size_t n_x, n_v, n_stress, n_pressure, n_volume;
 } mpp_snapshot;
 
 /* A run record (RunInfo).  NULL strings/pointers and times <= 0 are left
@@ -229,8 +227,9 @@ typedef struct {
 } mpp_reply;
 
 /* Decodes a packed Reply into *out (cleared first); max as in
- * mpp_msg_bytes_to_json().  Returns 0, MPM_ESYNTAX, MPM_ETOOBIG or
- * MPM_ENOMEM.  A Reply without a body is not an error: its kind is
+ * mpp_msg_bytes_to_json().  Returns 0, MPM_ESYNTAX (also for a Snapshot
+ * whose arrays do not hold n times their width, or dim not 1..3 with
+ * arrays), MPM_ETOOBIG or MPM_ENOMEM.  A Reply without a body is not an error: its kind is
  * MPP_REPLY_NONE.  Release with mpp_reply_clear(). */
 int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mpm_error *err);
 void mpp_reply_clear(mpp_reply *r);
@@ -286,7 +285,8 @@ typedef struct {
 } mpp_stream;
 
 /* Decodes a packed StreamMsg into *out (cleared first); max as in
- * mpp_msg_bytes_to_json().  Returns 0, MPM_ESYNTAX or MPM_ETOOBIG; a
+ * mpp_msg_bytes_to_json().  Returns 0, MPM_ESYNTAX (as for a Reply's
+ * Snapshot) or MPM_ETOOBIG; a
  * message without a body is not an error (kind MPP_STREAM_NONE).  Release
  * with mpp_stream_clear(). */
 int mpp_stream_decode(const void *buf, size_t len, size_t max, mpp_stream *out, mpm_error *err);

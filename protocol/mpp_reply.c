@@ -362,7 +362,10 @@ int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mp
         break;
     }
     case MPMD__REPLY__BODY_SNAPSHOT:
-        mpp_take_snapshot(&out->snapshot, r->snapshot);
+        if ((rc = mpp_take_snapshot(&out->snapshot, r->snapshot, err))) {
+            mpp_reply_clear(out);
+            return rc;
+        }
         break;
     case MPMD__REPLY__BODY_PONG:
         out->server_version = str(r->pong->server_version);

@@ -123,7 +123,10 @@ int mpp_stream_decode(const void *buf, size_t len, size_t max, mpp_stream *out, 
         mpp_take_energy(&out->energy, sm->energy);
         break;
     case MPMD__STREAM_MSG__BODY_SNAPSHOT:
-        mpp_take_snapshot(&out->snapshot, sm->snapshot);
+        if ((rc = mpp_take_snapshot(&out->snapshot, sm->snapshot, err))) {
+            mpp_stream_clear(out);
+            return rc;
+        }
         break;
     case MPMD__STREAM_MSG__BODY_FINISHED: {
         const Mpmd__Finished *f = sm->finished;

@@ -24,7 +24,7 @@
  */
 #include "srv_daemon.h"
 
-#include "srv_codec.h"
+#include "mpp_msg.h"
 #include "srv_log.h"
 #include "srv_pool.h"
 #include "store.h"
@@ -97,30 +97,30 @@ static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field,
     va_end(ap);
     uint8_t *buf = NULL;
     size_t len = 0;
-    srv_reply_error(code, msg, field, &buf, &len);
+    mpp_reply_error(code, msg, field, &buf, &len);
     send_reply(d, id, buf, len);
 }
 
-/* The JSON path a case error starts with ("materials[0].density: ..."). */
-static void error_field(const char *msg, char *field, size_t n)
+/* Answers with the Error reply of an mpm_error (wire code, camelCase
+ * field and text from the protocol library). */
+static void reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e)
 {
-    const char *c = strstr(msg, ": ");
-    size_t k = c ? (size_t)(c - msg) : 0;
-    if (k >= n || strchr(msg, ' ') < c) k = 0;
-    memcpy(field, msg, k);
-    field[k] = 0;
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    mpp_reply_error_from(e, &buf, &len);
+    send_reply(d, id, buf, len);
 }
 
 static int status_to_srv(store_status s)
 {
-    static const int map[] = {SRV_STATUS_QUEUED, SRV_STATUS_RUNNING, SRV_STATUS_FINISHED,
-                              SRV_STATUS_FAILED, SRV_STATUS_CANCELLED, SRV_STATUS_INTERRUPTED};
-    return (unsigned)s < 6 ? map[s] : SRV_STATUS_FAILED;
+    static const int map[] = {MPP_STATUS_QUEUED, MPP_STATUS_RUNNING, MPP_STATUS_FINISHED,
+                              MPP_STATUS_FAILED, MPP_STATUS_CANCELLED, MPP_STATUS_INTERRUPTED};
+    return (unsigned)s < 6 ? map[s] : MPP_STATUS_FAILED;
 }
 
 static int status_to_store(int s, store_status *out)
 {
-    if (s < SRV_STATUS_QUEUED || s > SRV_STATUS_INTERRUPTED) return -1;
+    if (s < MPP_STATUS_QUEUED || s > MPP_STATUS_INTERRUPTED) return -1;
     *out = (store_status)(s - 1);
     return 0;
 }
@@ -128,7 +128,7 @@ static int status_to_store(int s, store_status *out)
 /* RunInfo from a stored run, with its last energy sample and stored
  * snapshots (x, cleared by the caller after encoding) and the live figures
  * of a running job. */
-static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_energy_sample *e,
+static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_energy_sample *e,
                      store_run_extra *x)
 {
     memset(ri, 0, sizeof *ri);
@@ -199,16 +199,16 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     int rc = store_run_get(d->st, (int64_t)run, &r);
     const char *what = strcmp(field, "jobId") ? "run" : "job";
     if (rc == STORE_ENOTFOUND) {
-        reply_error(d, id, SRV_ERR_NOT_FOUND, field, "no %s %llu", what, (unsigned long long)run);
+        reply_error(d, id, MPP_ERR_NOT_FOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
     }
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading %s %llu: %s", what,
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading %s %llu: %s", what,
                     (unsigned long long)run, store_errmsg());
         return;
     }
-    srv_run_info ri;
-    srv_energy_sample e;
+    mpp_run_info ri;
+    mpm_energy_sample e;
     store_run_extra x;
     run_info(d, &r, &ri, &e, &x);
     if (with_case) {
@@ -217,8 +217,8 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     }
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_reply_run(&ri, &buf, &len))
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
+    if (mpp_reply_run(&ri, &buf, &len))
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
     else send_reply(d, id, buf, len);
     store_run_extra_clear(&x);
     store_run_clear(&r);
@@ -239,65 +239,49 @@ static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
 
 /* ---- requests ---- */
 
-static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
-    char err[1024], field[256];
     if (stop_signal || d->stopping) {
-        reply_error(d, id, SRV_ERR_UNAVAILABLE, "", "mpmd is shutting down");
+        reply_error(d, id, MPP_ERR_UNAVAILABLE, "", "mpmd is shutting down");
         return;
     }
-    srv_case *sc = NULL;
-    int rc = srv_case_from_pb(rq->case_pb, &sc, err, sizeof err);
+    mpp_case *sc = NULL;
+    mpm_error cerr;
+    int rc = mpp_case_from_pb(rq->case_pb, (size_t)d->cfg->max_particles, &sc, &cerr);
     if (rc) {
-        error_field(err, field, sizeof field);
-        reply_error(d, id, rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_INVALID_CASE,
-                    field, "%s", err);
+        reply_mpm_error(d, id, &cerr);
         return;
     }
-    long nparticles = mpm_case_count(&sc->c, err, sizeof err);
-    if (nparticles < 0) {
-        error_field(err, field, sizeof field);
-        reply_error(d, id, SRV_ERR_INVALID_CASE, field, "%s", err);
-        srv_case_destroy(&sc);
-        return;
-    }
-    if (nparticles > d->cfg->max_particles) {
-        reply_error(d, id, SRV_ERR_TOO_LARGE, "bodies",
-                    "bodies: the case has %ld particles, above this server's limit %lld "
-                    "(--max-particles)", nparticles, d->cfg->max_particles);
-        srv_case_destroy(&sc);
-        return;
-    }
+    long nparticles = (long)sc->particles;
     /* in floating point: endTime / dt can be far beyond any integer type */
     double steps = !sc->has_end_time ? (double)sc->steps
                    : sc->c.dt > 0 ? ceil(sc->end_time / sc->c.dt - 0.5) : 0;
     if (!(steps <= (double)d->cfg->max_steps)) {
-        reply_error(d, id, SRV_ERR_TOO_LARGE, sc->has_end_time ? "endTime" : "steps",
+        reply_error(d, id, MPP_ERR_TOO_LARGE, sc->has_end_time ? "endTime" : "steps",
                     "%s: the case asks for %.15g steps%s, above this server's limit %lld "
                     "(--max-steps)", sc->has_end_time ? "endTime" : "steps", steps,
                     sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
         return;
     }
     if (!srv_pool_has_room(d->pool)) {
-        reply_error(d, id, SRV_ERR_QUEUE_FULL, "",
+        reply_error(d, id, MPP_ERR_QUEUE_FULL, "",
                     "the job queue is full (%d running, %d queued at most); retry later",
                     d->cfg->workers, d->cfg->queue_max);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
         return;
     }
     uint8_t *pb = NULL;
     size_t pblen = 0;
     /* the stored case names its method and update: it keeps its meaning
      * whatever later defaults say */
-    srv_case_pin_defaults(rq->case_pb);
-    if (srv_case_pack(rq->case_pb, &pb, &pblen)) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
-        srv_case_destroy(&sc);
+    mpp_case_pin_defaults(rq->case_pb);
+    if (mpp_case_pack(rq->case_pb, &pb, &pblen)) {
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "out of memory");
+        mpp_case_destroy(&sc);
         return;
     }
-    size_t nodes = 1;
-    for (int k = 0; k < sc->c.grid.dim; k++) nodes *= (size_t)sc->c.grid.nodes[k];
+    size_t nodes = sc->nodes;
     store_run r = {0};
     r.name = sc->name;
     r.case_pb = pb;
@@ -309,13 +293,13 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     r.nodes = (int64_t)nodes;
     r.status = STORE_QUEUED;
     r.submitted_at = wall_now();
-    r.server_version = SRV_VERSION;
+    r.server_version = MPP_VERSION;
     int64_t run = 0;
     rc = store_run_insert(d->st, &r, &run);
     free(pb);
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot record the run: %s", store_errmsg());
-        srv_case_destroy(&sc);
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot record the run: %s", store_errmsg());
+        mpp_case_destroy(&sc);
         return;
     }
     const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
@@ -328,16 +312,16 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
         end.error = rc == SRV_POOL_EFULL ? "job queue full" : rc == SRV_POOL_ESTOPPED
                     ? STORE_INTERRUPTED_QUEUED : "out of memory";
         store_run_finish(d->st, run, &end);
-        reply_error(d, id, rc == SRV_POOL_EFULL ? SRV_ERR_QUEUE_FULL : rc == SRV_POOL_ESTOPPED
-                    ? SRV_ERR_UNAVAILABLE : SRV_ERR_INTERNAL, "", "%s", end.error);
-        srv_case_destroy(&sc);
+        reply_error(d, id, rc == SRV_POOL_EFULL ? MPP_ERR_QUEUE_FULL : rc == SRV_POOL_ESTOPPED
+                    ? MPP_ERR_UNAVAILABLE : MPP_ERR_INTERNAL, "", "%s", end.error);
+        mpp_case_destroy(&sc);
         return;
     }
     srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %ld particles", namebuf, (long)r.dim,
             r.method == STORE_METHOD_GIMP ? "GMPM" : "MPM", store_update_name(r.update), nparticles);
     uint8_t *buf = NULL;
     size_t len = 0;
-    srv_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
+    mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
     send_reply(d, id, buf, len);
 }
 
@@ -351,16 +335,16 @@ static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
         store_run r;
         int src = store_run_get(d->st, (int64_t)job, &r);
         if (src == STORE_ENOTFOUND) {
-            reply_error(d, id, SRV_ERR_NOT_FOUND, "jobId", "no job %llu", (unsigned long long)job);
+            reply_error(d, id, MPP_ERR_NOT_FOUND, "jobId", "no job %llu", (unsigned long long)job);
             return;
         }
         if (!src) {
-            reply_error(d, id, SRV_ERR_CONFLICT, "jobId", "job %llu already ended (%s)",
-                        (unsigned long long)job, srv_status_name(status_to_srv(r.status)));
+            reply_error(d, id, MPP_ERR_CONFLICT, "jobId", "job %llu already ended (%s)",
+                        (unsigned long long)job, mpp_status_name(status_to_srv(r.status)));
             store_run_clear(&r);
             return;
         }
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
                     store_errmsg());
         return;
     }
@@ -369,14 +353,14 @@ static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
     reply_run(d, id, job, 0, "jobId");
 }
 
-static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     size_t limit = rq->limit ? rq->limit : ENERGY_PAGE_DEFAULT;
     if (limit > ENERGY_PAGE_MAX) limit = ENERGY_PAGE_MAX;
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == STORE_ENOTFOUND) {
-        reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu", (unsigned long long)rq->id);
+        reply_error(d, id, MPP_ERR_NOT_FOUND, "runId", "no run %llu", (unsigned long long)rq->id);
         return;
     }
     int dim = rc ? 3 : r.dim;
@@ -387,16 +371,16 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     int64_t from = rq->from_seq > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)rq->from_seq;
     rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es);
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading energies of run %llu: %s",
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading energies of run %llu: %s",
                     (unsigned long long)rq->id, store_errmsg());
         return;
     }
     int more = es.n > limit;
     size_t n = more ? limit : es.n;
-    srv_energy_sample *s = calloc(n ? n : 1, sizeof *s);
+    mpm_energy_sample *s = calloc(n ? n : 1, sizeof *s);
     if (!s) {
         store_energy_series_free(&es);
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "out of memory");
         return;
     }
     for (size_t i = 0; i < n; i++) {
@@ -416,20 +400,20 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     }
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_reply_energy(rq->id, s, n, more, &buf, &len))
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu energy samples", n);
+    if (mpp_reply_energy(rq->id, s, n, more, &buf, &len))
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode %zu energy samples", n);
     else send_reply(d, id, buf, len);
     free(s);
     store_energy_series_free(&es);
 }
 
-static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     store_flush(d->st);
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == STORE_ENOTFOUND) {
-        reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu",
+        reply_error(d, id, MPP_ERR_NOT_FOUND, "runId", "no run %llu",
                     (unsigned long long)rq->id);
         return;
     }
@@ -440,15 +424,15 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
          : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
     if (rc == STORE_ENOTFOUND) {
         if (rq->has_step)
-            reply_error(d, id, SRV_ERR_NOT_FOUND, "step", "run %llu has no stored snapshot at "
+            reply_error(d, id, MPP_ERR_NOT_FOUND, "step", "run %llu has no stored snapshot at "
                         "step %lld", (unsigned long long)rq->id, (long long)rq->step);
         else
-            reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "run %llu has no stored snapshot "
+            reply_error(d, id, MPP_ERR_NOT_FOUND, "runId", "run %llu has no stored snapshot "
                         "(the case must set output.recordSnapshots)", (unsigned long long)rq->id);
         return;
     }
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading a snapshot: %s", store_errmsg());
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading a snapshot: %s", store_errmsg());
         return;
     }
     size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
@@ -461,35 +445,35 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
             off += cnt[i];
         }
     if (off * sizeof(double) != ss.size) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "stored snapshot of run %llu at step %lld is "
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "stored snapshot of run %llu at step %lld is "
                     "corrupt (%zu bytes, expected %zu)", (unsigned long long)rq->id,
                     (long long)ss.step, ss.size, off * sizeof(double));
         store_snapshot_clear(&ss);
         return;
     }
-    srv_snapshot s = {ss.step, ss.t, n, (int)dim, arr[0], arr[1], arr[2], arr[3], arr[4]};
+    mpp_snapshot s = {ss.step, ss.t, n, (int)dim, arr[0], arr[1], arr[2], arr[3], arr[4]};
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_reply_snapshot(&s, &buf, &len))
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode the snapshot");
+    if (mpp_reply_snapshot(&s, &buf, &len))
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode the snapshot");
     else send_reply(d, id, buf, len);
     store_snapshot_clear(&ss);
 }
 
-static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     store_run_filter f = {0};
     store_status st;
     if (rq->status) {
         if (status_to_store(rq->status, &st)) {
-            reply_error(d, id, SRV_ERR_BAD_REQUEST, "listRuns.status", "listRuns.status: unknown "
+            reply_error(d, id, MPP_ERR_BAD_REQUEST, "listRuns.status", "listRuns.status: unknown "
                         "value %d", rq->status);
             return;
         }
         f.status_mask = STORE_STATUS_BIT(st);
     }
     if (rq->limit > LIST_MAX) {
-        reply_error(d, id, SRV_ERR_TOO_LARGE, "listRuns.limit", "listRuns.limit: %u is above this "
+        reply_error(d, id, MPP_ERR_TOO_LARGE, "listRuns.limit", "listRuns.limit: %u is above this "
                     "server's maximum of %u runs per listing", rq->limit, LIST_MAX);
         return;
     }
@@ -497,20 +481,20 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     store_run *runs = NULL;
     size_t n = 0;
     if (store_run_list(d->st, &f, &runs, &n)) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "listing runs: %s", store_errmsg());
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "listing runs: %s", store_errmsg());
         return;
     }
-    srv_run_info *ri = calloc(n ? n : 1, sizeof *ri);
-    srv_energy_sample *es = calloc(n ? n : 1, sizeof *es);
+    mpp_run_info *ri = calloc(n ? n : 1, sizeof *ri);
+    mpm_energy_sample *es = calloc(n ? n : 1, sizeof *es);
     store_run_extra *xs = calloc(n ? n : 1, sizeof *xs);
     if (!ri || !es || !xs) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
+        reply_error(d, id, MPP_ERR_INTERNAL, "", "out of memory");
     } else {
         for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
         uint8_t *buf = NULL;
         size_t len = 0;
-        if (srv_reply_runs(ri, n, &buf, &len))
-            reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu runs", n);
+        if (mpp_reply_runs(ri, n, &buf, &len))
+            reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode %zu runs", n);
         else send_reply(d, id, buf, len);
     }
     if (xs)
@@ -523,69 +507,65 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 
 static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t size)
 {
-    char err[512];
-    srv_request rq;
+    mpp_request rq;
     d->requests++;
     if (size > (size_t)d->cfg->max_request_bytes) {
         d->bad_requests++;
         srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
-        reply_error(d, id, SRV_ERR_TOO_LARGE, "", "request of %zu bytes is above this server's "
+        reply_error(d, id, MPP_ERR_TOO_LARGE, "", "request of %zu bytes is above this server's "
                     "limit of %lld bytes (--max-request-bytes)", size, d->cfg->max_request_bytes);
         return;
     }
-    int rc = srv_request_decode(data, size, (size_t)d->cfg->max_request_bytes, &rq, err, sizeof err);
+    mpm_error rerr;
+    int rc = mpp_request_decode(data, size, (size_t)d->cfg->max_request_bytes, &rq, &rerr);
     if (rc) {
-        char field[128];
+        char text[sizeof rerr.message + 256];
         d->bad_requests++;
-        srv_debug(0, "bad request: %s", err);
-        error_field(err, field, sizeof field);  /* "status.jobId: missing" */
-        if (!strcmp(field, "request")) field[0] = 0;  /* no body: no one field */
-        reply_error(d, id, rc == SRV_CODEC_EVERSION ? SRV_ERR_BAD_SCHEMA
-                    : rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_BAD_REQUEST, field,
-                    "%s", err);
-        srv_request_clear(&rq);
+        srv_debug(0, "bad request: %s", mpm_error_text(&rerr, MPM_FIELD_JSON, text, sizeof text));
+        reply_mpm_error(d, id, &rerr);
+        mpp_request_clear(&rq);
         return;
     }
     uint8_t *buf = NULL;
     size_t len = 0;
     switch (rq.kind) {
-    case SRV_REQ_SUBMIT: do_submit(d, id, &rq); break;
-    case SRV_REQ_CANCEL: do_cancel(d, id, rq.id); break;
-    case SRV_REQ_STATUS:
+    case MPP_REQ_SUBMIT: do_submit(d, id, &rq); break;
+    case MPP_REQ_CANCEL: do_cancel(d, id, rq.id); break;
+    case MPP_REQ_STATUS:
         store_flush(d->st);
         reply_run(d, id, rq.id, 0, "jobId");
         break;
-    case SRV_REQ_GET_RUN:
+    case MPP_REQ_GET_RUN:
         store_flush(d->st);
         reply_run(d, id, rq.id, rq.with_case, "runId");
         break;
-    case SRV_REQ_LIST_RUNS:
+    case MPP_REQ_LIST_RUNS:
         store_flush(d->st);
         do_list(d, id, &rq);
         break;
-    case SRV_REQ_GET_ENERGY: do_energy(d, id, &rq); break;
-    case SRV_REQ_GET_SNAPSHOT: do_snapshot(d, id, &rq); break;
-    case SRV_REQ_PING:
-        srv_reply_pong(SRV_VERSION, d->cfg->stream_endpoint, &buf, &len);
+    case MPP_REQ_GET_ENERGY: do_energy(d, id, &rq); break;
+    case MPP_REQ_GET_SNAPSHOT: do_snapshot(d, id, &rq); break;
+    case MPP_REQ_PING:
+        mpp_reply_pong(MPP_VERSION, d->cfg->stream_endpoint, &buf, &len);
         send_reply(d, id, buf, len);
         break;
-    case SRV_REQ_VERSION: {
+    case MPP_REQ_VERSION: {
         int maj, min, pat;
         zmq_version(&maj, &min, &pat);
         char zv[32];
         snprintf(zv, sizeof zv, "%d.%d.%d", maj, min, pat);
         const char *names[] = {"libzmq", "sqlite", "protobuf-c", "schema"};
         char sv[8];
-        snprintf(sv, sizeof sv, "%d", SRV_SCHEMA_VERSION);
-        const char *vers[] = {zv, store_sqlite_version(), srv_codec_protobuf_c_version(), sv};
-        srv_reply_version(SRV_VERSION, names, vers, 4, &buf, &len);
+        snprintf(sv, sizeof sv, "%d", MPP_SCHEMA_VERSION);
+        const char *vers[] = {zv, store_sqlite_version(), mpp_protobuf_c_version(), sv};
+        mpp_reply_version(MPP_VERSION, names, vers, 4, &buf, &len);
         send_reply(d, id, buf, len);
         break;
     }
     default:
-        reply_error(d, id, SRV_ERR_BAD_REQUEST, "", "unknown request kind %d", (int)rq.kind);
+        reply_error(d, id, MPP_ERR_BAD_REQUEST, "", "unknown request kind %d", (int)rq.kind);
     }
-    srv_request_clear(&rq);
+    mpp_request_clear(&rq);
 }
 
 /* Reads one multipart message from the ROUTER and answers it. */
@@ -618,7 +598,7 @@ static void on_router(daemon_t *d)
                  "request)", total);
         /* answerable when the delimiter is there: the peer speaks the protocol */
         if (nparts >= 2 && zmq_msg_size(&part[1]) == 0)
-            reply_error(d, &part[0], SRV_ERR_BAD_REQUEST, "",
+            reply_error(d, &part[0], MPP_ERR_BAD_REQUEST, "",
                         "expected 1 request frame after the empty delimiter, got %zu", total - 2);
     }
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
@@ -704,7 +684,7 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
                        char *err, size_t errlen)
 {
     *out = NULL;
-    if (!srv_endpoint_is_local(ep)) {
+    if (!mpp_endpoint_is_local(ep)) {
         if (!allow_remote) {
             snprintf(err, errlen, "refusing to bind %s: not loopback, ipc:// or inproc:// "
                      "(mpmd has no authentication yet; pass --allow-remote to bind anyway)", ep);
@@ -790,7 +770,7 @@ int srv_daemon_run(const srv_config *cfg)
         goto out;
     }
     srv_log(0, "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
-            "queue %d", SRV_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
+            "queue %d", MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
             cfg->queue_max);
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},

@@ -38,7 +38,7 @@ enum { CANCEL_USER = 1, CANCEL_SHUTDOWN = 2 };
 
 typedef struct srv_job {
     uint64_t id;
-    srv_case *sc;
+    mpp_case *sc;
     atomic_int cancel;      /* 0, CANCEL_USER, CANCEL_SHUTDOWN */
     atomic_int watched;     /* someone subscribes to the job's stream */
     /* guarded by the pool mutex */
@@ -110,7 +110,7 @@ int srv_topic_parse(const char *buf, size_t len, uint64_t *job)
 static void job_free(srv_job *j)
 {
     if (!j) return;
-    srv_case_destroy(&j->sc);
+    mpp_case_destroy(&j->sc);
     free(j);
 }
 
@@ -171,10 +171,10 @@ static void flush_samples(ctx *c)
     pe->n = 0;
 }
 
-static void energy_sample(ctx *c, mpm_sim *sim, srv_energy_sample *out)
+static void energy_sample(ctx *c, mpm_sim *sim, mpm_energy_sample *out)
 {
     srv_job *j = c->j;
-    srv_energy_sample s = {0};
+    mpm_energy_sample s = {0};
     s.step = mpm_sim_steps(sim);
     s.t = mpm_sim_time(sim);
     s.dim = mpm_sim_dim(sim);
@@ -194,7 +194,7 @@ static void energy_sample(ctx *c, mpm_sim *sim, srv_energy_sample *out)
     r.mass = s.e.mass;
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
+    if (mpp_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
         srv_warn(j->id, "out of memory encoding an energy sample");
     if (out) *out = s;
     pending *pe = c->pe;
@@ -263,12 +263,12 @@ static void snapbuf_free(snapbuf *b)
 /* Packs a snapshot into the job's message buffer (a fresh one only when
  * zmq still holds the last, or it is too small) and sends it without a
  * copy. */
-static void publish_snapshot(ctx *c, snapbuf *b, const srv_snapshot *s)
+static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
 {
     srv_job *j = c->j;
     uint64_t seq = j->msg_seq++;
     size_t need = 0, len = 0;
-    srv_stream_snapshot_into(j->id, seq, s, NULL, 0, &need);  /* the size only */
+    mpp_stream_snapshot_into(j->id, seq, s, NULL, 0, &need);  /* the size only */
     snapmsg *m = b->msg;
     if (!m || m->cap < need || atomic_load(&m->refs) != 1) {
         snapmsg_unref(m);
@@ -280,7 +280,7 @@ static void publish_snapshot(ctx *c, snapbuf *b, const srv_snapshot *s)
         atomic_init(&m->refs, 1);
         m->cap = need;
     }
-    if (srv_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
+    if (mpp_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
         srv_warn(j->id, "cannot encode a snapshot");
         return;
     }
@@ -309,16 +309,16 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
     size_t per = 0;
     if (!b->n) {
         b->n = n;
-        if (f & SRV_SNAP_X) per += (size_t)dim;
-        if (f & SRV_SNAP_V) per += (size_t)dim;
-        if (f & SRV_SNAP_STRESS) per += 6;
-        if (f & SRV_SNAP_PRESSURE) per += 1;
-        if (f & SRV_SNAP_VOLUME) per += 1;
-        if (((f & SRV_SNAP_X) && !(b->x = malloc(n * dim * sizeof(double)))) ||
-            ((f & SRV_SNAP_V) && !(b->v = malloc(n * dim * sizeof(double)))) ||
-            ((f & SRV_SNAP_STRESS) && !(b->stress = malloc(n * 6 * sizeof(double)))) ||
-            ((f & SRV_SNAP_PRESSURE) && !(b->pressure = malloc(n * sizeof(double)))) ||
-            ((f & SRV_SNAP_VOLUME) && !(b->volume = malloc(n * sizeof(double)))) ||
+        if (f & MPP_SNAP_X) per += (size_t)dim;
+        if (f & MPP_SNAP_V) per += (size_t)dim;
+        if (f & MPP_SNAP_STRESS) per += 6;
+        if (f & MPP_SNAP_PRESSURE) per += 1;
+        if (f & MPP_SNAP_VOLUME) per += 1;
+        if (((f & MPP_SNAP_X) && !(b->x = malloc(n * dim * sizeof(double)))) ||
+            ((f & MPP_SNAP_V) && !(b->v = malloc(n * dim * sizeof(double)))) ||
+            ((f & MPP_SNAP_STRESS) && !(b->stress = malloc(n * 6 * sizeof(double)))) ||
+            ((f & MPP_SNAP_PRESSURE) && !(b->pressure = malloc(n * sizeof(double)))) ||
+            ((f & MPP_SNAP_VOLUME) && !(b->volume = malloc(n * sizeof(double)))) ||
             (record && !(b->packed = malloc(n * per * sizeof(double) + 1)))) {
             srv_warn(j->id, "out of memory for snapshots of %zu particles; snapshots off", n);
             snapbuf_free(b);
@@ -326,7 +326,7 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
         }
     }
     mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
-    srv_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n, dim,
+    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n, dim,
                       b->x, b->v, b->stress, b->pressure, b->volume};
     if (record && b->packed) {
         /* stored layout: the requested arrays back to back, in field-bit order */
@@ -367,25 +367,25 @@ static void progress(ctx *c, mpm_sim *sim, double wall)
     pthread_mutex_unlock(&c->p->mu);
     store_run_progress(c->p->st, (int64_t)j->id, k, wall,
                        wall > 0 ? (double)k * (double)mpm_sim_particles(sim) / wall : 0);
-    srv_progress pr = {k, total, t, dt, wall};
+    mpp_progress pr = {k, total, t, dt, wall};
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_stream_progress(j->id, j->msg_seq++, &pr, &buf, &len))
+    if (mpp_stream_progress(j->id, j->msg_seq++, &pr, &buf, &len))
         srv_warn(j->id, "out of memory encoding progress");
     publish(c, buf, len);
 }
 
 /* Records the end and publishes Finished. */
 static void finish(ctx *c, int status, const char *error, int64_t steps, double t, double wall,
-                   size_t particles, const srv_energy_sample *last)
+                   size_t particles, const mpm_energy_sample *last)
 {
     srv_job *j = c->j;
     flush_samples(c);
     store_run_end end = {0};
-    static const store_status map[] = {[SRV_STATUS_FINISHED] = STORE_FINISHED,
-                                       [SRV_STATUS_FAILED] = STORE_FAILED,
-                                       [SRV_STATUS_CANCELLED] = STORE_CANCELLED,
-                                       [SRV_STATUS_INTERRUPTED] = STORE_INTERRUPTED};
+    static const store_status map[] = {[MPP_STATUS_FINISHED] = STORE_FINISHED,
+                                       [MPP_STATUS_FAILED] = STORE_FAILED,
+                                       [MPP_STATUS_CANCELLED] = STORE_CANCELLED,
+                                       [MPP_STATUS_INTERRUPTED] = STORE_INTERRUPTED};
     end.status = map[status];
     end.steps_done = steps;
     end.wall_s = wall;
@@ -398,13 +398,13 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
     }
     int rc = store_run_finish(c->p->st, (int64_t)j->id, &end);
     if (rc) srv_warn(j->id, "end of run not recorded: %s", store_strerror(rc));
-    srv_finished f = {status, error, steps, t, wall, last};
+    mpp_finished f = {status, error, steps, t, wall, last};
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_stream_finished(j->id, j->msg_seq++, &f, &buf, &len))
+    if (mpp_stream_finished(j->id, j->msg_seq++, &f, &buf, &len))
         srv_warn(j->id, "out of memory encoding the end of the stream");
     publish(c, buf, len);
-    srv_log(j->id, "%s after %lld steps, t = %g, %.3f s%s%s", srv_status_name(status),
+    srv_log(j->id, "%s after %lld steps, t = %g, %.3f s%s%s", mpp_status_name(status),
             (long long)steps, t, wall, error ? ": " : "", error ? error : "");
 }
 
@@ -412,7 +412,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
 {
     ctx c = {p, push, j, "", NULL};
     srv_topic(j->id, c.topic);
-    srv_case *sc = j->sc;
+    mpp_case *sc = j->sc;
     const srv_config *cfg = p->cfg;
     double start = wall_now(), t0 = mono_now();
     store_run_set_status(p->st, (int64_t)j->id, STORE_RUNNING, start, NULL);
@@ -422,7 +422,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     char err[512];
     mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
     if (!sim) {
-        finish(&c, SRV_STATUS_FAILED, err[0] ? err : "out of memory", 0, 0, 0, 0, NULL);
+        finish(&c, MPP_STATUS_FAILED, err[0] ? err : "out of memory", 0, 0, 0, 0, NULL);
         return;
     }
     size_t n = mpm_sim_particles(sim);
@@ -434,12 +434,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     srv_log(j->id, "running: %zu particles, %zu nodes, %d thread%s", n, mpm_sim_nodes(sim),
             threads, threads > 1 ? "s" : "");
 
-    srv_energy_sample last;
+    mpm_energy_sample last;
     snapbuf sb = {0};
     /* without it (out of memory) samples go out one by one */
     c.pe = sc->energy_every ? calloc(1, sizeof *c.pe) : NULL;
     if (c.pe) c.pe->last_flush = c.pe->last_sample = mono_now();
-    int snaps_ok = 1, status = SRV_STATUS_FINISHED;
+    int snaps_ok = 1, status = MPP_STATUS_FINISHED;
     char why[512] = "";
     energy_sample(&c, sim, &last);
     progress(&c, sim, 0);
@@ -448,7 +448,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     for (;;) {
         int cancel = atomic_load_explicit(&j->cancel, memory_order_relaxed);
         if (cancel) {
-            status = cancel == CANCEL_USER ? SRV_STATUS_CANCELLED : SRV_STATUS_INTERRUPTED;
+            status = cancel == CANCEL_USER ? MPP_STATUS_CANCELLED : MPP_STATUS_INTERRUPTED;
             snprintf(why, sizeof why, "%s at step %ld",
                      cancel == CANCEL_USER ? "cancelled by a client" : "daemon shutting down",
                      mpm_sim_steps(sim));
@@ -459,7 +459,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
                              : k >= (int64_t)sc->steps)
             break;
         if (k >= cfg->max_steps) {
-            status = SRV_STATUS_FAILED;
+            status = MPP_STATUS_FAILED;
             snprintf(why, sizeof why, "step limit %lld of this server reached (--max-steps)",
                      cfg->max_steps);
             break;
@@ -468,7 +468,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
          * passes: energy_sample() then costs no pass of its own */
         if (every && (k + 1) % every == 0) mpm_sim_want_energy(sim);
         if (mpm_sim_step(sim)) {
-            status = SRV_STATUS_FAILED;
+            status = MPP_STATUS_FAILED;
             snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
             break;
         }
@@ -486,7 +486,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
                 next_progress = w + 0.2;
             }
             if (cfg->max_wall_s > 0 && w > cfg->max_wall_s) {
-                status = SRV_STATUS_FAILED;
+                status = MPP_STATUS_FAILED;
                 snprintf(why, sizeof why, "wall-time limit %g s of this server reached "
                          "(--max-wall-s)", cfg->max_wall_s);
                 break;
@@ -496,13 +496,13 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     double wall = mono_now() - t0;
     /* the divergence guard once more before a run is called finished: a
      * blow-up in the last steps must not be recorded as a result */
-    if (status == SRV_STATUS_FINISHED && mpm_sim_check(sim)) {
-        status = SRV_STATUS_FAILED;
+    if (status == MPP_STATUS_FINISHED && mpm_sim_check(sim)) {
+        status = MPP_STATUS_FAILED;
         snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
     }
-    if (last.step != mpm_sim_steps(sim) && status != SRV_STATUS_FAILED)
+    if (last.step != mpm_sim_steps(sim) && status != MPP_STATUS_FAILED)
         energy_sample(&c, sim, &last);
-    else if (status == SRV_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
+    else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
         /* a diverged state has no meaningful energies; keep the last good one */
     }
     progress(&c, sim, wall);
@@ -538,7 +538,7 @@ static void *worker_main(void *arg)
         if (!p->head) p->tail = NULL;
         p->nqueued--;
         j->next = NULL;
-        j->status = SRV_STATUS_RUNNING;
+        j->status = MPP_STATUS_RUNNING;
         p->running[w->index] = j;
         pthread_mutex_unlock(&p->mu);
 
@@ -608,7 +608,7 @@ int srv_pool_has_room(srv_pool *p)
     return room;
 }
 
-int srv_pool_submit(srv_pool *p, uint64_t id, srv_case **sc, double submitted_at,
+int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at,
                     size_t particles, size_t nodes)
 {
     srv_job *j = calloc(1, sizeof *j);
@@ -616,7 +616,7 @@ int srv_pool_submit(srv_pool *p, uint64_t id, srv_case **sc, double submitted_at
     j->id = id;
     atomic_init(&j->cancel, 0);
     atomic_init(&j->watched, 0);
-    j->status = SRV_STATUS_QUEUED;
+    j->status = MPP_STATUS_QUEUED;
     j->submitted_at = submitted_at;
     j->particles = particles;
     j->nodes = nodes;
@@ -683,7 +683,7 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
     pthread_mutex_lock(&p->mu);
     srv_job *prev, *j = find_locked(p, id, &prev);
     int rc = SRV_CANCEL_NONE;
-    if (j && j->status == SRV_STATUS_QUEUED) {
+    if (j && j->status == MPP_STATUS_QUEUED) {
         if (prev) prev->next = j->next;
         else p->head = j->next;
         if (p->tail == j) p->tail = prev;
@@ -702,8 +702,8 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         end.error = "cancelled by a client before it started";
         int src = store_run_finish(p->st, (int64_t)id, &end);
         if (src) srv_warn(id, "cancellation not recorded: %s", store_strerror(src));
-        srv_finished f = {SRV_STATUS_CANCELLED, end.error, 0, 0, 0, NULL};
-        if (srv_stream_finished(id, j->msg_seq++, &f, msg, len))
+        mpp_finished f = {MPP_STATUS_CANCELLED, end.error, 0, 0, 0, NULL};
+        if (mpp_stream_finished(id, j->msg_seq++, &f, msg, len))
             srv_warn(id, "out of memory encoding the end of the stream");
         srv_log(id, "cancelled while queued");
         job_free(j);
@@ -743,10 +743,10 @@ void srv_pool_stop(srv_pool *p, srv_pool_publish_fn pub, void *arg)
         if (rc) srv_warn(q->id, "interruption not recorded: %s", store_strerror(rc));
         srv_log(q->id, "interrupted while queued");
         if (pub) {
-            srv_finished f = {SRV_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL};
+            mpp_finished f = {MPP_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL};
             uint8_t *msg = NULL;
             size_t len = 0;
-            if (srv_stream_finished(q->id, q->msg_seq++, &f, &msg, &len))
+            if (mpp_stream_finished(q->id, q->msg_seq++, &f, &msg, &len))
                 srv_warn(q->id, "out of memory encoding the end of the stream");
             else pub(arg, q->id, msg, len);
         }

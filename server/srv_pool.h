@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "srv_codec.h"
+#include "mpp_msg.h"
 #include "srv_config.h"
 #include "store.h"
 
@@ -37,7 +37,7 @@ enum { SRV_CANCEL_NONE = 0, SRV_CANCEL_QUEUED = 1, SRV_CANCEL_RUNNING = 2 };
 
 /* A live job's state, for Status replies. */
 typedef struct {
-    int status;               /* srv_status: QUEUED or RUNNING */
+    int status;               /* mpp_status: QUEUED or RUNNING */
     int64_t steps, steps_total;
     double t, wall_s, submitted_at, started_at;
     size_t particles, nodes;
@@ -55,7 +55,7 @@ srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char 
 /* Queues job `id` (its run record already inserted).  Takes ownership of
  * *sc (set to NULL) on success.  Returns 0, SRV_POOL_EFULL or
  * SRV_POOL_ESTOPPED. */
-int srv_pool_submit(srv_pool *p, uint64_t id, srv_case **sc, double submitted_at,
+int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at,
                     size_t particles, size_t nodes);
 
 /* 1 if the queue has room for another job. */
