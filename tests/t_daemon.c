@@ -262,7 +262,7 @@ static int wait_lines(const td_bg *b, size_t n, double timeout)
 
 /* The error of a raw request for id: 0 if it is NOT_FOUND naming `field`,
  * with a message naming the id; else fails the test. */
-static int expect_not_found(const td_daemon *d, srv_request rq, const char *what, const char *field)
+static int expect_not_found(const td_daemon *d, mpp_request rq, const char *what, const char *field)
 {
     json_t *reply = NULL;
     char id[32];
@@ -437,11 +437,11 @@ DTEST(daemon_basic_run)
     {
         size_t len = 0;
         char *text = td_slurp(path, &len);
-        srv_case *sc = NULL;
+        mpp_case *sc = NULL;
         mpm_sim *sim = NULL;
         double worst = 0, worst_t = 0;
         CHECK(text);
-        CHECKF(srv_case_load(text, len, &sc, err, sizeof err) == 0, "%s", err);
+        CHECKF(td_case_load(text, len, &sc, err, sizeof err) == 0, "%s", err);
         free(text);
         sim = mpm_sim_new(&sc->c, err, sizeof err);
         CHECKF(sim, "%s", err);
@@ -486,7 +486,7 @@ DTEST(daemon_basic_run)
             free(st);
         }
         mpm_sim_destroy(&sim);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
     }
     {
         json_t *sn;
@@ -505,7 +505,7 @@ DTEST(daemon_basic_run)
     for (int k = 0; k < 2; k++) {
         /* the run exists, the step does not (7, or -1, which is no step
          * rather than "the latest"): the field is the step */
-        srv_request rq = {.kind = SRV_REQ_GET_SNAPSHOT, .id = 1, .has_step = 1, .step = k ? -1 : 7};
+        mpp_request rq = {.kind = MPP_REQ_GET_SNAPSHOT, .id = 1, .has_step = 1, .step = k ? -1 : 7};
         json_t *reply = NULL;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         CHECKF(!strcmp(td_err_code(reply), "NOT_FOUND") && !strcmp(td_err_field(reply), "step"),
@@ -515,7 +515,7 @@ DTEST(daemon_basic_run)
     }
     {
         /* energies from a seq beyond the end (even past INT64_MAX): none */
-        srv_request rq = {.kind = SRV_REQ_GET_ENERGY, .id = 1, .from_seq = UINT64_MAX};
+        mpp_request rq = {.kind = MPP_REQ_GET_ENERGY, .id = 1, .from_seq = UINT64_MAX};
         json_t *reply = NULL, *en;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         en = json_object_get(reply, "energy");
@@ -526,7 +526,7 @@ DTEST(daemon_basic_run)
     }
     {
         /* RunInfo carries the method and update (decoded reply, raw request) */
-        srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = 1};
+        mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = 1};
         json_t *reply = NULL, *run;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         run = json_object_get(reply, "run");
@@ -639,11 +639,11 @@ DTEST(daemon_basic_run)
     CHECK(td_ctl(&d, 30, &e, "show", "1", "--case", NULL) == 0);
     CHECK(e.status == 0);
     {
-        srv_case *sc = NULL;
-        CHECKF(srv_case_load(e.out, strlen(e.out), &sc, err, sizeof err) == 0, "show --case: %s", err);
+        mpp_case *sc = NULL;
+        CHECKF(td_case_load(e.out, strlen(e.out), &sc, err, sizeof err) == 0, "show --case: %s", err);
         CHECK(!strcmp(sc->name, "bar1d_mpm") && sc->has_end_time && sc->end_time == 0.5 &&
               sc->record_snapshots);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
     }
     td_out_free(&e);
 
@@ -715,7 +715,7 @@ DTEST(daemon_method_defaults)
     {
         static const char *const want[3][2] = {{"", ""}, {"GIMP", "MUSL"}, {"MPM", "USL"}};
         for (unsigned long long id = 1; id <= 2; id++) {
-            srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = id, .with_case = 1};
+            mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = id, .with_case = 1};
             json_t *reply = NULL, *run, *cs;
             CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
             run = json_object_get(reply, "run");
@@ -760,11 +760,11 @@ DTEST(daemon_method_defaults)
     /* show --case gives a case that loads as GIMP + MUSL */
     CHECK(td_ctl(&d, 30, &o, "show", "1", "--case", NULL) == 0);
     {
-        srv_case *sc = NULL;
-        CHECKF(o.status == 0 && srv_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
+        mpp_case *sc = NULL;
+        CHECKF(o.status == 0 && td_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
                "show 1 --case: %s", err);
         int ok = sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL && strstr(o.out, "\"GIMP\"");
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
         CHECKF(ok, "show 1 --case: %s", o.out);
     }
     td_out_free(&o);
@@ -849,11 +849,11 @@ DTEST(daemon_concurrency)
         char *text = td_slurp(longp, &len), err[ERRLEN];
         Mpmd__Case *pb = NULL;
         json_t *reply = NULL;
-        CHECK(text && srv_case_from_json(text, len, &pb, err, sizeof err) == 0);
+        CHECK(text && td_case_from_json(text, len, &pb, err, sizeof err) == 0);
         free(text);
-        srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
+        mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
-        srv_case_pb_free(&pb);
+        mpp_case_pb_free(&pb);
         CHECKF(!strcmp(td_err_code(reply), "QUEUE_FULL"), "raw submit: code %s", td_err_code(reply));
         json_decref(reply);
     }
@@ -1281,7 +1281,7 @@ DTEST(daemon_hard_kill)
 static int submit_expect(const td_daemon *d, Mpmd__Case *pb, const char *what, const char *code,
                          const char *field)
 {
-    srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
+    mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
     json_t *reply = NULL;
     int ok = 0;
     size_t fl = strlen(field);
@@ -1311,14 +1311,14 @@ static int bad_case(const td_daemon *d, const char *from, const char *to, const 
     char *json = td_patch(from, to);
     Mpmd__Case *pb = NULL;
     int ok;
-    if (!json || srv_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
+    if (!json || td_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
         t_fail(__FILE__, __LINE__, "patch %s -> %s: %s", from, to, json ? err : "not in the case");
         free(json);
         return 0;
     }
     snprintf(what, sizeof what, "%s", to);
     ok = submit_expect(d, pb, what, code, field);
-    srv_case_pb_free(&pb);
+    mpp_case_pb_free(&pb);
     free(json);
     return ok;
 }
@@ -1394,10 +1394,10 @@ DTEST(daemon_bad_input)
         }
         text = json_dumps(c, 0);
         json_decref(c);
-        CHECK(text && srv_case_from_json(text, strlen(text), &pb, err, sizeof err) == 0);
+        CHECK(text && td_case_from_json(text, strlen(text), &pb, err, sizeof err) == 0);
         free(text);
         int ok = submit_expect(&d, pb, "6000 points > --max-particles", "TOO_LARGE", "bodies*");
-        srv_case_pb_free(&pb);
+        mpp_case_pb_free(&pb);
         CHECK(ok);
     }
     {
@@ -1408,18 +1408,18 @@ DTEST(daemon_bad_input)
         uint8_t *buf = NULL, *b2;
         size_t len = 0;
         int ok;
-        CHECK(json && srv_case_from_json(json, strlen(json), &pb, err, sizeof err) == 0);
+        CHECK(json && td_case_from_json(json, strlen(json), &pb, err, sizeof err) == 0);
         free(json);
-        CHECK(srv_case_pack(pb, &buf, &len) == 0);
-        srv_case_pb_free(&pb);
+        CHECK(mpp_case_pack(pb, &buf, &len) == 0);
+        mpp_case_pb_free(&pb);
         b2 = realloc(buf, len + 2);
         CHECK(b2);
         b2[len] = 0x18;
         b2[len + 1] = 0x07;
-        CHECKF(srv_case_unpack(b2, len + 2, 0, &bad, err, sizeof err) == 0, "%s", err);
+        CHECKF(td_case_unpack(b2, len + 2, 0, &bad, err, sizeof err) == 0, "%s", err);
         free(b2);
         ok = submit_expect(&d, bad, "method = 7 (unknown enum)", "INVALID_CASE", "method");
-        srv_case_pb_free(&bad);
+        mpp_case_pb_free(&bad);
         CHECK(ok);
     }
 
@@ -1500,19 +1500,19 @@ DTEST(daemon_bad_input)
      * mapping spells it (as case errors name theirs), the id in the message */
     {
         static const struct {
-            srv_req_kind kind;
+            mpp_req_kind kind;
             int has_step;
             const char *what, *field;
         } unknown[] = {
-            {SRV_REQ_STATUS, 0, "status{jobId: 4242}", "jobId"},
-            {SRV_REQ_GET_RUN, 0, "getRun{runId: 4242}", "runId"},
-            {SRV_REQ_GET_ENERGY, 0, "getEnergy{runId: 4242}", "runId"},
-            {SRV_REQ_GET_SNAPSHOT, 0, "getSnapshot{runId: 4242}", "runId"},
-            {SRV_REQ_GET_SNAPSHOT, 1, "getSnapshot{runId: 4242, step}", "runId"},
-            {SRV_REQ_CANCEL, 0, "cancel{jobId: 4242}", "jobId"},
+            {MPP_REQ_STATUS, 0, "status{jobId: 4242}", "jobId"},
+            {MPP_REQ_GET_RUN, 0, "getRun{runId: 4242}", "runId"},
+            {MPP_REQ_GET_ENERGY, 0, "getEnergy{runId: 4242}", "runId"},
+            {MPP_REQ_GET_SNAPSHOT, 0, "getSnapshot{runId: 4242}", "runId"},
+            {MPP_REQ_GET_SNAPSHOT, 1, "getSnapshot{runId: 4242, step}", "runId"},
+            {MPP_REQ_CANCEL, 0, "cancel{jobId: 4242}", "jobId"},
         };
         for (size_t i = 0; i < sizeof unknown / sizeof unknown[0]; i++) {
-            srv_request rq = {.kind = unknown[i].kind, .id = 4242, .has_step = unknown[i].has_step,
+            mpp_request rq = {.kind = unknown[i].kind, .id = 4242, .has_step = unknown[i].has_step,
                               .step = 10};
             CHECK(expect_not_found(&d, rq, unknown[i].what, unknown[i].field) == 0);
         }
@@ -1528,7 +1528,7 @@ DTEST(daemon_bad_input)
     }
     /* a listing above the server's maximum says so, naming the field and the limit */
     {
-        srv_request rq = {.kind = SRV_REQ_LIST_RUNS, .limit = 20000};
+        mpp_request rq = {.kind = MPP_REQ_LIST_RUNS, .limit = 20000};
         json_t *reply = NULL;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         CHECKF(!strcmp(td_err_code(reply), "TOO_LARGE") && !strcmp(td_err_field(reply), "listRuns.limit") &&
@@ -1559,7 +1559,7 @@ DTEST(daemon_bad_input)
     CHECK(td_stop(&d) == 0);
 }
 
-/* A watched job's stream read with srv_stream_peek: every message in seq
+/* A watched job's stream read with mpp_stream_decode: every message in seq
  * order (energies batched by the worker lose none and keep their order),
  * every energy sample once, and the snapshots - packed into one reused
  * buffer and handed to zmq without a copy - each holding the state of its
@@ -1575,7 +1575,7 @@ DTEST(daemon_stream_snapshots)
     td_daemon d;
     td_out o;
     void *zctx = NULL, *sub = NULL;
-    srv_case *sc = NULL;
+    mpp_case *sc = NULL;
     mpm_sim *sim = NULL;
     double *x = NULL, *v = NULL;
     /* a receive queue of one message: what the watcher has not read stays
@@ -1632,7 +1632,7 @@ DTEST(daemon_stream_snapshots)
     {
         size_t len = 0;
         char *text = td_slurp(path, &len);
-        int lrc = text ? srv_case_load(text, len, &sc, err, sizeof err) : -1;
+        int lrc = text ? td_case_load(text, len, &sc, err, sizeof err) : -1;
         free(text);
         if (lrc || !(sim = mpm_sim_new(&sc->c, err, sizeof err))) {
             t_fail(__FILE__, __LINE__, "in-process case: %s", err);
@@ -1672,48 +1672,41 @@ DTEST(daemon_stream_snapshots)
             if (nparts < 2) part[nparts++] = m;
             else zmq_msg_close(&m);
         }
-        srv_stream_info si;
-        int prc = nparts == 2 ? srv_stream_peek(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), &si,
-                                                err, sizeof err)
+        mpp_stream si = {0};
+        mpm_error pe;
+        int prc = nparts == 2 ? mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0, &si, &pe)
                               : -1;
+        if (nparts == 2 && prc) mpm_error_text(&pe, MPM_FIELD_JSON, err, sizeof err);
         int ok = prc == 0 && si.job_id == 2 && si.seq == next_seq;
-        if (ok && si.kind == SRV_STREAM_ENERGY) {
+        if (ok && si.kind == MPP_STREAM_ENERGY) {
             ok = si.energy.seq == next_sample && si.energy.step == (int64_t)next_sample;
             next_sample++;
-        } else if (ok && si.kind == SRV_STREAM_SNAPSHOT) {
-            const srv_snapshot_info *s = &si.snapshot;
-            ok = s->n == np && s->dim == 2 && s->n_x == 2 * np && s->n_v == 2 * np &&
-                 s->n_stress == 0 && s->n_pressure == 0 && s->n_volume == 0 &&
+        } else if (ok && si.kind == MPP_STREAM_SNAPSHOT) {
+            const mpp_snapshot *s = &si.snapshot;
+            /* the decoder checked that x and v hold n*dim values each */
+            ok = s->n == np && s->dim == 2 && s->x && s->v && !s->stress && !s->pressure && !s->volume &&
                  s->step == (int64_t)(snaps + 1) * SNAP_EVERY;
-            /* its values: through the JSON bridge, against the solver */
-            char *text = NULL;
-            json_t *j = NULL, *sn;
+            /* its values, decoded once, against the solver */
             if (ok) {
                 while (mpm_sim_steps(sim) < s->step) ok = ok && mpm_sim_step(sim) == 0;
                 mpm_sim_snapshot(sim, &(mpm_snapshot){x, v, NULL, NULL, NULL});
-                ok = ok && !srv_msg_bytes_to_json(SRV_MSG_STREAM, zmq_msg_data(&part[1]),
-                                                  zmq_msg_size(&part[1]), 0, 0, &text, err,
-                                                  sizeof err) &&
-                     (j = json_loads(text, 0, NULL)) && (sn = json_object_get(j, "snapshot"));
-                for (size_t i = 0; ok && i < 2 * np; i++) {
-                    double gx = json_number_value(json_array_get(json_object_get(sn, "x"), i));
-                    double gv = json_number_value(json_array_get(json_object_get(sn, "v"), i));
-                    worst = fmax(worst, fmax(rel_diff(gx, x[i]), rel_diff(gv, v[i])));
-                }
+                for (size_t i = 0; ok && i < 2 * np; i++)
+                    worst = fmax(worst, fmax(rel_diff(s->x[i], x[i]), rel_diff(s->v[i], v[i])));
             }
-            free(text);
-            json_decref(j);
             snaps++;
-        } else if (ok && si.kind == SRV_STREAM_FINISHED) {
-            ok = si.status == SRV_STATUS_FINISHED && si.steps == STEPS && si.has_energy &&
+        } else if (ok && si.kind == MPP_STREAM_FINISHED) {
+            ok = si.finished.status == MPP_STATUS_FINISHED && si.finished.steps == STEPS && si.has_energy &&
                  si.energy.seq == STEPS && next_sample == STEPS + 1;
             finished = 1;
         }
+        uint64_t got_seq = si.seq;
+        int got_kind = (int)si.kind;
+        mpp_stream_clear(&si);
         for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
         if (!ok) {
             t_fail(__FILE__, __LINE__, "stream message seq %llu (expected %llu), kind %d, peek %d "
-                   "%s, samples %llu, snapshots %ld", (unsigned long long)si.seq,
-                   (unsigned long long)next_seq, (int)si.kind, prc, prc ? err : "",
+                   "%s, samples %llu, snapshots %ld", (unsigned long long)got_seq,
+                   (unsigned long long)next_seq, got_kind, prc, prc ? err : "",
                    (unsigned long long)next_sample, snaps);
             goto out;
         }
@@ -1731,7 +1724,7 @@ out:
     free(x);
     free(v);
     mpm_sim_destroy(&sim);
-    srv_case_destroy(&sc);
+    mpp_case_destroy(&sc);
     if (sub) zmq_close(sub);
     if (zctx) zmq_ctx_term(zctx);
     if (!rc) CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM");

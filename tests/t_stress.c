@@ -38,7 +38,7 @@
  */
 #include "mpm.h"
 #include "mpm_paper.h"
-#include "srv_codec.h"
+#include "mpp_msg.h"
 #include "t.h"
 #include "t_daemon.h"
 
@@ -814,9 +814,9 @@ static int extreme_cases(xcase *xs, int max, const char *me, const char *up, int
 static int run_case(const char *json, xout *o)
 {
     memset(o, 0, sizeof *o);
-    srv_case *sc = NULL;
+    mpp_case *sc = NULL;
     char err[512];
-    int rc = srv_case_load(json, strlen(json), &sc, err, sizeof err);
+    int rc = td_case_load(json, strlen(json), &sc, err, sizeof err);
     if (rc) {
         snprintf(o->msg, sizeof o->msg, "%s", err);
         return rc;
@@ -824,7 +824,7 @@ static int run_case(const char *json, xout *o)
     mpm_sim *s = mpm_sim_new(&sc->c, err, sizeof err);
     if (!s) {
         snprintf(o->msg, sizeof o->msg, "%s", err);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
         return -1;
     }
     mpm_energy e;
@@ -861,7 +861,7 @@ static int run_case(const char *json, xout *o)
     o->steps = mpm_sim_steps(s);
     o->t = mpm_sim_time(s);
     mpm_sim_destroy(&s);
-    srv_case_destroy(&sc);
+    mpp_case_destroy(&sc);
     return 0;
 }
 
@@ -953,7 +953,7 @@ static json_t *request(void *zctx, const char *ep, const char *req, double timeo
     uint8_t *buf = NULL;
     size_t len = 0;
     char err[256];
-    if (srv_msg_json_to_bytes(SRV_MSG_REQUEST, req, strlen(req), &buf, &len, err, sizeof err)) {
+    if (td_msg_json_to_bytes(MPP_MSG_REQUEST, req, strlen(req), &buf, &len, err, sizeof err)) {
         printf("    request not encodable: %s\n", err);
         return NULL;
     }
@@ -976,7 +976,7 @@ static json_t *request(void *zctx, const char *ep, const char *req, double timeo
                 zmq_msg_init(&part);
                 if (zmq_msg_recv(&part, sock, 0) >= 0) {
                     char *js = NULL;
-                    if (srv_msg_bytes_to_json(SRV_MSG_REPLY, zmq_msg_data(&part), zmq_msg_size(&part),
+                    if (td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&part), zmq_msg_size(&part),
                                               0, 0, &js, err, sizeof err) == 0)
                         out = json_loads(js, 0, NULL);
                     free(js);
