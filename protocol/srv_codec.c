@@ -638,13 +638,15 @@ int srv_case_from_pb(const Mpmd__Case *pb, srv_case **out, char *err, size_t err
     if (!sc) return ENOMEM_();
     rc = conv_case(pb, sc, err, errlen);
     if (!rc) {
-        switch (mpm_case_check(&sc->c, err, errlen)) {
+        mpm_error me;
+        switch (mpm_case_check(&sc->c, &sc->info, &me)) {
         case MPM_OK: break;
         case MPM_ECFL: rc = SRV_CODEC_ECFL; break;
         case MPM_ENOMEM: rc = SRV_CODEC_ENOMEM; break;
+        case MPM_ETOOBIG: rc = SRV_CODEC_ETOOBIG; break;
         default: rc = SRV_CODEC_EINVAL; break;
         }
-        if (rc && err && errlen) camel_error_path(err);
+        if (rc && err && errlen) camel_error_path(mpm_error_text(&me, MPM_FIELD_PROTO, err, errlen));
     }
     if (rc) {
         srv_case_destroy(&sc);

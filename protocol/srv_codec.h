@@ -71,6 +71,7 @@ enum {
  * came from. */
 typedef struct srv_case {
     mpm_case c;                 /* the solver case (passed mpm_case_check) */
+    mpm_case_info info;         /* what mpm_case_check found (particles, ...) */
     char *name;                 /* Case.name, "" when absent */
     int has_end_time;           /* 1: run until end_time; 0: run `steps` steps */
     double end_time;

@@ -254,16 +254,11 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
                     field, "%s", err);
         return;
     }
-    long nparticles = mpm_case_count(&sc->c, err, sizeof err);
-    if (nparticles < 0) {
-        error_field(err, field, sizeof field);
-        reply_error(d, id, SRV_ERR_INVALID_CASE, field, "%s", err);
-        srv_case_destroy(&sc);
-        return;
-    }
-    if (nparticles > d->cfg->max_particles) {
+    /* the codec's check counted the particles */
+    size_t nparticles = sc->info.particles;
+    if (nparticles > (unsigned long long)d->cfg->max_particles) {
         reply_error(d, id, SRV_ERR_TOO_LARGE, "bodies",
-                    "bodies: the case has %ld particles, above this server's limit %lld "
+                    "bodies: the case has %zu particles, above this server's limit %lld "
                     "(--max-particles)", nparticles, d->cfg->max_particles);
         srv_case_destroy(&sc);
         return;
@@ -296,8 +291,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
         srv_case_destroy(&sc);
         return;
     }
-    size_t nodes = 1;
-    for (int k = 0; k < sc->c.grid.dim; k++) nodes *= (size_t)sc->c.grid.nodes[k];
+    size_t nodes = sc->info.nodes;
     store_run r = {0};
     r.name = sc->name;
     r.case_pb = pb;
@@ -305,7 +299,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     r.method = sc->c.method == MPM_METHOD_GIMP ? STORE_METHOD_GIMP : STORE_METHOD_MPM;
     r.update = (store_update)sc->c.update;
     r.dim = sc->c.grid.dim;
-    r.particles = nparticles;
+    r.particles = (int64_t)nparticles;
     r.nodes = (int64_t)nodes;
     r.status = STORE_QUEUED;
     r.submitted_at = wall_now();
@@ -321,7 +315,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
     char namebuf[128];
     snprintf(namebuf, sizeof namebuf, "%s", name);
-    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, (size_t)nparticles, nodes);
+    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes);
     if (rc) {
         store_run_end end = {0};
         end.status = rc == SRV_POOL_ESTOPPED ? STORE_INTERRUPTED : STORE_FAILED;
@@ -333,7 +327,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
         srv_case_destroy(&sc);
         return;
     }
-    srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %ld particles", namebuf, (long)r.dim,
+    srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %zu particles", namebuf, (long)r.dim,
             r.method == STORE_METHOD_GIMP ? "GMPM" : "MPM", store_update_name(r.update), nparticles);
     uint8_t *buf = NULL;
     size_t len = 0;

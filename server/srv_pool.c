@@ -420,9 +420,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
                                                                             : cfg->solver_threads;
     sc->c.threads = threads;
     char err[512];
-    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    mpm_error me;
+    /* the case passed the codec's check (sc->info); threads is checked again */
+    mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me);
     if (!sim) {
-        finish(&c, SRV_STATUS_FAILED, err[0] ? err : "out of memory", 0, 0, 0, 0, NULL);
+        finish(&c, SRV_STATUS_FAILED, mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err), 0, 0,
+               0, 0, NULL);
         return;
     }
     size_t n = mpm_sim_particles(sim);
@@ -469,7 +472,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         if (every && (k + 1) % every == 0) mpm_sim_want_energy(sim);
         if (mpm_sim_step(sim)) {
             status = SRV_STATUS_FAILED;
-            snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+            mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
             break;
         }
         k++;
@@ -498,7 +501,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
      * blow-up in the last steps must not be recorded as a result */
     if (status == SRV_STATUS_FINISHED && mpm_sim_check(sim)) {
         status = SRV_STATUS_FAILED;
-        snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+        mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
     }
     if (last.step != mpm_sim_steps(sim) && status != SRV_STATUS_FAILED)
         energy_sample(&c, sim, &last);

@@ -43,15 +43,19 @@ static srv_case *load_example(const char *name)
  * (0 with the reason printed if the solver refuses it). */
 static size_t sim_particles(const srv_case *sc)
 {
-    char err[ERRLEN];
-    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *sim = mpm_sim_new(&sc->c, NULL, &err); /* checked again, from scratch */
     size_t n;
     if (!sim) {
-        TLOG("mpm_sim_new: %s", err);
+        TLOG("mpm_sim_new: %s", TERR(&err));
         return 0;
     }
     n = mpm_sim_particles(sim);
     mpm_sim_destroy(&sim);
+    if (n != sc->info.particles) { /* the codec's check counted them */
+        TLOG("the codec's check counted %zu particles, the solver made %zu", sc->info.particles, n);
+        return 0;
+    }
     return n;
 }
 

@@ -443,8 +443,9 @@ DTEST(daemon_basic_run)
         CHECK(text);
         CHECKF(srv_case_load(text, len, &sc, err, sizeof err) == 0, "%s", err);
         free(text);
-        sim = mpm_sim_new(&sc->c, err, sizeof err);
-        CHECKF(sim, "%s", err);
+        mpm_error me;
+        sim = mpm_sim_new(&sc->c, &sc->info, &me);
+        CHECKF(sim, "%s", TERR(&me));
         for (size_t i = 0; i < s.n; i++) {
             mpm_energy en;
             while (mpm_sim_steps(sim) < s.step[i]) CHECK(mpm_sim_step(sim) == 0);
@@ -1634,8 +1635,9 @@ DTEST(daemon_stream_snapshots)
         char *text = td_slurp(path, &len);
         int lrc = text ? srv_case_load(text, len, &sc, err, sizeof err) : -1;
         free(text);
-        if (lrc || !(sim = mpm_sim_new(&sc->c, err, sizeof err))) {
-            t_fail(__FILE__, __LINE__, "in-process case: %s", err);
+        mpm_error me = {0};
+        if (lrc || !(sim = mpm_sim_new(&sc->c, &sc->info, &me))) {
+            t_fail(__FILE__, __LINE__, "in-process case: %s", lrc ? err : TERR(&me));
             goto out;
         }
     }
