@@ -179,7 +179,7 @@ struct mpm_sim {
     mpm_thread_out *tout;
     pthread_t *threads;
     pthread_barrier_t bar_start, bar_end; /* bar_end also parts the passes
-                                    * of a step (team_sync) */
+                                    * of a step (mpm_team_sync()) */
     void (*phase)(mpm_sim *, int tid);
     int quit;
     pthread_mutex_t gate_mu;       /* start gate for the team */

@@ -246,7 +246,7 @@ static void ph_step_usl(mpm_sim *s, int tid)
 }
 
 /* Before a step: the active rows become those the last particle pass
- * recorded (update_rows), then the particles are sorted when due. */
+ * recorded (mpm_rows_update()), then the particles are sorted when due. */
 static void begin_step(mpm_sim *s)
 {
     mpm_rows_update(s);
@@ -341,7 +341,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         s->inv_h[d] = 1.0 / s->h[d];
         /* node 0 of the padded grid sits pad cells below the origin */
         s->x0[d] = d < dim ? c->grid.origin[d] - s->pad * s->h[d] : 0;
-        /* a GMPM centre may enter the first ghost cell (see build_fixed) */
+        /* a GMPM centre may enter the first ghost cell (see mpm_bc_build()) */
         s->lo[d] = d < dim ? c->grid.origin[d] - (s->pad / 2) * s->h[d] : 0;
         s->hi[d] = d < dim ? c->grid.origin[d] + (c->grid.nodes[d] - 1 + s->pad / 2) * s->h[d] : 0;
     }
