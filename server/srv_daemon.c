@@ -111,18 +111,11 @@ static void error_field(const char *msg, char *field, size_t n)
     field[k] = 0;
 }
 
-static int status_to_srv(store_status s)
+/* The codec's sample from the store's (until the codec speaks
+ * mpm_energy_sample too). */
+static srv_energy_sample codec_sample(const mpm_energy_sample *s)
 {
-    static const int map[] = {SRV_STATUS_QUEUED, SRV_STATUS_RUNNING, SRV_STATUS_FINISHED,
-                              SRV_STATUS_FAILED, SRV_STATUS_CANCELLED, SRV_STATUS_INTERRUPTED};
-    return (unsigned)s < 6 ? map[s] : SRV_STATUS_FAILED;
-}
-
-static int status_to_store(int s, store_status *out)
-{
-    if (s < SRV_STATUS_QUEUED || s > SRV_STATUS_INTERRUPTED) return -1;
-    *out = (store_status)(s - 1);
-    return 0;
+    return (srv_energy_sample){s->step, s->t, s->dim, s->e, s->seq};
 }
 
 /* RunInfo from a stored run, with its last energy sample and stored
@@ -134,49 +127,39 @@ static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_ener
     memset(ri, 0, sizeof *ri);
     ri->run_id = ri->job_id = (uint64_t)r->id;
     ri->name = r->name;
-    ri->status = status_to_srv(r->status);
+    ri->status = (int)r->status;
     ri->error = r->error;
     ri->submitted_at = r->submitted_at;
     ri->started_at = r->started_at;
-    ri->finished_at = r->ended_at;
-    ri->steps = r->steps_done;
-    if (r->status >= STORE_FINISHED) ri->steps_total = r->steps_done;
+    ri->finished_at = r->finished_at;
+    ri->steps = r->steps;
+    if (MPP_STATUS_ENDED(r->status)) ri->steps_total = r->steps;
     ri->wall_s = r->wall_s;
     ri->particles = (uint64_t)r->particles;
     ri->nodes = (uint64_t)r->nodes;
     ri->dim = r->dim;
-    ri->method = r->method == STORE_METHOD_GIMP ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
-    ri->update = r->update == STORE_MUSL ? MPM_MUSL : r->update == STORE_USL ? MPM_USL : MPM_USF;
+    ri->method = r->method;
+    ri->update = r->update;
     if (!isnan(r->energy.total)) {
         memset(e, 0, sizeof *e);
-        e->step = r->steps_done;
+        e->step = r->steps;
         e->dim = r->dim;
-        e->e.kinetic = r->energy.kinetic;
-        e->e.strain = r->energy.strain;
-        e->e.potential = r->energy.potential;
-        e->e.external_work = r->energy.external_work;
-        e->e.total = r->energy.total;
+        e->e = r->energy;
         ri->last_energy = e;
     }
     if (store_run_extras(d->st, r->id, x) == 0) {
         ri->energy_samples = (uint64_t)x->energy_count;
         ri->snapshot_steps = x->snapshot_steps;
         ri->n_snapshot_steps = x->n_snapshots;
-        store_energy_series es;
-        if (x->last_seq >= 0 && store_energy_read(d->st, r->id, x->last_seq, 1, &es) == 0) {
-            if (es.n == 1) {
-                memset(e, 0, sizeof *e);
-                e->step = es.step[0];
-                e->t = es.t[0];
-                e->seq = (uint64_t)es.seq[0];
-                e->dim = r->dim;
-                e->e = (mpm_energy){es.kinetic[0], es.strain[0], es.potential[0],
-                                    es.external_work[0], es.total[0], es.mass[0],
-                                    {es.momentum_x[0], es.momentum_y[0], es.momentum_z[0]}};
+        mpm_energy_sample *es = NULL;
+        size_t n = 0;
+        if (x->last_seq >= 0 && store_energy_read(d->st, r->id, x->last_seq, 1, &es, &n) == 0) {
+            if (n == 1) {
+                *e = codec_sample(&es[0]);
                 ri->last_energy = e;
                 ri->t = e->t;
             }
-            store_energy_series_free(&es);
+            free(es);
         }
     }
     srv_job_info ji;
@@ -198,13 +181,13 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     store_run r;
     int rc = store_run_get(d->st, (int64_t)run, &r);
     const char *what = strcmp(field, "jobId") ? "run" : "job";
-    if (rc == STORE_ENOTFOUND) {
+    if (rc == MPM_ENOTFOUND) {
         reply_error(d, id, SRV_ERR_NOT_FOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
     }
     if (rc) {
         reply_error(d, id, SRV_ERR_INTERNAL, "", "reading %s %llu: %s", what,
-                    (unsigned long long)run, store_errmsg());
+                    (unsigned long long)run, store_error()->message);
         return;
     }
     srv_run_info ri;
@@ -296,19 +279,19 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     r.name = sc->name;
     r.case_pb = pb;
     r.case_len = pblen;
-    r.method = sc->c.method == MPM_METHOD_GIMP ? STORE_METHOD_GIMP : STORE_METHOD_MPM;
-    r.update = (store_update)sc->c.update;
+    r.method = sc->c.method;
+    r.update = sc->c.update;
     r.dim = sc->c.grid.dim;
     r.particles = (int64_t)nparticles;
     r.nodes = (int64_t)nodes;
-    r.status = STORE_QUEUED;
+    r.status = MPP_STATUS_QUEUED;
     r.submitted_at = wall_now();
     r.server_version = SRV_VERSION;
     int64_t run = 0;
     rc = store_run_insert(d->st, &r, &run);
     free(pb);
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot record the run: %s", store_errmsg());
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot record the run: %s", store_error()->message);
         srv_case_destroy(&sc);
         return;
     }
@@ -318,7 +301,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes);
     if (rc) {
         store_run_end end = {0};
-        end.status = rc == SRV_POOL_ESTOPPED ? STORE_INTERRUPTED : STORE_FAILED;
+        end.status = rc == SRV_POOL_ESTOPPED ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
         end.error = rc == SRV_POOL_EFULL ? "job queue full" : rc == SRV_POOL_ESTOPPED
                     ? STORE_INTERRUPTED_QUEUED : "out of memory";
         store_run_finish(d->st, run, &end);
@@ -328,7 +311,8 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
         return;
     }
     srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %zu particles", namebuf, (long)r.dim,
-            r.method == STORE_METHOD_GIMP ? "GMPM" : "MPM", store_update_name(r.update), nparticles);
+            r.method == MPM_METHOD_GIMP ? "GMPM" : "MPM",
+            r.update == MPM_MUSL ? "musl" : r.update == MPM_USL ? "usl" : "usf", nparticles);
     uint8_t *buf = NULL;
     size_t len = 0;
     srv_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
@@ -344,18 +328,18 @@ static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
     if (rc == SRV_CANCEL_NONE) {
         store_run r;
         int src = store_run_get(d->st, (int64_t)job, &r);
-        if (src == STORE_ENOTFOUND) {
+        if (src == MPM_ENOTFOUND) {
             reply_error(d, id, SRV_ERR_NOT_FOUND, "jobId", "no job %llu", (unsigned long long)job);
             return;
         }
         if (!src) {
             reply_error(d, id, SRV_ERR_CONFLICT, "jobId", "job %llu already ended (%s)",
-                        (unsigned long long)job, srv_status_name(status_to_srv(r.status)));
+                        (unsigned long long)job, srv_status_name((int)r.status));
             store_run_clear(&r);
             return;
         }
         reply_error(d, id, SRV_ERR_INTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
-                    store_errmsg());
+                    store_error()->message);
         return;
     }
     if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested");
@@ -369,7 +353,7 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     if (limit > ENERGY_PAGE_MAX) limit = ENERGY_PAGE_MAX;
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
-    if (rc == STORE_ENOTFOUND) {
+    if (rc == MPM_ENOTFOUND) {
         reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu", (unsigned long long)rq->id);
         return;
     }
@@ -377,36 +361,26 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     if (!rc) store_run_clear(&r);
     /* what the workers published so far is in the store once flushed */
     store_flush(d->st);
-    store_energy_series es;
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
     int64_t from = rq->from_seq > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)rq->from_seq;
-    rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es);
+    rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es, &nes);
     if (rc) {
         reply_error(d, id, SRV_ERR_INTERNAL, "", "reading energies of run %llu: %s",
-                    (unsigned long long)rq->id, store_errmsg());
+                    (unsigned long long)rq->id, store_error()->message);
         return;
     }
-    int more = es.n > limit;
-    size_t n = more ? limit : es.n;
+    int more = nes > limit;
+    size_t n = more ? limit : nes;
     srv_energy_sample *s = calloc(n ? n : 1, sizeof *s);
     if (!s) {
-        store_energy_series_free(&es);
+        free(es);
         reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
         return;
     }
     for (size_t i = 0; i < n; i++) {
-        s[i].step = es.step[i];
-        s[i].t = es.t[i];
-        s[i].seq = (uint64_t)es.seq[i];
+        s[i] = codec_sample(&es[i]);
         s[i].dim = dim;
-        s[i].e.kinetic = es.kinetic[i];
-        s[i].e.strain = es.strain[i];
-        s[i].e.potential = es.potential[i];
-        s[i].e.external_work = es.external_work[i];
-        s[i].e.total = es.total[i];
-        s[i].e.momentum[0] = es.momentum_x[i];
-        s[i].e.momentum[1] = es.momentum_y[i];
-        s[i].e.momentum[2] = es.momentum_z[i];
-        s[i].e.mass = es.mass[i];
     }
     uint8_t *buf = NULL;
     size_t len = 0;
@@ -414,7 +388,7 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
         reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu energy samples", n);
     else send_reply(d, id, buf, len);
     free(s);
-    store_energy_series_free(&es);
+    free(es);
 }
 
 static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
@@ -422,7 +396,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     store_flush(d->st);
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
-    if (rc == STORE_ENOTFOUND) {
+    if (rc == MPM_ENOTFOUND) {
         reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu",
                     (unsigned long long)rq->id);
         return;
@@ -430,9 +404,9 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     if (!rc) store_run_clear(&r);  /* else the snapshot read reports it */
     store_snapshot ss;
     /* a negative step is no step (the store would read it as "latest") */
-    rc = rq->has_step && rq->step < 0 ? STORE_ENOTFOUND
+    rc = rq->has_step && rq->step < 0 ? MPM_ENOTFOUND
          : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
-    if (rc == STORE_ENOTFOUND) {
+    if (rc == MPM_ENOTFOUND) {
         if (rq->has_step)
             reply_error(d, id, SRV_ERR_NOT_FOUND, "step", "run %llu has no stored snapshot at "
                         "step %lld", (unsigned long long)rq->id, (long long)rq->step);
@@ -442,7 +416,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
         return;
     }
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading a snapshot: %s", store_errmsg());
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading a snapshot: %s", store_error()->message);
         return;
     }
     size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
@@ -473,14 +447,13 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 {
     store_run_filter f = {0};
-    store_status st;
     if (rq->status) {
-        if (status_to_store(rq->status, &st)) {
+        if (rq->status < MPP_STATUS_MIN || rq->status > MPP_STATUS_MAX) {
             reply_error(d, id, SRV_ERR_BAD_REQUEST, "listRuns.status", "listRuns.status: unknown "
                         "value %d", rq->status);
             return;
         }
-        f.status_mask = STORE_STATUS_BIT(st);
+        f.status_mask = STORE_STATUS_BIT(rq->status);
     }
     if (rq->limit > LIST_MAX) {
         reply_error(d, id, SRV_ERR_TOO_LARGE, "listRuns.limit", "listRuns.limit: %u is above this "
@@ -491,7 +464,7 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     store_run *runs = NULL;
     size_t n = 0;
     if (store_run_list(d->st, &f, &runs, &n)) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "listing runs: %s", store_errmsg());
+        reply_error(d, id, SRV_ERR_INTERNAL, "", "listing runs: %s", store_error()->message);
         return;
     }
     srv_run_info *ri = calloc(n ? n : 1, sizeof *ri);
@@ -758,8 +731,8 @@ int srv_daemon_run(const srv_config *cfg)
 
     store_options so = {0};
     so.log = srv_log_store;
-    if (store_open(cfg->db, &so, &d.st, err, sizeof err)) {
-        srv_warn(0, "%s", err);
+    if (store_open(cfg->db, &so, &d.st)) {
+        srv_warn(0, "%s", store_error()->message);
         return 1;
     }
     store_stats ss;
