@@ -5,10 +5,14 @@
  * requests (ZMQ_ROUTER_MANDATORY, replies sent with ZMQ_DONTWAIT so a
  * vanished client never blocks it), an XPUB for job streams (its
  * subscription messages tell which jobs are watched, so snapshots are only
- * packed for watched jobs), and an inproc PULL that collects the workers'
- * stream messages and forwards them to the XPUB unchanged.  A request is
- * answered completely before the next one is read; reads of the store go
- * through the store's own read connections.
+ * packed for watched jobs), an inproc PULL that collects the workers'
+ * stream messages and forwards them to the XPUB unchanged, and the store's
+ * commit notification fd.  Nothing on this loop waits for the store's
+ * writer: a read (Status, GetRun, ListRuns, GetEnergy, GetSnapshot, the
+ * reply of a Cancel) takes a ticket for the writes its run had enqueued and
+ * is answered, through the store's own read connections, once they are
+ * committed; until then it waits in a queue, and so does any later request
+ * of the same client, so that each client gets its replies in order.
  *
  * Frames on the ROUTER: [identity][empty][Request], answered with
  * [identity][empty][Reply] (a DEALER client sends [empty][Request]; a REQ
@@ -62,7 +66,25 @@ typedef struct {
     srv_pool *pool;
     int stopping;           /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
+    struct pending *pending, **pending_tail;  /* reads waiting for a commit */
+    size_t npending;
 } daemon_t;
+
+/* A request that waits, off the event loop: a read until the store has
+ * committed every write its run (or, for a listing, any run) had enqueued
+ * when it began, so it sees what the workers published before it and no
+ * read ever blocks the loop on a commit; any request behind a waiting one
+ * of the same client, so that a client's replies keep its order. */
+typedef struct pending {
+    zmq_msg_t id;           /* the client's identity frame */
+    srv_request rq;         /* the decoded request (a read: owns nothing big) */
+    int begun;              /* its action is done and its ticket taken */
+    uint64_t ticket;        /* store_ticket() when it began */
+    struct pending *next;
+} pending;
+/* Reads waiting at once, at most; more get UNAVAILABLE (a store that cannot
+ * keep up is not hidden behind an ever longer queue). */
+#define PENDING_MAX 4096
 
 static double wall_now(void)
 {
@@ -171,6 +193,12 @@ static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_ener
         ri->wall_s = ji.wall_s;
         if (ji.particles) ri->particles = ji.particles;
         if (ji.nodes) ri->nodes = ji.nodes;
+        /* the live figures are as of the last progress report; a stored
+         * sample may be newer */
+        if (ri->last_energy && ri->last_energy->step > ri->steps) {
+            ri->steps = ri->last_energy->step;
+            ri->t = ri->last_energy->t;
+        }
     }
 }
 
@@ -319,7 +347,134 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     send_reply(d, id, buf, len);
 }
 
-static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
+/* ---- requests in order, reads after their commit ---- */
+
+static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq);
+static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq);
+static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq);
+static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job);
+static void do_other(daemon_t *d, zmq_msg_t *id, srv_request *rq);
+
+static int is_read(srv_req_kind k)
+{
+    return k == SRV_REQ_CANCEL || k == SRV_REQ_STATUS || k == SRV_REQ_GET_RUN ||
+           k == SRV_REQ_LIST_RUNS || k == SRV_REQ_GET_ENERGY || k == SRV_REQ_GET_SNAPSHOT;
+}
+
+/* Answers a read request from committed data. */
+static void answer_read(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+{
+    switch (rq->kind) {
+    case SRV_REQ_CANCEL:
+    case SRV_REQ_STATUS: reply_run(d, id, rq->id, 0, "jobId"); break;
+    case SRV_REQ_GET_RUN: reply_run(d, id, rq->id, rq->with_case, "runId"); break;
+    case SRV_REQ_LIST_RUNS: do_list(d, id, rq); break;
+    case SRV_REQ_GET_ENERGY: do_energy(d, id, rq); break;
+    case SRV_REQ_GET_SNAPSHOT: do_snapshot(d, id, rq); break;
+    default: reply_error(d, id, SRV_ERR_INTERNAL, "", "request kind %d is not a read", (int)rq->kind);
+    }
+}
+
+/* Carries a request as far as it can go now: 1 when it is answered, 0 when
+ * its reply waits for *ticket (a read: the writes its run, or any run for a
+ * listing, had enqueued when it began, so that it sees everything the
+ * workers published before it).  *begun says the request's action (a
+ * cancel's) is done and its ticket taken. */
+static int run_request(daemon_t *d, zmq_msg_t *id, srv_request *rq, int *begun, uint64_t *ticket)
+{
+    if (!is_read(rq->kind)) {
+        do_other(d, id, rq);
+        return 1;
+    }
+    if (!*begun) {
+        if (rq->kind == SRV_REQ_CANCEL && cancel_job(d, id, rq->id)) return 1;
+        *ticket = store_ticket(d->st, rq->kind == SRV_REQ_LIST_RUNS ? 0 : (int64_t)rq->id);
+        *begun = 1;
+    }
+    if (!store_ticket_done(d->st, *ticket)) return 0;
+    answer_read(d, id, rq);
+    return 1;
+}
+
+static int same_peer(zmq_msg_t *a, zmq_msg_t *b)
+{
+    return zmq_msg_size(a) == zmq_msg_size(b) &&
+           !memcmp(zmq_msg_data(a), zmq_msg_data(b), zmq_msg_size(a));
+}
+
+/* 1 if a request of this client waits (a later one must wait behind it). */
+static int peer_waits(daemon_t *d, zmq_msg_t *id, const pending *before)
+{
+    for (const pending *q = d->pending; q && q != before; q = q->next)
+        if (same_peer((zmq_msg_t *)&q->id, id)) return 1;
+    return 0;
+}
+
+/* Queues a request (taken over: *rq is emptied); on failure answers
+ * UNAVAILABLE. */
+static void enqueue(daemon_t *d, zmq_msg_t *id, srv_request *rq, int begun, uint64_t ticket)
+{
+    pending *p = d->npending < PENDING_MAX ? calloc(1, sizeof *p) : NULL;
+    if (p && zmq_msg_init(&p->id) == 0 && zmq_msg_copy(&p->id, id) == 0) {
+        p->rq = *rq;
+        memset(rq, 0, sizeof *rq);
+        p->begun = begun;
+        p->ticket = ticket;
+        if (!d->pending_tail) d->pending_tail = &d->pending;
+        *d->pending_tail = p;
+        d->pending_tail = &p->next;
+        d->npending++;
+        return;
+    }
+    if (p) zmq_msg_close(&p->id);
+    free(p);
+    reply_error(d, id, SRV_ERR_UNAVAILABLE, "", "%zu requests are waiting for the store; retry "
+                "later", d->npending);
+}
+
+/* Runs a decoded request, in arrival order per client: behind a waiting
+ * request of the same client it queues; a read whose writes are not yet
+ * committed queues; everything else is answered now. */
+static void dispatch(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+{
+    int begun = 0;
+    uint64_t ticket = 0;
+    if (peer_waits(d, id, NULL) || !run_request(d, id, rq, &begun, &ticket))
+        enqueue(d, id, rq, begun, ticket);
+}
+
+/* Carries on the waiting requests whose writes are committed, in arrival
+ * order per client. */
+static void serve_pending(daemon_t *d)
+{
+    pending **pp = &d->pending;
+    d->pending_tail = &d->pending;
+    while (*pp) {
+        pending *p = *pp;
+        if (!peer_waits(d, &p->id, p) && run_request(d, &p->id, &p->rq, &p->begun, &p->ticket)) {
+            *pp = p->next;
+            zmq_msg_close(&p->id);
+            srv_request_clear(&p->rq);
+            free(p);
+            d->npending--;
+            continue;
+        }
+        d->pending_tail = &p->next;
+        pp = &p->next;
+    }
+}
+
+/* Answers every waiting request after a last flush (shutdown). */
+static void drain_pending(daemon_t *d)
+{
+    if (!d->pending) return;
+    store_flush(d->st);
+    serve_pending(d);
+}
+
+/* A cancel's action: 0 when the job was live (its reply, the run, follows
+ * once the store has it), 1 when it was answered with an error. */
+static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job)
 {
     uint8_t *msg = NULL;
     size_t len = 0;
@@ -330,21 +485,20 @@ static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
         int src = store_run_get(d->st, (int64_t)job, &r);
         if (src == MPM_ENOTFOUND) {
             reply_error(d, id, SRV_ERR_NOT_FOUND, "jobId", "no job %llu", (unsigned long long)job);
-            return;
+            return 1;
         }
         if (!src) {
             reply_error(d, id, SRV_ERR_CONFLICT, "jobId", "job %llu already ended (%s)",
                         (unsigned long long)job, srv_status_name((int)r.status));
             store_run_clear(&r);
-            return;
+            return 1;
         }
         reply_error(d, id, SRV_ERR_INTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
                     store_error()->message);
-        return;
+        return 1;
     }
     if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested");
-    store_flush(d->st);
-    reply_run(d, id, job, 0, "jobId");
+    return 0;
 }
 
 static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
@@ -359,8 +513,6 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     }
     int dim = rc ? 3 : r.dim;
     if (!rc) store_run_clear(&r);
-    /* what the workers published so far is in the store once flushed */
-    store_flush(d->st);
     mpm_energy_sample *es = NULL;
     size_t nes = 0;
     int64_t from = rq->from_seq > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)rq->from_seq;
@@ -393,7 +545,6 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 
 static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
 {
-    store_flush(d->st);
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == MPM_ENOTFOUND) {
@@ -488,6 +639,35 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     store_run_list_free(runs, n);
 }
 
+/* Requests that read nothing a worker writes: Submit, Ping, Version. */
+static void do_other(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+{
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    switch (rq->kind) {
+    case SRV_REQ_SUBMIT: do_submit(d, id, rq); break;
+    case SRV_REQ_PING:
+        srv_reply_pong(SRV_VERSION, d->cfg->stream_endpoint, &buf, &len);
+        send_reply(d, id, buf, len);
+        break;
+    case SRV_REQ_VERSION: {
+        int maj, min, pat;
+        zmq_version(&maj, &min, &pat);
+        char zv[32];
+        snprintf(zv, sizeof zv, "%d.%d.%d", maj, min, pat);
+        const char *names[] = {"libzmq", "sqlite", "protobuf-c", "schema"};
+        char sv[8];
+        snprintf(sv, sizeof sv, "%d", SRV_SCHEMA_VERSION);
+        const char *vers[] = {zv, store_sqlite_version(), srv_codec_protobuf_c_version(), sv};
+        srv_reply_version(SRV_VERSION, names, vers, 4, &buf, &len);
+        send_reply(d, id, buf, len);
+        break;
+    }
+    default:
+        reply_error(d, id, SRV_ERR_BAD_REQUEST, "", "unknown request kind %d", (int)rq->kind);
+    }
+}
+
 static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t size)
 {
     char err[512];
@@ -513,45 +693,7 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t 
         srv_request_clear(&rq);
         return;
     }
-    uint8_t *buf = NULL;
-    size_t len = 0;
-    switch (rq.kind) {
-    case SRV_REQ_SUBMIT: do_submit(d, id, &rq); break;
-    case SRV_REQ_CANCEL: do_cancel(d, id, rq.id); break;
-    case SRV_REQ_STATUS:
-        store_flush(d->st);
-        reply_run(d, id, rq.id, 0, "jobId");
-        break;
-    case SRV_REQ_GET_RUN:
-        store_flush(d->st);
-        reply_run(d, id, rq.id, rq.with_case, "runId");
-        break;
-    case SRV_REQ_LIST_RUNS:
-        store_flush(d->st);
-        do_list(d, id, &rq);
-        break;
-    case SRV_REQ_GET_ENERGY: do_energy(d, id, &rq); break;
-    case SRV_REQ_GET_SNAPSHOT: do_snapshot(d, id, &rq); break;
-    case SRV_REQ_PING:
-        srv_reply_pong(SRV_VERSION, d->cfg->stream_endpoint, &buf, &len);
-        send_reply(d, id, buf, len);
-        break;
-    case SRV_REQ_VERSION: {
-        int maj, min, pat;
-        zmq_version(&maj, &min, &pat);
-        char zv[32];
-        snprintf(zv, sizeof zv, "%d.%d.%d", maj, min, pat);
-        const char *names[] = {"libzmq", "sqlite", "protobuf-c", "schema"};
-        char sv[8];
-        snprintf(sv, sizeof sv, "%d", SRV_SCHEMA_VERSION);
-        const char *vers[] = {zv, store_sqlite_version(), srv_codec_protobuf_c_version(), sv};
-        srv_reply_version(SRV_VERSION, names, vers, 4, &buf, &len);
-        send_reply(d, id, buf, len);
-        break;
-    }
-    default:
-        reply_error(d, id, SRV_ERR_BAD_REQUEST, "", "unknown request kind %d", (int)rq.kind);
-    }
+    dispatch(d, id, &rq);
     srv_request_clear(&rq);
 }
 
@@ -654,17 +796,22 @@ static void stop_jobs(daemon_t *d)
     d->stopping = 1;
     srv_pool_stop(d->pool, publish, d);
     while (srv_pool_busy(d->pool)) {
-        zmq_pollitem_t items[] = {{d->router, 0, ZMQ_POLLIN, 0}, {d->pull, 0, ZMQ_POLLIN, 0}};
-        int n = zmq_poll(items, 2, 50);
+        zmq_pollitem_t items[] = {{d->router, 0, ZMQ_POLLIN, 0},
+                                  {d->pull, 0, ZMQ_POLLIN, 0},
+                                  {NULL, store_notify_fd(d->st), ZMQ_POLLIN, 0}};
+        int n = zmq_poll(items, 3, 50);
         if (n < 0 && errno != EINTR) {
             srv_warn(0, "zmq_poll while stopping: %s", zmq_strerror(errno));
             break;
         }
         if (n > 0 && (items[1].revents & ZMQ_POLLIN)) on_pull(d, 10000);
+        if (n > 0 && (items[2].revents & ZMQ_POLLIN)) store_notify_drain(d->st);
         if (n > 0 && (items[0].revents & ZMQ_POLLIN)) on_router(d);
+        if (d->pending) serve_pending(d);
     }
     srv_pool_destroy(&d->pool);
     on_pull(d, 0);
+    drain_pending(d);
 }
 
 static int open_socket(void *zctx, int type, const char *ep, int allow_remote, void **out,
@@ -762,16 +909,19 @@ int srv_daemon_run(const srv_config *cfg)
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},
                                   {d.xpub, 0, ZMQ_POLLIN, 0},
-                                  {d.pull, 0, ZMQ_POLLIN, 0}};
-        int n = zmq_poll(items, 3, 250);
+                                  {d.pull, 0, ZMQ_POLLIN, 0},
+                                  {NULL, store_notify_fd(d.st), ZMQ_POLLIN, 0}};
+        int n = zmq_poll(items, 4, 250);
         if (n < 0) {
             if (errno == EINTR) continue;
             srv_warn(0, "zmq_poll: %s", zmq_strerror(errno));
             break;
         }
+        if (items[3].revents & ZMQ_POLLIN) store_notify_drain(d.st);
         if (items[2].revents & ZMQ_POLLIN) on_pull(&d, 10000);
         if (items[1].revents & ZMQ_POLLIN) on_xpub(&d);
         if (items[0].revents & ZMQ_POLLIN) on_router(&d);
+        if (d.pending) serve_pending(&d);
     }
     srv_log(0, "%s: shutting down", stop_signal == SIGINT ? "SIGINT" : stop_signal == SIGTERM
             ? "SIGTERM" : "stopping");

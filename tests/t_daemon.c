@@ -1738,3 +1738,112 @@ out:
     if (zctx) zmq_ctx_term(zctx);
     if (!rc) CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM");
 }
+
+/* ---- one client's pipelined requests ------------------------------------------- */
+
+/* A client that sends several requests without waiting (a DEALER) gets its
+ * replies in the order it asked, while reads wait for their run's writes
+ * off the event loop: each energy page it gets is a gap-free prefix of the
+ * run's series that includes every sample written before it asked, and a
+ * Ping between two reads is answered in its place. */
+DTEST(daemon_pipelined_reads_keep_order)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--solver-threads", "1", NULL};
+    char dir[300], path[400];
+    td_daemon d;
+    td_out o;
+    void *ctx = NULL, *s = NULL;
+    int zero = 0;
+    static const char *const want[] = {"energy", "pong", "run", "energy", "runs", "version", "run"};
+    enum { NREQ = 7 };
+    json_t *rep[NREQ] = {0};
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(long_case(1000), dir, "long.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
+    CHECK(o.status == 0 && job_of(o.out) == 1);
+    td_out_free(&o);
+    CHECK(td_wait_steps(&d, 1, 20000, 30) == 0);
+
+    ctx = zmq_ctx_new();
+    CHECK(ctx);
+    s = zmq_socket(ctx, ZMQ_DEALER);
+    if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, d.ep)) {
+        if (s) zmq_close(s);
+        zmq_ctx_term(ctx);
+        CHECK(!"DEALER connect");
+    }
+    srv_request rq[NREQ];
+    memset(rq, 0, sizeof rq);
+    rq[0].kind = SRV_REQ_GET_ENERGY, rq[0].id = 1;
+    rq[1].kind = SRV_REQ_PING;
+    rq[2].kind = SRV_REQ_STATUS, rq[2].id = 1;
+    rq[3].kind = SRV_REQ_GET_ENERGY, rq[3].id = 1;
+    rq[4].kind = SRV_REQ_LIST_RUNS;
+    rq[5].kind = SRV_REQ_VERSION;
+    rq[6].kind = SRV_REQ_CANCEL, rq[6].id = 1;
+    int sent = 1;
+    for (int i = 0; i < NREQ && sent; i++) {
+        uint8_t *buf = NULL;
+        size_t len = 0;
+        sent = srv_request_encode(&rq[i], &buf, &len) == 0 &&
+               zmq_send(s, "", 0, ZMQ_SNDMORE) == 0 && zmq_send(s, buf, len, 0) == (int)len;
+        free(buf);
+    }
+    int got = 0;
+    for (; sent && got < NREQ; got++) {
+        zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
+        if (zmq_poll(&it, 1, 20000) != 1) break;
+        zmq_msg_t m[2];
+        int np = 0, more = 1;
+        while (more) {
+            zmq_msg_t x;
+            zmq_msg_init(&x);
+            if (zmq_msg_recv(&x, s, 0) < 0) {
+                zmq_msg_close(&x);
+                break;
+            }
+            more = zmq_msg_more(&x);
+            if (np < 2) m[np++] = x;
+            else zmq_msg_close(&x);
+        }
+        char *json = NULL, err[256];
+        if (np == 2 && !srv_msg_bytes_to_json(SRV_MSG_REPLY, zmq_msg_data(&m[1]), zmq_msg_size(&m[1]),
+                                               0, 0, &json, err, sizeof err))
+            rep[got] = json_loads(json, 0, NULL);
+        free(json);
+        for (int k = 0; k < np; k++) zmq_msg_close(&m[k]);
+        if (!rep[got]) break;
+    }
+    zmq_close(s);
+    zmq_ctx_term(ctx);
+
+    int in_order = got == NREQ;
+    for (int i = 0; i < got && in_order; i++) in_order = json_object_get(rep[i], want[i]) != NULL;
+    CHECKF(sent && in_order, "sent %d, %d replies in the asked order of %d", sent, got, NREQ);
+    /* both energy pages: seq 0, 1, 2, ... with no gap; the later one no shorter */
+    size_t n[2] = {0, 0};
+    for (int k = 0; k < 2; k++) {
+        json_t *smp = json_object_get(json_object_get(rep[k ? 3 : 0], "energy"), "samples");
+        n[k] = json_array_size(smp);
+        for (size_t i = 0; i < n[k]; i++)
+            CHECKF(jint(json_array_get(smp, i), "seq") == (long long)i, "page %d: sample %zu has seq %lld",
+                   k, i, jint(json_array_get(smp, i), "seq"));
+    }
+    /* the first page was read before the Status, the second after it */
+    json_t *run = json_object_get(rep[2], "run");
+    json_t *last0 = json_array_get(json_object_get(json_object_get(rep[0], "energy"), "samples"),
+                                   n[0] ? n[0] - 1 : 0);
+    CHECKF(n[0] >= 1 && n[1] >= n[0] && jint(last0, "step") <= jint(run, "steps") &&
+               !strcmp(jstr(run, "status"), "RUNNING"),
+           "pages of %zu and %zu samples (first ends at step %lld), Status %s at step %lld", n[0],
+           n[1], jint(last0, "step"), jstr(run, "status"), jint(run, "steps"));
+    TLOG("7 pipelined requests answered in order: pages of %zu and %zu samples around Status at "
+         "step %lld", n[0], n[1], jint(run, "steps"));
+    for (int i = 0; i < NREQ; i++) json_decref(rep[i]);
+    char st[32];
+    CHECK(td_wait_status(&d, 1, "CANCELLED", 10, st, sizeof st) == 0);
+    CHECK(td_stop(&d) == 0);
+}
