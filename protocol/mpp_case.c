@@ -8,9 +8,10 @@
  * enum values that need a mapping, the run control (stop, threads, output)
  * and the size limits that guard the copies.  Method, update, dt, CFL and
  * mass tolerance go to the solver as given (the enums have the same
- * values, asserted in mpp.c); the solver's check, run once at the end,
- * judges them with the physics and counts the particles.  Error fields are
- * written in the schema's snake_case spelling.
+ * values, asserted in mpp.c); the solver's check (mpm_case_check), run once
+ * at the end, judges them with the physics and counts the particles up to
+ * the caller's limit; its mpm_case_info stays in the mpp_case.  Error
+ * fields are written in the schema's snake_case spelling.
  */
 #include "mpp_internal.h"
 
@@ -144,7 +145,6 @@ static int conv_grid(const Mpmd__Grid *g, mpp_case *mc, mpm_error *err)
     if (total > MPP_CASE_MAX_NODES)
         return mpm_fail(err, MPM_ETOOBIG, "grid.nodes", "%.0f nodes, more than the limit of %u", total,
                         MPP_CASE_MAX_NODES);
-    mc->nodes = (size_t)total;
     return 0;
 }
 
@@ -481,33 +481,6 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
     return conv_run(pb, mc, err);
 }
 
-/* The solver's check of the converted case, once: validates it and counts
- * its particles, which must not exceed max.  (Today's solver API reports
- * through a "field: message" text in the proto spelling; this is the one
- * place that turns it into the error value, until the solver fills an
- * mpm_error itself.) */
-static int solver_check(mpp_case *mc, size_t max, mpm_error *err)
-{
-    char text[MPM_ERROR_MSG_MAX + 128] = "";
-    long n = mpm_case_count(&mc->c, text, sizeof text);
-    if (n < 0) {
-        int code = n == MPM_ECFL || n == MPM_ENOMEM ? (int)n : MPM_EINVAL;
-        const char *colon = strstr(text, ": ");
-        char field[128] = "";
-        size_t k = colon ? (size_t)(colon - text) : 0;
-        if (k && k < sizeof field && !memchr(text, ' ', k)) {
-            memcpy(field, text, k);
-            field[k] = 0;
-            return mpm_fail(err, code, field, "%s", colon + 2);
-        }
-        return mpm_fail(err, code, NULL, "%s", text[0] ? text : mpm_strerror(code));
-    }
-    if ((size_t)n > max)
-        return mpm_fail(err, MPM_ETOOBIG, "bodies", "the case has %ld particles, above the limit of %zu", n, max);
-    mc->particles = (size_t)n;
-    return 0;
-}
-
 int mpp_case_from_pb(const Mpmd__Case *pb, size_t max_particles, mpp_case **out, mpm_error *err)
 {
     mpp_case *mc;
@@ -519,7 +492,11 @@ int mpp_case_from_pb(const Mpmd__Case *pb, size_t max_particles, mpp_case **out,
     mc = calloc(1, sizeof *mc);
     if (!mc) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
     rc = conv_case(pb, mc, max, err);
-    if (!rc) rc = solver_check(mc, max, err);
+    if (!rc) {
+        /* the solver's check, once: it counts the particles up to the limit */
+        mc->c.max_particles = max;
+        rc = mpm_case_check(&mc->c, &mc->info, err);
+    }
     if (rc) {
         mpp_case_destroy(&mc);
         return rc;

@@ -2,8 +2,9 @@
  * mpp_case.h - a simulation case from the wire to the solver: JSON text or
  * protobuf bytes -> Mpmd__Case (the generated message, opaque here) ->
  * mpp_case, a checked, self-contained mpm_case ready for mpm_sim_new(),
- * with the run control and output requests beside it and the particle and
- * node counts the check found (so nobody counts again).
+ * with the run control and output requests beside it and what the solver's
+ * check found (mpm_case_info: the particle and node counts, ...), so
+ * nobody checks or counts again.
  *
  * The conversion checks only what the schema cannot express (dimensions,
  * array lengths, indices, enum values it maps, value ranges of the run
@@ -49,9 +50,10 @@ enum {
  * arrays, so it stays valid until mpp_case_destroy() whatever happens to
  * the message it came from. */
 typedef struct mpp_case {
-    mpm_case c;                 /* the solver case (passed the solver's check) */
-    size_t particles;           /* particles the case makes (the check's count) */
-    size_t nodes;               /* grid nodes */
+    mpm_case c;                 /* the solver case (passed mpm_case_check; its
+                                   max_particles is the limit it was checked under) */
+    mpm_case_info info;         /* what the check found: particles, nodes, ...;
+                                   give it to mpm_sim_new() to build unchecked */
     char *name;                 /* Case.name, "" when absent */
     int has_end_time;           /* 1: run until end_time; 0: run `steps` steps */
     double end_time;
@@ -97,7 +99,9 @@ void mpp_case_pin_defaults(Mpmd__Case *pb);
 
 /* Case message -> mpp_case: converts and checks (see above), refusing a
  * case of more than max_particles particles (0: MPP_DEFAULT_MAX_PARTICLES)
- * with MPM_ETOOBIG.  *out is NULL on error. */
+ * with MPM_ETOOBIG: the limit of the solver's counting pass (which stops
+ * there) and of the conversion's own guards before its copies.  *out is
+ * NULL on error. */
 int mpp_case_from_pb(const Mpmd__Case *pb, size_t max_particles, mpp_case **out, mpm_error *err);
 
 /* JSON text -> mpp_case in one call (mpp_case_from_json + _from_pb). */

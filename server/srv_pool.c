@@ -130,7 +130,7 @@ static void job_free(srv_job *j)
 #define FLUSH_MAX 256
 
 typedef struct {
-    store_energy_sample rec[FLUSH_MAX];
+    mpm_energy_sample rec[FLUSH_MAX];
     uint8_t *msg[FLUSH_MAX];        /* packed StreamMsg or NULL (encoding failed) */
     size_t len[FLUSH_MAX];
     size_t n;
@@ -163,10 +163,11 @@ static void flush_samples(ctx *c)
     if (!pe) return;
     pe->last_flush = mono_now();
     if (!pe->n) return;
-    int rc = store_energy_append_n(c->p->st, pe->rec, pe->n);
+    int rc = store_energy_append(c->p->st, (int64_t)c->j->id, pe->rec, pe->n);
     if (rc)
-        srv_warn(c->j->id, "energy samples %lld..%lld not recorded: %s", (long long)pe->rec[0].seq,
-                 (long long)pe->rec[pe->n - 1].seq, store_strerror(rc));
+        srv_warn(c->j->id, "energy samples %llu..%llu not recorded: %s",
+                 (unsigned long long)pe->rec[0].seq, (unsigned long long)pe->rec[pe->n - 1].seq,
+                 store_error()->message);
     for (size_t i = 0; i < pe->n; i++) publish(c, pe->msg[i], pe->len[i]);
     pe->n = 0;
 }
@@ -180,18 +181,7 @@ static void energy_sample(ctx *c, mpm_sim *sim, mpm_energy_sample *out)
     s.dim = mpm_sim_dim(sim);
     mpm_sim_energy(sim, &s.e);
     s.seq = j->energy_seq++;
-    store_energy_sample r = {0};
-    r.run_id = (int64_t)j->id;
-    r.seq = (int64_t)s.seq;
-    r.step = s.step;
-    r.t = s.t;
-    r.kinetic = s.e.kinetic;
-    r.strain = s.e.strain;
-    r.potential = s.e.potential;
-    r.external_work = s.e.external_work;
-    r.total = s.e.total;
-    for (int d = 0; d < 3; d++) r.momentum[d] = s.e.momentum[d];
-    r.mass = s.e.mass;
+    mpm_energy_sample r = s;  /* one shape to the wire and the store */
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
@@ -199,9 +189,9 @@ static void energy_sample(ctx *c, mpm_sim *sim, mpm_energy_sample *out)
     if (out) *out = s;
     pending *pe = c->pe;
     if (!pe) {
-        int rc = store_energy_append(c->p->st, &r);
+        int rc = store_energy_append(c->p->st, (int64_t)j->id, &r, 1);
         if (rc) srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
-                         store_strerror(rc));
+                         store_error()->message);
         publish(c, buf, len);
         return;
     }
@@ -342,7 +332,7 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
                              off * sizeof(double)};
         int rc = store_snapshot_put(c->p->st, &ss);
         if (rc) srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
-                         store_strerror(rc));
+                         store_error()->message);
     }
     if (stream) publish_snapshot(c, b, &s);
     return 0;
@@ -382,22 +372,17 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
     srv_job *j = c->j;
     flush_samples(c);
     store_run_end end = {0};
-    static const store_status map[] = {[MPP_STATUS_FINISHED] = STORE_FINISHED,
-                                       [MPP_STATUS_FAILED] = STORE_FAILED,
-                                       [MPP_STATUS_CANCELLED] = STORE_CANCELLED,
-                                       [MPP_STATUS_INTERRUPTED] = STORE_INTERRUPTED};
-    end.status = map[status];
-    end.steps_done = steps;
+    end.status = (mpp_status)status;
+    end.steps = steps;
     end.wall_s = wall;
     end.psteps_per_s = wall > 0 ? (double)steps * (double)particles / wall : 0;
     end.error = error;
     if (last) {
         end.has_energy = 1;
-        end.energy = (store_energies){last->e.kinetic, last->e.strain, last->e.potential,
-                                      last->e.external_work, last->e.total};
+        end.energy = last->e;
     }
     int rc = store_run_finish(c->p->st, (int64_t)j->id, &end);
-    if (rc) srv_warn(j->id, "end of run not recorded: %s", store_strerror(rc));
+    if (rc) srv_warn(j->id, "end of run not recorded: %s", store_error()->message);
     mpp_finished f = {status, error, steps, t, wall, last};
     uint8_t *buf = NULL;
     size_t len = 0;
@@ -415,14 +400,17 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     mpp_case *sc = j->sc;
     const srv_config *cfg = p->cfg;
     double start = wall_now(), t0 = mono_now();
-    store_run_set_status(p->st, (int64_t)j->id, STORE_RUNNING, start, NULL);
+    store_run_set_status(p->st, (int64_t)j->id, MPP_STATUS_RUNNING, start, NULL);
     int threads = sc->c.threads > 0 && sc->c.threads < cfg->solver_threads ? sc->c.threads
                                                                             : cfg->solver_threads;
     sc->c.threads = threads;
     char err[512];
-    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    mpm_error me;
+    /* the case passed the codec's check (sc->info); threads is checked again */
+    mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me);
     if (!sim) {
-        finish(&c, MPP_STATUS_FAILED, err[0] ? err : "out of memory", 0, 0, 0, 0, NULL);
+        finish(&c, MPP_STATUS_FAILED, mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err), 0, 0,
+               0, 0, NULL);
         return;
     }
     size_t n = mpm_sim_particles(sim);
@@ -469,7 +457,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         if (every && (k + 1) % every == 0) mpm_sim_want_energy(sim);
         if (mpm_sim_step(sim)) {
             status = MPP_STATUS_FAILED;
-            snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+            mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
             break;
         }
         k++;
@@ -498,7 +486,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
      * blow-up in the last steps must not be recorded as a result */
     if (status == MPP_STATUS_FINISHED && mpm_sim_check(sim)) {
         status = MPP_STATUS_FAILED;
-        snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+        mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
     }
     if (last.step != mpm_sim_steps(sim) && status != MPP_STATUS_FAILED)
         energy_sample(&c, sim, &last);
@@ -698,10 +686,10 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
     pthread_mutex_unlock(&p->mu);
     if (rc == SRV_CANCEL_QUEUED) {
         store_run_end end = {0};
-        end.status = STORE_CANCELLED;
+        end.status = MPP_STATUS_CANCELLED;
         end.error = "cancelled by a client before it started";
         int src = store_run_finish(p->st, (int64_t)id, &end);
-        if (src) srv_warn(id, "cancellation not recorded: %s", store_strerror(src));
+        if (src) srv_warn(id, "cancellation not recorded: %s", store_error()->message);
         mpp_finished f = {MPP_STATUS_CANCELLED, end.error, 0, 0, 0, NULL};
         if (mpp_stream_finished(id, j->msg_seq++, &f, msg, len))
             srv_warn(id, "out of memory encoding the end of the stream");
@@ -737,10 +725,10 @@ void srv_pool_stop(srv_pool *p, srv_pool_publish_fn pub, void *arg)
     while (q) {
         srv_job *nx = q->next;
         store_run_end end = {0};
-        end.status = STORE_INTERRUPTED;
+        end.status = MPP_STATUS_INTERRUPTED;
         end.error = STORE_INTERRUPTED_QUEUED;
         int rc = store_run_finish(p->st, (int64_t)q->id, &end);
-        if (rc) srv_warn(q->id, "interruption not recorded: %s", store_strerror(rc));
+        if (rc) srv_warn(q->id, "interruption not recorded: %s", store_error()->message);
         srv_log(q->id, "interrupted while queued");
         if (pub) {
             mpp_finished f = {MPP_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL};

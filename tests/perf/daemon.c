@@ -527,9 +527,11 @@ static int ref_job(const char *json, pb_row *r)
         return -1;
     }
     double t0 = pb_now(), c0 = pb_cpu_self();
-    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    mpm_error me;
+    mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me); /* checked by mpp_case_load */
     if (!sim) {
-        snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s", err[0] ? err : "out of memory");
+        snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s",
+                 mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
         mpp_case_destroy(&sc);
         return -1;
     }
@@ -541,7 +543,7 @@ static int ref_job(const char *json, pb_row *r)
     r->nodes = mpm_sim_nodes(sim);
     r->dim = mpm_sim_dim(sim);
     r->steps = (long)sc->steps;
-    if (rc) snprintf(r->msg, sizeof r->msg, "%s (%s)", mpm_strerror(rc), mpm_sim_error(sim));
+    if (rc) snprintf(r->msg, sizeof r->msg, "%s (%.200s)", mpm_strerror(rc), mpm_sim_error(sim)->message);
     mpm_sim_destroy(&sim);
     mpp_case_destroy(&sc);
     r->wall_s = t2 - t0;
