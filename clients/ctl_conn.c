@@ -227,14 +227,22 @@ int ctl_call_quiet(ctl_conn *c, const mpp_request *rq, const char *want, json_t 
     return interpret(c, *reply, want, body, err_code, err_msg);
 }
 
-/* Prints a Reply.error as ctl_call() does. */
+/* Prints a Reply.error: "mpmctl: CODE: message", with " (field F)" when
+ * the message does not already start with "F: " (an mpmd renders every
+ * error as "field: message"; an older one did not always). */
+static void print_error(const char *code, const char *message, const char *field)
+{
+    size_t n = field ? strlen(field) : 0;
+    fprintf(stderr, "mpmctl: %s: %s", code, message);
+    if (n && !(strncmp(message, field, n) == 0 && message[n] == ':'))
+        fprintf(stderr, " (field %s)", field);
+    fputc('\n', stderr);
+}
+
 static void print_server_error(json_t *reply)
 {
     json_t *e = json_object_get(reply, "error");
-    const char *field = cj_str(e, "field", NULL);
-    fprintf(stderr, "mpmctl: %s: %s", cj_str(e, "code", "INTERNAL"), cj_str(e, "message", ""));
-    if (field && *field) fprintf(stderr, " (field %s)", field);
-    fputc('\n', stderr);
+    print_error(cj_str(e, "code", "INTERNAL"), cj_str(e, "message", ""), cj_str(e, "field", NULL));
 }
 
 int ctl_call(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply, json_t **body)
@@ -262,9 +270,7 @@ int ctl_call_reply(ctl_conn *c, const mpp_request *rq, mpp_reply_kind want, mpp_
     if (rc) return rc;
     if (out->kind == MPP_REPLY_ERROR) {
         const char *code = mpp_err_code_name(out->err_code);
-        fprintf(stderr, "mpmctl: %s: %s", code ? code : "INTERNAL", out->err_message);
-        if (*out->err_field) fprintf(stderr, " (field %s)", out->err_field);
-        fputc('\n', stderr);
+        print_error(code ? code : "INTERNAL", out->err_message, out->err_field);
         return CTL_ESERVER;
     }
     if (out->kind != want) {

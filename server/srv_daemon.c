@@ -108,6 +108,18 @@ static void send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len)
     free(buf);
 }
 
+/* Answers with the Error reply of an mpm_error (wire code, camelCase
+ * field and text from the protocol library). */
+static void reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e)
+{
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    mpp_reply_error_from(e, &buf, &len);
+    send_reply(d, id, buf, len);
+}
+
+/* Answers with an error: code an MPM_E* code, field a path in the schema's
+ * spelling ("" or NULL: none), the message without the field. */
 static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
 static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
@@ -117,20 +129,9 @@ static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field,
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
-    uint8_t *buf = NULL;
-    size_t len = 0;
-    mpp_reply_error(code, msg, field, &buf, &len);
-    send_reply(d, id, buf, len);
-}
-
-/* Answers with the Error reply of an mpm_error (wire code, camelCase
- * field and text from the protocol library). */
-static void reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e)
-{
-    uint8_t *buf = NULL;
-    size_t len = 0;
-    mpp_reply_error_from(e, &buf, &len);
-    send_reply(d, id, buf, len);
+    mpm_error e;
+    mpm_fail(&e, code, field, "%s", msg);
+    reply_mpm_error(d, id, &e);
 }
 
 /* RunInfo from a stored run, with its last energy sample and stored
@@ -196,18 +197,18 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
 }
 
 /* Answers with the RunInfo of a run; field names the request's id field
- * ("jobId" or "runId") for NOT_FOUND. */
+ * ("job_id" or "run_id") for NOT_FOUND. */
 static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, const char *field)
 {
     store_run r;
     int rc = store_run_get(d->st, (int64_t)run, &r);
-    const char *what = strcmp(field, "jobId") ? "run" : "job";
+    const char *what = strcmp(field, "job_id") ? "run" : "job";
     if (rc == MPM_ENOTFOUND) {
-        reply_error(d, id, MPP_ERR_NOT_FOUND, field, "no %s %llu", what, (unsigned long long)run);
+        reply_error(d, id, MPM_ENOTFOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
     }
     if (rc) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading %s %llu: %s", what,
+        reply_error(d, id, MPM_EINTERNAL, "", "reading %s %llu: %s", what,
                     (unsigned long long)run, store_error()->message);
         return;
     }
@@ -222,7 +223,7 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_run(&ri, &buf, &len))
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
     else send_reply(d, id, buf, len);
     store_run_extra_clear(&x);
     store_run_clear(&r);
@@ -246,7 +247,7 @@ static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
 static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     if (stop_signal || d->stopping) {
-        reply_error(d, id, MPP_ERR_UNAVAILABLE, "", "mpmd is shutting down");
+        reply_error(d, id, MPM_EUNAVAIL, "", "mpmd is shutting down");
         return;
     }
     mpp_case *sc = NULL;
@@ -262,15 +263,15 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     double steps = !sc->has_end_time ? (double)sc->steps
                    : sc->c.dt > 0 ? ceil(sc->end_time / sc->c.dt - 0.5) : 0;
     if (!(steps <= (double)d->cfg->max_steps)) {
-        reply_error(d, id, MPP_ERR_TOO_LARGE, sc->has_end_time ? "endTime" : "steps",
-                    "%s: the case asks for %.15g steps%s, above this server's limit %lld "
-                    "(--max-steps)", sc->has_end_time ? "endTime" : "steps", steps,
+        reply_error(d, id, MPM_ETOOBIG, sc->has_end_time ? "end_time" : "steps",
+                    "the case asks for %.15g steps%s, above this server's limit %lld "
+                    "(--max-steps)", steps,
                     sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
         mpp_case_destroy(&sc);
         return;
     }
     if (!srv_pool_has_room(d->pool)) {
-        reply_error(d, id, MPP_ERR_QUEUE_FULL, "",
+        reply_error(d, id, MPM_EFULL, "",
                     "the job queue is full (%d running, %d queued at most); retry later",
                     d->cfg->workers, d->cfg->queue_max);
         mpp_case_destroy(&sc);
@@ -282,7 +283,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
      * whatever later defaults say */
     mpp_case_pin_defaults(rq->case_pb);
     if (mpp_case_pack(rq->case_pb, &pb, &pblen)) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "out of memory");
+        reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
         mpp_case_destroy(&sc);
         return;
     }
@@ -303,7 +304,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     rc = store_run_insert(d->st, &r, &run);
     free(pb);
     if (rc) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot record the run: %s", store_error()->message);
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot record the run: %s", store_error()->message);
         mpp_case_destroy(&sc);
         return;
     }
@@ -313,12 +314,11 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes);
     if (rc) {
         store_run_end end = {0};
-        end.status = rc == SRV_POOL_ESTOPPED ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
-        end.error = rc == SRV_POOL_EFULL ? "job queue full" : rc == SRV_POOL_ESTOPPED
+        end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
+        end.error = rc == MPM_EFULL ? "job queue full" : rc == MPM_EUNAVAIL
                     ? STORE_INTERRUPTED_QUEUED : "out of memory";
         store_run_finish(d->st, run, &end);
-        reply_error(d, id, rc == SRV_POOL_EFULL ? MPP_ERR_QUEUE_FULL : rc == SRV_POOL_ESTOPPED
-                    ? MPP_ERR_UNAVAILABLE : MPP_ERR_INTERNAL, "", "%s", end.error);
+        reply_error(d, id, rc, "", "%s", end.error);
         mpp_case_destroy(&sc);
         return;
     }
@@ -350,12 +350,12 @@ static void answer_read(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     switch (rq->kind) {
     case MPP_REQ_CANCEL:
-    case MPP_REQ_STATUS: reply_run(d, id, rq->id, 0, "jobId"); break;
-    case MPP_REQ_GET_RUN: reply_run(d, id, rq->id, rq->with_case, "runId"); break;
+    case MPP_REQ_STATUS: reply_run(d, id, rq->id, 0, "job_id"); break;
+    case MPP_REQ_GET_RUN: reply_run(d, id, rq->id, rq->with_case, "run_id"); break;
     case MPP_REQ_LIST_RUNS: do_list(d, id, rq); break;
     case MPP_REQ_GET_ENERGY: do_energy(d, id, rq); break;
     case MPP_REQ_GET_SNAPSHOT: do_snapshot(d, id, rq); break;
-    default: reply_error(d, id, MPP_ERR_INTERNAL, "", "request kind %d is not a read", (int)rq->kind);
+    default: reply_error(d, id, MPM_EINTERNAL, "", "request kind %d is not a read", (int)rq->kind);
     }
 }
 
@@ -412,7 +412,7 @@ static void enqueue(daemon_t *d, zmq_msg_t *id, mpp_request *rq, int begun, uint
     }
     if (p) zmq_msg_close(&p->id);
     free(p);
-    reply_error(d, id, MPP_ERR_UNAVAILABLE, "", "%zu requests are waiting for the store; retry "
+    reply_error(d, id, MPM_EUNAVAIL, "", "%zu requests are waiting for the store; retry "
                 "later", d->npending);
 }
 
@@ -468,16 +468,16 @@ static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job)
         store_run r;
         int src = store_run_get(d->st, (int64_t)job, &r);
         if (src == MPM_ENOTFOUND) {
-            reply_error(d, id, MPP_ERR_NOT_FOUND, "jobId", "no job %llu", (unsigned long long)job);
+            reply_error(d, id, MPM_ENOTFOUND, "job_id", "no job %llu", (unsigned long long)job);
             return 1;
         }
         if (!src) {
-            reply_error(d, id, MPP_ERR_CONFLICT, "jobId", "job %llu already ended (%s)",
+            reply_error(d, id, MPM_ECONFLICT, "job_id", "job %llu already ended (%s)",
                         (unsigned long long)job, mpp_status_name((int)r.status));
             store_run_clear(&r);
             return 1;
         }
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
+        reply_error(d, id, MPM_EINTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
                     store_error()->message);
         return 1;
     }
@@ -492,7 +492,7 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == MPM_ENOTFOUND) {
-        reply_error(d, id, MPP_ERR_NOT_FOUND, "runId", "no run %llu", (unsigned long long)rq->id);
+        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu", (unsigned long long)rq->id);
         return;
     }
     int dim = rc ? 3 : r.dim;
@@ -502,7 +502,7 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     int64_t from = rq->from_seq > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)rq->from_seq;
     rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es, &nes);
     if (rc) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading energies of run %llu: %s",
+        reply_error(d, id, MPM_EINTERNAL, "", "reading energies of run %llu: %s",
                     (unsigned long long)rq->id, store_error()->message);
         return;
     }
@@ -512,7 +512,7 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_energy(rq->id, es, n, more, &buf, &len))
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode %zu energy samples", n);
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu energy samples", n);
     else send_reply(d, id, buf, len);
     free(es);
 }
@@ -522,7 +522,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == MPM_ENOTFOUND) {
-        reply_error(d, id, MPP_ERR_NOT_FOUND, "runId", "no run %llu",
+        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu",
                     (unsigned long long)rq->id);
         return;
     }
@@ -533,15 +533,15 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
          : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
     if (rc == MPM_ENOTFOUND) {
         if (rq->has_step)
-            reply_error(d, id, MPP_ERR_NOT_FOUND, "step", "run %llu has no stored snapshot at "
+            reply_error(d, id, MPM_ENOTFOUND, "step", "run %llu has no stored snapshot at "
                         "step %lld", (unsigned long long)rq->id, (long long)rq->step);
         else
-            reply_error(d, id, MPP_ERR_NOT_FOUND, "runId", "run %llu has no stored snapshot "
+            reply_error(d, id, MPM_ENOTFOUND, "run_id", "run %llu has no stored snapshot "
                         "(the case must set output.recordSnapshots)", (unsigned long long)rq->id);
         return;
     }
     if (rc) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "reading a snapshot: %s", store_error()->message);
+        reply_error(d, id, MPM_EINTERNAL, "", "reading a snapshot: %s", store_error()->message);
         return;
     }
     size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
@@ -554,7 +554,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
             off += cnt[i];
         }
     if (off * sizeof(double) != ss.size) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "stored snapshot of run %llu at step %lld is "
+        reply_error(d, id, MPM_EINTERNAL, "", "stored snapshot of run %llu at step %lld is "
                     "corrupt (%zu bytes, expected %zu)", (unsigned long long)rq->id,
                     (long long)ss.step, ss.size, off * sizeof(double));
         store_snapshot_clear(&ss);
@@ -564,7 +564,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_snapshot(&s, &buf, &len))
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode the snapshot");
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode the snapshot");
     else send_reply(d, id, buf, len);
     store_snapshot_clear(&ss);
 }
@@ -574,14 +574,14 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run_filter f = {0};
     if (rq->status) {
         if (rq->status < MPP_STATUS_MIN || rq->status > MPP_STATUS_MAX) {
-            reply_error(d, id, MPP_ERR_BAD_REQUEST, "listRuns.status", "listRuns.status: unknown "
+            reply_error(d, id, MPM_EREQUEST, "list_runs.status", "unknown "
                         "value %d", rq->status);
             return;
         }
         f.status_mask = STORE_STATUS_BIT(rq->status);
     }
     if (rq->limit > LIST_MAX) {
-        reply_error(d, id, MPP_ERR_TOO_LARGE, "listRuns.limit", "listRuns.limit: %u is above this "
+        reply_error(d, id, MPM_ETOOBIG, "list_runs.limit", "%u is above this "
                     "server's maximum of %u runs per listing", rq->limit, LIST_MAX);
         return;
     }
@@ -589,20 +589,20 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run *runs = NULL;
     size_t n = 0;
     if (store_run_list(d->st, &f, &runs, &n)) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "listing runs: %s", store_error()->message);
+        reply_error(d, id, MPM_EINTERNAL, "", "listing runs: %s", store_error()->message);
         return;
     }
     mpp_run_info *ri = calloc(n ? n : 1, sizeof *ri);
     mpm_energy_sample *es = calloc(n ? n : 1, sizeof *es);
     store_run_extra *xs = calloc(n ? n : 1, sizeof *xs);
     if (!ri || !es || !xs) {
-        reply_error(d, id, MPP_ERR_INTERNAL, "", "out of memory");
+        reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
     } else {
         for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
         uint8_t *buf = NULL;
         size_t len = 0;
         if (mpp_reply_runs(ri, n, &buf, &len))
-            reply_error(d, id, MPP_ERR_INTERNAL, "", "cannot encode %zu runs", n);
+            reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", n);
         else send_reply(d, id, buf, len);
     }
     if (xs)
@@ -638,7 +638,7 @@ static void do_other(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         break;
     }
     default:
-        reply_error(d, id, MPP_ERR_BAD_REQUEST, "", "unknown request kind %d", (int)rq->kind);
+        reply_error(d, id, MPM_EREQUEST, "", "unknown request kind %d", (int)rq->kind);
     }
 }
 
@@ -649,7 +649,7 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t 
     if (size > (size_t)d->cfg->max_request_bytes) {
         d->bad_requests++;
         srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
-        reply_error(d, id, MPP_ERR_TOO_LARGE, "", "request of %zu bytes is above this server's "
+        reply_error(d, id, MPM_ETOOBIG, "", "request of %zu bytes is above this server's "
                     "limit of %lld bytes (--max-request-bytes)", size, d->cfg->max_request_bytes);
         return;
     }
@@ -697,7 +697,7 @@ static void on_router(daemon_t *d)
                  "request)", total);
         /* answerable when the delimiter is there: the peer speaks the protocol */
         if (nparts >= 2 && zmq_msg_size(&part[1]) == 0)
-            reply_error(d, &part[0], MPP_ERR_BAD_REQUEST, "",
+            reply_error(d, &part[0], MPM_EREQUEST, "",
                         "expected 1 request frame after the empty delimiter, got %zu", total - 2);
     }
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);

@@ -600,7 +600,7 @@ int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at
                     size_t particles, size_t nodes)
 {
     srv_job *j = calloc(1, sizeof *j);
-    if (!j) return SRV_POOL_ENOMEM;
+    if (!j) return MPM_ENOMEM;
     j->id = id;
     atomic_init(&j->cancel, 0);
     atomic_init(&j->watched, 0);
@@ -611,9 +611,9 @@ int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at
     pthread_mutex_lock(&p->mu);
     int busy = 0;
     for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
-    int rc = p->stopping ? SRV_POOL_ESTOPPED
+    int rc = p->stopping ? MPM_EUNAVAIL
              : p->nqueued + (size_t)busy >= (size_t)p->nworkers + (size_t)p->cfg->queue_max
-                 ? SRV_POOL_EFULL
+                 ? MPM_EFULL
                  : 0;
     if (!rc) {
         j->sc = *sc;

@@ -26,11 +26,6 @@ void srv_topic(uint64_t job, char *buf);
 /* Parses a topic prefix of exactly SRV_TOPIC_LEN bytes; 0 if it is one. */
 int srv_topic_parse(const char *buf, size_t len, uint64_t *job);
 
-enum {
-    SRV_POOL_EFULL = -1,    /* the queue is full */
-    SRV_POOL_ESTOPPED = -2, /* shutting down */
-    SRV_POOL_ENOMEM = -3
-};
 
 /* What Cancel found. */
 enum { SRV_CANCEL_NONE = 0, SRV_CANCEL_QUEUED = 1, SRV_CANCEL_RUNNING = 2 };
@@ -53,8 +48,8 @@ srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char 
                        char *err, size_t errlen);
 
 /* Queues job `id` (its run record already inserted).  Takes ownership of
- * *sc (set to NULL) on success.  Returns 0, SRV_POOL_EFULL or
- * SRV_POOL_ESTOPPED. */
+ * *sc (set to NULL) on success.  Returns 0, MPM_EFULL or
+ * MPM_EUNAVAIL. */
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at,
                     size_t particles, size_t nodes);
 
