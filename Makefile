@@ -72,17 +72,24 @@ $(1)/%.o: %.c | $(GEN_H)
 $(1)/gen/%.o: build/gen/%.c $(GEN_H)
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(CSTD) $(2) $$(INC) -MMD -MP -c $$< -o $$@
-$(1)/libmpm.a: $(patsubst %.c,$(1)/%.o,$(MPM_SRCS))
-	$$(AR) rcs $$@ $$^
-$(1)/libmpp.a: $(patsubst %.c,$(1)/%.o,$(MPP_SRCS)) $(patsubst build/gen/%.c,$(1)/gen/%.o,$(GEN_C))
-	$$(AR) rcs $$@ $$^
-$(1)/libstore.a: $(patsubst %.c,$(1)/%.o,$(STORE_SRCS))
-	$$(AR) rcs $$@ $$^
-$(1)/libsrv.a: $(patsubst %.c,$(1)/%.o,$(SRV_SRCS))
-	$$(AR) rcs $$@ $$^
-$(1)/libtools.a: $(patsubst %.c,$(1)/%.o,$(TOOL_LIB))
-	$$(AR) rcs $$@ $$^
+$(1)/libmpm.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(MPM_SRCS))
+	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
+$(1)/libmpp.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(MPP_SRCS)) $(patsubst build/gen/%.c,$(1)/gen/%.o,$(GEN_C))
+	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
+$(1)/libstore.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(STORE_SRCS))
+	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
+$(1)/libsrv.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(SRV_SRCS))
+	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
+$(1)/libtools.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(TOOL_LIB))
+	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
 endef
+# A library depends on the list of sources of its build, rewritten only when
+# a file appears or goes, so a deleted source leaves no stale archive member.
+ALL_LIB_SRCS := $(sort $(MPM_SRCS) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) $(TOOL_LIB))
+define srclist
+$(shell mkdir -p $(1); [ "$$(cat $(1)/.sources 2>/dev/null)" = "$(ALL_LIB_SRCS)" ] || echo "$(ALL_LIB_SRCS)" > $(1)/.sources)
+endef
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN),$(call srclist,$(b)))
 $(eval $(call build_rules,$(REL),$(OPT)))
 $(eval $(call build_rules,$(ASAN),$(SAN)))
 $(eval $(call build_rules,$(TSAN),$(TSANF)))

@@ -1,8 +1,10 @@
 /*
  * ctl.h - the parts of mpmctl shared between its files: the connection to
- * mpmd (a DEALER on the control socket, requests encoded with srv_codec,
- * replies decoded through the JSON bridge into jansson values; energy
- * samples and stream messages also straight into srv_codec's structs), the JSON
+ * mpmd (a DEALER on the control socket, requests encoded with the protocol
+ * library; each reply decoded once, either into the library's structs
+ * (energy pages, snapshots, Status and Ping in `watch`) or, for the
+ * commands that print a record as the JSON mapping shows it, through the
+ * JSON bridge into jansson values), the JSON
  * helpers (field access that understands the protobuf JSON mapping, and a
  * printer that writes doubles in their shortest exact form), the output
  * formats and the live view of a job (`watch`).
@@ -21,7 +23,8 @@
 
 #include <jansson.h>
 
-#include "srv_codec.h"
+#include "mpp_endpoint.h"
+#include "mpp_msg.h"
 
 /* Return codes (negative). */
 enum {
@@ -76,29 +79,29 @@ void ctl_conn_close(ctl_conn *c);
  * `want` ("run", "energy", ...).  A Reply.error is printed ("mpmctl: CODE:
  * message (field F)") and gives CTL_ESERVER; if err_code is not NULL it
  * receives the error's code name (static storage, "" otherwise). */
-int ctl_call(ctl_conn *c, const srv_request *rq, const char *want, json_t **reply,
+int ctl_call(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply,
              json_t **body);
 /* As ctl_call(), without printing a server error: *err_code gets the code
  * name and *err_msg the message (both owned by *reply, which is set). */
-int ctl_call_quiet(ctl_conn *c, const srv_request *rq, const char *want, json_t **reply,
+int ctl_call_quiet(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply,
                    json_t **body, const char **err_code, const char **err_msg);
 
-/* The stream endpoint to subscribe to: the --stream override, else the one
- * Pong reports (for tcp with a wildcard or loopback host, derived from the
- * control endpoint instead: port + 1), else the derivation (tcp port + 1,
- * ipc path + ".stream"). */
+/* As ctl_call(), decoding the reply into *out (the protocol library's
+ * struct; release it with mpp_reply_clear() in every case): a body other
+ * than `want` is reported and gives CTL_EPROTO, a Reply.error is printed
+ * and gives CTL_ESERVER. */
+int ctl_call_reply(ctl_conn *c, const mpp_request *rq, mpp_reply_kind want, mpp_reply *out);
+
+/* The stream endpoint to subscribe to: the --stream override, else the
+ * protocol's rule (mpp_stream_endpoint_for_client) applied to what Pong
+ * reports and the control endpoint. */
 int ctl_stream_endpoint(ctl_conn *c, char *out, size_t n);
-/* tcp://host:port -> tcp://host:port+1, ipc://path -> ipc://path.stream. */
-int ctl_derive_stream(const char *ep, char *out, size_t n);
 
 /* Fetches every energy sample of a run with seq >= from (paging while the
  * server says `more`) and calls fn for each in order with the decoded
- * sample, and with want_json also its JSON object (else NULL; --json
- * output prints it as the server's JSON mapping gives it); fn returns 0 to
- * go on, negative to stop with that code. */
-typedef int (*ctl_sample_fn)(const srv_energy_sample *s, const json_t *js, void *arg);
-int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, int want_json, ctl_sample_fn fn,
-                     void *arg);
+ * sample; fn returns 0 to go on, negative to stop with that code. */
+typedef int (*ctl_sample_fn)(const mpm_energy_sample *s, void *arg);
+int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, ctl_sample_fn fn, void *arg);
 
 /* ---- JSON helpers (ctl_json.c) -------------------------------------- */
 
@@ -133,7 +136,8 @@ int cj_status(const json_t *o, const char *key);
 
 /* Energy sample writers: a header (text table / CSV), then one row per
  * sample.  dim: number of momentum components in CSV (0: from the sample).
- * A row is written from s (text, CSV) or js (JSON: required then). */
+ * JSON rows are the sample in the protobuf JSON mapping (made here, from
+ * the decoded sample, only for that format). */
 typedef struct {
     ctl_out fmt;
     int dim;
@@ -141,7 +145,7 @@ typedef struct {
     FILE *f;
 } ctl_energy_out;
 void ctl_energy_out_init(ctl_energy_out *o, ctl_out fmt, int dim, FILE *f);
-int ctl_energy_out_row(ctl_energy_out *o, const srv_energy_sample *s, const json_t *js);
+int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s);
 
 /* Local time of a Unix time as "YYYY-MM-DD HH:MM:SS" ("-" when <= 0). */
 void ctl_fmt_time(char *buf, size_t n, double unix_s);
@@ -151,7 +155,7 @@ void ctl_fmt_duration(char *buf, size_t n, double s);
 /* ---- watch (ctl_watch.c) -------------------------------------------- */
 
 /* The live view of a job until it ends (see mpmctl watch --help); stores
- * the run's final status (srv_status, 0 if unknown) in *final_status.
+ * the run's final status (mpp_status, 0 if unknown) in *final_status.
  * Returns 0 when the job ended (whatever its status), negative on error or
  * CTL_EINTR when interrupted. */
 int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status);

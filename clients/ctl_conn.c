@@ -2,12 +2,13 @@
  * ctl_conn.c - mpmctl's side of the control socket.  A DEALER connects to
  * the daemon's ROUTER and exchanges [empty][Request] / [empty][Reply]
  * frames, one request at a time, each bounded by the --timeout.  Requests
- * are packed with srv_request_encode(); replies are turned into JSON by the
- * codec's bridge and parsed with jansson, so every command reads the same
- * field names the --json output shows.  Also here: where the job streams
- * are published (the stream endpoint) and paging through a run's energy
- * samples, which are decoded straight into structs (srv_reply_energy_decode)
- * and go through JSON only for --json output.
+ * are packed with mpp_request_encode(); each reply is decoded once: into
+ * the protocol library's mpp_reply (ctl_call_reply: energy pages,
+ * snapshots, Status and Ping for `watch`), or, for the commands that print
+ * a record with the field names the --json output shows, by the JSON
+ * bridge into jansson (ctl_call).  Also here: where the job streams are
+ * published (the stream endpoint) and paging through a run's energy
+ * samples.
  */
 #include "ctl.h"
 
@@ -92,7 +93,7 @@ static int recv_multi(void *sock, zmq_msg_t *parts, int max, int *nparts)
 
 /* Sends the request and receives the Reply: its frame moved into *body
  * (initialised by the caller, who closes it in every case). */
-static int exchange_raw(ctl_conn *c, const srv_request *rq, zmq_msg_t *body)
+static int exchange_raw(ctl_conn *c, const mpp_request *rq, zmq_msg_t *body)
 {
     uint8_t *buf = NULL;
     size_t len = 0;
@@ -100,7 +101,7 @@ static int exchange_raw(ctl_conn *c, const srv_request *rq, zmq_msg_t *body)
     int n = 0, rc;
     double deadline = now_s() + c->timeout_s;
     if (!c->dealer && (rc = ctl_conn_open(c))) return rc;
-    rc = srv_request_encode(rq, &buf, &len);
+    rc = mpp_request_encode(rq, &buf, &len);
     if (rc) {
         fprintf(stderr, "mpmctl: cannot encode the request (%d)\n", rc);
         return CTL_ESYS;
@@ -150,10 +151,12 @@ static int exchange_raw(ctl_conn *c, const srv_request *rq, zmq_msg_t *body)
 /* Reply bytes -> a jansson object in *reply. */
 static int reply_json(ctl_conn *c, const void *data, size_t size, json_t **reply)
 {
-    char *text = NULL, err[512];
+    char *text = NULL, err[MPM_ERROR_MSG_MAX + 256];
+    mpm_error e;
     *reply = NULL;
-    if (srv_msg_bytes_to_json(SRV_MSG_REPLY, data, size, 0, 0, &text, err, sizeof err)) {
-        fprintf(stderr, "mpmctl: undecodable reply from %s: %s\n", c->endpoint, err);
+    if (mpp_msg_bytes_to_json(MPP_MSG_REPLY, data, size, 0, 0, &text, &e)) {
+        fprintf(stderr, "mpmctl: undecodable reply from %s: %s\n", c->endpoint,
+                mpm_error_text(&e, MPM_FIELD_JSON, err, sizeof err));
         return CTL_EPROTO;
     }
     json_error_t je;
@@ -168,7 +171,7 @@ static int reply_json(ctl_conn *c, const void *data, size_t size, json_t **reply
 
 /* Sends the request and receives the Reply bytes, decoded to a jansson
  * object in *reply. */
-static int exchange(ctl_conn *c, const srv_request *rq, json_t **reply)
+static int exchange(ctl_conn *c, const mpp_request *rq, json_t **reply)
 {
     zmq_msg_t body;
     int rc;
@@ -211,7 +214,7 @@ static int interpret(ctl_conn *c, json_t *reply, const char *want, json_t **body
     return 0;
 }
 
-int ctl_call_quiet(ctl_conn *c, const srv_request *rq, const char *want, json_t **reply,
+int ctl_call_quiet(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply,
                    json_t **body, const char **err_code, const char **err_msg)
 {
     int rc = exchange(c, rq, reply);
@@ -224,158 +227,98 @@ int ctl_call_quiet(ctl_conn *c, const srv_request *rq, const char *want, json_t 
     return interpret(c, *reply, want, body, err_code, err_msg);
 }
 
-/* Prints a Reply.error as ctl_call() does. */
-static void print_server_error(json_t *reply)
+/* Prints a Reply.error: "mpmctl: CODE: message", with " (field F)" when
+ * the message does not already start with "F: " (an mpmd renders every
+ * error as "field: message"; an older one did not always). */
+static void print_error(const char *code, const char *message, const char *field)
 {
-    json_t *e = json_object_get(reply, "error");
-    const char *field = cj_str(e, "field", NULL);
-    fprintf(stderr, "mpmctl: %s: %s", cj_str(e, "code", "INTERNAL"), cj_str(e, "message", ""));
-    if (field && *field) fprintf(stderr, " (field %s)", field);
+    size_t n = field ? strlen(field) : 0;
+    fprintf(stderr, "mpmctl: %s: %s", code, message);
+    if (n && !(strncmp(message, field, n) == 0 && message[n] == ':'))
+        fprintf(stderr, " (field %s)", field);
     fputc('\n', stderr);
 }
 
-int ctl_call(ctl_conn *c, const srv_request *rq, const char *want, json_t **reply, json_t **body)
+static void print_server_error(json_t *reply)
+{
+    json_t *e = json_object_get(reply, "error");
+    print_error(cj_str(e, "code", "INTERNAL"), cj_str(e, "message", ""), cj_str(e, "field", NULL));
+}
+
+int ctl_call(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply, json_t **body)
 {
     int rc = ctl_call_quiet(c, rq, want, reply, body, NULL, NULL);
     if (rc == CTL_ESERVER) print_server_error(*reply);
     return rc;
 }
 
-/* ---- stream endpoint ----------------------------------------------------- */
-
-int ctl_derive_stream(const char *ep, char *out, size_t n)
+int ctl_call_reply(ctl_conn *c, const mpp_request *rq, mpp_reply_kind want, mpp_reply *out)
 {
-    if (!strncmp(ep, "tcp://", 6)) {
-        const char *colon = strrchr(ep + 6, ':');
-        char *end;
-        long port;
-        if (colon) {
-            errno = 0;
-            port = strtol(colon + 1, &end, 10);
-            if (!errno && end != colon + 1 && !*end && port > 0 && port < 65535) {
-                int w = snprintf(out, n, "%.*s:%ld", (int)(colon - ep), ep, port + 1);
-                if (w > 0 && (size_t)w < n) return 0;
-            }
-        }
-    } else if (!strncmp(ep, "ipc://", 6)) {
-        int w = snprintf(out, n, "%s.stream", ep);
-        if (w > 0 && (size_t)w < n) return 0;
+    zmq_msg_t body;
+    mpm_error e;
+    char text[MPM_ERROR_MSG_MAX + 256];
+    int rc;
+    memset(out, 0, sizeof *out);
+    if (zmq_msg_init(&body)) return CTL_ESYS;
+    rc = exchange_raw(c, rq, &body);
+    if (!rc && (rc = mpp_reply_decode(zmq_msg_data(&body), zmq_msg_size(&body), 0, out, &e))) {
+        fprintf(stderr, "mpmctl: undecodable reply from %s: %s\n", c->endpoint,
+                mpm_error_text(&e, MPM_FIELD_JSON, text, sizeof text));
+        rc = rc == MPM_ENOMEM ? CTL_ESYS : CTL_EPROTO;
     }
-    fprintf(stderr, "mpmctl: cannot derive the stream endpoint from %s; give --stream EP\n", ep);
-    return CTL_EUSAGE;
-}
-
-/* Whether a tcp endpoint's host is a wildcard or loopback address, which
- * only means something on the daemon's machine. */
-static int host_is_local(const char *ep)
-{
-    static const char *const hosts[] = {"*", "0.0.0.0", "[::]", "::", "[*]", "localhost",
-                                        "[::1]", "::1", "ip6-localhost"};
-    const char *h = ep + 6, *colon = strrchr(h, ':');
-    size_t len = colon ? (size_t)(colon - h) : strlen(h);
-    if (len >= 4 && !strncmp(h, "127.", 4)) return 1;
-    for (size_t i = 0; i < sizeof hosts / sizeof hosts[0]; i++)
-        if (strlen(hosts[i]) == len && !strncmp(h, hosts[i], len)) return 1;
+    zmq_msg_close(&body);
+    if (rc) return rc;
+    if (out->kind == MPP_REPLY_ERROR) {
+        const char *code = mpp_err_code_name(out->err_code);
+        print_error(code ? code : "INTERNAL", out->err_message, out->err_field);
+        return CTL_ESERVER;
+    }
+    if (out->kind != want) {
+        fprintf(stderr, "mpmctl: unexpected reply from %s: %s instead of %s\n", c->endpoint,
+                mpp_reply_kind_name(out->kind), mpp_reply_kind_name(want));
+        return CTL_EPROTO;
+    }
     return 0;
 }
 
+/* ---- stream endpoint ----------------------------------------------------- */
+
 int ctl_stream_endpoint(ctl_conn *c, char *out, size_t n)
 {
-    srv_request rq = {.kind = SRV_REQ_PING};
-    json_t *reply = NULL, *pong = NULL;
-    const char *ep;
+    mpp_request rq = {.kind = MPP_REQ_PING};
+    mpp_reply pong;
     int rc;
     if (c->stream && *c->stream) {
         if ((size_t)snprintf(out, n, "%s", c->stream) >= n) return CTL_EUSAGE;
         return 0;
     }
-    rc = ctl_call(c, &rq, "pong", &reply, &pong);
-    if (rc) {
-        json_decref(reply);
-        return rc;
+    rc = ctl_call_reply(c, &rq, MPP_REPLY_PONG, &pong);
+    if (!rc && mpp_stream_endpoint_for_client(pong.stream_endpoint, c->endpoint, out, n)) {
+        fprintf(stderr, "mpmctl: cannot derive the stream endpoint from %s; give --stream EP\n",
+                c->endpoint);
+        rc = CTL_EUSAGE;
     }
-    ep = cj_str(pong, "streamEndpoint", "");
-    if (*ep && !(strncmp(ep, "tcp://", 6) == 0 && host_is_local(ep)) &&
-        (size_t)snprintf(out, n, "%s", ep) < n) {
-        json_decref(reply);
-        return 0;
-    }
-    json_decref(reply);
-    return ctl_derive_stream(c->endpoint, out, n);
+    mpp_reply_clear(&pong);
+    return rc;
 }
 
 /* ---- energy paging --------------------------------------------------------- */
 
-/* One page of GetEnergy: the samples decoded straight from the bytes
- * (srv_reply_energy_decode: no JSON round trip, which cost about half the
- * time of `mpmctl energy`), and with want_json also the JSON samples for
- * the --json output; anything but an EnergySeries goes the ctl_call() way
- * (a Reply.error printed, a wrong body reported). */
-static int energy_page(ctl_conn *c, const srv_request *rq, int want_json, srv_energy_sample **s,
-                       size_t *ns, int *more, json_t **reply, json_t **samples)
-{
-    zmq_msg_t body;
-    uint64_t run_id;
-    char err[512];
-    int rc;
-    *s = NULL;
-    *ns = 0;
-    *more = 0;
-    *reply = *samples = NULL;
-    if (zmq_msg_init(&body)) return CTL_ESYS;
-    rc = exchange_raw(c, rq, &body);
-    if (!rc) {
-        rc = srv_reply_energy_decode(zmq_msg_data(&body), zmq_msg_size(&body), 0, &run_id, s, ns,
-                                     more, err, sizeof err);
-        if (rc == SRV_CODEC_ENOMEM) {
-            fprintf(stderr, "mpmctl: out of memory decoding energy samples\n");
-            rc = CTL_ESYS;
-        } else if (rc || want_json) {
-            /* not an energy series (or undecodable), or --json: the JSON
-             * form, as every other reply */
-            json_t *series = NULL;
-            int bad = rc != 0;
-            rc = reply_json(c, zmq_msg_data(&body), zmq_msg_size(&body), reply);
-            if (!rc) rc = interpret(c, *reply, "energy", &series, NULL, NULL);
-            if (rc == CTL_ESERVER) print_server_error(*reply);
-            if (!rc && bad) rc = CTL_EPROTO;  /* JSON could read what the decoder could not */
-            if (!rc) {
-                json_t *a = json_object_get(series, "samples");
-                size_t na = json_is_array(a) ? json_array_size(a) : 0;
-                if (na != *ns) {
-                    fprintf(stderr, "mpmctl: energy page: %zu samples decoded, %zu in JSON\n", *ns, na);
-                    rc = CTL_EPROTO;
-                }
-                *samples = a;
-            }
-        }
-    }
-    zmq_msg_close(&body);
-    if (rc) {
-        free(*s);
-        *s = NULL;
-        *ns = 0;
-    }
-    return rc;
-}
-
-int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, int want_json, ctl_sample_fn fn,
-                     void *arg)
+int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, ctl_sample_fn fn, void *arg)
 {
     for (;;) {
-        srv_request rq = {.kind = SRV_REQ_GET_ENERGY, .id = run_id, .from_seq = from};
-        json_t *reply = NULL, *samples = NULL;
-        srv_energy_sample *s = NULL;
-        size_t i, ns = 0;
-        int more = 0;
+        mpp_request rq = {.kind = MPP_REQ_GET_ENERGY, .id = run_id, .from_seq = from};
+        mpp_reply page;
+        size_t i;
         uint64_t last = from;
-        int rc = energy_page(c, &rq, want_json, &s, &ns, &more, &reply, &samples);
-        for (i = 0; !rc && i < ns; i++) {
-            last = s[i].seq;
-            rc = fn(&s[i], samples ? json_array_get(samples, i) : NULL, arg);
+        int rc = ctl_call_reply(c, &rq, MPP_REPLY_ENERGY, &page);
+        for (i = 0; !rc && i < page.n_samples; i++) {
+            last = page.samples[i].seq;
+            rc = fn(&page.samples[i], arg);
         }
-        free(s);
-        json_decref(reply);
+        size_t ns = page.n_samples;
+        int more = page.more;
+        mpp_reply_clear(&page);
         if (rc) return rc;
         if (!more) return 0;
         if (!ns || last + 1 <= from) {

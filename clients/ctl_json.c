@@ -1,6 +1,7 @@
 /*
- * ctl_json.c - JSON helpers of mpmctl.  Replies arrive as protobuf bytes and
- * are turned into JSON text by the codec's bridge (protobuf JSON mapping:
+ * ctl_json.c - JSON helpers of mpmctl.  The replies a command prints as
+ * records arrive as protobuf bytes and are turned into JSON text by the
+ * protocol library's bridge (protobuf JSON mapping:
  * 64-bit integers and non-finite doubles as strings), then parsed with
  * jansson; the accessors here read fields under that mapping with a default
  * for absent ones.  The printer writes jansson values back out with every
@@ -95,7 +96,7 @@ size_t cj_len(const json_t *o, const char *key)
 int cj_status(const json_t *o, const char *key)
 {
     const json_t *v = o ? json_object_get(o, key) : NULL;
-    if (json_is_string(v)) return srv_status_from_name(json_string_value(v));
+    if (json_is_string(v)) return mpp_status_from_name(json_string_value(v));
     if (json_is_integer(v)) return (int)json_integer_value(v);
     return 0;
 }

@@ -8,6 +8,7 @@
  */
 #include "ctl.h"
 
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
@@ -27,15 +28,31 @@ static void csv_num(FILE *f, double v)
     fputs(b, f);
 }
 
-int ctl_energy_out_row(ctl_energy_out *o, const srv_energy_sample *s, const json_t *js)
+/* One sample as a JSON line: the protocol's JSON mapping of the sample,
+ * printed as every other JSON output (shortest exact doubles). */
+static int json_row(FILE *f, const mpm_energy_sample *s)
+{
+    char *text = NULL;
+    json_error_t je;
+    json_t *js = NULL;
+    int rc = CTL_ESYS;
+    if (!mpp_energy_to_json(s, &text, NULL) && (js = json_loads(text, 0, &je)) && !cj_print(f, js, 0)) {
+        fputc('\n', f);
+        rc = 0;
+    }
+    json_decref(js);
+    free(text);
+    return rc;
+}
+
+int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
 {
     static const char axis[3] = {'x', 'y', 'z'};
     FILE *f = o->f;
     if (o->dim <= 0) o->dim = s->dim < 1 ? 1 : s->dim > 3 ? 3 : s->dim;
     switch (o->fmt) {
     case CTL_OUT_JSON:
-        if (!js || cj_print(f, js, 0)) return CTL_ESYS;
-        fputc('\n', f);
+        if (json_row(f, s)) return CTL_ESYS;
         break;
     case CTL_OUT_CSV:
         if (!o->header_done) {

@@ -59,7 +59,7 @@ typedef struct {
     double kinetic, strain;
     int have_first;
 
-    int status;                 /* srv_status as last known */
+    int status;                 /* mpp_status as last known */
     char name[128];
     long long step, steps_total;
     double t, wall_s, dt;
@@ -73,9 +73,8 @@ typedef struct {
 
     int finished;               /* Finished seen */
     char error[512];            /* Finished.error */
-    json_t *fin_energy;         /* Finished.energy (a reference), or NULL */
     int has_fin;                /* Finished carried a final sample: */
-    srv_energy_sample fin;      /* that sample, decoded */
+    mpm_energy_sample fin;      /* that sample */
 
     /* Fault injection for the tests (environment, see ctl_watch()):
      * discard every drop_every-th energy message, and/or the Finished
@@ -93,8 +92,7 @@ static double now_s(void)
 
 static int terminal_status(int st)
 {
-    return st == SRV_STATUS_FINISHED || st == SRV_STATUS_FAILED || st == SRV_STATUS_CANCELLED ||
-           st == SRV_STATUS_INTERRUPTED;
+    return MPP_STATUS_ENDED(st);
 }
 
 static int term_cols(void)
@@ -124,7 +122,7 @@ static void append(char *line, size_t cap, size_t *n, const char *fmt, ...)
 static size_t status_line(const watch_t *w, int compact, char *line, size_t cap)
 {
     size_t n = 0;
-    const char *st = srv_status_name(w->status);
+    const char *st = mpp_status_name(w->status);
     line[0] = 0;
     if (compact)
         append(line, cap, &n, "%s step %lld", st ? st : "?", w->step);
@@ -174,8 +172,8 @@ static void draw(watch_t *w, int force)
     w->line_shown = 1;
 }
 
-/* Writes one accepted sample (js: its JSON form, needed for --json). */
-static int emit(watch_t *w, const srv_energy_sample *s, const json_t *js)
+/* Writes one accepted sample. */
+static int emit(watch_t *w, const mpm_energy_sample *s)
 {
     double total = cj_norm(s->e.total);
     if (!w->have_first) {
@@ -195,14 +193,14 @@ static int emit(watch_t *w, const srv_energy_sample *s, const json_t *js)
         draw(w, 0);
         return 0;
     }
-    int rc = ctl_energy_out_row(&w->eo, s, js);
+    int rc = ctl_energy_out_row(&w->eo, s);
     if (!rc && fflush(stdout)) rc = CTL_ESYS;
     if (rc) fprintf(stderr, "mpmctl: cannot write the energy series: %s\n", strerror(errno));
     return rc;
 }
 
 /* A sample from the stored history: in order by construction. */
-static int take_history(const srv_energy_sample *s, const json_t *js, void *arg)
+static int take_history(const mpm_energy_sample *s, void *arg)
 {
     watch_t *w = arg;
     uint64_t seq = s->seq;
@@ -213,16 +211,16 @@ static int take_history(const srv_energy_sample *s, const json_t *js, void *arg)
                 (unsigned long long)w->job, (unsigned long long)w->next, (unsigned long long)seq);
         w->next = seq;
     }
-    return emit(w, s, js);
+    return emit(w, s);
 }
 
 static int fetch_rest(watch_t *w)
 {
-    return ctl_fetch_energy(w->c, w->job, w->next, w->fmt == CTL_OUT_JSON, take_history, w);
+    return ctl_fetch_energy(w->c, w->job, w->next, take_history, w);
 }
 
 /* A sample from the live stream. */
-static int take_live(watch_t *w, const srv_energy_sample *s, const json_t *js)
+static int take_live(watch_t *w, const mpm_energy_sample *s)
 {
     uint64_t seq = s->seq;
     int rc;
@@ -239,27 +237,32 @@ static int take_live(watch_t *w, const srv_energy_sample *s, const json_t *js)
             w->next = seq;
         }
     }
-    return emit(w, s, js);
+    return emit(w, s);
 }
 
 /* Applies a RunInfo (Status reply) to the view. */
-static void apply_run(watch_t *w, const json_t *run)
+static void apply_run(watch_t *w, const mpp_run_info *run)
 {
-    w->status = cj_status(run, "status");
-    if (cj_int(run, "stepsTotal", 0) > 0) w->steps_total = cj_int(run, "stepsTotal", 0);
-    if (cj_int(run, "steps", 0) > w->step) {
-        w->step = cj_int(run, "steps", 0);
-        w->t = cj_num(run, "t", w->t);
+    w->status = run->status;
+    if (run->steps_total > 0) w->steps_total = run->steps_total;
+    if (run->steps > w->step) {
+        w->step = run->steps;
+        w->t = cj_norm(run->t);
     }
-    if (!w->name[0]) snprintf(w->name, sizeof w->name, "%s", cj_str(run, "name", ""));
+    if (!w->name[0]) snprintf(w->name, sizeof w->name, "%s", run->name);
 }
 
-/* Status(job); *run is the RunInfo (owned by *reply). */
-static int status(watch_t *w, json_t **reply, json_t **run)
+/* Status(job) into *reply (release it with mpp_reply_clear()); its run is
+ * reply->runs[0]. */
+static int status(watch_t *w, mpp_reply *reply)
 {
-    srv_request rq = {.kind = SRV_REQ_STATUS, .id = w->job};
-    int rc = ctl_call(w->c, &rq, "run", reply, run);
-    if (!rc) apply_run(w, *run);
+    mpp_request rq = {.kind = MPP_REQ_STATUS, .id = w->job};
+    int rc = ctl_call_reply(w->c, &rq, MPP_REPLY_RUN, reply);
+    if (!rc && reply->n_runs != 1) {
+        fprintf(stderr, "mpmctl: a Status reply without its run\n");
+        rc = CTL_EPROTO;
+    }
+    if (!rc) apply_run(w, &reply->runs[0]);
     return rc;
 }
 
@@ -285,16 +288,16 @@ static int finish_tail(watch_t *w)
     if (w->has_fin) {
         uint64_t seq = w->fin.seq;
         if (seq < w->next) return 0;
-        if (seq == w->next) return emit(w, &w->fin, w->fin_energy);
+        if (seq == w->next) return emit(w, &w->fin);
     } else if (w->step == 0 && w->next == 0) {
         /* it ended before its first step (cancelled or interrupted while
          * queued, or refused by the solver): it has no samples at all */
         return 0;
     }
-    if (w->status == SRV_STATUS_INTERRUPTED && saved > 3) w->c->timeout_s = 3;
+    if (w->status == MPP_STATUS_INTERRUPTED && saved > 3) w->c->timeout_s = 3;
     rc = fetch_rest(w);
     w->c->timeout_s = saved;
-    if (rc == CTL_ETIMEOUT && w->status == SRV_STATUS_INTERRUPTED) {
+    if (rc == CTL_ETIMEOUT && w->status == MPP_STATUS_INTERRUPTED) {
         fprintf(stderr, "mpmctl: warning: the daemon stopped; the series may lack its last "
                         "samples\n");
         return 0;
@@ -302,69 +305,59 @@ static int finish_tail(watch_t *w)
     return rc;
 }
 
-/* Handles one stream message; sets w->finished on Finished. */
+/* Handles one stream message (decoded once, into the protocol's struct);
+ * sets w->finished on Finished. */
 static int on_message(watch_t *w, const void *data, size_t len)
 {
-    char *text = NULL, err[256];
-    json_t *m, *b;
-    json_error_t je;
+    char text[MPM_ERROR_MSG_MAX + 256];
+    mpm_error e;
+    mpp_stream m;
     int rc = 0;
-    /* srv_stream_peek first: it reads a snapshot's header without copying
-     * its arrays (tens of MB the view ignores; through JSON one of 10^6
-     * particles would cost about a second), and gives the samples decoded;
-     * the JSON form of the rest is for the fields the view shows */
-    srv_stream_info si;
-    if (srv_stream_peek(data, len, &si, err, sizeof err)) {
-        fprintf(stderr, "mpmctl: warning: undecodable stream message: %s\n", err);
+    if (mpp_stream_decode(data, len, 0, &m, &e)) {
+        fprintf(stderr, "mpmctl: warning: undecodable stream message: %s\n",
+                mpm_error_text(&e, MPM_FIELD_JSON, text, sizeof text));
         return 0;
     }
-    if (si.has_job_id && si.job_id != w->job) return 0;
-    if (si.kind == SRV_STREAM_SNAPSHOT) {
-        if (si.has_seq) stream_seq(w, si.seq);
-        return 0;
+    if (m.has_job_id && m.job_id != w->job) goto out;
+    if (m.kind == MPP_STREAM_SNAPSHOT) {
+        if (m.has_seq) stream_seq(w, m.seq);
+        goto out;
     }
-    if (srv_msg_bytes_to_json(SRV_MSG_STREAM, data, len, 0, 0, &text, err, sizeof err)) {
-        fprintf(stderr, "mpmctl: warning: undecodable stream message: %s\n", err);
-        return 0;
-    }
-    m = json_loads(text, 0, &je);
-    free(text);
-    if (!m) {
-        fprintf(stderr, "mpmctl: stream message: %s\n", je.text);
-        return CTL_ESYS;
-    }
-    if (cj_u64(m, "jobId", w->job) != w->job) goto out;
-    if ((w->drop_every && json_object_get(m, "energy") && ++w->energy_seen % w->drop_every == 0) ||
-        (w->drop_finished && json_object_get(m, "finished")))
+    if ((w->drop_every && m.kind == MPP_STREAM_ENERGY && ++w->energy_seen % w->drop_every == 0) ||
+        (w->drop_finished && m.kind == MPP_STREAM_FINISHED))
         goto out;  /* injected loss: as if the stream never delivered it */
-    stream_seq(w, cj_u64(m, "seq", 0));
-    if ((b = json_object_get(m, "energy")) && si.kind == SRV_STREAM_ENERGY) {
-        if (w->status != SRV_STATUS_RUNNING && !terminal_status(w->status))
-            w->status = SRV_STATUS_RUNNING;
-        rc = take_live(w, &si.energy, b);
-    } else if ((b = json_object_get(m, "progress"))) {
-        w->status = SRV_STATUS_RUNNING;
+    stream_seq(w, m.seq);
+    switch (m.kind) {
+    case MPP_STREAM_ENERGY:
+        if (w->status != MPP_STATUS_RUNNING && !terminal_status(w->status))
+            w->status = MPP_STATUS_RUNNING;
+        rc = take_live(w, &m.energy);
+        break;
+    case MPP_STREAM_PROGRESS:
+        w->status = MPP_STATUS_RUNNING;
         w->have_progress = 1;
-        w->step = cj_int(b, "step", w->step);
-        w->t = cj_num(b, "t", w->t);
-        w->dt = cj_num(b, "dt", w->dt);
-        w->wall_s = cj_num(b, "wallS", w->wall_s);
-        if (cj_int(b, "stepsTotal", 0) > 0) w->steps_total = cj_int(b, "stepsTotal", 0);
+        w->step = m.progress.step;
+        w->t = cj_norm(m.progress.t);
+        w->dt = cj_norm(m.progress.dt);
+        w->wall_s = cj_norm(m.progress.wall_s);
+        if (m.progress.steps_total > 0) w->steps_total = m.progress.steps_total;
         draw(w, 0);
-    } else if ((b = json_object_get(m, "finished"))) {
+        break;
+    case MPP_STREAM_FINISHED:
         w->finished = 1;
-        w->status = cj_status(b, "status");
-        snprintf(w->error, sizeof w->error, "%s", cj_str(b, "error", ""));
-        w->step = cj_int(b, "steps", w->step);
-        w->t = cj_num(b, "t", w->t);
-        w->wall_s = cj_num(b, "wallS", w->wall_s);
-        json_decref(w->fin_energy);
-        w->fin_energy = json_incref(json_object_get(b, "energy"));
-        w->has_fin = si.kind == SRV_STREAM_FINISHED && si.has_energy;
-        w->fin = si.energy;
+        w->status = m.finished.status;
+        snprintf(w->error, sizeof w->error, "%s", m.finished.error);
+        w->step = m.finished.steps;
+        w->t = cj_norm(m.finished.t);
+        w->wall_s = cj_norm(m.finished.wall_s);
+        w->has_fin = m.has_energy;
+        w->fin = m.energy;
+        break;
+    default:
+        break;
     }
 out:
-    json_decref(m);
+    mpp_stream_clear(&m);
     return rc;
 }
 
@@ -406,13 +399,13 @@ out:
     return rc;
 }
 
-static void summary(watch_t *w, const json_t *run)
+static void summary(watch_t *w, const mpp_run_info *run)
 {
     FILE *f = w->info;
     char wall[32];
-    const char *st = srv_status_name(w->status);
-    const char *error = run ? cj_str(run, "error", "") : "";
-    const json_t *le = run ? json_object_get(run, "lastEnergy") : w->fin_energy;
+    const char *st = mpp_status_name(w->status);
+    const char *error = run ? run->error : "";
+    const mpm_energy_sample *le = run ? run->last_energy : w->has_fin ? &w->fin : NULL;
     if (!*error) error = w->error;
     if (w->tty && w->line_shown) {
         draw(w, 1);
@@ -421,12 +414,12 @@ static void summary(watch_t *w, const json_t *run)
     }
     fprintf(f, "job %llu%s%s%s: %s\n", (unsigned long long)w->job, w->name[0] ? " (" : "", w->name,
             w->name[0] ? ")" : "", st ? st : "unknown status");
-    ctl_fmt_duration(wall, sizeof wall, run ? cj_num(run, "wallS", 0) : w->wall_s);
-    fprintf(f, "  steps %lld, t %.10g, wall %s\n", run ? cj_int(run, "steps", w->step) : w->step,
-            run ? cj_num(run, "t", w->t) : w->t, wall);
+    ctl_fmt_duration(wall, sizeof wall, run ? cj_norm(run->wall_s) : w->wall_s);
+    fprintf(f, "  steps %lld, t %.10g, wall %s\n", run ? (long long)run->steps : w->step,
+            run ? cj_norm(run->t) : w->t, wall);
     if (le)
-        fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n",
-                cj_num(le, "kinetic", NAN), cj_num(le, "strain", NAN), cj_num(le, "total", NAN));
+        fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n", cj_norm(le->e.kinetic),
+                cj_norm(le->e.strain), cj_norm(le->e.total));
     else if (w->have_first)
         fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n", w->kinetic,
                 w->strain, w->last_total);
@@ -481,9 +474,9 @@ static int live(watch_t *w, void *sub)
             continue;
         }
         if (now_s() - last_msg >= WATCH_IDLE_S) {
-            json_t *reply = NULL, *run = NULL;
-            rc = status(w, &reply, &run);
-            json_decref(reply);
+            mpp_reply reply;
+            rc = status(w, &reply);
+            mpp_reply_clear(&reply);
             if (rc) return rc;
             draw(w, 1);
             if (terminal_status(w->status)) return fetch_rest(w);
@@ -497,7 +490,7 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
     watch_t w;
     char ep[512], topic[32];
     void *sub = NULL;
-    json_t *reply = NULL, *run = NULL;
+    mpp_reply reply = {0};
     int rc, hwm = WATCH_SUB_HWM, linger = 0;
     struct sigaction sa, old_int, old_term;
 
@@ -539,15 +532,13 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
     sigaction(SIGTERM, &sa, &old_term);
 
     /* where the job stands (and whether it exists) */
-    rc = status(&w, &reply, &run);
-    if (!rc) ctl_energy_out_init(&w.eo, fmt, (int)cj_int(run, "dim", 0), stdout);
-    json_decref(reply);  /* run belonged to it */
-    reply = NULL;
-    run = NULL;
+    rc = status(&w, &reply);
+    if (!rc) ctl_energy_out_init(&w.eo, fmt, reply.runs[0].dim, stdout);
+    mpp_reply_clear(&reply);
     if (rc) goto out;
     if (w.fmt == CTL_OUT_TEXT && !w.tty)
         fprintf(stdout, "job %llu%s%s%s: %s\n", (unsigned long long)job, w.name[0] ? " (" : "",
-                w.name, w.name[0] ? ")" : "", srv_status_name(w.status) ? srv_status_name(w.status) : "?");
+                w.name, w.name[0] ? ")" : "", mpp_status_name(w.status) ? mpp_status_name(w.status) : "?");
     draw(&w, 1);
     {
         int was_terminal = terminal_status(w.status);
@@ -556,9 +547,8 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
     }
     /* the summary: Finished says all it needs (and the daemon may be gone
      * after an INTERRUPTED job); otherwise the daemon's record of the job */
-    run = NULL;
-    if (!w.finished && (rc = status(&w, &reply, &run))) goto out;
-    summary(&w, run);
+    if (!w.finished && (rc = status(&w, &reply))) goto out;
+    summary(&w, w.finished ? NULL : &reply.runs[0]);
     *final_status = w.status;
 out:
     if (rc == CTL_EINTR) {
@@ -568,8 +558,7 @@ out:
                         "stops it)\n",
                 (unsigned long long)job, (unsigned long long)job);
     }
-    json_decref(reply);
-    json_decref(w.fin_energy);
+    mpp_reply_clear(&reply);
     zmq_close(sub);
     sigaction(SIGINT, &old_int, NULL);
     sigaction(SIGTERM, &old_term, NULL);

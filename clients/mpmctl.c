@@ -5,7 +5,9 @@
  * options anywhere, per-command options checked against the command, every
  * error naming the option) and one function per command; the connection,
  * the JSON helpers, the output formats and the live view are in ctl_*.c
- * (ctl.h).  A case is loaded and checked with the daemon's own codec before
+ * (ctl.h).  A case is loaded and checked with the protocol library (the
+ * daemon's own conversion and the solver's check, under the default
+ * particle limit) before
  * it is sent, so a bad case is reported with the JSON path of the field
  * without a round trip (the server checks it again).
  */
@@ -19,7 +21,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "srv_config.h"  /* SRV_VERSION: mpmctl and mpmd share the version */
+#include "mpp.h"  /* MPP_VERSION: mpmctl and mpmd share the version */
 
 volatile sig_atomic_t ctl_interrupted;
 
@@ -271,7 +273,7 @@ static int parse_args(int argc, char **argv, cli *a)
             up[k] = (ch >= 'a' && ch <= 'z') ? (char)(ch - 32) : ch;
         }
         up[k] = 0;
-        a->status = srv_status_from_name(up);
+        a->status = mpp_status_from_name(up);
         if (!a->status)
             return bad_usage("--status: '%s' is not one of QUEUED, RUNNING, FINISHED, FAILED, "
                              "CANCELLED, INTERRUPTED",
@@ -367,9 +369,9 @@ static double now_s(void)
 static int exit_for_status(int st)
 {
     switch (st) {
-    case SRV_STATUS_FINISHED: return CTL_EXIT_OK;
-    case SRV_STATUS_FAILED: return CTL_EXIT_FAILED;
-    case SRV_STATUS_CANCELLED: return CTL_EXIT_CANCELLED;
+    case MPP_STATUS_FINISHED: return CTL_EXIT_OK;
+    case MPP_STATUS_FAILED: return CTL_EXIT_FAILED;
+    case MPP_STATUS_CANCELLED: return CTL_EXIT_CANCELLED;
     default: return CTL_EXIT_INTERRUPTED;
     }
 }
@@ -394,11 +396,12 @@ static int cmd_submit(ctl_conn *c, const cli *a)
 {
     const char *path = a->pos[0];
     size_t len = 0;
-    char err[1024];
+    char err[MPM_ERROR_MSG_MAX + 256];
+    mpm_error e;
     char *text = slurp(path, &len);
     Mpmd__Case *pb = NULL;
-    srv_case *sc = NULL;
-    srv_request rq = {.kind = SRV_REQ_SUBMIT};
+    mpp_case *sc = NULL;
+    mpp_request rq = {.kind = MPP_REQ_SUBMIT};
     json_t *reply = NULL, *ok = NULL;
     uint64_t job;
     int rc;
@@ -406,21 +409,21 @@ static int cmd_submit(ctl_conn *c, const cli *a)
         fprintf(stderr, "mpmctl: cannot read %s: %s\n", path, strerror(errno));
         return CTL_EXIT_ERROR;
     }
-    rc = srv_case_from_json(text, len, &pb, err, sizeof err);
+    rc = mpp_case_from_json(text, len, &pb, &e);
     free(text);
-    if (!rc) rc = srv_case_from_pb(pb, &sc, err, sizeof err);
-    srv_case_destroy(&sc);
+    if (!rc) rc = mpp_case_from_pb(pb, 0, &sc, &e);
+    mpp_case_destroy(&sc);
     if (rc) {
-        fprintf(stderr, "mpmctl: %s: %s\n", path, err);
-        srv_case_pb_free(&pb);
+        fprintf(stderr, "mpmctl: %s: %s\n", path, mpm_error_text(&e, MPM_FIELD_JSON, err, sizeof err));
+        mpp_case_pb_free(&pb);
         return CTL_EXIT_ERROR;
     }
     /* the case means what this client's schema says, whatever the server's
      * defaults */
-    srv_case_pin_defaults(pb);
+    mpp_case_pin_defaults(pb);
     rq.case_pb = pb;
     rc = ctl_call(c, &rq, "submitOk", &reply, &ok);
-    srv_case_pb_free(&pb);
+    mpp_case_pb_free(&pb);
     if (rc) {
         json_decref(reply);
         return exit_for_rc(rc);
@@ -454,7 +457,7 @@ static int cmd_watch(ctl_conn *c, const cli *a)
 
 static int cmd_runs(ctl_conn *c, const cli *a)
 {
-    srv_request rq = {.kind = SRV_REQ_LIST_RUNS, .status = a->status, .limit = a->limit};
+    mpp_request rq = {.kind = MPP_REQ_LIST_RUNS, .status = a->status, .limit = a->limit};
     json_t *reply = NULL, *list = NULL, *runs;
     int rc = ctl_call(c, &rq, "runs", &reply, &list);
     size_t i, n;
@@ -468,7 +471,7 @@ static int cmd_runs(ctl_conn *c, const cli *a)
         for (i = 0; i < n && !rc; i++) rc = out_json_line(json_array_get(runs, i));
     } else if (!n) {
         printf("no runs%s%s\n", a->status ? " with status " : "",
-               a->status ? srv_status_name(a->status) : "");
+               a->status ? mpp_status_name(a->status) : "");
     } else {
         printf("%6s  %-20s %-11s %-6s %-6s %3s %10s %12s %9s  %s\n", "ID", "NAME", "STATUS",
                "METHOD", "UPDATE", "DIM", "PARTICLES", "STEPS", "WALL S", "SUBMITTED");
@@ -542,7 +545,7 @@ static void show_text(const json_t *r)
 
 static int cmd_show(ctl_conn *c, const cli *a)
 {
-    srv_request rq = {.kind = SRV_REQ_GET_RUN};
+    mpp_request rq = {.kind = MPP_REQ_GET_RUN};
     json_t *reply = NULL, *run = NULL;
     uint64_t id;
     int rc;
@@ -571,9 +574,9 @@ static int cmd_show(ctl_conn *c, const cli *a)
     return rc ? CTL_EXIT_ERROR : CTL_EXIT_OK;
 }
 
-static int energy_row(const srv_energy_sample *s, const json_t *js, void *arg)
+static int energy_row(const mpm_energy_sample *s, void *arg)
 {
-    return ctl_energy_out_row(arg, s, js);
+    return ctl_energy_out_row(arg, s);
 }
 
 static int cmd_energy(ctl_conn *c, const cli *a)
@@ -583,7 +586,7 @@ static int cmd_energy(ctl_conn *c, const cli *a)
     int rc;
     if (parse_id(a->pos[0], "energy", &id)) return CTL_EXIT_USAGE;
     ctl_energy_out_init(&eo, a->fmt, 0, stdout);
-    rc = ctl_fetch_energy(c, id, 0, a->fmt == CTL_OUT_JSON, energy_row, &eo);
+    rc = ctl_fetch_energy(c, id, 0, energy_row, &eo);
     if (!rc && !eo.header_done && a->fmt == CTL_OUT_TEXT)
         fprintf(stderr, "run %llu has no energy samples\n", (unsigned long long)id);
     if (fflush(stdout) || ferror(stdout)) {
@@ -593,56 +596,70 @@ static int cmd_energy(ctl_conn *c, const cli *a)
     return exit_for_rc(rc);
 }
 
-/* CSV of a snapshot: a header naming the fields present, a row per particle. */
-static int snapshot_csv(FILE *f, const json_t *s)
+/* CSV of a snapshot: a header naming the fields present, a row per
+ * particle (the decoder has checked that every array holds n times its
+ * width). */
+static int snapshot_csv(FILE *f, const mpp_snapshot *s)
 {
     static const char *const ax[3] = {"x", "y", "z"};
     static const char *const voigt[6] = {"sxx", "syy", "szz", "sxy", "syz", "sxz"};
-    size_t n = cj_u64(s, "n", 0), dim = cj_u64(s, "dim", 0);
-    size_t nx = cj_len(s, "x"), nv = cj_len(s, "v"), ns = cj_len(s, "stress");
-    size_t np = cj_len(s, "pressure"), nvol = cj_len(s, "volume");
-    const json_t *x = json_object_get(s, "x"), *v = json_object_get(s, "v");
-    const json_t *st = json_object_get(s, "stress"), *p = json_object_get(s, "pressure");
-    const json_t *vol = json_object_get(s, "volume");
+    size_t n = s->n, dim = s->dim > 0 ? (size_t)s->dim : 0;
     char b[40];
-    if (dim < 1 || dim > 3 || (nx && nx != n * dim) || (nv && nv != n * dim) || (ns && ns != 6 * n) ||
-        (np && np != n) || (nvol && nvol != n)) {
+    if ((s->x || s->v) && (dim < 1 || dim > 3)) {
         fprintf(stderr, "mpmctl: the snapshot's arrays do not match n = %zu, dim = %zu\n", n, dim);
         return CTL_EPROTO;
     }
     fputs("i", f);
-    if (nx) for (size_t d = 0; d < dim; d++) fprintf(f, ",%s", ax[d]);
-    if (nv) for (size_t d = 0; d < dim; d++) fprintf(f, ",v%s", ax[d]);
-    if (ns) for (int k = 0; k < 6; k++) fprintf(f, ",%s", voigt[k]);
-    if (np) fputs(",pressure", f);
-    if (nvol) fputs(",volume", f);
+    if (s->x) for (size_t d = 0; d < dim; d++) fprintf(f, ",%s", ax[d]);
+    if (s->v) for (size_t d = 0; d < dim; d++) fprintf(f, ",v%s", ax[d]);
+    if (s->stress) for (int k = 0; k < 6; k++) fprintf(f, ",%s", voigt[k]);
+    if (s->pressure) fputs(",pressure", f);
+    if (s->volume) fputs(",volume", f);
     fputc('\n', f);
-#define CELL(arr, idx)                                                     \
-    do {                                                                   \
-        const json_t *e_ = json_array_get(arr, idx);                       \
-        double d_ = json_is_number(e_) ? json_number_value(e_) : NAN;      \
-        if (json_is_string(e_)) d_ = strtod(json_string_value(e_), NULL);  \
-        cj_fmt_double(b, sizeof b, d_);                                    \
-        fputc(',', f);                                                     \
-        fputs(b, f);                                                       \
+#define CELL(v)                                 \
+    do {                                        \
+        cj_fmt_double(b, sizeof b, cj_norm(v)); \
+        fputc(',', f);                          \
+        fputs(b, f);                            \
     } while (0)
     for (size_t i = 0; i < n; i++) {
         fprintf(f, "%zu", i);
-        if (nx) for (size_t d = 0; d < dim; d++) CELL(x, i * dim + d);
-        if (nv) for (size_t d = 0; d < dim; d++) CELL(v, i * dim + d);
-        if (ns) for (size_t k = 0; k < 6; k++) CELL(st, i * 6 + k);
-        if (np) CELL(p, i);
-        if (nvol) CELL(vol, i);
+        if (s->x) for (size_t d = 0; d < dim; d++) CELL(s->x[i * dim + d]);
+        if (s->v) for (size_t d = 0; d < dim; d++) CELL(s->v[i * dim + d]);
+        if (s->stress) for (size_t k = 0; k < 6; k++) CELL(s->stress[i * 6 + k]);
+        if (s->pressure) CELL(s->pressure[i]);
+        if (s->volume) CELL(s->volume[i]);
         fputc('\n', f);
     }
 #undef CELL
     return ferror(f) ? CTL_ESYS : 0;
 }
 
+/* A snapshot as one JSON line: the JSON mapping's Snapshot, printed as
+ * every other JSON output (shortest exact doubles). */
+static int snapshot_json(FILE *f, const mpp_snapshot *s)
+{
+    char *text = NULL;
+    json_error_t je;
+    json_t *js = NULL;
+    int rc = CTL_ESYS;
+    if (mpp_snapshot_to_json(s, &text, NULL)) {
+        fprintf(stderr, "mpmctl: cannot write the snapshot as JSON\n");
+    } else if (!(js = json_loads(text, 0, &je))) {
+        fprintf(stderr, "mpmctl: snapshot JSON: %s\n", je.text);
+    } else if (!cj_print(f, js, 0)) {
+        fputc('\n', f);
+        rc = 0;
+    }
+    json_decref(js);
+    free(text);
+    return rc;
+}
+
 static int cmd_snapshot(ctl_conn *c, const cli *a)
 {
-    srv_request rq = {.kind = SRV_REQ_GET_SNAPSHOT, .has_step = a->given[O_STEP], .step = a->step};
-    json_t *reply = NULL, *snap = NULL;
+    mpp_request rq = {.kind = MPP_REQ_GET_SNAPSHOT, .has_step = a->given[O_STEP], .step = a->step};
+    mpp_reply reply;
     const char *path = a->val[O_OUT];
     size_t pl = strlen(path);
     int as_json = pl > 5 && !strcmp(path + pl - 5, ".json");
@@ -651,40 +668,36 @@ static int cmd_snapshot(ctl_conn *c, const cli *a)
     int rc;
     if (parse_id(a->pos[0], "snapshot", &id)) return CTL_EXIT_USAGE;
     rq.id = id;
-    rc = ctl_call(c, &rq, "snapshot", &reply, &snap);
+    rc = ctl_call_reply(c, &rq, MPP_REPLY_SNAPSHOT, &reply);
     if (rc) {
-        json_decref(reply);
+        mpp_reply_clear(&reply);
         return exit_for_rc(rc);
     }
+    const mpp_snapshot *snap = &reply.snapshot;
     f = strcmp(path, "-") ? fopen(path, "w") : stdout;
     if (!f) {
         fprintf(stderr, "mpmctl: cannot write %s: %s\n", path, strerror(errno));
-        json_decref(reply);
+        mpp_reply_clear(&reply);
         return CTL_EXIT_ERROR;
     }
-    if (as_json) {
-        rc = cj_print(f, snap, 0);
-        fputc('\n', f);
-    } else {
-        rc = snapshot_csv(f, snap);
-    }
+    rc = as_json ? snapshot_json(f, snap) : snapshot_csv(f, snap);
     if ((f == stdout ? fflush(f) : fclose(f)) || rc) {
         if (!rc) fprintf(stderr, "mpmctl: cannot write %s: %s\n", path, strerror(errno));
         if (f != stdout) remove(path);
-        json_decref(reply);
+        mpp_reply_clear(&reply);
         return CTL_EXIT_ERROR;
     }
     if (f != stdout)
         fprintf(stderr, "run %llu: snapshot at step %lld (t %.10g, %llu particles) -> %s\n",
-                (unsigned long long)id, cj_int(snap, "step", 0), cj_num(snap, "t", 0),
-                (unsigned long long)cj_u64(snap, "n", 0), path);
-    json_decref(reply);
+                (unsigned long long)id, (long long)snap->step, cj_norm(snap->t),
+                (unsigned long long)snap->n, path);
+    mpp_reply_clear(&reply);
     return CTL_EXIT_OK;
 }
 
 static int cmd_cancel(ctl_conn *c, const cli *a)
 {
-    srv_request rq = {.kind = SRV_REQ_CANCEL};
+    mpp_request rq = {.kind = MPP_REQ_CANCEL};
     json_t *reply = NULL, *run = NULL;
     uint64_t id;
     int rc;
@@ -697,7 +710,7 @@ static int cmd_cancel(ctl_conn *c, const cli *a)
         } else {
             int st = cj_status(run, "status");
             printf("job %llu: %s%s\n", (unsigned long long)id, cj_str(run, "status", "?"),
-                   st == SRV_STATUS_RUNNING ? " (cancel requested: it stops within one step)" : "");
+                   st == MPP_STATUS_RUNNING ? " (cancel requested: it stops within one step)" : "");
         }
     }
     json_decref(reply);
@@ -706,7 +719,7 @@ static int cmd_cancel(ctl_conn *c, const cli *a)
 
 static int cmd_ping(ctl_conn *c, const cli *a)
 {
-    srv_request rq = {.kind = SRV_REQ_PING};
+    mpp_request rq = {.kind = MPP_REQ_PING};
     json_t *reply = NULL, *pong = NULL;
     double t0 = now_s(), ms;
     int rc = ctl_call(c, &rq, "pong", &reply, &pong);
@@ -728,18 +741,18 @@ static int cmd_ping(ctl_conn *c, const cli *a)
 
 static int cmd_version(ctl_conn *c, const cli *a)
 {
-    srv_request rq = {.kind = SRV_REQ_VERSION};
+    mpp_request rq = {.kind = MPP_REQ_VERSION};
     json_t *reply = NULL, *vi = NULL;
     int rc;
     if (a->fmt != CTL_OUT_JSON) {
-        printf("mpmctl %s (schema %d)\n", SRV_VERSION, SRV_SCHEMA_VERSION);
+        printf("mpmctl %s (schema %d)\n", MPP_VERSION, MPP_SCHEMA_VERSION);
         fflush(stdout);
     }
     rc = ctl_call(c, &rq, "version", &reply, &vi);
     if (!rc) {
         if (a->fmt == CTL_OUT_JSON) {
-            json_t *o = json_pack("{s:{s:s,s:i},s:O}", "client", "version", SRV_VERSION,
-                                  "schemaVersion", SRV_SCHEMA_VERSION, "server", vi);
+            json_t *o = json_pack("{s:{s:s,s:i},s:O}", "client", "version", MPP_VERSION,
+                                  "schemaVersion", MPP_SCHEMA_VERSION, "server", vi);
             rc = o ? out_json_line(o) : CTL_ESYS;
             json_decref(o);
         } else {

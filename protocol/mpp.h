@@ -6,7 +6,8 @@
  * compile time).  Method and update are the solver's mpm_method and
  * mpm_update, whose values are the schema's Case.Method and Case.Update.
  *
- * Plain C, no generated code: any layer may include it.
+ * Plain C, no generated code: any layer may include it.  The few functions
+ * declared here are in protocol/mpp.c (link libmpp).
  */
 #ifndef MPP_H
 #define MPP_H
@@ -17,6 +18,11 @@
 #define MPP_VERSION "0.3.0"
 /* SCHEMA_VERSION of proto/mpmd.proto. */
 #define MPP_SCHEMA_VERSION 1
+
+/* The particle limit of a case when the caller gives none (mpmd's
+ * --max-particles default, mpmctl's local check).  One limit: the codec's
+ * early refusal and the count of the case check use the same value. */
+#define MPP_DEFAULT_MAX_PARTICLES ((size_t)10000000)
 
 /* Run status; values as mpmd.RunStatus. */
 typedef enum {
@@ -45,5 +51,23 @@ typedef enum {
     MPP_ERR_CONFLICT = 8,
     MPP_ERR_UNAVAILABLE = 9
 } mpp_err_code;
+
+/* "QUEUED", ... as in the schema; NULL for a value that is not a status. */
+const char *mpp_status_name(int status);
+/* The status named (schema spelling), or 0 if none. */
+int mpp_status_from_name(const char *name);
+
+/* "INVALID_CASE", ... as in the schema; NULL for an unknown value. */
+const char *mpp_err_code_name(int code);
+
+/* The wire Error.Code for an MPM_E* code (the one mapping): EINVAL and
+ * ECFL -> INVALID_CASE, EREQUEST and ESYNTAX -> BAD_REQUEST, EVERSION ->
+ * BAD_SCHEMA, ENOTFOUND -> NOT_FOUND, EFULL -> QUEUE_FULL, ETOOBIG ->
+ * TOO_LARGE, ECONFLICT -> CONFLICT, EUNAVAIL -> UNAVAILABLE, anything
+ * else -> INTERNAL. */
+mpp_err_code mpp_error_wire_code(int mpm_code);
+
+/* The protobuf-c runtime version, e.g. "1.4.1". */
+const char *mpp_protobuf_c_version(void);
 
 #endif

@@ -51,7 +51,7 @@ static void defaults(srv_config *c)
     c->workers = 2;
     c->solver_threads = 1;
     c->queue_max = 16;
-    c->max_particles = 10000000;
+    c->max_particles = (long long)MPP_DEFAULT_MAX_PARTICLES;
     c->max_steps = 100000000;
     c->max_wall_s = 0;
     c->max_request_bytes = 64LL << 20;
@@ -180,7 +180,7 @@ int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errl
             return 1;
         }
         if (!strcmp(argv[i], "--version")) {
-            printf("mpmd %s\n", SRV_VERSION);
+            printf("mpmd %s\n", MPP_VERSION);
             return 1;
         }
     }
@@ -218,14 +218,14 @@ int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errl
         if (set(c, s, argv[++i], a, err, errlen)) return -1;
     }
     if (!c->stream_endpoint[0] &&
-        srv_stream_endpoint_derive(c->endpoint, c->stream_endpoint, sizeof c->stream_endpoint)) {
+        mpp_stream_endpoint_derive(c->endpoint, c->stream_endpoint, sizeof c->stream_endpoint)) {
         snprintf(err, errlen, "--endpoint %s: cannot derive the stream endpoint (tcp://HOST:PORT "
                  "or ipc://PATH); give --stream-endpoint", c->endpoint);
         return -1;
     }
     const char *eps[2] = {c->endpoint, c->stream_endpoint};
     for (int i = 0; i < 2; i++)
-        if (!srv_endpoint_is_local(eps[i]) && !c->allow_remote) {
+        if (!mpp_endpoint_is_local(eps[i]) && !c->allow_remote) {
             snprintf(err, errlen, "%s %s: refusing to bind a non-loopback address (there is no "
                      "authentication yet); use tcp://127.0.0.1:PORT or ipc://, or pass "
                      "--allow-remote", i ? "--stream-endpoint" : "--endpoint", eps[i]);
@@ -236,27 +236,4 @@ int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errl
         return -1;
     }
     return 0;
-}
-
-int srv_endpoint_is_local(const char *ep)
-{
-    if (!strncmp(ep, "ipc://", 6) || !strncmp(ep, "inproc://", 9)) return 1;
-    if (strncmp(ep, "tcp://", 6)) return 0;
-    const char *h = ep + 6;
-    return !strncmp(h, "127.", 4) || !strncmp(h, "localhost:", 10) || !strncmp(h, "[::1]:", 6);
-}
-
-int srv_stream_endpoint_derive(const char *ep, char *out, size_t n)
-{
-    if (!strncmp(ep, "ipc://", 6)) {
-        int w = snprintf(out, n, "%s.stream", ep);
-        return w > 0 && (size_t)w < n ? 0 : -1;
-    }
-    if (strncmp(ep, "tcp://", 6)) return -1;
-    const char *colon = strrchr(ep, ':');
-    char *end;
-    long port = colon ? strtol(colon + 1, &end, 10) : -1;
-    if (!colon || colon < ep + 6 || *end || port < 1 || port >= 65535) return -1;
-    int w = snprintf(out, n, "%.*s:%ld", (int)(colon - ep), ep, port + 1);
-    return w > 0 && (size_t)w < n ? 0 : -1;
 }

@@ -9,7 +9,8 @@
 
 #include <stddef.h>
 
-#define SRV_VERSION "0.2.0"
+#include "mpp.h"
+#include "mpp_endpoint.h"
 
 typedef struct {
     char endpoint[256];          /* control socket (ROUTER) */
@@ -30,13 +31,5 @@ typedef struct {
  * Returns 0 to run, 1 when --help or --version was printed (exit 0), or -1
  * with a message in err (exit 2). */
 int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errlen);
-
-/* 1 if a ZeroMQ endpoint binds only on this machine (loopback tcp, ipc,
- * inproc), else 0. */
-int srv_endpoint_is_local(const char *ep);
-
-/* The stream endpoint that goes with a control endpoint: tcp port + 1, or
- * ipc path + ".stream".  Returns 0, or -1 if ep has neither form. */
-int srv_stream_endpoint_derive(const char *ep, char *out, size_t n);
 
 #endif

@@ -5,10 +5,14 @@
  * requests (ZMQ_ROUTER_MANDATORY, replies sent with ZMQ_DONTWAIT so a
  * vanished client never blocks it), an XPUB for job streams (its
  * subscription messages tell which jobs are watched, so snapshots are only
- * packed for watched jobs), and an inproc PULL that collects the workers'
- * stream messages and forwards them to the XPUB unchanged.  A request is
- * answered completely before the next one is read; reads of the store go
- * through the store's own read connections.
+ * packed for watched jobs), an inproc PULL that collects the workers'
+ * stream messages and forwards them to the XPUB unchanged, and the store's
+ * commit notification fd.  Nothing on this loop waits for the store's
+ * writer: a read (Status, GetRun, ListRuns, GetEnergy, GetSnapshot, the
+ * reply of a Cancel) takes a ticket for the writes its run had enqueued and
+ * is answered, through the store's own read connections, once they are
+ * committed; until then it waits in a queue, and so does any later request
+ * of the same client, so that each client gets its replies in order.
  *
  * Frames on the ROUTER: [identity][empty][Request], answered with
  * [identity][empty][Reply] (a DEALER client sends [empty][Request]; a REQ
@@ -24,7 +28,7 @@
  */
 #include "srv_daemon.h"
 
-#include "srv_codec.h"
+#include "mpp_msg.h"
 #include "srv_log.h"
 #include "srv_pool.h"
 #include "store.h"
@@ -62,7 +66,25 @@ typedef struct {
     srv_pool *pool;
     int stopping;           /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
+    struct pending *pending, **pending_tail;  /* reads waiting for a commit */
+    size_t npending;
 } daemon_t;
+
+/* A request that waits, off the event loop: a read until the store has
+ * committed every write its run (or, for a listing, any run) had enqueued
+ * when it began, so it sees what the workers published before it and no
+ * read ever blocks the loop on a commit; any request behind a waiting one
+ * of the same client, so that a client's replies keep its order. */
+typedef struct pending {
+    zmq_msg_t id;           /* the client's identity frame */
+    mpp_request rq;         /* the decoded request (a read: owns nothing big) */
+    int begun;              /* its action is done and its ticket taken */
+    uint64_t ticket;        /* store_ticket() when it began */
+    struct pending *next;
+} pending;
+/* Reads waiting at once, at most; more get UNAVAILABLE (a store that cannot
+ * keep up is not hidden behind an ever longer queue). */
+#define PENDING_MAX 4096
 
 static double wall_now(void)
 {
@@ -86,6 +108,18 @@ static void send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len)
     free(buf);
 }
 
+/* Answers with the Error reply of an mpm_error (wire code, camelCase
+ * field and text from the protocol library). */
+static void reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e)
+{
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    mpp_reply_error_from(e, &buf, &len);
+    send_reply(d, id, buf, len);
+}
+
+/* Answers with an error: code an MPM_E* code, field a path in the schema's
+ * spelling ("" or NULL: none), the message without the field. */
 static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
 static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
@@ -95,88 +129,53 @@ static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field,
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
-    uint8_t *buf = NULL;
-    size_t len = 0;
-    srv_reply_error(code, msg, field, &buf, &len);
-    send_reply(d, id, buf, len);
-}
-
-/* The JSON path a case error starts with ("materials[0].density: ..."). */
-static void error_field(const char *msg, char *field, size_t n)
-{
-    const char *c = strstr(msg, ": ");
-    size_t k = c ? (size_t)(c - msg) : 0;
-    if (k >= n || strchr(msg, ' ') < c) k = 0;
-    memcpy(field, msg, k);
-    field[k] = 0;
-}
-
-static int status_to_srv(store_status s)
-{
-    static const int map[] = {SRV_STATUS_QUEUED, SRV_STATUS_RUNNING, SRV_STATUS_FINISHED,
-                              SRV_STATUS_FAILED, SRV_STATUS_CANCELLED, SRV_STATUS_INTERRUPTED};
-    return (unsigned)s < 6 ? map[s] : SRV_STATUS_FAILED;
-}
-
-static int status_to_store(int s, store_status *out)
-{
-    if (s < SRV_STATUS_QUEUED || s > SRV_STATUS_INTERRUPTED) return -1;
-    *out = (store_status)(s - 1);
-    return 0;
+    mpm_error e;
+    mpm_fail(&e, code, field, "%s", msg);
+    reply_mpm_error(d, id, &e);
 }
 
 /* RunInfo from a stored run, with its last energy sample and stored
  * snapshots (x, cleared by the caller after encoding) and the live figures
  * of a running job. */
-static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_energy_sample *e,
+static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_energy_sample *e,
                      store_run_extra *x)
 {
     memset(ri, 0, sizeof *ri);
     ri->run_id = ri->job_id = (uint64_t)r->id;
     ri->name = r->name;
-    ri->status = status_to_srv(r->status);
+    ri->status = (int)r->status;
     ri->error = r->error;
     ri->submitted_at = r->submitted_at;
     ri->started_at = r->started_at;
-    ri->finished_at = r->ended_at;
-    ri->steps = r->steps_done;
-    if (r->status >= STORE_FINISHED) ri->steps_total = r->steps_done;
+    ri->finished_at = r->finished_at;
+    ri->steps = r->steps;
+    if (MPP_STATUS_ENDED(r->status)) ri->steps_total = r->steps;
     ri->wall_s = r->wall_s;
     ri->particles = (uint64_t)r->particles;
     ri->nodes = (uint64_t)r->nodes;
     ri->dim = r->dim;
-    ri->method = r->method == STORE_METHOD_GIMP ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
-    ri->update = r->update == STORE_MUSL ? MPM_MUSL : r->update == STORE_USL ? MPM_USL : MPM_USF;
+    ri->method = r->method;
+    ri->update = r->update;
     if (!isnan(r->energy.total)) {
         memset(e, 0, sizeof *e);
-        e->step = r->steps_done;
+        e->step = r->steps;
         e->dim = r->dim;
-        e->e.kinetic = r->energy.kinetic;
-        e->e.strain = r->energy.strain;
-        e->e.potential = r->energy.potential;
-        e->e.external_work = r->energy.external_work;
-        e->e.total = r->energy.total;
+        e->e = r->energy;
         ri->last_energy = e;
     }
     if (store_run_extras(d->st, r->id, x) == 0) {
         ri->energy_samples = (uint64_t)x->energy_count;
         ri->snapshot_steps = x->snapshot_steps;
         ri->n_snapshot_steps = x->n_snapshots;
-        store_energy_series es;
-        if (x->last_seq >= 0 && store_energy_read(d->st, r->id, x->last_seq, 1, &es) == 0) {
-            if (es.n == 1) {
-                memset(e, 0, sizeof *e);
-                e->step = es.step[0];
-                e->t = es.t[0];
-                e->seq = (uint64_t)es.seq[0];
-                e->dim = r->dim;
-                e->e = (mpm_energy){es.kinetic[0], es.strain[0], es.potential[0],
-                                    es.external_work[0], es.total[0], es.mass[0],
-                                    {es.momentum_x[0], es.momentum_y[0], es.momentum_z[0]}};
+        mpm_energy_sample *es = NULL;
+        size_t n = 0;
+        if (x->last_seq >= 0 && store_energy_read(d->st, r->id, x->last_seq, 1, &es, &n) == 0) {
+            if (n == 1) {
+                *e = es[0];
                 ri->last_energy = e;
                 ri->t = e->t;
             }
-            store_energy_series_free(&es);
+            free(es);
         }
     }
     srv_job_info ji;
@@ -188,27 +187,33 @@ static void run_info(daemon_t *d, const store_run *r, srv_run_info *ri, srv_ener
         ri->wall_s = ji.wall_s;
         if (ji.particles) ri->particles = ji.particles;
         if (ji.nodes) ri->nodes = ji.nodes;
+        /* the live figures are as of the last progress report; a stored
+         * sample may be newer */
+        if (ri->last_energy && ri->last_energy->step > ri->steps) {
+            ri->steps = ri->last_energy->step;
+            ri->t = ri->last_energy->t;
+        }
     }
 }
 
 /* Answers with the RunInfo of a run; field names the request's id field
- * ("jobId" or "runId") for NOT_FOUND. */
+ * ("job_id" or "run_id") for NOT_FOUND. */
 static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, const char *field)
 {
     store_run r;
     int rc = store_run_get(d->st, (int64_t)run, &r);
-    const char *what = strcmp(field, "jobId") ? "run" : "job";
-    if (rc == STORE_ENOTFOUND) {
-        reply_error(d, id, SRV_ERR_NOT_FOUND, field, "no %s %llu", what, (unsigned long long)run);
+    const char *what = strcmp(field, "job_id") ? "run" : "job";
+    if (rc == MPM_ENOTFOUND) {
+        reply_error(d, id, MPM_ENOTFOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
     }
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading %s %llu: %s", what,
-                    (unsigned long long)run, store_errmsg());
+        reply_error(d, id, MPM_EINTERNAL, "", "reading %s %llu: %s", what,
+                    (unsigned long long)run, store_error()->message);
         return;
     }
-    srv_run_info ri;
-    srv_energy_sample e;
+    mpp_run_info ri;
+    mpm_energy_sample e;
     store_run_extra x;
     run_info(d, &r, &ri, &e, &x);
     if (with_case) {
@@ -217,8 +222,8 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     }
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_reply_run(&ri, &buf, &len))
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
+    if (mpp_reply_run(&ri, &buf, &len))
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
     else send_reply(d, id, buf, len);
     store_run_extra_clear(&x);
     store_run_clear(&r);
@@ -239,109 +244,221 @@ static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
 
 /* ---- requests ---- */
 
-static void do_submit(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
-    char err[1024], field[256];
     if (stop_signal || d->stopping) {
-        reply_error(d, id, SRV_ERR_UNAVAILABLE, "", "mpmd is shutting down");
+        reply_error(d, id, MPM_EUNAVAIL, "", "mpmd is shutting down");
         return;
     }
-    srv_case *sc = NULL;
-    int rc = srv_case_from_pb(rq->case_pb, &sc, err, sizeof err);
+    mpp_case *sc = NULL;
+    mpm_error cerr;
+    /* checked and counted once, under this server's --max-particles */
+    int rc = mpp_case_from_pb(rq->case_pb, (size_t)d->cfg->max_particles, &sc, &cerr);
     if (rc) {
-        error_field(err, field, sizeof field);
-        reply_error(d, id, rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_INVALID_CASE,
-                    field, "%s", err);
+        reply_mpm_error(d, id, &cerr);
         return;
     }
-    long nparticles = mpm_case_count(&sc->c, err, sizeof err);
-    if (nparticles < 0) {
-        error_field(err, field, sizeof field);
-        reply_error(d, id, SRV_ERR_INVALID_CASE, field, "%s", err);
-        srv_case_destroy(&sc);
-        return;
-    }
-    if (nparticles > d->cfg->max_particles) {
-        reply_error(d, id, SRV_ERR_TOO_LARGE, "bodies",
-                    "bodies: the case has %ld particles, above this server's limit %lld "
-                    "(--max-particles)", nparticles, d->cfg->max_particles);
-        srv_case_destroy(&sc);
-        return;
-    }
+    size_t nparticles = sc->info.particles;
     /* in floating point: endTime / dt can be far beyond any integer type */
     double steps = !sc->has_end_time ? (double)sc->steps
                    : sc->c.dt > 0 ? ceil(sc->end_time / sc->c.dt - 0.5) : 0;
     if (!(steps <= (double)d->cfg->max_steps)) {
-        reply_error(d, id, SRV_ERR_TOO_LARGE, sc->has_end_time ? "endTime" : "steps",
-                    "%s: the case asks for %.15g steps%s, above this server's limit %lld "
-                    "(--max-steps)", sc->has_end_time ? "endTime" : "steps", steps,
+        reply_error(d, id, MPM_ETOOBIG, sc->has_end_time ? "end_time" : "steps",
+                    "the case asks for %.15g steps%s, above this server's limit %lld "
+                    "(--max-steps)", steps,
                     sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
         return;
     }
     if (!srv_pool_has_room(d->pool)) {
-        reply_error(d, id, SRV_ERR_QUEUE_FULL, "",
+        reply_error(d, id, MPM_EFULL, "",
                     "the job queue is full (%d running, %d queued at most); retry later",
                     d->cfg->workers, d->cfg->queue_max);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
         return;
     }
     uint8_t *pb = NULL;
     size_t pblen = 0;
     /* the stored case names its method and update: it keeps its meaning
      * whatever later defaults say */
-    srv_case_pin_defaults(rq->case_pb);
-    if (srv_case_pack(rq->case_pb, &pb, &pblen)) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
-        srv_case_destroy(&sc);
+    mpp_case_pin_defaults(rq->case_pb);
+    if (mpp_case_pack(rq->case_pb, &pb, &pblen)) {
+        reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
+        mpp_case_destroy(&sc);
         return;
     }
-    size_t nodes = 1;
-    for (int k = 0; k < sc->c.grid.dim; k++) nodes *= (size_t)sc->c.grid.nodes[k];
+    size_t nodes = sc->info.nodes;
     store_run r = {0};
     r.name = sc->name;
     r.case_pb = pb;
     r.case_len = pblen;
-    r.method = sc->c.method == MPM_METHOD_GIMP ? STORE_METHOD_GIMP : STORE_METHOD_MPM;
-    r.update = (store_update)sc->c.update;
+    r.method = sc->c.method;
+    r.update = sc->c.update;
     r.dim = sc->c.grid.dim;
-    r.particles = nparticles;
+    r.particles = (int64_t)nparticles;
     r.nodes = (int64_t)nodes;
-    r.status = STORE_QUEUED;
+    r.status = MPP_STATUS_QUEUED;
     r.submitted_at = wall_now();
-    r.server_version = SRV_VERSION;
+    r.server_version = MPP_VERSION;
     int64_t run = 0;
     rc = store_run_insert(d->st, &r, &run);
     free(pb);
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot record the run: %s", store_errmsg());
-        srv_case_destroy(&sc);
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot record the run: %s", store_error()->message);
+        mpp_case_destroy(&sc);
         return;
     }
     const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
     char namebuf[128];
     snprintf(namebuf, sizeof namebuf, "%s", name);
-    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, (size_t)nparticles, nodes);
+    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes);
     if (rc) {
         store_run_end end = {0};
-        end.status = rc == SRV_POOL_ESTOPPED ? STORE_INTERRUPTED : STORE_FAILED;
-        end.error = rc == SRV_POOL_EFULL ? "job queue full" : rc == SRV_POOL_ESTOPPED
+        end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
+        end.error = rc == MPM_EFULL ? "job queue full" : rc == MPM_EUNAVAIL
                     ? STORE_INTERRUPTED_QUEUED : "out of memory";
         store_run_finish(d->st, run, &end);
-        reply_error(d, id, rc == SRV_POOL_EFULL ? SRV_ERR_QUEUE_FULL : rc == SRV_POOL_ESTOPPED
-                    ? SRV_ERR_UNAVAILABLE : SRV_ERR_INTERNAL, "", "%s", end.error);
-        srv_case_destroy(&sc);
+        reply_error(d, id, rc, "", "%s", end.error);
+        mpp_case_destroy(&sc);
         return;
     }
-    srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %ld particles", namebuf, (long)r.dim,
-            r.method == STORE_METHOD_GIMP ? "GMPM" : "MPM", store_update_name(r.update), nparticles);
+    srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %zu particles", namebuf, (long)r.dim,
+            r.method == MPM_METHOD_GIMP ? "GMPM" : "MPM",
+            r.update == MPM_MUSL ? "musl" : r.update == MPM_USL ? "usl" : "usf", nparticles);
     uint8_t *buf = NULL;
     size_t len = 0;
-    srv_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
+    mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
     send_reply(d, id, buf, len);
 }
 
-static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
+/* ---- requests in order, reads after their commit ---- */
+
+static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
+static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
+static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
+static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job);
+static void do_other(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
+
+static int is_read(mpp_req_kind k)
+{
+    return k == MPP_REQ_CANCEL || k == MPP_REQ_STATUS || k == MPP_REQ_GET_RUN ||
+           k == MPP_REQ_LIST_RUNS || k == MPP_REQ_GET_ENERGY || k == MPP_REQ_GET_SNAPSHOT;
+}
+
+/* Answers a read request from committed data. */
+static void answer_read(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+{
+    switch (rq->kind) {
+    case MPP_REQ_CANCEL:
+    case MPP_REQ_STATUS: reply_run(d, id, rq->id, 0, "job_id"); break;
+    case MPP_REQ_GET_RUN: reply_run(d, id, rq->id, rq->with_case, "run_id"); break;
+    case MPP_REQ_LIST_RUNS: do_list(d, id, rq); break;
+    case MPP_REQ_GET_ENERGY: do_energy(d, id, rq); break;
+    case MPP_REQ_GET_SNAPSHOT: do_snapshot(d, id, rq); break;
+    default: reply_error(d, id, MPM_EINTERNAL, "", "request kind %d is not a read", (int)rq->kind);
+    }
+}
+
+/* Carries a request as far as it can go now: 1 when it is answered, 0 when
+ * its reply waits for *ticket (a read: the writes its run, or any run for a
+ * listing, had enqueued when it began, so that it sees everything the
+ * workers published before it).  *begun says the request's action (a
+ * cancel's) is done and its ticket taken. */
+static int run_request(daemon_t *d, zmq_msg_t *id, mpp_request *rq, int *begun, uint64_t *ticket)
+{
+    if (!is_read(rq->kind)) {
+        do_other(d, id, rq);
+        return 1;
+    }
+    if (!*begun) {
+        if (rq->kind == MPP_REQ_CANCEL && cancel_job(d, id, rq->id)) return 1;
+        *ticket = store_ticket(d->st, rq->kind == MPP_REQ_LIST_RUNS ? 0 : (int64_t)rq->id);
+        *begun = 1;
+    }
+    if (!store_ticket_done(d->st, *ticket)) return 0;
+    answer_read(d, id, rq);
+    return 1;
+}
+
+static int same_peer(zmq_msg_t *a, zmq_msg_t *b)
+{
+    return zmq_msg_size(a) == zmq_msg_size(b) &&
+           !memcmp(zmq_msg_data(a), zmq_msg_data(b), zmq_msg_size(a));
+}
+
+/* 1 if a request of this client waits (a later one must wait behind it). */
+static int peer_waits(daemon_t *d, zmq_msg_t *id, const pending *before)
+{
+    for (const pending *q = d->pending; q && q != before; q = q->next)
+        if (same_peer((zmq_msg_t *)&q->id, id)) return 1;
+    return 0;
+}
+
+/* Queues a request (taken over: *rq is emptied); on failure answers
+ * UNAVAILABLE. */
+static void enqueue(daemon_t *d, zmq_msg_t *id, mpp_request *rq, int begun, uint64_t ticket)
+{
+    pending *p = d->npending < PENDING_MAX ? calloc(1, sizeof *p) : NULL;
+    if (p && zmq_msg_init(&p->id) == 0 && zmq_msg_copy(&p->id, id) == 0) {
+        p->rq = *rq;
+        memset(rq, 0, sizeof *rq);
+        p->begun = begun;
+        p->ticket = ticket;
+        if (!d->pending_tail) d->pending_tail = &d->pending;
+        *d->pending_tail = p;
+        d->pending_tail = &p->next;
+        d->npending++;
+        return;
+    }
+    if (p) zmq_msg_close(&p->id);
+    free(p);
+    reply_error(d, id, MPM_EUNAVAIL, "", "%zu requests are waiting for the store; retry "
+                "later", d->npending);
+}
+
+/* Runs a decoded request, in arrival order per client: behind a waiting
+ * request of the same client it queues; a read whose writes are not yet
+ * committed queues; everything else is answered now. */
+static void dispatch(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+{
+    int begun = 0;
+    uint64_t ticket = 0;
+    if (peer_waits(d, id, NULL) || !run_request(d, id, rq, &begun, &ticket))
+        enqueue(d, id, rq, begun, ticket);
+}
+
+/* Carries on the waiting requests whose writes are committed, in arrival
+ * order per client. */
+static void serve_pending(daemon_t *d)
+{
+    pending **pp = &d->pending;
+    d->pending_tail = &d->pending;
+    while (*pp) {
+        pending *p = *pp;
+        if (!peer_waits(d, &p->id, p) && run_request(d, &p->id, &p->rq, &p->begun, &p->ticket)) {
+            *pp = p->next;
+            zmq_msg_close(&p->id);
+            mpp_request_clear(&p->rq);
+            free(p);
+            d->npending--;
+            continue;
+        }
+        d->pending_tail = &p->next;
+        pp = &p->next;
+    }
+}
+
+/* Answers every waiting request after a last flush (shutdown). */
+static void drain_pending(daemon_t *d)
+{
+    if (!d->pending) return;
+    store_flush(d->st);
+    serve_pending(d);
+}
+
+/* A cancel's action: 0 when the job was live (its reply, the run, follows
+ * once the store has it), 1 when it was answered with an error. */
+static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job)
 {
     uint8_t *msg = NULL;
     size_t len = 0;
@@ -350,105 +467,81 @@ static void do_cancel(daemon_t *d, zmq_msg_t *id, uint64_t job)
     if (rc == SRV_CANCEL_NONE) {
         store_run r;
         int src = store_run_get(d->st, (int64_t)job, &r);
-        if (src == STORE_ENOTFOUND) {
-            reply_error(d, id, SRV_ERR_NOT_FOUND, "jobId", "no job %llu", (unsigned long long)job);
-            return;
+        if (src == MPM_ENOTFOUND) {
+            reply_error(d, id, MPM_ENOTFOUND, "job_id", "no job %llu", (unsigned long long)job);
+            return 1;
         }
         if (!src) {
-            reply_error(d, id, SRV_ERR_CONFLICT, "jobId", "job %llu already ended (%s)",
-                        (unsigned long long)job, srv_status_name(status_to_srv(r.status)));
+            reply_error(d, id, MPM_ECONFLICT, "job_id", "job %llu already ended (%s)",
+                        (unsigned long long)job, mpp_status_name((int)r.status));
             store_run_clear(&r);
-            return;
+            return 1;
         }
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
-                    store_errmsg());
-        return;
+        reply_error(d, id, MPM_EINTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
+                    store_error()->message);
+        return 1;
     }
     if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested");
-    store_flush(d->st);
-    reply_run(d, id, job, 0, "jobId");
+    return 0;
 }
 
-static void do_energy(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     size_t limit = rq->limit ? rq->limit : ENERGY_PAGE_DEFAULT;
     if (limit > ENERGY_PAGE_MAX) limit = ENERGY_PAGE_MAX;
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
-    if (rc == STORE_ENOTFOUND) {
-        reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu", (unsigned long long)rq->id);
+    if (rc == MPM_ENOTFOUND) {
+        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu", (unsigned long long)rq->id);
         return;
     }
     int dim = rc ? 3 : r.dim;
     if (!rc) store_run_clear(&r);
-    /* what the workers published so far is in the store once flushed */
-    store_flush(d->st);
-    store_energy_series es;
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
     int64_t from = rq->from_seq > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)rq->from_seq;
-    rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es);
+    rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es, &nes);
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading energies of run %llu: %s",
-                    (unsigned long long)rq->id, store_errmsg());
+        reply_error(d, id, MPM_EINTERNAL, "", "reading energies of run %llu: %s",
+                    (unsigned long long)rq->id, store_error()->message);
         return;
     }
-    int more = es.n > limit;
-    size_t n = more ? limit : es.n;
-    srv_energy_sample *s = calloc(n ? n : 1, sizeof *s);
-    if (!s) {
-        store_energy_series_free(&es);
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
-        return;
-    }
-    for (size_t i = 0; i < n; i++) {
-        s[i].step = es.step[i];
-        s[i].t = es.t[i];
-        s[i].seq = (uint64_t)es.seq[i];
-        s[i].dim = dim;
-        s[i].e.kinetic = es.kinetic[i];
-        s[i].e.strain = es.strain[i];
-        s[i].e.potential = es.potential[i];
-        s[i].e.external_work = es.external_work[i];
-        s[i].e.total = es.total[i];
-        s[i].e.momentum[0] = es.momentum_x[i];
-        s[i].e.momentum[1] = es.momentum_y[i];
-        s[i].e.momentum[2] = es.momentum_z[i];
-        s[i].e.mass = es.mass[i];
-    }
+    int more = nes > limit;
+    size_t n = more ? limit : nes;
+    for (size_t i = 0; i < n; i++) es[i].dim = dim;
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_reply_energy(rq->id, s, n, more, &buf, &len))
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu energy samples", n);
+    if (mpp_reply_energy(rq->id, es, n, more, &buf, &len))
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu energy samples", n);
     else send_reply(d, id, buf, len);
-    free(s);
-    store_energy_series_free(&es);
+    free(es);
 }
 
-static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
-    store_flush(d->st);
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
-    if (rc == STORE_ENOTFOUND) {
-        reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "no run %llu",
+    if (rc == MPM_ENOTFOUND) {
+        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu",
                     (unsigned long long)rq->id);
         return;
     }
     if (!rc) store_run_clear(&r);  /* else the snapshot read reports it */
     store_snapshot ss;
     /* a negative step is no step (the store would read it as "latest") */
-    rc = rq->has_step && rq->step < 0 ? STORE_ENOTFOUND
+    rc = rq->has_step && rq->step < 0 ? MPM_ENOTFOUND
          : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
-    if (rc == STORE_ENOTFOUND) {
+    if (rc == MPM_ENOTFOUND) {
         if (rq->has_step)
-            reply_error(d, id, SRV_ERR_NOT_FOUND, "step", "run %llu has no stored snapshot at "
+            reply_error(d, id, MPM_ENOTFOUND, "step", "run %llu has no stored snapshot at "
                         "step %lld", (unsigned long long)rq->id, (long long)rq->step);
         else
-            reply_error(d, id, SRV_ERR_NOT_FOUND, "runId", "run %llu has no stored snapshot "
+            reply_error(d, id, MPM_ENOTFOUND, "run_id", "run %llu has no stored snapshot "
                         "(the case must set output.recordSnapshots)", (unsigned long long)rq->id);
         return;
     }
     if (rc) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "reading a snapshot: %s", store_errmsg());
+        reply_error(d, id, MPM_EINTERNAL, "", "reading a snapshot: %s", store_error()->message);
         return;
     }
     size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
@@ -461,35 +554,34 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, srv_request *rq)
             off += cnt[i];
         }
     if (off * sizeof(double) != ss.size) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "stored snapshot of run %llu at step %lld is "
+        reply_error(d, id, MPM_EINTERNAL, "", "stored snapshot of run %llu at step %lld is "
                     "corrupt (%zu bytes, expected %zu)", (unsigned long long)rq->id,
                     (long long)ss.step, ss.size, off * sizeof(double));
         store_snapshot_clear(&ss);
         return;
     }
-    srv_snapshot s = {ss.step, ss.t, n, (int)dim, arr[0], arr[1], arr[2], arr[3], arr[4]};
+    mpp_snapshot s = {ss.step, ss.t, n, (int)dim, arr[0], arr[1], arr[2], arr[3], arr[4]};
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_reply_snapshot(&s, &buf, &len))
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode the snapshot");
+    if (mpp_reply_snapshot(&s, &buf, &len))
+        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode the snapshot");
     else send_reply(d, id, buf, len);
     store_snapshot_clear(&ss);
 }
 
-static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
+static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     store_run_filter f = {0};
-    store_status st;
     if (rq->status) {
-        if (status_to_store(rq->status, &st)) {
-            reply_error(d, id, SRV_ERR_BAD_REQUEST, "listRuns.status", "listRuns.status: unknown "
+        if (rq->status < MPP_STATUS_MIN || rq->status > MPP_STATUS_MAX) {
+            reply_error(d, id, MPM_EREQUEST, "list_runs.status", "unknown "
                         "value %d", rq->status);
             return;
         }
-        f.status_mask = STORE_STATUS_BIT(st);
+        f.status_mask = STORE_STATUS_BIT(rq->status);
     }
     if (rq->limit > LIST_MAX) {
-        reply_error(d, id, SRV_ERR_TOO_LARGE, "listRuns.limit", "listRuns.limit: %u is above this "
+        reply_error(d, id, MPM_ETOOBIG, "list_runs.limit", "%u is above this "
                     "server's maximum of %u runs per listing", rq->limit, LIST_MAX);
         return;
     }
@@ -497,20 +589,20 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     store_run *runs = NULL;
     size_t n = 0;
     if (store_run_list(d->st, &f, &runs, &n)) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "listing runs: %s", store_errmsg());
+        reply_error(d, id, MPM_EINTERNAL, "", "listing runs: %s", store_error()->message);
         return;
     }
-    srv_run_info *ri = calloc(n ? n : 1, sizeof *ri);
-    srv_energy_sample *es = calloc(n ? n : 1, sizeof *es);
+    mpp_run_info *ri = calloc(n ? n : 1, sizeof *ri);
+    mpm_energy_sample *es = calloc(n ? n : 1, sizeof *es);
     store_run_extra *xs = calloc(n ? n : 1, sizeof *xs);
     if (!ri || !es || !xs) {
-        reply_error(d, id, SRV_ERR_INTERNAL, "", "out of memory");
+        reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
     } else {
         for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
         uint8_t *buf = NULL;
         size_t len = 0;
-        if (srv_reply_runs(ri, n, &buf, &len))
-            reply_error(d, id, SRV_ERR_INTERNAL, "", "cannot encode %zu runs", n);
+        if (mpp_reply_runs(ri, n, &buf, &len))
+            reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", n);
         else send_reply(d, id, buf, len);
     }
     if (xs)
@@ -521,71 +613,58 @@ static void do_list(daemon_t *d, zmq_msg_t *id, srv_request *rq)
     store_run_list_free(runs, n);
 }
 
-static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t size)
+/* Requests that read nothing a worker writes: Submit, Ping, Version. */
+static void do_other(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
-    char err[512];
-    srv_request rq;
-    d->requests++;
-    if (size > (size_t)d->cfg->max_request_bytes) {
-        d->bad_requests++;
-        srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
-        reply_error(d, id, SRV_ERR_TOO_LARGE, "", "request of %zu bytes is above this server's "
-                    "limit of %lld bytes (--max-request-bytes)", size, d->cfg->max_request_bytes);
-        return;
-    }
-    int rc = srv_request_decode(data, size, (size_t)d->cfg->max_request_bytes, &rq, err, sizeof err);
-    if (rc) {
-        char field[128];
-        d->bad_requests++;
-        srv_debug(0, "bad request: %s", err);
-        error_field(err, field, sizeof field);  /* "status.jobId: missing" */
-        if (!strcmp(field, "request")) field[0] = 0;  /* no body: no one field */
-        reply_error(d, id, rc == SRV_CODEC_EVERSION ? SRV_ERR_BAD_SCHEMA
-                    : rc == SRV_CODEC_ETOOBIG ? SRV_ERR_TOO_LARGE : SRV_ERR_BAD_REQUEST, field,
-                    "%s", err);
-        srv_request_clear(&rq);
-        return;
-    }
     uint8_t *buf = NULL;
     size_t len = 0;
-    switch (rq.kind) {
-    case SRV_REQ_SUBMIT: do_submit(d, id, &rq); break;
-    case SRV_REQ_CANCEL: do_cancel(d, id, rq.id); break;
-    case SRV_REQ_STATUS:
-        store_flush(d->st);
-        reply_run(d, id, rq.id, 0, "jobId");
-        break;
-    case SRV_REQ_GET_RUN:
-        store_flush(d->st);
-        reply_run(d, id, rq.id, rq.with_case, "runId");
-        break;
-    case SRV_REQ_LIST_RUNS:
-        store_flush(d->st);
-        do_list(d, id, &rq);
-        break;
-    case SRV_REQ_GET_ENERGY: do_energy(d, id, &rq); break;
-    case SRV_REQ_GET_SNAPSHOT: do_snapshot(d, id, &rq); break;
-    case SRV_REQ_PING:
-        srv_reply_pong(SRV_VERSION, d->cfg->stream_endpoint, &buf, &len);
+    switch (rq->kind) {
+    case MPP_REQ_SUBMIT: do_submit(d, id, rq); break;
+    case MPP_REQ_PING:
+        mpp_reply_pong(MPP_VERSION, d->cfg->stream_endpoint, &buf, &len);
         send_reply(d, id, buf, len);
         break;
-    case SRV_REQ_VERSION: {
+    case MPP_REQ_VERSION: {
         int maj, min, pat;
         zmq_version(&maj, &min, &pat);
         char zv[32];
         snprintf(zv, sizeof zv, "%d.%d.%d", maj, min, pat);
         const char *names[] = {"libzmq", "sqlite", "protobuf-c", "schema"};
         char sv[8];
-        snprintf(sv, sizeof sv, "%d", SRV_SCHEMA_VERSION);
-        const char *vers[] = {zv, store_sqlite_version(), srv_codec_protobuf_c_version(), sv};
-        srv_reply_version(SRV_VERSION, names, vers, 4, &buf, &len);
+        snprintf(sv, sizeof sv, "%d", MPP_SCHEMA_VERSION);
+        const char *vers[] = {zv, store_sqlite_version(), mpp_protobuf_c_version(), sv};
+        mpp_reply_version(MPP_VERSION, names, vers, 4, &buf, &len);
         send_reply(d, id, buf, len);
         break;
     }
     default:
-        reply_error(d, id, SRV_ERR_BAD_REQUEST, "", "unknown request kind %d", (int)rq.kind);
+        reply_error(d, id, MPM_EREQUEST, "", "unknown request kind %d", (int)rq->kind);
     }
-    srv_request_clear(&rq);
+}
+
+static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t size)
+{
+    mpp_request rq;
+    d->requests++;
+    if (size > (size_t)d->cfg->max_request_bytes) {
+        d->bad_requests++;
+        srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
+        reply_error(d, id, MPM_ETOOBIG, "", "request of %zu bytes is above this server's "
+                    "limit of %lld bytes (--max-request-bytes)", size, d->cfg->max_request_bytes);
+        return;
+    }
+    mpm_error rerr;
+    int rc = mpp_request_decode(data, size, (size_t)d->cfg->max_request_bytes, &rq, &rerr);
+    if (rc) {
+        char text[sizeof rerr.message + 256];
+        d->bad_requests++;
+        srv_debug(0, "bad request: %s", mpm_error_text(&rerr, MPM_FIELD_JSON, text, sizeof text));
+        reply_mpm_error(d, id, &rerr);
+        mpp_request_clear(&rq);
+        return;
+    }
+    dispatch(d, id, &rq);
+    mpp_request_clear(&rq);
 }
 
 /* Reads one multipart message from the ROUTER and answers it. */
@@ -618,7 +697,7 @@ static void on_router(daemon_t *d)
                  "request)", total);
         /* answerable when the delimiter is there: the peer speaks the protocol */
         if (nparts >= 2 && zmq_msg_size(&part[1]) == 0)
-            reply_error(d, &part[0], SRV_ERR_BAD_REQUEST, "",
+            reply_error(d, &part[0], MPM_EREQUEST, "",
                         "expected 1 request frame after the empty delimiter, got %zu", total - 2);
     }
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
@@ -687,24 +766,29 @@ static void stop_jobs(daemon_t *d)
     d->stopping = 1;
     srv_pool_stop(d->pool, publish, d);
     while (srv_pool_busy(d->pool)) {
-        zmq_pollitem_t items[] = {{d->router, 0, ZMQ_POLLIN, 0}, {d->pull, 0, ZMQ_POLLIN, 0}};
-        int n = zmq_poll(items, 2, 50);
+        zmq_pollitem_t items[] = {{d->router, 0, ZMQ_POLLIN, 0},
+                                  {d->pull, 0, ZMQ_POLLIN, 0},
+                                  {NULL, store_notify_fd(d->st), ZMQ_POLLIN, 0}};
+        int n = zmq_poll(items, 3, 50);
         if (n < 0 && errno != EINTR) {
             srv_warn(0, "zmq_poll while stopping: %s", zmq_strerror(errno));
             break;
         }
         if (n > 0 && (items[1].revents & ZMQ_POLLIN)) on_pull(d, 10000);
+        if (n > 0 && (items[2].revents & ZMQ_POLLIN)) store_notify_drain(d->st);
         if (n > 0 && (items[0].revents & ZMQ_POLLIN)) on_router(d);
+        if (d->pending) serve_pending(d);
     }
     srv_pool_destroy(&d->pool);
     on_pull(d, 0);
+    drain_pending(d);
 }
 
 static int open_socket(void *zctx, int type, const char *ep, int allow_remote, void **out,
                        char *err, size_t errlen)
 {
     *out = NULL;
-    if (!srv_endpoint_is_local(ep)) {
+    if (!mpp_endpoint_is_local(ep)) {
         if (!allow_remote) {
             snprintf(err, errlen, "refusing to bind %s: not loopback, ipc:// or inproc:// "
                      "(mpmd has no authentication yet; pass --allow-remote to bind anyway)", ep);
@@ -764,8 +848,8 @@ int srv_daemon_run(const srv_config *cfg)
 
     store_options so = {0};
     so.log = srv_log_store;
-    if (store_open(cfg->db, &so, &d.st, err, sizeof err)) {
-        srv_warn(0, "%s", err);
+    if (store_open(cfg->db, &so, &d.st)) {
+        srv_warn(0, "%s", store_error()->message);
         return 1;
     }
     store_stats ss;
@@ -790,21 +874,24 @@ int srv_daemon_run(const srv_config *cfg)
         goto out;
     }
     srv_log(0, "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
-            "queue %d", SRV_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
+            "queue %d", MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
             cfg->queue_max);
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},
                                   {d.xpub, 0, ZMQ_POLLIN, 0},
-                                  {d.pull, 0, ZMQ_POLLIN, 0}};
-        int n = zmq_poll(items, 3, 250);
+                                  {d.pull, 0, ZMQ_POLLIN, 0},
+                                  {NULL, store_notify_fd(d.st), ZMQ_POLLIN, 0}};
+        int n = zmq_poll(items, 4, 250);
         if (n < 0) {
             if (errno == EINTR) continue;
             srv_warn(0, "zmq_poll: %s", zmq_strerror(errno));
             break;
         }
+        if (items[3].revents & ZMQ_POLLIN) store_notify_drain(d.st);
         if (items[2].revents & ZMQ_POLLIN) on_pull(&d, 10000);
         if (items[1].revents & ZMQ_POLLIN) on_xpub(&d);
         if (items[0].revents & ZMQ_POLLIN) on_router(&d);
+        if (d.pending) serve_pending(&d);
     }
     srv_log(0, "%s: shutting down", stop_signal == SIGINT ? "SIGINT" : stop_signal == SIGTERM
             ? "SIGTERM" : "stopping");

@@ -38,7 +38,7 @@ enum { CANCEL_USER = 1, CANCEL_SHUTDOWN = 2 };
 
 typedef struct srv_job {
     uint64_t id;
-    srv_case *sc;
+    mpp_case *sc;
     atomic_int cancel;      /* 0, CANCEL_USER, CANCEL_SHUTDOWN */
     atomic_int watched;     /* someone subscribes to the job's stream */
     /* guarded by the pool mutex */
@@ -110,7 +110,7 @@ int srv_topic_parse(const char *buf, size_t len, uint64_t *job)
 static void job_free(srv_job *j)
 {
     if (!j) return;
-    srv_case_destroy(&j->sc);
+    mpp_case_destroy(&j->sc);
     free(j);
 }
 
@@ -130,7 +130,7 @@ static void job_free(srv_job *j)
 #define FLUSH_MAX 256
 
 typedef struct {
-    store_energy_sample rec[FLUSH_MAX];
+    mpm_energy_sample rec[FLUSH_MAX];
     uint8_t *msg[FLUSH_MAX];        /* packed StreamMsg or NULL (encoding failed) */
     size_t len[FLUSH_MAX];
     size_t n;
@@ -163,45 +163,35 @@ static void flush_samples(ctx *c)
     if (!pe) return;
     pe->last_flush = mono_now();
     if (!pe->n) return;
-    int rc = store_energy_append_n(c->p->st, pe->rec, pe->n);
+    int rc = store_energy_append(c->p->st, (int64_t)c->j->id, pe->rec, pe->n);
     if (rc)
-        srv_warn(c->j->id, "energy samples %lld..%lld not recorded: %s", (long long)pe->rec[0].seq,
-                 (long long)pe->rec[pe->n - 1].seq, store_strerror(rc));
+        srv_warn(c->j->id, "energy samples %llu..%llu not recorded: %s",
+                 (unsigned long long)pe->rec[0].seq, (unsigned long long)pe->rec[pe->n - 1].seq,
+                 store_error()->message);
     for (size_t i = 0; i < pe->n; i++) publish(c, pe->msg[i], pe->len[i]);
     pe->n = 0;
 }
 
-static void energy_sample(ctx *c, mpm_sim *sim, srv_energy_sample *out)
+static void energy_sample(ctx *c, mpm_sim *sim, mpm_energy_sample *out)
 {
     srv_job *j = c->j;
-    srv_energy_sample s = {0};
+    mpm_energy_sample s = {0};
     s.step = mpm_sim_steps(sim);
     s.t = mpm_sim_time(sim);
     s.dim = mpm_sim_dim(sim);
     mpm_sim_energy(sim, &s.e);
     s.seq = j->energy_seq++;
-    store_energy_sample r = {0};
-    r.run_id = (int64_t)j->id;
-    r.seq = (int64_t)s.seq;
-    r.step = s.step;
-    r.t = s.t;
-    r.kinetic = s.e.kinetic;
-    r.strain = s.e.strain;
-    r.potential = s.e.potential;
-    r.external_work = s.e.external_work;
-    r.total = s.e.total;
-    for (int d = 0; d < 3; d++) r.momentum[d] = s.e.momentum[d];
-    r.mass = s.e.mass;
+    mpm_energy_sample r = s;  /* one shape to the wire and the store */
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
+    if (mpp_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
         srv_warn(j->id, "out of memory encoding an energy sample");
     if (out) *out = s;
     pending *pe = c->pe;
     if (!pe) {
-        int rc = store_energy_append(c->p->st, &r);
+        int rc = store_energy_append(c->p->st, (int64_t)j->id, &r, 1);
         if (rc) srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
-                         store_strerror(rc));
+                         store_error()->message);
         publish(c, buf, len);
         return;
     }
@@ -263,12 +253,12 @@ static void snapbuf_free(snapbuf *b)
 /* Packs a snapshot into the job's message buffer (a fresh one only when
  * zmq still holds the last, or it is too small) and sends it without a
  * copy. */
-static void publish_snapshot(ctx *c, snapbuf *b, const srv_snapshot *s)
+static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
 {
     srv_job *j = c->j;
     uint64_t seq = j->msg_seq++;
     size_t need = 0, len = 0;
-    srv_stream_snapshot_into(j->id, seq, s, NULL, 0, &need);  /* the size only */
+    mpp_stream_snapshot_into(j->id, seq, s, NULL, 0, &need);  /* the size only */
     snapmsg *m = b->msg;
     if (!m || m->cap < need || atomic_load(&m->refs) != 1) {
         snapmsg_unref(m);
@@ -280,7 +270,7 @@ static void publish_snapshot(ctx *c, snapbuf *b, const srv_snapshot *s)
         atomic_init(&m->refs, 1);
         m->cap = need;
     }
-    if (srv_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
+    if (mpp_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
         srv_warn(j->id, "cannot encode a snapshot");
         return;
     }
@@ -309,16 +299,16 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
     size_t per = 0;
     if (!b->n) {
         b->n = n;
-        if (f & SRV_SNAP_X) per += (size_t)dim;
-        if (f & SRV_SNAP_V) per += (size_t)dim;
-        if (f & SRV_SNAP_STRESS) per += 6;
-        if (f & SRV_SNAP_PRESSURE) per += 1;
-        if (f & SRV_SNAP_VOLUME) per += 1;
-        if (((f & SRV_SNAP_X) && !(b->x = malloc(n * dim * sizeof(double)))) ||
-            ((f & SRV_SNAP_V) && !(b->v = malloc(n * dim * sizeof(double)))) ||
-            ((f & SRV_SNAP_STRESS) && !(b->stress = malloc(n * 6 * sizeof(double)))) ||
-            ((f & SRV_SNAP_PRESSURE) && !(b->pressure = malloc(n * sizeof(double)))) ||
-            ((f & SRV_SNAP_VOLUME) && !(b->volume = malloc(n * sizeof(double)))) ||
+        if (f & MPP_SNAP_X) per += (size_t)dim;
+        if (f & MPP_SNAP_V) per += (size_t)dim;
+        if (f & MPP_SNAP_STRESS) per += 6;
+        if (f & MPP_SNAP_PRESSURE) per += 1;
+        if (f & MPP_SNAP_VOLUME) per += 1;
+        if (((f & MPP_SNAP_X) && !(b->x = malloc(n * dim * sizeof(double)))) ||
+            ((f & MPP_SNAP_V) && !(b->v = malloc(n * dim * sizeof(double)))) ||
+            ((f & MPP_SNAP_STRESS) && !(b->stress = malloc(n * 6 * sizeof(double)))) ||
+            ((f & MPP_SNAP_PRESSURE) && !(b->pressure = malloc(n * sizeof(double)))) ||
+            ((f & MPP_SNAP_VOLUME) && !(b->volume = malloc(n * sizeof(double)))) ||
             (record && !(b->packed = malloc(n * per * sizeof(double) + 1)))) {
             srv_warn(j->id, "out of memory for snapshots of %zu particles; snapshots off", n);
             snapbuf_free(b);
@@ -326,7 +316,7 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
         }
     }
     mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
-    srv_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n, dim,
+    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n, dim,
                       b->x, b->v, b->stress, b->pressure, b->volume};
     if (record && b->packed) {
         /* stored layout: the requested arrays back to back, in field-bit order */
@@ -342,7 +332,7 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
                              off * sizeof(double)};
         int rc = store_snapshot_put(c->p->st, &ss);
         if (rc) srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
-                         store_strerror(rc));
+                         store_error()->message);
     }
     if (stream) publish_snapshot(c, b, &s);
     return 0;
@@ -367,44 +357,39 @@ static void progress(ctx *c, mpm_sim *sim, double wall)
     pthread_mutex_unlock(&c->p->mu);
     store_run_progress(c->p->st, (int64_t)j->id, k, wall,
                        wall > 0 ? (double)k * (double)mpm_sim_particles(sim) / wall : 0);
-    srv_progress pr = {k, total, t, dt, wall};
+    mpp_progress pr = {k, total, t, dt, wall};
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_stream_progress(j->id, j->msg_seq++, &pr, &buf, &len))
+    if (mpp_stream_progress(j->id, j->msg_seq++, &pr, &buf, &len))
         srv_warn(j->id, "out of memory encoding progress");
     publish(c, buf, len);
 }
 
 /* Records the end and publishes Finished. */
 static void finish(ctx *c, int status, const char *error, int64_t steps, double t, double wall,
-                   size_t particles, const srv_energy_sample *last)
+                   size_t particles, const mpm_energy_sample *last)
 {
     srv_job *j = c->j;
     flush_samples(c);
     store_run_end end = {0};
-    static const store_status map[] = {[SRV_STATUS_FINISHED] = STORE_FINISHED,
-                                       [SRV_STATUS_FAILED] = STORE_FAILED,
-                                       [SRV_STATUS_CANCELLED] = STORE_CANCELLED,
-                                       [SRV_STATUS_INTERRUPTED] = STORE_INTERRUPTED};
-    end.status = map[status];
-    end.steps_done = steps;
+    end.status = (mpp_status)status;
+    end.steps = steps;
     end.wall_s = wall;
     end.psteps_per_s = wall > 0 ? (double)steps * (double)particles / wall : 0;
     end.error = error;
     if (last) {
         end.has_energy = 1;
-        end.energy = (store_energies){last->e.kinetic, last->e.strain, last->e.potential,
-                                      last->e.external_work, last->e.total};
+        end.energy = last->e;
     }
     int rc = store_run_finish(c->p->st, (int64_t)j->id, &end);
-    if (rc) srv_warn(j->id, "end of run not recorded: %s", store_strerror(rc));
-    srv_finished f = {status, error, steps, t, wall, last};
+    if (rc) srv_warn(j->id, "end of run not recorded: %s", store_error()->message);
+    mpp_finished f = {status, error, steps, t, wall, last};
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (srv_stream_finished(j->id, j->msg_seq++, &f, &buf, &len))
+    if (mpp_stream_finished(j->id, j->msg_seq++, &f, &buf, &len))
         srv_warn(j->id, "out of memory encoding the end of the stream");
     publish(c, buf, len);
-    srv_log(j->id, "%s after %lld steps, t = %g, %.3f s%s%s", srv_status_name(status),
+    srv_log(j->id, "%s after %lld steps, t = %g, %.3f s%s%s", mpp_status_name(status),
             (long long)steps, t, wall, error ? ": " : "", error ? error : "");
 }
 
@@ -412,17 +397,20 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
 {
     ctx c = {p, push, j, "", NULL};
     srv_topic(j->id, c.topic);
-    srv_case *sc = j->sc;
+    mpp_case *sc = j->sc;
     const srv_config *cfg = p->cfg;
     double start = wall_now(), t0 = mono_now();
-    store_run_set_status(p->st, (int64_t)j->id, STORE_RUNNING, start, NULL);
+    store_run_set_status(p->st, (int64_t)j->id, MPP_STATUS_RUNNING, start, NULL);
     int threads = sc->c.threads > 0 && sc->c.threads < cfg->solver_threads ? sc->c.threads
                                                                             : cfg->solver_threads;
     sc->c.threads = threads;
     char err[512];
-    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    mpm_error me;
+    /* the case passed the codec's check (sc->info); threads is checked again */
+    mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me);
     if (!sim) {
-        finish(&c, SRV_STATUS_FAILED, err[0] ? err : "out of memory", 0, 0, 0, 0, NULL);
+        finish(&c, MPP_STATUS_FAILED, mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err), 0, 0,
+               0, 0, NULL);
         return;
     }
     size_t n = mpm_sim_particles(sim);
@@ -434,12 +422,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     srv_log(j->id, "running: %zu particles, %zu nodes, %d thread%s", n, mpm_sim_nodes(sim),
             threads, threads > 1 ? "s" : "");
 
-    srv_energy_sample last;
+    mpm_energy_sample last;
     snapbuf sb = {0};
     /* without it (out of memory) samples go out one by one */
     c.pe = sc->energy_every ? calloc(1, sizeof *c.pe) : NULL;
     if (c.pe) c.pe->last_flush = c.pe->last_sample = mono_now();
-    int snaps_ok = 1, status = SRV_STATUS_FINISHED;
+    int snaps_ok = 1, status = MPP_STATUS_FINISHED;
     char why[512] = "";
     energy_sample(&c, sim, &last);
     progress(&c, sim, 0);
@@ -448,7 +436,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     for (;;) {
         int cancel = atomic_load_explicit(&j->cancel, memory_order_relaxed);
         if (cancel) {
-            status = cancel == CANCEL_USER ? SRV_STATUS_CANCELLED : SRV_STATUS_INTERRUPTED;
+            status = cancel == CANCEL_USER ? MPP_STATUS_CANCELLED : MPP_STATUS_INTERRUPTED;
             snprintf(why, sizeof why, "%s at step %ld",
                      cancel == CANCEL_USER ? "cancelled by a client" : "daemon shutting down",
                      mpm_sim_steps(sim));
@@ -459,7 +447,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
                              : k >= (int64_t)sc->steps)
             break;
         if (k >= cfg->max_steps) {
-            status = SRV_STATUS_FAILED;
+            status = MPP_STATUS_FAILED;
             snprintf(why, sizeof why, "step limit %lld of this server reached (--max-steps)",
                      cfg->max_steps);
             break;
@@ -468,8 +456,8 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
          * passes: energy_sample() then costs no pass of its own */
         if (every && (k + 1) % every == 0) mpm_sim_want_energy(sim);
         if (mpm_sim_step(sim)) {
-            status = SRV_STATUS_FAILED;
-            snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+            status = MPP_STATUS_FAILED;
+            mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
             break;
         }
         k++;
@@ -486,7 +474,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
                 next_progress = w + 0.2;
             }
             if (cfg->max_wall_s > 0 && w > cfg->max_wall_s) {
-                status = SRV_STATUS_FAILED;
+                status = MPP_STATUS_FAILED;
                 snprintf(why, sizeof why, "wall-time limit %g s of this server reached "
                          "(--max-wall-s)", cfg->max_wall_s);
                 break;
@@ -496,13 +484,13 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     double wall = mono_now() - t0;
     /* the divergence guard once more before a run is called finished: a
      * blow-up in the last steps must not be recorded as a result */
-    if (status == SRV_STATUS_FINISHED && mpm_sim_check(sim)) {
-        status = SRV_STATUS_FAILED;
-        snprintf(why, sizeof why, "%s", mpm_sim_error(sim));
+    if (status == MPP_STATUS_FINISHED && mpm_sim_check(sim)) {
+        status = MPP_STATUS_FAILED;
+        mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
     }
-    if (last.step != mpm_sim_steps(sim) && status != SRV_STATUS_FAILED)
+    if (last.step != mpm_sim_steps(sim) && status != MPP_STATUS_FAILED)
         energy_sample(&c, sim, &last);
-    else if (status == SRV_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
+    else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
         /* a diverged state has no meaningful energies; keep the last good one */
     }
     progress(&c, sim, wall);
@@ -538,7 +526,7 @@ static void *worker_main(void *arg)
         if (!p->head) p->tail = NULL;
         p->nqueued--;
         j->next = NULL;
-        j->status = SRV_STATUS_RUNNING;
+        j->status = MPP_STATUS_RUNNING;
         p->running[w->index] = j;
         pthread_mutex_unlock(&p->mu);
 
@@ -608,24 +596,24 @@ int srv_pool_has_room(srv_pool *p)
     return room;
 }
 
-int srv_pool_submit(srv_pool *p, uint64_t id, srv_case **sc, double submitted_at,
+int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at,
                     size_t particles, size_t nodes)
 {
     srv_job *j = calloc(1, sizeof *j);
-    if (!j) return SRV_POOL_ENOMEM;
+    if (!j) return MPM_ENOMEM;
     j->id = id;
     atomic_init(&j->cancel, 0);
     atomic_init(&j->watched, 0);
-    j->status = SRV_STATUS_QUEUED;
+    j->status = MPP_STATUS_QUEUED;
     j->submitted_at = submitted_at;
     j->particles = particles;
     j->nodes = nodes;
     pthread_mutex_lock(&p->mu);
     int busy = 0;
     for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
-    int rc = p->stopping ? SRV_POOL_ESTOPPED
+    int rc = p->stopping ? MPM_EUNAVAIL
              : p->nqueued + (size_t)busy >= (size_t)p->nworkers + (size_t)p->cfg->queue_max
-                 ? SRV_POOL_EFULL
+                 ? MPM_EFULL
                  : 0;
     if (!rc) {
         j->sc = *sc;
@@ -683,7 +671,7 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
     pthread_mutex_lock(&p->mu);
     srv_job *prev, *j = find_locked(p, id, &prev);
     int rc = SRV_CANCEL_NONE;
-    if (j && j->status == SRV_STATUS_QUEUED) {
+    if (j && j->status == MPP_STATUS_QUEUED) {
         if (prev) prev->next = j->next;
         else p->head = j->next;
         if (p->tail == j) p->tail = prev;
@@ -698,12 +686,12 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
     pthread_mutex_unlock(&p->mu);
     if (rc == SRV_CANCEL_QUEUED) {
         store_run_end end = {0};
-        end.status = STORE_CANCELLED;
+        end.status = MPP_STATUS_CANCELLED;
         end.error = "cancelled by a client before it started";
         int src = store_run_finish(p->st, (int64_t)id, &end);
-        if (src) srv_warn(id, "cancellation not recorded: %s", store_strerror(src));
-        srv_finished f = {SRV_STATUS_CANCELLED, end.error, 0, 0, 0, NULL};
-        if (srv_stream_finished(id, j->msg_seq++, &f, msg, len))
+        if (src) srv_warn(id, "cancellation not recorded: %s", store_error()->message);
+        mpp_finished f = {MPP_STATUS_CANCELLED, end.error, 0, 0, 0, NULL};
+        if (mpp_stream_finished(id, j->msg_seq++, &f, msg, len))
             srv_warn(id, "out of memory encoding the end of the stream");
         srv_log(id, "cancelled while queued");
         job_free(j);
@@ -737,16 +725,16 @@ void srv_pool_stop(srv_pool *p, srv_pool_publish_fn pub, void *arg)
     while (q) {
         srv_job *nx = q->next;
         store_run_end end = {0};
-        end.status = STORE_INTERRUPTED;
+        end.status = MPP_STATUS_INTERRUPTED;
         end.error = STORE_INTERRUPTED_QUEUED;
         int rc = store_run_finish(p->st, (int64_t)q->id, &end);
-        if (rc) srv_warn(q->id, "interruption not recorded: %s", store_strerror(rc));
+        if (rc) srv_warn(q->id, "interruption not recorded: %s", store_error()->message);
         srv_log(q->id, "interrupted while queued");
         if (pub) {
-            srv_finished f = {SRV_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL};
+            mpp_finished f = {MPP_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL};
             uint8_t *msg = NULL;
             size_t len = 0;
-            if (srv_stream_finished(q->id, q->msg_seq++, &f, &msg, &len))
+            if (mpp_stream_finished(q->id, q->msg_seq++, &f, &msg, &len))
                 srv_warn(q->id, "out of memory encoding the end of the stream");
             else pub(arg, q->id, msg, len);
         }

@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "srv_codec.h"
+#include "mpp_msg.h"
 #include "srv_config.h"
 #include "store.h"
 
@@ -26,18 +26,13 @@ void srv_topic(uint64_t job, char *buf);
 /* Parses a topic prefix of exactly SRV_TOPIC_LEN bytes; 0 if it is one. */
 int srv_topic_parse(const char *buf, size_t len, uint64_t *job);
 
-enum {
-    SRV_POOL_EFULL = -1,    /* the queue is full */
-    SRV_POOL_ESTOPPED = -2, /* shutting down */
-    SRV_POOL_ENOMEM = -3
-};
 
 /* What Cancel found. */
 enum { SRV_CANCEL_NONE = 0, SRV_CANCEL_QUEUED = 1, SRV_CANCEL_RUNNING = 2 };
 
 /* A live job's state, for Status replies. */
 typedef struct {
-    int status;               /* srv_status: QUEUED or RUNNING */
+    int status;               /* mpp_status: QUEUED or RUNNING */
     int64_t steps, steps_total;
     double t, wall_s, submitted_at, started_at;
     size_t particles, nodes;
@@ -53,9 +48,9 @@ srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char 
                        char *err, size_t errlen);
 
 /* Queues job `id` (its run record already inserted).  Takes ownership of
- * *sc (set to NULL) on success.  Returns 0, SRV_POOL_EFULL or
- * SRV_POOL_ESTOPPED. */
-int srv_pool_submit(srv_pool *p, uint64_t id, srv_case **sc, double submitted_at,
+ * *sc (set to NULL) on success.  Returns 0, MPM_EFULL or
+ * MPM_EUNAVAIL. */
+int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at,
                     size_t particles, size_t nodes);
 
 /* 1 if the queue has room for another job. */

@@ -11,6 +11,8 @@
 #include <math.h>
 #include <stdio.h>
 
+#include "mpm_error.h"
+
 typedef void (*t_fn)(void);
 void t_register(const char *name, t_fn fn);
 void t_fail(const char *file, int line, const char *fmt, ...)
@@ -43,5 +45,9 @@ const char *t_tmpdir(void);
          if (!(a_ < b_)) {                                                \
              t_fail(__FILE__, __LINE__, "%s = %.6g is not < %s = %.6g", #a, a_, #b, b_); \
              return; } } while (0)
+
+/* An mpm_error as "field: message" (the proto's spelling), in a buffer
+ * that lives to the end of the enclosing block: for TLOG and CHECKF. */
+#define TERR(e) mpm_error_text((e), MPM_FIELD_PROTO, (char[512]){0}, 512)
 
 #endif

@@ -262,7 +262,7 @@ static int wait_lines(const td_bg *b, size_t n, double timeout)
 
 /* The error of a raw request for id: 0 if it is NOT_FOUND naming `field`,
  * with a message naming the id; else fails the test. */
-static int expect_not_found(const td_daemon *d, srv_request rq, const char *what, const char *field)
+static int expect_not_found(const td_daemon *d, mpp_request rq, const char *what, const char *field)
 {
     json_t *reply = NULL;
     char id[32];
@@ -437,14 +437,15 @@ DTEST(daemon_basic_run)
     {
         size_t len = 0;
         char *text = td_slurp(path, &len);
-        srv_case *sc = NULL;
+        mpp_case *sc = NULL;
         mpm_sim *sim = NULL;
         double worst = 0, worst_t = 0;
         CHECK(text);
-        CHECKF(srv_case_load(text, len, &sc, err, sizeof err) == 0, "%s", err);
+        CHECKF(td_case_load(text, len, &sc, err, sizeof err) == 0, "%s", err);
         free(text);
-        sim = mpm_sim_new(&sc->c, err, sizeof err);
-        CHECKF(sim, "%s", err);
+        mpm_error me;
+        sim = mpm_sim_new(&sc->c, &sc->info, &me);
+        CHECKF(sim, "%s", TERR(&me));
         for (size_t i = 0; i < s.n; i++) {
             mpm_energy en;
             while (mpm_sim_steps(sim) < s.step[i]) CHECK(mpm_sim_step(sim) == 0);
@@ -486,7 +487,7 @@ DTEST(daemon_basic_run)
             free(st);
         }
         mpm_sim_destroy(&sim);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
     }
     {
         json_t *sn;
@@ -505,7 +506,7 @@ DTEST(daemon_basic_run)
     for (int k = 0; k < 2; k++) {
         /* the run exists, the step does not (7, or -1, which is no step
          * rather than "the latest"): the field is the step */
-        srv_request rq = {.kind = SRV_REQ_GET_SNAPSHOT, .id = 1, .has_step = 1, .step = k ? -1 : 7};
+        mpp_request rq = {.kind = MPP_REQ_GET_SNAPSHOT, .id = 1, .has_step = 1, .step = k ? -1 : 7};
         json_t *reply = NULL;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         CHECKF(!strcmp(td_err_code(reply), "NOT_FOUND") && !strcmp(td_err_field(reply), "step"),
@@ -515,7 +516,7 @@ DTEST(daemon_basic_run)
     }
     {
         /* energies from a seq beyond the end (even past INT64_MAX): none */
-        srv_request rq = {.kind = SRV_REQ_GET_ENERGY, .id = 1, .from_seq = UINT64_MAX};
+        mpp_request rq = {.kind = MPP_REQ_GET_ENERGY, .id = 1, .from_seq = UINT64_MAX};
         json_t *reply = NULL, *en;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         en = json_object_get(reply, "energy");
@@ -526,7 +527,7 @@ DTEST(daemon_basic_run)
     }
     {
         /* RunInfo carries the method and update (decoded reply, raw request) */
-        srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = 1};
+        mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = 1};
         json_t *reply = NULL, *run;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         run = json_object_get(reply, "run");
@@ -639,11 +640,11 @@ DTEST(daemon_basic_run)
     CHECK(td_ctl(&d, 30, &e, "show", "1", "--case", NULL) == 0);
     CHECK(e.status == 0);
     {
-        srv_case *sc = NULL;
-        CHECKF(srv_case_load(e.out, strlen(e.out), &sc, err, sizeof err) == 0, "show --case: %s", err);
+        mpp_case *sc = NULL;
+        CHECKF(td_case_load(e.out, strlen(e.out), &sc, err, sizeof err) == 0, "show --case: %s", err);
         CHECK(!strcmp(sc->name, "bar1d_mpm") && sc->has_end_time && sc->end_time == 0.5 &&
               sc->record_snapshots);
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
     }
     td_out_free(&e);
 
@@ -715,7 +716,7 @@ DTEST(daemon_method_defaults)
     {
         static const char *const want[3][2] = {{"", ""}, {"GIMP", "MUSL"}, {"MPM", "USL"}};
         for (unsigned long long id = 1; id <= 2; id++) {
-            srv_request rq = {.kind = SRV_REQ_GET_RUN, .id = id, .with_case = 1};
+            mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = id, .with_case = 1};
             json_t *reply = NULL, *run, *cs;
             CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
             run = json_object_get(reply, "run");
@@ -760,11 +761,11 @@ DTEST(daemon_method_defaults)
     /* show --case gives a case that loads as GIMP + MUSL */
     CHECK(td_ctl(&d, 30, &o, "show", "1", "--case", NULL) == 0);
     {
-        srv_case *sc = NULL;
-        CHECKF(o.status == 0 && srv_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
+        mpp_case *sc = NULL;
+        CHECKF(o.status == 0 && td_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
                "show 1 --case: %s", err);
         int ok = sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL && strstr(o.out, "\"GIMP\"");
-        srv_case_destroy(&sc);
+        mpp_case_destroy(&sc);
         CHECKF(ok, "show 1 --case: %s", o.out);
     }
     td_out_free(&o);
@@ -849,11 +850,11 @@ DTEST(daemon_concurrency)
         char *text = td_slurp(longp, &len), err[ERRLEN];
         Mpmd__Case *pb = NULL;
         json_t *reply = NULL;
-        CHECK(text && srv_case_from_json(text, len, &pb, err, sizeof err) == 0);
+        CHECK(text && td_case_from_json(text, len, &pb, err, sizeof err) == 0);
         free(text);
-        srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
+        mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
-        srv_case_pb_free(&pb);
+        mpp_case_pb_free(&pb);
         CHECKF(!strcmp(td_err_code(reply), "QUEUE_FULL"), "raw submit: code %s", td_err_code(reply));
         json_decref(reply);
     }
@@ -1281,7 +1282,7 @@ DTEST(daemon_hard_kill)
 static int submit_expect(const td_daemon *d, Mpmd__Case *pb, const char *what, const char *code,
                          const char *field)
 {
-    srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_pb = pb};
+    mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
     json_t *reply = NULL;
     int ok = 0;
     size_t fl = strlen(field);
@@ -1311,14 +1312,14 @@ static int bad_case(const td_daemon *d, const char *from, const char *to, const 
     char *json = td_patch(from, to);
     Mpmd__Case *pb = NULL;
     int ok;
-    if (!json || srv_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
+    if (!json || td_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
         t_fail(__FILE__, __LINE__, "patch %s -> %s: %s", from, to, json ? err : "not in the case");
         free(json);
         return 0;
     }
     snprintf(what, sizeof what, "%s", to);
     ok = submit_expect(d, pb, what, code, field);
-    srv_case_pb_free(&pb);
+    mpp_case_pb_free(&pb);
     free(json);
     return ok;
 }
@@ -1394,10 +1395,10 @@ DTEST(daemon_bad_input)
         }
         text = json_dumps(c, 0);
         json_decref(c);
-        CHECK(text && srv_case_from_json(text, strlen(text), &pb, err, sizeof err) == 0);
+        CHECK(text && td_case_from_json(text, strlen(text), &pb, err, sizeof err) == 0);
         free(text);
         int ok = submit_expect(&d, pb, "6000 points > --max-particles", "TOO_LARGE", "bodies*");
-        srv_case_pb_free(&pb);
+        mpp_case_pb_free(&pb);
         CHECK(ok);
     }
     {
@@ -1408,18 +1409,18 @@ DTEST(daemon_bad_input)
         uint8_t *buf = NULL, *b2;
         size_t len = 0;
         int ok;
-        CHECK(json && srv_case_from_json(json, strlen(json), &pb, err, sizeof err) == 0);
+        CHECK(json && td_case_from_json(json, strlen(json), &pb, err, sizeof err) == 0);
         free(json);
-        CHECK(srv_case_pack(pb, &buf, &len) == 0);
-        srv_case_pb_free(&pb);
+        CHECK(mpp_case_pack(pb, &buf, &len) == 0);
+        mpp_case_pb_free(&pb);
         b2 = realloc(buf, len + 2);
         CHECK(b2);
         b2[len] = 0x18;
         b2[len + 1] = 0x07;
-        CHECKF(srv_case_unpack(b2, len + 2, 0, &bad, err, sizeof err) == 0, "%s", err);
+        CHECKF(td_case_unpack(b2, len + 2, 0, &bad, err, sizeof err) == 0, "%s", err);
         free(b2);
         ok = submit_expect(&d, bad, "method = 7 (unknown enum)", "INVALID_CASE", "method");
-        srv_case_pb_free(&bad);
+        mpp_case_pb_free(&bad);
         CHECK(ok);
     }
 
@@ -1432,9 +1433,11 @@ DTEST(daemon_bad_input)
     CHECK(td_write(path, "{\"grid\": {\"dim\": 2, \"spacing\": [0.01, 0.01], \"nodes\": [101, 101]},"
                          " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
                          " \"bodies\": [{\"box\": {\"lo\": [0, 0], \"hi\": [1, 1]}}], \"steps\": 1}") == 0);
-    EXPECT_CTL(&d, 1, "TOO_LARGE: bodies: the case has 40000 particles", "submit", path);
+    /* the solver's count stops at this server's --max-particles (the one
+     * limit), naming the body that passed it */
+    EXPECT_CTL(&d, 1, "TOO_LARGE: bodies[0]: the case has more than 5000 particles", "submit", path);
     CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
-    CHECKF(strstr(o.err, "(field bodies)"), "mpmctl does not name the field: %s", o.err);
+    CHECKF(strstr(o.err, "TOO_LARGE: bodies[0]: "), "mpmctl does not name the field: %s", o.err);
     td_out_free(&o);
 
     /* damaged requests and frames */
@@ -1500,35 +1503,35 @@ DTEST(daemon_bad_input)
      * mapping spells it (as case errors name theirs), the id in the message */
     {
         static const struct {
-            srv_req_kind kind;
+            mpp_req_kind kind;
             int has_step;
             const char *what, *field;
         } unknown[] = {
-            {SRV_REQ_STATUS, 0, "status{jobId: 4242}", "jobId"},
-            {SRV_REQ_GET_RUN, 0, "getRun{runId: 4242}", "runId"},
-            {SRV_REQ_GET_ENERGY, 0, "getEnergy{runId: 4242}", "runId"},
-            {SRV_REQ_GET_SNAPSHOT, 0, "getSnapshot{runId: 4242}", "runId"},
-            {SRV_REQ_GET_SNAPSHOT, 1, "getSnapshot{runId: 4242, step}", "runId"},
-            {SRV_REQ_CANCEL, 0, "cancel{jobId: 4242}", "jobId"},
+            {MPP_REQ_STATUS, 0, "status{jobId: 4242}", "jobId"},
+            {MPP_REQ_GET_RUN, 0, "getRun{runId: 4242}", "runId"},
+            {MPP_REQ_GET_ENERGY, 0, "getEnergy{runId: 4242}", "runId"},
+            {MPP_REQ_GET_SNAPSHOT, 0, "getSnapshot{runId: 4242}", "runId"},
+            {MPP_REQ_GET_SNAPSHOT, 1, "getSnapshot{runId: 4242, step}", "runId"},
+            {MPP_REQ_CANCEL, 0, "cancel{jobId: 4242}", "jobId"},
         };
         for (size_t i = 0; i < sizeof unknown / sizeof unknown[0]; i++) {
-            srv_request rq = {.kind = unknown[i].kind, .id = 4242, .has_step = unknown[i].has_step,
+            mpp_request rq = {.kind = unknown[i].kind, .id = 4242, .has_step = unknown[i].has_step,
                               .step = 10};
             CHECK(expect_not_found(&d, rq, unknown[i].what, unknown[i].field) == 0);
         }
         /* mpmctl shows the field */
         CHECK(td_ctl(&d, 30, &o, "show", "4242", NULL) == 0);
-        CHECKF(o.status == 1 && strstr(o.err, "NOT_FOUND: no run 4242 (field runId)"), "show 4242: %s",
+        CHECKF(o.status == 1 && strstr(o.err, "NOT_FOUND: runId: no run 4242\n"), "show 4242: %s",
                o.err);
         td_out_free(&o);
         CHECK(td_ctl(&d, 30, &o, "cancel", "4242", NULL) == 0);
-        CHECKF(o.status == 1 && strstr(o.err, "NOT_FOUND: no job 4242 (field jobId)"), "cancel 4242: %s",
+        CHECKF(o.status == 1 && strstr(o.err, "NOT_FOUND: jobId: no job 4242\n"), "cancel 4242: %s",
                o.err);
         td_out_free(&o);
     }
     /* a listing above the server's maximum says so, naming the field and the limit */
     {
-        srv_request rq = {.kind = SRV_REQ_LIST_RUNS, .limit = 20000};
+        mpp_request rq = {.kind = MPP_REQ_LIST_RUNS, .limit = 20000};
         json_t *reply = NULL;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         CHECKF(!strcmp(td_err_code(reply), "TOO_LARGE") && !strcmp(td_err_field(reply), "listRuns.limit") &&
@@ -1559,7 +1562,7 @@ DTEST(daemon_bad_input)
     CHECK(td_stop(&d) == 0);
 }
 
-/* A watched job's stream read with srv_stream_peek: every message in seq
+/* A watched job's stream read with mpp_stream_decode: every message in seq
  * order (energies batched by the worker lose none and keep their order),
  * every energy sample once, and the snapshots - packed into one reused
  * buffer and handed to zmq without a copy - each holding the state of its
@@ -1575,7 +1578,7 @@ DTEST(daemon_stream_snapshots)
     td_daemon d;
     td_out o;
     void *zctx = NULL, *sub = NULL;
-    srv_case *sc = NULL;
+    mpp_case *sc = NULL;
     mpm_sim *sim = NULL;
     double *x = NULL, *v = NULL;
     /* a receive queue of one message: what the watcher has not read stays
@@ -1632,10 +1635,11 @@ DTEST(daemon_stream_snapshots)
     {
         size_t len = 0;
         char *text = td_slurp(path, &len);
-        int lrc = text ? srv_case_load(text, len, &sc, err, sizeof err) : -1;
+        int lrc = text ? td_case_load(text, len, &sc, err, sizeof err) : -1;
         free(text);
-        if (lrc || !(sim = mpm_sim_new(&sc->c, err, sizeof err))) {
-            t_fail(__FILE__, __LINE__, "in-process case: %s", err);
+        mpm_error me = {0};
+        if (lrc || !(sim = mpm_sim_new(&sc->c, &sc->info, &me))) {
+            t_fail(__FILE__, __LINE__, "in-process case: %s", lrc ? err : TERR(&me));
             goto out;
         }
     }
@@ -1672,48 +1676,41 @@ DTEST(daemon_stream_snapshots)
             if (nparts < 2) part[nparts++] = m;
             else zmq_msg_close(&m);
         }
-        srv_stream_info si;
-        int prc = nparts == 2 ? srv_stream_peek(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), &si,
-                                                err, sizeof err)
+        mpp_stream si = {0};
+        mpm_error pe;
+        int prc = nparts == 2 ? mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0, &si, &pe)
                               : -1;
+        if (nparts == 2 && prc) mpm_error_text(&pe, MPM_FIELD_JSON, err, sizeof err);
         int ok = prc == 0 && si.job_id == 2 && si.seq == next_seq;
-        if (ok && si.kind == SRV_STREAM_ENERGY) {
+        if (ok && si.kind == MPP_STREAM_ENERGY) {
             ok = si.energy.seq == next_sample && si.energy.step == (int64_t)next_sample;
             next_sample++;
-        } else if (ok && si.kind == SRV_STREAM_SNAPSHOT) {
-            const srv_snapshot_info *s = &si.snapshot;
-            ok = s->n == np && s->dim == 2 && s->n_x == 2 * np && s->n_v == 2 * np &&
-                 s->n_stress == 0 && s->n_pressure == 0 && s->n_volume == 0 &&
+        } else if (ok && si.kind == MPP_STREAM_SNAPSHOT) {
+            const mpp_snapshot *s = &si.snapshot;
+            /* the decoder checked that x and v hold n*dim values each */
+            ok = s->n == np && s->dim == 2 && s->x && s->v && !s->stress && !s->pressure && !s->volume &&
                  s->step == (int64_t)(snaps + 1) * SNAP_EVERY;
-            /* its values: through the JSON bridge, against the solver */
-            char *text = NULL;
-            json_t *j = NULL, *sn;
+            /* its values, decoded once, against the solver */
             if (ok) {
                 while (mpm_sim_steps(sim) < s->step) ok = ok && mpm_sim_step(sim) == 0;
                 mpm_sim_snapshot(sim, &(mpm_snapshot){x, v, NULL, NULL, NULL});
-                ok = ok && !srv_msg_bytes_to_json(SRV_MSG_STREAM, zmq_msg_data(&part[1]),
-                                                  zmq_msg_size(&part[1]), 0, 0, &text, err,
-                                                  sizeof err) &&
-                     (j = json_loads(text, 0, NULL)) && (sn = json_object_get(j, "snapshot"));
-                for (size_t i = 0; ok && i < 2 * np; i++) {
-                    double gx = json_number_value(json_array_get(json_object_get(sn, "x"), i));
-                    double gv = json_number_value(json_array_get(json_object_get(sn, "v"), i));
-                    worst = fmax(worst, fmax(rel_diff(gx, x[i]), rel_diff(gv, v[i])));
-                }
+                for (size_t i = 0; ok && i < 2 * np; i++)
+                    worst = fmax(worst, fmax(rel_diff(s->x[i], x[i]), rel_diff(s->v[i], v[i])));
             }
-            free(text);
-            json_decref(j);
             snaps++;
-        } else if (ok && si.kind == SRV_STREAM_FINISHED) {
-            ok = si.status == SRV_STATUS_FINISHED && si.steps == STEPS && si.has_energy &&
+        } else if (ok && si.kind == MPP_STREAM_FINISHED) {
+            ok = si.finished.status == MPP_STATUS_FINISHED && si.finished.steps == STEPS && si.has_energy &&
                  si.energy.seq == STEPS && next_sample == STEPS + 1;
             finished = 1;
         }
+        uint64_t got_seq = si.seq;
+        int got_kind = (int)si.kind;
+        mpp_stream_clear(&si);
         for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
         if (!ok) {
             t_fail(__FILE__, __LINE__, "stream message seq %llu (expected %llu), kind %d, peek %d "
-                   "%s, samples %llu, snapshots %ld", (unsigned long long)si.seq,
-                   (unsigned long long)next_seq, (int)si.kind, prc, prc ? err : "",
+                   "%s, samples %llu, snapshots %ld", (unsigned long long)got_seq,
+                   (unsigned long long)next_seq, got_kind, prc, prc ? err : "",
                    (unsigned long long)next_sample, snaps);
             goto out;
         }
@@ -1731,8 +1728,117 @@ out:
     free(x);
     free(v);
     mpm_sim_destroy(&sim);
-    srv_case_destroy(&sc);
+    mpp_case_destroy(&sc);
     if (sub) zmq_close(sub);
     if (zctx) zmq_ctx_term(zctx);
     if (!rc) CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM");
+}
+
+/* ---- one client's pipelined requests ------------------------------------------- */
+
+/* A client that sends several requests without waiting (a DEALER) gets its
+ * replies in the order it asked, while reads wait for their run's writes
+ * off the event loop: each energy page it gets is a gap-free prefix of the
+ * run's series that includes every sample written before it asked, and a
+ * Ping between two reads is answered in its place. */
+DTEST(daemon_pipelined_reads_keep_order)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--solver-threads", "1", NULL};
+    char dir[300], path[400];
+    td_daemon d;
+    td_out o;
+    void *ctx = NULL, *s = NULL;
+    int zero = 0;
+    static const char *const want[] = {"energy", "pong", "run", "energy", "runs", "version", "run"};
+    enum { NREQ = 7 };
+    json_t *rep[NREQ] = {0};
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(long_case(1000), dir, "long.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
+    CHECK(o.status == 0 && job_of(o.out) == 1);
+    td_out_free(&o);
+    CHECK(td_wait_steps(&d, 1, 20000, 30) == 0);
+
+    ctx = zmq_ctx_new();
+    CHECK(ctx);
+    s = zmq_socket(ctx, ZMQ_DEALER);
+    if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, d.ep)) {
+        if (s) zmq_close(s);
+        zmq_ctx_term(ctx);
+        CHECK(!"DEALER connect");
+    }
+    mpp_request rq[NREQ];
+    memset(rq, 0, sizeof rq);
+    rq[0].kind = MPP_REQ_GET_ENERGY, rq[0].id = 1;
+    rq[1].kind = MPP_REQ_PING;
+    rq[2].kind = MPP_REQ_STATUS, rq[2].id = 1;
+    rq[3].kind = MPP_REQ_GET_ENERGY, rq[3].id = 1;
+    rq[4].kind = MPP_REQ_LIST_RUNS;
+    rq[5].kind = MPP_REQ_VERSION;
+    rq[6].kind = MPP_REQ_CANCEL, rq[6].id = 1;
+    int sent = 1;
+    for (int i = 0; i < NREQ && sent; i++) {
+        uint8_t *buf = NULL;
+        size_t len = 0;
+        sent = mpp_request_encode(&rq[i], &buf, &len) == 0 &&
+               zmq_send(s, "", 0, ZMQ_SNDMORE) == 0 && zmq_send(s, buf, len, 0) == (int)len;
+        free(buf);
+    }
+    int got = 0;
+    for (; sent && got < NREQ; got++) {
+        zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
+        if (zmq_poll(&it, 1, 20000) != 1) break;
+        zmq_msg_t m[2];
+        int np = 0, more = 1;
+        while (more) {
+            zmq_msg_t x;
+            zmq_msg_init(&x);
+            if (zmq_msg_recv(&x, s, 0) < 0) {
+                zmq_msg_close(&x);
+                break;
+            }
+            more = zmq_msg_more(&x);
+            if (np < 2) m[np++] = x;
+            else zmq_msg_close(&x);
+        }
+        char *json = NULL, err[256];
+        if (np == 2 && !td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&m[1]), zmq_msg_size(&m[1]),
+                                               0, 0, &json, err, sizeof err))
+            rep[got] = json_loads(json, 0, NULL);
+        free(json);
+        for (int k = 0; k < np; k++) zmq_msg_close(&m[k]);
+        if (!rep[got]) break;
+    }
+    zmq_close(s);
+    zmq_ctx_term(ctx);
+
+    int in_order = got == NREQ;
+    for (int i = 0; i < got && in_order; i++) in_order = json_object_get(rep[i], want[i]) != NULL;
+    CHECKF(sent && in_order, "sent %d, %d replies in the asked order of %d", sent, got, NREQ);
+    /* both energy pages: seq 0, 1, 2, ... with no gap; the later one no shorter */
+    size_t n[2] = {0, 0};
+    for (int k = 0; k < 2; k++) {
+        json_t *smp = json_object_get(json_object_get(rep[k ? 3 : 0], "energy"), "samples");
+        n[k] = json_array_size(smp);
+        for (size_t i = 0; i < n[k]; i++)
+            CHECKF(jint(json_array_get(smp, i), "seq") == (long long)i, "page %d: sample %zu has seq %lld",
+                   k, i, jint(json_array_get(smp, i), "seq"));
+    }
+    /* the first page was read before the Status, the second after it */
+    json_t *run = json_object_get(rep[2], "run");
+    json_t *last0 = json_array_get(json_object_get(json_object_get(rep[0], "energy"), "samples"),
+                                   n[0] ? n[0] - 1 : 0);
+    CHECKF(n[0] >= 1 && n[1] >= n[0] && jint(last0, "step") <= jint(run, "steps") &&
+               !strcmp(jstr(run, "status"), "RUNNING"),
+           "pages of %zu and %zu samples (first ends at step %lld), Status %s at step %lld", n[0],
+           n[1], jint(last0, "step"), jstr(run, "status"), jint(run, "steps"));
+    TLOG("7 pipelined requests answered in order: pages of %zu and %zu samples around Status at "
+         "step %lld", n[0], n[1], jint(run, "steps"));
+    for (int i = 0; i < NREQ; i++) json_decref(rep[i]);
+    char st[32];
+    CHECK(td_wait_status(&d, 1, "CANCELLED", 10, st, sizeof st) == 0);
+    CHECK(td_stop(&d) == 0);
 }

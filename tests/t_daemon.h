@@ -17,7 +17,7 @@
 
 #include <jansson.h>
 
-#include "srv_codec.h"
+#include "mpp_msg.h"
 #include "t.h"
 
 /* A test whose daemons and clients are cleaned up however it returns. */
@@ -84,10 +84,21 @@ int td_ctl_bg(const td_daemon *d, td_bg *b, const char *tag, ...);
 /* Waits up to timeout s for it and reads its output. */
 int td_bg_wait(td_bg *b, double timeout, td_out *o);
 
+/* The protocol library's case calls with the error rendered as a user
+ * reads it ("field: message", JSON spelling) into err (n bytes).
+ * td_case_load uses the default particle limit. */
+int td_case_load(const char *json, size_t len, mpp_case **out, char *err, size_t n);
+int td_case_from_json(const char *json, size_t len, Mpmd__Case **out, char *err, size_t n);
+int td_case_unpack(const void *buf, size_t len, size_t max, Mpmd__Case **out, char *err, size_t n);
+int td_msg_json_to_bytes(mpp_msg_kind kind, const char *json, size_t len, uint8_t **buf,
+                         size_t *nbytes, char *err, size_t n);
+int td_msg_bytes_to_json(mpp_msg_kind kind, const void *buf, size_t nbytes, size_t max,
+                         unsigned flags, char **json, char *err, size_t n);
+
 /* One raw request: packs rq, sends [empty][bytes] on a fresh DEALER and
  * waits up to timeout s.  *reply is the decoded Reply as JSON (NULL if no
  * reply came: returns 1).  Returns 0 with a reply, 1 without, -1 on error. */
-int td_request(const char *ep, const srv_request *rq, double timeout, json_t **reply);
+int td_request(const char *ep, const mpp_request *rq, double timeout, json_t **reply);
 /* Raw frames (n of them, lens[i] bytes each) on a fresh DEALER; as above. */
 int td_frames(const char *ep, const void *const *frames, const size_t *lens, int n,
               double timeout, json_t **reply);

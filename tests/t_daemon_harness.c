@@ -209,13 +209,52 @@ static pid_t spawn(const char *const *argv, int out_fd, int err_fd)
     return pid;
 }
 
-int td_request(const char *ep, const srv_request *rq, double timeout, json_t **reply)
+/* Renders e into err when rc is an error; returns rc. */
+static int td_err(int rc, const mpm_error *e, char *err, size_t n)
+{
+    if (rc && err && n) mpm_error_text(e, MPM_FIELD_JSON, err, n);
+    return rc;
+}
+
+int td_case_load(const char *json, size_t len, mpp_case **out, char *err, size_t n)
+{
+    mpm_error e;
+    return td_err(mpp_case_load(json, len, 0, out, &e), &e, err, n);
+}
+
+int td_case_from_json(const char *json, size_t len, Mpmd__Case **out, char *err, size_t n)
+{
+    mpm_error e;
+    return td_err(mpp_case_from_json(json, len, out, &e), &e, err, n);
+}
+
+int td_case_unpack(const void *buf, size_t len, size_t max, Mpmd__Case **out, char *err, size_t n)
+{
+    mpm_error e;
+    return td_err(mpp_case_unpack(buf, len, max, out, &e), &e, err, n);
+}
+
+int td_msg_json_to_bytes(mpp_msg_kind kind, const char *json, size_t len, uint8_t **buf,
+                         size_t *nbytes, char *err, size_t n)
+{
+    mpm_error e;
+    return td_err(mpp_msg_json_to_bytes(kind, json, len, buf, nbytes, &e), &e, err, n);
+}
+
+int td_msg_bytes_to_json(mpp_msg_kind kind, const void *buf, size_t nbytes, size_t max,
+                         unsigned flags, char **json, char *err, size_t n)
+{
+    mpm_error e;
+    return td_err(mpp_msg_bytes_to_json(kind, buf, nbytes, max, flags, json, &e), &e, err, n);
+}
+
+int td_request(const char *ep, const mpp_request *rq, double timeout, json_t **reply)
 {
     uint8_t *buf = NULL;
     size_t len = 0;
     int rc;
     *reply = NULL;
-    if (srv_request_encode(rq, &buf, &len)) return -1;
+    if (mpp_request_encode(rq, &buf, &len)) return -1;
     const void *frames[2] = {"", buf};
     size_t lens[2] = {0, len};
     rc = td_frames(ep, frames, lens, 2, timeout, reply);
@@ -260,8 +299,8 @@ int td_frames(const char *ep, const void *const *frames, const size_t *lens, int
     }
     if (np == 2 && zmq_msg_size(&parts[0]) == 0) {
         char *json = NULL, err[256];
-        if (!srv_msg_bytes_to_json(SRV_MSG_REPLY, zmq_msg_data(&parts[1]), zmq_msg_size(&parts[1]),
-                                   0, 0, &json, err, sizeof err)) {
+        if (!td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&parts[1]), zmq_msg_size(&parts[1]),
+                                  0, 0, &json, err, sizeof err)) {
             *reply = json_loads(json, 0, NULL);
             rc = *reply ? 0 : -1;
         } else {
@@ -318,7 +357,7 @@ int td_start(td_daemon *d, const char *dir, const char *const *extra)
     reg_add(d->pid, 1, d->log);
     end = td_now() + TD_READY_S;
     while (td_now() < end) {
-        srv_request rq = {.kind = SRV_REQ_PING};
+        mpp_request rq = {.kind = MPP_REQ_PING};
         json_t *reply = NULL;
         int st = wait_deadline(d->pid, 0);
         if (st != -2) {
@@ -590,7 +629,7 @@ const char *td_err_msg(const json_t *reply)
 int td_job_status(const td_daemon *d, unsigned long long job, char *buf, size_t n,
                   long long *steps)
 {
-    srv_request rq = {.kind = SRV_REQ_STATUS, .id = job};
+    mpp_request rq = {.kind = MPP_REQ_STATUS, .id = job};
     json_t *reply = NULL, *run;
     buf[0] = 0;
     if (td_request(d->ep, &rq, 10, &reply)) {

@@ -64,9 +64,9 @@ TEST(inv_p2g_conserves_mass_and_momentum)
             mpm_paper t;
             double v[3] = {0.7, -0.4, 0.25};
             block_case(&t, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, MPM_USF, v);
-            char err[256];
-            mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
-            CHECKF(s, "%s", err);
+            mpm_error err;
+            mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
+            CHECKF(s, "%s", TERR(&err));
             mpm_energy e0, e1;
             mpm_sim_energy(s, &e0);
             CHECK(mpm_sim_step(s) == 0);
@@ -112,17 +112,17 @@ TEST(inv_uniform_velocity_translates_rigidly)
                 mpm_paper t;
                 double v[3] = {0.3, -0.2, 0.1};
                 block_case(&t, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, (mpm_update)up, v);
-                char err[256];
-                mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+                mpm_error err;
+                mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
                 mpm_paper_free(&t);
-                CHECKF(s, "%s", err);
+                CHECKF(s, "%s", TERR(&err));
                 size_t n = mpm_sim_particles(s);
                 double *x0 = malloc(n * dim * sizeof *x0), *x1 = malloc(n * dim * sizeof *x1),
                        *sig = malloc(n * 6 * sizeof *sig), *vel = malloc(n * dim * sizeof *vel);
                 CHECK(x0 && x1 && sig && vel);
                 mpm_sim_snapshot(s, &(mpm_snapshot){.x = x0});
                 int rc = mpm_sim_run(s, 200);
-                if (rc) TLOG("%s", mpm_sim_error(s));
+                if (rc) TLOG("%s", TERR(mpm_sim_error(s)));
                 mpm_sim_snapshot(s, &(mpm_snapshot){.x = x1, .stress = sig, .v = vel});
                 double T = mpm_sim_time(s), dx = 0, smax = 0, dv = 0;
                 for (size_t p = 0; p < n; p++) {
@@ -167,13 +167,13 @@ TEST(inv_fixed_dofs_keep_zero_momentum)
             t.body[0].center[0] = t.body[0].center[1] = 0.16;
             t.body[1].center[0] = t.body[1].center[1] = 0.84;
             t.c.gravity[1] = -1;
-            char err[256];
-            mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+            mpm_error err;
+            mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
             mpm_paper_free(&t);
-            CHECKF(s, "%s", err);
+            CHECKF(s, "%s", TERR(&err));
             double worst = 0, touched = 0;
             for (int k = 0; k < 300; k++) {
-                CHECKF(mpm_sim_step(s) == 0, "%s", mpm_sim_error(s));
+                CHECKF(mpm_sim_step(s) == 0, "%s", TERR(mpm_sim_error(s)));
                 for (int i = 0; i < 21; i++)
                     for (int side = 0; side < 4; side++) {
                         int ijk[3] = {side < 2 ? i : (side == 2 ? 0 : 20),
@@ -216,8 +216,8 @@ static double phantom_strain(double shift, double mass_tol)
     c.materials = &mat;
     c.n_bodies = 1;
     c.bodies = &b;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
     if (!s) return NAN;
     mpm_sim_step(s);
     double sig[6] = {0};
@@ -247,10 +247,10 @@ TEST(inv_gravity_free_fall)
     block_case(&t, 2, MPM_METHOD_GIMP, MPM_USF, v);
     t.c.gravity[1] = -9.81;
     t.c.dt = 1e-4;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
-    CHECKF(s, "%s", err);
+    CHECKF(s, "%s", TERR(&err));
     mpm_energy e0, e1;
     mpm_sim_energy(s, &e0);
     CHECK(mpm_sim_run(s, 1000) == 0);
@@ -273,15 +273,15 @@ TEST(inv_particle_forces_match_gravity)
 {
     mpm_paper t;
     double v[3] = {0, 0, 0};
-    char err[256];
+    mpm_error err;
     block_case(&t, 2, MPM_METHOD_GIMP, MPM_MUSL, v);
     t.c.dt = 1e-4;
     t.c.gravity[1] = -9.81;
-    mpm_sim *a = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_sim *a = mpm_sim_new(&t.c, NULL, &err);
     t.c.gravity[1] = 0;
-    mpm_sim *b = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_sim *b = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
-    CHECKF(a && b, "%s", err);
+    CHECKF(a && b, "%s", TERR(&err));
     size_t n = mpm_sim_particles(b);
     mpm_energy e0, ea0;
     mpm_sim_energy(b, &e0);
@@ -316,7 +316,7 @@ TEST(inv_particle_forces_match_gravity)
     /* a NaN is refused, named, and changes nothing */
     f[7] = NAN;
     CHECK(mpm_sim_set_particle_forces(b, f) == MPM_EINVAL);
-    CHECKF(strstr(mpm_sim_error(b), "particle_forces[7]: must be finite"), "%s", mpm_sim_error(b));
+    CHECKF(strstr(TERR(mpm_sim_error(b)), "particle_forces[7]: must be finite"), "%s", TERR(mpm_sim_error(b)));
     CHECK(mpm_sim_step(b) == 0);
     free(f);
     free(xa);
@@ -358,9 +358,9 @@ TEST(inv_initial_stress_release_is_not_divergence)
         c.materials = &mat;
         c.n_bodies = 1;
         c.bodies = &b;
-        char err[256];
-        mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
-        CHECKF(s, "%s", err);
+        mpm_error err;
+        mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+        CHECKF(s, "%s", TERR(&err));
         double u0 = 0.5 * s0 * s0 / E * L, peak = 0, T = 2 * L / sqrt(E); /* 2 L / c */
         int rc = 0;
         while (!rc && mpm_sim_time(s) < 2 * T) {
@@ -372,8 +372,8 @@ TEST(inv_initial_stress_release_is_not_divergence)
         if (!rc) rc = mpm_sim_check(s);
         TLOG("%s: %ld steps to t = %.3f (two periods 2L/c), max (K + S) / U0 = %.3f (continuum: 2); %s",
              m ? "GIMP MUSL" : "MPM USF", mpm_sim_steps(s), mpm_sim_time(s), peak / u0,
-             rc ? mpm_sim_error(s) : "finished");
-        CHECKF(rc == 0, "%s", mpm_sim_error(s));
+             rc ? TERR(mpm_sim_error(s)) : "finished");
+        CHECKF(rc == 0, "%s", TERR(mpm_sim_error(s)));
         CHECK(peak > 1.5 * u0 && peak < 2.3 * u0);
         mpm_sim_destroy(&s);
     }
@@ -392,10 +392,10 @@ TEST(inv_traction_momentum_and_work)
         t.c.n_tractions = 1;
         t.c.tractions = &tr;
         t.c.dt = 2e-5;
-        char err[256];
-        mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+        mpm_error err;
+        mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
         mpm_paper_free(&t);
-        CHECKF(s, "%s", err);
+        CHECKF(s, "%s", TERR(&err));
         CHECK(mpm_sim_run(s, 2000) == 0);
         mpm_energy e;
         mpm_sim_energy(s, &e);
@@ -419,15 +419,15 @@ TEST(inv_particle_leaving_grid_is_an_error)
     t.c.bc.face_mask[0] = 0;
     t.body[0].velocity[0] = 5.0;
     t.mat[0].youngs_modulus = 1.0;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
-    CHECKF(s, "%s", err);
+    CHECKF(s, "%s", TERR(&err));
     int rc = mpm_sim_run(s, 100000);
-    TLOG("%s", mpm_sim_error(s));
+    TLOG("%s", TERR(mpm_sim_error(s)));
     CHECK(rc == MPM_ELEFTGRID);
-    CHECK(strstr(mpm_sim_error(s), "particle 0 left the grid at step") != NULL);
-    CHECK(strstr(mpm_sim_error(s), "position (1") != NULL);
+    CHECK(strstr(TERR(mpm_sim_error(s)), "particle 0 left the grid at step") != NULL);
+    CHECK(strstr(TERR(mpm_sim_error(s)), "position (1") != NULL);
     CHECK(mpm_sim_step(s) == MPM_ESTATE);
     mpm_sim_destroy(&s);
 }
@@ -447,13 +447,13 @@ TEST(inv_nan_is_divergence)
     c.materials = &mat;
     c.n_bodies = 1;
     c.bodies = &b;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
-    CHECKF(s, "%s", err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+    CHECKF(s, "%s", TERR(&err));
     int rc = mpm_sim_step(s);
-    TLOG("%s", mpm_sim_error(s));
+    TLOG("%s", TERR(mpm_sim_error(s)));
     CHECK(rc == MPM_EDIVERGED);
-    CHECK(strstr(mpm_sim_error(s), "diverged at step 1, time") != NULL);
+    CHECK(strstr(TERR(mpm_sim_error(s)), "diverged at step 1, time") != NULL);
     mpm_sim_destroy(&s);
 }
 
@@ -461,17 +461,17 @@ TEST(inv_dt_above_cfl_refused_unless_allowed)
 {
     mpm_paper t;
     CHECK(mpm_paper_bar(&t, MPM_METHOD_MPM, MPM_USF, 7, 1, 0, 0.1, 0.1) == 0);
-    char err[256];
-    CHECK(mpm_case_check(&t.c, err, sizeof err) == MPM_ECFL);
-    TLOG("%s", err);
-    CHECK(strstr(err, "dt: 0.1 is above the CFL limit") != NULL);
-    CHECK(mpm_sim_new(&t.c, err, sizeof err) == NULL);
+    mpm_error err;
+    CHECK(mpm_case_check(&t.c, NULL, &err) == MPM_ECFL);
+    TLOG("%s", TERR(&err));
+    CHECK(strstr(TERR(&err), "dt: 0.1 is above the CFL limit") != NULL);
+    CHECK(mpm_sim_new(&t.c, NULL, &err) == NULL);
     t.c.allow_unstable_dt = 1;
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
-    CHECKF(s, "%s", err);
+    CHECKF(s, "%s", TERR(&err));
     int rc = mpm_sim_run(s, 100000);
-    TLOG("allowed, then: %s", mpm_sim_error(s));
+    TLOG("allowed, then: %s", TERR(mpm_sim_error(s)));
     CHECK(rc == MPM_EDIVERGED || rc == MPM_ELEFTGRID);
     mpm_sim_destroy(&s);
 }
@@ -481,10 +481,10 @@ TEST(inv_automatic_dt_follows_cfl)
     mpm_paper t;
     CHECK(mpm_paper_bar(&t, MPM_METHOD_MPM, MPM_USF, 7, 1, 0, 0, 0.1) == 0);
     t.c.cfl = 0.4;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
-    CHECKF(s, "%s", err);
+    CHECKF(s, "%s", TERR(&err));
     double h = 1.0 / 7, c = sqrt(10.0);
     CHECK_NEAR(mpm_sim_dt(s), 0.4 * h / (c + 0.1 * sin(M_PI / 2 * 13 / 14.0)), 1e-15);
     CHECK(mpm_sim_run(s, 100) == 0);
@@ -511,7 +511,7 @@ TEST(inv_case_errors_name_the_field)
         {"threads: must be in [0, 64] (got 100)", 9},
         {"update: unknown value -1", 10},
         {"bodies[0].ppc: particles per cell per axis must be in [1, 8] (got 0)", 11},
-        {"boundary.faces[z_lo]: direction mask 4 is not within 0 for a 2D grid", 12},
+        {"boundary.z_lo: direction mask 4 is not within 0 for a 2D grid", 12},
         {"grid.dim: must be 1, 2 or 3 (got 4)", 13},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
@@ -533,14 +533,123 @@ TEST(inv_case_errors_name_the_field)
         case 12: t.c.bc.face_mask[4] = 4; break;
         case 13: t.c.grid.dim = 4; break;
         }
-        char err[256] = "";
-        int rc = mpm_case_check(&t.c, err, sizeof err);
-        mpm_sim *s = mpm_sim_new(&t.c, NULL, 0);
+        mpm_error err;
+        int rc = mpm_case_check(&t.c, NULL, &err);
+        mpm_sim *s = mpm_sim_new(&t.c, NULL, NULL);
         mpm_paper_free(&t);
         CHECKF(rc == MPM_EINVAL && s == NULL, "case %zu: rc %d", i, rc);
-        CHECKF(strstr(err, cases[i].expect) != NULL, "case %zu: got '%s', want '%s'", i, err,
+        CHECKF(strstr(TERR(&err), cases[i].expect) != NULL, "case %zu: got '%s', want '%s'", i, TERR(&err),
                cases[i].expect);
     }
+}
+
+/* The error is structured: the field is a path of the .proto's names,
+ * rendered in its spelling or in the JSON mapping's, and the message does
+ * not repeat it. */
+TEST(inv_case_error_is_structured)
+{
+    mpm_paper t;
+    mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.05);
+    double x[2] = {0.5, 0.5}, vol = 0.0025, hl[2] = {0.025, -0.025};
+    t.body[1].n_points = 1;
+    t.body[1].x = x;
+    t.body[1].volume = &vol;
+    t.body[1].half_length = hl;
+    mpm_error err;
+    int rc = mpm_case_check(&t.c, NULL, &err);
+    mpm_paper_free(&t);
+    char proto[128], json[128];
+    mpm_error_field(&err, MPM_FIELD_PROTO, proto, sizeof proto);
+    mpm_error_field(&err, MPM_FIELD_JSON, json, sizeof json);
+    TLOG("%s | %s | %s", proto, json, err.message);
+    CHECK(rc == MPM_EINVAL && err.code == MPM_EINVAL);
+    CHECK(err.depth == 3 && !strcmp(err.path[0].name, "bodies") && err.path[0].index == 1 &&
+          !strcmp(err.path[1].name, "points") && err.path[1].index < 0 &&
+          !strcmp(err.path[2].name, "half_length") && err.path[2].index == 1);
+    CHECK(!strcmp(proto, "bodies[1].points.half_length[1]"));
+    CHECK(!strcmp(json, "bodies[1].points.halfLength[1]"));
+    CHECKF(!strncmp(err.message, "the GMPM half-width must be in (0, h]", 37), "%s", err.message);
+}
+
+/* One check gives the count, the nodes and what the build needs; the
+ * build from it (no second check) is the same simulation, bit for bit;
+ * max_particles refuses a case as soon as the count passes it, however
+ * many particles the case would make; a case changed after its check is
+ * refused, not overrun. */
+TEST(inv_case_check_once)
+{
+    mpm_paper t;
+    mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_MUSL, 0.025);
+    t.c.threads = 2;
+    mpm_case_info info;
+    mpm_error err;
+    CHECKF(mpm_case_check(&t.c, &info, &err) == 0 && err.code == 0, "%s", TERR(&err));
+    mpm_sim *a = mpm_sim_new(&t.c, &info, &err), *b = mpm_sim_new(&t.c, NULL, &err);
+    CHECKF(a && b, "%s", TERR(&err));
+    TLOG("disks: %zu particles, %zu nodes, dim %d, vmax %g, cmax %g", info.particles, info.nodes,
+         info.dim, info.vmax, info.cmax);
+    CHECK(info.particles == 784 && info.particles == mpm_sim_particles(a));
+    CHECK(info.nodes == mpm_sim_nodes(a) && info.dim == 2);
+    CHECK(mpm_sim_run(a, 300) == 0 && mpm_sim_run(b, 300) == 0);
+    size_t n = info.particles;
+    double *xa = malloc(2 * n * sizeof *xa), *xb = malloc(2 * n * sizeof *xb);
+    CHECK(xa && xb);
+    mpm_sim_snapshot(a, &(mpm_snapshot){.x = xa});
+    mpm_sim_snapshot(b, &(mpm_snapshot){.x = xb});
+    int same = !memcmp(xa, xb, 2 * n * sizeof *xa);
+    free(xa);
+    free(xb);
+    mpm_energy_sample es;
+    mpm_sim_energy_sample(a, &es);
+    CHECK(es.seq == 0 && es.step == 300 && es.t == mpm_sim_time(a) && es.dim == 2 && es.e.mass > 0);
+    mpm_sim_destroy(&a);
+    mpm_sim_destroy(&b);
+    CHECK(same);
+
+    /* the limit: exactly the count passes, one less is refused */
+    t.c.max_particles = n;
+    CHECK(mpm_case_check(&t.c, NULL, &err) == 0);
+    t.c.max_particles = n - 1;
+    CHECK(mpm_case_check(&t.c, NULL, &err) == MPM_ETOOBIG);
+    TLOG("max_particles %zu: %s", n - 1, TERR(&err));
+    CHECK(strstr(TERR(&err), "bodies[1]: the case has more than 783 particles") != NULL);
+    CHECK(mpm_sim_new(&t.c, NULL, &err) == NULL && err.code == MPM_ETOOBIG);
+    t.c.max_particles = 0;
+
+    /* a changed case: refused by the build from the old check */
+    t.body[1].ppc = 3;
+    CHECK(mpm_sim_new(&t.c, &info, &err) == NULL && err.code == MPM_EINVAL);
+    TLOG("changed after the check: %s", TERR(&err));
+    t.body[1].ppc = 1;
+    CHECK(mpm_sim_new(&t.c, &info, &err) == NULL && err.code == MPM_EINVAL);
+    t.body[1].ppc = 2;
+    t.c.threads = MPM_MAX_THREADS + 1; /* threads, the one field that may change, is checked */
+    CHECK(mpm_sim_new(&t.c, &info, &err) == NULL && err.code == MPM_EINVAL);
+    mpm_paper_free(&t);
+
+    /* a box of about 10^12 particles is refused at the limit, at once */
+    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.2, 1.0};
+    mpm_body_desc body = {0};
+    body.shape = MPM_SHAPE_BOX;
+    body.ppc = 8;
+    mpm_case c = {0};
+    c.grid = (mpm_grid_desc){3, {0, 0, 0}, {1, 1, 1}, {1200, 1200, 1200}};
+    for (int d = 0; d < 3; d++) body.hi[d] = 1199;
+    c.method = MPM_METHOD_MPM;
+    c.n_materials = 1;
+    c.materials = &mat;
+    c.n_bodies = 1;
+    c.bodies = &body;
+    c.max_particles = 1000;
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int rc = mpm_case_check(&c, NULL, &err);
+    c.max_particles = 0; /* MPM_MAX_PARTICLES */
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    double ms = 1e3 * (t1.tv_sec - t0.tv_sec) + 1e-6 * (t1.tv_nsec - t0.tv_nsec);
+    TLOG("10^12-particle box, max_particles 1000: %s after %.3f ms", TERR(&err), ms);
+    CHECK(rc == MPM_ETOOBIG && !strcmp(TERR(&err), "bodies[0]: the case has more than 1000 particles, the limit"));
+    CHECK(ms < 100);
 }
 
 /* Same case, same thread count: bitwise identical.  1 vs 2 threads: the
@@ -551,8 +660,8 @@ static int run_disks_threads(int threads, double *x, double *sig, size_t *n)
     mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.025);
     t.c.threads = threads;
     t.c.dt = 1e-3;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
     if (!s) return -1;
     int rc = mpm_sim_run(s, 2500); /* through the impact */
@@ -596,10 +705,10 @@ TEST(inv_cancel_between_steps)
     mpm_paper t;
     mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.025);
     t.c.allow_unstable_dt = 0;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
-    CHECKF(s, "%s", err);
+    CHECKF(s, "%s", TERR(&err));
     mpm_sim_cancel(s); /* pending cancel: the run stops before its first step */
     CHECK(mpm_sim_run(s, 10) == MPM_ECANCELLED);
     CHECK(mpm_sim_steps(s) == 0);
@@ -607,7 +716,7 @@ TEST(inv_cancel_between_steps)
     CHECK(pthread_create(&th, NULL, canceller, s) == 0);
     int rc = mpm_sim_run(s, 1L << 40);
     pthread_join(th, NULL);
-    TLOG("%s", mpm_sim_error(s));
+    TLOG("%s", TERR(mpm_sim_error(s)));
     CHECK(rc == MPM_ECANCELLED);
     CHECK(mpm_sim_step(s) == 0); /* a cancelled run can go on */
     mpm_sim_destroy(&s);

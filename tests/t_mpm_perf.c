@@ -66,16 +66,16 @@ TEST(perf_gimp_3_nodes_equal_4_nodes)
                 mpm_body_desc b;
                 falling_box(&c, &mat, &b, dim, ups[u]);
                 c.threads = T;
-                char err[256];
-                mpm_sim *s3 = mpm_sim_new(&c, err, sizeof err);
-                CHECKF(s3, "%s", err);
-                mpm_sim *s4 = mpm_sim_new(&c, err, sizeof err);
-                CHECKF(s4, "%s", err);
+                mpm_error err;
+                mpm_sim *s3 = mpm_sim_new(&c, NULL, &err);
+                CHECKF(s3, "%s", TERR(&err));
+                mpm_sim *s4 = mpm_sim_new(&c, NULL, &err);
+                CHECKF(s4, "%s", TERR(&err));
                 CHECK(s3->ns == 3); /* generated particles: lp = h/4 */
                 CHECK(mpm_sim_set_gimp_nodes(s4, 4) == 0);
                 CHECK(s4->ns == 4);
                 int rc3 = mpm_sim_run(s3, 40), rc4 = mpm_sim_run(s4, 40);
-                CHECKF(rc3 == 0 && rc4 == 0, "%s / %s", mpm_sim_error(s3), mpm_sim_error(s4));
+                CHECKF(rc3 == 0 && rc4 == 0, "%s / %s", TERR(mpm_sim_error(s3)), TERR(mpm_sim_error(s4)));
                 size_t n = mpm_sim_particles(s3);
                 double *buf = malloc(2 * n * (2 * 3 + 6) * sizeof *buf);
                 CHECK(buf);
@@ -121,9 +121,9 @@ TEST(perf_gimp_family_follows_half_width)
         c.materials = &mat;
         c.n_bodies = 1;
         c.bodies = &b;
-        char err[256];
-        mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
-        CHECKF(s, "%s", err);
+        mpm_error err;
+        mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+        CHECKF(s, "%s", TERR(&err));
         int ns = s->ns, rc3 = mpm_sim_set_gimp_nodes(s, 3);
         CHECK(mpm_sim_step(s) == 0);
         int late = mpm_sim_set_gimp_nodes(s, 4);
@@ -171,7 +171,7 @@ static double sorted_run(int rev, int T, double *vout, int *sorted)
     c.materials = &mat;
     c.n_bodies = 1;
     c.bodies = &b;
-    mpm_sim *s = mpm_sim_new(&c, NULL, 0);
+    mpm_sim *s = mpm_sim_new(&c, NULL, NULL);
     if (!s) return -1;
     mpm_sim_snapshot(s, &(mpm_snapshot){.x = xs, .v = vs});
     int same = 1;
@@ -240,14 +240,14 @@ TEST(perf_active_box_leaves_no_stale_nodes)
             c.materials = &mat;
             c.n_bodies = 1;
             c.bodies = &b;
-            char err[256];
-            mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
-            CHECKF(s, "%s", err);
+            mpm_error err;
+            mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+            CHECKF(s, "%s", TERR(&err));
             mpm_energy e;
             mpm_sim_energy(s, &e);
             double worst = 0;
             for (int step = 0; step < 150; step++) {
-                CHECKF(mpm_sim_step(s) == 0, "%s", mpm_sim_error(s));
+                CHECKF(mpm_sim_step(s) == 0, "%s", TERR(mpm_sim_error(s)));
                 double mg = 0, q[3];
                 for (int j = 0; j < 51; j++)
                     for (int i = 0; i < 51; i++) {
@@ -365,10 +365,10 @@ static int rows_case(int dim, int shape, int m, int up, int T, double *worst, do
     c.materials = &mat;
     c.n_bodies = 2;
     c.bodies = b;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
     if (!s) {
-        TLOG("mpm_sim_new: %s", err);
+        TLOG("mpm_sim_new: %s", TERR(&err));
         return -1;
     }
     size_t n = mpm_sim_particles(s), nn = s->nn;
@@ -382,7 +382,7 @@ static int rows_case(int dim, int shape, int m, int up, int T, double *worst, do
     for (int step = 0; step < 60 && !rc; step++) {
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = x});
         if (mpm_sim_step(s)) {
-            TLOG("step %d: %s", step, mpm_sim_error(s));
+            TLOG("step %d: %s", step, TERR(mpm_sim_error(s)));
             rc = -1;
             break;
         }
@@ -471,10 +471,10 @@ static int split_1d_case(int m, int up, int T, double *worst, long *checked)
     c.materials = &mat;
     c.n_bodies = 2;
     c.bodies = b;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
     if (!s) {
-        TLOG("mpm_sim_new: %s", err);
+        TLOG("mpm_sim_new: %s", TERR(&err));
         return -1;
     }
     size_t n = mpm_sim_particles(s), nn = s->nn;
@@ -487,7 +487,7 @@ static int split_1d_case(int m, int up, int T, double *worst, long *checked)
     for (int step = 0; step < 120 && !rc; step++) {
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = x});
         if (mpm_sim_step(s)) {
-            TLOG("step %d: %s", step, mpm_sim_error(s));
+            TLOG("step %d: %s", step, TERR(mpm_sim_error(s)));
             rc = -1;
             break;
         }
@@ -544,14 +544,14 @@ static int loaded_box(int dim, mpm_update up, int T, double *x, double *v, doubl
     c.n_tractions = 1;
     c.tractions = &tr;
     c.threads = T;
-    char err[256];
-    mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
     if (!s) {
-        TLOG("mpm_sim_new: %s", err);
+        TLOG("mpm_sim_new: %s", TERR(&err));
         return -1;
     }
     int rc = mpm_sim_run(s, 150);
-    if (rc) TLOG("%s", mpm_sim_error(s));
+    if (rc) TLOG("%s", TERR(mpm_sim_error(s)));
     *n = mpm_sim_particles(s);
     mpm_sim_snapshot(s, &(mpm_snapshot){.x = x, .v = v, .stress = sig});
     mpm_sim_destroy(&s);
@@ -618,7 +618,7 @@ TEST(perf_sort_order_independent_of_threads)
         c.materials = &mat;
         c.n_bodies = 1;
         c.bodies = &b;
-        mpm_sim *s = mpm_sim_new(&c, NULL, 0);
+        mpm_sim *s = mpm_sim_new(&c, NULL, NULL);
         CHECK(s != NULL);
         if (!s) return;
         memcpy(id[T - 1], s->P.id, sizeof id[0]);
@@ -690,11 +690,11 @@ TEST(perf_step_energies_equal_energy_pass)
                     mpm_material_desc mat;
                     mpm_body_desc b;
                     energy_case(&c, &mat, &b, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, ups[u], T);
-                    char err[256];
-                    mpm_sim *sa_ = mpm_sim_new(&c, err, sizeof err);
-                    CHECKF(sa_, "%s", err);
-                    mpm_sim *sb_ = mpm_sim_new(&c, err, sizeof err);
-                    CHECKF(sb_, "%s", err);
+                    mpm_error err;
+                    mpm_sim *sa_ = mpm_sim_new(&c, NULL, &err);
+                    CHECKF(sa_, "%s", TERR(&err));
+                    mpm_sim *sb_ = mpm_sim_new(&c, NULL, &err);
+                    CHECKF(sb_, "%s", TERR(&err));
                     size_t n = mpm_sim_particles(sa_);
                     CHECK(n > 0 && n <= MAXP);
                     double cw = 0, strain = 0;
@@ -702,7 +702,7 @@ TEST(perf_step_energies_equal_energy_pass)
                         int want = k < STEPS; /* the last step: no request */
                         if (want) mpm_sim_want_energy(sa_);
                         int ra = mpm_sim_step(sa_), rb = mpm_sim_step(sb_);
-                        CHECKF(ra == 0 && rb == 0, "%s / %s", mpm_sim_error(sa_), mpm_sim_error(sb_));
+                        CHECKF(ra == 0 && rb == 0, "%s / %s", TERR(mpm_sim_error(sa_)), TERR(mpm_sim_error(sb_)));
                         CHECK(sa_->ecache_ok == want && !sb_->ecache_ok);
                         mpm_energy ea, eb;
                         mpm_sim_energy(sa_, &ea);

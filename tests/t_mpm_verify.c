@@ -22,12 +22,12 @@ typedef struct {
 static int run_point(mpm_update up, double dt, double tend, point_run *o)
 {
     mpm_paper t;
-    char err[256];
+    mpm_error err;
     mpm_paper_point(&t, up, dt, V0);
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
     if (!s) {
-        printf("    %s\n", err);
+        printf("    %s\n", TERR(&err));
         return -1;
     }
     double xv = 0, vv = 0;
@@ -37,7 +37,7 @@ static int run_point(mpm_update up, double dt, double tend, point_run *o)
     long n = lround(tend / dt);
     for (long i = 0; i < n; i++) {
         if (mpm_sim_step(s)) {
-            printf("    %s\n", mpm_sim_error(s));
+            printf("    %s\n", TERR(mpm_sim_error(s)));
             mpm_sim_destroy(&s);
             return -1;
         }
@@ -101,12 +101,12 @@ static double bar_error(mpm_method m, mpm_update up, int ncell, int extra, doubl
                         double v0)
 {
     mpm_paper t;
-    char err[256];
+    mpm_error err;
     if (mpm_paper_bar(&t, m, up, ncell, 1, extra, dt, v0)) return INFINITY;
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
     if (!s) {
-        printf("    %s\n", err);
+        printf("    %s\n", TERR(&err));
         return INFINITY;
     }
     long n = lround(periods * 2 * M_PI / mpm_paper_bar_omega() / dt);
@@ -114,7 +114,7 @@ static double bar_error(mpm_method m, mpm_update up, int ncell, int extra, doubl
     mpm_energy e;
     for (long i = 0; i < n; i++) {
         if (mpm_sim_step(s)) {
-            printf("    %s\n", mpm_sim_error(s));
+            printf("    %s\n", TERR(mpm_sim_error(s)));
             worst = INFINITY;
             break;
         }
@@ -171,13 +171,13 @@ typedef struct {
 static int run_disks(mpm_method m, mpm_update up, double h, double dt, double tend, disk_run *o)
 {
     mpm_paper t;
-    char err[256];
+    mpm_error err;
     mpm_paper_disks(&t, m, up, h);
     t.c.dt = dt;
-    mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
     mpm_paper_free(&t);
     if (!s) {
-        printf("    %s\n", err);
+        printf("    %s\n", TERR(&err));
         return -1;
     }
     mpm_energy e;
@@ -186,7 +186,7 @@ static int run_disks(mpm_method m, mpm_update up, double h, double dt, double te
                     e.mass * 0.1};
     while (mpm_sim_time(s) < tend) {
         if (mpm_sim_step(s)) {
-            printf("    %s\n", mpm_sim_error(s));
+            printf("    %s\n", TERR(mpm_sim_error(s)));
             mpm_sim_destroy(&s);
             return -1;
         }
@@ -251,7 +251,8 @@ TEST(verify_disks_fine_gimp_usf_energy)
  * particle mass, which differs between these layouts, so a sliver node at
  * the free end can be phantom in one and not in another (a 1e-9 effect);
  * the comparison runs with M_TOL off to be exact. */
-static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, double mtol, char *err)
+static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, double mtol,
+                       mpm_error *err)
 {
     double h = 1.0 / ncell, beta = M_PI / 2;
     int per_x = ppc, across = 2 * ppc, nlat = dim == 1 ? 1 : dim == 2 ? across : across * across;
@@ -261,7 +262,7 @@ static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, dou
         free(x);
         free(vol);
         free(v);
-        snprintf(err, 256, "out of memory");
+        mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
         return NULL;
     }
     size_t p = 0;
@@ -295,7 +296,7 @@ static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, dou
     c.bodies = &b;
     c.bc.face_mask[0] = 1; /* x fixed at x = 0 */
     for (int d = 1; d < dim; d++) c.bc.face_mask[2 * d] = c.bc.face_mask[2 * d + 1] = 1u << d;
-    mpm_sim *s = mpm_sim_new(&c, err, 256);
+    mpm_sim *s = mpm_sim_new(&c, NULL, err);
     free(x);
     free(vol);
     free(v);
@@ -305,11 +306,11 @@ static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, dou
 TEST(verify_bar_2d_3d_match_1d)
 {
     for (int m = 0; m < 2; m++) {
-        char err[256];
+        mpm_error err;
         mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
-        mpm_sim *s1 = bar_nd(1, meth, 8, 2, V0, 1e-300, err), *s2 = bar_nd(2, meth, 8, 2, V0, 1e-300, err),
-                *s3 = bar_nd(3, meth, 8, 2, V0, 1e-300, err);
-        CHECKF(s1 && s2 && s3, "%s", err);
+        mpm_sim *s1 = bar_nd(1, meth, 8, 2, V0, 1e-300, &err), *s2 = bar_nd(2, meth, 8, 2, V0, 1e-300, &err),
+                *s3 = bar_nd(3, meth, 8, 2, V0, 1e-300, &err);
+        CHECKF(s1 && s2 && s3, "%s", TERR(&err));
         long n = lround(2 * 2 * M_PI / mpm_paper_bar_omega() / 1e-3);
         double d2 = 0, d3 = 0, ea = 0, amp = V0 * 2 / M_PI;
         mpm_energy e1, e2, e3;

@@ -38,7 +38,7 @@
  */
 #include "mpm.h"
 #include "mpm_paper.h"
-#include "srv_codec.h"
+#include "mpp_msg.h"
 #include "t.h"
 #include "t_daemon.h"
 
@@ -164,19 +164,19 @@ typedef struct {
 static void cfl_run(int dim, mpm_method m, mpm_update u, double C, double v0, cfl_out *o)
 {
     wave w;
-    char err[256];
+    mpm_error err;
     memset(o, 0, sizeof *o);
     if (wave_case(&w, dim, m, u, C, 1, v0)) {
         o->rc = MPM_ENOMEM;
         snprintf(o->msg, sizeof o->msg, "out of memory");
         return;
     }
-    mpm_sim *s = mpm_sim_new(&w.c, err, sizeof err);
+    mpm_sim *s = mpm_sim_new(&w.c, NULL, &err);
     double period = w.period, tend = 10 * period;
     wave_free(&w);
     if (!s) {
         o->rc = MPM_EINVAL;
-        snprintf(o->msg, sizeof o->msg, "%s", err);
+        snprintf(o->msg, sizeof o->msg, "%s", TERR(&err));
         return;
     }
     mpm_energy e0, e;
@@ -197,7 +197,7 @@ static void cfl_run(int dim, mpm_method m, mpm_update u, double C, double v0, cf
             break;
         }
         if ((o->rc = mpm_sim_step(s))) {
-            snprintf(o->msg, sizeof o->msg, "%s", mpm_sim_error(s));
+            snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
             break;
         }
         if (mpm_sim_steps(s) % every == 0) {
@@ -214,7 +214,7 @@ static void cfl_run(int dim, mpm_method m, mpm_update u, double C, double v0, cf
         }
     }
     /* as the daemon does before it reports a run finished */
-    if (!o->rc && (o->rc = mpm_sim_check(s))) snprintf(o->msg, sizeof o->msg, "%s", mpm_sim_error(s));
+    if (!o->rc && (o->rc = mpm_sim_check(s))) snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
     mpm_sim_energy(s, &e);
     o->end = e.total / e0.total;
     o->growth = nlast ? (last / nlast) / (first / nfirst) - 1 : 0;
@@ -290,54 +290,54 @@ TEST(stress_cfl_sweep)
     /* the refusal: cfl > 1 and a given dt above the limit, unless allowed */
     for (int dim = 1; dim <= 2; dim++) {
         wave w;
-        char err[256] = "";
+        mpm_error err;
         CHECK(wave_case(&w, dim, MPM_METHOD_MPM, MPM_USF, 1.05, 0, 1e-3) == 0);
-        int rc = mpm_case_check(&w.c, err, sizeof err);
-        CHECKF(rc == MPM_ECFL && strstr(err, "cfl: 1.05 is above the stability limit 1"),
-               "rc %d: %s", rc, err);
+        int rc = mpm_case_check(&w.c, NULL, &err);
+        CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "cfl: 1.05 is above the stability limit 1"),
+               "rc %d: %s", rc, TERR(&err));
         w.c.cfl = 1.0;
-        CHECK(mpm_case_check(&w.c, err, sizeof err) == 0);
-        mpm_sim *s = mpm_sim_new(&w.c, err, sizeof err);
-        CHECKF(s, "%s", err);
+        CHECK(mpm_case_check(&w.c, NULL, &err) == 0);
+        mpm_sim *s = mpm_sim_new(&w.c, NULL, &err);
+        CHECKF(s, "%s", TERR(&err));
         double lim = mpm_sim_dt_limit(s);
         mpm_sim_destroy(&s);
         w.c.cfl = 0;
         w.c.dt = 1.01 * lim;
-        rc = mpm_case_check(&w.c, err, sizeof err);
-        CHECKF(rc == MPM_ECFL && strstr(err, "above the CFL limit"), "rc %d: %s", rc, err);
+        rc = mpm_case_check(&w.c, NULL, &err);
+        CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "above the CFL limit"), "rc %d: %s", rc, TERR(&err));
         TLOG("%dD refusal: cfl 1.05 -> \"cfl: 1.05 is above the stability limit 1; ...\"; "
-             "dt = 1.01 x limit -> \"%.60s...\"", dim, err);
+             "dt = 1.01 x limit -> \"%.60s...\"", dim, TERR(&err));
         w.c.dt = 0.99 * lim;
-        CHECK(mpm_case_check(&w.c, err, sizeof err) == 0);
+        CHECK(mpm_case_check(&w.c, NULL, &err) == 0);
         wave_free(&w);
     }
     /* USL: the sweep finds it unstable from C = 0.6, so the refusal starts
      * above MPM_USL_MAX_CFL = 0.5, for a Courant factor and a given dt */
     {
         wave w;
-        char err[256] = "";
+        mpm_error err;
         CHECK(wave_case(&w, 1, MPM_METHOD_GIMP, MPM_USL, 0.6, 0, 1e-3) == 0);
-        int rc = mpm_case_check(&w.c, err, sizeof err);
-        CHECKF(rc == MPM_ECFL && strstr(err, "cfl: 0.6 is above the stability limit 0.5 of USL"),
-               "rc %d: %s", rc, err);
+        int rc = mpm_case_check(&w.c, NULL, &err);
+        CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "cfl: 0.6 is above the stability limit 0.5 of USL"),
+               "rc %d: %s", rc, TERR(&err));
         w.c.cfl = 0.5;
-        CHECKF(mpm_case_check(&w.c, err, sizeof err) == 0, "%s", err);
-        mpm_sim *s = mpm_sim_new(&w.c, err, sizeof err);
-        CHECKF(s, "%s", err);
+        CHECKF(mpm_case_check(&w.c, NULL, &err) == 0, "%s", TERR(&err));
+        mpm_sim *s = mpm_sim_new(&w.c, NULL, &err);
+        CHECKF(s, "%s", TERR(&err));
         double lim = mpm_sim_dt_limit(s);
         mpm_sim_destroy(&s);
         w.c.cfl = 0;
         w.c.dt = 0.51 * lim;
-        rc = mpm_case_check(&w.c, err, sizeof err);
-        CHECKF(rc == MPM_ECFL && strstr(err, "(USL)"), "rc %d: %s", rc, err);
+        rc = mpm_case_check(&w.c, NULL, &err);
+        CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "(USL)"), "rc %d: %s", rc, TERR(&err));
         TLOG("USL refusal: cfl 0.6 -> \"cfl: 0.6 is above the stability limit 0.5 of USL; ...\"; "
-             "dt = 0.51 x h/(c+|v|) -> \"%.80s...\"", err);
+             "dt = 0.51 x h/(c+|v|) -> \"%.80s...\"", TERR(&err));
         w.c.dt = 0.49 * lim;
-        CHECKF(mpm_case_check(&w.c, err, sizeof err) == 0, "%s", err);
+        CHECKF(mpm_case_check(&w.c, NULL, &err) == 0, "%s", TERR(&err));
         w.c.allow_unstable_dt = 1;
         w.c.dt = 0;
         w.c.cfl = 0.9;
-        CHECKF(mpm_case_check(&w.c, err, sizeof err) == 0, "%s", err);
+        CHECKF(mpm_case_check(&w.c, NULL, &err) == 0, "%s", TERR(&err));
         wave_free(&w);
     }
 }
@@ -365,7 +365,7 @@ static void long_run(mpm_sim *s, long nsteps, long window, long_out *o)
     for (long i = 0; i < nsteps; i += every) {
         long k = i + every <= nsteps ? every : nsteps - i;
         if ((o->rc = mpm_sim_run(s, k))) {
-            snprintf(o->msg, sizeof o->msg, "%s", mpm_sim_error(s));
+            snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
             break;
         }
         mpm_sim_energy(s, &e);
@@ -399,12 +399,12 @@ TEST(stress_long_runs)
     for (int m = 0; m < 2; m++)
         for (int u = 0; u < 3; u++) {
             mpm_paper t;
-            char err[256];
+            mpm_error err;
             mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
             CHECK(mpm_paper_bar(&t, meth, (mpm_update)u, m ? 13 : 7, 1, 1, 1e-3, 0.1) == 0);
-            mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+            mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
             mpm_paper_free(&t);
-            CHECKF(s, "%s", err);
+            CHECKF(s, "%s", TERR(&err));
             long_out o;
             long_run(s, nbar, wbar, &o);
             mpm_sim_destroy(&s);
@@ -440,14 +440,14 @@ TEST(stress_long_runs)
     for (int m = 0; m < 2; m++)
         for (int u = 0; u < 3; u++) {
             mpm_paper t;
-            char err[256];
+            mpm_error err;
             mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
             mpm_paper_disks(&t, meth, (mpm_update)u, h);
             t.c.dt = 1e-3;
             for (int f = 0; f < 4; f++) t.c.bc.face_mask[f] = 1u << (f / 2);
-            mpm_sim *s = mpm_sim_new(&t.c, err, sizeof err);
+            mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
             mpm_paper_free(&t);
-            CHECKF(s, "%s", err);
+            CHECKF(s, "%s", TERR(&err));
             long_out o;
             long_run(s, ndisk, 1000, &o);
             mpm_sim_destroy(&s);
@@ -507,7 +507,7 @@ static double noise(const double *s0, const double *s1, const double *s2, size_t
 }
 
 static mpm_sim *block_sim(mpm_method m, mpm_update u, double V, double v0, int ppc, double dt,
-                          char *err)
+                          mpm_error *err)
 {
     const int nx = 8, ny = 4, travel = 20;
     double h = 1.0 / 32, L = nx * h;
@@ -516,7 +516,7 @@ static mpm_sim *block_sim(mpm_method m, mpm_update u, double V, double v0, int p
     double *x = malloc(2 * n * sizeof *x), *vol = malloc(n * sizeof *vol), *v = malloc(2 * n * sizeof *v);
     mpm_sim *s = NULL;
     if (!x || !vol || !v) {
-        snprintf(err, 256, "out of memory");
+        mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
         goto out;
     }
     for (int j = 0; j < py; j++)
@@ -544,7 +544,7 @@ static mpm_sim *block_sim(mpm_method m, mpm_update u, double V, double v0, int p
     cs.materials = &mat;
     cs.n_bodies = 1;
     cs.bodies = &b;
-    s = mpm_sim_new(&cs, err, 256);
+    s = mpm_sim_new(&cs, NULL, err);
 out:
     free(x);
     free(vol);
@@ -557,8 +557,8 @@ static void crossing(mpm_method m, mpm_update u, double v0, int ppc, cross_out *
     memset(o, 0, sizeof *o);
     const double h = 1.0 / 32, L = 8 * h, c = 1.0, V = 0.2 * c, w = M_PI * c / L;
     double dt = 0.4 * h / (c + 1.2 * V), tend = 20 * h / V, scale = c * (v0 > 0 ? v0 : V);
-    char err[256];
-    mpm_sim *a = block_sim(m, u, 0.0, v0, ppc, dt, err), *b = a ? block_sim(m, u, V, v0, ppc, dt, err) : NULL;
+    mpm_error err;
+    mpm_sim *a = block_sim(m, u, 0.0, v0, ppc, dt, &err), *b = a ? block_sim(m, u, V, v0, ppc, dt, &err) : NULL;
     size_t n = a ? mpm_sim_particles(a) : 0;
     /* stress histories: sa[k], sb[k] hold steps i - 2 + k (ring of 3) */
     double *sa[3], *sb[3], *x0 = malloc(2 * n * sizeof *x0 + 1), *x1 = malloc(2 * n * sizeof *x1 + 1);
@@ -570,7 +570,7 @@ static void crossing(mpm_method m, mpm_update u, double v0, int ppc, cross_out *
     }
     if (!a || !b || !okm) {
         o->rc = MPM_EINVAL;
-        snprintf(o->msg, sizeof o->msg, "%s", a && b ? "out of memory" : err);
+        snprintf(o->msg, sizeof o->msg, "%s", a && b ? "out of memory" : TERR(&err));
         goto out;
     }
     mpm_sim_snapshot(b, &(mpm_snapshot){.x = x0});
@@ -578,7 +578,7 @@ static void crossing(mpm_method m, mpm_update u, double v0, int ppc, cross_out *
         int ra = mpm_sim_step(a), rb = mpm_sim_step(b);
         if (ra || rb) {
             o->rc = ra ? ra : rb;
-            snprintf(o->msg, sizeof o->msg, "%s%s", ra ? "at rest: " : "", mpm_sim_error(ra ? a : b));
+            snprintf(o->msg, sizeof o->msg, "%s%s", ra ? "at rest: " : "", TERR(mpm_sim_error(ra ? a : b)));
             break;
         }
         double *ta = sa[0], *tb = sb[0];
@@ -814,17 +814,18 @@ static int extreme_cases(xcase *xs, int max, const char *me, const char *up, int
 static int run_case(const char *json, xout *o)
 {
     memset(o, 0, sizeof *o);
-    srv_case *sc = NULL;
+    mpp_case *sc = NULL;
     char err[512];
-    int rc = srv_case_load(json, strlen(json), &sc, err, sizeof err);
+    int rc = td_case_load(json, strlen(json), &sc, err, sizeof err);
     if (rc) {
         snprintf(o->msg, sizeof o->msg, "%s", err);
         return rc;
     }
-    mpm_sim *s = mpm_sim_new(&sc->c, err, sizeof err);
+    mpm_error me;
+    mpm_sim *s = mpm_sim_new(&sc->c, &sc->info, &me);
     if (!s) {
-        snprintf(o->msg, sizeof o->msg, "%s", err);
-        srv_case_destroy(&sc);
+        snprintf(o->msg, sizeof o->msg, "%s", TERR(&me));
+        mpp_case_destroy(&sc);
         return -1;
     }
     mpm_energy e;
@@ -842,7 +843,7 @@ static int run_case(const char *json, xout *o)
             break;
         }
         if ((o->rc = mpm_sim_step(s))) {
-            snprintf(o->msg, sizeof o->msg, "%s", mpm_sim_error(s));
+            snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
             break;
         }
         if ((k + 1) % 10 == 0) {
@@ -852,7 +853,7 @@ static int run_case(const char *json, xout *o)
             o->pmax = fmax(o->pmax, fabs(e.momentum[0] + e.momentum[1]));
         }
     }
-    if (!o->rc && (o->rc = mpm_sim_check(s))) snprintf(o->msg, sizeof o->msg, "%s", mpm_sim_error(s));
+    if (!o->rc && (o->rc = mpm_sim_check(s))) snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
     if (!o->rc) {
         mpm_sim_energy(s, &e);
         o->emax = fmax(o->emax, e.total);
@@ -861,7 +862,7 @@ static int run_case(const char *json, xout *o)
     o->steps = mpm_sim_steps(s);
     o->t = mpm_sim_time(s);
     mpm_sim_destroy(&s);
-    srv_case_destroy(&sc);
+    mpp_case_destroy(&sc);
     return 0;
 }
 
@@ -953,7 +954,7 @@ static json_t *request(void *zctx, const char *ep, const char *req, double timeo
     uint8_t *buf = NULL;
     size_t len = 0;
     char err[256];
-    if (srv_msg_json_to_bytes(SRV_MSG_REQUEST, req, strlen(req), &buf, &len, err, sizeof err)) {
+    if (td_msg_json_to_bytes(MPP_MSG_REQUEST, req, strlen(req), &buf, &len, err, sizeof err)) {
         printf("    request not encodable: %s\n", err);
         return NULL;
     }
@@ -976,7 +977,7 @@ static json_t *request(void *zctx, const char *ep, const char *req, double timeo
                 zmq_msg_init(&part);
                 if (zmq_msg_recv(&part, sock, 0) >= 0) {
                     char *js = NULL;
-                    if (srv_msg_bytes_to_json(SRV_MSG_REPLY, zmq_msg_data(&part), zmq_msg_size(&part),
+                    if (td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&part), zmq_msg_size(&part),
                                               0, 0, &js, err, sizeof err) == 0)
                         out = json_loads(js, 0, NULL);
                     free(js);

@@ -133,12 +133,13 @@ int main(int argc, char **argv)
     P.c.cfl = cfl;
     P.c.threads = (int)threads;
 
-    char err[256];
+    char err[512];
+    mpm_error me;
     const char *mname = P.c.method == MPM_METHOD_GIMP ? "GMPM" : "MPM";
-    mpm_sim *s = mpm_sim_new(&P.c, err, sizeof err);
+    mpm_sim *s = mpm_sim_new(&P.c, NULL, &me);
     mpm_paper_free(&P);
     if (!s) {
-        fprintf(stderr, "mpmrun: invalid case: %s\n", err);
+        fprintf(stderr, "mpmrun: invalid case: %s\n", mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
         return 1;
     }
     long nsteps = (long)ceil(tend / mpm_sim_dt(s) - 1e-9);
@@ -190,7 +191,7 @@ int main(int argc, char **argv)
     printf("# total energy %.6e -> %.6e (%+.3f%%), momentum (%.2e, %.2e)\n", e0.total, e.total,
            100 * (e.total - e0.total) / e0.total, e.momentum[0], e.momentum[1]);
     if (kind != 2) printf("# max Eq. 38 error of the centre-of-mass velocity: %.3e\n", err_max);
-    if (rc) fprintf(stderr, "mpmrun: %s\n", mpm_sim_error(s));
+    if (rc) fprintf(stderr, "mpmrun: %s\n", mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, err, sizeof err));
     mpm_sim_destroy(&s);
     return rc ? 1 : 0;
 }

@@ -13,8 +13,10 @@
  * mpm_sim_new(), then mpm_sim_run() or mpm_sim_step(), and read results with
  * mpm_sim_energy() and mpm_sim_snapshot() only when they are wanted.
  * This library is plain C11 + libm + pthreads: no I/O, no sockets, no
- * database.  All functions return 0 or a negative MPM_E* code; the text of
- * the last error of a simulation is mpm_sim_error().
+ * database.  All functions return 0 or a negative MPM_E* code; a failure is
+ * described by an mpm_error (mpm_error.h): the field it concerns, as a path
+ * of the .proto's names ("bodies[0].points.half_length[3]"), and a message.
+ * The last error of a simulation is mpm_sim_error().
  */
 #ifndef MPM_H
 #define MPM_H
@@ -28,7 +30,7 @@
 
 /* Error codes: the shared MPM_E* codes of mpm_error.h (MPM_EINVAL,
  * MPM_ENOMEM, MPM_ELEFTGRID, MPM_EDIVERGED, MPM_ECANCELLED, MPM_ECFL,
- * MPM_ESTATE from the solver). */
+ * MPM_ESTATE and MPM_ETOOBIG from the solver). */
 
 typedef enum { MPM_METHOD_MPM = 0, MPM_METHOD_GIMP = 1 } mpm_method;
 typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
@@ -122,6 +124,8 @@ typedef struct {
     mpm_bc_desc bc;
 
     int threads;          /* solver threads (0 or 1: serial) */
+    size_t max_particles; /* most particles the case may make (0:
+                           * MPM_MAX_PARTICLES, which also caps it) */
 } mpm_case;
 
 #define MPM_DEFAULT_CFL 0.5
@@ -168,19 +172,31 @@ typedef struct {
 
 typedef struct mpm_sim mpm_sim;
 
-/* Creates a simulation from a case.  Returns NULL only on allocation
- * failure with err NULL; otherwise an invalid case returns NULL and writes a
- * message naming the field and the limit into err (errlen bytes). */
-mpm_sim *mpm_sim_new(const mpm_case *c, char *err, size_t errlen);
+/* What mpm_case_check() learnt about a valid case: enough for
+ * mpm_sim_new() to build it without checking it again. */
+typedef struct {
+    size_t particles;     /* particles the case makes */
+    size_t nodes;         /* real grid nodes */
+    int dim;
+    double vmax;          /* largest initial particle speed */
+    double cmax;          /* largest p-wave speed of the materials */
+} mpm_case_info;
+
+/* Validates every field of a case and counts its particles, in one pass
+ * over them, allocating nothing.  Returns 0 and fills *info (info may be
+ * NULL), or MPM_EINVAL / MPM_ECFL (a dt or cfl above the stability limit
+ * without allow_unstable_dt) / MPM_ETOOBIG (more particles than
+ * max_particles; the counting stops there) with err naming the field. */
+int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err);
+
+/* Creates a simulation from a case.  checked NULL: the case is checked
+ * first (mpm_case_check()).  checked not NULL: the case passed
+ * mpm_case_check() with that info and has not changed since, except for
+ * `threads` (checked again here); it is built in one pass without checking
+ * again.  Returns NULL on failure with err (may be NULL) filled in:
+ * MPM_ENOMEM, or the check's codes. */
+mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error *err);
 void mpm_sim_destroy(mpm_sim **sim);
-
-/* Checks a case without building it (used before queueing a job).
- * Returns 0 or MPM_EINVAL / MPM_ECFL with a message in err. */
-int mpm_case_check(const mpm_case *c, char *err, size_t errlen);
-
-/* Checks a case like mpm_case_check() and returns its particle count, or a
- * negative code with a message in err.  Allocates nothing. */
-long mpm_case_count(const mpm_case *c, char *err, size_t errlen);
 
 /* Advances one step.  Returns 0, or MPM_ELEFTGRID / MPM_EDIVERGED (after
  * which the state is frozen and every further step returns MPM_ESTATE). */
@@ -217,7 +233,9 @@ int mpm_sim_set_particle_forces(mpm_sim *sim, const double *f);
 size_t mpm_sim_particles(const mpm_sim *sim);
 size_t mpm_sim_nodes(const mpm_sim *sim);       /* real grid nodes */
 int mpm_sim_dim(const mpm_sim *sim);
-const char *mpm_sim_error(const mpm_sim *sim);  /* "" when none */
+/* The error that stopped the simulation or refused the last call (code 0
+ * when none).  Valid as long as the simulation. */
+const mpm_error *mpm_sim_error(const mpm_sim *sim);
 
 /* Computes energies (one pass over the particles, only when called, on the
  * simulation's threads; the sums are reproducible for a given thread count).
@@ -225,6 +243,10 @@ const char *mpm_sim_error(const mpm_sim *sim);  /* "" when none */
  * sums that step made instead (the same values), with no pass.  Not to be
  * called while a step runs. */
 void mpm_sim_energy(const mpm_sim *sim, mpm_energy *e);
+
+/* mpm_sim_energy() as a sample: step, time, dim and the energies (seq 0,
+ * for whoever records it to number). */
+void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *s);
 
 /* The next step also computes the energies, summed inside the particle
  * passes it runs anyway (per thread, combined in thread order: the same

@@ -2,17 +2,21 @@
  * mpm_case.c - checks a case and generates its particles.
  *
  * Every field of an mpm_case is checked here, before anything is allocated,
- * and each error names the field and the limit ("bodies[1].sphere.radius: must be
- * > 0 (got -0.1)").  Particles are produced by one iterator that either
- * only counts them (for the check: particle count, the largest initial
- * speed for the CFL test, and which traction regions hold particles) or
- * writes them into the solver's struct-of-arrays.  Generated bodies put
+ * and each error names the field (a path of the .proto's names) and the
+ * limit: {"bodies[1].sphere.radius", "must be finite and > 0 (got -0.1)"}.
+ * Particles are produced by one iterator that either only counts them (the
+ * check, mpm_case_check(): one pass giving the particle count, the largest
+ * initial speed for the CFL test, and which traction regions hold
+ * particles, stopping as soon as the count passes the case's limit) or
+ * writes them into the solver's struct-of-arrays (mpm_case_fill(), the one
+ * pass of mpm_sim_new()).  Generated bodies put
  * ppc^dim particles per cell at the sub-cell centres that fall inside the
  * shape, each with volume prod(h/ppc) and uGIMP half-width h/(2 ppc).
  */
 #include "mpm_internal.h"
 
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -23,9 +27,36 @@ typedef struct {
     mpm_particles *P;     /* NULL: count only */
     const mpm_mat_params *mats;
     size_t n;
+    size_t limit;         /* the count may not exceed it (filling: P->n) */
     double vmax;
     size_t *load_count;   /* per traction: particles inside its region */
 } gen_ctx;
+
+/* "bodies[%zu]..." into a field path buffer */
+static const char *pathf(char *buf, size_t n, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static const char *pathf(char *buf, size_t n, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, n, fmt, ap);
+    va_end(ap);
+    return buf;
+}
+#define PATH(...) pathf(path, sizeof path, __VA_ARGS__)
+
+/* The count passed the limit: refused at once, naming the body that did.
+ * Filling, the limit is the count the check found: the case changed. */
+static int too_many(const gen_ctx *g, size_t bi, mpm_error *err)
+{
+    char path[64];
+    if (g->P)
+        return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu]", bi),
+                        "the case makes another number of particles than when it was checked "
+                        "(%zu)", g->limit);
+    return mpm_fail(err, MPM_ETOOBIG, PATH("bodies[%zu]", bi),
+                    "the case has more than %zu particles, the limit", g->limit);
+}
 
 static int in_region(const mpm_traction_desc *t, int dim, const double *x)
 {
@@ -44,7 +75,7 @@ static void emit(gen_ctx *g, const mpm_body_desc *b, const double *x, double vol
     if (g->load_count)
         for (size_t t = 0; t < g->c->n_tractions; t++)
             if (in_region(&g->c->tractions[t], dim, x)) g->load_count[t]++;
-    if (g->P) {
+    if (g->P && g->n < g->P->n) {
         mpm_particles *P = g->P;
         size_t p = g->n;
         for (int d = 0; d < dim; d++) {
@@ -63,12 +94,13 @@ static void emit(gen_ctx *g, const mpm_body_desc *b, const double *x, double vol
     g->n++;
 }
 
-static int gen_shape(gen_ctx *g, const mpm_body_desc *b, size_t bi, char *err, size_t errlen)
+static int gen_shape(gen_ctx *g, const mpm_body_desc *b, size_t bi, mpm_error *err)
 {
     const mpm_grid_desc *gr = &g->c->grid;
     int dim = gr->dim, ppc = b->ppc;
     int c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0};
     double lo[3], hi[3], vol = 1, lp[3] = {0, 0, 0};
+    char path[64];
     for (int d = 0; d < dim; d++) {
         if (b->shape == MPM_SHAPE_BOX) {
             lo[d] = b->lo[d];
@@ -103,14 +135,16 @@ static int gen_shape(gen_ctx *g, const mpm_body_desc *b, size_t bi, char *err, s
                             r2 += (x[d] - b->center[d]) * (x[d] - b->center[d]);
                     }
                     if (b->shape == MPM_SHAPE_SPHERE) inside = r2 <= b->radius * b->radius;
-                    if (inside) emit(g, b, x, vol, 0, b->velocity, NULL, lp);
+                    if (inside) {
+                        emit(g, b, x, vol, 0, b->velocity, NULL, lp);
+                        if (g->n > g->limit) return too_many(g, bi, err);
+                    }
                 }
-    if (g->n == before) {
-        snprintf(err, errlen, "bodies[%zu]: the %s holds no particle (no sub-cell centre at "
-                 "%d per cell lies inside it); enlarge it or raise ppc", bi,
-                 b->shape == MPM_SHAPE_BOX ? "box" : "sphere", ppc);
-        return MPM_EINVAL;
-    }
+    if (g->n == before)
+        return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu]", bi),
+                        "the %s holds no particle (no sub-cell centre at %d per cell lies "
+                        "inside it); enlarge it or raise ppc",
+                        b->shape == MPM_SHAPE_BOX ? "box" : "sphere", ppc);
     return 0;
 }
 
@@ -123,88 +157,76 @@ static int check_inside(const mpm_grid_desc *gr, const double *x, int dim)
     return -1;
 }
 
-static int gen_points(gen_ctx *g, const mpm_body_desc *b, size_t bi, char *err, size_t errlen)
+static int gen_points(gen_ctx *g, const mpm_body_desc *b, size_t bi, mpm_error *err)
 {
     const mpm_grid_desc *gr = &g->c->grid;
     int dim = gr->dim;
-    if (!b->x || !b->volume) {
-        snprintf(err, errlen, "bodies[%zu].points.%s: required with %zu explicit points", bi,
-                 b->x ? "volume" : "x", b->n_points);
-        return MPM_EINVAL;
-    }
+    char path[96];
+    if (!b->x || !b->volume)
+        return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].points.%s", bi, b->x ? "volume" : "x"),
+                        "required with %zu explicit points", b->n_points);
+    if (b->n_points > g->limit - g->n) return too_many(g, bi, err); /* g->n <= limit */
     for (size_t p = 0; p < b->n_points; p++) {
         const double *x = b->x + p * dim;
         double lp[3] = {0, 0, 0}, vol = b->volume[p], mass = b->mass ? b->mass[p] : 0;
         int d = check_inside(gr, x, dim);
-        if (d >= 0) {
-            snprintf(err, errlen, "bodies[%zu].points.x[%zu]: point at %c = %g is outside the grid "
-                     "[%g, %g)", bi, p * dim + d, "xyz"[d], x[d], gr->origin[d],
-                     gr->origin[d] + (gr->nodes[d] - 1) * gr->h[d]);
-            return MPM_EINVAL;
-        }
-        if (!(vol > 0) || !isfinite(vol)) {
-            snprintf(err, errlen, "bodies[%zu].points.volume[%zu]: must be finite and > 0 (got %g)",
-                     bi, p, vol);
-            return MPM_EINVAL;
-        }
-        if (b->mass && (!(mass > 0) || !isfinite(mass))) {
-            snprintf(err, errlen, "bodies[%zu].points.mass[%zu]: must be finite and > 0 (got %g)",
-                     bi, p, mass);
-            return MPM_EINVAL;
-        }
+        if (d >= 0)
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].points.x[%zu]", bi, p * dim + d),
+                            "point at %c = %g is outside the grid [%g, %g)", "xyz"[d], x[d],
+                            gr->origin[d], gr->origin[d] + (gr->nodes[d] - 1) * gr->h[d]);
+        if (!(vol > 0) || !isfinite(vol))
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].points.volume[%zu]", bi, p),
+                            "must be finite and > 0 (got %g)", vol);
+        if (b->mass && (!(mass > 0) || !isfinite(mass)))
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].points.mass[%zu]", bi, p),
+                            "must be finite and > 0 (got %g)", mass);
         const double *v = b->v ? b->v + p * dim : b->velocity;
         for (int e = 0; e < dim; e++)
-            if (!isfinite(v[e])) {
-                snprintf(err, errlen, "bodies[%zu].points.v[%zu]: must be finite", bi, p * dim + e);
-                return MPM_EINVAL;
-            }
+            if (!isfinite(v[e]))
+                return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].points.v[%zu]", bi, p * dim + e),
+                                "must be finite");
         if (b->stress)
             for (int e = 0; e < 6; e++)
-                if (!isfinite(b->stress[p * 6 + e])) {
-                    snprintf(err, errlen, "bodies[%zu].points.stress[%zu]: must be finite", bi, p * 6 + e);
-                    return MPM_EINVAL;
-                }
+                if (!isfinite(b->stress[p * 6 + e]))
+                    return mpm_fail(err, MPM_EINVAL,
+                                    PATH("bodies[%zu].points.stress[%zu]", bi, p * 6 + e),
+                                    "must be finite");
         for (int e = 0; e < dim; e++) {
             lp[e] = b->half_length ? b->half_length[p * dim + e] : 0.5 * pow(vol, 1.0 / dim);
-            if (g->c->method == MPM_METHOD_GIMP && !(lp[e] > 0 && lp[e] <= gr->h[e])) {
-                snprintf(err, errlen, "bodies[%zu].points.half_length[%zu]: the GMPM half-width must be "
-                         "in (0, h] = (0, %g] (got %g)", bi, p * dim + e, gr->h[e], lp[e]);
-                return MPM_EINVAL;
-            }
+            if (g->c->method == MPM_METHOD_GIMP && !(lp[e] > 0 && lp[e] <= gr->h[e]))
+                return mpm_fail(err, MPM_EINVAL,
+                                PATH("bodies[%zu].points.half_length[%zu]", bi, p * dim + e),
+                                "the GMPM half-width must be in (0, h] = (0, %g] (got %g)",
+                                gr->h[e], lp[e]);
         }
         emit(g, b, x, vol, mass, v, b->stress ? b->stress + p * 6 : NULL, lp);
     }
     return 0;
 }
 
-static int check_body(const mpm_case *c, const mpm_body_desc *b, size_t bi, char *err, size_t errlen)
+static int check_body(const mpm_case *c, const mpm_body_desc *b, size_t bi, mpm_error *err)
 {
     const mpm_grid_desc *gr = &c->grid;
     int dim = gr->dim;
-    if (b->material < 0 || (size_t)b->material >= c->n_materials) {
-        snprintf(err, errlen, "bodies[%zu].material: index %d out of range (%zu materials)",
-                 bi, b->material, c->n_materials);
-        return MPM_EINVAL;
-    }
+    char path[64];
+    if (b->material < 0 || (size_t)b->material >= c->n_materials)
+        return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].material", bi),
+                        "index %d out of range (%zu materials)", b->material, c->n_materials);
     for (int d = 0; d < dim; d++)
-        if (!isfinite(b->velocity[d])) {
-            snprintf(err, errlen, "bodies[%zu].velocity[%d]: must be finite", bi, d);
-            return MPM_EINVAL;
-        }
+        if (!isfinite(b->velocity[d]))
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].velocity[%d]", bi, d),
+                            "must be finite");
     if (b->n_points > 0) return 0;
-    if (b->shape != MPM_SHAPE_BOX && b->shape != MPM_SHAPE_SPHERE) {
-        snprintf(err, errlen, "bodies[%zu].shape: unknown shape %d", bi, (int)b->shape);
-        return MPM_EINVAL;
-    }
-    if (b->ppc < 1 || b->ppc > MAX_PPC) {
-        snprintf(err, errlen, "bodies[%zu].ppc: particles per cell per axis must be in [1, %d] "
-                 "(got %d)", bi, MAX_PPC, b->ppc);
-        return MPM_EINVAL;
-    }
-    if (b->shape == MPM_SHAPE_SPHERE && (!(b->radius > 0) || !isfinite(b->radius))) {
-        snprintf(err, errlen, "bodies[%zu].sphere.radius: must be finite and > 0 (got %g)", bi, b->radius);
-        return MPM_EINVAL;
-    }
+    if (b->shape != MPM_SHAPE_BOX && b->shape != MPM_SHAPE_SPHERE)
+        return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu]", bi), "unknown shape %d",
+                        (int)b->shape);
+    if (b->ppc < 1 || b->ppc > MAX_PPC)
+        return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].ppc", bi),
+                        "particles per cell per axis must be in [1, %d] (got %d)", MAX_PPC,
+                        b->ppc);
+    if (b->shape == MPM_SHAPE_SPHERE && (!(b->radius > 0) || !isfinite(b->radius)))
+        return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].sphere.radius", bi),
+                        "must be finite and > 0 (got %g)", b->radius);
     for (int d = 0; d < dim; d++) {
         double glo = gr->origin[d], ghi = gr->origin[d] + (gr->nodes[d] - 1) * gr->h[d];
         double lo, hi;
@@ -213,228 +235,226 @@ static int check_body(const mpm_case *c, const mpm_body_desc *b, size_t bi, char
             lo = b->lo[d];
             hi = b->hi[d];
             what = "box";
-            if (!(lo < hi)) {
-                snprintf(err, errlen, "bodies[%zu].box.hi[%d]: must be > lo[%d] (got %g <= %g)",
-                         bi, d, d, hi, lo);
-                return MPM_EINVAL;
-            }
+            if (!(lo < hi))
+                return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].box.hi[%d]", bi, d),
+                                "must be > lo[%d] (got %g <= %g)", d, hi, lo);
         } else {
             lo = b->center[d] - b->radius;
             hi = b->center[d] + b->radius;
             what = "sphere";
         }
-        if (!(lo >= glo && hi <= ghi)) {
-            snprintf(err, errlen, "bodies[%zu].%s: the body spans %c in [%g, %g], outside the "
-                     "grid [%g, %g]", bi, what, "xyz"[d], lo, hi, glo, ghi);
-            return MPM_EINVAL;
-        }
+        if (!(lo >= glo && hi <= ghi))
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].%s", bi, what),
+                            "the body spans %c in [%g, %g], outside the grid [%g, %g]", "xyz"[d],
+                            lo, hi, glo, ghi);
     }
     return 0;
 }
 
-static long run_gen(gen_ctx *g, char *err, size_t errlen)
+/* The particles of every body, counted or written; stops at the first
+ * error or as soon as the count passes g->limit. */
+static int run_gen(gen_ctx *g, mpm_error *err)
 {
     const mpm_case *c = g->c;
     for (size_t bi = 0; bi < c->n_bodies; bi++) {
         const mpm_body_desc *b = &c->bodies[bi];
-        int rc = b->n_points > 0 ? gen_points(g, b, bi, err, errlen)
-                                 : gen_shape(g, b, bi, err, errlen);
+        int rc = b->n_points > 0 ? gen_points(g, b, bi, err) : gen_shape(g, b, bi, err);
         if (rc) return rc;
-        if (g->n > MPM_MAX_PARTICLES) {
-            snprintf(err, errlen, "bodies[%zu]: the case has more than %zu particles", bi,
-                     (size_t)MPM_MAX_PARTICLES);
-            return MPM_EINVAL;
-        }
-    }
-    return (long)g->n;
-}
-
-static int check_grid(const mpm_case *c, char *err, size_t errlen)
-{
-    const mpm_grid_desc *gr = &c->grid;
-    if (gr->dim < 1 || gr->dim > 3) {
-        snprintf(err, errlen, "grid.dim: must be 1, 2 or 3 (got %d)", gr->dim);
-        return MPM_EINVAL;
-    }
-    double nn = 1;
-    for (int d = 0; d < gr->dim; d++) {
-        if (!(gr->h[d] > 0) || !isfinite(gr->h[d])) {
-            snprintf(err, errlen, "grid.spacing[%d]: must be finite and > 0 (got %g)", d, gr->h[d]);
-            return MPM_EINVAL;
-        }
-        if (!isfinite(gr->origin[d])) {
-            snprintf(err, errlen, "grid.origin[%d]: must be finite", d);
-            return MPM_EINVAL;
-        }
-        if (gr->nodes[d] < 2) {
-            snprintf(err, errlen, "grid.nodes[%d]: must be >= 2 (got %d)", d, gr->nodes[d]);
-            return MPM_EINVAL;
-        }
-        nn *= gr->nodes[d] + 2.0;
-    }
-    if (nn > (double)MPM_MAX_NODES) {
-        snprintf(err, errlen, "grid.nodes: %.0f nodes (with ghost layers) exceed the limit %zu",
-                 nn, (size_t)MPM_MAX_NODES);
-        return MPM_EINVAL;
     }
     return 0;
 }
 
-static int check_bc(const mpm_case *c, char *err, size_t errlen)
+static int check_grid(const mpm_case *c, mpm_error *err)
+{
+    const mpm_grid_desc *gr = &c->grid;
+    char path[64];
+    if (gr->dim < 1 || gr->dim > 3)
+        return mpm_fail(err, MPM_EINVAL, "grid.dim", "must be 1, 2 or 3 (got %d)", gr->dim);
+    double nn = 1;
+    for (int d = 0; d < gr->dim; d++) {
+        if (!(gr->h[d] > 0) || !isfinite(gr->h[d]))
+            return mpm_fail(err, MPM_EINVAL, PATH("grid.spacing[%d]", d),
+                            "must be finite and > 0 (got %g)", gr->h[d]);
+        if (!isfinite(gr->origin[d]))
+            return mpm_fail(err, MPM_EINVAL, PATH("grid.origin[%d]", d), "must be finite");
+        if (gr->nodes[d] < 2)
+            return mpm_fail(err, MPM_EINVAL, PATH("grid.nodes[%d]", d), "must be >= 2 (got %d)",
+                            gr->nodes[d]);
+        nn *= gr->nodes[d] + 2.0;
+    }
+    if (nn > (double)MPM_MAX_NODES)
+        return mpm_fail(err, MPM_EINVAL, "grid.nodes",
+                        "%.0f nodes (with ghost layers) exceed the limit %zu", nn,
+                        (size_t)MPM_MAX_NODES);
+    return 0;
+}
+
+/* the field of face 2 d + s in the .proto (Boundary.x_lo ...) */
+static const char *const face_path[2 * MPM_MAX_DIM] = {
+    "boundary.x_lo", "boundary.x_hi", "boundary.y_lo",
+    "boundary.y_hi", "boundary.z_lo", "boundary.z_hi"};
+
+static int check_bc(const mpm_case *c, mpm_error *err)
 {
     int dim = c->grid.dim;
     unsigned all = (1u << dim) - 1;
+    char path[64];
     /* bits of axes the grid lacks are ignored on its faces (7 is a wall in
      * any dimension); a face of an axis it lacks must be free */
     for (int f = 2 * dim; f < 2 * MPM_MAX_DIM; f++) {
         unsigned m = c->bc.face_mask[f];
-        if (m != 0) {
-            snprintf(err, errlen, "boundary.faces[%c_%s]: direction mask %u is not within 0 "
-                     "for a %dD grid", "xyz"[f / 2], f % 2 ? "hi" : "lo", m, dim);
-            return MPM_EINVAL;
-        }
+        if (m != 0)
+            return mpm_fail(err, MPM_EINVAL, face_path[f],
+                            "direction mask %u is not within 0 for a %dD grid", m, dim);
     }
-    if (c->bc.n_nodes && (!c->bc.node_ijk || !c->bc.node_mask)) {
-        snprintf(err, errlen, "boundary.nodes: %zu nodes given without indices or masks",
-                 c->bc.n_nodes);
-        return MPM_EINVAL;
-    }
+    if (c->bc.n_nodes && (!c->bc.node_ijk || !c->bc.node_mask))
+        return mpm_fail(err, MPM_EINVAL, "boundary.nodes", "%zu nodes given without indices or masks",
+                        c->bc.n_nodes);
     for (size_t i = 0; i < c->bc.n_nodes; i++) {
         for (int d = 0; d < dim; d++) {
             int v = c->bc.node_ijk[3 * i + d];
-            if (v < 0 || v >= c->grid.nodes[d]) {
-                snprintf(err, errlen, "boundary.nodes[%zu].ijk[%d]: %d is outside [0, %d)",
-                         i, d, v, c->grid.nodes[d]);
-                return MPM_EINVAL;
-            }
+            if (v < 0 || v >= c->grid.nodes[d])
+                return mpm_fail(err, MPM_EINVAL, PATH("boundary.nodes[%zu].ijk[%d]", i, d),
+                                "%d is outside [0, %d)", v, c->grid.nodes[d]);
         }
-        if (c->bc.node_mask[i] & ~all) {
-            snprintf(err, errlen, "boundary.nodes[%zu].mask: %u is not within %u", i,
-                     c->bc.node_mask[i], all);
-            return MPM_EINVAL;
-        }
+        if (c->bc.node_mask[i] & ~all)
+            return mpm_fail(err, MPM_EINVAL, PATH("boundary.nodes[%zu].mask", i),
+                            "%u is not within %u", c->bc.node_mask[i], all);
     }
     return 0;
 }
 
-int mpm_case_check(const mpm_case *c, char *err, size_t errlen)
+#ifdef MPM_LEAN
+/* A build without gravity, loads and fixed boundaries refuses cases that
+ * use them. */
+static int lean_check(const mpm_case *c, mpm_error *err)
 {
-    long n = mpm_case_count(c, err, errlen);
-    return n < 0 ? (int)n : 0;
+    const char *what = NULL;
+    for (int d = 0; d < c->grid.dim; d++)
+        if (c->gravity[d] != 0) what = "gravity";
+    if (c->n_tractions) what = "tractions";
+    for (int f = 0; f < 2 * c->grid.dim; f++)
+        if (c->bc.face_mask[f]) what = face_path[f];
+    if (c->bc.n_nodes) what = "boundary.nodes";
+    if (!what) return 0;
+    return mpm_fail(err, MPM_EINVAL, what,
+                    "this solver was built with MPM_LEAN (no gravity, loads or fixed boundaries)");
+}
+#endif
+
+/* The particle limit of a case: max_particles, 0 and anything above
+ * MPM_MAX_PARTICLES meaning MPM_MAX_PARTICLES. */
+static size_t particle_limit(const mpm_case *c)
+{
+    return c->max_particles && c->max_particles < MPM_MAX_PARTICLES ? c->max_particles
+                                                                    : MPM_MAX_PARTICLES;
 }
 
-long mpm_case_count(const mpm_case *c, char *err, size_t errlen)
+int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
 {
-    int rc = check_grid(c, err, errlen);
+    char path[64];
+    int rc = check_grid(c, err);
     if (rc) return rc;
     int dim = c->grid.dim;
-    if (c->method != MPM_METHOD_MPM && c->method != MPM_METHOD_GIMP) {
-        snprintf(err, errlen, "method: unknown value %d (MPM or GIMP)", (int)c->method);
-        return MPM_EINVAL;
-    }
-    if (c->update != MPM_USF && c->update != MPM_USL && c->update != MPM_MUSL) {
-        snprintf(err, errlen, "update: unknown value %d (USF, USL or MUSL)", (int)c->update);
-        return MPM_EINVAL;
-    }
-    if (!(c->dt >= 0) || !isfinite(c->dt)) {
-        snprintf(err, errlen, "dt: must be finite and >= 0 (0: automatic) (got %g)", c->dt);
-        return MPM_EINVAL;
-    }
-    if (!(c->cfl >= 0) || !isfinite(c->cfl)) {
-        snprintf(err, errlen, "cfl: must be finite and >= 0 (0: default %g) (got %g)",
-                 MPM_DEFAULT_CFL, c->cfl);
-        return MPM_EINVAL;
-    }
+    if (c->method != MPM_METHOD_MPM && c->method != MPM_METHOD_GIMP)
+        return mpm_fail(err, MPM_EINVAL, "method", "unknown value %d (MPM or GIMP)",
+                        (int)c->method);
+    if (c->update != MPM_USF && c->update != MPM_USL && c->update != MPM_MUSL)
+        return mpm_fail(err, MPM_EINVAL, "update", "unknown value %d (USF, USL or MUSL)",
+                        (int)c->update);
+    if (!(c->dt >= 0) || !isfinite(c->dt))
+        return mpm_fail(err, MPM_EINVAL, "dt", "must be finite and >= 0 (0: automatic) (got %g)",
+                        c->dt);
+    if (!(c->cfl >= 0) || !isfinite(c->cfl))
+        return mpm_fail(err, MPM_EINVAL, "cfl", "must be finite and >= 0 (0: default %g) (got %g)",
+                        MPM_DEFAULT_CFL, c->cfl);
     double cmaxf = c->update == MPM_USL ? MPM_USL_MAX_CFL : MPM_MAX_CFL;
-    if (c->cfl > cmaxf && !c->allow_unstable_dt) {
-        snprintf(err, errlen, "cfl: %g is above the stability limit %g%s; set allow_unstable_dt "
-                 "to run anyway", c->cfl, cmaxf, c->update == MPM_USL ? " of USL" : "");
-        return MPM_ECFL;
-    }
-    if (!(c->mass_tol >= 0) || !isfinite(c->mass_tol)) {
-        snprintf(err, errlen, "mass_tol: must be finite and >= 0 (0: default %g) (got %g)",
-                 MPM_DEFAULT_MASS_TOL, c->mass_tol);
-        return MPM_EINVAL;
-    }
-    if (c->threads < 0 || c->threads > MPM_MAX_THREADS) {
-        snprintf(err, errlen, "threads: must be in [0, %d] (got %d)", MPM_MAX_THREADS, c->threads);
-        return MPM_EINVAL;
-    }
+    if (c->cfl > cmaxf && !c->allow_unstable_dt)
+        return mpm_fail(err, MPM_ECFL, "cfl",
+                        "%g is above the stability limit %g%s; set allow_unstable_dt to run anyway",
+                        c->cfl, cmaxf, c->update == MPM_USL ? " of USL" : "");
+    if (!(c->mass_tol >= 0) || !isfinite(c->mass_tol))
+        return mpm_fail(err, MPM_EINVAL, "mass_tol",
+                        "must be finite and >= 0 (0: default %g) (got %g)", MPM_DEFAULT_MASS_TOL,
+                        c->mass_tol);
+    if (c->threads < 0 || c->threads > MPM_MAX_THREADS)
+        return mpm_fail(err, MPM_EINVAL, "threads", "must be in [0, %d] (got %d)", MPM_MAX_THREADS,
+                        c->threads);
     for (int d = 0; d < dim; d++)
-        if (!isfinite(c->gravity[d])) {
-            snprintf(err, errlen, "gravity[%d]: must be finite", d);
-            return MPM_EINVAL;
-        }
-    if (c->n_materials < 1 || c->n_materials > 65535 || !c->materials) {
-        snprintf(err, errlen, "materials: need 1 to 65535 materials (got %zu)", c->n_materials);
-        return MPM_EINVAL;
-    }
+        if (!isfinite(c->gravity[d]))
+            return mpm_fail(err, MPM_EINVAL, PATH("gravity[%d]", d), "must be finite");
+    if (c->n_materials < 1 || c->n_materials > 65535 || !c->materials)
+        return mpm_fail(err, MPM_EINVAL, "materials", "need 1 to 65535 materials (got %zu)",
+                        c->n_materials);
     double cmax = 0;
     for (size_t i = 0; i < c->n_materials; i++) {
         mpm_mat_params mp;
-        if ((rc = mpm_model_params(&c->materials[i], dim, i, &mp, err, errlen))) return rc;
+        if ((rc = mpm_model_params(&c->materials[i], dim, i, &mp, err))) return rc;
         if (mp.c > cmax) cmax = mp.c;
     }
-    if (c->n_bodies < 1 || !c->bodies) {
-        snprintf(err, errlen, "bodies: the case has no body, so no particles");
-        return MPM_EINVAL;
-    }
+    if (c->n_bodies < 1 || !c->bodies)
+        return mpm_fail(err, MPM_EINVAL, "bodies", "the case has no body, so no particles");
     for (size_t i = 0; i < c->n_bodies; i++)
-        if ((rc = check_body(c, &c->bodies[i], i, err, errlen))) return rc;
-    if ((rc = check_bc(c, err, errlen))) return rc;
+        if ((rc = check_body(c, &c->bodies[i], i, err))) return rc;
+    if ((rc = check_bc(c, err))) return rc;
     for (size_t t = 0; t < c->n_tractions; t++) {
         const mpm_traction_desc *tr = &c->tractions[t];
-        if (tr->normal < 0 || tr->normal >= dim) {
-            snprintf(err, errlen, "tractions[%zu].normal: axis must be in [0, %d) (got %d)",
-                     t, dim, tr->normal);
-            return MPM_EINVAL;
-        }
+        if (tr->normal < 0 || tr->normal >= dim)
+            return mpm_fail(err, MPM_EINVAL, PATH("tractions[%zu].normal", t),
+                            "axis must be in [0, %d) (got %d)", dim, tr->normal);
         for (int d = 0; d < dim; d++)
-            if (!isfinite(tr->value[d]) || !(tr->lo[d] <= tr->hi[d])) {
-                snprintf(err, errlen, "tractions[%zu]: value[%d] must be finite and lo[%d] <= hi[%d]",
-                         t, d, d, d);
-                return MPM_EINVAL;
-            }
+            if (!isfinite(tr->value[d]) || !(tr->lo[d] <= tr->hi[d]))
+                return mpm_fail(err, MPM_EINVAL, PATH("tractions[%zu]", t),
+                                "value[%d] must be finite and lo[%d] <= hi[%d]", d, d, d);
     }
+#ifdef MPM_LEAN
+    if ((rc = lean_check(c, err))) return rc;
+#endif
 
     size_t counts[64], *lc = NULL;
-    if (c->n_tractions > 64) {
-        snprintf(err, errlen, "tractions: at most 64 (got %zu)", c->n_tractions);
-        return MPM_EINVAL;
-    }
+    if (c->n_tractions > 64)
+        return mpm_fail(err, MPM_EINVAL, "tractions", "at most 64 (got %zu)", c->n_tractions);
     if (c->n_tractions) {
         memset(counts, 0, sizeof counts);
         lc = counts;
     }
-    gen_ctx g = {c, NULL, NULL, 0, 0, lc};
-    long n = run_gen(&g, err, errlen);
-    if (n < 0) return (int)n;
+    gen_ctx g = {c, NULL, NULL, 0, particle_limit(c), 0, lc};
+    if ((rc = run_gen(&g, err))) return rc;
     for (size_t t = 0; t < c->n_tractions; t++)
-        if (counts[t] == 0) {
-            snprintf(err, errlen, "tractions[%zu]: its region holds no particle centre", t);
-            return MPM_EINVAL;
-        }
+        if (counts[t] == 0)
+            return mpm_fail(err, MPM_EINVAL, PATH("tractions[%zu]", t),
+                            "its region holds no particle centre");
 
     if (c->dt > 0) {
         double hmin = c->grid.h[0];
         for (int d = 1; d < dim; d++) hmin = fmin(hmin, c->grid.h[d]);
         double f = c->update == MPM_USL ? MPM_USL_MAX_CFL : MPM_MAX_CFL;
         double lim = f * hmin / (cmax + g.vmax);
-        if (c->dt > lim && !c->allow_unstable_dt) {
-            snprintf(err, errlen, "dt: %g is above the CFL limit %g = %g h_min / (c + |v|max) = "
-                     "%g x %g / (%g + %g)%s; set allow_unstable_dt to run anyway",
-                     c->dt, lim, f, f, hmin, cmax, g.vmax, f < 1 ? " (USL)" : "");
-            return MPM_ECFL;
-        }
+        if (c->dt > lim && !c->allow_unstable_dt)
+            return mpm_fail(err, MPM_ECFL, "dt",
+                            "%g is above the CFL limit %g = %g h_min / (c + |v|max) = "
+                            "%g x %g / (%g + %g)%s; set allow_unstable_dt to run anyway",
+                            c->dt, lim, f, f, hmin, cmax, g.vmax, f < 1 ? " (USL)" : "");
     }
-    return n;
+    if (info) {
+        memset(info, 0, sizeof *info);
+        info->particles = g.n;
+        info->nodes = 1;
+        for (int d = 0; d < dim; d++) info->nodes *= (size_t)c->grid.nodes[d];
+        info->dim = dim;
+        info->vmax = g.vmax;
+        info->cmax = cmax;
+    }
+    mpm_error_clear(err);
+    return 0;
 }
 
-long mpm_case_particles(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats,
-                        double *vmax, char *err, size_t errlen)
+int mpm_case_fill(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats, double *vmax,
+                  mpm_error *err)
 {
-    gen_ctx g = {c, P, mats, 0, 0, NULL};
-    long n = run_gen(&g, err, errlen);
+    gen_ctx g = {c, P, mats, 0, P->n, 0, NULL};
+    int rc = run_gen(&g, err);
+    if (!rc && g.n != P->n) rc = too_many(&g, c->n_bodies - 1, err);
     if (vmax) *vmax = g.vmax;
-    return n;
+    return rc;
 }

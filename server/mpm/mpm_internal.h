@@ -1,6 +1,14 @@
 /*
- * mpm_internal.h - the solver's private data layout, shared by the solver's
- * own modules (mpm_sim.c, mpm_kernels.c, mpm_case.c, mpm_model.c) only.
+ * mpm_internal.h - the solver's private data layout and the declarations its
+ * own modules share, for them only:
+ *   mpm_sim.c      the public API: creation, the step, results
+ *   mpm_team.c     the thread team that runs the passes
+ *   mpm_rows.c     the active rows, the scatter targets and the node passes
+ *   mpm_sort.c     the particles' sort by cell
+ *   mpm_loads.c    essential boundary conditions, tractions, particle forces
+ *   mpm_energy.c   the energy sums and the divergence guard
+ *   mpm_kernels.c  the particle loops;  mpm_model.c  the constitutive models
+ *   mpm_case.c     checking a case and generating its particles
  *
  * Hot data is struct-of-arrays: particle field c of particle p is
  * P.field[c][p].  The grid is padded by two ghost layers per side for GMPM,
@@ -17,6 +25,7 @@
 
 #include <pthread.h>
 #include <stdatomic.h>
+#include <stdlib.h>
 
 /* Stress and strain components stored per dimension: 1D xx; 2D plane strain
  * xx yy zz xy; 3D xx yy zz xy yz xz.  Component c is the Voigt index c.  In
@@ -170,7 +179,7 @@ struct mpm_sim {
     mpm_thread_out *tout;
     pthread_t *threads;
     pthread_barrier_t bar_start, bar_end; /* bar_end also parts the passes
-                                    * of a step (team_sync) */
+                                    * of a step (mpm_team_sync()) */
     void (*phase)(mpm_sim *, int tid);
     int quit;
     pthread_mutex_t gate_mu;       /* start gate for the team */
@@ -180,7 +189,7 @@ struct mpm_sim {
 
     atomic_int cancel;
     int failed;                    /* 0 or the MPM_E* code that froze the run */
-    char err[256];
+    mpm_error err;                 /* mpm_sim_error() */
 };
 
 /* Kernel family for one (dimension, method).  Each runs over the particles
@@ -234,10 +243,10 @@ struct mpm_model_ops {
 };
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
-/* Fills derived constants; returns 0 or MPM_EINVAL with a message naming
- * materials[i] and the limit. */
+/* Fills derived constants; returns 0 or MPM_EINVAL with err naming
+ * materials[i]'s field and the limit. */
 int mpm_model_params(const mpm_material_desc *d, int dim, size_t i,
-                     mpm_mat_params *out, char *err, size_t errlen);
+                     mpm_mat_params *out, mpm_error *err);
 
 /* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
  * eps_zz array, its term is zero) */
@@ -249,11 +258,145 @@ static inline double mpm_strain_density(const mpm_particles *P, int dim, size_t 
     return se;
 }
 
-/* Generates the particles of a checked case into P (arrays allocated for the
- * count; P NULL: count only), with material constants mats (may be NULL
- * when counting).  Returns the particle count, or a negative code with a
- * message; *vmax (if not NULL) gets the largest initial speed. */
-long mpm_case_particles(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats,
-                        double *vmax, char *err, size_t errlen);
+/* Writes the particles of a case that passed mpm_case_check() into P, whose
+ * arrays are allocated for the count the check found (P->n), with material
+ * constants mats, in one pass; *vmax (if not NULL) gets the largest initial
+ * speed.  Returns 0, or MPM_EINVAL when the case no longer makes P->n
+ * particles (nothing is written beyond them). */
+int mpm_case_fill(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats, double *vmax,
+                  mpm_error *err);
+
+/* ---- small shared helpers (inline: some run inside the passes) ---- */
+
+static inline double *mpm_dalloc(size_t n)
+{
+    return calloc(n ? n : 1, sizeof(double));
+}
+
+/* thread tid's share [a, b) of n items split evenly among T threads */
+static inline void mpm_slice(size_t n, int T, int tid, size_t *a, size_t *b)
+{
+    *a = n * (size_t)tid / (size_t)T;
+    *b = n * (size_t)(tid + 1) / (size_t)T;
+}
+
+/* thread tid's fixed contiguous slice of the particles */
+static inline void mpm_particle_slice(const mpm_sim *s, int tid, size_t *a, size_t *b)
+{
+    mpm_slice(s->P.n, s->nthreads, tid, a, b);
+}
+
+/* flat padded index of real node ijk */
+static inline size_t mpm_node_index(const mpm_sim *s, const int ijk[3])
+{
+    size_t n = 0;
+    for (int d = 0; d < s->dim; d++) n += (size_t)(ijk[d] + s->pad) * s->stride[d];
+    return n;
+}
+
+/* ---- the thread team (mpm_team.c) ----
+ *
+ * A team of nthreads (the caller's thread is thread 0) runs a phase: every
+ * thread calls fn(s, tid) once, and mpm_team_run() returns when all have.
+ * Inside a phase the threads meet at mpm_team_sync(). */
+typedef void (*mpm_phase_fn)(mpm_sim *, int tid);
+
+/* Runs fn on the team (serially when there is one thread). */
+void mpm_team_run(mpm_sim *s, mpm_phase_fn fn);
+/* Starts threads 1..nthreads-1.  Returns 0 or MPM_ENOMEM, after which the
+ * started ones have been joined and the simulation stays serial. */
+int mpm_team_start(mpm_sim *s);
+/* Stops and joins the team and frees its synchronisation (destroy). */
+void mpm_team_stop(mpm_sim *s);
+
+/* A barrier between the passes of one phase. */
+static inline void mpm_team_sync(mpm_sim *s)
+{
+    if (s->nthreads > 1) pthread_barrier_wait(&s->bar_end);
+}
+
+/* ---- the active rows and the node passes (mpm_rows.c) ---- */
+
+/* rows (y, z) of box lo..hi (inclusive); 0 when empty */
+static inline size_t mpm_box_rows(const int lo[3], const int hi[3])
+{
+    if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return 0;
+    return (size_t)(hi[1] - lo[1] + 1) * (size_t)(hi[2] - lo[2] + 1);
+}
+
+/* row index (y + z np[1]) of row r of box lo..hi */
+static inline size_t mpm_box_row(const mpm_sim *s, const int lo[3], const int hi[3], size_t r)
+{
+    size_t ny = (size_t)(hi[1] - lo[1] + 1);
+    size_t y = (size_t)lo[1] + r % ny, z = (size_t)lo[2] + r / ny;
+    return y + z * (size_t)s->np[1];
+}
+
+/* flat index of node x of row `row` */
+static inline size_t mpm_row_node(const mpm_sim *s, size_t row, int x)
+{
+    return row * (size_t)s->np[0] + (size_t)x;
+}
+
+/* Grid fields, for mpm_scatter_buf() and the node passes' reduction. */
+enum { MPM_F_M = 1, MPM_F_Q = 2, MPM_F_F = 4, MPM_F_Q2 = 8 };
+/* Node operations of mpm_node_pass(), in the order applied to each node
+ * (after the reduction of the fields named): inverse mass with phantom
+ * nodes at 0, gravity f += m g, BC1 on q or on q2, BC2 on f, q += f dt. */
+enum {
+    MPM_N_MINV = 16, MPM_N_GRAV = 32, MPM_N_BC1 = 64, MPM_N_BC1Q2 = 128, MPM_N_BC2 = 256,
+    MPM_N_UPD = 512
+};
+
+/* Allocates the row extents (all empty) of the simulation and of each
+ * thread, and the sort's row offsets.  Returns 0 or MPM_ENOMEM. */
+int mpm_rows_init(mpm_sim *s);
+/* Makes the active rows those the last particle pass recorded (serial). */
+void mpm_rows_update(mpm_sim *s);
+/* Thread tid's scatter target, zeroed over its rows for the fields named. */
+mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields);
+/* A node pass over thread tid's share of the active nodes: ops is MPM_F_*
+ * fields to reduce | MPM_N_* operations. */
+void mpm_node_pass(mpm_sim *s, int tid, int ops);
+/* Phase: records the support box and row extents of the thread's slice. */
+void mpm_ph_bbox(mpm_sim *s, int tid);
+
+/* ---- sorting by cell (mpm_sort.c) ---- */
+
+#define MPM_SORT_EVERY 16
+/* Sorts the particles by cell over the active rows (stable; nothing moves
+ * when they are in order already).  The rows stay valid. */
+void mpm_sort_particles(mpm_sim *s);
+
+/* ---- boundary conditions and loads (mpm_loads.c) ---- */
+
+/* The fixed nodes of the face masks and the node set.  0 or MPM_ENOMEM. */
+int mpm_bc_build(mpm_sim *s, const mpm_bc_desc *bc);
+/* BC1 / BC2: zeroes the fixed components of field over the flat nodes
+ * first..last (one segment of a row). */
+void mpm_bc_zero(const mpm_sim *s, double *const field[3], size_t first, size_t last);
+/* The tractions' shares of the particles in their regions.  0 or
+ * MPM_ENOMEM. */
+int mpm_loads_build(mpm_sim *s, const mpm_case *c);
+/* Before a step: the loaded particles' positions; after it: the work of
+ * their forces over the step (external_work, external_work_abs). */
+void mpm_loads_begin_step(mpm_sim *s);
+void mpm_loads_end_step(mpm_sim *s);
+/* mpm_sim_set_particle_forces() once f is checked (f NULL: zero).  0 or
+ * MPM_ENOMEM. */
+int mpm_loads_set_forces(mpm_sim *s, const double *f);
+
+/* ---- energies and the divergence guard (mpm_energy.c) ---- */
+
+#define MPM_GUARD_EVERY 16
+/* Phase: the energies of the thread's slice into its tout. */
+void mpm_ph_energy(mpm_sim *s, int tid);
+/* The partial sums in tout combined in thread order (external work and
+ * total left out). */
+void mpm_energy_sum(const mpm_sim *s, mpm_energy *e);
+/* The guard: 0, or MPM_EDIVERGED with s->err set and s->failed. */
+int mpm_guard(mpm_sim *s);
+/* The elastic energy stored by the initial stress (U0, see mpm_guard()). */
+double mpm_initial_stress_energy(const mpm_sim *s);
 
 #endif

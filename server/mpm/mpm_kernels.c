@@ -37,7 +37,7 @@
  * The passes that move the particles also record, per thread, the box of
  * padded nodes that the new positions' supports touch and, for each row of
  * nodes along x, the first and last node touched; the step zeroes, reduces
- * and updates only those rows' extents (mpm_sim.c).
+ * and updates only those rows' extents (mpm_rows.c).
  */
 /* the fixed-trip node loops want complete unrolling (the -O3 kind) */
 #if defined(__GNUC__) && !defined(__clang__)
@@ -367,7 +367,7 @@ INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6]
 }
 
 /* Energy sums of a slice (EN: the step wants them), in the order and with
- * the arithmetic of the energy pass (mpm_sim.c, ph_energy), so that the
+ * the arithmetic of the energy pass (mpm_energy.c, mpm_ph_energy), so that the
  * sums are the same: kinetic, potential, momentum and mass of particle p
  * once its position and velocity are final, strain energy of a block once
  * its stress, strain and volume are. */

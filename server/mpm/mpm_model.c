@@ -87,27 +87,25 @@ const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
 }
 
 int mpm_model_params(const mpm_material_desc *d, int dim, size_t i,
-                     mpm_mat_params *out, char *err, size_t errlen)
+                     mpm_mat_params *out, mpm_error *err)
 {
+    char path[64];
     if (!mpm_model_get(d->model)) {
-        snprintf(err, errlen, "materials[%zu].model: unknown model %d", i, (int)d->model);
-        return MPM_EINVAL;
+        snprintf(path, sizeof path, "materials[%zu].model", i);
+        return mpm_fail(err, MPM_EINVAL, path, "unknown model %d", (int)d->model);
     }
     if (!(d->youngs_modulus > 0) || !isfinite(d->youngs_modulus)) {
-        snprintf(err, errlen, "materials[%zu].youngs_modulus: must be finite and > 0 (got %g)",
-                 i, d->youngs_modulus);
-        return MPM_EINVAL;
+        snprintf(path, sizeof path, "materials[%zu].youngs_modulus", i);
+        return mpm_fail(err, MPM_EINVAL, path, "must be finite and > 0 (got %g)", d->youngs_modulus);
     }
     if (!(d->density > 0) || !isfinite(d->density)) {
-        snprintf(err, errlen, "materials[%zu].density: must be finite and > 0 (got %g)",
-                 i, d->density);
-        return MPM_EINVAL;
+        snprintf(path, sizeof path, "materials[%zu].density", i);
+        return mpm_fail(err, MPM_EINVAL, path, "must be finite and > 0 (got %g)", d->density);
     }
     double nu = dim == 1 ? 0.0 : d->poisson_ratio;
     if (dim > 1 && !(nu > -1.0 && nu < 0.5)) {
-        snprintf(err, errlen, "materials[%zu].poisson_ratio: must be in (-1, 0.5) (got %g)",
-                 i, d->poisson_ratio);
-        return MPM_EINVAL;
+        snprintf(path, sizeof path, "materials[%zu].poisson_ratio", i);
+        return mpm_fail(err, MPM_EINVAL, path, "must be in (-1, 0.5) (got %g)", d->poisson_ratio);
     }
     out->E = d->youngs_modulus;
     out->nu = nu;

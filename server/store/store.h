@@ -3,17 +3,32 @@
  * row per submitted run (its case as protobuf bytes, status, timings and
  * final energies), the energy samples of each run and opaque particle
  * snapshots.  Writes are asynchronous: any thread enqueues them and one
- * writer thread commits them in batches, in enqueue order; store_flush()
- * waits until they are on disk.  Reads are synchronous, thread-safe and
- * never wait for the writer (WAL mode, their own read-only connections).
- * One daemon per database file: store_open() takes an exclusive flock() on
- * "<path>.lock" and refuses to open a file another mpmd holds.
+ * writer thread commits them in batches, in enqueue order.  Commits can be
+ * awaited without blocking (store_ticket, store_ticket_done and a file
+ * descriptor for a poll loop, store_notify_fd) or by blocking
+ * (store_flush).  Reads are synchronous, thread-safe and never wait for the
+ * writer (WAL mode, their own read-only connections).  One daemon per
+ * database file: store_open() takes an exclusive flock() on "<path>.lock"
+ * and refuses to open a file another mpmd holds.
  *
- * Callers never see SQLite types; every function returns 0 or a negative
- * STORE_E* code (store_strerror() names it, store_errmsg() gives the text of
- * the calling thread's last error, SQLite's message included).  Strings and
- * blobs passed in are copied; strings and blobs handed out are owned by the
- * returned struct and released by its *_clear / *_free function.
+ * The API speaks mpmd's one vocabulary: run status is mpp_status
+ * (protocol/mpp.h), method and update are the solver's mpm_method and
+ * mpm_update, energy samples are mpm_energy_sample (server/mpm/mpm.h).
+ * Callers never see SQLite types.  Every function returns 0 or a negative
+ * MPM_E* code (mpm_error.h), and store_error() gives the calling thread's
+ * last error (SQLite's message included):
+ *   MPM_EINVAL     a bad argument (the message names it)
+ *   MPM_ENOMEM     allocation failed
+ *   MPM_EIO        an SQLite or file-system error; an asynchronous write
+ *                  that failed (store_flush)
+ *   MPM_ELOCKED    the database is in use by another mpmd
+ *   MPM_ESCHEMA    not an mpmd database, or a newer schema
+ *   MPM_ENOTFOUND  no such run / snapshot
+ *   MPM_EFULL      a snapshot dropped: the write queue is above its cap
+ *   MPM_EUNAVAIL   the store is closing
+ * Strings and blobs passed in are copied; strings and blobs handed out are
+ * owned by the returned struct and released by its *_clear / *_free
+ * function.
  *
  * Times are unix seconds as doubles (0 = not set, stored as NULL).  Energy
  * values that are NaN are stored as NULL and read back as NaN (SQLite has
@@ -22,104 +37,61 @@
 #ifndef STORE_H
 #define STORE_H
 
+#include "mpm.h"
+#include "mpm_error.h"
+#include "mpp.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
-/* Error codes (negative). */
-enum {
-    STORE_OK = 0,
-    STORE_EINVAL = -1,    /* bad argument (the message names it) */
-    STORE_ENOMEM = -2,    /* allocation failed */
-    STORE_ESQL = -3,      /* SQLite error (the message has sqlite3_errmsg) */
-    STORE_EIO = -4,       /* lock file or other file-system error */
-    STORE_ELOCKED = -5,   /* the database is in use by another mpmd */
-    STORE_ESCHEMA = -6,   /* not an mpmd database, or a newer schema */
-    STORE_ENOTFOUND = -7, /* no such run / snapshot */
-    STORE_EFULL = -8,     /* snapshot dropped: write queue above its cap */
-    STORE_ECLOSED = -9,   /* the store is closing */
-    STORE_EWRITE = -10    /* an asynchronous write failed (store_flush) */
-};
-
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 1
+#define STORE_SCHEMA_VERSION 2
 
-typedef enum {
-    STORE_QUEUED = 0,
-    STORE_RUNNING = 1,
-    STORE_FINISHED = 2,
-    STORE_FAILED = 3,
-    STORE_CANCELLED = 4,
-    STORE_INTERRUPTED = 5
-} store_status;
-#define STORE_NSTATUS 6
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))
-
-/* Same numbering as mpm_method / mpm_update in mpm.h. */
-typedef enum { STORE_METHOD_MPM = 0, STORE_METHOD_GIMP = 1 } store_method;
-typedef enum { STORE_USF = 0, STORE_USL = 1, STORE_MUSL = 2 } store_update;
 
 /* Error texts written by crash recovery (see store_open). */
 #define STORE_INTERRUPTED_RUNNING "daemon stopped before the run ended"
 #define STORE_INTERRUPTED_QUEUED "daemon stopped before the run started"
 
-typedef struct {
-    double kinetic, strain, potential, external_work, total;
-} store_energies;
-
 /* A run record.  As input (store_run_insert) the pointers are borrowed and
  * copied; as output (store_run_get / store_run_list) they are owned by the
- * struct and freed by store_run_clear(). */
+ * struct and freed by store_run_clear().  Field names are the schema's
+ * (mpmd.RunInfo). */
 typedef struct {
     int64_t id;                 /* job id; <= 0 on insert: allocate one */
     const char *name;           /* NULL on insert: "" */
     const void *case_pb;        /* the case's protobuf bytes */
     size_t case_len;
-    char case_hash[65];         /* hex SHA-256 of case_pb (set by the store) */
-    store_method method;
-    store_update update;
+    mpm_method method;
+    mpm_update update;
     int dim;                    /* 1..3 */
     int64_t particles, nodes;
-    store_status status;
+    mpp_status status;
     double submitted_at;        /* 0 on insert: now */
-    double started_at, ended_at;
-    int64_t steps_done;
+    double started_at, finished_at;
+    int64_t steps;              /* steps done */
     double wall_s;              /* wall-clock seconds of the run */
     double psteps_per_s;        /* particle-steps per second */
-    store_energies energy;      /* final energies; NaN = not set (insert
-                                   ignores them: see store_run_finish) */
+    mpm_energy energy;          /* final energies: kinetic, strain,
+                                   potential, external_work and total; NaN =
+                                   not set (insert ignores them: see
+                                   store_run_finish).  mass and momentum are
+                                   not stored and read back as 0. */
     const char *error;          /* NULL = none */
     const char *server_version; /* NULL on insert: "" */
 } store_run;
 
 /* How a run ended (store_run_finish). */
 typedef struct {
-    store_status status;        /* FINISHED, FAILED, CANCELLED or INTERRUPTED */
-    double ended_at;            /* 0: now */
-    int64_t steps_done;
+    mpp_status status;          /* FINISHED, FAILED, CANCELLED or INTERRUPTED */
+    double finished_at;         /* 0: now */
+    int64_t steps;
     double wall_s, psteps_per_s;
     int has_energy;             /* 0: leave the final energies unset */
-    store_energies energy;
+    mpm_energy energy;          /* kinetic .. total are stored */
     const char *error;          /* NULL = none */
 } store_run_end;
-
-/* One energy sample of a run; seq numbers the samples of a run 0, 1, ... */
-typedef struct {
-    int64_t run_id, seq, step;
-    double t;
-    double kinetic, strain, potential, external_work, total;
-    double momentum[3];
-    double mass;
-} store_energy_sample;
-
-/* Energy samples read back as parallel arrays of n entries, in seq order.
- * One allocation; release with store_energy_series_free(). */
-typedef struct {
-    size_t n;
-    int64_t *seq, *step;
-    double *t, *kinetic, *strain, *potential, *external_work, *total;
-    double *momentum_x, *momentum_y, *momentum_z, *mass;
-} store_energy_series;
 
 /* A particle snapshot: data is opaque to the store (the caller's encoding of
  * n particles in dim dimensions with the fields in the `fields` mask).  As
@@ -171,31 +143,54 @@ typedef struct {
 
 typedef struct store store;
 
+/* ---- errors ---- */
+
+/* The calling thread's last error from a store function (code 0 when
+ * none yet); valid until the thread's next failing store call. */
+const mpm_error *store_error(void);
+
 /* ---- open / close ---- */
 
 /* Opens (creating if needed) the database at path: takes the lock on
  * "<path>.lock" (writing our pid into it), sets WAL mode, busy_timeout and
  * foreign keys, applies the pending schema migrations in one transaction,
  * marks runs left 'running' or 'queued' by a previous daemon 'interrupted'
- * (error STORE_INTERRUPTED_RUNNING / STORE_INTERRUPTED_QUEUED, ended_at left
- * unset since the time of the stop is unknown, steps_done and the final
- * energies taken from the run's last energy sample when it has one), loads the next run id and
- * starts the writer thread.  opt may be NULL.  On failure returns a negative
- * code, sets *out to NULL and writes a message into err (errlen bytes), e.g.
- * "database X is in use by another mpmd (pid N)" with STORE_ELOCKED. */
-int store_open(const char *path, const store_options *opt, store **out,
-               char *err, size_t errlen);
+ * (error STORE_INTERRUPTED_RUNNING / STORE_INTERRUPTED_QUEUED, finished_at
+ * left unset since the time of the stop is unknown, steps and the final
+ * energies taken from the run's last energy sample when it has one), loads
+ * the next run id and starts the writer thread.  opt may be NULL.  On
+ * failure returns a negative code and sets *out to NULL; store_error()
+ * says why, e.g. "database X is in use by another mpmd (pid N)" with
+ * MPM_ELOCKED. */
+int store_open(const char *path, const store_options *opt, store **out);
 
 /* Flushes every pending write, stops the writer thread, closes the
  * connections, releases the lock and sets *s to NULL.  No other thread may
  * use the store during or after the call.  NULL or *s == NULL: no-op. */
 void store_close(store **s);
 
+/* ---- commits ---- */
+
 /* Blocks until every write enqueued (by any thread) before the call is
- * committed.  Returns 0, or STORE_EWRITE when some asynchronous write has
- * failed since the previous store_flush (each failure is reported once; the
- * text is in store_last_write_error()). */
+ * committed.  Returns 0, or MPM_EIO when some asynchronous write has failed
+ * since the previous store_flush (each failure is reported once; the text
+ * is in store_last_write_error()).  For tests and shutdown: an event loop
+ * uses tickets instead. */
 int store_flush(store *s);
+
+/* A ticket for "every write enqueued so far for run_id" (run_id <= 0: for
+ * any run).  Never blocks; asks the writer to commit those writes without
+ * waiting out its batching window.  0 when nothing is pending (a ticket
+ * that is done already). */
+uint64_t store_ticket(store *s, int64_t run_id);
+/* 1 when every write covered by the ticket is committed (or failed, see
+ * store_flush), else 0.  Never blocks. */
+int store_ticket_done(store *s, uint64_t ticket);
+/* A file descriptor (an eventfd) that becomes readable after each commit,
+ * for poll() / zmq_poll(); owned by the store.  store_notify_drain()
+ * empties it (non-blocking). */
+int store_notify_fd(store *s);
+void store_notify_drain(store *s);
 
 /* ---- writes (asynchronous: enqueue a copy and return) ---- */
 
@@ -204,38 +199,40 @@ int store_flush(store *s);
 int64_t store_new_run_id(store *s);
 
 /* Enqueues a new run row.  run->id <= 0 allocates an id.  Every field but
- * case_hash (computed here) and energy (unset) is stored as given; the id
- * used is written to *id_out if not NULL. */
+ * energy (unset) is stored as given; the id used is written to *id_out if
+ * not NULL. */
 int store_run_insert(store *s, const store_run *run, int64_t *id_out);
 
 /* Sets a run's status.  RUNNING also sets started_at = at; the terminal
- * statuses also set ended_at = at (at == 0: now).  error, if not NULL,
+ * statuses also set finished_at = at (at == 0: now).  error, if not NULL,
  * replaces the run's error text.  Like progress and finish, it applies only
  * to a run still 'queued' or 'running': a terminal status is final, and an
  * update of an ended run fails (as a write error: "run N already ended"). */
-int store_run_set_status(store *s, int64_t id, store_status status,
+int store_run_set_status(store *s, int64_t id, mpp_status status,
                          double at, const char *error);
 
 /* Records progress: steps done, wall seconds so far, particle-steps/s. */
-int store_run_progress(store *s, int64_t id, int64_t steps_done,
-                       double wall_s, double psteps_per_s);
+int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s,
+                       double psteps_per_s);
 
 /* Ends a run: terminal status, end time, final counters, energies, error. */
 int store_run_finish(store *s, int64_t id, const store_run_end *end);
 
-/* Appends energy samples (n of them, one queue entry).  Never dropped: when
- * the queue is above its cap it grows instead (see store.c). */
-int store_energy_append(store *s, const store_energy_sample *e);
-int store_energy_append_n(store *s, const store_energy_sample *e, size_t n);
+/* Appends n energy samples of run_id (one queue entry; each sample keeps
+ * its seq).  Every field is stored but dim: reads give the run's dim.
+ * Never dropped: when the queue is above its cap it grows instead (see
+ * store_writer.c). */
+int store_energy_append(store *s, int64_t run_id, const mpm_energy_sample *e,
+                        size_t n);
 
 /* Stores a snapshot (replacing one at the same run and step).  Returns
- * STORE_EFULL, logging a line, if the pending writes would exceed the queue
+ * MPM_EFULL, logging a line, if the pending writes would exceed the queue
  * cap: the snapshot is dropped. */
 int store_snapshot_put(store *s, const store_snapshot *snap);
 
 /* ---- reads (synchronous, from any thread; see committed data only) ---- */
 
-/* Reads one run (with its case bytes).  STORE_ENOTFOUND if none. */
+/* Reads one run (with its case bytes).  MPM_ENOTFOUND if none. */
 int store_run_get(store *s, int64_t id, store_run *out);
 /* Frees the strings and blob of a run read back, and zeroes it. */
 void store_run_clear(store_run *r);
@@ -247,10 +244,11 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs,
 void store_run_list_free(store_run *runs, size_t n);
 
 /* Reads the energy samples of a run with seq >= from_seq, at most max of
- * them (0: all), into out (n = 0 when there are none: not an error). */
+ * them (0: all), in seq order, into *out: a malloc'd array of *n samples
+ * (free() it; NULL when there are none, which is not an error).  Each
+ * sample's dim is its run's. */
 int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
-                      store_energy_series *out);
-void store_energy_series_free(store_energy_series *es);
+                      mpm_energy_sample **out, size_t *n);
 
 /* A run's energy-sample count, the seq of its last sample (-1: none) and
  * the steps of its stored snapshots (ascending). */
@@ -266,7 +264,7 @@ int store_run_extras(store *s, int64_t run_id, store_run_extra *out);
 void store_run_extra_clear(store_run_extra *x);
 
 /* Reads the snapshot of a run at step (step < 0: the one with the highest
- * step).  STORE_ENOTFOUND if none. */
+ * step).  MPM_ENOTFOUND if none. */
 int store_snapshot_get(store *s, int64_t run_id, int64_t step,
                        store_snapshot *out);
 void store_snapshot_clear(store_snapshot *snap);
@@ -280,21 +278,17 @@ void store_get_stats(store *s, store_stats *st);
 /* Copies the text of the last failed asynchronous write ("" if none). */
 void store_last_write_error(store *s, char *buf, size_t len);
 
-const char *store_strerror(int code);
-/* Text of the calling thread's last error from a store function. */
-const char *store_errmsg(void);
-
-const char *store_status_name(store_status st);   /* "queued", ... */
-int store_status_parse(const char *name, store_status *st);
-const char *store_method_name(store_method m);    /* "mpm", "gimp" */
-const char *store_update_name(store_update u);    /* "usf", "usl", "musl" */
 /* The SQLite library version in use, e.g. "3.40.1". */
 const char *store_sqlite_version(void);
 
-/* Hex SHA-256 (FIPS 180-4) of len bytes into out (64 digits + NUL). */
-void store_sha256_hex(const void *data, size_t len, char out[65]);
-
 /* Unix time now, in seconds. */
 double store_time_now(void);
+
+/* Runs SQL statements on the database file at path with a connection of
+ * its own: no lock, no migration, no store.  For tests that build a
+ * database by hand (an old schema) and inspect one; never on a file a
+ * store has open.  result, if not NULL, gets the first column of the last
+ * row a statement returned (unchanged if none). */
+int store_exec_raw(const char *path, const char *sql, int64_t *result);
 
 #endif

@@ -67,7 +67,6 @@ static int st_run(mpm_method meth, mpm_update up, int rebuild, double *xo, doubl
     mpm_material_desc mat;
     mpm_body_desc b;
     mpm_case c;
-    char err[256];
     if (!rebuild) {
         memset(&b, 0, sizeof b);
         b.n_points = ST_N;
@@ -77,7 +76,7 @@ static int st_run(mpm_method meth, mpm_update up, int rebuild, double *xo, doubl
         b.v = v;
         b.half_length = hl;
         st_case(&c, &mat, &b, meth, up);
-        mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+        mpm_sim *s = mpm_sim_new(&c, NULL, NULL);
         if (!s) return -1;
         double t = 0;
         for (int k = 0; k < ST_STEPS; k++) {
@@ -114,7 +113,7 @@ static int st_run(mpm_method meth, mpm_update up, int rebuild, double *xo, doubl
         st_case(&c, &mat, &b, meth, up);
         c.tractions = tr;
         c.n_tractions = ST_N;
-        mpm_sim *s = mpm_sim_new(&c, err, sizeof err);
+        mpm_sim *s = mpm_sim_new(&c, NULL, NULL);
         if (!s) return -1;
         int rc = mpm_sim_step(s);
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = x, .v = v, .stress = sig, .volume = vol});

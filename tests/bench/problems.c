@@ -112,7 +112,7 @@ static int timed_run(mpm_sim *s, long k, bench_res *r)
     r->wall += bench_now() - t0;
     if (rc) {
         r->rc = rc;
-        snprintf(r->msg, sizeof r->msg, "%s", mpm_sim_error(s));
+        mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, r->msg, sizeof r->msg);
     }
     return rc;
 }
@@ -131,8 +131,10 @@ static int keep_positions(mpm_sim *s, bench_res *r)
 
 static mpm_sim *make_sim(const mpm_case *c, bench_res *r)
 {
-    mpm_sim *s = mpm_sim_new(c, r->msg, sizeof r->msg);
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(c, NULL, &err);
     if (s) r->particles = mpm_sim_particles(s);
+    else mpm_error_text(&err, MPM_FIELD_PROTO, r->msg, sizeof r->msg);
     return s;
 }
 
@@ -359,11 +361,11 @@ static int run_mms(const bench_cfg *cf, int keep, bench_res *r)
         for (long j = 0; j < k; j++) {
             mms_forces(&p, mpm_sim_time(s));
             if ((r->rc = bench_force_set(s, p.f))) {
-                snprintf(r->msg, sizeof r->msg, "%s", mpm_sim_error(s));
+                mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, r->msg, sizeof r->msg);
                 goto out;
             }
             if ((r->rc = mpm_sim_step(s))) {
-                snprintf(r->msg, sizeof r->msg, "%s", mpm_sim_error(s));
+                mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, r->msg, sizeof r->msg);
                 break;
             }
         }

@@ -15,7 +15,7 @@
  * the load of the (shared) machine hits all three alike.
  *  - daemon-inproc: the reference, a forked process that stays up between
  *    its jobs like the daemon: the case converted by the same codec
- *    (srv_case_load), then mpm_sim_new() + mpm_sim_run() timed together,
+ *    (mpp_case_load), then mpm_sim_new() + mpm_sim_run() timed together,
  *    since the daemon's worker does both between a Submit and its Finished
  *    message.
  *  - daemon-nowatch: no output section (energies only at the start and the
@@ -26,11 +26,12 @@
  *    snapshots (X, V, PRESSURE) every 100 steps, and the client also
  *    subscribes to the job's exact topic right after SubmitOk (the daemon
  *    packs snapshots only for watched jobs); it decodes every stream
- *    message of the job with srv_stream_peek() (a snapshot's arrays are
- *    counted, not copied) and counts energies, snapshots and seq gaps.
- * The bench goes through srv_codec.h only: replies are read with
- * srv_reply_peek(), and each case is kept as packed Case bytes, submitted
- * as they are (srv_request.case_bytes).
+ *    message of the job once with mpp_stream_decode() (protobuf-c's unpack;
+ *    a snapshot's arrays are copied once by it) and counts energies,
+ *    snapshots and seq gaps.
+ * The bench goes through the protocol library (mpp_msg.h) only: replies
+ * are read with mpp_reply_decode(), and each case is kept as packed Case
+ * bytes, submitted as they are (mpp_request.case_bytes).
  * Time per job: from just before the Submit is sent to the arrival of the
  * job's Finished message, on the client.  Finished.wall_s (the worker's own
  * loop, from before mpm_sim_new) splits it into daemon work around the
@@ -55,7 +56,7 @@ int pb_daemon_scene(mpm_method m, mpm_update u, long particles, long steps, int 
 
 #else
 
-#include "srv_codec.h"
+#include "mpp_msg.h"
 
 #include <dirent.h>
 #include <errno.h>
@@ -180,15 +181,16 @@ static int stop_daemon(dmn *d)
     return rc;
 }
 
-/* One request, one reply (decoded into *out by srv_reply_peek).  A
- * Reply.error becomes -1 with its text. */
-static int call(dmn *d, const srv_request *rq, srv_reply_info *out, double timeout, char *err,
+/* One request, one reply (decoded into *out by mpp_reply_decode; release
+ * it with mpp_reply_clear() in every case).  A Reply.error becomes -1 with
+ * its text. */
+static int call(dmn *d, const mpp_request *rq, mpp_reply *out, double timeout, char *err,
                 size_t errlen)
 {
     uint8_t *buf = NULL;
     size_t len = 0;
     memset(out, 0, sizeof *out);
-    if (srv_request_encode(rq, &buf, &len)) {
+    if (mpp_request_encode(rq, &buf, &len)) {
         snprintf(err, errlen, "cannot encode a request");
         return -1;
     }
@@ -243,11 +245,13 @@ static int call(dmn *d, const srv_request *rq, srv_reply_info *out, double timeo
         snprintf(err, errlen, "malformed reply from mpmd");
         rc = -1;
     } else {
-        char why[256];
-        if (srv_reply_peek(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), out, why, sizeof why)) {
-            snprintf(err, errlen, "undecodable reply from mpmd: %s", why);
+        char why[MPM_ERROR_MSG_MAX + 256];
+        mpm_error e;
+        if (mpp_reply_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0, out, &e)) {
+            snprintf(err, errlen, "undecodable reply from mpmd: %.300s",
+                     mpm_error_text(&e, MPM_FIELD_JSON, why, sizeof why));
             rc = -1;
-        } else if (out->kind == SRV_REPLY_ERROR) {
+        } else if (out->kind == MPP_REPLY_ERROR) {
             snprintf(err, errlen, "mpmd: error %d: %.300s%s%.100s%s", out->err_code, out->err_message,
                      *out->err_field ? " (field " : "", out->err_field, *out->err_field ? ")" : "");
             rc = -1;
@@ -320,17 +324,20 @@ static int start_daemon(dmn *d, const char *bin, int threads)
         return -1;
     }
     /* one Ping, queued until mpmd binds: the DEALER connects by itself */
-    srv_request rq = {.kind = SRV_REQ_PING};
-    srv_reply_info rep;
+    mpp_request rq = {.kind = MPP_REQ_PING};
+    mpp_reply rep;
     char err[512];
     if (call(d, &rq, &rep, READY_S, err, sizeof err)) {
+        mpp_reply_clear(&rep);
         fprintf(stderr, "mpmbench: mpmd did not start: %s\n", err);
         log_tail(d, 20);
         return -1;
     }
-    if (rep.kind != SRV_REPLY_PONG) {
+    mpp_reply_kind kind = rep.kind;
+    mpp_reply_clear(&rep);
+    if (kind != MPP_REPLY_PONG) {
         fprintf(stderr, "mpmbench: mpmd did not start: unexpected reply to Ping (body %d)\n",
-                (int)rep.kind);
+                (int)kind);
         log_tail(d, 20);
         return -1;
     }
@@ -359,16 +366,17 @@ static double proc_cpu(pid_t pid)
 
 static int job_status(dmn *d, uint64_t job, int *status, char *err, size_t errlen)
 {
-    srv_request rq = {.kind = SRV_REQ_STATUS, .id = job};
-    srv_reply_info rep;
-    if (call(d, &rq, &rep, CALL_S, err, errlen)) return -1;
-    *status = rep.kind == SRV_REPLY_RUN ? rep.status : 0;
-    return 0;
+    mpp_request rq = {.kind = MPP_REQ_STATUS, .id = job};
+    mpp_reply rep;
+    int rc = call(d, &rq, &rep, CALL_S, err, errlen);
+    *status = !rc && rep.kind == MPP_REPLY_RUN && rep.n_runs == 1 ? rep.runs[0].status : 0;
+    mpp_reply_clear(&rep);
+    return rc ? -1 : 0;
 }
 
-/* Receives one [topic][StreamMsg] message into *msg (srv_stream_peek: a
- * snapshot's arrays are counted, not copied); *ok 0 when it is not one. */
-static int recv_stream(void *sub, srv_stream_info *msg, int *ok)
+/* Receives one [topic][StreamMsg] message into *msg (mpp_stream_decode;
+ * release it with mpp_stream_clear()); *ok 0 when it is not one. */
+static int recv_stream(void *sub, mpp_stream *msg, int *ok)
 {
     zmq_msg_t part[2];
     int nparts = 0, more = 1, rc = 0;
@@ -386,7 +394,7 @@ static int recv_stream(void *sub, srv_stream_info *msg, int *ok)
         else zmq_msg_close(&m);
     }
     if (!rc && nparts == 2 && zmq_msg_size(&part[0]) == TOPIC_LEN)
-        *ok = srv_stream_peek(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), msg, NULL, 0) == 0;
+        *ok = mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0, msg, NULL) == 0;
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
     return rc;
 }
@@ -397,15 +405,18 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
                    size_t particles, double cap_s, job_res *jr, char *err, size_t errlen)
 {
     memset(jr, 0, sizeof *jr);
-    srv_request rq = {.kind = SRV_REQ_SUBMIT, .case_bytes = case_bytes, .case_len = case_len};
-    srv_reply_info rep;
+    mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_bytes = case_bytes, .case_len = case_len};
+    mpp_reply rep;
     double t0 = pb_now(), c0 = proc_cpu(d->pid);
-    if (call(d, &rq, &rep, CALL_S, err, errlen)) return -1;
-    if (rep.kind != SRV_REPLY_SUBMIT_OK || !rep.has_job_id) {
+    int crc = call(d, &rq, &rep, CALL_S, err, errlen);
+    int sub_ok = !crc && rep.kind == MPP_REPLY_SUBMIT_OK && rep.has_job_id;
+    uint64_t job = rep.job_id;
+    mpp_reply_clear(&rep);
+    if (crc) return -1;
+    if (!sub_ok) {
         snprintf(err, errlen, "unexpected reply to Submit");
         return -1;
     }
-    uint64_t job = rep.job_id;
     char topic[TOPIC_LEN + 1];
     snprintf(topic, sizeof topic, "job:%016llx:", (unsigned long long)job);
     if (watch && zmq_setsockopt(d->sub, ZMQ_SUBSCRIBE, topic, TOPIC_LEN)) {
@@ -433,21 +444,21 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
             } else if (now - last > IDLE_S) {
                 int st = 0;
                 if (job_status(d, job, &st, err, errlen)) rc = -1;
-                else if (st == SRV_STATUS_FINISHED && warmup) {
+                else if (st == MPP_STATUS_FINISHED && warmup) {
                     /* the SUB of a fresh daemon may connect after a short
                      * first job is over; only the warm-up can be that one */
                     jr->wall = pb_now() - t0;
                     rc = 0;
-                } else if (st >= SRV_STATUS_FINISHED) {
+                } else if (st >= MPP_STATUS_FINISHED) {
                     snprintf(err, errlen, "job %llu ended (%s) but its Finished message never "
-                             "arrived", (unsigned long long)job, srv_status_name(st));
+                             "arrived", (unsigned long long)job, mpp_status_name(st));
                     rc = -1;
                 }
                 last = pb_now();
             }
             continue;
         }
-        srv_stream_info m;
+        mpp_stream m = {0};
         int ok = 0;
         if (recv_stream(d->sub, &m, &ok)) {
             snprintf(err, errlen, "stream: %s", zmq_strerror(errno));
@@ -455,32 +466,37 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
             break;
         }
         last = pb_now();
-        if (!ok || m.job_id != job) continue;
+        if (!ok || m.job_id != job) {
+            mpp_stream_clear(&m);
+            continue;
+        }
         if (m.seq > next) jr->lost += (long)(m.seq - next);
         if (m.seq >= next) next = m.seq + 1;
         switch (m.kind) {
-        case SRV_STREAM_ENERGY:
+        case MPP_STREAM_ENERGY:
             jr->energies++;
             break;
-        case SRV_STREAM_SNAPSHOT: {
-            const srv_snapshot_info *s = &m.snapshot;
+        case MPP_STREAM_SNAPSHOT: {
+            /* the decoder checked that each array present holds n times
+             * its width */
+            const mpp_snapshot *s = &m.snapshot;
             jr->snapshots++;
-            if (s->n != particles || s->n_x != 2 * s->n || s->n_v != 2 * s->n ||
-                s->n_pressure != s->n)
+            if (s->n != particles || s->dim != 2 || !s->x || !s->v || !s->pressure)
                 jr->snap_bad++;
             break;
         }
-        case SRV_STREAM_PROGRESS:
+        case MPP_STREAM_PROGRESS:
             jr->progress++;
             break;
-        case SRV_STREAM_FINISHED:
+        case MPP_STREAM_FINISHED:
             jr->wall = pb_now() - t0;
             jr->cpu = proc_cpu(d->pid) - c0;
-            jr->worker_wall = m.wall_s;
-            if (m.status != SRV_STATUS_FINISHED) {
+            jr->worker_wall = m.finished.wall_s;
+            if (m.finished.status != MPP_STATUS_FINISHED) {
                 snprintf(err, errlen, "job %llu ended %s%s%.300s", (unsigned long long)job,
-                         srv_status_name(m.status) ? srv_status_name(m.status) : "without a status",
-                         m.error[0] ? ": " : "", m.error);
+                         mpp_status_name(m.finished.status) ? mpp_status_name(m.finished.status)
+                                                            : "without a status",
+                         m.finished.error[0] ? ": " : "", m.finished.error);
                 rc = -1;
             } else {
                 rc = 0;
@@ -489,6 +505,7 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
         default:
             break;
         }
+        mpp_stream_clear(&m);
     }
     if (watch) zmq_setsockopt(d->sub, ZMQ_UNSUBSCRIBE, topic, TOPIC_LEN);
     return rc;
@@ -501,17 +518,21 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
  * and of mpm_sim_new() (setup_s). */
 static int ref_job(const char *json, pb_row *r)
 {
-    srv_case *sc = NULL;
+    mpp_case *sc = NULL;
     char err[512];
-    if (srv_case_load(json, strlen(json), &sc, err, sizeof err)) {
-        snprintf(r->msg, sizeof r->msg, "the bench's own case: %.200s", err);
+    mpm_error e;
+    if (mpp_case_load(json, strlen(json), 0, &sc, &e)) {
+        snprintf(r->msg, sizeof r->msg, "the bench's own case: %.200s",
+                 mpm_error_text(&e, MPM_FIELD_JSON, err, sizeof err));
         return -1;
     }
     double t0 = pb_now(), c0 = pb_cpu_self();
-    mpm_sim *sim = mpm_sim_new(&sc->c, err, sizeof err);
+    mpm_error me;
+    mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me); /* checked by mpp_case_load */
     if (!sim) {
-        snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s", err[0] ? err : "out of memory");
-        srv_case_destroy(&sc);
+        snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s",
+                 mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
+        mpp_case_destroy(&sc);
         return -1;
     }
     double t1 = pb_now();
@@ -522,9 +543,9 @@ static int ref_job(const char *json, pb_row *r)
     r->nodes = mpm_sim_nodes(sim);
     r->dim = mpm_sim_dim(sim);
     r->steps = (long)sc->steps;
-    if (rc) snprintf(r->msg, sizeof r->msg, "%s (%s)", mpm_strerror(rc), mpm_sim_error(sim));
+    if (rc) snprintf(r->msg, sizeof r->msg, "%s (%.200s)", mpm_strerror(rc), mpm_sim_error(sim)->message);
     mpm_sim_destroy(&sim);
-    srv_case_destroy(&sc);
+    mpp_case_destroy(&sc);
     r->wall_s = t2 - t0;
     r->setup_s = t1 - t0;
     return rc ? -1 : 0;
@@ -582,7 +603,8 @@ static void cases_free(cases *c)
 
 static int cases_make(cases *c, int cells, mpm_method m, mpm_update u, long steps, int threads)
 {
-    char err[512];
+    char err[MPM_ERROR_MSG_MAX + 256];
+    mpm_error e;
     long wsteps = steps < WARM_STEPS ? steps : WARM_STEPS;
     memset(c, 0, sizeof *c);
     for (int w = 0; w < 2; w++)
@@ -592,9 +614,9 @@ static int cases_make(cases *c, int cells, mpm_method m, mpm_update u, long step
                 fprintf(stderr, "mpmbench: out of memory\n");
                 return -1;
             }
-            if (srv_msg_json_to_bytes(SRV_MSG_CASE, js, strlen(js), &c->bytes[w][j], &c->len[w][j],
-                                      err, sizeof err)) {
-                fprintf(stderr, "mpmbench: the bench's own case: %s\n", err);
+            if (mpp_msg_json_to_bytes(MPP_MSG_CASE, js, strlen(js), &c->bytes[w][j], &c->len[w][j], &e)) {
+                fprintf(stderr, "mpmbench: the bench's own case: %s\n",
+                        mpm_error_text(&e, MPM_FIELD_JSON, err, sizeof err));
                 return -1;
             }
         }

@@ -310,8 +310,8 @@ static int timed_runs(mpm_sim *sim, const pb_cfg *c, pb_row *r)
     while (k < steps) {
         int rc = mpm_sim_step(sim);
         if (rc) {
-            snprintf(r->msg, sizeof r->msg, "warm-up step %ld: %s (%s)", k + 1, mpm_strerror(rc),
-                     mpm_sim_error(sim));
+            snprintf(r->msg, sizeof r->msg, "warm-up step %ld: %s (%.200s)", k + 1, mpm_strerror(rc),
+                     mpm_sim_error(sim)->message);
             return -1;
         }
         k++;
@@ -337,8 +337,8 @@ static int timed_runs(mpm_sim *sim, const pb_cfg *c, pb_row *r)
         wall[i] = pb_now() - t0;
         wsum += wall[i];
         if (rc) {
-            snprintf(r->msg, sizeof r->msg, "timed run %d: %s (%s)", i + 1, mpm_strerror(rc),
-                     mpm_sim_error(sim));
+            snprintf(r->msg, sizeof r->msg, "timed run %d: %s (%.200s)", i + 1, mpm_strerror(rc),
+                     mpm_sim_error(sim)->message);
             return -1;
         }
         rate[i] = (double)r->particles * (double)steps / (wall[i] > 0 ? wall[i] : 1e-9) / 1e6;
@@ -366,9 +366,11 @@ static int work_scene(void *arg, pb_row *r)
         snprintf(r->msg, sizeof r->msg, "%s", err);
         return -1;
     }
-    mpm_sim *sim = mpm_sim_new(&t.c, err, sizeof err);
+    mpm_error me;
+    mpm_sim *sim = mpm_sim_new(&t.c, NULL, &me);
     if (!sim) {
-        snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s", err[0] ? err : "out of memory");
+        snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s",
+                 mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
         mpm_paper_free(&t);
         return -1;
     }

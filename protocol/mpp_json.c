@@ -1,18 +1,18 @@
 /*
- * srv_json.c - JSON <-> protobuf-c messages by walking descriptors.
+ * mpp_json.c - JSON <-> protobuf-c messages by walking descriptors.
  *
  * Parsing goes through libjansson (duplicate keys rejected), then a
  * recursive walk over the JSON object and the ProtobufCMessageDescriptor of
  * the target type fills a message laid out exactly as protobuf-c's unpacker
  * would (malloc'd message, arrays and strings; has_ flags, n_ counts and
  * oneof case members set), so protobuf_c_message_free_unpacked() frees it,
- * even when an error stops the walk half-way.  A path buffer follows the
- * walk so every error names where it happened.  Printing writes the JSON
+ * even when an error stops the walk half-way.  A field path follows the
+ * walk so every error (an mpm_error) names where it happened.  Printing writes the JSON
  * text directly into a growing buffer, so numbers keep the shortest exact
  * form and fields keep their .proto order.  The mapping rules are those of
- * the protobuf JSON mapping; see srv_json.h for the details.
+ * the protobuf JSON mapping; see mpp_json.h for the details.
  */
-#include "srv_json.h"
+#include "mpp_json.h"
 
 #include <errno.h>
 #include <float.h>
@@ -27,90 +27,90 @@
 #include <jansson.h>
 
 /* ------------------------------------------------------------------------ */
-/* Walk context: the JSON path of the current value and the error buffer.   */
+/* Walk context: the path of the current value (a structured mpm_error path:
+ * one element per key, the index of an array element on its field's
+ * element) and where an error goes.  Elements deeper than MPM_PATH_MAX are
+ * counted, not kept.  Keys are kept as the input spelled them (a .proto
+ * name when printing); mpm_error_field() renders them at the edge.         */
 
-#define PATH_LEN 256
-#define KEY_SHOWN 64 /* longest key copied into a path */
+/* path_push_index() returns the old state with this bit, so that
+ * path_pop() knows it undoes an index, not a key */
+#define POP_INDEX ((size_t)1 << (sizeof(size_t) * 8 - 1))
 
 typedef struct {
-    char *err;
-    size_t errlen;
-    char path[PATH_LEN];
-    size_t plen;
-    int depth;
+    mpm_error *err;
+    mpm_path_elem path[MPM_PATH_MAX];
+    int plen;    /* elements kept */
+    int over;    /* elements beyond MPM_PATH_MAX */
+    int depth;   /* message nesting */
 } jctx;
 
-static void ctx_init(jctx *c, char *err, size_t errlen)
+static void ctx_init(jctx *c, mpm_error *err)
 {
     memset(c, 0, sizeof *c);
     c->err = err;
-    c->errlen = errlen;
-    if (err && errlen) err[0] = 0;
+    mpm_error_clear(err);
 }
 
-/* Appends ".key" (or "key" at the root) to the path; with camel set, key is
- * a .proto name written as its JSON name.  Returns the old length for
- * path_pop().  Control characters are shown as '?'; long keys are cut. */
-static size_t path_push_key(jctx *c, const char *key, int camel)
+/* Appends a key element; control characters are shown as '?', a long key
+ * is cut.  Returns the old state for path_pop(). */
+static size_t path_push_key(jctx *c, const char *key)
 {
-    size_t old = c->plen;
-    size_t room = sizeof c->path - 1 - c->plen;
-    int up = 0;
-    if (c->plen && room) {
-        c->path[c->plen++] = '.';
-        room--;
+    size_t old = (size_t)(c->plen + c->over);
+    if (c->plen >= MPM_PATH_MAX) {
+        c->over++;
+        return old;
     }
-    for (size_t k = 0; key[k] && room && k < KEY_SHOWN; k++) {
+    mpm_path_elem *e = &c->path[c->plen++];
+    size_t k = 0;
+    for (; key[k] && k + 1 < sizeof e->name; k++) {
         unsigned char ch = (unsigned char)key[k];
-        if (camel && ch == '_') {
-            up = 1;
-            continue;
-        }
-        if (up && ch >= 'a' && ch <= 'z') ch = (unsigned char)(ch - 'a' + 'A');
-        up = 0;
-        c->path[c->plen++] = (ch < 0x20 || ch == 0x7f) ? '?' : (char)ch;
-        room--;
+        e->name[k] = (ch < 0x20 || ch == 0x7f) ? '?' : (char)ch;
     }
-    c->path[c->plen] = 0;
+    e->name[k] = 0;
+    e->index = -1;
     return old;
 }
 
+/* Sets the index of the innermost element (an array or map entry). */
 static size_t path_push_index(jctx *c, size_t i)
 {
-    size_t old = c->plen;
-    int n = snprintf(c->path + c->plen, sizeof c->path - c->plen, "[%zu]", i);
-    if (n > 0) c->plen += (size_t)n;
-    if (c->plen >= sizeof c->path) c->plen = sizeof c->path - 1;
-    return old;
+    if (!c->over && c->plen) c->path[c->plen - 1].index = (long)i;
+    return POP_INDEX;
 }
 
 static void path_pop(jctx *c, size_t old)
 {
-    c->plen = old;
-    c->path[old] = 0;
+    if (old == POP_INDEX) {
+        if (!c->over && c->plen) c->path[c->plen - 1].index = -1;
+        return;
+    }
+    while ((size_t)(c->plen + c->over) > old) {
+        if (c->over) c->over--;
+        else c->plen--;
+    }
 }
 
-/* Writes "<path>: <message>" into the error buffer and returns code. */
+/* Fills the error (code, message, the current path) and returns code. */
 __attribute__((format(printf, 3, 4)))
 static int fail(jctx *c, int code, const char *fmt, ...)
 {
-    if (c->err && c->errlen) {
-        int n = 0;
-        if (c->plen) n = snprintf(c->err, c->errlen, "%s: ", c->path);
-        if (n < 0) n = 0;
-        if ((size_t)n < c->errlen) {
-            va_list ap;
-            va_start(ap, fmt);
-            vsnprintf(c->err + n, c->errlen - (size_t)n, fmt, ap);
-            va_end(ap);
-        }
+    if (c->err) {
+        char msg[MPM_ERROR_MSG_MAX];
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(msg, sizeof msg, fmt, ap);
+        va_end(ap);
+        mpm_fail(c->err, code, NULL, "%s", msg);
+        c->err->depth = c->plen;
+        memcpy(c->err->path, c->path, (size_t)c->plen * sizeof c->path[0]);
     }
     return code;
 }
 
 static int fail_nomem(jctx *c)
 {
-    return fail(c, SRV_JSON_ENOMEM, "out of memory");
+    return fail(c, MPM_ENOMEM, "out of memory");
 }
 
 /* A short description of a JSON value for error messages: "string \"ab\"",
@@ -152,13 +152,13 @@ static int fail_type(jctx *c, const char *what, const json_t *v)
 {
     char d[80];
     describe(v, d, sizeof d);
-    return fail(c, SRV_JSON_ESCHEMA, "expected %s, got %s", what, d);
+    return fail(c, MPM_EINVAL, "expected %s, got %s", what, d);
 }
 
 /* ------------------------------------------------------------------------ */
 /* Names                                                                    */
 
-size_t srv_json_name(const char *proto_name, char *buf, size_t len)
+size_t mpp_json_name(const char *proto_name, char *buf, size_t len)
 {
     size_t n = 0;
     int up = 0;
@@ -216,7 +216,7 @@ static void list_fields(const ProtobufCMessageDescriptor *d, char *buf, size_t l
     size_t o = strlen(buf);
     for (unsigned i = 0; i < d->n_fields && o + 1 < len; i++) {
         char name[96];
-        srv_json_name(d->fields[i].name, name, sizeof name);
+        mpp_json_name(d->fields[i].name, name, sizeof name);
         int n = snprintf(buf + o, len - o, "%s%s", i ? ", " : "", name);
         if (n < 0 || (size_t)n >= len - o) {
             if (len > 4) strcpy(buf + len - 4, "...");
@@ -238,7 +238,7 @@ static int is_map(const ProtobufCMessageDescriptor *parent, const ProtobufCField
     if (d->n_fields != 2 || d->fields[0].id != 1 || d->fields[1].id != 2 ||
         strcmp(d->fields[0].name, "key") || strcmp(d->fields[1].name, "value"))
         return 0;
-    n = srv_json_name(f->name, want, sizeof want);
+    n = mpp_json_name(f->name, want, sizeof want);
     if (n + sizeof "Entry" > sizeof want) return 0;
     if (want[0] >= 'a' && want[0] <= 'z') want[0] = (char)(want[0] - 'a' + 'A');
     strcat(want, "Entry");
@@ -364,7 +364,7 @@ static int parse_int(jctx *c, ProtobufCType t, const json_t *v, void *dst)
     if (json_is_integer(v)) {
         json_int_t x = json_integer_value(v);
         if (!is_signed && x < 0)
-            return fail(c, SRV_JSON_ESCHEMA, "expected a non-negative integer, got %" JSON_INTEGER_FORMAT, x);
+            return fail(c, MPM_EINVAL, "expected a non-negative integer, got %" JSON_INTEGER_FORMAT, x);
         if (is_signed) s = x;
         else u = (uint64_t)x;
         r = 0;
@@ -383,7 +383,7 @@ static int parse_int(jctx *c, ProtobufCType t, const json_t *v, void *dst)
     if (r == 2) {
         char d[80];
         describe(v, d, sizeof d);
-        return fail(c, SRV_JSON_ESCHEMA, "%s out of range for %s", d, type_name(t));
+        return fail(c, MPM_EINVAL, "%s out of range for %s", d, type_name(t));
     }
     if (type_is_32(t)) {
         if (is_signed) *(int32_t *)dst = (int32_t)s;
@@ -416,7 +416,7 @@ static int parse_double(jctx *c, const json_t *v, double *out)
             errno = 0;
             double x = strtod(s, &end);
             if (end != s && !*end) {
-                if (errno == ERANGE && isinf(x)) return fail(c, SRV_JSON_ESCHEMA, "number \"%s\" out of range", s);
+                if (errno == ERANGE && isinf(x)) return fail(c, MPM_EINVAL, "number \"%s\" out of range", s);
                 *out = x;
                 return 0;
             }
@@ -451,7 +451,7 @@ static int parse_enum(jctx *c, const ProtobufCEnumDescriptor *ed, const json_t *
     }
     char d[80];
     describe(v, d, sizeof d);
-    return fail(c, SRV_JSON_ESCHEMA, "unknown value %s for enum %s (expected one of: %s)",
+    return fail(c, MPM_EINVAL, "unknown value %s for enum %s (expected one of: %s)",
                 d, ed->name, names);
 }
 
@@ -561,7 +561,7 @@ static int parse_value(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, vo
         int rc = parse_double(c, v, &x);
         if (rc) return rc;
         if (isfinite(x) && fabs(x) > FLT_MAX)
-            return fail(c, SRV_JSON_ESCHEMA, "%g out of range for float", x);
+            return fail(c, MPM_EINVAL, "%g out of range for float", x);
         *(float *)dst = (float)x;
         return 0;
     }
@@ -597,7 +597,7 @@ static int parse_repeated(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v,
         size_t old = path_push_index(c, i);
         int rc;
         if (json_is_null(e)) {
-            rc = fail(c, SRV_JSON_ESCHEMA, "null is not allowed in an array");
+            rc = fail(c, MPM_EINVAL, "null is not allowed in an array");
         } else if (f->type == PROTOBUF_C_TYPE_MESSAGE) {
             const ProtobufCMessageDescriptor *sd = f->descriptor;
             ProtobufCMessage *sm;
@@ -639,7 +639,7 @@ static int parse_map(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, Prot
     *arrp = arr;
     *np = 0;
     json_object_foreach(v, key, val) {
-        size_t old = path_push_key(c, key, 0);
+        size_t old = path_push_key(c, key);
         ProtobufCMessage *e = new_message(ed);
         char *kdst;
         int rc = 0;
@@ -655,7 +655,7 @@ static int parse_map(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, Prot
         } else if (kf->type == PROTOBUF_C_TYPE_BOOL) {
             if (!strcmp(key, "true")) *(protobuf_c_boolean *)kdst = 1;
             else if (!strcmp(key, "false")) *(protobuf_c_boolean *)kdst = 0;
-            else rc = fail(c, SRV_JSON_ESCHEMA, "map key must be \"true\" or \"false\"");
+            else rc = fail(c, MPM_EINVAL, "map key must be \"true\" or \"false\"");
         } else {
             json_t *ks = json_string(key);
             if (!ks) return fail_nomem(c);
@@ -664,7 +664,7 @@ static int parse_map(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, Prot
         }
         if (rc) return rc;
         set_has(kf, e);
-        if (json_is_null(val)) return fail(c, SRV_JSON_ESCHEMA, "null is not allowed as a map value");
+        if (json_is_null(val)) return fail(c, MPM_EINVAL, "null is not allowed as a map value");
         rc = parse_field(c, ed, vf, val, e);
         if (rc) return rc;
         path_pop(c, old);
@@ -685,8 +685,8 @@ static int parse_field(jctx *c, const ProtobufCMessageDescriptor *d,
         if (*cs != 0 && *cs != f->id) {
             const ProtobufCFieldDescriptor *o = field_by_id(d, *cs);
             char on[96] = "?";
-            if (o) srv_json_name(o->name, on, sizeof on);
-            return fail(c, SRV_JSON_ESCHEMA,
+            if (o) mpp_json_name(o->name, on, sizeof on);
+            return fail(c, MPM_EINVAL,
                         "only one member of a oneof may be set, and \"%s\" is set already", on);
         }
         *cs = f->id;
@@ -705,22 +705,22 @@ static int parse_message(jctx *c, const ProtobufCMessageDescriptor *d, json_t *o
     json_t *val;
     int rc = 0;
     if (!json_is_object(obj)) return fail_type(c, "an object", obj);
-    if (c->depth >= SRV_JSON_MAX_DEPTH)
-        return fail(c, SRV_JSON_ESCHEMA, "messages nested deeper than %d", SRV_JSON_MAX_DEPTH);
+    if (c->depth >= MPP_JSON_MAX_DEPTH)
+        return fail(c, MPM_EINVAL, "messages nested deeper than %d", MPP_JSON_MAX_DEPTH);
     seen = calloc(d->n_fields ? d->n_fields : 1, sizeof *seen);
     if (!seen) return fail_nomem(c);
     c->depth++;
     json_object_foreach(obj, key, val) {
         int i = find_field(d, key);
-        size_t old = path_push_key(c, key, 0);
+        size_t old = path_push_key(c, key);
         if (i < 0) {
             char known[240];
             snprintf(known, sizeof known, "unknown field (%s has: ", d->short_name);
             list_fields(d, known, sizeof known - 1);
             strcat(known, ")");
-            rc = fail(c, SRV_JSON_ESCHEMA, "%s", known);
+            rc = fail(c, MPM_EINVAL, "%s", known);
         } else if (seen[i]) {
-            rc = fail(c, SRV_JSON_ESCHEMA, "field given twice (also as \"%s\")", seen[i]);
+            rc = fail(c, MPM_EINVAL, "field given twice (as \"%s\" and \"%s\")", key, seen[i]);
         } else {
             seen[i] = key;
             if (!json_is_null(val)) rc = parse_field(c, d, &d->fields[i], val, m);
@@ -731,8 +731,8 @@ static int parse_message(jctx *c, const ProtobufCMessageDescriptor *d, json_t *o
     for (unsigned i = 0; !rc && i < d->n_fields; i++) {
         if (d->fields[i].label != PROTOBUF_C_LABEL_REQUIRED) continue;
         if (seen[i] && !json_is_null(json_object_get(obj, seen[i]))) continue;
-        size_t old = path_push_key(c, d->fields[i].name, 1);
-        rc = fail(c, SRV_JSON_ESCHEMA, "required field missing");
+        size_t old = path_push_key(c, d->fields[i].name);
+        rc = fail(c, MPM_EINVAL, "required field missing");
         path_pop(c, old);
     }
     c->depth--;
@@ -740,20 +740,20 @@ static int parse_message(jctx *c, const ProtobufCMessageDescriptor *d, json_t *o
     return rc;
 }
 
-int srv_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
-                   size_t len, ProtobufCMessage **out, char *err, size_t errlen)
+int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
+                   size_t len, ProtobufCMessage **out, mpm_error *err)
 {
     jctx c;
     json_error_t je;
     json_t *root;
     ProtobufCMessage *m;
     int rc;
-    ctx_init(&c, err, errlen);
+    ctx_init(&c, err);
     *out = NULL;
     root = json_loadb(text, len, JSON_REJECT_DUPLICATES, &je);
     if (!root) {
         if (json_error_code(&je) == json_error_out_of_memory) return fail_nomem(&c);
-        return fail(&c, SRV_JSON_ESYNTAX, "invalid JSON at line %d, column %d: %s",
+        return fail(&c, MPM_ESYNTAX, "invalid JSON at line %d, column %d: %s",
                     je.line, je.column, je.text);
     }
     if (!json_is_object(root)) {
@@ -857,7 +857,7 @@ static size_t utf8_len(const unsigned char *s)
     return n;
 }
 
-int srv_json_utf8_valid(const char *s)
+int mpp_json_utf8_valid(const char *s)
 {
     const unsigned char *p = (const unsigned char *)s;
     while (*p) {
@@ -875,7 +875,7 @@ static int put_string(ectx *e, const char *str)
     while (*s) {
         size_t n = utf8_len(s);
         char esc[8];
-        if (n == 0) return fail(&e->c, SRV_JSON_ESCHEMA, "string is not valid UTF-8");
+        if (n == 0) return fail(&e->c, MPM_EINVAL, "string is not valid UTF-8");
         if (*s == '"') puts_(e, "\\\"");
         else if (*s == '\\') puts_(e, "\\\\");
         else if (*s == '\n') puts_(e, "\\n");
@@ -913,7 +913,7 @@ static void put_bytes(ectx *e, const ProtobufCBinaryData *b)
 static void put_json_name(ectx *e, const char *proto_name)
 {
     char buf[128];
-    size_t n = srv_json_name(proto_name, buf, sizeof buf);
+    size_t n = mpp_json_name(proto_name, buf, sizeof buf);
     put(e, "\"", 1);
     if (n < sizeof buf) {
         put(e, buf, n);
@@ -923,7 +923,7 @@ static void put_json_name(ectx *e, const char *proto_name)
             e->oom = 1;
             return;
         }
-        srv_json_name(proto_name, big, n + 1);
+        mpp_json_name(proto_name, big, n + 1);
         put(e, big, n);
         free(big);
     }
@@ -940,12 +940,12 @@ static int emit_value(ectx *e, const ProtobufCFieldDescriptor *f, const void *p,
     switch (f->type) {
     case PROTOBUF_C_TYPE_MESSAGE: {
         const ProtobufCMessage *sm = *(ProtobufCMessage *const *)p;
-        if (!sm) return fail(&e->c, SRV_JSON_ESCHEMA, "NULL message");
+        if (!sm) return fail(&e->c, MPM_EINVAL, "NULL message");
         return emit_message(e, sm, indent);
     }
     case PROTOBUF_C_TYPE_STRING: {
         const char *s = *(char *const *)p;
-        if (!s) return fail(&e->c, SRV_JSON_ESCHEMA, "NULL string");
+        if (!s) return fail(&e->c, MPM_EINVAL, "NULL string");
         return put_string(e, s);
     }
     case PROTOBUF_C_TYPE_BYTES: put_bytes(e, p); return 0;
@@ -976,7 +976,7 @@ static int emit_value(ectx *e, const ProtobufCFieldDescriptor *f, const void *p,
     return 0;
 }
 
-/* Whether field f of m is present (see the printing rules in srv_json.h). */
+/* Whether field f of m is present (see the printing rules in mpp_json.h). */
 static int present(const ProtobufCFieldDescriptor *f, const ProtobufCMessage *m)
 {
     const char *base = (const char *)m;
@@ -1016,7 +1016,7 @@ static int emit_map(ectx *e, const ProtobufCFieldDescriptor *f, const ProtobufCM
         char kb[48];
         int rc;
         size_t old = path_push_index(&e->c, i);
-        if (!en) return fail(&e->c, SRV_JSON_ESCHEMA, "NULL map entry");
+        if (!en) return fail(&e->c, MPM_EINVAL, "NULL map entry");
         kp = (const char *)en + kf->offset;
         if (i) put(e, ",", 1);
         newline(e, indent + 1);
@@ -1065,7 +1065,7 @@ static int emit_field(ectx *e, const ProtobufCMessageDescriptor *d, const Protob
     n = *(const size_t *)(base + f->quantifier_offset);
     arr = *(const char *const *)(base + f->offset);
     es = elem_size(f->type);
-    if (!arr) return fail(&e->c, SRV_JSON_ESCHEMA, "NULL array of %zu elements", n);
+    if (!arr) return fail(&e->c, MPM_EINVAL, "NULL array of %zu elements", n);
     put(e, "[", 1);
     for (size_t i = 0; i < n; i++) {
         size_t old = path_push_index(&e->c, i);
@@ -1086,9 +1086,9 @@ static int emit_message(ectx *e, const ProtobufCMessage *m, int indent)
     const ProtobufCMessageDescriptor *d = m->descriptor;
     int first = 1;
     if (!d || d->magic != PROTOBUF_C__MESSAGE_DESCRIPTOR_MAGIC)
-        return fail(&e->c, SRV_JSON_ESCHEMA, "not a protobuf-c message");
-    if (e->c.depth >= SRV_JSON_MAX_DEPTH)
-        return fail(&e->c, SRV_JSON_ESCHEMA, "messages nested deeper than %d", SRV_JSON_MAX_DEPTH);
+        return fail(&e->c, MPM_EINVAL, "not a protobuf-c message");
+    if (e->c.depth >= MPP_JSON_MAX_DEPTH)
+        return fail(&e->c, MPM_EINVAL, "messages nested deeper than %d", MPP_JSON_MAX_DEPTH);
     e->c.depth++;
     put(e, "{", 1);
     for (unsigned i = 0; i < d->n_fields; i++) {
@@ -1101,7 +1101,7 @@ static int emit_message(ectx *e, const ProtobufCMessage *m, int indent)
         newline(e, indent + 1);
         put_json_name(e, f->name);
         put(e, e->pretty ? ": " : ":", e->pretty ? 2 : 1);
-        old = path_push_key(&e->c, f->name, 1);
+        old = path_push_key(&e->c, f->name);
         rc = emit_field(e, d, f, m, indent + 1);
         path_pop(&e->c, old);
         if (rc) return rc;
@@ -1112,14 +1112,14 @@ static int emit_message(ectx *e, const ProtobufCMessage *m, int indent)
     return 0;
 }
 
-int srv_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
-                     char *err, size_t errlen)
+int mpp_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
+                     mpm_error *err)
 {
     ectx e;
     int rc;
     memset(&e, 0, sizeof e);
-    ctx_init(&e.c, err, errlen);
-    e.pretty = (flags & SRV_JSON_PRETTY) != 0;
+    ctx_init(&e.c, err);
+    e.pretty = (flags & MPP_JSON_PRETTY) != 0;
     *out = NULL;
     rc = emit_message(&e, msg, 0);
     if (!rc && e.pretty) put(&e, "\n", 1);

@@ -1,5 +1,6 @@
 /*
- * srv_json.h - generic conversion between JSON text and protobuf-c messages,
+ * mpp_json.h - the JSON mapping of the protocol library: generic conversion
+ * between JSON text and protobuf-c messages,
  * following the protobuf JSON mapping, driven only by the message
  * descriptors (so a field added to a .proto needs no C change here).
  *
@@ -11,10 +12,11 @@
  * (A 64-bit value above 2^63 - 1 must be a string: jansson reads JSON
  * numbers into a long long.)
  * Unknown fields, two members of one oneof, a field given twice (under both
- * of its names) and values of the wrong type are errors; every error starts
- * with the JSON path of the offending value, e.g.
+ * of its names) and values of the wrong type are errors, reported as an
+ * mpm_error whose field is the path of the offending value (the keys as the
+ * input spelled them, rendered by mpm_error_field()), e.g. with
+ * mpm_error_text(MPM_FIELD_JSON):
  *   "materials[0].youngsModulus: expected a number, got string \"ten\"".
- * The path uses the keys as the input spelled them.
  *
  * protobuf -> JSON: lowerCamelCase names in field-number order, only the
  * fields that are present (proto2 has_ flags, non-NULL strings/messages,
@@ -25,54 +27,47 @@
  * unpacker uses, so protobuf_c_message_free_unpacked(msg, NULL) frees them.
  * Well-known types (Timestamp, Any, wrappers, ...) get no special mapping.
  */
-#ifndef SRV_JSON_H
-#define SRV_JSON_H
+#ifndef MPP_JSON_H
+#define MPP_JSON_H
 
 #include <stddef.h>
 
 #include <protobuf-c/protobuf-c.h>
 
-/* Return codes (negative on error). */
-enum {
-    SRV_JSON_OK = 0,
-    SRV_JSON_ESYNTAX = -1,  /* the text is not JSON */
-    SRV_JSON_ESCHEMA = -2,  /* JSON that does not fit the message type */
-    SRV_JSON_ENOMEM = -3    /* allocation failed */
-};
+#include "mpm_error.h"
 
-/* Flags for srv_json_from_pb(). */
-#define SRV_JSON_PRETTY 1u  /* indent two spaces, one field per line */
+/* Flags for mpp_json_from_pb(). */
+#define MPP_JSON_PRETTY 1u  /* indent two spaces, one field per line */
 
 /* Deepest message nesting accepted in either direction. */
-#define SRV_JSON_MAX_DEPTH 64
+#define MPP_JSON_MAX_DEPTH 64
 
 /* Parses `len` bytes of JSON text (a JSON object) into a new message of
  * type `desc`.  On success stores it in *out (free it with
  * protobuf_c_message_free_unpacked(*out, NULL)) and returns 0; otherwise
- * sets *out to NULL, writes a message into err (errlen bytes; err may be
- * NULL) and returns SRV_JSON_ESYNTAX, SRV_JSON_ESCHEMA or SRV_JSON_ENOMEM.
- * A syntax error names the line and column. */
-int srv_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
-                   size_t len, ProtobufCMessage **out, char *err,
-                   size_t errlen);
+ * sets *out to NULL, fills err (may be NULL) and returns MPM_ESYNTAX (not
+ * JSON: the message names the line and column), MPM_EINVAL (JSON that does
+ * not fit the message type) or MPM_ENOMEM. */
+int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
+                   size_t len, ProtobufCMessage **out, mpm_error *err);
 
 /* Prints a message as JSON text.  flags: 0 (compact, one line) or
- * SRV_JSON_PRETTY (ends with a newline).  On success stores a malloc'd,
+ * MPP_JSON_PRETTY (ends with a newline).  On success stores a malloc'd,
  * NUL-terminated string in *out (the caller frees it) and returns 0;
- * otherwise sets *out to NULL, writes a message into err and returns
- * SRV_JSON_ESCHEMA (a string that is not UTF-8, a NULL array element,
- * nesting too deep) or SRV_JSON_ENOMEM. */
-int srv_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
-                     char *err, size_t errlen);
+ * otherwise sets *out to NULL, fills err and returns MPM_EINVAL (a string
+ * that is not UTF-8, a NULL array element, nesting too deep) or
+ * MPM_ENOMEM. */
+int mpp_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
+                     mpm_error *err);
 
 /* Writes the JSON (lowerCamelCase) name of a .proto field name into buf:
  * underscores are dropped and the letter after one is upper-cased
  * ("youngs_modulus" -> "youngsModulus").  Returns the length of the full
  * name (as snprintf does: the result was truncated if >= len). */
-size_t srv_json_name(const char *proto_name, char *buf, size_t len);
+size_t mpp_json_name(const char *proto_name, char *buf, size_t len);
 
 /* Whether the NUL-terminated string s is valid UTF-8 (no overlong forms,
  * no surrogates), as JSON text requires. */
-int srv_json_utf8_valid(const char *s);
+int mpp_json_utf8_valid(const char *s);
 
 #endif

@@ -1,0 +1,266 @@
+/*
+ * mpp.c - the vocabulary of mpp.h (status and wire-code names, the one
+ * MPM_E* -> Error.Code mapping, versions), checked against the generated
+ * enums at compile time, and what the library's files share (mpp_internal.h):
+ * pack / unpack with a size limit, any message as JSON <-> bytes, and the
+ * EnergySample / Snapshot fills.
+ */
+#include "mpp_internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#define SAME(a, b) ((int)(a) == (int)(b))
+_Static_assert(MPP_SCHEMA_VERSION == MPMD__SCHEMA_VERSION__SCHEMA_VERSION,
+               "MPP_SCHEMA_VERSION must match proto/mpmd.proto");
+_Static_assert(SAME(MPP_STATUS_QUEUED, MPMD__RUN_STATUS__QUEUED) &&
+               SAME(MPP_STATUS_RUNNING, MPMD__RUN_STATUS__RUNNING) &&
+               SAME(MPP_STATUS_FINISHED, MPMD__RUN_STATUS__FINISHED) &&
+               SAME(MPP_STATUS_FAILED, MPMD__RUN_STATUS__FAILED) &&
+               SAME(MPP_STATUS_CANCELLED, MPMD__RUN_STATUS__CANCELLED) &&
+               SAME(MPP_STATUS_INTERRUPTED, MPMD__RUN_STATUS__INTERRUPTED),
+               "mpp_status must match mpmd.RunStatus");
+_Static_assert(SAME(MPP_ERR_INTERNAL, MPMD__ERROR__CODE__INTERNAL) &&
+               SAME(MPP_ERR_BAD_REQUEST, MPMD__ERROR__CODE__BAD_REQUEST) &&
+               SAME(MPP_ERR_BAD_SCHEMA, MPMD__ERROR__CODE__BAD_SCHEMA) &&
+               SAME(MPP_ERR_INVALID_CASE, MPMD__ERROR__CODE__INVALID_CASE) &&
+               SAME(MPP_ERR_NOT_FOUND, MPMD__ERROR__CODE__NOT_FOUND) &&
+               SAME(MPP_ERR_QUEUE_FULL, MPMD__ERROR__CODE__QUEUE_FULL) &&
+               SAME(MPP_ERR_TOO_LARGE, MPMD__ERROR__CODE__TOO_LARGE) &&
+               SAME(MPP_ERR_CONFLICT, MPMD__ERROR__CODE__CONFLICT) &&
+               SAME(MPP_ERR_UNAVAILABLE, MPMD__ERROR__CODE__UNAVAILABLE),
+               "mpp_err_code must match mpmd.Error.Code");
+_Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
+               SAME(MPM_METHOD_GIMP, MPMD__CASE__METHOD__GIMP) &&
+               SAME(MPM_USF, MPMD__CASE__UPDATE__USF) && SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
+               SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),
+               "mpm_method / mpm_update must match mpmd.Case.Method / Update");
+_Static_assert(SAME(MPP_STREAM_PROGRESS, MPMD__STREAM_MSG__BODY_PROGRESS) &&
+               SAME(MPP_STREAM_ENERGY, MPMD__STREAM_MSG__BODY_ENERGY) &&
+               SAME(MPP_STREAM_SNAPSHOT, MPMD__STREAM_MSG__BODY_SNAPSHOT) &&
+               SAME(MPP_STREAM_FINISHED, MPMD__STREAM_MSG__BODY_FINISHED),
+               "mpp_stream_kind must match the StreamMsg.body field numbers");
+_Static_assert(SAME(MPP_REPLY_ERROR, MPMD__REPLY__BODY_ERROR) &&
+               SAME(MPP_REPLY_SUBMIT_OK, MPMD__REPLY__BODY_SUBMIT_OK) &&
+               SAME(MPP_REPLY_RUN, MPMD__REPLY__BODY_RUN) && SAME(MPP_REPLY_RUNS, MPMD__REPLY__BODY_RUNS) &&
+               SAME(MPP_REPLY_ENERGY, MPMD__REPLY__BODY_ENERGY) &&
+               SAME(MPP_REPLY_SNAPSHOT, MPMD__REPLY__BODY_SNAPSHOT) &&
+               SAME(MPP_REPLY_PONG, MPMD__REPLY__BODY_PONG) &&
+               SAME(MPP_REPLY_VERSION, MPMD__REPLY__BODY_VERSION),
+               "mpp_reply_kind must match the Reply.body field numbers");
+#undef SAME
+
+/* ---- names and the wire code ---------------------------------------------- */
+
+/* The name of value v of an enum, from its descriptor. */
+static const char *enum_name(const ProtobufCEnumDescriptor *d, int v)
+{
+    const ProtobufCEnumValue *ev = protobuf_c_enum_descriptor_get_value(d, v);
+    return ev ? ev->name : NULL;
+}
+
+const char *mpp_status_name(int status)
+{
+    return enum_name(&mpmd__run_status__descriptor, status);
+}
+
+int mpp_status_from_name(const char *name)
+{
+    const ProtobufCEnumValue *ev =
+        name ? protobuf_c_enum_descriptor_get_value_by_name(&mpmd__run_status__descriptor, name) : NULL;
+    return ev ? ev->value : 0;
+}
+
+const char *mpp_err_code_name(int code)
+{
+    return enum_name(&mpmd__error__code__descriptor, code);
+}
+
+mpp_err_code mpp_error_wire_code(int mpm_code)
+{
+    switch (mpm_code) {
+    case MPM_EINVAL:
+    case MPM_ECFL: return MPP_ERR_INVALID_CASE;
+    case MPM_EREQUEST:
+    case MPM_ESYNTAX: return MPP_ERR_BAD_REQUEST;
+    case MPM_EVERSION: return MPP_ERR_BAD_SCHEMA;
+    case MPM_ENOTFOUND: return MPP_ERR_NOT_FOUND;
+    case MPM_EFULL: return MPP_ERR_QUEUE_FULL;
+    case MPM_ETOOBIG: return MPP_ERR_TOO_LARGE;
+    case MPM_ECONFLICT: return MPP_ERR_CONFLICT;
+    case MPM_EUNAVAIL: return MPP_ERR_UNAVAILABLE;
+    default: return MPP_ERR_INTERNAL;
+    }
+}
+
+const char *mpp_protobuf_c_version(void)
+{
+    return protobuf_c_version();
+}
+
+/* ---- pack / unpack ----------------------------------------------------------- */
+
+int mpp_pack(const ProtobufCMessage *m, uint8_t **buf, size_t *len)
+{
+    size_t n = protobuf_c_message_get_packed_size(m);
+    uint8_t *b = malloc(n ? n : 1);
+    *buf = NULL;
+    *len = 0;
+    if (!b) return MPM_ENOMEM;
+    if (protobuf_c_message_pack(m, b) != n) {
+        free(b);
+        return MPM_ENOMEM;
+    }
+    *buf = b;
+    *len = n;
+    return 0;
+}
+
+int mpp_unpack(const ProtobufCMessageDescriptor *d, const void *buf, size_t len, size_t max,
+               ProtobufCMessage **out, mpm_error *err)
+{
+    static const uint8_t empty[1];
+    *out = NULL;
+    if (!max) max = MPP_MSG_MAX;
+    if (len > max)
+        return mpm_fail(err, MPM_ETOOBIG, NULL, "%s message of %zu bytes: more than the limit of %zu",
+                        d->name, len, max);
+    *out = protobuf_c_message_unpack(d, NULL, len, buf ? buf : empty);
+    if (!*out) return mpm_fail(err, MPM_ESYNTAX, NULL, "not a valid %s message (%zu bytes)", d->name, len);
+    return 0;
+}
+
+static const ProtobufCMessageDescriptor *kind_desc(mpp_msg_kind kind)
+{
+    switch (kind) {
+    case MPP_MSG_CASE: return &mpmd__case__descriptor;
+    case MPP_MSG_REQUEST: return &mpmd__request__descriptor;
+    case MPP_MSG_REPLY: return &mpmd__reply__descriptor;
+    case MPP_MSG_STREAM: return &mpmd__stream_msg__descriptor;
+    }
+    return NULL;
+}
+
+int mpp_msg_json_to_bytes(mpp_msg_kind kind, const char *json, size_t len, uint8_t **buf, size_t *n,
+                          mpm_error *err)
+{
+    const ProtobufCMessageDescriptor *d = kind_desc(kind);
+    ProtobufCMessage *m;
+    int rc;
+    *buf = NULL;
+    *n = 0;
+    if (!d) return mpm_fail(err, MPM_EINVAL, NULL, "unknown message kind %d", (int)kind);
+    rc = mpp_json_to_pb(d, json, len, &m, err);
+    if (rc) return rc;
+    rc = mpp_pack(m, buf, n);
+    protobuf_c_message_free_unpacked(m, NULL);
+    return rc ? mpm_fail(err, rc, NULL, "out of memory") : 0;
+}
+
+int mpp_msg_bytes_to_json(mpp_msg_kind kind, const void *buf, size_t n, size_t max, unsigned flags,
+                          char **json, mpm_error *err)
+{
+    const ProtobufCMessageDescriptor *d = kind_desc(kind);
+    ProtobufCMessage *m;
+    int rc;
+    *json = NULL;
+    if (!d) return mpm_fail(err, MPM_EINVAL, NULL, "unknown message kind %d", (int)kind);
+    rc = mpp_unpack(d, buf, n, max, &m, err);
+    if (rc) return rc;
+    rc = mpp_json_from_pb(m, flags, json, err);
+    protobuf_c_message_free_unpacked(m, NULL);
+    return rc;
+}
+
+/* ---- EnergySample and Snapshot ------------------------------------------------ */
+
+void mpp_fill_energy(Mpmd__EnergySample *es, const mpm_energy_sample *s)
+{
+    mpmd__energy_sample__init(es);
+    es->has_step = es->has_t = es->has_kinetic = es->has_strain = 1;
+    es->has_potential = es->has_external_work = es->has_total = es->has_mass = 1;
+    es->has_seq = 1;
+    es->step = s->step;
+    es->t = s->t;
+    es->kinetic = s->e.kinetic;
+    es->strain = s->e.strain;
+    es->potential = s->e.potential;
+    es->external_work = s->e.external_work;
+    es->total = s->e.total;
+    es->mass = s->e.mass;
+    es->seq = s->seq;
+    es->n_momentum = s->dim < 0 ? 0 : s->dim > MPM_MAX_DIM ? MPM_MAX_DIM : (size_t)s->dim;
+    es->momentum = (double *)s->e.momentum;
+}
+
+void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e)
+{
+    memset(s, 0, sizeof *s);
+    if (!e) return;
+    s->step = e->step;
+    s->t = e->t;
+    s->e.kinetic = e->kinetic;
+    s->e.strain = e->strain;
+    s->e.potential = e->potential;
+    s->e.external_work = e->external_work;
+    s->e.total = e->total;
+    s->e.mass = e->mass;
+    s->dim = e->n_momentum > MPM_MAX_DIM ? MPM_MAX_DIM : (int)e->n_momentum;
+    for (int d = 0; d < s->dim; d++) s->e.momentum[d] = e->momentum[d];
+    s->seq = e->seq;
+}
+
+void mpp_fill_snapshot(Mpmd__Snapshot *ps, const mpp_snapshot *s)
+{
+    size_t nd = s->n * (size_t)(s->dim > 0 ? s->dim : 0);
+    mpmd__snapshot__init(ps);
+    ps->has_step = ps->has_t = ps->has_n = ps->has_dim = 1;
+    ps->step = s->step;
+    ps->t = s->t;
+    ps->n = s->n;
+    ps->dim = (uint32_t)(s->dim > 0 ? s->dim : 0);
+    ps->n_x = s->x ? nd : 0;
+    ps->x = (double *)s->x;
+    ps->n_v = s->v ? nd : 0;
+    ps->v = (double *)s->v;
+    ps->n_stress = s->stress ? 6 * s->n : 0;
+    ps->stress = (double *)s->stress;
+    ps->n_pressure = s->pressure ? s->n : 0;
+    ps->pressure = (double *)s->pressure;
+    ps->n_volume = s->volume ? s->n : 0;
+    ps->volume = (double *)s->volume;
+}
+
+int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
+{
+    memset(s, 0, sizeof *s);
+    if (!ps) return 0;
+    s->step = ps->step;
+    s->t = ps->t;
+    s->n = (size_t)ps->n;
+    s->dim = ps->dim <= MPM_MAX_DIM ? (int)ps->dim : 0;
+    if ((ps->n_x || ps->n_v) && (ps->dim < 1 || ps->dim > MPM_MAX_DIM))
+        return mpm_fail(err, MPM_ESYNTAX, "snapshot.dim", "%u: must be 1, 2 or 3 with positions or velocities",
+                        ps->dim);
+    const struct {
+        const char *name;
+        size_t have;
+        uint64_t width;
+        double *v;
+        const double **dst;
+    } a[] = {{"x", ps->n_x, ps->dim, ps->x, &s->x},
+             {"v", ps->n_v, ps->dim, ps->v, &s->v},
+             {"stress", ps->n_stress, 6, ps->stress, &s->stress},
+             {"pressure", ps->n_pressure, 1, ps->pressure, &s->pressure},
+             {"volume", ps->n_volume, 1, ps->volume, &s->volume}};
+    for (size_t i = 0; i < sizeof a / sizeof a[0]; i++) {
+        if (!a[i].have) continue;
+        /* n * width without overflow: have / width == n exactly */
+        if (a[i].have % a[i].width || a[i].have / a[i].width != ps->n)
+            return mpm_fail(err, MPM_ESYNTAX, NULL,
+                            "snapshot.%s holds %zu values, not n = %llu times %llu", a[i].name, a[i].have,
+                            (unsigned long long)ps->n, (unsigned long long)a[i].width);
+        *a[i].dst = a[i].v;
+    }
+    return 0;
+}

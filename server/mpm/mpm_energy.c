@@ -1,0 +1,129 @@
+/*
+ * mpm_energy.c - the energy sums and the divergence guard.
+ *
+ * The energies are summed per thread over its slice of the particles and
+ * combined in thread order, so they are reproducible for a given thread
+ * count; the guard compares them with what the initial state and the loads
+ * can supply.
+ */
+#include "mpm_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+/* The divergence guard.  A blow-up need not produce a NaN: an unstable
+ * scheme (USL above C = 0.5, MPM when points cross cells) can multiply the
+ * energy by 1e4 and still finish.  Every MPM_GUARD_EVERY steps the kinetic
+ * plus strain energy is compared with what the loads can have supplied,
+ * E0 + 2 U0 (U0: the energy stored by an initial stress, see
+ * mpm_initial_stress_energy()) + (the loads' work, summed as |f . dx|) -
+ * (change of gravity's potential); it never
+ * exceeds that in the continuum, and the discrete schemes stay within a few
+ * per cent of it on every problem of the stress suite (make stress), the
+ * worst +29 % (MPM USF, one particle per cell).  Twice the available energy
+ * is a blow-up, recorded as MPM_EDIVERGED.  Cost: one pass over the
+ * particles every MPM_GUARD_EVERY steps, and whenever the largest particle
+ * speed (known every step) has doubled its square since the last check, so
+ * a fast blow-up is caught within a step or two; mpm_sim_check() runs it on
+ * demand (at the end of a run). */
+#define MPM_GUARD_FACTOR 2.0
+
+/* The guard's energies on the team: each thread sums its slice exactly as
+ * mpm_sim_energy() does, and the partial sums are added in thread order,
+ * so the result is reproducible for a given thread count (and with one
+ * thread equals mpm_sim_energy()'s).  A step asked for energies
+ * (mpm_sim_want_energy()) makes the same per-thread sums inside its
+ * kernels (mpm_kernels.c, esum_*), in the same particle order and with the
+ * same arithmetic; the guard then uses those. */
+void mpm_ph_energy(mpm_sim *s, int tid)
+{
+    const mpm_particles *P = &s->P;
+    int dim = s->dim;
+    size_t a, b;
+    mpm_particle_slice(s, tid, &a, &b);
+    double ek = 0, es = 0, ep = 0, mom[3] = {0, 0, 0}, ms = 0;
+    for (size_t p = a; p < b; p++) {
+        double m = P->m[p], v2 = 0;
+        for (int d = 0; d < dim; d++) {
+            v2 += P->v[d][p] * P->v[d][p];
+            mom[d] += m * P->v[d][p];
+            ep -= m * s->gravity[d] * P->x[d][p];
+        }
+        ek += 0.5 * m * v2;
+        es += 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
+        ms += m;
+    }
+    mpm_thread_out *o = &s->tout[tid];
+    o->ekin = ek;
+    o->estr = es;
+    o->epot = ep;
+    o->emass = ms;
+    for (int d = 0; d < 3; d++) o->emom[d] = mom[d];
+}
+
+/* The partial sums in tout combined in thread order (external work and
+ * total left out). */
+void mpm_energy_sum(const mpm_sim *s, mpm_energy *e)
+{
+    memset(e, 0, sizeof *e);
+    for (int t = 0; t < s->nthreads; t++) {
+        const mpm_thread_out *o = &s->tout[t];
+        e->kinetic += o->ekin;
+        e->strain += o->estr;
+        e->potential += o->epot;
+        e->mass += o->emass;
+        for (int d = 0; d < s->dim; d++) e->momentum[d] += o->emom[d];
+    }
+}
+
+int mpm_guard(mpm_sim *s)
+{
+    mpm_energy e;
+    if (s->ecache_ok) { /* summed by the step just taken: the same sums */
+        e = s->ecache;
+    } else {
+        mpm_team_run(s, mpm_ph_energy);
+        mpm_energy_sum(s, &e);
+    }
+    e.external_work = s->external_work;
+    double have = e.kinetic + fabs(e.strain); /* a blow-up can drive 1/2 sigma:eps negative */
+    s->guard_v2 = s->vmax * s->vmax;
+    /* the loads' work counted as its absolute value: a bound that holds
+     * however a coarse solution mis-integrates a force that does work
+     * back and forth (the manufactured solutions do) */
+    double avail = s->e_total0 - e.potential + s->external_work_abs;
+    if (isfinite(have) && have <= MPM_GUARD_FACTOR * fmax(avail, 0) + s->e_floor) return 0;
+    mpm_fail(&s->err, MPM_EDIVERGED, NULL,
+             "diverged at step %ld, time %.9g: kinetic + strain energy %.6g is more than %g "
+             "times the energy the initial state and the loads supply (%.6g)",
+             s->steps, s->t, have, MPM_GUARD_FACTOR, avail);
+    s->failed = MPM_EDIVERGED;
+    return s->failed;
+}
+
+/* The elastic energy stored by the initial stress, sum 1/2 sigma0 : C^-1 :
+ * sigma0 V0 (isotropic linear elasticity; 2D is plane strain with sigma_zz
+ * stored).  The reported strain energy 1/2 sigma : eps counts strain from
+ * the initial state, so a body released from an initial stress shows
+ * kinetic + strain energy up to 2 U0 with E0 = 0; the divergence guard
+ * counts 2 U0 as available (see mpm_guard()). */
+double mpm_initial_stress_energy(const mpm_sim *s)
+{
+    const mpm_particles *P = &s->P;
+    int dim = s->dim;
+    double u = 0;
+    for (size_t p = 0; p < P->n; p++) {
+        const mpm_mat_params *mp = &s->mats[P->mat[p]];
+        double E = mp->E, nu = mp->nu, w;
+        if (dim == 1) {
+            w = P->sig[0][p] * P->sig[0][p] / E;
+        } else {
+            double xx = P->sig[0][p], yy = P->sig[1][p], zz = P->sig[2][p], sh = P->sig[3][p] * P->sig[3][p];
+            if (dim == 3) sh += P->sig[4][p] * P->sig[4][p] + P->sig[5][p] * P->sig[5][p];
+            w = (xx * xx + yy * yy + zz * zz - 2 * nu * (xx * yy + yy * zz + zz * xx) + 2 * (1 + nu) * sh) / E;
+        }
+        u += 0.5 * w * P->vol[p];
+    }
+    return u;
+}
+

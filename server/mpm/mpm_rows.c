@@ -1,0 +1,323 @@
+/*
+ * mpm_rows.c - the active rows: where the particles' supports reach, the
+ * threads' scatter targets zeroed over them, and the node passes.
+ *
+ * Particle passes scatter only into the nodes their supports touch, and
+ * record them row by row (a row: the nodes along x at fixed y, z): each
+ * thread zeroes its private grid over its own rows' extents before
+ * scattering, node passes run over the extents of the union (the rows of
+ * the union box split among the threads), and the main grid outside the
+ * union's extents is kept all zero.  The cost of a step, and the pages of
+ * the grids ever touched, follow the particles, not the grid.
+ */
+#include "mpm_internal.h"
+
+#include <limits.h>
+#include <stdlib.h>
+#include <string.h>
+
+int mpm_rows_init(mpm_sim *s)
+{
+    s->nrows = (size_t)s->np[1] * (size_t)s->np[2];
+    if (!(s->ulo = malloc(s->nrows * sizeof *s->ulo)) || !(s->uhi = malloc(s->nrows * sizeof *s->uhi)) ||
+        !(s->rowoff = malloc((s->nrows + 1) * sizeof *s->rowoff)) ||
+        !(s->acc = calloc(s->nrows + 1, sizeof *s->acc)))
+        return MPM_ENOMEM;
+    for (int t = 0; t < s->nthreads; t++)
+        if (!(s->tout[t].rlo = malloc(s->nrows * sizeof(int))) ||
+            !(s->tout[t].rhi = malloc(s->nrows * sizeof(int))))
+            return MPM_ENOMEM;
+    for (size_t r = 0; r < s->nrows; r++) {
+        s->ulo[r] = INT_MAX;
+        s->uhi[r] = -1;
+        for (int t = 0; t < s->nthreads; t++) {
+            s->tout[t].rlo[r] = INT_MAX;
+            s->tout[t].rhi[r] = -1;
+        }
+    }
+    return 0;
+}
+
+/* Zeroes a thread's private field over the extents of its rows. */
+static void zero_rows(const mpm_sim *s, double *a, const mpm_thread_out *o)
+{
+    size_t nr = mpm_box_rows(o->blo, o->bhi);
+    for (size_t r = 0; r < nr; r++) {
+        size_t row = mpm_box_row(s, o->blo, o->bhi, r);
+        int lo = o->rlo[row], hi = o->rhi[row];
+        if (lo <= hi) memset(a + mpm_row_node(s, row, lo), 0, (size_t)(hi - lo + 1) * sizeof *a);
+    }
+}
+
+/* the grid fields in use, as a list */
+static int grid_fields(const mpm_sim *s, const mpm_gridbuf *b, double **out)
+{
+    int k = 0;
+    out[k++] = b->m;
+    for (int d = 0; d < s->dim; d++) {
+        out[k++] = b->q[d];
+        out[k++] = b->f[d];
+        if (b->q2[d]) out[k++] = b->q2[d];
+    }
+    return k;
+}
+
+/* box lo..hi = the union of the threads' boxes (clamped when recorded) */
+static void union_box(const mpm_sim *s, int lo[3], int hi[3])
+{
+    for (int d = 0; d < 3; d++) {
+        lo[d] = d < s->dim ? INT_MAX : 0;
+        hi[d] = d < s->dim ? -1 : 0;
+    }
+    for (int t = 0; t < s->nthreads; t++) {
+        const mpm_thread_out *o = &s->tout[t];
+        if (o->blo[0] > o->bhi[0]) continue;
+        for (int d = 0; d < s->dim; d++) {
+            if (o->blo[d] < lo[d]) lo[d] = o->blo[d];
+            if (o->bhi[d] > hi[d]) hi[d] = o->bhi[d];
+        }
+    }
+}
+
+/* zeroes nodes a..b (inclusive, possibly none) of a row in the fields f */
+static void zero_span(const mpm_sim *s, double *const *f, int nf, size_t row, int a, int b)
+{
+    if (a > b) return;
+    for (int i = 0; i < nf; i++) memset(f[i] + mpm_row_node(s, row, a), 0, (size_t)(b - a + 1) * sizeof(double));
+}
+
+/* Makes the active rows the union of the threads' rows as the last
+ * particle pass recorded them, and zeroes, in every field of the main
+ * grid, the nodes of the old extents outside the new ones (which keeps the
+ * main grid zero outside the active rows); then counts the new extents'
+ * nodes row by row (acc, for the node passes' split).  Serial; the rows
+ * visited are those of the old and the new box. */
+void mpm_rows_update(mpm_sim *s)
+{
+    int lo[3], hi[3], alo[3], ahi[3];
+    union_box(s, lo, hi);
+    int has_old = mpm_box_rows(s->blo, s->bhi) > 0, has_new = mpm_box_rows(lo, hi) > 0;
+    for (int d = 0; d < 3; d++) {
+        alo[d] = has_old && (!has_new || s->blo[d] < lo[d]) ? s->blo[d] : lo[d];
+        ahi[d] = has_old && (!has_new || s->bhi[d] > hi[d]) ? s->bhi[d] : hi[d];
+    }
+    double *f[10];
+    int nf = grid_fields(s, &s->g, f);
+    size_t nr = has_old || has_new ? mpm_box_rows(alo, ahi) : 0;
+    for (size_t r = 0; r < nr; r++) {
+        size_t row = mpm_box_row(s, alo, ahi, r);
+        int nlo = INT_MAX, nhi = -1;
+        for (int t = 0; t < s->nthreads; t++) {
+            const mpm_thread_out *o = &s->tout[t];
+            if (o->rlo[row] < nlo) nlo = o->rlo[row];
+            if (o->rhi[row] > nhi) nhi = o->rhi[row];
+        }
+        int olo = s->ulo[row], ohi = s->uhi[row];
+        if (nlo > nhi) {
+            zero_span(s, f, nf, row, olo, ohi);
+        } else {
+            zero_span(s, f, nf, row, olo, ohi < nlo - 1 ? ohi : nlo - 1);
+            zero_span(s, f, nf, row, olo > nhi + 1 ? olo : nhi + 1, ohi);
+        }
+        s->ulo[row] = nlo;
+        s->uhi[row] = nhi;
+    }
+    memcpy(s->blo, lo, sizeof lo);
+    memcpy(s->bhi, hi, sizeof hi);
+    size_t nb = mpm_box_rows(lo, hi), n = 0;
+    for (size_t r = 0; r < nb; r++) {
+        size_t row = mpm_box_row(s, lo, hi, r);
+        s->acc[r] = n;
+        if (s->ulo[row] <= s->uhi[row]) n += (size_t)(s->uhi[row] - s->ulo[row] + 1);
+    }
+    s->acc[nb] = n;
+    s->nact = n;
+}
+
+/* The scatter target of thread tid, zeroed over the thread's rows for the
+ * fields named: thread 0 scatters straight into the main grid (its sums
+ * come first in the reduction anyway), the others into private grids.
+ * While a pass scatters, nobody reads the fields it scatters into. */
+mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields)
+{
+    mpm_gridbuf *b = tid == 0 ? &s->g : &s->tbuf[tid];
+    const mpm_thread_out *o = &s->tout[tid];
+    if (fields & MPM_F_M) zero_rows(s, b->m, o);
+    for (int d = 0; d < s->dim; d++) {
+        if (fields & MPM_F_Q) zero_rows(s, b->q[d], o);
+        if (fields & MPM_F_F) zero_rows(s, b->f[d], o);
+        if (fields & MPM_F_Q2) zero_rows(s, b->q2[d], o);
+    }
+    return b;
+}
+
+/* ---- node passes split by nodes ----
+ *
+ * The nodes of the active rows' extents, numbered row by row over the box
+ * (acc[r]: those before row r), are split evenly among the threads, so a
+ * node pass is balanced however few the rows (1D has one) or however
+ * uneven their extents.  A thread's share is a run of segments, nodes
+ * a..b of a row.  Every node pass computes each node from that node alone,
+ * so the split changes no result. */
+typedef struct {
+    size_t r, nr, n, n1;
+} seg_iter;
+
+static void seg_begin(const mpm_sim *s, int tid, seg_iter *it)
+{
+    size_t n0, n1, lo = 0, hi = mpm_box_rows(s->blo, s->bhi);
+    mpm_slice(s->nact, s->nthreads, tid, &n0, &n1);
+    it->nr = hi;
+    while (lo < hi) { /* the first row r with acc[r + 1] > n0 */
+        size_t mid = lo + (hi - lo) / 2;
+        if (s->acc[mid + 1] > n0) hi = mid;
+        else lo = mid + 1;
+    }
+    it->r = lo;
+    it->n = n0;
+    it->n1 = n1;
+}
+
+static int seg_next(const mpm_sim *s, seg_iter *it, size_t *row, int *a, int *b)
+{
+    while (it->n < it->n1 && it->r < it->nr) {
+        size_t r = it->r++, w = s->acc[r + 1] - s->acc[r];
+        if (!w) continue;
+        size_t off = it->n - s->acc[r], take = w - off;
+        if (take > it->n1 - it->n) take = it->n1 - it->n;
+        *row = mpm_box_row(s, s->blo, s->bhi, r);
+        *a = s->ulo[*row] + (int)off;
+        *b = *a + (int)take - 1;
+        it->n += take;
+        return 1;
+    }
+    return 0;
+}
+
+static double *field_of(const mpm_gridbuf *b, int fl, int d)
+{
+    return fl == MPM_F_M ? b->m : fl == MPM_F_Q ? b->q[d] : fl == MPM_F_F ? b->f[d] : b->q2[d];
+}
+
+static void span_zero(double *restrict dst, size_t a, size_t b)
+{
+    if (a <= b) memset(dst + a, 0, (b - a + 1) * sizeof *dst);
+}
+
+static void span_copy(double *restrict dst, const double *restrict src, size_t a, size_t b)
+{
+    if (a <= b) memcpy(dst + a, src + a, (b - a + 1) * sizeof *dst);
+}
+
+static void span_add(double *restrict dst, const double *restrict src, size_t a, size_t b)
+{
+    if (a > b) return;
+    for (size_t n = a; n <= b; n++) dst[n] += src[n];
+}
+
+/* Sums the private grids of the fields named into the grid over nodes
+ * a..b of a row, in thread order.  Thread 0's values are in place; each
+ * further thread adds its values where an earlier thread's extent
+ * (within a..b) lies, copies them where none did (0 + v = v), and any gap
+ * between the two is zeroed; what no thread touched is zeroed at the
+ * end.  The extents are intervals, so the nodes already summed always
+ * form one interval ia..ib. */
+static void reduce_seg(mpm_sim *s, int fields, size_t row, int a, int b)
+{
+    int T = s->nthreads;
+    size_t base = mpm_row_node(s, row, 0);
+    for (int pass = 0; pass < 4; pass++) {
+        int fl = 1 << pass;
+        if (!(fields & fl)) continue;
+        for (int d = 0; d < (fl == MPM_F_M ? 1 : s->dim); d++) {
+            double *dst = field_of(&s->g, fl, d) + base;
+            long ia = 1, ib = 0; /* empty */
+            for (int t = 0; t < T; t++) {
+                const mpm_thread_out *o = &s->tout[t];
+                long lo = o->rlo[row] > a ? o->rlo[row] : a, hi = o->rhi[row] < b ? o->rhi[row] : b;
+                if (lo > hi) continue;
+                if (t == 0) {
+                    ia = lo;
+                    ib = hi;
+                    continue;
+                }
+                const double *src = field_of(&s->tbuf[t], fl, d) + base;
+                if (ia > ib) {
+                    span_copy(dst, src, (size_t)lo, (size_t)hi);
+                    ia = lo;
+                    ib = hi;
+                    continue;
+                }
+                if (hi < ia - 1) span_zero(dst, (size_t)hi + 1, (size_t)ia - 1);
+                if (lo > ib + 1) span_zero(dst, (size_t)ib + 1, (size_t)lo - 1);
+                if (lo < ia) span_copy(dst, src, (size_t)lo, (size_t)(hi < ia - 1 ? hi : ia - 1));
+                if (hi > ib) span_copy(dst, src, (size_t)(lo > ib + 1 ? lo : ib + 1), (size_t)hi);
+                long sa = lo > ia ? lo : ia, sb = hi < ib ? hi : ib;
+                if (sa <= sb) span_add(dst, src, (size_t)sa, (size_t)sb);
+                if (lo < ia) ia = lo;
+                if (hi > ib) ib = hi;
+            }
+            if (ia > ib) {
+                span_zero(dst, (size_t)a, (size_t)b);
+            } else {
+                if (ia > a) span_zero(dst, (size_t)a, (size_t)ia - 1);
+                if (ib < b) span_zero(dst, (size_t)ib + 1, (size_t)b);
+            }
+        }
+    }
+}
+
+/* support box and row extents of the thread's slice, nothing moved */
+void mpm_ph_bbox(mpm_sim *s, int tid)
+{
+    size_t a, b;
+    mpm_particle_slice(s, tid, &a, &b);
+    s->k->bbox(s, &s->tout[tid], a, b);
+}
+
+/* A node pass over the thread's share of the extents' nodes, each node in
+ * the step's order: reduce the fields named (MPM_F_*), then inverse mass with
+ * phantom nodes (m <= M_TOL) at 0 (MPM_N_MINV), gravity f += m g (MPM_N_GRAV,
+ * sum_p m_p b S_np), BC1 on q (MPM_N_BC1) or on q2 (MPM_N_BC1Q2), BC2 on f
+ * (MPM_N_BC2), and q += f dt (MPM_N_UPD: Eq. 13 integrated, Fig. 6 step 6). */
+void mpm_node_pass(mpm_sim *s, int tid, int ops)
+{
+    int fields = ops & (MPM_F_M | MPM_F_Q | MPM_F_F | MPM_F_Q2);
+    double mtol = s->mtol, dt = s->dt;
+#ifdef MPM_LEAN
+    ops &= ~(MPM_N_GRAV | MPM_N_BC1 | MPM_N_BC1Q2 | MPM_N_BC2);
+#endif
+    if (!s->has_gravity) ops &= ~MPM_N_GRAV;
+    if (!s->nfixed) ops &= ~(MPM_N_BC1 | MPM_N_BC1Q2 | MPM_N_BC2);
+    seg_iter it;
+    seg_begin(s, tid, &it);
+    size_t row;
+    int lo, hi;
+    while (seg_next(s, &it, &row, &lo, &hi)) {
+        if (fields && s->nthreads > 1) reduce_seg(s, fields, row, lo, hi);
+        size_t base = mpm_row_node(s, row, lo), w = (size_t)(hi - lo + 1);
+        if (ops & MPM_N_MINV) {
+            const double *restrict m = s->g.m + base;
+            double *restrict mi = s->minv + base;
+            for (size_t i = 0; i < w; i++) mi[i] = m[i] > mtol ? 1.0 / m[i] : 0.0;
+        }
+        if (ops & MPM_N_GRAV)
+            for (int d = 0; d < s->dim; d++) {
+                double gd = s->gravity[d];
+                if (gd == 0) continue;
+                const double *restrict m = s->g.m + base;
+                double *restrict f = s->g.f[d] + base;
+                for (size_t i = 0; i < w; i++) f[i] += gd * m[i];
+            }
+        if (ops & MPM_N_BC1) mpm_bc_zero(s, s->g.q, base, base + w - 1);
+        if (ops & MPM_N_BC1Q2) mpm_bc_zero(s, s->g.q2, base, base + w - 1);
+        if (ops & MPM_N_BC2) mpm_bc_zero(s, s->g.f, base, base + w - 1);
+        if (ops & MPM_N_UPD)
+            for (int d = 0; d < s->dim; d++) {
+                double *restrict q = s->g.q[d] + base;
+                const double *restrict f = s->g.f[d] + base;
+                for (size_t i = 0; i < w; i++) q[i] += f[i] * dt;
+            }
+    }
+}
+

@@ -1,0 +1,122 @@
+/*
+ * mpm_team.c - the thread team that runs a simulation's passes.
+ *
+ * A simulation with nthreads > 1 keeps nthreads - 1 worker threads for its
+ * whole life; the caller's thread is thread 0.  mpm_team_run() hands the
+ * team one phase: every thread runs fn(s, tid) between two barriers
+ * (bar_start, bar_end), and the phase's passes meet at bar_end in between
+ * (mpm_team_sync()).  The workers are started behind a gate that opens
+ * only once all of them exist, so a failed pthread_create() leaves no
+ * thread waiting at a barrier of the wrong size: the started ones are
+ * released through the gate, joined, and the simulation stays serial.
+ */
+#include "mpm_internal.h"
+
+#include <stdlib.h>
+
+typedef struct {
+    mpm_sim *s;
+    int tid;
+} worker_arg;
+
+static void *worker(void *arg)
+{
+    worker_arg wa = *(worker_arg *)arg;
+    mpm_sim *s = wa.s;
+    free(arg);
+    /* the gate opens (1) once every thread exists, or aborts (-1) */
+    pthread_mutex_lock(&s->gate_mu);
+    while (s->gate == 0) pthread_cond_wait(&s->gate_cv, &s->gate_mu);
+    int go = s->gate > 0;
+    pthread_mutex_unlock(&s->gate_mu);
+    if (!go) return NULL;
+    for (;;) {
+        pthread_barrier_wait(&s->bar_start);
+        if (s->quit) break;
+        s->phase(s, wa.tid);
+        pthread_barrier_wait(&s->bar_end);
+    }
+    return NULL;
+}
+
+void mpm_team_run(mpm_sim *s, mpm_phase_fn fn)
+{
+    if (s->nthreads == 1) {
+        fn(s, 0);
+        return;
+    }
+    s->phase = fn;
+    pthread_barrier_wait(&s->bar_start);
+    fn(s, 0);
+    pthread_barrier_wait(&s->bar_end);
+}
+
+static void open_gate(mpm_sim *s, int v)
+{
+    pthread_mutex_lock(&s->gate_mu);
+    s->gate = v;
+    pthread_cond_broadcast(&s->gate_cv);
+    pthread_mutex_unlock(&s->gate_mu);
+}
+
+int mpm_team_start(mpm_sim *s)
+{
+    int T = s->nthreads, started = 1, rc = 0;
+    if (T == 1) return 0;
+    if (!(s->threads = calloc((size_t)T, sizeof *s->threads))) return MPM_ENOMEM;
+    if (pthread_mutex_init(&s->gate_mu, NULL)) return MPM_ENOMEM;
+    if (pthread_cond_init(&s->gate_cv, NULL)) {
+        pthread_mutex_destroy(&s->gate_mu);
+        return MPM_ENOMEM;
+    }
+    s->sync_init = 1;
+    if (pthread_barrier_init(&s->bar_start, NULL, (unsigned)T)) return MPM_ENOMEM;
+    if (pthread_barrier_init(&s->bar_end, NULL, (unsigned)T)) {
+        pthread_barrier_destroy(&s->bar_start);
+        return MPM_ENOMEM;
+    }
+    s->sync_init = 2;
+    for (; started < T; started++) {
+        worker_arg *wa = malloc(sizeof *wa);
+        if (!wa) {
+            rc = MPM_ENOMEM;
+            break;
+        }
+        wa->s = s;
+        wa->tid = started;
+        if (pthread_create(&s->threads[started], NULL, worker, wa)) {
+            free(wa);
+            rc = MPM_ENOMEM;
+            break;
+        }
+    }
+    if (rc) {
+        open_gate(s, -1);
+        for (int t = 1; t < started; t++) pthread_join(s->threads[t], NULL);
+        free(s->threads);
+        s->threads = NULL;
+        return rc;
+    }
+    open_gate(s, 1);
+    return 0;
+}
+
+void mpm_team_stop(mpm_sim *s)
+{
+    if (s->threads) {
+        s->quit = 1;
+        pthread_barrier_wait(&s->bar_start);
+        for (int t = 1; t < s->nthreads; t++) pthread_join(s->threads[t], NULL);
+        free(s->threads);
+        s->threads = NULL;
+    }
+    if (s->sync_init >= 2) {
+        pthread_barrier_destroy(&s->bar_start);
+        pthread_barrier_destroy(&s->bar_end);
+    }
+    if (s->sync_init >= 1) {
+        pthread_mutex_destroy(&s->gate_mu);
+        pthread_cond_destroy(&s->gate_cv);
+    }
+    s->sync_init = 0;
+}

@@ -1,0 +1,626 @@
+/*
+ * store_open.c - opening and closing the run store (see store.h): the
+ * one-daemon lock, the connection settings, the schema migrations, crash
+ * recovery and the writer thread's start; also what the store's files
+ * share: the calling thread's error, logging, the on-disk names of the
+ * enums and the SQLite helpers (store_internal.h).
+ *
+ * Open.  store_open: flock(<path>.lock) (non-blocking; one daemon per
+ * database), then WAL, busy_timeout, foreign keys, schema migrations (the
+ * table of steps `migrations[]`, the pending ones applied in order in one
+ * transaction, the version recorded in PRAGMA user_version), crash
+ * recovery (runs left 'running' or 'queued' become 'interrupted'; queued
+ * ones too, because the daemon's job queue lives in memory and nothing would
+ * ever start them; steps and final energies become those of the run's last
+ * energy sample), the next run id, the commit-notification eventfd and the
+ * writer thread (store_writer.c).  Reads use connections of their own
+ * (store_read.c).
+ *
+ * On disk.  Status, method and update are stored as text ('queued',
+ * 'gimp', 'musl'), so a database reads the same whatever the C enums'
+ * values; the API speaks mpp_status, mpm_method and mpm_update.
+ */
+#define _GNU_SOURCE
+#include "store_internal.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <inttypes.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/eventfd.h>
+#include <sys/file.h>
+#include <time.h>
+#include <unistd.h>
+
+/* ---------------------------------------------------------------------- */
+/* Schema migrations: migrations[v] takes the schema from version v to v+1.
+ * Append only; never edit a released step. */
+
+static const char *const migrations[] = {
+    /* 0 -> 1: everything */
+    "CREATE TABLE runs ("
+    "  id             INTEGER PRIMARY KEY,"
+    "  name           TEXT NOT NULL DEFAULT '',"
+    "  case_pb        BLOB NOT NULL,"
+    "  case_hash      TEXT NOT NULL,"
+    "  method         TEXT NOT NULL CHECK (method IN ('mpm','gimp')),"
+    "  update_scheme  TEXT NOT NULL CHECK (update_scheme IN ('usf','usl','musl')),"
+    "  dim            INTEGER NOT NULL CHECK (dim BETWEEN 1 AND 3),"
+    "  particles      INTEGER NOT NULL DEFAULT 0,"
+    "  nodes          INTEGER NOT NULL DEFAULT 0,"
+    "  status         TEXT NOT NULL CHECK (status IN ('queued','running',"
+    "                   'finished','failed','cancelled','interrupted')),"
+    "  submitted_at   REAL NOT NULL,"
+    "  started_at     REAL,"
+    "  ended_at       REAL,"
+    "  steps_done     INTEGER NOT NULL DEFAULT 0,"
+    "  wall_s         REAL,"
+    "  psteps_per_s   REAL,"
+    "  kinetic        REAL,"
+    "  strain         REAL,"
+    "  potential      REAL,"
+    "  external_work  REAL,"
+    "  total          REAL,"
+    "  error          TEXT,"
+    "  server_version TEXT NOT NULL DEFAULT ''"
+    ");"
+    "CREATE INDEX runs_by_status ON runs(status, id);"
+    "CREATE INDEX runs_by_case_hash ON runs(case_hash);"
+    "CREATE TABLE energy ("
+    "  run_id        INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,"
+    "  seq           INTEGER NOT NULL,"
+    "  step          INTEGER NOT NULL,"
+    "  t             REAL,"
+    "  kinetic       REAL,"
+    "  strain        REAL,"
+    "  potential     REAL,"
+    "  external_work REAL,"
+    "  total         REAL,"
+    "  momentum_x    REAL,"
+    "  momentum_y    REAL,"
+    "  momentum_z    REAL,"
+    "  mass          REAL,"
+    "  PRIMARY KEY (run_id, seq)"
+    ") WITHOUT ROWID;"
+    "CREATE TABLE snapshots ("
+    "  run_id INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,"
+    "  step   INTEGER NOT NULL,"
+    "  t      REAL,"
+    "  n      INTEGER NOT NULL CHECK (n >= 0),"
+    "  dim    INTEGER NOT NULL CHECK (dim BETWEEN 1 AND 3),"
+    "  fields INTEGER NOT NULL,"
+    "  data   BLOB NOT NULL,"
+    "  PRIMARY KEY (run_id, step)"
+    ");",
+    /* 1 -> 2: the case hash goes (nothing ever read it), and the columns
+     * take the schema's names (mpmd.RunInfo); "update" is an SQL keyword,
+     * so every statement quotes it. */
+    "DROP INDEX runs_by_case_hash;"
+    "ALTER TABLE runs DROP COLUMN case_hash;"
+    "ALTER TABLE runs RENAME COLUMN update_scheme TO \"update\";"
+    "ALTER TABLE runs RENAME COLUMN ended_at TO finished_at;"
+    "ALTER TABLE runs RENAME COLUMN steps_done TO steps;",
+};
+
+_Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,
+               "one migration step per schema version");
+
+/* ---------------------------------------------------------------------- */
+/* Errors, logging, time */
+
+static _Thread_local mpm_error tl_err;
+
+const mpm_error *store_error(void) { return &tl_err; }
+mpm_error *sti_error(void) { return &tl_err; }
+
+int sti_fail(int code, const char *fmt, ...)
+{
+    char msg[MPM_ERROR_MSG_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    return mpm_fail(&tl_err, code, NULL, "%s", msg);
+}
+
+int sti_sql_fail(sqlite3 *db, int rc, const char *what)
+{
+    const char *msg = db ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
+    if (db && sqlite3_errcode(db) == SQLITE_OK)
+        msg = sqlite3_errstr(rc);
+    return sti_fail((rc & 0xff) == SQLITE_NOMEM ? MPM_ENOMEM : MPM_EIO, "%s: %s", what, msg);
+}
+
+/* Prefixes the thread's error message with "database PATH: ". */
+static int fail_in(const char *path, int code)
+{
+    char m[MPM_ERROR_MSG_MAX];
+    snprintf(m, sizeof m, "%s", tl_err.message);
+    return sti_fail(code, "database %s: %s", path, m);
+}
+
+static void default_log(void *ud, const char *msg)
+{
+    (void)ud;
+    fprintf(stderr, "mpmd store: %s\n", msg);
+}
+
+void sti_log(store *s, const char *fmt, ...)
+{
+    char buf[768];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    s->log(s->log_ud, buf);
+}
+
+double sti_mono_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+double store_time_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+const char *store_sqlite_version(void)
+{
+    return sqlite3_libversion();
+}
+
+/* ---------------------------------------------------------------------- */
+/* On-disk names of the enums */
+
+const char *const sti_status_names[STORE_NSTATUS] = {
+    "queued", "running", "finished", "failed", "cancelled", "interrupted"
+};
+const char *const sti_method_names[2] = { "mpm", "gimp" };
+const char *const sti_update_names[3] = { "usf", "usl", "musl" };
+
+_Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
+               MPP_STATUS_FINISHED == 3 && MPP_STATUS_FAILED == 4 &&
+               MPP_STATUS_CANCELLED == 5 && MPP_STATUS_INTERRUPTED == MPP_STATUS_MAX,
+               "sti_status_names follows mpp_status");
+_Static_assert(MPM_METHOD_MPM == 0 && MPM_METHOD_GIMP == 1, "sti_method_names");
+_Static_assert(MPM_USF == 0 && MPM_USL == 1 && MPM_MUSL == 2, "sti_update_names");
+
+int sti_status_ok(mpp_status st) { return st >= MPP_STATUS_MIN && st <= MPP_STATUS_MAX; }
+int sti_method_ok(mpm_method m) { return (unsigned)m < 2; }
+int sti_update_ok(mpm_update u) { return (unsigned)u < 3; }
+
+const char *sti_status_name(mpp_status st)
+{
+    return sti_status_ok(st) ? sti_status_names[st - MPP_STATUS_MIN] : "?";
+}
+
+int sti_parse_name(const char *name, const char *const *names, int n)
+{
+    for (int i = 0; name && i < n; i++)
+        if (!strcmp(name, names[i])) return i;
+    return -1;
+}
+
+/* ---------------------------------------------------------------------- */
+/* SQLite helpers */
+
+int sti_exec(sqlite3 *db, const char *sql, const char *what)
+{
+    char *msg = NULL;
+    int rc = sqlite3_exec(db, sql, NULL, NULL, &msg);
+    if (rc != SQLITE_OK) {
+        int code = (rc & 0xff) == SQLITE_NOMEM ? MPM_ENOMEM : MPM_EIO;
+        sti_fail(code, "%s: %s", what, msg ? msg : sqlite3_errstr(rc));
+        sqlite3_free(msg);
+        return code;
+    }
+    return 0;
+}
+
+int sti_query1(sqlite3 *db, const char *sql, int64_t *v, char *txt, size_t txtlen)
+{
+    sqlite3_stmt *st = NULL;
+    int rc = sqlite3_prepare_v2(db, sql, -1, &st, NULL);
+    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, sql);
+    rc = sqlite3_step(st);
+    if (rc != SQLITE_ROW) {
+        int r = rc == SQLITE_DONE ? sti_fail(MPM_EIO, "%s: no result", sql)
+                                  : sti_sql_fail(db, rc, sql);
+        sqlite3_finalize(st);   /* returns the step's error, reported above */
+        return r;
+    }
+    if (v) *v = sqlite3_column_int64(st, 0);
+    if (txt) {
+        const unsigned char *t = sqlite3_column_text(st, 0);
+        snprintf(txt, txtlen, "%s", t ? (const char *)t : "");
+    }
+    rc = sqlite3_finalize(st);
+    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, sql);
+    return 0;
+}
+
+int sti_conn_setup(sqlite3 *db, int busy_ms)
+{
+    int rc = sqlite3_extended_result_codes(db, 1);
+    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, "extended result codes");
+    rc = sqlite3_busy_timeout(db, busy_ms);
+    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, "busy_timeout");
+    return sti_exec(db, "PRAGMA foreign_keys = ON", "enabling foreign keys");
+}
+
+void sti_close_db(store *s, sqlite3 *db)
+{
+    int rc = sqlite3_close(db);
+    if (rc != SQLITE_OK) sti_log(s, "closing a connection: %s", sqlite3_errstr(rc));
+}
+
+/* Keeps the first column of each row (the last one wins). */
+static int raw_row(void *ud, int ncol, char **vals, char **names)
+{
+    (void)names;
+    if (ud && ncol > 0 && vals[0]) *(int64_t *)ud = strtoll(vals[0], NULL, 10);
+    return 0;
+}
+
+int store_exec_raw(const char *path, const char *sql, int64_t *result)
+{
+    if (!path || !sql) return sti_fail(MPM_EINVAL, "store_exec_raw: NULL argument");
+    sqlite3 *db = NULL;
+    int rc = sqlite3_open_v2(path, &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL);
+    if (rc != SQLITE_OK) {
+        int r = sti_fail(MPM_EIO, "cannot open database %s: %s", path,
+                         db ? sqlite3_errmsg(db) : sqlite3_errstr(rc));
+        sqlite3_close(db);
+        return r;
+    }
+    char *msg = NULL;
+    rc = sqlite3_exec(db, sql, raw_row, result, &msg);
+    int r = 0;
+    if (rc != SQLITE_OK)
+        r = sti_fail(MPM_EIO, "database %s: %s", path, msg ? msg : sqlite3_errstr(rc));
+    sqlite3_free(msg);
+    rc = sqlite3_close(db);
+    if (!r && rc != SQLITE_OK)
+        r = sti_fail(MPM_EIO, "closing database %s: %s", path, sqlite3_errstr(rc));
+    return r;
+}
+
+/* ---------------------------------------------------------------------- */
+/* Lock file: one daemon per database */
+
+static int lock_acquire(store *s)
+{
+    int fd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd < 0)
+        return sti_fail(MPM_EIO, "cannot open lock file %s: %s", s->lock_path,
+                        strerror(errno));
+    if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
+        int e = errno;
+        if (e == EWOULDBLOCK) {
+            char buf[32] = { 0 };
+            ssize_t n = pread(fd, buf, sizeof buf - 1, 0);
+            long pid = 0;
+            char *end = NULL;
+            if (n > 0) pid = strtol(buf, &end, 10);
+            close(fd);
+            if (n > 0 && end != buf && pid > 0)
+                return sti_fail(MPM_ELOCKED, "database %s is in use by another mpmd (pid %ld)",
+                                s->path, pid);
+            return sti_fail(MPM_ELOCKED, "database %s is in use by another mpmd (pid unknown)",
+                            s->path);
+        }
+        close(fd);
+        return sti_fail(MPM_EIO, "cannot lock %s: %s", s->lock_path, strerror(e));
+    }
+    char pid[32];
+    int n = snprintf(pid, sizeof pid, "%ld\n", (long)getpid());
+    if (ftruncate(fd, 0) != 0 || pwrite(fd, pid, (size_t)n, 0) != n) {
+        int e = errno;
+        close(fd);
+        return sti_fail(MPM_EIO, "cannot write pid into %s: %s", s->lock_path, strerror(e));
+    }
+    s->lock_fd = fd;
+    return 0;
+}
+
+static void lock_release(store *s)
+{
+    if (s->lock_fd < 0) return;
+    /* empty the pid before the lock goes; the file stays (unlinking a lock
+     * file races with a process that has just opened it) */
+    if (ftruncate(s->lock_fd, 0) != 0)
+        sti_log(s, "cannot truncate %s: %s", s->lock_path, strerror(errno));
+    close(s->lock_fd);        /* releases the flock */
+    s->lock_fd = -1;
+}
+
+/* ---------------------------------------------------------------------- */
+/* The writer connection */
+
+static int open_writer(store *s)
+{
+    int rc = sqlite3_open_v2(s->path, &s->wdb,
+                             SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE |
+                             SQLITE_OPEN_NOMUTEX, NULL);
+    if (rc != SQLITE_OK) {
+        int r = sti_fail(MPM_EIO, "cannot open database %s: %s", s->path,
+                         s->wdb ? sqlite3_errmsg(s->wdb) : sqlite3_errstr(rc));
+        if (s->wdb) sti_close_db(s, s->wdb);
+        s->wdb = NULL;
+        return r;
+    }
+    int r = sti_conn_setup(s->wdb, s->busy_ms);
+    if (r) return r;
+    char mode[16];
+    r = sti_query1(s->wdb, "PRAGMA journal_mode = WAL", NULL, mode, sizeof mode);
+    if (r) return fail_in(s->path, r);   /* e.g. "file is not a database": name the file */
+    if (strcmp(mode, "wal"))
+        return sti_fail(MPM_EIO, "database %s: cannot enable WAL journal mode (got '%s')",
+                        s->path, mode);
+    r = sti_exec(s->wdb, "PRAGMA synchronous = NORMAL", "synchronous");
+    if (r) return r;
+    int64_t fk = 0;
+    r = sti_query1(s->wdb, "PRAGMA foreign_keys", &fk, NULL, 0);
+    if (r) return r;
+    if (fk != 1) return sti_fail(MPM_EIO, "this SQLite does not enforce foreign keys");
+    return 0;
+}
+
+/* Rolls back the writer's open transaction after a failure, keeping the
+ * thread's error (a failed rollback is logged). */
+static int rollback_keep(store *s, int r, const char *what)
+{
+    if (!sqlite3_get_autocommit(s->wdb)) {
+        mpm_error keep = tl_err;
+        if (sti_exec(s->wdb, "ROLLBACK", "rollback"))
+            sti_log(s, "rollback after %s: %s", what, tl_err.message);
+        tl_err = keep;
+    }
+    return r;
+}
+
+/* ---------------------------------------------------------------------- */
+/* Migrations and crash recovery */
+
+static int migrate(store *s)
+{
+    sqlite3 *db = s->wdb;
+    int64_t uv = 0, appid = 0, ntables = 0;
+    int r = sti_exec(db, "BEGIN IMMEDIATE", "starting the migration transaction");
+    if (r) return r;
+    if ((r = sti_query1(db, "PRAGMA user_version", &uv, NULL, 0)) ||
+        (r = sti_query1(db, "PRAGMA application_id", &appid, NULL, 0)) ||
+        (r = sti_query1(db, "SELECT count(*) FROM sqlite_master", &ntables, NULL, 0)))
+        return rollback_keep(s, r, "a failed migration");
+    if (appid != 0 && appid != STORE_APP_ID) {
+        r = sti_fail(MPM_ESCHEMA, "%s is not an mpmd database (application_id 0x%" PRIx64 ")",
+                     s->path, (uint64_t)appid);
+        return rollback_keep(s, r, "a failed migration");
+    }
+    if (uv == 0 && ntables > 0) {
+        r = sti_fail(MPM_ESCHEMA, "%s is not an mpmd database (it has tables but no schema "
+                     "version)", s->path);
+        return rollback_keep(s, r, "a failed migration");
+    }
+    if (uv > STORE_SCHEMA_VERSION || uv < 0) {
+        r = sti_fail(MPM_ESCHEMA, "database %s has schema version %" PRId64
+                     ", newer than this mpmd supports (%d)", s->path, uv, STORE_SCHEMA_VERSION);
+        return rollback_keep(s, r, "a failed migration");
+    }
+    for (int64_t v = uv; v < STORE_SCHEMA_VERSION; v++) {
+        char what[64], sql[64];
+        snprintf(what, sizeof what, "schema migration %" PRId64 " -> %" PRId64, v, v + 1);
+        if ((r = sti_exec(db, migrations[v], what)))
+            return rollback_keep(s, r, "a failed migration");
+        snprintf(sql, sizeof sql, "PRAGMA user_version = %" PRId64, v + 1);
+        if ((r = sti_exec(db, sql, what))) return rollback_keep(s, r, "a failed migration");
+    }
+    if (uv == 0) {
+        char sql[64];
+        snprintf(sql, sizeof sql, "PRAGMA application_id = %d", STORE_APP_ID);
+        if ((r = sti_exec(db, sql, "setting application_id")))
+            return rollback_keep(s, r, "a failed migration");
+    }
+    if ((r = sti_exec(db, "COMMIT", "committing the schema migration")))
+        return rollback_keep(s, r, "a failed migration");
+    if (uv == 0)
+        sti_log(s, "%s: new database, schema version %d", s->path, STORE_SCHEMA_VERSION);
+    else if (uv < STORE_SCHEMA_VERSION)
+        sti_log(s, "%s: schema migrated from version %" PRId64 " to %d", s->path, uv,
+                STORE_SCHEMA_VERSION);
+    return 0;
+}
+
+/* Runs `UPDATE ... SET status='interrupted', error=?1 WHERE status=?2`.
+ * The steps done and the final energies become those of the run's last
+ * stored energy sample: the progress figures in the row lag behind it or
+ * run ahead of it by whatever the crash left, while the sample is a
+ * consistent state (its step, t and energies belong together, and RunInfo
+ * takes t and the last energies from it). */
+static int recover_status(store *s, const char *from, const char *error, int64_t *count)
+{
+    sqlite3_stmt *st = NULL;
+#define LAST_SAMPLE(cols) "(SELECT " cols " FROM energy WHERE run_id = runs.id ORDER BY seq DESC LIMIT 1)"
+    const char *sql =
+        "UPDATE runs SET status = 'interrupted', error = ?1,"
+        " steps = COALESCE(" LAST_SAMPLE("step") ", steps),"
+        " (kinetic, strain, potential, external_work, total) ="
+        " " LAST_SAMPLE("kinetic, strain, potential, external_work, total")
+        " WHERE status = ?2";
+#undef LAST_SAMPLE
+    int rc = sqlite3_prepare_v2(s->wdb, sql, -1, &st, NULL);
+    if (rc != SQLITE_OK) return sti_sql_fail(s->wdb, rc, "crash recovery");
+    rc = sqlite3_bind_text(st, 1, error, -1, SQLITE_STATIC);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_text(st, 2, from, -1, SQLITE_STATIC);
+    if (rc == SQLITE_OK) rc = sqlite3_step(st);
+    int r = rc == SQLITE_DONE ? 0 : sti_sql_fail(s->wdb, rc, "crash recovery");
+    *count = sqlite3_changes(s->wdb);
+    rc = sqlite3_finalize(st);
+    if (!r && rc != SQLITE_OK) r = sti_sql_fail(s->wdb, rc, "crash recovery");
+    return r;
+}
+
+static int recover(store *s)
+{
+    int r = sti_exec(s->wdb, "BEGIN IMMEDIATE", "crash recovery");
+    if (r) return r;
+    if ((r = recover_status(s, "running", STORE_INTERRUPTED_RUNNING, &s->rec_running)) ||
+        (r = recover_status(s, "queued", STORE_INTERRUPTED_QUEUED, &s->rec_queued)) ||
+        (r = sti_exec(s->wdb, "COMMIT", "crash recovery")))
+        return rollback_keep(s, r, "failed recovery");
+    if (s->rec_running || s->rec_queued)
+        sti_log(s, "%s: marked %" PRId64 " running and %" PRId64
+                " queued runs of a previous daemon 'interrupted'",
+                s->path, s->rec_running, s->rec_queued);
+    return 0;
+}
+
+/* ---------------------------------------------------------------------- */
+/* Open and close */
+
+/* Frees everything; the writer thread must not be running. */
+static void destroy(store *s)
+{
+    sti_readers_close(s);
+    sti_writer_free(s);
+    if (s->wdb) sti_close_db(s, s->wdb);   /* last connection: checkpoints, drops the WAL */
+    s->wdb = NULL;
+    lock_release(s);
+    if (s->notify_fd >= 0) close(s->notify_fd);
+    if (s->sync_ready) {
+        pthread_mutex_destroy(&s->mu);
+        pthread_mutex_destroy(&s->pool_mu);
+        pthread_cond_destroy(&s->cv_work);
+        pthread_cond_destroy(&s->cv_done);
+    }
+    free(s->path);
+    free(s->lock_path);
+    free(s);
+}
+
+static int init_sync(store *s)
+{
+    pthread_condattr_t ca;
+    if (pthread_condattr_init(&ca)) return sti_fail(MPM_ENOMEM, "pthread_condattr_init failed");
+    int e = pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+    if (e) {
+        pthread_condattr_destroy(&ca);
+        return sti_fail(MPM_ENOMEM, "pthread_condattr_setclock: %s", strerror(e));
+    }
+    if (pthread_mutex_init(&s->mu, NULL)) goto f0;
+    if (pthread_mutex_init(&s->pool_mu, NULL)) goto f1;
+    if (pthread_cond_init(&s->cv_work, &ca)) goto f2;
+    if (pthread_cond_init(&s->cv_done, &ca)) goto f3;
+    pthread_condattr_destroy(&ca);
+    s->sync_ready = 1;
+    return 0;
+f3: pthread_cond_destroy(&s->cv_work);
+f2: pthread_mutex_destroy(&s->pool_mu);
+f1: pthread_mutex_destroy(&s->mu);
+f0: pthread_condattr_destroy(&ca);
+    return sti_fail(MPM_ENOMEM, "cannot initialise the store's mutexes");
+}
+
+static int open_notify(store *s)
+{
+    s->notify_fd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    if (s->notify_fd < 0)
+        return sti_fail(MPM_EIO, "cannot create the commit eventfd: %s", strerror(errno));
+    return 0;
+}
+
+/* The store with the options applied, or NULL (out of memory). */
+static store *store_alloc(const char *path, const store_options *opt)
+{
+    store *s = calloc(1, sizeof *s);
+    if (!s) return NULL;
+    s->lock_fd = -1;
+    s->notify_fd = -1;
+    s->log = default_log;
+    s->batch_s = DEFAULT_BATCH_MS / 1000;
+    s->batch_ops = DEFAULT_BATCH_OPS;
+    s->cap = DEFAULT_QUEUE_CAP;
+    s->busy_ms = DEFAULT_BUSY_MS;
+    if (opt) {
+        if (opt->batch_ms > 0) s->batch_s = opt->batch_ms / 1000;
+        if (opt->batch_ops > 0) s->batch_ops = opt->batch_ops;
+        if (opt->queue_cap > 0) s->cap = opt->queue_cap;
+        if (opt->busy_timeout_ms > 0) s->busy_ms = opt->busy_timeout_ms;
+        if (opt->log) {
+            s->log = opt->log;
+            s->log_ud = opt->log_ud;
+        }
+    }
+    size_t plen = strlen(path);
+    s->path = malloc(plen + 1);
+    s->lock_path = malloc(plen + sizeof ".lock");
+    if (!s->path || !s->lock_path) {
+        free(s->path);
+        free(s->lock_path);
+        free(s);
+        return NULL;
+    }
+    memcpy(s->path, path, plen + 1);
+    memcpy(s->lock_path, path, plen);
+    memcpy(s->lock_path + plen, ".lock", sizeof ".lock");
+    return s;
+}
+
+int store_open(const char *path, const store_options *opt, store **out)
+{
+    int r;
+    if (out) *out = NULL;
+    if (!path || !*path || !out) return sti_fail(MPM_EINVAL, "store_open: no database path");
+    if (!sqlite3_threadsafe())
+        return sti_fail(MPM_EIO, "this SQLite library is built without thread support");
+    store *s = store_alloc(path, opt);
+    if (!s) return sti_fail(MPM_ENOMEM, "out of memory opening %s", path);
+
+    if ((r = init_sync(s)) || (r = lock_acquire(s)) || (r = open_writer(s)) ||
+        (r = migrate(s)) || (r = recover(s)) || (r = open_notify(s)))
+        goto fail;
+    int64_t next = 1;
+    if ((r = sti_query1(s->wdb, "SELECT COALESCE(MAX(id), 0) + 1 FROM runs", &next, NULL, 0)))
+        goto fail;
+    s->next_id = next;
+    if ((r = sti_writer_prepare(s))) goto fail;
+    int e = pthread_create(&s->writer, NULL, sti_writer_main, s);
+    if (e) {
+        r = sti_fail(MPM_ENOMEM, "cannot start the store writer thread: %s", strerror(e));
+        goto fail;
+    }
+    s->writer_running = 1;
+    (void)pthread_setname_np(s->writer, "mpmd-store");   /* cosmetic */
+    *out = s;
+    return 0;
+fail:
+    destroy(s);
+    return r;
+}
+
+void store_close(store **sp)
+{
+    if (!sp || !*sp) return;
+    store *s = *sp;
+    *sp = NULL;
+    if (s->writer_running) {
+        pthread_mutex_lock(&s->mu);
+        s->stopping = 1;                 /* the writer drains the queue first */
+        pthread_cond_broadcast(&s->cv_work);
+        pthread_mutex_unlock(&s->mu);
+        pthread_join(s->writer, NULL);
+        s->writer_running = 0;
+        if (s->unreported)
+            sti_log(s, "%" PRIu64 " asynchronous write(s) failed before close; last: %s",
+                    s->unreported, s->last_werr);
+    }
+    destroy(s);
+}

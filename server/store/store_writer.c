@@ -1,0 +1,866 @@
+/*
+ * store_writer.c - the store's write side (see store.h): the queue every
+ * write function appends to, the one writer thread that commits it, and
+ * commit tracking (store_flush, tickets, the notify fd).
+ *
+ * Writer thread.  One thread owns the write connection.  Every write
+ * function (store_run_insert, store_run_set_status, store_run_progress,
+ * store_run_finish, store_energy_append, store_snapshot_put) copies its
+ * arguments into one heap block (an `op`, strings and blobs appended to the
+ * struct), and appends it to a FIFO under s->mu, numbering it with
+ * s->enq_seq; it never touches the disk, so a solver thread appending an
+ * energy sample costs a malloc, a memcpy and a mutex hold of a few
+ * instructions.  Like the job queues of Redis's bio.c, the queue is a plain
+ * linked list guarded by one mutex and a condition variable the writer
+ * sleeps on.
+ *
+ * Batching.  When the queue becomes non-empty the writer waits until the
+ * oldest pending op is batch_ms (50 ms) old, or batch_ops (1024) ops are
+ * pending, or someone waits for a commit (store_flush, store_ticket), or
+ * the store is closing; then it detaches up to batch_ops ops from the head
+ * and applies them in ONE transaction (BEGIN IMMEDIATE ... COMMIT) with
+ * prepared statements, outside the mutex, so producers keep enqueueing
+ * while it writes.  A commit in WAL mode with synchronous=NORMAL costs no
+ * fsync (the WAL is synced at checkpoints), so a batch is cheap and a crash
+ * of the daemon loses nothing committed (a power loss may lose the last
+ * transactions).
+ *
+ * Ordering.  There is one queue and one writer, and ops are applied in
+ * enqueue order: whatever one thread enqueues is applied in its program
+ * order, and an op enqueued after another returned (in any thread) is
+ * applied after it.  So a run's insert always precedes its samples, and the
+ * foreign keys hold.  done_seq is the seq of the last op of the last
+ * committed batch.
+ *
+ * Commit tracking.  store_flush() waits for done_seq >= the enq_seq it saw
+ * on entry.  An event loop must not wait, so a ticket is the enqueue
+ * number of the last op of a run (kept in a small hash map, s->rmap, whose
+ * committed entries are dropped when it is rebuilt) or of any run; it is
+ * done once done_seq reaches it.  After each batch the writer adds 1 to an
+ * eventfd, which a poll loop watches to re-check its tickets.
+ *
+ * Errors of asynchronous writes.  An op that fails (a constraint: duplicate
+ * run id, a sample for an unknown run; an update of a missing run or of one
+ * that already ended - terminal statuses are final, so a late "running"
+ * cannot overwrite "cancelled") is skipped - SQLite undoes only that
+ * statement - and the rest of the batch commits.  If SQLite rolls back the
+ * whole transaction (disk full, I/O error) the batch is lost.  BEGIN
+ * failing with SQLITE_BUSY (another process writing; not another mpmd, the
+ * lock prevents that) is retried.  Every failure is logged, counted
+ * (store_get_stats) and reported once by the next store_flush() as
+ * MPM_EIO.
+ *
+ * Memory cap.  s->qbytes counts the bytes of ops not yet committed.  Above
+ * queue_cap (64 MiB): snapshots (the bulky items) are dropped with a log
+ * line and MPM_EFULL; every other op - energy samples, run inserts and
+ * updates - is still accepted and the queue GROWS (logged once each time it
+ * crosses the cap).  We chose growing over blocking the producer because
+ * enqueue must never wait on disk I/O (a solver step stalled behind a slow
+ * disk would distort its timings), and because those ops are small: past
+ * the cap the queue grows by one queue entry (~480 bytes) per sample
+ * appended alone, or about 100 bytes per sample appended in a batch, so
+ * memory stays near the cap unless the disk stops for good, which the log
+ * shows.
+ */
+#include "store_internal.h"
+
+#include <errno.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#define OP_ALIGN 16
+#define OP_HDR ((sizeof(op) + OP_ALIGN - 1) / OP_ALIGN * OP_ALIGN)
+#define RMAP_MIN 64
+
+/* Updates of a run apply only while it has not ended: a terminal status
+ * is final (a late "running" cannot overwrite "cancelled"). */
+#define NOT_ENDED " AND status IN ('queued','running')"
+
+static const char *const writer_sql[WS_COUNT] = {
+    [WS_BEGIN] = "BEGIN IMMEDIATE",
+    [WS_COMMIT] = "COMMIT",
+    [WS_ROLLBACK] = "ROLLBACK",
+    [WS_INS_RUN] =
+        "INSERT INTO runs (id, name, case_pb, method, \"update\","
+        " dim, particles, nodes, status, submitted_at, started_at, finished_at,"
+        " steps, wall_s, psteps_per_s, error, server_version)"
+        " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14,"
+        " ?15, ?16, ?17)",
+    [WS_UPD_STATUS] =
+        "UPDATE runs SET status = ?2,"
+        " started_at = CASE WHEN ?2 = 'running' THEN ?3 ELSE started_at END,"
+        " finished_at = CASE WHEN ?2 IN ('finished','failed','cancelled',"
+        "   'interrupted') THEN ?3 ELSE finished_at END,"
+        " error = COALESCE(?4, error)"
+        " WHERE id = ?1" NOT_ENDED,
+    [WS_UPD_PROGRESS] =
+        "UPDATE runs SET steps = ?2, wall_s = ?3, psteps_per_s = ?4"
+        " WHERE id = ?1" NOT_ENDED,
+    [WS_FINISH] =
+        "UPDATE runs SET status = ?2, finished_at = ?3, steps = ?4,"
+        " wall_s = ?5, psteps_per_s = ?6, kinetic = ?7, strain = ?8,"
+        " potential = ?9, external_work = ?10, total = ?11, error = ?12"
+        " WHERE id = ?1" NOT_ENDED,
+    [WS_INS_ENERGY] =
+        "INSERT INTO energy (run_id, seq, step, t, kinetic, strain, potential,"
+        " external_work, total, momentum_x, momentum_y, momentum_z, mass)"
+        " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
+    [WS_PUT_SNAP] =
+        "INSERT OR REPLACE INTO snapshots (run_id, step, t, n, dim, fields, data)"
+        " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+    [WS_GET_STATUS] = "SELECT status FROM runs WHERE id = ?1",
+};
+
+static struct timespec to_timespec(double t)
+{
+    struct timespec ts;
+    if (t < 0) t = 0;
+    ts.tv_sec = (time_t)t;
+    ts.tv_nsec = (long)((t - (double)ts.tv_sec) * 1e9);
+    if (ts.tv_nsec >= 1000000000L) { ts.tv_sec++; ts.tv_nsec -= 1000000000L; }
+    if (ts.tv_nsec < 0) ts.tv_nsec = 0;
+    return ts;
+}
+
+/* ---------------------------------------------------------------------- */
+/* Binding */
+
+/* Binds a double, NaN as NULL (SQLite would do so anyway; explicit). */
+static int bind_real(sqlite3_stmt *st, int i, double v)
+{
+    return isnan(v) ? sqlite3_bind_null(st, i) : sqlite3_bind_double(st, i, v);
+}
+
+/* Binds a time: 0 (not set) as NULL. */
+static int bind_time(sqlite3_stmt *st, int i, double v)
+{
+    return v == 0 || isnan(v) ? sqlite3_bind_null(st, i) : sqlite3_bind_double(st, i, v);
+}
+
+static int bind_text_or_null(sqlite3_stmt *st, int i, const char *v)
+{
+    return v ? sqlite3_bind_text(st, i, v, -1, SQLITE_STATIC) : sqlite3_bind_null(st, i);
+}
+
+/* Blob; an empty one as a zero-length blob (a NULL pointer would bind NULL). */
+static int bind_blob(sqlite3_stmt *st, int i, const void *p, size_t n)
+{
+    if (!n) return sqlite3_bind_zeroblob(st, i, 0);
+    return sqlite3_bind_blob64(st, i, p, (sqlite3_uint64)n, SQLITE_STATIC);
+}
+
+static int bind_static(sqlite3_stmt *st, int i, const char *v)
+{
+    return sqlite3_bind_text(st, i, v, -1, SQLITE_STATIC);
+}
+
+/* ---------------------------------------------------------------------- */
+/* The writer thread */
+
+/* Records a failed asynchronous write: logged, counted, reported by flush. */
+__attribute__((format(printf, 3, 4)))
+static void write_error(store *s, uint64_t nops, const char *fmt, ...)
+{
+    char buf[512];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    pthread_mutex_lock(&s->mu);
+    s->write_errors += nops;
+    s->unreported += nops;
+    snprintf(s->last_werr, sizeof s->last_werr, "%s", buf);
+    pthread_mutex_unlock(&s->mu);
+    sti_log(s, "write failed: %s", buf);
+}
+
+/* Why an update of run id matched no row: "no run N" or "run N already
+ * ended (status)". */
+static void run_state(store *s, int64_t id, char *buf, size_t len)
+{
+    sqlite3_stmt *st = s->ws[WS_GET_STATUS];
+    int rc = sqlite3_bind_int64(st, 1, id);
+    if (rc == SQLITE_OK) rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW) {
+        const unsigned char *t = sqlite3_column_text(st, 0);
+        snprintf(buf, len, "run %" PRId64 " already ended (%s)", id,
+                 t ? (const char *)t : "?");
+    } else if (rc == SQLITE_DONE) {
+        snprintf(buf, len, "no run %" PRId64, id);
+    } else {
+        snprintf(buf, len, "run %" PRId64 " not updated (%s)", id, sqlite3_errmsg(s->wdb));
+    }
+    if (sqlite3_reset(st) != SQLITE_OK || sqlite3_clear_bindings(st) != SQLITE_OK)
+        sti_log(s, "reading the status of run %" PRId64 ": %s", id, sqlite3_errmsg(s->wdb));
+}
+
+#define BIND(call) do { if (rc == SQLITE_OK) rc = (call); } while (0)
+
+/* Steps a bound writer statement to completion and resets it.  Returns the
+ * SQLite code of the step (SQLITE_DONE on success) or of a failed bind. */
+static int ws_run(sqlite3_stmt *st, int bind_rc)
+{
+    int rc = bind_rc == SQLITE_OK ? sqlite3_step(st) : bind_rc;
+    int rrc = sqlite3_reset(st);   /* repeats a step error; else must be OK */
+    int crc = sqlite3_clear_bindings(st);
+    if (rc == SQLITE_DONE && rrc != SQLITE_OK) rc = rrc;
+    if (rc == SQLITE_DONE && crc != SQLITE_OK) rc = crc;
+    return rc;
+}
+
+/* Inserts the energy samples of an op; 0 or -1 after recording the error. */
+static int apply_energy(store *s, const op *o)
+{
+    sqlite3_stmt *st = s->ws[WS_INS_ENERGY];
+    size_t bad = 0;
+    char msg[256] = "";
+    for (size_t i = 0; i < o->u.en.n; i++) {
+        const mpm_energy_sample *e = &o->u.en.v[i];
+        int rc = SQLITE_OK;
+        BIND(sqlite3_bind_int64(st, 1, o->run_id));
+        BIND(sqlite3_bind_int64(st, 2, (sqlite3_int64)e->seq));
+        BIND(sqlite3_bind_int64(st, 3, e->step));
+        BIND(bind_real(st, 4, e->t));
+        BIND(bind_real(st, 5, e->e.kinetic));
+        BIND(bind_real(st, 6, e->e.strain));
+        BIND(bind_real(st, 7, e->e.potential));
+        BIND(bind_real(st, 8, e->e.external_work));
+        BIND(bind_real(st, 9, e->e.total));
+        BIND(bind_real(st, 10, e->e.momentum[0]));
+        BIND(bind_real(st, 11, e->e.momentum[1]));
+        BIND(bind_real(st, 12, e->e.momentum[2]));
+        BIND(bind_real(st, 13, e->e.mass));
+        rc = ws_run(st, rc);
+        if (rc != SQLITE_DONE) {
+            if (!bad++)
+                snprintf(msg, sizeof msg, "run %" PRId64 " seq %" PRIu64 ": %s", o->run_id,
+                         e->seq, sqlite3_errmsg(s->wdb));
+            if (sqlite3_get_autocommit(s->wdb)) break;   /* txn gone */
+        }
+    }
+    if (bad) {
+        write_error(s, bad, "append energy sample: %zu of %zu samples failed; first: %s", bad,
+                    o->u.en.n, msg);
+        return -1;
+    }
+    return 0;
+}
+
+/* Applies one op inside the open transaction.  Returns 0, or -1 after
+ * recording the error. */
+static int apply_op(store *s, op *o)
+{
+    sqlite3_stmt *st = NULL;
+    int rc = SQLITE_OK;
+    int64_t id = o->run_id;
+    const char *what = "";
+    int is_update = 0;
+
+    switch (o->kind) {
+    case OP_RUN_INSERT: {
+        const store_run *r = &o->u.run;
+        st = s->ws[WS_INS_RUN];
+        what = "insert run";
+        BIND(sqlite3_bind_int64(st, 1, r->id));
+        BIND(bind_static(st, 2, r->name));
+        BIND(bind_blob(st, 3, r->case_pb, r->case_len));
+        BIND(bind_static(st, 4, sti_method_names[r->method]));
+        BIND(bind_static(st, 5, sti_update_names[r->update]));
+        BIND(sqlite3_bind_int(st, 6, r->dim));
+        BIND(sqlite3_bind_int64(st, 7, r->particles));
+        BIND(sqlite3_bind_int64(st, 8, r->nodes));
+        BIND(bind_static(st, 9, sti_status_name(r->status)));
+        BIND(sqlite3_bind_double(st, 10, r->submitted_at));
+        BIND(bind_time(st, 11, r->started_at));
+        BIND(bind_time(st, 12, r->finished_at));
+        BIND(sqlite3_bind_int64(st, 13, r->steps));
+        BIND(bind_real(st, 14, r->wall_s));
+        BIND(bind_real(st, 15, r->psteps_per_s));
+        BIND(bind_text_or_null(st, 16, r->error));
+        BIND(bind_static(st, 17, r->server_version));
+        break;
+    }
+    case OP_RUN_STATUS:
+        st = s->ws[WS_UPD_STATUS];
+        what = "update run status";
+        is_update = 1;
+        BIND(sqlite3_bind_int64(st, 1, id));
+        BIND(bind_static(st, 2, sti_status_name(o->u.st.status)));
+        BIND(bind_time(st, 3, o->u.st.at));
+        BIND(bind_text_or_null(st, 4, o->u.st.error));
+        break;
+    case OP_RUN_PROGRESS:
+        st = s->ws[WS_UPD_PROGRESS];
+        what = "update run progress";
+        is_update = 1;
+        BIND(sqlite3_bind_int64(st, 1, id));
+        BIND(sqlite3_bind_int64(st, 2, o->u.prog.steps));
+        BIND(bind_real(st, 3, o->u.prog.wall));
+        BIND(bind_real(st, 4, o->u.prog.rate));
+        break;
+    case OP_RUN_FINISH: {
+        const store_run_end *e = &o->u.fin;
+        st = s->ws[WS_FINISH];
+        what = "finish run";
+        is_update = 1;
+        BIND(sqlite3_bind_int64(st, 1, id));
+        BIND(bind_static(st, 2, sti_status_name(e->status)));
+        BIND(bind_time(st, 3, e->finished_at));
+        BIND(sqlite3_bind_int64(st, 4, e->steps));
+        BIND(bind_real(st, 5, e->wall_s));
+        BIND(bind_real(st, 6, e->psteps_per_s));
+        BIND(bind_real(st, 7, e->has_energy ? e->energy.kinetic : NAN));
+        BIND(bind_real(st, 8, e->has_energy ? e->energy.strain : NAN));
+        BIND(bind_real(st, 9, e->has_energy ? e->energy.potential : NAN));
+        BIND(bind_real(st, 10, e->has_energy ? e->energy.external_work : NAN));
+        BIND(bind_real(st, 11, e->has_energy ? e->energy.total : NAN));
+        BIND(bind_text_or_null(st, 12, e->error));
+        break;
+    }
+    case OP_ENERGY:
+        return apply_energy(s, o);
+    case OP_SNAPSHOT: {
+        const store_snapshot *sn = &o->u.snap;
+        st = s->ws[WS_PUT_SNAP];
+        what = "put snapshot";
+        BIND(sqlite3_bind_int64(st, 1, sn->run_id));
+        BIND(sqlite3_bind_int64(st, 2, sn->step));
+        BIND(bind_real(st, 3, sn->t));
+        BIND(sqlite3_bind_int64(st, 4, sn->n));
+        BIND(sqlite3_bind_int(st, 5, sn->dim));
+        BIND(sqlite3_bind_int64(st, 6, sn->fields));
+        BIND(bind_blob(st, 7, sn->data, sn->size));
+        break;
+    }
+    default:
+        write_error(s, 1, "unknown queue entry kind %d", (int)o->kind);
+        return -1;
+    }
+    rc = ws_run(st, rc);
+    if (rc != SQLITE_DONE) {
+        write_error(s, 1, "%s (run %" PRId64 "): %s", what, id, sqlite3_errmsg(s->wdb));
+        return -1;
+    }
+    if (is_update && sqlite3_changes(s->wdb) == 0) {
+        char why[160];
+        run_state(s, id, why, sizeof why);
+        write_error(s, 1, "%s: %s", what, why);
+        return -1;
+    }
+    return 0;
+}
+
+static int ws_simple(store *s, int which)
+{
+    int rc = ws_run(s->ws[which], SQLITE_OK);
+    return rc == SQLITE_DONE ? SQLITE_OK : rc;
+}
+
+/* Applies a batch of n ops in one transaction; records every failure. */
+static void apply_batch(store *s, op *batch, size_t n)
+{
+    uint64_t failed = 0;
+    int rc;
+    for (int attempt = 0;; attempt++) {
+        rc = ws_simple(s, WS_BEGIN);
+        if (rc == SQLITE_OK) break;
+        if ((rc & 0xff) == SQLITE_BUSY && attempt < BEGIN_RETRIES) {
+            sti_log(s, "database busy, retrying a batch of %zu writes", n);
+            struct timespec ts = { 0, 100 * 1000 * 1000 };
+            nanosleep(&ts, NULL);
+            continue;
+        }
+        write_error(s, n, "BEGIN: %s; %zu writes lost", sqlite3_errmsg(s->wdb), n);
+        return;
+    }
+    for (op *o = batch; o; o = o->next) {
+        if (apply_op(s, o) == 0) continue;
+        failed++;
+        if (sqlite3_get_autocommit(s->wdb)) {
+            /* SQLite rolled the whole transaction back (disk full, I/O) */
+            write_error(s, n - failed, "transaction rolled back (%s); %zu more writes lost",
+                        sqlite3_errmsg(s->wdb), (size_t)(n - failed));
+            return;
+        }
+    }
+    rc = ws_simple(s, WS_COMMIT);
+    if (rc != SQLITE_OK) {
+        write_error(s, n - failed, "COMMIT: %s; %zu writes lost", sqlite3_errmsg(s->wdb),
+                    (size_t)(n - failed));
+        if (!sqlite3_get_autocommit(s->wdb) && ws_simple(s, WS_ROLLBACK) != SQLITE_OK)
+            sti_log(s, "ROLLBACK: %s", sqlite3_errmsg(s->wdb));
+        return;
+    }
+    pthread_mutex_lock(&s->mu);
+    s->transactions++;
+    s->ops_committed += n - failed;
+    pthread_mutex_unlock(&s->mu);
+}
+
+/* Makes the notify fd readable (an eventfd never blocks a write of 1 short
+ * of 2^64 - 1 pending, so EAGAIN cannot happen in practice). */
+static void notify(store *s)
+{
+    uint64_t one = 1;
+    ssize_t w = write(s->notify_fd, &one, sizeof one);
+    (void)w;
+}
+
+void *sti_writer_main(void *arg)
+{
+    store *s = arg;
+    pthread_mutex_lock(&s->mu);
+    for (;;) {
+        while (!s->head && !s->stopping)
+            pthread_cond_wait(&s->cv_work, &s->mu);
+        if (!s->head) break;                     /* stopping, queue drained */
+        /* batching window: until the oldest op is batch_s old */
+        struct timespec dl = to_timespec(s->head->t_enq + s->batch_s);
+        while (!s->stopping && s->flush_target <= s->done_seq &&
+               s->qops < s->batch_ops) {
+            if (pthread_cond_timedwait(&s->cv_work, &s->mu, &dl) == ETIMEDOUT) break;
+        }
+        op *batch = s->head, *last = batch;
+        size_t n = 1, bytes = batch->bytes;
+        while (last->next && n < s->batch_ops) {
+            last = last->next;
+            n++;
+            bytes += last->bytes;
+        }
+        s->head = last->next;
+        if (!s->head) s->tail = NULL;
+        last->next = NULL;
+        s->qops -= n;
+        uint64_t last_seq = last->seq;
+        pthread_mutex_unlock(&s->mu);
+
+        apply_batch(s, batch, n);
+        while (batch) {
+            op *next = batch->next;
+            free(batch);
+            batch = next;
+        }
+
+        pthread_mutex_lock(&s->mu);
+        s->qbytes -= bytes;
+        if (s->over_cap && s->qbytes <= s->cap / 2) s->over_cap = 0;
+        s->done_seq = last_seq;
+        pthread_cond_broadcast(&s->cv_done);
+        notify(s);
+    }
+    pthread_mutex_unlock(&s->mu);
+    return NULL;
+}
+
+int sti_writer_prepare(store *s)
+{
+    for (int i = 0; i < WS_COUNT; i++) {
+        int rc = sqlite3_prepare_v3(s->wdb, writer_sql[i], -1, SQLITE_PREPARE_PERSISTENT,
+                                    &s->ws[i], NULL);
+        if (rc != SQLITE_OK) return sti_sql_fail(s->wdb, rc, writer_sql[i]);
+    }
+    return 0;
+}
+
+void sti_writer_free(store *s)
+{
+    for (int i = 0; i < WS_COUNT; i++) {
+        if (s->ws[i] && sqlite3_finalize(s->ws[i]) != SQLITE_OK)
+            sti_log(s, "finalizing a statement: %s", sqlite3_errmsg(s->wdb));
+        s->ws[i] = NULL;
+    }
+    while (s->head) {
+        op *o = s->head;
+        s->head = o->next;
+        free(o);
+    }
+    s->tail = NULL;
+    free(s->rmap);
+    s->rmap = NULL;
+    s->rmap_cap = s->rmap_used = 0;
+}
+
+/* ---------------------------------------------------------------------- */
+/* The per-run map of last enqueue numbers (under s->mu) */
+
+static size_t rmap_slot(const run_seq *m, size_t cap, int64_t run_id)
+{
+    size_t i = (size_t)(((uint64_t)run_id * 0x9e3779b97f4a7c15u) >> 20) & (cap - 1);
+    while (m[i].seq && m[i].run_id != run_id) i = (i + 1) & (cap - 1);
+    return i;
+}
+
+/* Rebuilds the map without its committed entries, with room for one more
+ * run at a load of at most 1/4.  -1 when out of memory (map unchanged). */
+static int rmap_rebuild(store *s)
+{
+    size_t live = 0;
+    for (size_t i = 0; i < s->rmap_cap; i++)
+        if (s->rmap[i].seq > s->done_seq) live++;
+    size_t cap = RMAP_MIN;
+    while (cap < 4 * (live + 1)) cap *= 2;
+    run_seq *m = calloc(cap, sizeof *m);
+    if (!m) return -1;
+    for (size_t i = 0; i < s->rmap_cap; i++)
+        if (s->rmap[i].seq > s->done_seq) m[rmap_slot(m, cap, s->rmap[i].run_id)] = s->rmap[i];
+    free(s->rmap);
+    s->rmap = m;
+    s->rmap_cap = cap;
+    s->rmap_used = live;
+    return 0;
+}
+
+static void rmap_set(store *s, int64_t run_id, uint64_t seq)
+{
+    if (s->rmap_cap) {
+        size_t i = rmap_slot(s->rmap, s->rmap_cap, run_id);
+        if (s->rmap[i].seq) {
+            s->rmap[i].seq = seq;
+            return;
+        }
+    }
+    if (2 * (s->rmap_used + 1) > s->rmap_cap && rmap_rebuild(s)) {
+        s->unmapped_seq = seq;      /* every ticket covers it: conservative */
+        return;
+    }
+    size_t i = rmap_slot(s->rmap, s->rmap_cap, run_id);
+    s->rmap[i].run_id = run_id;
+    s->rmap[i].seq = seq;
+    s->rmap_used++;
+}
+
+static uint64_t rmap_get(const store *s, int64_t run_id)
+{
+    if (!s->rmap_cap) return 0;
+    return s->rmap[rmap_slot(s->rmap, s->rmap_cap, run_id)].seq;
+}
+
+/* ---------------------------------------------------------------------- */
+/* Enqueueing */
+
+/* Allocates an op with tail bytes of room after the header. */
+static op *op_new(op_kind kind, int64_t run_id, size_t tail, char **tailp)
+{
+    size_t bytes = OP_HDR + tail;
+    op *o = calloc(1, bytes);
+    if (!o) {
+        sti_fail(MPM_ENOMEM, "out of memory queueing a write (%zu bytes)", bytes);
+        return NULL;
+    }
+    o->kind = kind;
+    o->run_id = run_id;
+    o->bytes = bytes;
+    *tailp = (char *)o + OP_HDR;
+    return o;
+}
+
+/* Copies n bytes at *cur, advancing it; returns the copy. */
+static void *tail_put(char **cur, const void *src, size_t n)
+{
+    void *p = *cur;
+    if (n) memcpy(p, src, n);
+    *cur += n;
+    return p;
+}
+
+static const char *tail_str(char **cur, const char *str)
+{
+    return str ? tail_put(cur, str, strlen(str) + 1) : NULL;
+}
+
+static size_t str_room(const char *str) { return str ? strlen(str) + 1 : 0; }
+
+/* Refuses a snapshot because the queue is above its cap: counts and logs. */
+static int drop_snapshot(store *s, const store_snapshot *snap, size_t qb)
+{
+    sti_log(s, "snapshot of run %" PRId64 " at step %" PRId64 " (%zu bytes) dropped:"
+            " %zu bytes of writes pending, cap %zu", snap->run_id, snap->step,
+            snap->size, qb, s->cap);
+    return sti_fail(MPM_EFULL, "snapshot of run %" PRId64 " at step %" PRId64
+                    " dropped: write queue full (%zu bytes pending, cap %zu)",
+                    snap->run_id, snap->step, qb, s->cap);
+}
+
+/* Appends an op to the queue.  droppable: a snapshot, refused above the
+ * cap.  Takes ownership of o in every case. */
+static int submit(store *s, op *o, int droppable)
+{
+    int log_cap = 0;
+    size_t qb;
+    pthread_mutex_lock(&s->mu);
+    if (s->stopping) {
+        pthread_mutex_unlock(&s->mu);
+        free(o);
+        return sti_fail(MPM_EUNAVAIL, "the store is closing");
+    }
+    if (droppable && s->qbytes + o->bytes > s->cap) {
+        s->snapshots_dropped++;
+        qb = s->qbytes;
+        pthread_mutex_unlock(&s->mu);
+        int r = drop_snapshot(s, &o->u.snap, qb);
+        free(o);
+        return r;
+    }
+    o->seq = ++s->enq_seq;
+    o->t_enq = sti_mono_now();
+    o->next = NULL;
+    rmap_set(s, o->run_id, o->seq);
+    int was_empty = !s->head;
+    if (s->tail) s->tail->next = o;
+    else s->head = o;
+    s->tail = o;
+    s->qops++;
+    s->qbytes += o->bytes;
+    if (s->qbytes > s->qbytes_max) s->qbytes_max = s->qbytes;
+    if (s->qbytes > s->cap && !s->over_cap) {
+        s->over_cap = 1;
+        log_cap = 1;
+    }
+    qb = s->qbytes;
+    /* the writer sleeps untimed on an empty queue, timed in a batching
+     * window: wake it for the first op and when a batch is full */
+    if (was_empty || s->qops == s->batch_ops) pthread_cond_signal(&s->cv_work);
+    pthread_mutex_unlock(&s->mu);
+    if (log_cap)
+        sti_log(s, "write queue above its cap (%zu > %zu bytes): the disk is behind;"
+                " growing (only snapshots are dropped)", qb, s->cap);
+    return 0;
+}
+
+int64_t store_new_run_id(store *s)
+{
+    pthread_mutex_lock(&s->mu);
+    int64_t id = s->next_id++;
+    pthread_mutex_unlock(&s->mu);
+    return id;
+}
+
+int store_run_insert(store *s, const store_run *run, int64_t *id_out)
+{
+    if (!s || !run) return sti_fail(MPM_EINVAL, "store_run_insert: NULL argument");
+    if (run->dim < 1 || run->dim > 3)
+        return sti_fail(MPM_EINVAL, "run dim %d not in 1..3", run->dim);
+    if (!sti_method_ok(run->method))
+        return sti_fail(MPM_EINVAL, "unknown method %d", (int)run->method);
+    if (!sti_update_ok(run->update))
+        return sti_fail(MPM_EINVAL, "unknown update scheme %d", (int)run->update);
+    if (!sti_status_ok(run->status))
+        return sti_fail(MPM_EINVAL, "unknown run status %d", (int)run->status);
+    if (run->case_len && !run->case_pb)
+        return sti_fail(MPM_EINVAL, "case_pb is NULL with case_len %zu", run->case_len);
+    if (run->particles < 0 || run->nodes < 0 || run->steps < 0)
+        return sti_fail(MPM_EINVAL, "negative particles, nodes or steps");
+    if (isnan(run->submitted_at) || run->submitted_at < 0)
+        return sti_fail(MPM_EINVAL, "bad submitted_at");
+
+    const char *name = run->name ? run->name : "";
+    const char *ver = run->server_version ? run->server_version : "";
+    char *cur;
+    op *o = op_new(OP_RUN_INSERT, 0, str_room(name) + str_room(ver) +
+                   str_room(run->error) + run->case_len, &cur);
+    if (!o) return MPM_ENOMEM;
+    store_run *r = &o->u.run;
+    *r = *run;
+    r->name = tail_str(&cur, name);
+    r->server_version = tail_str(&cur, ver);
+    r->error = tail_str(&cur, run->error);
+    r->case_pb = run->case_len ? tail_put(&cur, run->case_pb, run->case_len) : NULL;
+    if (r->submitted_at == 0) r->submitted_at = store_time_now();
+
+    pthread_mutex_lock(&s->mu);
+    if (r->id <= 0) r->id = s->next_id++;
+    else if (r->id >= s->next_id) s->next_id = r->id + 1;
+    pthread_mutex_unlock(&s->mu);
+
+    int64_t id = o->run_id = r->id;
+    int rc = submit(s, o, 0);
+    if (!rc && id_out) *id_out = id;
+    return rc;
+}
+
+int store_run_set_status(store *s, int64_t id, mpp_status status, double at,
+                         const char *error)
+{
+    if (!s) return sti_fail(MPM_EINVAL, "store_run_set_status: NULL store");
+    if (!sti_status_ok(status))
+        return sti_fail(MPM_EINVAL, "unknown run status %d", (int)status);
+    if (isnan(at) || at < 0) return sti_fail(MPM_EINVAL, "bad status time");
+    char *cur;
+    op *o = op_new(OP_RUN_STATUS, id, str_room(error), &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.st.status = status;
+    o->u.st.at = at == 0 ? store_time_now() : at;
+    o->u.st.error = tail_str(&cur, error);
+    return submit(s, o, 0);
+}
+
+int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s,
+                       double psteps_per_s)
+{
+    if (!s) return sti_fail(MPM_EINVAL, "store_run_progress: NULL store");
+    if (steps < 0) return sti_fail(MPM_EINVAL, "negative steps");
+    char *cur;
+    op *o = op_new(OP_RUN_PROGRESS, id, 0, &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.prog.steps = steps;
+    o->u.prog.wall = wall_s;
+    o->u.prog.rate = psteps_per_s;
+    return submit(s, o, 0);
+}
+
+int store_run_finish(store *s, int64_t id, const store_run_end *end)
+{
+    if (!s || !end) return sti_fail(MPM_EINVAL, "store_run_finish: NULL argument");
+    if (!sti_status_ok(end->status) || !MPP_STATUS_ENDED(end->status))
+        return sti_fail(MPM_EINVAL, "store_run_finish: status '%s' is not a final status",
+                        sti_status_name(end->status));
+    if (end->steps < 0) return sti_fail(MPM_EINVAL, "negative steps");
+    if (isnan(end->finished_at) || end->finished_at < 0)
+        return sti_fail(MPM_EINVAL, "bad finished_at");
+    char *cur;
+    op *o = op_new(OP_RUN_FINISH, id, str_room(end->error), &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.fin = *end;
+    o->u.fin.error = tail_str(&cur, end->error);
+    if (o->u.fin.finished_at == 0) o->u.fin.finished_at = store_time_now();
+    return submit(s, o, 0);
+}
+
+int store_energy_append(store *s, int64_t run_id, const mpm_energy_sample *e, size_t n)
+{
+    if (!s || (n && !e)) return sti_fail(MPM_EINVAL, "store_energy_append: NULL argument");
+    if (!n) return 0;
+    if (n > (SIZE_MAX - OP_HDR) / sizeof *e)
+        return sti_fail(MPM_EINVAL, "store_energy_append: %zu samples", n);
+    char *cur;
+    op *o = op_new(OP_ENERGY, run_id, n * sizeof *e, &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.en.n = n;
+    o->u.en.v = tail_put(&cur, e, n * sizeof *e);
+    return submit(s, o, 0);
+}
+
+int store_snapshot_put(store *s, const store_snapshot *snap)
+{
+    if (!s || !snap) return sti_fail(MPM_EINVAL, "store_snapshot_put: NULL argument");
+    if (snap->size && !snap->data)
+        return sti_fail(MPM_EINVAL, "snapshot data is NULL with size %zu", snap->size);
+    if (snap->dim < 1 || snap->dim > 3)
+        return sti_fail(MPM_EINVAL, "snapshot dim %d not in 1..3", snap->dim);
+    if (snap->n < 0 || snap->step < 0)
+        return sti_fail(MPM_EINVAL, "negative snapshot step or particle count");
+    if (snap->size > SIZE_MAX - OP_HDR)
+        return sti_fail(MPM_EINVAL, "snapshot of %zu bytes", snap->size);
+    /* refuse before copying a big blob; submit() checks again under the
+     * same lock that enqueues */
+    pthread_mutex_lock(&s->mu);
+    size_t qb = s->qbytes;
+    int full = qb + OP_HDR + snap->size > s->cap;
+    if (full) s->snapshots_dropped++;
+    pthread_mutex_unlock(&s->mu);
+    if (full) return drop_snapshot(s, snap, qb);
+    char *cur;
+    op *o = op_new(OP_SNAPSHOT, snap->run_id, snap->size, &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.snap = *snap;
+    o->u.snap.data = snap->size ? tail_put(&cur, snap->data, snap->size) : NULL;
+    return submit(s, o, 1);
+}
+
+/* ---------------------------------------------------------------------- */
+/* Commit tracking */
+
+int store_flush(store *s)
+{
+    if (!s) return sti_fail(MPM_EINVAL, "store_flush: NULL store");
+    pthread_mutex_lock(&s->mu);
+    uint64_t target = s->enq_seq;
+    if (target > s->flush_target) s->flush_target = target;
+    pthread_cond_signal(&s->cv_work);
+    while (s->done_seq < target)
+        pthread_cond_wait(&s->cv_done, &s->mu);
+    int rc = 0;
+    if (s->unreported) {
+        rc = sti_fail(MPM_EIO, "%" PRIu64 " asynchronous write(s) failed; last: %s",
+                      s->unreported, s->last_werr);
+        s->unreported = 0;
+    }
+    pthread_mutex_unlock(&s->mu);
+    return rc;
+}
+
+uint64_t store_ticket(store *s, int64_t run_id)
+{
+    if (!s) return 0;
+    pthread_mutex_lock(&s->mu);
+    uint64_t t = run_id > 0 ? rmap_get(s, run_id) : s->enq_seq;
+    if (s->unmapped_seq > t) t = s->unmapped_seq;
+    if (t <= s->done_seq) {
+        t = 0;
+    } else if (t > s->flush_target) {
+        s->flush_target = t;              /* someone waits: skip the window */
+        pthread_cond_signal(&s->cv_work);
+    }
+    pthread_mutex_unlock(&s->mu);
+    return t;
+}
+
+int store_ticket_done(store *s, uint64_t ticket)
+{
+    if (!s || !ticket) return 1;
+    pthread_mutex_lock(&s->mu);
+    int done = s->done_seq >= ticket;
+    pthread_mutex_unlock(&s->mu);
+    return done;
+}
+
+int store_notify_fd(store *s)
+{
+    return s ? s->notify_fd : -1;
+}
+
+void store_notify_drain(store *s)
+{
+    uint64_t v;
+    if (!s) return;
+    /* one read empties an eventfd; EAGAIN: it was empty */
+    ssize_t r = read(s->notify_fd, &v, sizeof v);
+    (void)r;
+}
+
+/* ---------------------------------------------------------------------- */
+/* Diagnostics */
+
+void store_get_stats(store *s, store_stats *st)
+{
+    memset(st, 0, sizeof *st);
+    if (!s) return;
+    pthread_mutex_lock(&s->mu);
+    st->ops_enqueued = s->enq_seq;
+    st->ops_committed = s->ops_committed;
+    st->transactions = s->transactions;
+    st->write_errors = s->write_errors;
+    st->snapshots_dropped = s->snapshots_dropped;
+    st->queue_ops = s->qops;
+    st->queue_bytes = s->qbytes;
+    st->queue_bytes_max = s->qbytes_max;
+    st->recovered_running = s->rec_running;
+    st->recovered_queued = s->rec_queued;
+    pthread_mutex_unlock(&s->mu);
+}
+
+void store_last_write_error(store *s, char *buf, size_t len)
+{
+    if (!buf || !len) return;
+    buf[0] = 0;
+    if (!s) return;
+    pthread_mutex_lock(&s->mu);
+    snprintf(buf, len, "%s", s->last_werr);
+    pthread_mutex_unlock(&s->mu);
+}
