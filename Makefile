@@ -20,10 +20,7 @@ CSTD    := -std=c11 -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
 WARN    := -Wall -Wextra -Werror -Wshadow -Wpointer-arith -Wstrict-prototypes -Wmissing-prototypes
 OPT     ?= -O2 -g
 SAN     := -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
-# -Wno-error=format-truncation: only until mpm_sim.c:1328 is fixed (its
-# "left the grid" message can overflow err[256]; gcc sees it with this build's
-# inlining only).  The warning is still printed.  Remove the flag then.
-TSANF   := -O1 -g -fsanitize=thread -Wno-error=format-truncation
+TSANF   := -O1 -g -fsanitize=thread
 LDLIBS  := -lm -lpthread
 ZMQLIBS := -lzmq -lprotobuf-c -ljansson
 SRVLIBS := $(ZMQLIBS) -lsqlite3
