@@ -131,7 +131,7 @@ static void describe(const json_t *v, char *buf, size_t len)
         const char *s = json_string_value(v);
         size_t o = 0, k;
         o = (size_t)snprintf(buf, len, "string \"");
-        for (k = 0; s[k] && k < 40 && o + 5 < len; k++) {
+        for (k = 0; k < 40 && s[k] && o + 5 < len; k++) {
             unsigned char ch = (unsigned char)s[k];
             buf[o++] = (ch < 0x20 || ch == '"' || ch == '\\') ? '?' : (char)ch;
         }

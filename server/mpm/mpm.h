@@ -246,7 +246,7 @@ void mpm_sim_energy(const mpm_sim *sim, mpm_energy *e);
 
 /* mpm_sim_energy() as a sample: step, time, dim and the energies (seq 0,
  * for whoever records it to number). */
-void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *s);
+void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out);
 
 /* The next step also computes the energies, summed inside the particle
  * passes it runs anyway (per thread, combined in thread order: the same
@@ -256,7 +256,7 @@ void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *s);
 void mpm_sim_want_energy(mpm_sim *sim);
 
 /* Copies the requested particle fields into caller arrays. */
-void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *s);
+void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);
 
 /* Grid state after the last step, for tests and diagnostics: node mass and
  * momentum of real node (i, j, k) (unused indices 0). */

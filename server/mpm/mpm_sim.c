@@ -599,13 +599,13 @@ void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
     e->total = e->kinetic + e->strain + e->potential - e->external_work;
 }
 
-void mpm_sim_energy_sample(const mpm_sim *s, mpm_energy_sample *o)
+void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out)
 {
-    memset(o, 0, sizeof *o);
-    o->step = s->steps;
-    o->t = s->t;
-    o->dim = s->dim;
-    mpm_sim_energy(s, &o->e);
+    memset(out, 0, sizeof *out);
+    out->step = sim->steps;
+    out->t = sim->t;
+    out->dim = sim->dim;
+    mpm_sim_energy(sim, &out->e);
 }
 
 void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
