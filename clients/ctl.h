@@ -29,24 +29,24 @@
 /* Return codes (negative). */
 enum {
     CTL_OK = 0,
-    CTL_EUSAGE = -1,    /* bad command line */
-    CTL_ESERVER = -2,   /* the server answered with Reply.error */
-    CTL_ETIMEOUT = -3,  /* no reply within the timeout */
-    CTL_EPROTO = -4,    /* a reply that is not what was asked for */
-    CTL_ESYS = -5,      /* zmq, file or allocation failure */
-    CTL_ECASE = -6,     /* the case file is unreadable or invalid */
-    CTL_EINTR = -7      /* interrupted by a signal */
+    CTL_EUSAGE = -1,   /* bad command line */
+    CTL_ESERVER = -2,  /* the server answered with Reply.error */
+    CTL_ETIMEOUT = -3, /* no reply within the timeout */
+    CTL_EPROTO = -4,   /* a reply that is not what was asked for */
+    CTL_ESYS = -5,     /* zmq, file or allocation failure */
+    CTL_ECASE = -6,    /* the case file is unreadable or invalid */
+    CTL_EINTR = -7     /* interrupted by a signal */
 };
 
 /* Exit statuses of mpmctl. */
 enum {
     CTL_EXIT_OK = 0,
-    CTL_EXIT_ERROR = 1,        /* any error */
-    CTL_EXIT_USAGE = 2,        /* bad command line */
-    CTL_EXIT_FAILED = 3,       /* watched run ended FAILED */
-    CTL_EXIT_CANCELLED = 4,    /* ... CANCELLED */
-    CTL_EXIT_INTERRUPTED = 5,  /* ... INTERRUPTED (or still not finished) */
-    CTL_EXIT_SIGNAL = 130      /* watch stopped by Ctrl-C */
+    CTL_EXIT_ERROR = 1,       /* any error */
+    CTL_EXIT_USAGE = 2,       /* bad command line */
+    CTL_EXIT_FAILED = 3,      /* watched run ended FAILED */
+    CTL_EXIT_CANCELLED = 4,   /* ... CANCELLED */
+    CTL_EXIT_INTERRUPTED = 5, /* ... INTERRUPTED (or still not finished) */
+    CTL_EXIT_SIGNAL = 130     /* watch stopped by Ctrl-C */
 };
 
 /* Set by the SIGINT/SIGTERM handler of `watch`; a wait interrupted by a
@@ -62,11 +62,11 @@ typedef enum { CTL_OUT_TEXT = 0, CTL_OUT_CSV = 1, CTL_OUT_JSON = 2 } ctl_out;
 /* ---- connection (ctl_conn.c) --------------------------------------- */
 
 typedef struct {
-    const char *endpoint;   /* control socket */
-    const char *stream;     /* stream socket override (--stream / MPMD_STREAM) or NULL */
-    double timeout_s;       /* per request */
-    void *zctx;             /* zmq context, NULL until ctl_conn_open */
-    void *dealer;           /* control socket */
+    const char *endpoint; /* control socket */
+    const char *stream;   /* stream socket override (--stream / MPMD_STREAM) or NULL */
+    double timeout_s;     /* per request */
+    void *zctx;           /* zmq context, NULL until ctl_conn_open */
+    void *dealer;         /* control socket */
 } ctl_conn;
 
 /* Creates the context and connects the DEALER (linger 0). */
@@ -79,8 +79,7 @@ void ctl_conn_close(ctl_conn *c);
  * `want` ("run", "energy", ...).  A Reply.error is printed ("mpmctl: CODE:
  * message (field F)") and gives CTL_ESERVER; if err_code is not NULL it
  * receives the error's code name (static storage, "" otherwise). */
-int ctl_call(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply,
-             json_t **body);
+int ctl_call(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply, json_t **body);
 /* As ctl_call(), without printing a server error: *err_code gets the code
  * name and *err_msg the message (both owned by *reply, which is set). */
 int ctl_call_quiet(ctl_conn *c, const mpp_request *rq, const char *want, json_t **reply,

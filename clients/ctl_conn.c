@@ -60,7 +60,8 @@ void ctl_conn_close(ctl_conn *c)
     if (c->dealer) zmq_close(c->dealer);
     c->dealer = NULL;
     if (c->zctx) {
-        while (zmq_ctx_term(c->zctx) && errno == EINTR) {}
+        while (zmq_ctx_term(c->zctx) && errno == EINTR) {
+        }
     }
     c->zctx = NULL;
 }
@@ -83,8 +84,10 @@ static int recv_multi(void *sock, zmq_msg_t *parts, int max, int *nparts)
             }
         }
         if (zmq_getsockopt(sock, ZMQ_RCVMORE, &more, &ml)) more = 0;
-        if (n < max) parts[n] = m;
-        else zmq_msg_close(&m);
+        if (n < max)
+            parts[n] = m;
+        else
+            zmq_msg_close(&m);
         n++;
     }
     *nparts = n;
@@ -201,7 +204,8 @@ static int interpret(ctl_conn *c, json_t *reply, const char *want, json_t **body
     if (!*body) {
         const char *key, *got = "nothing";
         json_t *v;
-        json_object_foreach(reply, key, v) {
+        json_object_foreach(reply, key, v)
+        {
             if (strcmp(key, "schemaVersion")) {
                 got = key;
                 break;
@@ -322,8 +326,9 @@ int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, ctl_sample_fn 
         if (rc) return rc;
         if (!more) return 0;
         if (!ns || last + 1 <= from) {
-            fprintf(stderr, "mpmctl: energy of run %llu: the server says there is more after seq "
-                            "%llu but sent nothing new\n",
+            fprintf(stderr,
+                    "mpmctl: energy of run %llu: the server says there is more after seq "
+                    "%llu but sent nothing new\n",
                     (unsigned long long)run_id, (unsigned long long)from);
             return CTL_EPROTO;
         }

@@ -19,9 +19,18 @@
 static int str_num(const char *s, double *v)
 {
     char *end;
-    if (!strcmp(s, "NaN")) { *v = NAN; return 0; }
-    if (!strcmp(s, "Infinity")) { *v = INFINITY; return 0; }
-    if (!strcmp(s, "-Infinity")) { *v = -INFINITY; return 0; }
+    if (!strcmp(s, "NaN")) {
+        *v = NAN;
+        return 0;
+    }
+    if (!strcmp(s, "Infinity")) {
+        *v = INFINITY;
+        return 0;
+    }
+    if (!strcmp(s, "-Infinity")) {
+        *v = -INFINITY;
+        return 0;
+    }
     errno = 0;
     *v = strtod(s, &end);
     return (end == s || *end || errno == ERANGE) ? -1 : 0;
@@ -108,8 +117,14 @@ double cj_norm(double v)
 
 void cj_fmt_double(char *buf, size_t n, double v)
 {
-    if (isnan(v)) { snprintf(buf, n, "NaN"); return; }
-    if (isinf(v)) { snprintf(buf, n, v > 0 ? "Infinity" : "-Infinity"); return; }
+    if (isnan(v)) {
+        snprintf(buf, n, "NaN");
+        return;
+    }
+    if (isinf(v)) {
+        snprintf(buf, n, v > 0 ? "Infinity" : "-Infinity");
+        return;
+    }
     for (int p = 15; p <= 17; p++) {
         snprintf(buf, n, "%.*g", p, v);
         if (strtod(buf, NULL) == v) return;
@@ -118,7 +133,7 @@ void cj_fmt_double(char *buf, size_t n, double v)
 
 /* ---- printer ------------------------------------------------------------ */
 
-#define CJ_MAX_DEPTH 128  /* replies nest far less (the codec stops at 64) */
+#define CJ_MAX_DEPTH 128 /* replies nest far less (the codec stops at 64) */
 
 static int is_scalar(const json_t *v)
 {
@@ -141,7 +156,8 @@ static int print_value(FILE *f, const json_t *v, int pretty, int depth)
         json_t *m;
         int first = 1;
         fputc('{', f);
-        json_object_foreach((json_t *)v, key, m) {
+        json_object_foreach((json_t *)v, key, m)
+        {
             json_t *k = json_string(key);
             char *ks = k ? json_dumps(k, JSON_ENCODE_ANY) : NULL;
             json_decref(k);
@@ -181,9 +197,7 @@ static int print_value(FILE *f, const json_t *v, int pretty, int depth)
         free(s);
         return 0;
     }
-    case JSON_INTEGER:
-        fprintf(f, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
-        return 0;
+    case JSON_INTEGER: fprintf(f, "%" JSON_INTEGER_FORMAT, json_integer_value(v)); return 0;
     case JSON_REAL:
         cj_fmt_double(num, sizeof num, json_real_value(v));
         fputs(num, f);

@@ -36,7 +36,8 @@ static int json_row(FILE *f, const mpm_energy_sample *s)
     json_error_t je;
     json_t *js = NULL;
     int rc = CTL_ESYS;
-    if (!mpp_energy_to_json(s, &text, NULL) && (js = json_loads(text, 0, &je)) && !cj_print(f, js, 0)) {
+    if (!mpp_energy_to_json(s, &text, NULL) && (js = json_loads(text, 0, &je)) &&
+        !cj_print(f, js, 0)) {
         fputc('\n', f);
         rc = 0;
     }
@@ -77,8 +78,7 @@ int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
                     "strain", "potential-work", "total");
         fprintf(f, "%8llu %10lld %14.6g %15.8e %15.8e %15.8e %15.8e\n", (unsigned long long)s->seq,
                 (long long)s->step, cj_norm(s->t), cj_norm(s->e.kinetic), cj_norm(s->e.strain),
-                cj_norm(s->e.potential) - cj_norm(s->e.external_work),
-                cj_norm(s->e.total));
+                cj_norm(s->e.potential) - cj_norm(s->e.external_work), cj_norm(s->e.total));
         break;
     }
     o->header_done = 1;
@@ -95,9 +95,14 @@ void ctl_fmt_time(char *buf, size_t n, double unix_s)
 
 void ctl_fmt_duration(char *buf, size_t n, double s)
 {
-    if (!(s >= 0)) snprintf(buf, n, "?");
-    else if (s < 60) snprintf(buf, n, "%.1f s", s);
-    else if (s < 3600) snprintf(buf, n, "%dm%02ds", (int)(s / 60), (int)s % 60);
-    else if (s < 1e7) snprintf(buf, n, "%dh%02dm", (int)(s / 3600), (int)(s / 60) % 60);
-    else snprintf(buf, n, "%.3g s", s);
+    if (!(s >= 0))
+        snprintf(buf, n, "?");
+    else if (s < 60)
+        snprintf(buf, n, "%.1f s", s);
+    else if (s < 3600)
+        snprintf(buf, n, "%dm%02ds", (int)(s / 60), (int)s % 60);
+    else if (s < 1e7)
+        snprintf(buf, n, "%dh%02dm", (int)(s / 3600), (int)(s / 60) % 60);
+    else
+        snprintf(buf, n, "%.3g s", s);
 }

@@ -40,26 +40,26 @@
 
 #include <zmq.h>
 
-#define WATCH_IDLE_S 1.0        /* quiet this long: ask Status */
-#define WATCH_REDRAW_S 0.1      /* terminal line at most this often */
-#define WATCH_SUB_HWM 100000    /* stream messages buffered before dropping */
+#define WATCH_IDLE_S 1.0     /* quiet this long: ask Status */
+#define WATCH_REDRAW_S 0.1   /* terminal line at most this often */
+#define WATCH_SUB_HWM 100000 /* stream messages buffered before dropping */
 
 typedef struct {
     ctl_conn *c;
     uint64_t job;
     ctl_out fmt;
-    int tty;                    /* text mode on a terminal: one line redrawn */
+    int tty; /* text mode on a terminal: one line redrawn */
     ctl_energy_out eo;
-    FILE *info;                 /* where the summary goes */
+    FILE *info; /* where the summary goes */
 
-    uint64_t next;              /* next energy seq expected */
-    uint64_t samples;           /* samples written */
-    uint64_t gaps_filled;       /* times the stream skipped samples */
+    uint64_t next;        /* next energy seq expected */
+    uint64_t samples;     /* samples written */
+    uint64_t gaps_filled; /* times the stream skipped samples */
     double first_total, last_total;
     double kinetic, strain;
     int have_first;
 
-    int status;                 /* mpp_status as last known */
+    int status; /* mpp_status as last known */
     char name[128];
     long long step, steps_total;
     double t, wall_s, dt;
@@ -68,13 +68,13 @@ typedef struct {
     int line_shown;
 
     int have_stream_seq;
-    uint64_t stream_seq;        /* last StreamMsg.seq seen */
-    uint64_t stream_lost;       /* messages the stream dropped */
+    uint64_t stream_seq;  /* last StreamMsg.seq seen */
+    uint64_t stream_lost; /* messages the stream dropped */
 
-    int finished;               /* Finished seen */
-    char error[512];            /* Finished.error */
-    int has_fin;                /* Finished carried a final sample: */
-    mpm_energy_sample fin;      /* that sample */
+    int finished;          /* Finished seen */
+    char error[512];       /* Finished.error */
+    int has_fin;           /* Finished carried a final sample: */
+    mpm_energy_sample fin; /* that sample */
 
     /* Fault injection for the tests (environment, see ctl_watch()):
      * discard every drop_every-th energy message, and/or the Finished
@@ -103,8 +103,8 @@ static int term_cols(void)
 }
 
 /* Appends to a bounded line (silently truncated). */
-__attribute__((format(printf, 4, 5)))
-static void append(char *line, size_t cap, size_t *n, const char *fmt, ...)
+__attribute__((format(printf, 4, 5))) static void append(char *line, size_t cap, size_t *n,
+                                                         const char *fmt, ...)
 {
     va_list ap;
     int k;
@@ -230,8 +230,9 @@ static int take_live(watch_t *w, const mpm_energy_sample *s)
         if ((rc = fetch_rest(w))) return rc;
         if (seq < w->next) return 0;
         if (seq > w->next) {
-            fprintf(stderr, "mpmctl: warning: job %llu: sample seq %llu streamed but the history "
-                            "ends at %llu\n",
+            fprintf(stderr,
+                    "mpmctl: warning: job %llu: sample seq %llu streamed but the history "
+                    "ends at %llu\n",
                     (unsigned long long)w->job, (unsigned long long)seq,
                     (unsigned long long)w->next);
             w->next = seq;
@@ -325,7 +326,7 @@ static int on_message(watch_t *w, const void *data, size_t len)
     }
     if ((w->drop_every && m.kind == MPP_STREAM_ENERGY && ++w->energy_seen % w->drop_every == 0) ||
         (w->drop_finished && m.kind == MPP_STREAM_FINISHED))
-        goto out;  /* injected loss: as if the stream never delivered it */
+        goto out; /* injected loss: as if the stream never delivered it */
     stream_seq(w, m.seq);
     switch (m.kind) {
     case MPP_STREAM_ENERGY:
@@ -353,8 +354,7 @@ static int on_message(watch_t *w, const void *data, size_t len)
         w->has_fin = m.has_energy;
         w->fin = m.energy;
         break;
-    default:
-        break;
+    default: break;
     }
 out:
     mpp_stream_clear(&m);
@@ -373,7 +373,7 @@ static int recv_stream(watch_t *w, void *sub)
         zmq_msg_close(&body);
         return (errno == EAGAIN || errno == EINTR) ? 0 : CTL_ESYS;
     }
-    if (zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml) || !more) goto out;  /* malformed: drop */
+    if (zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml) || !more) goto out; /* malformed: drop */
     if (zmq_msg_recv(&body, sub, 0) < 0) {
         rc = CTL_ESYS;
         goto out;
@@ -384,8 +384,7 @@ static int recv_stream(watch_t *w, void *sub)
         while (more) {
             zmq_msg_t x;
             if (zmq_msg_init(&x)) break;
-            if (zmq_msg_recv(&x, sub, 0) < 0 ||
-                zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml))
+            if (zmq_msg_recv(&x, sub, 0) < 0 || zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml))
                 more = 0;
             zmq_msg_close(&x);
         }
@@ -418,8 +417,8 @@ static void summary(watch_t *w, const mpp_run_info *run)
     fprintf(f, "  steps %lld, t %.10g, wall %s\n", run ? (long long)run->steps : w->step,
             run ? cj_norm(run->t) : w->t, wall);
     if (le)
-        fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n", cj_norm(le->e.kinetic),
-                cj_norm(le->e.strain), cj_norm(le->e.total));
+        fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n",
+                cj_norm(le->e.kinetic), cj_norm(le->e.strain), cj_norm(le->e.total));
     else if (w->have_first)
         fprintf(f, "  final energy: kinetic %.10e  strain %.10e  total %.10e\n", w->kinetic,
                 w->strain, w->last_total);
@@ -520,7 +519,8 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
         return CTL_ESYS;
     }
     if (zmq_connect(sub, ep)) {
-        fprintf(stderr, "mpmctl: cannot connect to the stream at %s: %s\n", ep, zmq_strerror(errno));
+        fprintf(stderr, "mpmctl: cannot connect to the stream at %s: %s\n", ep,
+                zmq_strerror(errno));
         zmq_close(sub);
         return CTL_ESYS;
     }
@@ -538,7 +538,8 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
     if (rc) goto out;
     if (w.fmt == CTL_OUT_TEXT && !w.tty)
         fprintf(stdout, "job %llu%s%s%s: %s\n", (unsigned long long)job, w.name[0] ? " (" : "",
-                w.name, w.name[0] ? ")" : "", mpp_status_name(w.status) ? mpp_status_name(w.status) : "?");
+                w.name, w.name[0] ? ")" : "",
+                mpp_status_name(w.status) ? mpp_status_name(w.status) : "?");
     draw(&w, 1);
     {
         int was_terminal = terminal_status(w.status);
@@ -554,8 +555,9 @@ out:
     if (rc == CTL_EINTR) {
         if (w.line_shown) fputc('\n', stdout);
         fflush(stdout);
-        fprintf(stderr, "mpmctl: stopped watching job %llu; it keeps running (mpmctl cancel %llu "
-                        "stops it)\n",
+        fprintf(stderr,
+                "mpmctl: stopped watching job %llu; it keeps running (mpmctl cancel %llu "
+                "stops it)\n",
                 (unsigned long long)job, (unsigned long long)job);
     }
     mpp_reply_clear(&reply);

@@ -21,7 +21,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "mpp.h"  /* MPP_VERSION: mpmctl and mpmd share the version */
+#include "mpp.h" /* MPP_VERSION: mpmctl and mpmd share the version */
 
 volatile sig_atomic_t ctl_interrupted;
 
@@ -41,11 +41,11 @@ enum {
 };
 
 typedef struct {
-    const char *name;   /* e.g. "submit" */
+    const char *name; /* e.g. "submit" */
     unsigned bit;
-    const char *args;   /* synopsis */
-    const char *help;   /* one line */
-    const char *more;   /* details for `mpmctl CMD --help` */
+    const char *args; /* synopsis */
+    const char *help; /* one line */
+    const char *more; /* details for `mpmctl CMD --help` */
 } command;
 
 static const command commands[] = {
@@ -88,15 +88,26 @@ static const command commands[] = {
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 
 typedef enum {
-    O_ENDPOINT, O_STREAM, O_TIMEOUT, O_HELP, O_WATCH, O_CSV, O_JSON, O_STATUS, O_LIMIT, O_CASE,
-    O_STEP, O_OUT, O_COUNT
+    O_ENDPOINT,
+    O_STREAM,
+    O_TIMEOUT,
+    O_HELP,
+    O_WATCH,
+    O_CSV,
+    O_JSON,
+    O_STATUS,
+    O_LIMIT,
+    O_CASE,
+    O_STEP,
+    O_OUT,
+    O_COUNT
 } opt_id;
 
 typedef struct {
-    const char *name;   /* long name */
-    char shortname;     /* 0: none */
+    const char *name; /* long name */
+    char shortname;   /* 0: none */
     int has_arg;
-    unsigned cmds;      /* commands that take it (C_GLOBAL: all) */
+    unsigned cmds; /* commands that take it (C_GLOBAL: all) */
 } option;
 
 static const option options[O_COUNT] = {
@@ -154,8 +165,7 @@ static void command_usage(const command *c)
     printf("\nGlobal options: --endpoint EP, --stream EP, --timeout S (see mpmctl --help).\n");
 }
 
-__attribute__((format(printf, 1, 2)))
-static int bad_usage(const char *fmt, ...)
+__attribute__((format(printf, 1, 2))) static int bad_usage(const char *fmt, ...)
 {
     va_list ap;
     fputs("mpmctl: ", stderr);
@@ -219,7 +229,9 @@ static int parse_args(int argc, char **argv, cli *a)
                 const char *eq = strchr(s + 2, '=');
                 size_t len = eq ? (size_t)(eq - s - 2) : strlen(s + 2);
                 o = find_long(s + 2, len, &id);
-                if (!o) return bad_usage("unknown option '%.*s' (see mpmctl --help)", (int)(len + 2), s);
+                if (!o)
+                    return bad_usage("unknown option '%.*s' (see mpmctl --help)", (int)(len + 2),
+                                     s);
                 if (eq && !o->has_arg) return bad_usage("option --%s takes no value", o->name);
                 if (eq) val = eq + 1;
             } else {
@@ -259,9 +271,11 @@ static int parse_args(int argc, char **argv, cli *a)
         errno = 0;
         a->timeout = strtod(a->val[O_TIMEOUT], &end);
         if (errno || end == a->val[O_TIMEOUT] || *end || !(a->timeout > 0) || a->timeout > 86400)
-            return bad_usage("--timeout: expected seconds in (0, 86400], got '%s'", a->val[O_TIMEOUT]);
+            return bad_usage("--timeout: expected seconds in (0, 86400], got '%s'",
+                             a->val[O_TIMEOUT]);
     }
-    if (a->given[O_CSV] && a->given[O_JSON]) return bad_usage("--csv and --json exclude each other");
+    if (a->given[O_CSV] && a->given[O_JSON])
+        return bad_usage("--csv and --json exclude each other");
     a->fmt = a->given[O_CSV] ? CTL_OUT_CSV : a->given[O_JSON] ? CTL_OUT_JSON : CTL_OUT_TEXT;
     if (a->cmd->bit == C_SUBMIT && a->given[O_CSV] && !a->given[O_WATCH])
         return bad_usage("submit: --csv needs --watch");
@@ -414,7 +428,8 @@ static int cmd_submit(ctl_conn *c, const cli *a)
     if (!rc) rc = mpp_case_from_pb(pb, 0, &sc, &e);
     mpp_case_destroy(&sc);
     if (rc) {
-        fprintf(stderr, "mpmctl: %s: %s\n", path, mpm_error_text(&e, MPM_FIELD_JSON, err, sizeof err));
+        fprintf(stderr, "mpmctl: %s: %s\n", path,
+                mpm_error_text(&e, MPM_FIELD_JSON, err, sizeof err));
         mpp_case_pb_free(&pb);
         return CTL_EXIT_ERROR;
     }
@@ -519,10 +534,17 @@ static void show_text(const json_t *r)
     printf("  method      %s, %s", cj_str(r, "method", "?"), cj_str(r, "update", "?"));
     if (cs) {
         double dt = cj_num(cs, "dt", 0);
-        if (dt > 0) printf(", dt %.10g%s\n", dt, json_is_true(json_object_get(cs, "allowUnstableDt")) ? " (unstable allowed)" : "");
-        else printf(", automatic dt (CFL %g)\n", cj_num(cs, "cfl", 0) > 0 ? cj_num(cs, "cfl", 0) : 0.5);
-        if (json_object_get(cs, "endTime")) printf("  stop        at t = %.10g\n", cj_num(cs, "endTime", 0));
-        else printf("  stop        after %lld steps\n", cj_int(cs, "steps", 0));
+        if (dt > 0)
+            printf(", dt %.10g%s\n", dt,
+                   json_is_true(json_object_get(cs, "allowUnstableDt")) ? " (unstable allowed)"
+                                                                        : "");
+        else
+            printf(", automatic dt (CFL %g)\n",
+                   cj_num(cs, "cfl", 0) > 0 ? cj_num(cs, "cfl", 0) : 0.5);
+        if (json_object_get(cs, "endTime"))
+            printf("  stop        at t = %.10g\n", cj_num(cs, "endTime", 0));
+        else
+            printf("  stop        after %lld steps\n", cj_int(cs, "steps", 0));
     } else {
         putchar('\n');
     }
@@ -536,7 +558,8 @@ static void show_text(const json_t *r)
     if (json_is_array(snaps) && json_array_size(snaps)) {
         size_t n = json_array_size(snaps);
         printf("  snapshots   %zu stored, steps", n);
-        for (size_t i = 0; i < n && i < 20; i++) printf(" %lld", (long long)cj_at(r, "snapshotSteps", i, 0));
+        for (size_t i = 0; i < n && i < 20; i++)
+            printf(" %lld", (long long)cj_at(r, "snapshotSteps", i, 0));
         printf("%s\n", n > 20 ? " ..." : "");
     } else {
         printf("  snapshots   none stored\n");
@@ -562,7 +585,8 @@ static int cmd_show(ctl_conn *c, const cli *a)
     } else if (a->given[O_CASE]) {
         json_t *cs = json_object_get(run, "case");
         if (!cs) {
-            fprintf(stderr, "mpmctl: the server sent run %llu without its case\n", (unsigned long long)id);
+            fprintf(stderr, "mpmctl: the server sent run %llu without its case\n",
+                    (unsigned long long)id);
             rc = CTL_EPROTO;
         } else if (!(rc = cj_print(stdout, cs, 1))) {
             fputc('\n', stdout);
@@ -610,9 +634,12 @@ static int snapshot_csv(FILE *f, const mpp_snapshot *s)
         return CTL_EPROTO;
     }
     fputs("i", f);
-    if (s->x) for (size_t d = 0; d < dim; d++) fprintf(f, ",%s", ax[d]);
-    if (s->v) for (size_t d = 0; d < dim; d++) fprintf(f, ",v%s", ax[d]);
-    if (s->stress) for (int k = 0; k < 6; k++) fprintf(f, ",%s", voigt[k]);
+    if (s->x)
+        for (size_t d = 0; d < dim; d++) fprintf(f, ",%s", ax[d]);
+    if (s->v)
+        for (size_t d = 0; d < dim; d++) fprintf(f, ",v%s", ax[d]);
+    if (s->stress)
+        for (int k = 0; k < 6; k++) fprintf(f, ",%s", voigt[k]);
     if (s->pressure) fputs(",pressure", f);
     if (s->volume) fputs(",volume", f);
     fputc('\n', f);
@@ -624,9 +651,12 @@ static int snapshot_csv(FILE *f, const mpp_snapshot *s)
     } while (0)
     for (size_t i = 0; i < n; i++) {
         fprintf(f, "%zu", i);
-        if (s->x) for (size_t d = 0; d < dim; d++) CELL(s->x[i * dim + d]);
-        if (s->v) for (size_t d = 0; d < dim; d++) CELL(s->v[i * dim + d]);
-        if (s->stress) for (size_t k = 0; k < 6; k++) CELL(s->stress[i * 6 + k]);
+        if (s->x)
+            for (size_t d = 0; d < dim; d++) CELL(s->x[i * dim + d]);
+        if (s->v)
+            for (size_t d = 0; d < dim; d++) CELL(s->v[i * dim + d]);
+        if (s->stress)
+            for (size_t k = 0; k < 6; k++) CELL(s->stress[i * 6 + k]);
         if (s->pressure) CELL(s->pressure[i]);
         if (s->volume) CELL(s->volume[i]);
         fputc('\n', f);
@@ -727,12 +757,14 @@ static int cmd_ping(ctl_conn *c, const cli *a)
     if (!rc) {
         if (a->fmt == CTL_OUT_JSON) {
             json_t *rt = json_real(ms);
-            if (!rt || json_object_set_new(pong, "roundTripMs", rt)) rc = CTL_ESYS;
-            else rc = out_json_line(pong);
+            if (!rt || json_object_set_new(pong, "roundTripMs", rt))
+                rc = CTL_ESYS;
+            else
+                rc = out_json_line(pong);
         } else {
             printf("mpmd %s at %s: schema %lld, stream %s, round trip %.2f ms\n",
-                   cj_str(pong, "serverVersion", "?"), c->endpoint, cj_int(pong, "schemaVersion", 0),
-                   cj_str(pong, "streamEndpoint", "?"), ms);
+                   cj_str(pong, "serverVersion", "?"), c->endpoint,
+                   cj_int(pong, "schemaVersion", 0), cj_str(pong, "streamEndpoint", "?"), ms);
         }
     }
     json_decref(reply);
@@ -776,8 +808,10 @@ int main(int argc, char **argv)
     int rc;
     if (parse_args(argc, argv, &a)) return CTL_EXIT_USAGE;
     if (a.given[O_HELP]) {
-        if (a.cmd) command_usage(a.cmd);
-        else usage(stdout);
+        if (a.cmd)
+            command_usage(a.cmd);
+        else
+            usage(stdout);
         return CTL_EXIT_OK;
     }
     memset(&c, 0, sizeof c);

@@ -14,39 +14,41 @@
 _Static_assert(MPP_SCHEMA_VERSION == MPMD__SCHEMA_VERSION__SCHEMA_VERSION,
                "MPP_SCHEMA_VERSION must match proto/mpmd.proto");
 _Static_assert(SAME(MPP_STATUS_QUEUED, MPMD__RUN_STATUS__QUEUED) &&
-               SAME(MPP_STATUS_RUNNING, MPMD__RUN_STATUS__RUNNING) &&
-               SAME(MPP_STATUS_FINISHED, MPMD__RUN_STATUS__FINISHED) &&
-               SAME(MPP_STATUS_FAILED, MPMD__RUN_STATUS__FAILED) &&
-               SAME(MPP_STATUS_CANCELLED, MPMD__RUN_STATUS__CANCELLED) &&
-               SAME(MPP_STATUS_INTERRUPTED, MPMD__RUN_STATUS__INTERRUPTED),
+                   SAME(MPP_STATUS_RUNNING, MPMD__RUN_STATUS__RUNNING) &&
+                   SAME(MPP_STATUS_FINISHED, MPMD__RUN_STATUS__FINISHED) &&
+                   SAME(MPP_STATUS_FAILED, MPMD__RUN_STATUS__FAILED) &&
+                   SAME(MPP_STATUS_CANCELLED, MPMD__RUN_STATUS__CANCELLED) &&
+                   SAME(MPP_STATUS_INTERRUPTED, MPMD__RUN_STATUS__INTERRUPTED),
                "mpp_status must match mpmd.RunStatus");
 _Static_assert(SAME(MPP_ERR_INTERNAL, MPMD__ERROR__CODE__INTERNAL) &&
-               SAME(MPP_ERR_BAD_REQUEST, MPMD__ERROR__CODE__BAD_REQUEST) &&
-               SAME(MPP_ERR_BAD_SCHEMA, MPMD__ERROR__CODE__BAD_SCHEMA) &&
-               SAME(MPP_ERR_INVALID_CASE, MPMD__ERROR__CODE__INVALID_CASE) &&
-               SAME(MPP_ERR_NOT_FOUND, MPMD__ERROR__CODE__NOT_FOUND) &&
-               SAME(MPP_ERR_QUEUE_FULL, MPMD__ERROR__CODE__QUEUE_FULL) &&
-               SAME(MPP_ERR_TOO_LARGE, MPMD__ERROR__CODE__TOO_LARGE) &&
-               SAME(MPP_ERR_CONFLICT, MPMD__ERROR__CODE__CONFLICT) &&
-               SAME(MPP_ERR_UNAVAILABLE, MPMD__ERROR__CODE__UNAVAILABLE),
+                   SAME(MPP_ERR_BAD_REQUEST, MPMD__ERROR__CODE__BAD_REQUEST) &&
+                   SAME(MPP_ERR_BAD_SCHEMA, MPMD__ERROR__CODE__BAD_SCHEMA) &&
+                   SAME(MPP_ERR_INVALID_CASE, MPMD__ERROR__CODE__INVALID_CASE) &&
+                   SAME(MPP_ERR_NOT_FOUND, MPMD__ERROR__CODE__NOT_FOUND) &&
+                   SAME(MPP_ERR_QUEUE_FULL, MPMD__ERROR__CODE__QUEUE_FULL) &&
+                   SAME(MPP_ERR_TOO_LARGE, MPMD__ERROR__CODE__TOO_LARGE) &&
+                   SAME(MPP_ERR_CONFLICT, MPMD__ERROR__CODE__CONFLICT) &&
+                   SAME(MPP_ERR_UNAVAILABLE, MPMD__ERROR__CODE__UNAVAILABLE),
                "mpp_err_code must match mpmd.Error.Code");
 _Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
-               SAME(MPM_METHOD_GIMP, MPMD__CASE__METHOD__GIMP) &&
-               SAME(MPM_USF, MPMD__CASE__UPDATE__USF) && SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
-               SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),
+                   SAME(MPM_METHOD_GIMP, MPMD__CASE__METHOD__GIMP) &&
+                   SAME(MPM_USF, MPMD__CASE__UPDATE__USF) &&
+                   SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
+                   SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),
                "mpm_method / mpm_update must match mpmd.Case.Method / Update");
 _Static_assert(SAME(MPP_STREAM_PROGRESS, MPMD__STREAM_MSG__BODY_PROGRESS) &&
-               SAME(MPP_STREAM_ENERGY, MPMD__STREAM_MSG__BODY_ENERGY) &&
-               SAME(MPP_STREAM_SNAPSHOT, MPMD__STREAM_MSG__BODY_SNAPSHOT) &&
-               SAME(MPP_STREAM_FINISHED, MPMD__STREAM_MSG__BODY_FINISHED),
+                   SAME(MPP_STREAM_ENERGY, MPMD__STREAM_MSG__BODY_ENERGY) &&
+                   SAME(MPP_STREAM_SNAPSHOT, MPMD__STREAM_MSG__BODY_SNAPSHOT) &&
+                   SAME(MPP_STREAM_FINISHED, MPMD__STREAM_MSG__BODY_FINISHED),
                "mpp_stream_kind must match the StreamMsg.body field numbers");
 _Static_assert(SAME(MPP_REPLY_ERROR, MPMD__REPLY__BODY_ERROR) &&
-               SAME(MPP_REPLY_SUBMIT_OK, MPMD__REPLY__BODY_SUBMIT_OK) &&
-               SAME(MPP_REPLY_RUN, MPMD__REPLY__BODY_RUN) && SAME(MPP_REPLY_RUNS, MPMD__REPLY__BODY_RUNS) &&
-               SAME(MPP_REPLY_ENERGY, MPMD__REPLY__BODY_ENERGY) &&
-               SAME(MPP_REPLY_SNAPSHOT, MPMD__REPLY__BODY_SNAPSHOT) &&
-               SAME(MPP_REPLY_PONG, MPMD__REPLY__BODY_PONG) &&
-               SAME(MPP_REPLY_VERSION, MPMD__REPLY__BODY_VERSION),
+                   SAME(MPP_REPLY_SUBMIT_OK, MPMD__REPLY__BODY_SUBMIT_OK) &&
+                   SAME(MPP_REPLY_RUN, MPMD__REPLY__BODY_RUN) &&
+                   SAME(MPP_REPLY_RUNS, MPMD__REPLY__BODY_RUNS) &&
+                   SAME(MPP_REPLY_ENERGY, MPMD__REPLY__BODY_ENERGY) &&
+                   SAME(MPP_REPLY_SNAPSHOT, MPMD__REPLY__BODY_SNAPSHOT) &&
+                   SAME(MPP_REPLY_PONG, MPMD__REPLY__BODY_PONG) &&
+                   SAME(MPP_REPLY_VERSION, MPMD__REPLY__BODY_VERSION),
                "mpp_reply_kind must match the Reply.body field numbers");
 #undef SAME
 
@@ -67,7 +69,8 @@ const char *mpp_status_name(int status)
 int mpp_status_from_name(const char *name)
 {
     const ProtobufCEnumValue *ev =
-        name ? protobuf_c_enum_descriptor_get_value_by_name(&mpmd__run_status__descriptor, name) : NULL;
+        name ? protobuf_c_enum_descriptor_get_value_by_name(&mpmd__run_status__descriptor, name)
+             : NULL;
     return ev ? ev->value : 0;
 }
 
@@ -123,10 +126,11 @@ int mpp_unpack(const ProtobufCMessageDescriptor *d, const void *buf, size_t len,
     *out = NULL;
     if (!max) max = MPP_MSG_MAX;
     if (len > max)
-        return mpm_fail(err, MPM_ETOOBIG, NULL, "%s message of %zu bytes: more than the limit of %zu",
-                        d->name, len, max);
+        return mpm_fail(err, MPM_ETOOBIG, NULL,
+                        "%s message of %zu bytes: more than the limit of %zu", d->name, len, max);
     *out = protobuf_c_message_unpack(d, NULL, len, buf ? buf : empty);
-    if (!*out) return mpm_fail(err, MPM_ESYNTAX, NULL, "not a valid %s message (%zu bytes)", d->name, len);
+    if (!*out)
+        return mpm_fail(err, MPM_ESYNTAX, NULL, "not a valid %s message (%zu bytes)", d->name, len);
     return 0;
 }
 
@@ -240,8 +244,8 @@ int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
     s->n = (size_t)ps->n;
     s->dim = ps->dim <= MPM_MAX_DIM ? (int)ps->dim : 0;
     if ((ps->n_x || ps->n_v) && (ps->dim < 1 || ps->dim > MPM_MAX_DIM))
-        return mpm_fail(err, MPM_ESYNTAX, "snapshot.dim", "%u: must be 1, 2 or 3 with positions or velocities",
-                        ps->dim);
+        return mpm_fail(err, MPM_ESYNTAX, "snapshot.dim",
+                        "%u: must be 1, 2 or 3 with positions or velocities", ps->dim);
     const struct {
         const char *name;
         size_t have;
@@ -258,8 +262,8 @@ int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
         /* n * width without overflow: have / width == n exactly */
         if (a[i].have % a[i].width || a[i].have / a[i].width != ps->n)
             return mpm_fail(err, MPM_ESYNTAX, NULL,
-                            "snapshot.%s holds %zu values, not n = %llu times %llu", a[i].name, a[i].have,
-                            (unsigned long long)ps->n, (unsigned long long)a[i].width);
+                            "snapshot.%s holds %zu values, not n = %llu times %llu", a[i].name,
+                            a[i].have, (unsigned long long)ps->n, (unsigned long long)a[i].width);
         *a[i].dst = a[i].v;
     }
     return 0;

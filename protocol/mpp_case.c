@@ -72,7 +72,7 @@ void mpp_case_pb_free(Mpmd__Case **pb)
 void mpp_case_pin_defaults(Mpmd__Case *pb)
 {
     if (!pb) return;
-    pb->has_method = 1;  /* an absent field holds the schema's default */
+    pb->has_method = 1; /* an absent field holds the schema's default */
     pb->has_update = 1;
 }
 
@@ -89,9 +89,11 @@ static int get_vec(const char *path, const double *v, size_t n, int dim, int opt
     if (n == 0 && optional) return 0;
     if (n == 0) return mpm_fail(err, MPM_EINVAL, path, "missing (%d values, one per axis)", dim);
     if (n != (size_t)dim)
-        return mpm_fail(err, MPM_EINVAL, path, "expected %d values (one per axis), got %zu", dim, n);
+        return mpm_fail(err, MPM_EINVAL, path, "expected %d values (one per axis), got %zu", dim,
+                        n);
     for (size_t i = 0; i < n; i++) {
-        if (!isfinite(v[i])) return mpm_fail(err, MPM_EINVAL, AT("%s[%zu]", path, i), "must be a finite number");
+        if (!isfinite(v[i]))
+            return mpm_fail(err, MPM_EINVAL, AT("%s[%zu]", path, i), "must be a finite number");
         out[i] = v[i];
     }
     return 0;
@@ -108,7 +110,8 @@ static int chk_points(const char *path, const double *v, size_t n, size_t want, 
         return mpm_fail(err, MPM_EINVAL, path, "expected %zu values (%s), got %zu", want,
                         optional ? "per point, or none" : "per point", n);
     for (size_t i = 0; i < n; i++) {
-        if (!isfinite(v[i])) return mpm_fail(err, MPM_EINVAL, AT("%s[%zu]", path, i), "must be a finite number");
+        if (!isfinite(v[i]))
+            return mpm_fail(err, MPM_EINVAL, AT("%s[%zu]", path, i), "must be a finite number");
         if (positive && !(v[i] > 0))
             return mpm_fail(err, MPM_EINVAL, AT("%s[%zu]", path, i), "must be > 0 (got %g)", v[i]);
     }
@@ -126,25 +129,30 @@ static int conv_grid(const Mpmd__Grid *g, mpp_case *mc, mpm_error *err)
     if (g->dim < 1 || g->dim > MPM_MAX_DIM)
         return mpm_fail(err, MPM_EINVAL, "grid.dim", "must be 1, 2 or 3 (got %u)", g->dim);
     gd->dim = (int)g->dim;
-    if ((rc = get_vec("grid.origin", g->origin, g->n_origin, gd->dim, 1, gd->origin, err))) return rc;
+    if ((rc = get_vec("grid.origin", g->origin, g->n_origin, gd->dim, 1, gd->origin, err)))
+        return rc;
     if ((rc = get_vec("grid.spacing", g->spacing, g->n_spacing, gd->dim, 0, gd->h, err))) return rc;
     for (int d = 0; d < gd->dim; d++)
         if (!(gd->h[d] > 0))
-            return mpm_fail(err, MPM_EINVAL, AT("grid.spacing[%d]", d), "must be > 0 (got %g)", gd->h[d]);
+            return mpm_fail(err, MPM_EINVAL, AT("grid.spacing[%d]", d), "must be > 0 (got %g)",
+                            gd->h[d]);
     if (g->n_nodes == 0)
-        return mpm_fail(err, MPM_EINVAL, "grid.nodes", "missing (%d values, one per axis)", gd->dim);
+        return mpm_fail(err, MPM_EINVAL, "grid.nodes", "missing (%d values, one per axis)",
+                        gd->dim);
     if (g->n_nodes != (size_t)gd->dim)
         return mpm_fail(err, MPM_EINVAL, "grid.nodes", "expected %d values (one per axis), got %zu",
                         gd->dim, g->n_nodes);
     for (int d = 0; d < gd->dim; d++) {
         if (g->nodes[d] < 2)
-            return mpm_fail(err, MPM_EINVAL, AT("grid.nodes[%d]", d), "must be >= 2 (got %u)", g->nodes[d]);
+            return mpm_fail(err, MPM_EINVAL, AT("grid.nodes[%d]", d), "must be >= 2 (got %u)",
+                            g->nodes[d]);
         total *= g->nodes[d];
-        gd->nodes[d] = g->nodes[d] > (uint32_t)MPP_CASE_MAX_NODES ? (int)MPP_CASE_MAX_NODES : (int)g->nodes[d];
+        gd->nodes[d] =
+            g->nodes[d] > (uint32_t)MPP_CASE_MAX_NODES ? (int)MPP_CASE_MAX_NODES : (int)g->nodes[d];
     }
     if (total > MPP_CASE_MAX_NODES)
-        return mpm_fail(err, MPM_ETOOBIG, "grid.nodes", "%.0f nodes, more than the limit of %u", total,
-                        MPP_CASE_MAX_NODES);
+        return mpm_fail(err, MPM_ETOOBIG, "grid.nodes", "%.0f nodes, more than the limit of %u",
+                        total, MPP_CASE_MAX_NODES);
     return 0;
 }
 
@@ -154,7 +162,8 @@ static int conv_materials(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
     char at_[96];
     if (n == 0) return mpm_fail(err, MPM_EINVAL, "materials", "at least one material is required");
     if (n > MPP_CASE_MAX_ITEMS)
-        return mpm_fail(err, MPM_ETOOBIG, "materials", "%zu, more than the limit of %u", n, MPP_CASE_MAX_ITEMS);
+        return mpm_fail(err, MPM_ETOOBIG, "materials", "%zu, more than the limit of %u", n,
+                        MPP_CASE_MAX_ITEMS);
     mc->materials = calloc(n, sizeof *mc->materials);
     if (!mc->materials) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
     mc->c.materials = mc->materials;
@@ -165,18 +174,22 @@ static int conv_materials(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         switch (m->model) {
         case MPMD__MATERIAL__MODEL__LINEAR_ELASTIC: md->model = MPM_MODEL_LINEAR_ELASTIC; break;
         default:
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].model", i), "unknown value %d", (int)m->model);
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].model", i), "unknown value %d",
+                            (int)m->model);
         }
-        if (!m->has_youngs_modulus) return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].youngs_modulus", i), "missing");
+        if (!m->has_youngs_modulus)
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].youngs_modulus", i), "missing");
         if (!isfinite(m->youngs_modulus) || !(m->youngs_modulus > 0))
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].youngs_modulus", i), "must be > 0 (got %g)",
-                            m->youngs_modulus);
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].youngs_modulus", i),
+                            "must be > 0 (got %g)", m->youngs_modulus);
         if (m->has_poisson_ratio && !(m->poisson_ratio > -1 && m->poisson_ratio < 0.5))
             return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].poisson_ratio", i),
                             "must be in (-1, 0.5) (got %g)", m->poisson_ratio);
-        if (!m->has_density) return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].density", i), "missing");
+        if (!m->has_density)
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].density", i), "missing");
         if (!isfinite(m->density) || !(m->density > 0))
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].density", i), "must be > 0 (got %g)", m->density);
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].density", i),
+                            "must be > 0 (got %g)", m->density);
         md->youngs_modulus = m->youngs_modulus;
         md->poisson_ratio = m->has_poisson_ratio ? m->poisson_ratio : 0;
         md->density = m->density;
@@ -204,7 +217,9 @@ static int conv_points(const Mpmd__Points *p, size_t bi, mpp_case *mc, double *t
     char at_[96], path[64];
     double *blk;
     int rc;
-    if (n == 0) return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].points.volume", bi), "at least one point is required");
+    if (n == 0)
+        return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].points.volume", bi),
+                        "at least one point is required");
     if (n > max || *total + (double)n > (double)max)
         return mpm_fail(err, MPM_ETOOBIG, AT("bodies[%zu].points", bi),
                         "%zu points, more than the limit of %zu particles in a case", n, max);
@@ -233,13 +248,13 @@ static int conv_points(const Mpmd__Points *p, size_t bi, mpp_case *mc, double *t
                  sizeof *blk);
     if (!blk) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
     mc->point_blocks[bi] = blk;
-#define TAKE(dst, field)                                                        \
-    do {                                                                        \
-        if (p->n_##field) {                                                     \
-            memcpy(blk + off, p->field, p->n_##field * sizeof *blk);            \
-            b->dst = blk + off;                                                 \
-            off += p->n_##field;                                                \
-        }                                                                       \
+#define TAKE(dst, field)                                             \
+    do {                                                             \
+        if (p->n_##field) {                                          \
+            memcpy(blk + off, p->field, p->n_##field * sizeof *blk); \
+            b->dst = blk + off;                                      \
+            off += p->n_##field;                                     \
+        }                                                            \
     } while (0)
     TAKE(x, x);
     TAKE(volume, volume);
@@ -262,7 +277,8 @@ static int conv_bodies(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error
     char at_[96], path[64];
     if (n == 0) return mpm_fail(err, MPM_EINVAL, "bodies", "at least one body is required");
     if (n > MPP_CASE_MAX_ITEMS)
-        return mpm_fail(err, MPM_ETOOBIG, "bodies", "%zu, more than the limit of %u", n, MPP_CASE_MAX_ITEMS);
+        return mpm_fail(err, MPM_ETOOBIG, "bodies", "%zu, more than the limit of %u", n,
+                        MPP_CASE_MAX_ITEMS);
     mc->bodies = calloc(n, sizeof *mc->bodies);
     mc->point_blocks = calloc(n, sizeof *mc->point_blocks);
     if (!mc->bodies || !mc->point_blocks) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
@@ -272,16 +288,18 @@ static int conv_bodies(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error
         const Mpmd__Body *pbb = pb->bodies[i];
         mpm_body_desc *b = &mc->bodies[i];
         if (pbb->material >= pb->n_materials)
-            return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].material", i), "no material %u (the case has %zu)",
-                            pbb->material, pb->n_materials);
+            return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].material", i),
+                            "no material %u (the case has %zu)", pbb->material, pb->n_materials);
         b->material = (int)pbb->material;
         snprintf(path, sizeof path, "bodies[%zu].velocity", i);
-        if ((rc = get_vec(path, pbb->velocity, pbb->n_velocity, dim, 1, b->velocity, err))) return rc;
+        if ((rc = get_vec(path, pbb->velocity, pbb->n_velocity, dim, 1, b->velocity, err)))
+            return rc;
         b->ppc = 2;
         if (pbb->geometry_case == MPMD__BODY__GEOMETRY_BOX ||
             pbb->geometry_case == MPMD__BODY__GEOMETRY_SPHERE) {
             if (pbb->ppc < 1 || pbb->ppc > 8)
-                return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].ppc", i), "must be 1..8 (got %u)", pbb->ppc);
+                return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].ppc", i), "must be 1..8 (got %u)",
+                                pbb->ppc);
             b->ppc = (int)pbb->ppc;
         }
         switch (pbb->geometry_case) {
@@ -299,25 +317,28 @@ static int conv_bodies(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error
         case MPMD__BODY__GEOMETRY_SPHERE:
             b->shape = MPM_SHAPE_SPHERE;
             snprintf(path, sizeof path, "bodies[%zu].sphere.center", i);
-            if ((rc = get_vec(path, pbb->sphere->center, pbb->sphere->n_center, dim, 0, b->center, err)))
+            if ((rc = get_vec(path, pbb->sphere->center, pbb->sphere->n_center, dim, 0, b->center,
+                              err)))
                 return rc;
             if (!pbb->sphere->has_radius)
                 return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].sphere.radius", i), "missing");
             if (!isfinite(pbb->sphere->radius) || !(pbb->sphere->radius > 0))
-                return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].sphere.radius", i), "must be > 0 (got %g)",
-                                pbb->sphere->radius);
+                return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu].sphere.radius", i),
+                                "must be > 0 (got %g)", pbb->sphere->radius);
             b->radius = pbb->sphere->radius;
             break;
         case MPMD__BODY__GEOMETRY_POINTS:
             if ((rc = conv_points(pbb->points, i, mc, &total, max, err))) return rc;
             continue;
         default:
-            return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu]", i), "needs one of box, sphere or points");
+            return mpm_fail(err, MPM_EINVAL, AT("bodies[%zu]", i),
+                            "needs one of box, sphere or points");
         }
         total += est_generated(b, &mc->c.grid);
         if (total > (double)max && total > MPP_ESTIMATE_FROM)
             return mpm_fail(err, MPM_ETOOBIG, AT("bodies[%zu]", i),
-                            "about %.0f particles up to this body, more than the limit of %zu", total, max);
+                            "about %.0f particles up to this body, more than the limit of %zu",
+                            total, max);
     }
     return 0;
 }
@@ -329,7 +350,8 @@ static int conv_tractions(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
     char at_[96], path[64];
     if (n == 0) return 0;
     if (n > MPP_CASE_MAX_ITEMS)
-        return mpm_fail(err, MPM_ETOOBIG, "tractions", "%zu, more than the limit of %u", n, MPP_CASE_MAX_ITEMS);
+        return mpm_fail(err, MPM_ETOOBIG, "tractions", "%zu, more than the limit of %u", n,
+                        MPP_CASE_MAX_ITEMS);
     mc->tractions = calloc(n, sizeof *mc->tractions);
     if (!mc->tractions) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
     mc->c.tractions = mc->tractions;
@@ -343,8 +365,8 @@ static int conv_tractions(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         if ((rc = get_vec(path, t->hi, t->n_hi, dim, 0, td->hi, err))) return rc;
         for (int d = 0; d < dim; d++)
             if (td->hi[d] < td->lo[d])
-                return mpm_fail(err, MPM_EINVAL, AT("tractions[%zu].hi[%d]", i, d), "must be >= lo[%d] (%g < %g)",
-                                d, td->hi[d], td->lo[d]);
+                return mpm_fail(err, MPM_EINVAL, AT("tractions[%zu].hi[%d]", i, d),
+                                "must be >= lo[%d] (%g < %g)", d, td->hi[d], td->lo[d]);
         if (t->normal >= (uint32_t)dim)
             return mpm_fail(err, MPM_EINVAL, AT("tractions[%zu].normal", i),
                             "must be an axis below dim %d (got %u)", dim, t->normal);
@@ -375,8 +397,8 @@ static int conv_boundary(const Mpmd__Boundary *bd, mpp_case *mc, mpm_error *err)
             return mpm_fail(err, MPM_EINVAL, AT("boundary.%s", face[f]),
                             "mask %u has bits other than 1 (x), 2 (y), 4 (z)", mask[f]);
         if (mask[f] && f / 2 >= g->dim)
-            return mpm_fail(err, MPM_EINVAL, AT("boundary.%s", face[f]), "the grid has no axis %d (dim %d)",
-                            f / 2, g->dim);
+            return mpm_fail(err, MPM_EINVAL, AT("boundary.%s", face[f]),
+                            "the grid has no axis %d (dim %d)", f / 2, g->dim);
         mc->c.bc.face_mask[f] = mask[f];
     }
     n = bd->n_nodes;
@@ -395,7 +417,8 @@ static int conv_boundary(const Mpmd__Boundary *bd, mpp_case *mc, mpm_error *err)
         for (int d = 0; d < g->dim; d++) {
             if (nf->ijk[d] >= (uint32_t)g->nodes[d])
                 return mpm_fail(err, MPM_EINVAL, AT("boundary.nodes[%zu].ijk[%d]", i, d),
-                                "%u is outside the grid (nodes[%d] = %d)", nf->ijk[d], d, g->nodes[d]);
+                                "%u is outside the grid (nodes[%d] = %d)", nf->ijk[d], d,
+                                g->nodes[d]);
             mc->node_ijk[3 * i + (size_t)d] = (int)nf->ijk[d];
         }
         if (nf->mask > 7)
@@ -422,8 +445,8 @@ static int conv_run(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         break;
     case MPMD__CASE__STOP_STEPS:
         if (pb->steps < 1 || pb->steps > MPP_CASE_MAX_STEPS)
-            return mpm_fail(err, MPM_EINVAL, "steps", "must be 1..%lld (got %lld)", (long long)MPP_CASE_MAX_STEPS,
-                            (long long)pb->steps);
+            return mpm_fail(err, MPM_EINVAL, "steps", "must be 1..%lld (got %lld)",
+                            (long long)MPP_CASE_MAX_STEPS, (long long)pb->steps);
         mc->steps = pb->steps;
         break;
     default:
@@ -431,7 +454,8 @@ static int conv_run(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
     }
     /* a uint32 the solver's int must hold */
     if (pb->has_threads && pb->threads > MPM_MAX_THREADS)
-        return mpm_fail(err, MPM_EINVAL, "threads", "must be 0..%d (got %u)", MPM_MAX_THREADS, pb->threads);
+        return mpm_fail(err, MPM_EINVAL, "threads", "must be 0..%d (got %u)", MPM_MAX_THREADS,
+                        pb->threads);
     mc->c.threads = pb->has_threads ? (int)pb->threads : 0;
     mc->snapshot_fields = MPP_SNAP_ALL;
     if (!o) return 0;
@@ -447,8 +471,8 @@ static int conv_run(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         case MPMD__OUTPUT__FIELD__PRESSURE: mc->snapshot_fields |= MPP_SNAP_PRESSURE; break;
         case MPMD__OUTPUT__FIELD__VOLUME: mc->snapshot_fields |= MPP_SNAP_VOLUME; break;
         default:
-            return mpm_fail(err, MPM_EINVAL, AT("output.snapshot_fields[%zu]", i), "unknown value %d",
-                            (int)o->snapshot_fields[i]);
+            return mpm_fail(err, MPM_EINVAL, AT("output.snapshot_fields[%zu]", i),
+                            "unknown value %d", (int)o->snapshot_fields[i]);
         }
     }
     return 0;
@@ -473,7 +497,8 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
     c->cfl = pb->has_cfl ? pb->cfl : 0;
     c->mass_tol = pb->has_mass_tol ? pb->mass_tol : 0;
     c->allow_unstable_dt = pb->has_allow_unstable_dt && pb->allow_unstable_dt;
-    if ((rc = get_vec("gravity", pb->gravity, pb->n_gravity, c->grid.dim, 1, c->gravity, err))) return rc;
+    if ((rc = get_vec("gravity", pb->gravity, pb->n_gravity, c->grid.dim, 1, c->gravity, err)))
+        return rc;
     if ((rc = conv_materials(pb, mc, err))) return rc;
     if ((rc = conv_bodies(pb, mc, max, err))) return rc;
     if ((rc = conv_tractions(pb, mc, err))) return rc;
@@ -505,7 +530,8 @@ int mpp_case_from_pb(const Mpmd__Case *pb, size_t max_particles, mpp_case **out,
     return 0;
 }
 
-int mpp_case_load(const char *json, size_t len, size_t max_particles, mpp_case **out, mpm_error *err)
+int mpp_case_load(const char *json, size_t len, size_t max_particles, mpp_case **out,
+                  mpm_error *err)
 {
     Mpmd__Case *pb;
     int rc = mpp_case_from_json(json, len, &pb, err);

@@ -50,24 +50,24 @@ enum {
  * arrays, so it stays valid until mpp_case_destroy() whatever happens to
  * the message it came from. */
 typedef struct mpp_case {
-    mpm_case c;                 /* the solver case (passed mpm_case_check; its
-                                   max_particles is the limit it was checked under) */
-    mpm_case_info info;         /* what the check found: particles, nodes, ...;
-                                   give it to mpm_sim_new() to build unchecked */
-    char *name;                 /* Case.name, "" when absent */
-    int has_end_time;           /* 1: run until end_time; 0: run `steps` steps */
+    mpm_case c;         /* the solver case (passed mpm_case_check; its
+                           max_particles is the limit it was checked under) */
+    mpm_case_info info; /* what the check found: particles, nodes, ...;
+                           give it to mpm_sim_new() to build unchecked */
+    char *name;         /* Case.name, "" when absent */
+    int has_end_time;   /* 1: run until end_time; 0: run `steps` steps */
     double end_time;
     long long steps;
-    unsigned energy_every;      /* Output.energy_every (0: only the final sample) */
-    unsigned snapshot_every;    /* Output.snapshot_every (0: none) */
-    unsigned snapshot_fields;   /* MPP_SNAP_* bits; MPP_SNAP_ALL when none listed */
-    int record_snapshots;       /* Output.record_snapshots */
-    size_t explicit_points;     /* particles given as explicit points */
+    unsigned energy_every;    /* Output.energy_every (0: only the final sample) */
+    unsigned snapshot_every;  /* Output.snapshot_every (0: none) */
+    unsigned snapshot_fields; /* MPP_SNAP_* bits; MPP_SNAP_ALL when none listed */
+    int record_snapshots;     /* Output.record_snapshots */
+    size_t explicit_points;   /* particles given as explicit points */
 
     /* Storage behind c (owned). */
     mpm_material_desc *materials;
     mpm_body_desc *bodies;
-    double **point_blocks;      /* per body: its explicit arrays, or NULL */
+    double **point_blocks; /* per body: its explicit arrays, or NULL */
     mpm_traction_desc *tractions;
     int *node_ijk;
     unsigned *node_mask;

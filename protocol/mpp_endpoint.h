@@ -28,7 +28,6 @@ int mpp_stream_endpoint_derive(const char *ep, char *out, size_t n);
  * with a loopback or wildcard host (which only means something on the
  * daemon's machine), or unknown; then the derivation from the control
  * endpoint.  Returns 0 or -1 (nothing usable). */
-int mpp_stream_endpoint_for_client(const char *reported, const char *control, char *out,
-                                   size_t n);
+int mpp_stream_endpoint_for_client(const char *reported, const char *control, char *out, size_t n);
 
 #endif

@@ -40,9 +40,9 @@
 typedef struct {
     mpm_error *err;
     mpm_path_elem path[MPM_PATH_MAX];
-    int plen;    /* elements kept */
-    int over;    /* elements beyond MPM_PATH_MAX */
-    int depth;   /* message nesting */
+    int plen;  /* elements kept */
+    int over;  /* elements beyond MPM_PATH_MAX */
+    int depth; /* message nesting */
 } jctx;
 
 static void ctx_init(jctx *c, mpm_error *err)
@@ -86,14 +86,15 @@ static void path_pop(jctx *c, size_t old)
         return;
     }
     while ((size_t)(c->plen + c->over) > old) {
-        if (c->over) c->over--;
-        else c->plen--;
+        if (c->over)
+            c->over--;
+        else
+            c->plen--;
     }
 }
 
 /* Fills the error (code, message, the current path) and returns code. */
-__attribute__((format(printf, 3, 4)))
-static int fail(jctx *c, int code, const char *fmt, ...)
+__attribute__((format(printf, 3, 4))) static int fail(jctx *c, int code, const char *fmt, ...)
 {
     if (c->err) {
         char msg[MPM_ERROR_MSG_MAX];
@@ -197,13 +198,11 @@ static int is_json_name(const char *proto_name, const char *key)
 static int find_field(const ProtobufCMessageDescriptor *d, const char *key)
 {
     for (unsigned i = 0; i < d->n_fields; i++)
-        if (!strcmp(d->fields[i].name, key) || is_json_name(d->fields[i].name, key))
-            return (int)i;
+        if (!strcmp(d->fields[i].name, key) || is_json_name(d->fields[i].name, key)) return (int)i;
     return -1;
 }
 
-static const ProtobufCFieldDescriptor *field_by_id(const ProtobufCMessageDescriptor *d,
-                                                   uint32_t id)
+static const ProtobufCFieldDescriptor *field_by_id(const ProtobufCMessageDescriptor *d, uint32_t id)
 {
     for (unsigned i = 0; i < d->n_fields; i++)
         if (d->fields[i].id == id) return &d->fields[i];
@@ -233,8 +232,7 @@ static int is_map(const ProtobufCMessageDescriptor *parent, const ProtobufCField
     const ProtobufCMessageDescriptor *d = f->descriptor;
     char want[128];
     size_t pl, n;
-    if (f->label != PROTOBUF_C_LABEL_REPEATED || f->type != PROTOBUF_C_TYPE_MESSAGE || !d)
-        return 0;
+    if (f->label != PROTOBUF_C_LABEL_REPEATED || f->type != PROTOBUF_C_TYPE_MESSAGE || !d) return 0;
     if (d->n_fields != 2 || d->fields[0].id != 1 || d->fields[1].id != 2 ||
         strcmp(d->fields[0].name, "key") || strcmp(d->fields[1].name, "value"))
         return 0;
@@ -254,15 +252,18 @@ static int is_map(const ProtobufCMessageDescriptor *parent, const ProtobufCField
 static size_t elem_size(ProtobufCType t)
 {
     switch (t) {
-    case PROTOBUF_C_TYPE_INT32: case PROTOBUF_C_TYPE_SINT32:
-    case PROTOBUF_C_TYPE_SFIXED32: case PROTOBUF_C_TYPE_UINT32:
-    case PROTOBUF_C_TYPE_FIXED32: case PROTOBUF_C_TYPE_ENUM:
-        return 4;
+    case PROTOBUF_C_TYPE_INT32:
+    case PROTOBUF_C_TYPE_SINT32:
+    case PROTOBUF_C_TYPE_SFIXED32:
+    case PROTOBUF_C_TYPE_UINT32:
+    case PROTOBUF_C_TYPE_FIXED32:
+    case PROTOBUF_C_TYPE_ENUM: return 4;
     case PROTOBUF_C_TYPE_FLOAT: return sizeof(float);
-    case PROTOBUF_C_TYPE_INT64: case PROTOBUF_C_TYPE_SINT64:
-    case PROTOBUF_C_TYPE_SFIXED64: case PROTOBUF_C_TYPE_UINT64:
-    case PROTOBUF_C_TYPE_FIXED64:
-        return 8;
+    case PROTOBUF_C_TYPE_INT64:
+    case PROTOBUF_C_TYPE_SINT64:
+    case PROTOBUF_C_TYPE_SFIXED64:
+    case PROTOBUF_C_TYPE_UINT64:
+    case PROTOBUF_C_TYPE_FIXED64: return 8;
     case PROTOBUF_C_TYPE_DOUBLE: return sizeof(double);
     case PROTOBUF_C_TYPE_BOOL: return sizeof(protobuf_c_boolean);
     case PROTOBUF_C_TYPE_STRING: return sizeof(char *);
@@ -364,9 +365,12 @@ static int parse_int(jctx *c, ProtobufCType t, const json_t *v, void *dst)
     if (json_is_integer(v)) {
         json_int_t x = json_integer_value(v);
         if (!is_signed && x < 0)
-            return fail(c, MPM_EINVAL, "expected a non-negative integer, got %" JSON_INTEGER_FORMAT, x);
-        if (is_signed) s = x;
-        else u = (uint64_t)x;
+            return fail(c, MPM_EINVAL, "expected a non-negative integer, got %" JSON_INTEGER_FORMAT,
+                        x);
+        if (is_signed)
+            s = x;
+        else
+            u = (uint64_t)x;
         r = 0;
     } else if (json_is_real(v)) {
         r = int_from_double(json_real_value(v), is_signed, &s, &u);
@@ -386,11 +390,15 @@ static int parse_int(jctx *c, ProtobufCType t, const json_t *v, void *dst)
         return fail(c, MPM_EINVAL, "%s out of range for %s", d, type_name(t));
     }
     if (type_is_32(t)) {
-        if (is_signed) *(int32_t *)dst = (int32_t)s;
-        else *(uint32_t *)dst = (uint32_t)u;
+        if (is_signed)
+            *(int32_t *)dst = (int32_t)s;
+        else
+            *(uint32_t *)dst = (uint32_t)u;
     } else {
-        if (is_signed) *(int64_t *)dst = s;
-        else *(uint64_t *)dst = u;
+        if (is_signed)
+            *(int64_t *)dst = s;
+        else
+            *(uint64_t *)dst = u;
     }
     return 0;
 }
@@ -409,14 +417,24 @@ static int parse_double(jctx *c, const json_t *v, double *out)
     if (json_is_string(v)) {
         const char *s = json_string_value(v);
         char *end;
-        if (!strcmp(s, "NaN")) { *out = NAN; return 0; }
-        if (!strcmp(s, "Infinity")) { *out = INFINITY; return 0; }
-        if (!strcmp(s, "-Infinity")) { *out = -INFINITY; return 0; }
+        if (!strcmp(s, "NaN")) {
+            *out = NAN;
+            return 0;
+        }
+        if (!strcmp(s, "Infinity")) {
+            *out = INFINITY;
+            return 0;
+        }
+        if (!strcmp(s, "-Infinity")) {
+            *out = -INFINITY;
+            return 0;
+        }
         if (numeric_text(s)) {
             errno = 0;
             double x = strtod(s, &end);
             if (end != s && !*end) {
-                if (errno == ERANGE && isinf(x)) return fail(c, MPM_EINVAL, "number \"%s\" out of range", s);
+                if (errno == ERANGE && isinf(x))
+                    return fail(c, MPM_EINVAL, "number \"%s\" out of range", s);
                 *out = x;
                 return 0;
             }
@@ -451,8 +469,8 @@ static int parse_enum(jctx *c, const ProtobufCEnumDescriptor *ed, const json_t *
     }
     char d[80];
     describe(v, d, sizeof d);
-    return fail(c, MPM_EINVAL, "unknown value %s for enum %s (expected one of: %s)",
-                d, ed->name, names);
+    return fail(c, MPM_EINVAL, "unknown value %s for enum %s (expected one of: %s)", d, ed->name,
+                names);
 }
 
 /* base64 (standard or URL-safe alphabet, padding optional) -> bytes. */
@@ -546,16 +564,13 @@ static int parse_value(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, vo
         *(char **)dst = copy;
         return 0;
     }
-    case PROTOBUF_C_TYPE_BYTES:
-        return parse_bytes(c, v, dst);
+    case PROTOBUF_C_TYPE_BYTES: return parse_bytes(c, v, dst);
     case PROTOBUF_C_TYPE_BOOL:
         if (!json_is_boolean(v)) return fail_type(c, "true or false", v);
         *(protobuf_c_boolean *)dst = json_is_true(v);
         return 0;
-    case PROTOBUF_C_TYPE_ENUM:
-        return parse_enum(c, f->descriptor, v, dst);
-    case PROTOBUF_C_TYPE_DOUBLE:
-        return parse_double(c, v, dst);
+    case PROTOBUF_C_TYPE_ENUM: return parse_enum(c, f->descriptor, v, dst);
+    case PROTOBUF_C_TYPE_DOUBLE: return parse_double(c, v, dst);
     case PROTOBUF_C_TYPE_FLOAT: {
         double x;
         int rc = parse_double(c, v, &x);
@@ -565,8 +580,7 @@ static int parse_value(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, vo
         *(float *)dst = (float)x;
         return 0;
     }
-    default:
-        return parse_int(c, f->type, v, dst);
+    default: return parse_int(c, f->type, v, dst);
     }
 }
 
@@ -638,7 +652,8 @@ static int parse_map(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, Prot
     if (!arr) return fail_nomem(c);
     *arrp = arr;
     *np = 0;
-    json_object_foreach(v, key, val) {
+    json_object_foreach(v, key, val)
+    {
         size_t old = path_push_key(c, key);
         ProtobufCMessage *e = new_message(ed);
         char *kdst;
@@ -653,9 +668,12 @@ static int parse_map(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, Prot
             memcpy(copy, key, kl + 1);
             *(char **)kdst = copy;
         } else if (kf->type == PROTOBUF_C_TYPE_BOOL) {
-            if (!strcmp(key, "true")) *(protobuf_c_boolean *)kdst = 1;
-            else if (!strcmp(key, "false")) *(protobuf_c_boolean *)kdst = 0;
-            else rc = fail(c, MPM_EINVAL, "map key must be \"true\" or \"false\"");
+            if (!strcmp(key, "true"))
+                *(protobuf_c_boolean *)kdst = 1;
+            else if (!strcmp(key, "false"))
+                *(protobuf_c_boolean *)kdst = 0;
+            else
+                rc = fail(c, MPM_EINVAL, "map key must be \"true\" or \"false\"");
         } else {
             json_t *ks = json_string(key);
             if (!ks) return fail_nomem(c);
@@ -710,7 +728,8 @@ static int parse_message(jctx *c, const ProtobufCMessageDescriptor *d, json_t *o
     seen = calloc(d->n_fields ? d->n_fields : 1, sizeof *seen);
     if (!seen) return fail_nomem(c);
     c->depth++;
-    json_object_foreach(obj, key, val) {
+    json_object_foreach(obj, key, val)
+    {
         int i = find_field(d, key);
         size_t old = path_push_key(c, key);
         if (i < 0) {
@@ -740,8 +759,8 @@ static int parse_message(jctx *c, const ProtobufCMessageDescriptor *d, json_t *o
     return rc;
 }
 
-int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
-                   size_t len, ProtobufCMessage **out, mpm_error *err)
+int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text, size_t len,
+                   ProtobufCMessage **out, mpm_error *err)
 {
     jctx c;
     json_error_t je;
@@ -753,8 +772,8 @@ int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
     root = json_loadb(text, len, JSON_REJECT_DUPLICATES, &je);
     if (!root) {
         if (json_error_code(&je) == json_error_out_of_memory) return fail_nomem(&c);
-        return fail(&c, MPM_ESYNTAX, "invalid JSON at line %d, column %d: %s",
-                    je.line, je.column, je.text);
+        return fail(&c, MPM_ESYNTAX, "invalid JSON at line %d, column %d: %s", je.line, je.column,
+                    je.text);
     }
     if (!json_is_object(root)) {
         char what[64];
@@ -815,7 +834,10 @@ static void put(ectx *e, const char *s, size_t n)
     e->p[e->n] = 0;
 }
 
-static void puts_(ectx *e, const char *s) { put(e, s, strlen(s)); }
+static void puts_(ectx *e, const char *s)
+{
+    put(e, s, strlen(s));
+}
 
 static void newline(ectx *e, int indent)
 {
@@ -828,8 +850,14 @@ static void newline(ectx *e, int indent)
 static void put_double(ectx *e, double x, int is_float)
 {
     char buf[40];
-    if (isnan(x)) { puts_(e, "\"NaN\""); return; }
-    if (isinf(x)) { puts_(e, x > 0 ? "\"Infinity\"" : "\"-Infinity\""); return; }
+    if (isnan(x)) {
+        puts_(e, "\"NaN\"");
+        return;
+    }
+    if (isinf(x)) {
+        puts_(e, x > 0 ? "\"Infinity\"" : "\"-Infinity\"");
+        return;
+    }
     for (int prec = is_float ? 6 : 15; prec <= (is_float ? 9 : 17); prec++) {
         snprintf(buf, sizeof buf, "%.*g", prec, x);
         if (is_float ? strtof(buf, NULL) == (float)x : strtod(buf, NULL) == x) break;
@@ -843,10 +871,17 @@ static size_t utf8_len(const unsigned char *s)
     unsigned cp;
     size_t n;
     if (s[0] < 0x80) return 1;
-    if (s[0] >= 0xc2 && s[0] <= 0xdf) { n = 2; cp = s[0] & 0x1fu; }
-    else if (s[0] >= 0xe0 && s[0] <= 0xef) { n = 3; cp = s[0] & 0x0fu; }
-    else if (s[0] >= 0xf0 && s[0] <= 0xf4) { n = 4; cp = s[0] & 0x07u; }
-    else return 0;
+    if (s[0] >= 0xc2 && s[0] <= 0xdf) {
+        n = 2;
+        cp = s[0] & 0x1fu;
+    } else if (s[0] >= 0xe0 && s[0] <= 0xef) {
+        n = 3;
+        cp = s[0] & 0x0fu;
+    } else if (s[0] >= 0xf0 && s[0] <= 0xf4) {
+        n = 4;
+        cp = s[0] & 0x07u;
+    } else
+        return 0;
     for (size_t i = 1; i < n; i++) {
         if ((s[i] & 0xc0) != 0x80) return 0;
         cp = (cp << 6) | (s[i] & 0x3fu);
@@ -876,15 +911,21 @@ static int put_string(ectx *e, const char *str)
         size_t n = utf8_len(s);
         char esc[8];
         if (n == 0) return fail(&e->c, MPM_EINVAL, "string is not valid UTF-8");
-        if (*s == '"') puts_(e, "\\\"");
-        else if (*s == '\\') puts_(e, "\\\\");
-        else if (*s == '\n') puts_(e, "\\n");
-        else if (*s == '\t') puts_(e, "\\t");
-        else if (*s == '\r') puts_(e, "\\r");
+        if (*s == '"')
+            puts_(e, "\\\"");
+        else if (*s == '\\')
+            puts_(e, "\\\\");
+        else if (*s == '\n')
+            puts_(e, "\\n");
+        else if (*s == '\t')
+            puts_(e, "\\t");
+        else if (*s == '\r')
+            puts_(e, "\\r");
         else if (*s < 0x20) {
             snprintf(esc, sizeof esc, "\\u%04x", *s);
             puts_(e, esc);
-        } else put(e, (const char *)s, n);
+        } else
+            put(e, (const char *)s, n);
         s += n;
     }
     put(e, "\"", 1);
@@ -949,7 +990,9 @@ static int emit_value(ectx *e, const ProtobufCFieldDescriptor *f, const void *p,
         return put_string(e, s);
     }
     case PROTOBUF_C_TYPE_BYTES: put_bytes(e, p); return 0;
-    case PROTOBUF_C_TYPE_BOOL: puts_(e, *(const protobuf_c_boolean *)p ? "true" : "false"); return 0;
+    case PROTOBUF_C_TYPE_BOOL:
+        puts_(e, *(const protobuf_c_boolean *)p ? "true" : "false");
+        return 0;
     case PROTOBUF_C_TYPE_DOUBLE: put_double(e, *(const double *)p, 0); return 0;
     case PROTOBUF_C_TYPE_FLOAT: put_double(e, *(const float *)p, 1); return 0;
     case PROTOBUF_C_TYPE_ENUM: {
@@ -959,16 +1002,22 @@ static int emit_value(ectx *e, const ProtobufCFieldDescriptor *f, const void *p,
         snprintf(buf, sizeof buf, "%" PRId32, v);
         break;
     }
-    case PROTOBUF_C_TYPE_INT32: case PROTOBUF_C_TYPE_SINT32: case PROTOBUF_C_TYPE_SFIXED32:
+    case PROTOBUF_C_TYPE_INT32:
+    case PROTOBUF_C_TYPE_SINT32:
+    case PROTOBUF_C_TYPE_SFIXED32:
         snprintf(buf, sizeof buf, "%" PRId32, *(const int32_t *)p);
         break;
-    case PROTOBUF_C_TYPE_UINT32: case PROTOBUF_C_TYPE_FIXED32:
+    case PROTOBUF_C_TYPE_UINT32:
+    case PROTOBUF_C_TYPE_FIXED32:
         snprintf(buf, sizeof buf, "%" PRIu32, *(const uint32_t *)p);
         break;
-    case PROTOBUF_C_TYPE_INT64: case PROTOBUF_C_TYPE_SINT64: case PROTOBUF_C_TYPE_SFIXED64:
+    case PROTOBUF_C_TYPE_INT64:
+    case PROTOBUF_C_TYPE_SINT64:
+    case PROTOBUF_C_TYPE_SFIXED64:
         snprintf(buf, sizeof buf, "\"%" PRId64 "\"", *(const int64_t *)p);
         break;
-    case PROTOBUF_C_TYPE_UINT64: case PROTOBUF_C_TYPE_FIXED64:
+    case PROTOBUF_C_TYPE_UINT64:
+    case PROTOBUF_C_TYPE_FIXED64:
         snprintf(buf, sizeof buf, "\"%" PRIu64 "\"", *(const uint64_t *)p);
         break;
     }
@@ -982,7 +1031,8 @@ static int present(const ProtobufCFieldDescriptor *f, const ProtobufCMessage *m)
     const char *base = (const char *)m;
     const void *p = base + f->offset;
     int ptr_type = f->type == PROTOBUF_C_TYPE_MESSAGE || f->type == PROTOBUF_C_TYPE_STRING;
-    if (f->label == PROTOBUF_C_LABEL_REPEATED) return *(const size_t *)(base + f->quantifier_offset) > 0;
+    if (f->label == PROTOBUF_C_LABEL_REPEATED)
+        return *(const size_t *)(base + f->quantifier_offset) > 0;
     if (f->flags & PROTOBUF_C_FIELD_FLAG_ONEOF) {
         if (*(const uint32_t *)(base + f->quantifier_offset) != f->id) return 0;
         return !ptr_type || *(void *const *)p != NULL;
@@ -991,8 +1041,7 @@ static int present(const ProtobufCFieldDescriptor *f, const ProtobufCMessage *m)
     case PROTOBUF_C_LABEL_OPTIONAL:
         if (ptr_type) return *(void *const *)p != NULL && *(void *const *)p != f->default_value;
         return *(const protobuf_c_boolean *)(base + f->quantifier_offset) != 0;
-    case PROTOBUF_C_LABEL_REQUIRED:
-        return !ptr_type || *(void *const *)p != NULL;
+    case PROTOBUF_C_LABEL_REQUIRED: return !ptr_type || *(void *const *)p != NULL;
     default: /* proto3 implicit presence: print non-default values */
         if (f->type == PROTOBUF_C_TYPE_MESSAGE) return *(void *const *)p != NULL;
         if (f->type == PROTOBUF_C_TYPE_STRING) return *(void *const *)p && **(char *const *)p;
@@ -1003,12 +1052,14 @@ static int present(const ProtobufCFieldDescriptor *f, const ProtobufCMessage *m)
     }
 }
 
-static int emit_map(ectx *e, const ProtobufCFieldDescriptor *f, const ProtobufCMessage *m, int indent)
+static int emit_map(ectx *e, const ProtobufCFieldDescriptor *f, const ProtobufCMessage *m,
+                    int indent)
 {
     const ProtobufCMessageDescriptor *ed = f->descriptor;
     const ProtobufCFieldDescriptor *kf = &ed->fields[0], *vf = &ed->fields[1];
     size_t n = *(const size_t *)((const char *)m + f->quantifier_offset);
-    ProtobufCMessage *const *arr = *(ProtobufCMessage *const *const *)(const void *)((const char *)m + f->offset);
+    ProtobufCMessage *const *arr =
+        *(ProtobufCMessage *const *const *)(const void *)((const char *)m + f->offset);
     put(e, "{", 1);
     for (size_t i = 0; i < n; i++) {
         const ProtobufCMessage *en = arr[i];
@@ -1040,7 +1091,8 @@ static int emit_map(ectx *e, const ProtobufCFieldDescriptor *f, const ProtobufCM
             puts_(e, kb);
         }
         put(e, e->pretty ? ": " : ":", e->pretty ? 2 : 1);
-        if (vf->type == PROTOBUF_C_TYPE_MESSAGE && !*(void *const *)((const char *)en + vf->offset)) {
+        if (vf->type == PROTOBUF_C_TYPE_MESSAGE &&
+            !*(void *const *)((const char *)en + vf->offset)) {
             puts_(e, "{}");
         } else {
             rc = emit_value(e, vf, (const char *)en + vf->offset, indent + 1);
@@ -1053,8 +1105,8 @@ static int emit_map(ectx *e, const ProtobufCFieldDescriptor *f, const ProtobufCM
     return 0;
 }
 
-static int emit_field(ectx *e, const ProtobufCMessageDescriptor *d, const ProtobufCFieldDescriptor *f,
-                      const ProtobufCMessage *m, int indent)
+static int emit_field(ectx *e, const ProtobufCMessageDescriptor *d,
+                      const ProtobufCFieldDescriptor *f, const ProtobufCMessage *m, int indent)
 {
     const char *base = (const char *)m;
     size_t n, es;
@@ -1112,8 +1164,7 @@ static int emit_message(ectx *e, const ProtobufCMessage *m, int indent)
     return 0;
 }
 
-int mpp_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
-                     mpm_error *err)
+int mpp_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out, mpm_error *err)
 {
     ectx e;
     int rc;

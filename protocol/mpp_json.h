@@ -37,7 +37,7 @@
 #include "mpm_error.h"
 
 /* Flags for mpp_json_from_pb(). */
-#define MPP_JSON_PRETTY 1u  /* indent two spaces, one field per line */
+#define MPP_JSON_PRETTY 1u /* indent two spaces, one field per line */
 
 /* Deepest message nesting accepted in either direction. */
 #define MPP_JSON_MAX_DEPTH 64
@@ -48,8 +48,8 @@
  * sets *out to NULL, fills err (may be NULL) and returns MPM_ESYNTAX (not
  * JSON: the message names the line and column), MPM_EINVAL (JSON that does
  * not fit the message type) or MPM_ENOMEM. */
-int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
-                   size_t len, ProtobufCMessage **out, mpm_error *err);
+int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text, size_t len,
+                   ProtobufCMessage **out, mpm_error *err);
 
 /* Prints a message as JSON text.  flags: 0 (compact, one line) or
  * MPP_JSON_PRETTY (ends with a newline).  On success stores a malloc'd,
@@ -57,8 +57,7 @@ int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text,
  * otherwise sets *out to NULL, fills err and returns MPM_EINVAL (a string
  * that is not UTF-8, a NULL array element, nesting too deep) or
  * MPM_ENOMEM. */
-int mpp_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out,
-                     mpm_error *err);
+int mpp_json_from_pb(const ProtobufCMessage *msg, unsigned flags, char **out, mpm_error *err);
 
 /* Writes the JSON (lowerCamelCase) name of a .proto field name into buf:
  * underscores are dropped and the letter after one is upper-cased

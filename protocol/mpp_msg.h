@@ -34,20 +34,20 @@
 /* ---- any schema message as JSON <-> bytes ------------------------------ */
 
 typedef enum {
-    MPP_MSG_CASE = 0,     /* mpmd.Case */
-    MPP_MSG_REQUEST = 1,  /* mpmd.Request */
-    MPP_MSG_REPLY = 2,    /* mpmd.Reply */
-    MPP_MSG_STREAM = 3    /* mpmd.StreamMsg */
+    MPP_MSG_CASE = 0,    /* mpmd.Case */
+    MPP_MSG_REQUEST = 1, /* mpmd.Request */
+    MPP_MSG_REPLY = 2,   /* mpmd.Reply */
+    MPP_MSG_STREAM = 3   /* mpmd.StreamMsg */
 } mpp_msg_kind;
 
 /* JSON text of a message of that kind -> packed bytes (malloc'd). */
-int mpp_msg_json_to_bytes(mpp_msg_kind kind, const char *json, size_t len, uint8_t **buf,
-                          size_t *n, mpm_error *err);
+int mpp_msg_json_to_bytes(mpp_msg_kind kind, const char *json, size_t len, uint8_t **buf, size_t *n,
+                          mpm_error *err);
 
 /* Packed bytes of a message of that kind -> JSON text (malloc'd); max is
  * the largest n accepted (0: MPP_MSG_MAX); flags 0 or MPP_JSON_PRETTY. */
-int mpp_msg_bytes_to_json(mpp_msg_kind kind, const void *buf, size_t n, size_t max,
-                          unsigned flags, char **json, mpm_error *err);
+int mpp_msg_bytes_to_json(mpp_msg_kind kind, const void *buf, size_t n, size_t max, unsigned flags,
+                          char **json, mpm_error *err);
 
 /* ---- requests (mpp_request.c) ------------------------------------------ */
 
@@ -67,15 +67,15 @@ typedef enum {
 typedef struct {
     mpp_req_kind kind;
     uint32_t schema_version;
-    uint64_t id;          /* Cancel, Status: job_id; GetRun, GetEnergy, GetSnapshot: run_id */
-    int status;           /* ListRuns: mpp_status filter, 0 = all */
-    uint32_t limit;       /* ListRuns, GetEnergy: 0 = server default */
-    int with_case;        /* GetRun */
-    uint64_t from_seq;    /* GetEnergy */
-    int has_step;         /* GetSnapshot: 0 = the latest */
+    uint64_t id;       /* Cancel, Status: job_id; GetRun, GetEnergy, GetSnapshot: run_id */
+    int status;        /* ListRuns: mpp_status filter, 0 = all */
+    uint32_t limit;    /* ListRuns, GetEnergy: 0 = server default */
+    int with_case;     /* GetRun */
+    uint64_t from_seq; /* GetEnergy */
+    int has_step;      /* GetSnapshot: 0 = the latest */
     int64_t step;
-    Mpmd__Case *case_pb;  /* Submit: the case (owned by a decoded request;
-                             convert with mpp_case_from_pb) */
+    Mpmd__Case *case_pb;    /* Submit: the case (owned by a decoded request;
+                               convert with mpp_case_from_pb) */
     const void *case_bytes; /* Submit, mpp_request_encode() only: a packed Case sent */
     size_t case_len;        /* as it is when case_pb is NULL (never set by decode) */
 } mpp_request;
@@ -117,9 +117,9 @@ typedef struct {
 typedef struct {
     uint64_t run_id, job_id;
     const char *name;
-    int status;                   /* mpp_status (0: absent, decoded only) */
+    int status; /* mpp_status (0: absent, decoded only) */
     const char *error;
-    double submitted_at, started_at, finished_at;  /* Unix time, s */
+    double submitted_at, started_at, finished_at; /* Unix time, s */
     int64_t steps, steps_total;
     double t, wall_s;
     uint64_t particles, nodes;
@@ -128,12 +128,12 @@ typedef struct {
     uint64_t energy_samples;
     size_t n_snapshot_steps;
     const int64_t *snapshot_steps;
-    mpm_method method;            /* always sent (RunInfo.method) */
-    mpm_update update;            /* always sent (RunInfo.update) */
-    const void *case_bytes;       /* packed Case to include, or NULL; its
-                                     method and update are sent as the two
-                                     fields above say (encode only: a
-                                     decoded run has NULL here) */
+    mpm_method method;      /* always sent (RunInfo.method) */
+    mpm_update update;      /* always sent (RunInfo.update) */
+    const void *case_bytes; /* packed Case to include, or NULL; its
+                               method and update are sent as the two
+                               fields above say (encode only: a
+                               decoded run has NULL here) */
     size_t case_len;
 } mpp_run_info;
 
@@ -145,11 +145,11 @@ typedef struct {
 
 /* End of a job (Finished). */
 typedef struct {
-    int status;                   /* mpp_status (0: absent, decoded only) */
-    const char *error;            /* NULL: none (decoded: "" when none) */
+    int status;        /* mpp_status (0: absent, decoded only) */
+    const char *error; /* NULL: none (decoded: "" when none) */
     int64_t steps;
     double t, wall_s;
-    const mpm_energy_sample *energy;  /* NULL: none */
+    const mpm_energy_sample *energy; /* NULL: none */
 } mpp_finished;
 
 /* ---- replies (mpp_reply.c) ---------------------------------------------- */
@@ -169,8 +169,8 @@ int mpp_reply_error_from(const mpm_error *e, uint8_t **buf, size_t *len);
 int mpp_reply_submit_ok(uint64_t job_id, uint64_t run_id, uint8_t **buf, size_t *len);
 int mpp_reply_run(const mpp_run_info *ri, uint8_t **buf, size_t *len);
 int mpp_reply_runs(const mpp_run_info *ri, size_t n, uint8_t **buf, size_t *len);
-int mpp_reply_energy(uint64_t run_id, const mpm_energy_sample *s, size_t n, int more,
-                     uint8_t **buf, size_t *len);
+int mpp_reply_energy(uint64_t run_id, const mpm_energy_sample *s, size_t n, int more, uint8_t **buf,
+                     size_t *len);
 int mpp_reply_snapshot(const mpp_snapshot *s, uint8_t **buf, size_t *len);
 int mpp_reply_pong(const char *server_version, const char *stream_endpoint, uint8_t **buf,
                    size_t *len);
@@ -199,9 +199,9 @@ const char *mpp_reply_kind_name(mpp_reply_kind kind);
  * for the body that came). */
 typedef struct {
     mpp_reply_kind kind;
-    uint32_t schema_version;      /* Reply.schema_version, 0 when absent */
+    uint32_t schema_version; /* Reply.schema_version, 0 when absent */
     /* ERROR */
-    int err_code;                 /* mpp_err_code (INTERNAL when absent) */
+    int err_code; /* mpp_err_code (INTERNAL when absent) */
     const char *err_message, *err_field;
     /* SUBMIT_OK: the new job and run; ENERGY: run_id */
     int has_job_id, has_run_id;
@@ -219,7 +219,7 @@ typedef struct {
     /* PONG, VERSION (server_schema: their schema_version) */
     const char *server_version, *stream_endpoint;
     uint32_t server_schema;
-    size_t n_components;          /* VERSION */
+    size_t n_components; /* VERSION */
 
     /* owned: the unpacked message and the arrays above */
     void *msg_;
@@ -273,15 +273,15 @@ typedef struct {
     mpp_stream_kind kind;
     int has_job_id, has_seq;
     uint64_t job_id;
-    uint64_t seq;                 /* StreamMsg.seq */
-    mpp_progress progress;        /* PROGRESS */
-    mpm_energy_sample energy;     /* ENERGY; FINISHED: its final sample, if has_energy */
-    mpp_snapshot snapshot;        /* SNAPSHOT (arrays point into the message) */
-    mpp_finished finished;        /* FINISHED (error points into the message,
-                                     "" when none; energy is NULL: see below) */
-    int has_energy;               /* FINISHED: `energy` holds the final sample */
+    uint64_t seq;             /* StreamMsg.seq */
+    mpp_progress progress;    /* PROGRESS */
+    mpm_energy_sample energy; /* ENERGY; FINISHED: its final sample, if has_energy */
+    mpp_snapshot snapshot;    /* SNAPSHOT (arrays point into the message) */
+    mpp_finished finished;    /* FINISHED (error points into the message,
+                                 "" when none; energy is NULL: see below) */
+    int has_energy;           /* FINISHED: `energy` holds the final sample */
 
-    void *msg_;                   /* owned: the unpacked message */
+    void *msg_; /* owned: the unpacked message */
 } mpp_stream;
 
 /* Decodes a packed StreamMsg into *out (cleared first); max as in

@@ -50,7 +50,8 @@ static int fill_run(Mpmd__RunInfo *pi, Mpmd__EnergySample *es, const mpp_run_inf
     pi->update = (Mpmd__Case__Update)ri->update;
     if (ri->case_bytes) {
         ProtobufCMessage *cm;
-        if (mpp_unpack(&mpmd__case__descriptor, ri->case_bytes, ri->case_len, (size_t)-1, &cm, NULL))
+        if (mpp_unpack(&mpmd__case__descriptor, ri->case_bytes, ri->case_len, (size_t)-1, &cm,
+                       NULL))
             return MPM_ESYNTAX;
         pi->case_ = (Mpmd__Case *)cm;
         /* what the run used, also for a case stored without the two fields
@@ -150,8 +151,8 @@ int mpp_reply_runs(const mpp_run_info *ri, size_t n, uint8_t **buf, size_t *len)
     return rc;
 }
 
-int mpp_reply_energy(uint64_t run_id, const mpm_energy_sample *s, size_t n, int more,
-                     uint8_t **buf, size_t *len)
+int mpp_reply_energy(uint64_t run_id, const mpm_energy_sample *s, size_t n, int more, uint8_t **buf,
+                     size_t *len)
 {
     Mpmd__Reply r = MPMD__REPLY__INIT;
     Mpmd__EnergySeries es = MPMD__ENERGY_SERIES__INIT;
@@ -240,7 +241,6 @@ int mpp_reply_version(const char *server_version, const char *const *names,
     return rc;
 }
 
-
 /* ---- JSON of single bodies (clients' --json output) ------------------------------ */
 
 int mpp_energy_to_json(const mpm_energy_sample *s, char **json, mpm_error *err)
@@ -262,9 +262,11 @@ int mpp_snapshot_to_json(const mpp_snapshot *s, char **json, mpm_error *err)
 const char *mpp_reply_kind_name(mpp_reply_kind kind)
 {
     /* the JSON names of the Reply.body members, by field number */
-    static const char *const names[] = {"nothing", "schemaVersion", "error", "submitOk", "run",
-                                        "runs", "energy", "snapshot", "pong", "version"};
-    return kind >= MPP_REPLY_NONE && kind <= MPP_REPLY_VERSION && kind != 1 ? names[kind] : "unknown";
+    static const char *const names[] = {"nothing", "schemaVersion", "error",  "submitOk",
+                                        "run",     "runs",          "energy", "snapshot",
+                                        "pong",    "version"};
+    return kind >= MPP_REPLY_NONE && kind <= MPP_REPLY_VERSION && kind != 1 ? names[kind]
+                                                                            : "unknown";
 }
 
 static const char *str(const char *s)
@@ -315,7 +317,7 @@ int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mp
     out->kind = (mpp_reply_kind)r->body_case;
     switch (r->body_case) {
     case MPMD__REPLY__BODY_ERROR:
-        out->err_code = (int)r->error->code;  /* the schema's default when absent */
+        out->err_code = (int)r->error->code; /* the schema's default when absent */
         out->err_message = str(r->error->message);
         out->err_field = str(r->error->field);
         break;
@@ -356,7 +358,8 @@ int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mp
                 mpp_reply_clear(out);
                 return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
             }
-            for (size_t i = 0; i < es->n_samples; i++) mpp_take_energy(&out->samples[i], es->samples[i]);
+            for (size_t i = 0; i < es->n_samples; i++)
+                mpp_take_energy(&out->samples[i], es->samples[i]);
             out->n_samples = es->n_samples;
         }
         break;
@@ -378,8 +381,7 @@ int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mp
         out->server_schema = r->version->schema_version;
         out->n_components = r->version->n_components;
         break;
-    default:
-        break;
+    default: break;
     }
     return 0;
 }

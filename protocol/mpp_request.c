@@ -10,17 +10,16 @@
 #include <string.h>
 
 /* Request body: the id field of a body, which must be present. */
-#define NEED_ID(body, field, path)                                        \
-    do {                                                                  \
-        if (!r->body->has_##field) {                                      \
-            rc = mpm_fail(err, MPM_EREQUEST, path, "missing");            \
-            goto out;                                                     \
-        }                                                                 \
-        rq->id = r->body->field;                                          \
+#define NEED_ID(body, field, path)                             \
+    do {                                                       \
+        if (!r->body->has_##field) {                           \
+            rc = mpm_fail(err, MPM_EREQUEST, path, "missing"); \
+            goto out;                                          \
+        }                                                      \
+        rq->id = r->body->field;                               \
     } while (0)
 
-int mpp_request_decode(const void *buf, size_t len, size_t max, mpp_request *rq,
-                       mpm_error *err)
+int mpp_request_decode(const void *buf, size_t len, size_t max, mpp_request *rq, mpm_error *err)
 {
     ProtobufCMessage *m;
     Mpmd__Request *r;
@@ -32,8 +31,8 @@ int mpp_request_decode(const void *buf, size_t len, size_t max, mpp_request *rq,
     rq->schema_version = r->has_schema_version ? r->schema_version : 0;
     if (rq->schema_version != MPP_SCHEMA_VERSION) {
         rc = mpm_fail(err, MPM_EVERSION, "schema_version", "%s%u; this server speaks %d",
-                 r->has_schema_version ? "" : "missing, taken as ", rq->schema_version,
-                 MPP_SCHEMA_VERSION);
+                      r->has_schema_version ? "" : "missing, taken as ", rq->schema_version,
+                      MPP_SCHEMA_VERSION);
         goto out;
     }
     switch (r->body_case) {
@@ -58,7 +57,8 @@ int mpp_request_decode(const void *buf, size_t len, size_t max, mpp_request *rq,
         rq->kind = MPP_REQ_LIST_RUNS;
         if (r->list_runs->has_status) {
             if (!mpp_status_name(r->list_runs->status)) {
-                rc = mpm_fail(err, MPM_EREQUEST, "list_runs.status", "unknown value %d", (int)r->list_runs->status);
+                rc = mpm_fail(err, MPM_EREQUEST, "list_runs.status", "unknown value %d",
+                              (int)r->list_runs->status);
                 goto out;
             }
             rq->status = r->list_runs->status;
@@ -85,8 +85,9 @@ int mpp_request_decode(const void *buf, size_t len, size_t max, mpp_request *rq,
     case MPMD__REQUEST__BODY_PING: rq->kind = MPP_REQ_PING; break;
     case MPMD__REQUEST__BODY_VERSION: rq->kind = MPP_REQ_VERSION; break;
     default:
-        rc = mpm_fail(err, MPM_EREQUEST, NULL, "request: no body (one of submit, cancel, status, listRuns, getRun, "
-                  "getEnergy, getSnapshot, ping, version)");
+        rc = mpm_fail(err, MPM_EREQUEST, NULL,
+                      "request: no body (one of submit, cancel, status, listRuns, getRun, "
+                      "getEnergy, getSnapshot, ping, version)");
         break;
     }
 out:
@@ -101,7 +102,6 @@ void mpp_request_clear(mpp_request *rq)
     mpp_case_pb_free(&rq->case_pb);
     memset(rq, 0, sizeof *rq);
 }
-
 
 /* Appends a varint; returns the bytes written (at most 10). */
 /* Wire types of the protobuf encoding used by the Submit writer below. */
@@ -122,8 +122,8 @@ static size_t put_varint(uint8_t *p, uint64_t v)
  * directly (the bytes are copied, not decoded). */
 static int submit_bytes(uint32_t version, const void *cb, size_t cn, uint8_t **buf, size_t *len)
 {
-    const ProtobufCFieldDescriptor *fv =
-        protobuf_c_message_descriptor_get_field_by_name(&mpmd__request__descriptor, "schema_version");
+    const ProtobufCFieldDescriptor *fv = protobuf_c_message_descriptor_get_field_by_name(
+        &mpmd__request__descriptor, "schema_version");
     const ProtobufCFieldDescriptor *fs =
         protobuf_c_message_descriptor_get_field_by_name(&mpmd__request__descriptor, "submit");
     const ProtobufCFieldDescriptor *fc =
@@ -236,9 +236,7 @@ int mpp_request_encode(const mpp_request *rq, uint8_t **buf, size_t *len)
         r.body_case = MPMD__REQUEST__BODY_VERSION;
         r.version = &ve;
         break;
-    default:
-        return MPM_EINVAL;
+    default: return MPM_EINVAL;
     }
     return mpp_pack(&r.base, buf, len);
 }
-

@@ -12,7 +12,8 @@
 
 /* ---- encoders ------------------------------------------------------------------- */
 
-static int pack_stream(Mpmd__StreamMsg *m, uint64_t job_id, uint64_t seq, uint8_t **buf, size_t *len)
+static int pack_stream(Mpmd__StreamMsg *m, uint64_t job_id, uint64_t seq, uint8_t **buf,
+                       size_t *len)
 {
     m->has_job_id = m->has_seq = 1;
     m->job_id = job_id;
@@ -119,9 +120,7 @@ int mpp_stream_decode(const void *buf, size_t len, size_t max, mpp_stream *out, 
         out->progress.steps_total = sm->progress->steps_total;
         out->progress.wall_s = sm->progress->wall_s;
         break;
-    case MPMD__STREAM_MSG__BODY_ENERGY:
-        mpp_take_energy(&out->energy, sm->energy);
-        break;
+    case MPMD__STREAM_MSG__BODY_ENERGY: mpp_take_energy(&out->energy, sm->energy); break;
     case MPMD__STREAM_MSG__BODY_SNAPSHOT:
         if ((rc = mpp_take_snapshot(&out->snapshot, sm->snapshot, err))) {
             mpp_stream_clear(out);
@@ -139,8 +138,7 @@ int mpp_stream_decode(const void *buf, size_t len, size_t max, mpp_stream *out, 
         mpp_take_energy(&out->energy, f->energy);
         break;
     }
-    default:
-        break;
+    default: break;
     }
     return 0;
 }

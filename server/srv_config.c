@@ -15,10 +15,10 @@
 enum { T_STR, T_INT, T_LL, T_DBL, T_FLAG };
 
 typedef struct {
-    const char *key;   /* long flag without "--", config key */
-    const char *env;   /* environment variable or NULL */
+    const char *key; /* long flag without "--", config key */
+    const char *env; /* environment variable or NULL */
     int type;
-    size_t off, size;  /* field in srv_config; size for strings */
+    size_t off, size; /* field in srv_config; size for strings */
     double lo, hi;
     const char *help;
 } setting;
@@ -32,13 +32,17 @@ static const setting settings[] = {
     {"db", "MPMD_DB", T_STR, F(db), 0, 0, "SQLite file of run records (default mpmd.db)"},
     {"workers", NULL, T_INT, F(workers), 1, 256, "jobs that run at once (default 2)"},
     {"solver-threads", NULL, T_INT, F(solver_threads), 1, 64, "solver threads per job (default 1)"},
-    {"queue-max", NULL, T_INT, F(queue_max), 0, 1000000, "queued jobs beyond the running ones (default 16)"},
-    {"max-particles", NULL, T_LL, F(max_particles), 1, 1e10, "particles per job (default 10000000)"},
+    {"queue-max", NULL, T_INT, F(queue_max), 0, 1000000,
+     "queued jobs beyond the running ones (default 16)"},
+    {"max-particles", NULL, T_LL, F(max_particles), 1, 1e10,
+     "particles per job (default 10000000)"},
     {"max-steps", NULL, T_LL, F(max_steps), 1, 1e15, "steps per job (default 100000000)"},
-    {"max-wall-s", NULL, T_DBL, F(max_wall_s), 0, 1e9, "wall seconds per job, 0 = no limit (default 0)"},
+    {"max-wall-s", NULL, T_DBL, F(max_wall_s), 0, 1e9,
+     "wall seconds per job, 0 = no limit (default 0)"},
     {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30,
      "largest request accepted (default 67108864)"},
-    {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1, "allow binding on non-loopback addresses"},
+    {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1,
+     "allow binding on non-loopback addresses"},
     {"verbose", NULL, T_FLAG, F(verbose), 0, 1, "debug log lines"},
 };
 #define NSET (sizeof settings / sizeof settings[0])
@@ -79,8 +83,10 @@ static int set(srv_config *c, const setting *s, const char *val, const char *src
     }
     if (s->type == T_FLAG) {
         int v;
-        if (!strcmp(val, "1") || !strcmp(val, "true") || !strcmp(val, "yes")) v = 1;
-        else if (!strcmp(val, "0") || !strcmp(val, "false") || !strcmp(val, "no")) v = 0;
+        if (!strcmp(val, "1") || !strcmp(val, "true") || !strcmp(val, "yes"))
+            v = 1;
+        else if (!strcmp(val, "0") || !strcmp(val, "false") || !strcmp(val, "no"))
+            v = 0;
         else {
             snprintf(err, errlen, "%s: %s expects true or false, got '%s'", src, s->key, val);
             return -1;
@@ -158,7 +164,8 @@ static void usage(void)
            "threads, streams energies and snapshots, and records every run in SQLite.\n\n");
     for (size_t i = 0; i < NSET; i++) {
         char flag[64];
-        snprintf(flag, sizeof flag, "--%s%s", settings[i].key, settings[i].type == T_FLAG ? "" : " V");
+        snprintf(flag, sizeof flag, "--%s%s", settings[i].key,
+                 settings[i].type == T_FLAG ? "" : " V");
         printf("  %-24s %s%s%s%s\n", flag, settings[i].help, settings[i].env ? " [env " : "",
                settings[i].env ? settings[i].env : "", settings[i].env ? "]" : "");
     }
@@ -219,16 +226,20 @@ int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errl
     }
     if (!c->stream_endpoint[0] &&
         mpp_stream_endpoint_derive(c->endpoint, c->stream_endpoint, sizeof c->stream_endpoint)) {
-        snprintf(err, errlen, "--endpoint %s: cannot derive the stream endpoint (tcp://HOST:PORT "
-                 "or ipc://PATH); give --stream-endpoint", c->endpoint);
+        snprintf(err, errlen,
+                 "--endpoint %s: cannot derive the stream endpoint (tcp://HOST:PORT "
+                 "or ipc://PATH); give --stream-endpoint",
+                 c->endpoint);
         return -1;
     }
     const char *eps[2] = {c->endpoint, c->stream_endpoint};
     for (int i = 0; i < 2; i++)
         if (!mpp_endpoint_is_local(eps[i]) && !c->allow_remote) {
-            snprintf(err, errlen, "%s %s: refusing to bind a non-loopback address (there is no "
+            snprintf(err, errlen,
+                     "%s %s: refusing to bind a non-loopback address (there is no "
                      "authentication yet); use tcp://127.0.0.1:PORT or ipc://, or pass "
-                     "--allow-remote", i ? "--stream-endpoint" : "--endpoint", eps[i]);
+                     "--allow-remote",
+                     i ? "--stream-endpoint" : "--endpoint", eps[i]);
             return -1;
         }
     if (!strcmp(c->endpoint, c->stream_endpoint)) {

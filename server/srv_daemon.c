@@ -47,7 +47,7 @@
 #define ENERGY_PAGE_DEFAULT 10000u
 #define ENERGY_PAGE_MAX 100000u
 #define LIST_DEFAULT 100u
-#define LIST_MAX 10000u       /* a RunInfo costs a few store reads on the main thread */
+#define LIST_MAX 10000u /* a RunInfo costs a few store reads on the main thread */
 /* How long the last stream messages and replies may take to leave at
  * shutdown (a vanished peer holds the exit up this long, no longer). */
 #define SHUTDOWN_LINGER_MS 1000
@@ -64,9 +64,9 @@ typedef struct {
     void *zctx, *router, *xpub, *pull;
     store *st;
     srv_pool *pool;
-    int stopping;           /* shutting down: no new jobs */
+    int stopping; /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
-    struct pending *pending, **pending_tail;  /* reads waiting for a commit */
+    struct pending *pending, **pending_tail; /* reads waiting for a commit */
     size_t npending;
 } daemon_t;
 
@@ -76,10 +76,10 @@ typedef struct {
  * read ever blocks the loop on a commit; any request behind a waiting one
  * of the same client, so that a client's replies keep its order. */
 typedef struct pending {
-    zmq_msg_t id;           /* the client's identity frame */
-    mpp_request rq;         /* the decoded request (a read: owns nothing big) */
-    int begun;              /* its action is done and its ticket taken */
-    uint64_t ticket;        /* store_ticket() when it began */
+    zmq_msg_t id;    /* the client's identity frame */
+    mpp_request rq;  /* the decoded request (a read: owns nothing big) */
+    int begun;       /* its action is done and its ticket taken */
+    uint64_t ticket; /* store_ticket() when it began */
     struct pending *next;
 } pending;
 /* Reads waiting at once, at most; more get UNAVAILABLE (a store that cannot
@@ -120,9 +120,10 @@ static void reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e)
 
 /* Answers with an error: code an MPM_E* code, field a path in the schema's
  * spelling ("" or NULL: none), the message without the field. */
-static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
-    __attribute__((format(printf, 5, 6)));
-static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
+static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt,
+                        ...) __attribute__((format(printf, 5, 6)));
+static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt,
+                        ...)
 {
     char msg[1024];
     va_list ap;
@@ -208,8 +209,8 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
         return;
     }
     if (rc) {
-        reply_error(d, id, MPM_EINTERNAL, "", "reading %s %llu: %s", what,
-                    (unsigned long long)run, store_error()->message);
+        reply_error(d, id, MPM_EINTERNAL, "", "reading %s %llu: %s", what, (unsigned long long)run,
+                    store_error()->message);
         return;
     }
     mpp_run_info ri;
@@ -224,7 +225,8 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     size_t len = 0;
     if (mpp_reply_run(&ri, &buf, &len))
         reply_error(d, id, MPM_EINTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
-    else send_reply(d, id, buf, len);
+    else
+        send_reply(d, id, buf, len);
     store_run_extra_clear(&x);
     store_run_clear(&r);
 }
@@ -261,12 +263,13 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     size_t nparticles = sc->info.particles;
     /* in floating point: endTime / dt can be far beyond any integer type */
     double steps = !sc->has_end_time ? (double)sc->steps
-                   : sc->c.dt > 0 ? ceil(sc->end_time / sc->c.dt - 0.5) : 0;
+                   : sc->c.dt > 0    ? ceil(sc->end_time / sc->c.dt - 0.5)
+                                     : 0;
     if (!(steps <= (double)d->cfg->max_steps)) {
         reply_error(d, id, MPM_ETOOBIG, sc->has_end_time ? "end_time" : "steps",
                     "the case asks for %.15g steps%s, above this server's limit %lld "
-                    "(--max-steps)", steps,
-                    sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
+                    "(--max-steps)",
+                    steps, sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
         mpp_case_destroy(&sc);
         return;
     }
@@ -315,8 +318,9 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     if (rc) {
         store_run_end end = {0};
         end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
-        end.error = rc == MPM_EFULL ? "job queue full" : rc == MPM_EUNAVAIL
-                    ? STORE_INTERRUPTED_QUEUED : "out of memory";
+        end.error = rc == MPM_EFULL      ? "job queue full"
+                    : rc == MPM_EUNAVAIL ? STORE_INTERRUPTED_QUEUED
+                                         : "out of memory";
         store_run_finish(d->st, run, &end);
         reply_error(d, id, rc, "", "%s", end.error);
         mpp_case_destroy(&sc);
@@ -324,7 +328,10 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     }
     srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %zu particles", namebuf, (long)r.dim,
             r.method == MPM_METHOD_GIMP ? "GMPM" : "MPM",
-            r.update == MPM_MUSL ? "musl" : r.update == MPM_USL ? "usl" : "usf", nparticles);
+            r.update == MPM_MUSL  ? "musl"
+            : r.update == MPM_USL ? "usl"
+                                  : "usf",
+            nparticles);
     uint8_t *buf = NULL;
     size_t len = 0;
     mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
@@ -412,8 +419,10 @@ static void enqueue(daemon_t *d, zmq_msg_t *id, mpp_request *rq, int begun, uint
     }
     if (p) zmq_msg_close(&p->id);
     free(p);
-    reply_error(d, id, MPM_EUNAVAIL, "", "%zu requests are waiting for the store; retry "
-                "later", d->npending);
+    reply_error(d, id, MPM_EUNAVAIL, "",
+                "%zu requests are waiting for the store; retry "
+                "later",
+                d->npending);
 }
 
 /* Runs a decoded request, in arrival order per client: behind a waiting
@@ -513,7 +522,8 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     size_t len = 0;
     if (mpp_reply_energy(rq->id, es, n, more, &buf, &len))
         reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu energy samples", n);
-    else send_reply(d, id, buf, len);
+    else
+        send_reply(d, id, buf, len);
     free(es);
 }
 
@@ -522,22 +532,26 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == MPM_ENOTFOUND) {
-        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu",
-                    (unsigned long long)rq->id);
+        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu", (unsigned long long)rq->id);
         return;
     }
-    if (!rc) store_run_clear(&r);  /* else the snapshot read reports it */
+    if (!rc) store_run_clear(&r); /* else the snapshot read reports it */
     store_snapshot ss;
     /* a negative step is no step (the store would read it as "latest") */
-    rc = rq->has_step && rq->step < 0 ? MPM_ENOTFOUND
-         : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
+    rc = rq->has_step && rq->step < 0
+             ? MPM_ENOTFOUND
+             : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
     if (rc == MPM_ENOTFOUND) {
         if (rq->has_step)
-            reply_error(d, id, MPM_ENOTFOUND, "step", "run %llu has no stored snapshot at "
-                        "step %lld", (unsigned long long)rq->id, (long long)rq->step);
+            reply_error(d, id, MPM_ENOTFOUND, "step",
+                        "run %llu has no stored snapshot at "
+                        "step %lld",
+                        (unsigned long long)rq->id, (long long)rq->step);
         else
-            reply_error(d, id, MPM_ENOTFOUND, "run_id", "run %llu has no stored snapshot "
-                        "(the case must set output.recordSnapshots)", (unsigned long long)rq->id);
+            reply_error(d, id, MPM_ENOTFOUND, "run_id",
+                        "run %llu has no stored snapshot "
+                        "(the case must set output.recordSnapshots)",
+                        (unsigned long long)rq->id);
         return;
     }
     if (rc) {
@@ -554,9 +568,10 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
             off += cnt[i];
         }
     if (off * sizeof(double) != ss.size) {
-        reply_error(d, id, MPM_EINTERNAL, "", "stored snapshot of run %llu at step %lld is "
-                    "corrupt (%zu bytes, expected %zu)", (unsigned long long)rq->id,
-                    (long long)ss.step, ss.size, off * sizeof(double));
+        reply_error(d, id, MPM_EINTERNAL, "",
+                    "stored snapshot of run %llu at step %lld is "
+                    "corrupt (%zu bytes, expected %zu)",
+                    (unsigned long long)rq->id, (long long)ss.step, ss.size, off * sizeof(double));
         store_snapshot_clear(&ss);
         return;
     }
@@ -565,7 +580,8 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     size_t len = 0;
     if (mpp_reply_snapshot(&s, &buf, &len))
         reply_error(d, id, MPM_EINTERNAL, "", "cannot encode the snapshot");
-    else send_reply(d, id, buf, len);
+    else
+        send_reply(d, id, buf, len);
     store_snapshot_clear(&ss);
 }
 
@@ -574,15 +590,19 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run_filter f = {0};
     if (rq->status) {
         if (rq->status < MPP_STATUS_MIN || rq->status > MPP_STATUS_MAX) {
-            reply_error(d, id, MPM_EREQUEST, "list_runs.status", "unknown "
-                        "value %d", rq->status);
+            reply_error(d, id, MPM_EREQUEST, "list_runs.status",
+                        "unknown "
+                        "value %d",
+                        rq->status);
             return;
         }
         f.status_mask = STORE_STATUS_BIT(rq->status);
     }
     if (rq->limit > LIST_MAX) {
-        reply_error(d, id, MPM_ETOOBIG, "list_runs.limit", "%u is above this "
-                    "server's maximum of %u runs per listing", rq->limit, LIST_MAX);
+        reply_error(d, id, MPM_ETOOBIG, "list_runs.limit",
+                    "%u is above this "
+                    "server's maximum of %u runs per listing",
+                    rq->limit, LIST_MAX);
         return;
     }
     f.limit = rq->limit ? rq->limit : LIST_DEFAULT;
@@ -603,7 +623,8 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         size_t len = 0;
         if (mpp_reply_runs(ri, n, &buf, &len))
             reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", n);
-        else send_reply(d, id, buf, len);
+        else
+            send_reply(d, id, buf, len);
     }
     if (xs)
         for (size_t i = 0; i < n; i++) store_run_extra_clear(&xs[i]);
@@ -637,8 +658,7 @@ static void do_other(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         send_reply(d, id, buf, len);
         break;
     }
-    default:
-        reply_error(d, id, MPM_EREQUEST, "", "unknown request kind %d", (int)rq->kind);
+    default: reply_error(d, id, MPM_EREQUEST, "", "unknown request kind %d", (int)rq->kind);
     }
 }
 
@@ -649,8 +669,10 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t 
     if (size > (size_t)d->cfg->max_request_bytes) {
         d->bad_requests++;
         srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
-        reply_error(d, id, MPM_ETOOBIG, "", "request of %zu bytes is above this server's "
-                    "limit of %lld bytes (--max-request-bytes)", size, d->cfg->max_request_bytes);
+        reply_error(d, id, MPM_ETOOBIG, "",
+                    "request of %zu bytes is above this server's "
+                    "limit of %lld bytes (--max-request-bytes)",
+                    size, d->cfg->max_request_bytes);
         return;
     }
     mpm_error rerr;
@@ -682,7 +704,8 @@ static void on_router(daemon_t *d)
             break;
         }
         more = zmq_msg_more(&m);
-        if (nparts < 4) part[nparts++] = m;
+        if (nparts < 4)
+            part[nparts++] = m;
         else {
             extra++;
             zmq_msg_close(&m);
@@ -693,8 +716,10 @@ static void on_router(daemon_t *d)
     } else if (nparts >= 1) {
         d->bad_requests++;
         size_t total = (size_t)nparts + extra;
-        srv_warn(0, "malformed request: %zu frames (expected identity, empty delimiter, "
-                 "request)", total);
+        srv_warn(0,
+                 "malformed request: %zu frames (expected identity, empty delimiter, "
+                 "request)",
+                 total);
         /* answerable when the delimiter is there: the peer speaks the protocol */
         if (nparts >= 2 && zmq_msg_size(&part[1]) == 0)
             reply_error(d, &part[0], MPM_EREQUEST, "",
@@ -790,12 +815,16 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
     *out = NULL;
     if (!mpp_endpoint_is_local(ep)) {
         if (!allow_remote) {
-            snprintf(err, errlen, "refusing to bind %s: not loopback, ipc:// or inproc:// "
-                     "(mpmd has no authentication yet; pass --allow-remote to bind anyway)", ep);
+            snprintf(err, errlen,
+                     "refusing to bind %s: not loopback, ipc:// or inproc:// "
+                     "(mpmd has no authentication yet; pass --allow-remote to bind anyway)",
+                     ep);
             return -1;
         }
-        srv_warn(0, "!!! binding %s on a non-loopback address: ANYONE WHO CAN REACH IT CAN "
-                 "SUBMIT JOBS AND READ RUNS (no authentication yet) !!!", ep);
+        srv_warn(0,
+                 "!!! binding %s on a non-loopback address: ANYONE WHO CAN REACH IT CAN "
+                 "SUBMIT JOBS AND READ RUNS (no authentication yet) !!!",
+                 ep);
     }
     void *s = zmq_socket(zctx, type);
     int zero = 0, one = 1, hwm = 10000;
@@ -855,15 +884,19 @@ int srv_daemon_run(const srv_config *cfg)
     store_stats ss;
     store_get_stats(d.st, &ss);
     if (ss.recovered_running || ss.recovered_queued)
-        srv_log(0, "%lld run(s) left running and %lld left queued by an earlier mpmd are now "
-                "interrupted", (long long)ss.recovered_running, (long long)ss.recovered_queued);
+        srv_log(0,
+                "%lld run(s) left running and %lld left queued by an earlier mpmd are now "
+                "interrupted",
+                (long long)ss.recovered_running, (long long)ss.recovered_queued);
     d.zctx = zmq_ctx_new();
     if (!d.zctx) {
         srv_warn(0, "zmq_ctx_new: %s", zmq_strerror(errno));
         goto out;
     }
-    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg->allow_remote, &d.router, err, sizeof err) ||
-        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg->allow_remote, &d.xpub, err, sizeof err) ||
+    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg->allow_remote, &d.router, err,
+                    sizeof err) ||
+        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg->allow_remote, &d.xpub, err,
+                    sizeof err) ||
         open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, 0, &d.pull, err, sizeof err)) {
         srv_warn(0, "%s", err);
         goto out;
@@ -873,8 +906,10 @@ int srv_daemon_run(const srv_config *cfg)
         srv_warn(0, "%s", err);
         goto out;
     }
-    srv_log(0, "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
-            "queue %d", MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
+    srv_log(0,
+            "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
+            "queue %d",
+            MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
             cfg->queue_max);
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},
@@ -893,16 +928,19 @@ int srv_daemon_run(const srv_config *cfg)
         if (items[0].revents & ZMQ_POLLIN) on_router(&d);
         if (d.pending) serve_pending(&d);
     }
-    srv_log(0, "%s: shutting down", stop_signal == SIGINT ? "SIGINT" : stop_signal == SIGTERM
-            ? "SIGTERM" : "stopping");
+    srv_log(0, "%s: shutting down",
+            stop_signal == SIGINT    ? "SIGINT"
+            : stop_signal == SIGTERM ? "SIGTERM"
+                                     : "stopping");
     rc = 0;
 out:
-    if (d.pool) stop_jobs(&d);  /* the pool exists only with all three sockets */
+    if (d.pool) stop_jobs(&d); /* the pool exists only with all three sockets */
     close_socket(&d.pull, 0, "inproc");
     close_socket(&d.xpub, SHUTDOWN_LINGER_MS, "stream");
     close_socket(&d.router, SHUTDOWN_LINGER_MS, "request");
     if (d.zctx) {
-        while (zmq_ctx_term(d.zctx) && errno == EINTR) {}
+        while (zmq_ctx_term(d.zctx) && errno == EINTR) {
+        }
     }
     store_close(&d.st);
     srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,

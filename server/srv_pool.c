@@ -39,14 +39,14 @@ enum { CANCEL_USER = 1, CANCEL_SHUTDOWN = 2 };
 typedef struct srv_job {
     uint64_t id;
     mpp_case *sc;
-    atomic_int cancel;      /* 0, CANCEL_USER, CANCEL_SHUTDOWN */
-    atomic_int watched;     /* someone subscribes to the job's stream */
+    atomic_int cancel;  /* 0, CANCEL_USER, CANCEL_SHUTDOWN */
+    atomic_int watched; /* someone subscribes to the job's stream */
     /* guarded by the pool mutex */
     int status;
     int64_t steps, steps_total;
     double t, wall_s, submitted_at, started_at;
     size_t particles, nodes;
-    struct srv_job *next;   /* FIFO link */
+    struct srv_job *next; /* FIFO link */
     /* worker-private */
     uint64_t msg_seq, energy_seq;
 } srv_job;
@@ -65,9 +65,9 @@ struct srv_pool {
     char events_ep[128];
     pthread_mutex_t mu;
     pthread_cond_t cv;
-    srv_job *head, *tail;   /* queued */
+    srv_job *head, *tail; /* queued */
     size_t nqueued;
-    srv_job **running;      /* one slot per worker */
+    srv_job **running; /* one slot per worker */
     worker *workers;
     int nworkers;
     int stopping;
@@ -131,10 +131,10 @@ static void job_free(srv_job *j)
 
 typedef struct {
     mpm_energy_sample rec[FLUSH_MAX];
-    uint8_t *msg[FLUSH_MAX];        /* packed StreamMsg or NULL (encoding failed) */
+    uint8_t *msg[FLUSH_MAX]; /* packed StreamMsg or NULL (encoding failed) */
     size_t len[FLUSH_MAX];
     size_t n;
-    double last_flush, last_sample;  /* mono_now() */
+    double last_flush, last_sample; /* mono_now() */
 } pending;
 
 typedef struct {
@@ -142,7 +142,7 @@ typedef struct {
     void *push;
     srv_job *j;
     char topic[SRV_TOPIC_LEN + 1];
-    pending *pe;    /* NULL: every sample handed on at once */
+    pending *pe; /* NULL: every sample handed on at once */
 } ctx;
 
 static void publish(ctx *c, uint8_t *buf, size_t len)
@@ -150,8 +150,10 @@ static void publish(ctx *c, uint8_t *buf, size_t len)
     if (!buf) return;
     if (zmq_send(c->push, c->topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
         zmq_send(c->push, buf, len, ZMQ_DONTWAIT) < 0) {
-        if (errno != EAGAIN) srv_warn(c->j->id, "stream send: %s", zmq_strerror(errno));
-        else srv_debug(c->j->id, "stream message dropped (main thread behind)");
+        if (errno != EAGAIN)
+            srv_warn(c->j->id, "stream send: %s", zmq_strerror(errno));
+        else
+            srv_debug(c->j->id, "stream message dropped (main thread behind)");
     }
     free(buf);
 }
@@ -181,7 +183,7 @@ static void energy_sample(ctx *c, mpm_sim *sim, mpm_energy_sample *out)
     s.dim = mpm_sim_dim(sim);
     mpm_sim_energy(sim, &s.e);
     s.seq = j->energy_seq++;
-    mpm_energy_sample r = s;  /* one shape to the wire and the store */
+    mpm_energy_sample r = s; /* one shape to the wire and the store */
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_stream_energy(j->id, j->msg_seq++, &s, &buf, &len))
@@ -190,8 +192,9 @@ static void energy_sample(ctx *c, mpm_sim *sim, mpm_energy_sample *out)
     pending *pe = c->pe;
     if (!pe) {
         int rc = store_energy_append(c->p->st, (int64_t)j->id, &r, 1);
-        if (rc) srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
-                         store_error()->message);
+        if (rc)
+            srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
+                     store_error()->message);
         publish(c, buf, len);
         return;
     }
@@ -249,7 +252,7 @@ static void snapmsg_zmq_free(void *data, void *hint)
 typedef struct {
     double *x, *v, *stress, *pressure, *volume, *packed;
     size_t n;
-    snapmsg *msg;   /* the last streamed message's buffer, or NULL */
+    snapmsg *msg; /* the last streamed message's buffer, or NULL */
 } snapbuf;
 
 static void snapbuf_free(snapbuf *b)
@@ -272,7 +275,7 @@ static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
     srv_job *j = c->j;
     uint64_t seq = j->msg_seq++;
     size_t need = 0, len = 0;
-    mpp_stream_snapshot_into(j->id, seq, s, NULL, 0, &need);  /* the size only */
+    mpp_stream_snapshot_into(j->id, seq, s, NULL, 0, &need); /* the size only */
     snapmsg *m = b->msg;
     if (!m || m->cap < need || atomic_load(&m->refs) != 1) {
         snapmsg_unref(m);
@@ -289,7 +292,7 @@ static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
         return;
     }
     zmq_msg_t msg;
-    atomic_fetch_add(&m->refs, 1);  /* zmq's, dropped by snapmsg_zmq_free */
+    atomic_fetch_add(&m->refs, 1); /* zmq's, dropped by snapmsg_zmq_free */
     TSAN_RELEASE(m);
     if (zmq_msg_init_data(&msg, m->data, len, snapmsg_zmq_free, m)) {
         atomic_fetch_sub(&m->refs, 1);
@@ -298,16 +301,18 @@ static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
     }
     if (zmq_send(c->push, c->topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
         zmq_msg_send(&msg, c->push, ZMQ_DONTWAIT) < 0) {
-        if (errno != EAGAIN) srv_warn(j->id, "stream send: %s", zmq_strerror(errno));
-        else srv_debug(j->id, "stream message dropped (main thread behind)");
-        zmq_msg_close(&msg);  /* not sent: zmq_msg_send left it to us */
+        if (errno != EAGAIN)
+            srv_warn(j->id, "stream send: %s", zmq_strerror(errno));
+        else
+            srv_debug(j->id, "stream message dropped (main thread behind)");
+        zmq_msg_close(&msg); /* not sent: zmq_msg_send left it to us */
     }
 }
 
 static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
 {
     srv_job *j = c->j;
-    flush_samples(c);  /* the samples before it go out (and in) first */
+    flush_samples(c); /* the samples before it go out (and in) first */
     unsigned f = j->sc->snapshot_fields;
     size_t n = mpm_sim_particles(sim);
     int dim = mpm_sim_dim(sim);
@@ -331,8 +336,8 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
         }
     }
     mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
-    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n, dim,
-                      b->x, b->v, b->stress, b->pressure, b->volume};
+    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,        dim, b->x, b->v,
+                      b->stress,          b->pressure,       b->volume};
     if (record && b->packed) {
         /* stored layout: the requested arrays back to back, in field-bit order */
         size_t off = 0;
@@ -343,11 +348,12 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
                 memcpy(b->packed + off, arr[i], cnt[i] * sizeof(double));
                 off += cnt[i];
             }
-        store_snapshot ss = {(int64_t)j->id, s.step, s.t, (int64_t)n, dim, f, b->packed,
+        store_snapshot ss = {(int64_t)j->id,      s.step, s.t, (int64_t)n, dim, f, b->packed,
                              off * sizeof(double)};
         int rc = store_snapshot_put(c->p->st, &ss);
-        if (rc) srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
-                         store_error()->message);
+        if (rc)
+            srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
+                     store_error()->message);
     }
     if (stream) publish_snapshot(c, b, &s);
     return 0;
@@ -362,7 +368,8 @@ static void progress(ctx *c, mpm_sim *sim, double wall)
      * exceed any integer: the step limit stops such a run, not this) */
     double left = j->sc->has_end_time && dt > 0 ? ceil((j->sc->end_time - t) / dt - 0.5) : 0;
     if (!(left < 9e18 - (double)k)) left = 9e18 - (double)k;
-    int64_t total = j->sc->has_end_time ? k + (int64_t)(left > 0 ? left : 0) : (int64_t)j->sc->steps;
+    int64_t total =
+        j->sc->has_end_time ? k + (int64_t)(left > 0 ? left : 0) : (int64_t)j->sc->steps;
     flush_samples(c);
     pthread_mutex_lock(&c->p->mu);
     j->steps = k;
@@ -417,7 +424,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     double start = wall_now(), t0 = mono_now();
     store_run_set_status(p->st, (int64_t)j->id, MPP_STATUS_RUNNING, start, NULL);
     int threads = sc->c.threads > 0 && sc->c.threads < cfg->solver_threads ? sc->c.threads
-                                                                            : cfg->solver_threads;
+                                                                           : cfg->solver_threads;
     sc->c.threads = threads;
     char err[512];
     mpm_error me;
@@ -434,8 +441,8 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     j->particles = n;
     j->nodes = mpm_sim_nodes(sim);
     pthread_mutex_unlock(&p->mu);
-    srv_log(j->id, "running: %zu particles, %zu nodes, %d thread%s", n, mpm_sim_nodes(sim),
-            threads, threads > 1 ? "s" : "");
+    srv_log(j->id, "running: %zu particles, %zu nodes, %d thread%s", n, mpm_sim_nodes(sim), threads,
+            threads > 1 ? "s" : "");
 
     mpm_energy_sample last;
     snapbuf sb = {0};
@@ -490,8 +497,10 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             }
             if (cfg->max_wall_s > 0 && w > cfg->max_wall_s) {
                 status = MPP_STATUS_FAILED;
-                snprintf(why, sizeof why, "wall-time limit %g s of this server reached "
-                         "(--max-wall-s)", cfg->max_wall_s);
+                snprintf(why, sizeof why,
+                         "wall-time limit %g s of this server reached "
+                         "(--max-wall-s)",
+                         cfg->max_wall_s);
                 break;
             }
         }
@@ -511,7 +520,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     progress(&c, sim, wall);
     finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last);
     snapbuf_free(&sb);
-    free(c.pe);  /* empty: finish() handed everything on */
+    free(c.pe); /* empty: finish() handed everything on */
     mpm_sim_destroy(&sim);
 }
 
@@ -606,13 +615,14 @@ int srv_pool_has_room(srv_pool *p)
     int busy = 0;
     for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
     /* a job goes straight to an idle worker, or waits in the queue */
-    int room = !p->stopping && p->nqueued + (size_t)busy < (size_t)p->nworkers + (size_t)p->cfg->queue_max;
+    int room =
+        !p->stopping && p->nqueued + (size_t)busy < (size_t)p->nworkers + (size_t)p->cfg->queue_max;
     pthread_mutex_unlock(&p->mu);
     return room;
 }
 
-int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at,
-                    size_t particles, size_t nodes)
+int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
+                    size_t nodes)
 {
     srv_job *j = calloc(1, sizeof *j);
     if (!j) return MPM_ENOMEM;
@@ -634,8 +644,10 @@ int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at
         j->sc = *sc;
         *sc = NULL;
         j->steps_total = j->sc->has_end_time ? 0 : (int64_t)j->sc->steps;
-        if (p->tail) p->tail->next = j;
-        else p->head = j;
+        if (p->tail)
+            p->tail->next = j;
+        else
+            p->head = j;
         p->tail = j;
         p->nqueued++;
         pthread_cond_signal(&p->cv);
@@ -687,8 +699,10 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
     srv_job *prev, *j = find_locked(p, id, &prev);
     int rc = SRV_CANCEL_NONE;
     if (j && j->status == MPP_STATUS_QUEUED) {
-        if (prev) prev->next = j->next;
-        else p->head = j->next;
+        if (prev)
+            prev->next = j->next;
+        else
+            p->head = j->next;
         if (p->tail == j) p->tail = prev;
         p->nqueued--;
         rc = SRV_CANCEL_QUEUED;
@@ -751,7 +765,8 @@ void srv_pool_stop(srv_pool *p, srv_pool_publish_fn pub, void *arg)
             size_t len = 0;
             if (mpp_stream_finished(q->id, q->msg_seq++, &f, &msg, &len))
                 srv_warn(q->id, "out of memory encoding the end of the stream");
-            else pub(arg, q->id, msg, len);
+            else
+                pub(arg, q->id, msg, len);
         }
         job_free(q);
         q = nx;

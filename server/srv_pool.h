@@ -26,18 +26,17 @@ void srv_topic(uint64_t job, char *buf);
 /* Parses a topic prefix of exactly SRV_TOPIC_LEN bytes; 0 if it is one. */
 int srv_topic_parse(const char *buf, size_t len, uint64_t *job);
 
-
 /* What Cancel found. */
 enum { SRV_CANCEL_NONE = 0, SRV_CANCEL_QUEUED = 1, SRV_CANCEL_RUNNING = 2 };
 
 /* A live job's state, for Status replies. */
 typedef struct {
-    int status;               /* mpp_status: QUEUED or RUNNING */
+    int status; /* mpp_status: QUEUED or RUNNING */
     int64_t steps, steps_total;
     double t, wall_s, submitted_at, started_at;
     size_t particles, nodes;
     int dim;
-    const char *name;         /* valid until the next pool call */
+    const char *name; /* valid until the next pool call */
 } srv_job_info;
 
 typedef struct srv_pool srv_pool;
@@ -50,8 +49,8 @@ srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char 
 /* Queues job `id` (its run record already inserted).  Takes ownership of
  * *sc (set to NULL) on success.  Returns 0, MPM_EFULL or
  * MPM_EUNAVAIL. */
-int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at,
-                    size_t particles, size_t nodes);
+int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
+                    size_t nodes);
 
 /* 1 if the queue has room for another job. */
 int srv_pool_has_room(srv_pool *p);

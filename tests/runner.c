@@ -17,7 +17,10 @@
 #include <unistd.h>
 
 #define T_MAX 512
-static struct { const char *name; t_fn fn; } tests[T_MAX];
+static struct {
+    const char *name;
+    t_fn fn;
+} tests[T_MAX];
 static int ntests;
 static int cur_failed;
 static char tmpdir[256];
@@ -45,7 +48,10 @@ void t_fail(const char *file, int line, const char *fmt, ...)
     fflush(stdout);
 }
 
-int t_failed(void) { return cur_failed; }
+int t_failed(void)
+{
+    return cur_failed;
+}
 
 const char *t_tmpdir(void)
 {
@@ -62,7 +68,9 @@ const char *t_tmpdir(void)
 
 static int rm_one(const char *path, const struct stat *sb, int flag, struct FTW *ftw)
 {
-    (void)sb; (void)flag; (void)ftw;
+    (void)sb;
+    (void)flag;
+    (void)ftw;
     return remove(path);
 }
 
@@ -84,7 +92,8 @@ int main(int argc, char **argv)
     const char *failed_names[T_MAX];
     if (argc > 1 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
         printf("usage: %s [--list] [NAME...]\n"
-               "  runs every test, or those whose name contains a NAME\n", argv[0]);
+               "  runs every test, or those whose name contains a NAME\n",
+               argv[0]);
         return 0;
     }
     /* constructor order is link order; run in name order */
@@ -96,7 +105,10 @@ int main(int argc, char **argv)
         for (int i = 0; i < ntests; i++)
             for (int j = 0; j < ntests; j++)
                 if (tests[j].name == names[i]) fns[i] = tests[j].fn;
-        for (int i = 0; i < ntests; i++) { tests[i].name = names[i]; tests[i].fn = fns[i]; }
+        for (int i = 0; i < ntests; i++) {
+            tests[i].name = names[i];
+            tests[i].fn = fns[i];
+        }
     }
     if (argc > 1 && !strcmp(argv[1], "--list")) {
         for (int i = 0; i < ntests; i++) puts(tests[i].name);
@@ -114,11 +126,15 @@ int main(int argc, char **argv)
         double t0 = now();
         tests[i].fn();
         double dt = now() - t0;
-        if (tmpdir[0] && !cur_failed) nftw(tmpdir, rm_one, 16, FTW_DEPTH | FTW_PHYS);
-        else if (tmpdir[0]) printf("    (kept %s)\n", tmpdir);
+        if (tmpdir[0] && !cur_failed)
+            nftw(tmpdir, rm_one, 16, FTW_DEPTH | FTW_PHYS);
+        else if (tmpdir[0])
+            printf("    (kept %s)\n", tmpdir);
         printf("  %s %s (%.2f s)\n", cur_failed ? "FAIL" : "ok  ", tests[i].name, dt);
-        if (cur_failed) failed_names[failed++] = tests[i].name;
-        else passed++;
+        if (cur_failed)
+            failed_names[failed++] = tests[i].name;
+        else
+            passed++;
     }
     printf("\n");
     for (int i = 0; i < failed; i++) printf("failed: %s\n", failed_names[i]);

@@ -15,36 +15,59 @@
 
 typedef void (*t_fn)(void);
 void t_register(const char *name, t_fn fn);
-void t_fail(const char *file, int line, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
+void t_fail(const char *file, int line, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 int t_failed(void);
 /* A fresh temporary directory for the current test (removed afterwards
  * unless the test failed); path valid until the test ends. */
 const char *t_tmpdir(void);
 
-#define TEST(name)                                                        \
-    static void t_##name(void);                                           \
-    __attribute__((constructor)) static void t_reg_##name(void)           \
-    { t_register(#name, t_##name); }                                      \
+#define TEST(name)                                              \
+    static void t_##name(void);                                 \
+    __attribute__((constructor)) static void t_reg_##name(void) \
+    {                                                           \
+        t_register(#name, t_##name);                            \
+    }                                                           \
     static void t_##name(void)
 
-#define TLOG(...) do { printf("    "); printf(__VA_ARGS__); printf("\n"); } while (0)
+#define TLOG(...)            \
+    do {                     \
+        printf("    ");      \
+        printf(__VA_ARGS__); \
+        printf("\n");        \
+    } while (0)
 
-#define CHECK(cond)                                                       \
-    do { if (!(cond)) { t_fail(__FILE__, __LINE__, "%s", #cond); return; } } while (0)
-#define CHECKF(cond, ...)                                                 \
-    do { if (!(cond)) { t_fail(__FILE__, __LINE__, __VA_ARGS__); return; } } while (0)
+#define CHECK(cond)                                  \
+    do {                                             \
+        if (!(cond)) {                               \
+            t_fail(__FILE__, __LINE__, "%s", #cond); \
+            return;                                  \
+        }                                            \
+    } while (0)
+#define CHECKF(cond, ...)                            \
+    do {                                             \
+        if (!(cond)) {                               \
+            t_fail(__FILE__, __LINE__, __VA_ARGS__); \
+            return;                                  \
+        }                                            \
+    } while (0)
 /* |a - b| <= tol, printing both values on failure */
-#define CHECK_NEAR(a, b, tol)                                             \
-    do { double a_ = (a), b_ = (b), t_ = (tol);                           \
-         if (!(fabs(a_ - b_) <= t_)) {                                    \
-             t_fail(__FILE__, __LINE__, "%s = %.17g, %s = %.17g, |diff| %.3g > %.3g", \
-                    #a, a_, #b, b_, fabs(a_ - b_), t_); return; } } while (0)
-#define CHECK_LT(a, b)                                                    \
-    do { double a_ = (a), b_ = (b);                                       \
-         if (!(a_ < b_)) {                                                \
-             t_fail(__FILE__, __LINE__, "%s = %.6g is not < %s = %.6g", #a, a_, #b, b_); \
-             return; } } while (0)
+#define CHECK_NEAR(a, b, tol)                                                                    \
+    do {                                                                                         \
+        double a_ = (a), b_ = (b), t_ = (tol);                                                   \
+        if (!(fabs(a_ - b_) <= t_)) {                                                            \
+            t_fail(__FILE__, __LINE__, "%s = %.17g, %s = %.17g, |diff| %.3g > %.3g", #a, a_, #b, \
+                   b_, fabs(a_ - b_), t_);                                                       \
+            return;                                                                              \
+        }                                                                                        \
+    } while (0)
+#define CHECK_LT(a, b)                                                                  \
+    do {                                                                                \
+        double a_ = (a), b_ = (b);                                                      \
+        if (!(a_ < b_)) {                                                               \
+            t_fail(__FILE__, __LINE__, "%s = %.6g is not < %s = %.6g", #a, a_, #b, b_); \
+            return;                                                                     \
+        }                                                                               \
+    } while (0)
 
 /* An mpm_error as "field: message" (the proto's spelling), in a buffer
  * that lives to the end of the enclosing block: for TLOG and CHECKF. */

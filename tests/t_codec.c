@@ -23,7 +23,6 @@
 
 #define ERRLEN 512
 
-
 /* Renders e into err (ERRLEN bytes) when rc is an error; returns rc. */
 static int errtext(int rc, const mpm_error *e, char *err)
 {
@@ -112,8 +111,8 @@ static int expect_bad(const char *from, const char *to, int rc_want, const char 
     rc = load_text(json, err);
     free(json);
     if (rc != rc_want || !strstr(err, want)) {
-        t_fail(__FILE__, __LINE__, "%s -> %s: rc %d (want %d), error \"%s\" (want \"%s\")", from, to,
-               rc, rc_want, err, want);
+        t_fail(__FILE__, __LINE__, "%s -> %s: rc %d (want %d), error \"%s\" (want \"%s\")", from,
+               to, rc, rc_want, err, want);
         return 1;
     }
     TLOG("%-44.44s -> %s", to, err);
@@ -152,7 +151,8 @@ TEST(codec_example_point1d)
     CHECK(c->n_bodies == 1 && c->bodies[0].n_points == 1);
     CHECK_NEAR(c->bodies[0].x[0], 0.5, 0);
     CHECK_NEAR(c->bodies[0].volume[0], 1.0, 0);
-    CHECK(!c->bodies[0].mass && !c->bodies[0].v && !c->bodies[0].stress && !c->bodies[0].half_length);
+    CHECK(!c->bodies[0].mass && !c->bodies[0].v && !c->bodies[0].stress &&
+          !c->bodies[0].half_length);
     CHECK_NEAR(c->bodies[0].velocity[0], 0.1, 0);
     CHECK(c->bc.face_mask[0] == 1 && c->bc.face_mask[1] == 0 && c->bc.n_nodes == 0);
     CHECK(sc->has_end_time);
@@ -273,8 +273,8 @@ TEST(codec_example_cube3d)
 /* JSON -> pb -> bytes -> pb -> JSON -> pb -> bytes: same bytes. */
 TEST(codec_roundtrip)
 {
-    static const char *const names[] = {"point1d", "bar1d_mpm", "bar1d_gimp", "disks2d_coarse",
-                                        "disks2d_fine", "cube3d"};
+    static const char *const names[] = {"point1d",        "bar1d_mpm",    "bar1d_gimp",
+                                        "disks2d_coarse", "disks2d_fine", "cube3d"};
     for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
         char path[256], err[ERRLEN];
         size_t len = 0, n1 = 0, n2 = 0;
@@ -284,15 +284,16 @@ TEST(codec_roundtrip)
         int ok = 0;
         snprintf(path, sizeof path, "proto/examples/%s.json", names[k]);
         char *text = td_slurp(path, &len);
-        if (text && !td_case_from_json(text, len, &p1, err, sizeof err) && !mpp_case_pack(p1, &b1, &n1) &&
-            !td_case_unpack(b1, n1, 0, &p2, err, sizeof err) &&
+        if (text && !td_case_from_json(text, len, &p1, err, sizeof err) &&
+            !mpp_case_pack(p1, &b1, &n1) && !td_case_unpack(b1, n1, 0, &p2, err, sizeof err) &&
             !case_to_json(p2, MPP_JSON_PRETTY, &json, err) &&
-            !td_case_from_json(json, strlen(json), &p3, err, sizeof err) && !mpp_case_pack(p3, &b2, &n2) &&
-            !case_to_json(p3, 0, &compact, err) &&
+            !td_case_from_json(json, strlen(json), &p3, err, sizeof err) &&
+            !mpp_case_pack(p3, &b2, &n2) && !case_to_json(p3, 0, &compact, err) &&
             !td_case_from_json(compact, strlen(compact), &p4, err, sizeof err))
             ok = 1;
-        if (ok) TLOG("%s: %zu bytes JSON, %zu bytes protobuf, %zu bytes compact JSON", names[k], len, n1,
-                     strlen(compact));
+        if (ok)
+            TLOG("%s: %zu bytes JSON, %zu bytes protobuf, %zu bytes compact JSON", names[k], len,
+                 n1, strlen(compact));
         int same = ok && n1 == n2 && !memcmp(b1, b2, n1);
         /* the examples are in the pretty printer's canonical form */
         int same_text = ok && !strcmp(json, text);
@@ -365,50 +366,76 @@ TEST(codec_bad_json)
 {
     const int S = MPM_EINVAL;
     if (expect_bad("\"youngsModulus\": 1", "\"youngsModulus\": \"ten\"", S,
-                   "materials[0].youngsModulus: expected a number, got string \"ten\"")) return;
-    if (expect_bad("\"youngsModulus\": 1", "\"youngsModulus\": 1, \"colour\": \"red\"", S,
-                   "materials[0].colour: unknown field")) return;
-    if (expect_bad("\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"colour\": 1", S,
-                   "bodies[1].colour: unknown field (Body has: material, velocity, box, sphere, points, ppc)"))
+                   "materials[0].youngsModulus: expected a number, got string \"ten\""))
         return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"method\": \"FEM\"", S,
-                   "method: unknown value string \"FEM\" for enum mpmd.Case.Method (expected one of: MPM, GIMP)"))
+    if (expect_bad("\"youngsModulus\": 1", "\"youngsModulus\": 1, \"colour\": \"red\"", S,
+                   "materials[0].colour: unknown field"))
+        return;
+    if (expect_bad(
+            "\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"colour\": 1", S,
+            "bodies[1].colour: unknown field (Body has: material, velocity, box, sphere, points, ppc)"))
+        return;
+    if (expect_bad(
+            "\"endTime\": 1", "\"endTime\": 1, \"method\": \"FEM\"", S,
+            "method: unknown value string \"FEM\" for enum mpmd.Case.Method (expected one of: MPM, GIMP)"))
         return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"update\": 7", S,
-                   "update: unknown value number 7 for enum mpmd.Case.Update")) return;
+                   "update: unknown value number 7 for enum mpmd.Case.Update"))
+        return;
     if (expect_bad("\"radius\": 0.1", "\"radius\": [0.1]", S,
-                   "bodies[0].sphere.radius: expected a number, got array")) return;
+                   "bodies[0].sphere.radius: expected a number, got array"))
+        return;
     if (expect_bad("\"hi\": [0.8, 0.8]", "\"hi\": [0.8, true]", S,
-                   "bodies[1].box.hi[1]: expected a number, got boolean true")) return;
+                   "bodies[1].box.hi[1]: expected a number, got boolean true"))
+        return;
     if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, -11]", S,
-                   "grid.nodes[1]: expected a non-negative integer, got -11")) return;
+                   "grid.nodes[1]: expected a non-negative integer, got -11"))
+        return;
     if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, 4294967296]", S,
-                   "grid.nodes[1]: number 4294967296 out of range for uint32")) return;
+                   "grid.nodes[1]: number 4294967296 out of range for uint32"))
+        return;
     if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, 11.5]", S,
-                   "grid.nodes[1]: expected an integer, got number 11.5")) return;
+                   "grid.nodes[1]: expected an integer, got number 11.5"))
+        return;
     if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, null]", S,
-                   "grid.nodes[1]: null is not allowed in an array")) return;
-    if (expect_bad("\"dim\": 2", "\"dim\": \"two\"", S, "grid.dim: expected an integer, got string \"two\""))
+                   "grid.nodes[1]: null is not allowed in an array"))
         return;
-    if (expect_bad("\"grid\": {", "\"grid\": [], \"x\": {", S, "grid: expected an object, got array")) return;
+    if (expect_bad("\"dim\": 2", "\"dim\": \"two\"", S,
+                   "grid.dim: expected an integer, got string \"two\""))
+        return;
+    if (expect_bad("\"grid\": {", "\"grid\": [], \"x\": {", S,
+                   "grid: expected an object, got array"))
+        return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"steps\": 5", S,
-                   "steps: only one member of a oneof may be set, and \"endTime\" is set already")) return;
-    if (expect_bad("\"sphere\": {", "\"box\": {}, \"sphere\": {", S,
-                   "bodies[0].sphere: only one member of a oneof may be set, and \"box\" is set already")) return;
-    if (expect_bad("\"density\": 1", "\"density\": 1, \"youngs_modulus\": 3", S,
-                   "materials[0].youngsModulus: field given twice (as \"youngs_modulus\" and \"youngsModulus\")"))
+                   "steps: only one member of a oneof may be set, and \"endTime\" is set already"))
         return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [1, \"a\"]}]}", S,
-                   "boundary.nodes[0].ijk[1]: expected an integer, got string \"a\"")) return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"output\": {\"snapshotFields\": [\"X\", \"Q\"]}", S,
-                   "output.snapshotFields[1]: unknown value string \"Q\"")) return;
+    if (expect_bad(
+            "\"sphere\": {", "\"box\": {}, \"sphere\": {", S,
+            "bodies[0].sphere: only one member of a oneof may be set, and \"box\" is set already"))
+        return;
+    if (expect_bad(
+            "\"density\": 1", "\"density\": 1, \"youngs_modulus\": 3", S,
+            "materials[0].youngsModulus: field given twice (as \"youngs_modulus\" and \"youngsModulus\")"))
+        return;
+    if (expect_bad("\"endTime\": 1",
+                   "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [1, \"a\"]}]}", S,
+                   "boundary.nodes[0].ijk[1]: expected an integer, got string \"a\""))
+        return;
+    if (expect_bad("\"endTime\": 1",
+                   "\"endTime\": 1, \"output\": {\"snapshotFields\": [\"X\", \"Q\"]}", S,
+                   "output.snapshotFields[1]: unknown value string \"Q\""))
+        return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"name\": 5", S,
-                   "name: expected a string, got number 5")) return;
+                   "name: expected a string, got number 5"))
+        return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"allowUnstableDt\": 1", S,
-                   "allowUnstableDt: expected true or false, got number 1")) return;
+                   "allowUnstableDt: expected true or false, got number 1"))
+        return;
     if (expect_bad("{\"grid\"", "[{\"grid\"", MPM_ESYNTAX, "invalid JSON at line 1")) return;
-    if (expect_bad("\"endTime\": 1}", "\"endTime\": 1,}", MPM_ESYNTAX, "invalid JSON at line 1")) return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"endTime\": 2", MPM_ESYNTAX, "duplicate")) return;
+    if (expect_bad("\"endTime\": 1}", "\"endTime\": 1,}", MPM_ESYNTAX, "invalid JSON at line 1"))
+        return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"endTime\": 2", MPM_ESYNTAX, "duplicate"))
+        return;
     {
         char err[ERRLEN];
         CHECK(load_text("[1, 2]", err) == MPM_EINVAL);
@@ -423,80 +450,124 @@ TEST(codec_bad_case)
     char err[ERRLEN];
     /* the base case itself is fine */
     CHECKF(load_text(td_good2d, err) == 0, "%s", err);
-    if (expect_bad("\"radius\": 0.1", "\"radius\": 0", I, "bodies[0].sphere.radius: must be > 0")) return;
-    if (expect_bad("\"radius\": 0.1", "\"radius\": \"NaN\"", I, "bodies[0].sphere.radius: must be > 0")) return;
+    if (expect_bad("\"radius\": 0.1", "\"radius\": 0", I, "bodies[0].sphere.radius: must be > 0"))
+        return;
+    if (expect_bad("\"radius\": 0.1", "\"radius\": \"NaN\"", I,
+                   "bodies[0].sphere.radius: must be > 0"))
+        return;
     if (expect_bad(", \"radius\": 0.1", "", I, "bodies[0].sphere.radius: missing")) return;
     if (expect_bad("\"center\": [0.3, 0.3]", "\"center\": [0.3]", I,
-                   "bodies[0].sphere.center: expected 2 values (one per axis), got 1")) return;
+                   "bodies[0].sphere.center: expected 2 values (one per axis), got 1"))
+        return;
     if (expect_bad("\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"material\": 3", I,
-                   "bodies[1].material: no material 3 (the case has 1)")) return;
-    if (expect_bad("\"hi\": [0.8, 0.8]", "\"hi\": [0.8, 0.6]", I, "bodies[1].box.hi[1]: must be > lo[1]"))
+                   "bodies[1].material: no material 3 (the case has 1)"))
+        return;
+    if (expect_bad("\"hi\": [0.8, 0.8]", "\"hi\": [0.8, 0.6]", I,
+                   "bodies[1].box.hi[1]: must be > lo[1]"))
         return;
     if (expect_bad("\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"ppc\": 9", I,
-                   "bodies[1].ppc: must be 1..8 (got 9)")) return;
+                   "bodies[1].ppc: must be 1..8 (got 9)"))
+        return;
     if (expect_bad("{\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, ", "{", I,
-                   "bodies[1]: needs one of box, sphere or points")) return;
+                   "bodies[1]: needs one of box, sphere or points"))
+        return;
     if (expect_bad("\"dim\": 2", "\"dim\": 4", I, "grid.dim: must be 1, 2 or 3 (got 4)")) return;
     if (expect_bad("\"dim\": 2, ", "", I, "grid.dim: missing")) return;
-    if (expect_bad("\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, -0.1]", I, "grid.spacing[1]: must be > 0"))
+    if (expect_bad("\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, -0.1]", I,
+                   "grid.spacing[1]: must be > 0"))
         return;
-    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, 1]", I, "grid.nodes[1]: must be >= 2")) return;
+    if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [11, 1]", I, "grid.nodes[1]: must be >= 2"))
+        return;
     if (expect_bad("\"nodes\": [11, 11]", "\"nodes\": [100000, 100000]", MPM_ETOOBIG,
-                   "grid.nodes: 10000000000 nodes, more than the limit")) return;
-    if (expect_bad("\"radius\": 0.1", "\"radius\": 0.1}, \"ppc\": 8, \"x\": {", MPM_EINVAL,
-                   "bodies[0].x: unknown field")) return;
-    if (expect_bad("\"spacing\": [0.1, 0.1], \"nodes\": [11, 11]", "\"spacing\": [1e-4, 1e-4], \"nodes\": [4000, 4000]",
-                   MPM_ETOOBIG, "bodies[0]: about")) return;
-    if (expect_bad("\"density\": 1", "\"density\": -1", I, "materials[0].density: must be > 0 (got -1)"))
+                   "grid.nodes: 10000000000 nodes, more than the limit"))
         return;
-    if (expect_bad("\"poissonRatio\": 0.2", "\"poissonRatio\": 0.5", I, "materials[0].poissonRatio: must be in (-1, 0.5)"))
+    if (expect_bad("\"radius\": 0.1", "\"radius\": 0.1}, \"ppc\": 8, \"x\": {", MPM_EINVAL,
+                   "bodies[0].x: unknown field"))
+        return;
+    if (expect_bad("\"spacing\": [0.1, 0.1], \"nodes\": [11, 11]",
+                   "\"spacing\": [1e-4, 1e-4], \"nodes\": [4000, 4000]", MPM_ETOOBIG,
+                   "bodies[0]: about"))
+        return;
+    if (expect_bad("\"density\": 1", "\"density\": -1", I,
+                   "materials[0].density: must be > 0 (got -1)"))
+        return;
+    if (expect_bad("\"poissonRatio\": 0.2", "\"poissonRatio\": 0.5", I,
+                   "materials[0].poissonRatio: must be in (-1, 0.5)"))
         return;
     if (expect_bad("\"youngsModulus\": 1, ", "", I, "materials[0].youngsModulus: missing")) return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 0", I, "endTime: must be > 0")) return;
     if (expect_bad("\"endTime\": 1", "\"steps\": 0", I, "steps: must be 1..")) return;
-    if (expect_bad(", \"endTime\": 1", "", I, "endTime: missing (a case needs endTime or steps)")) return;
-    /* dt is the solver's to judge (the codec no longer checks it twice) */
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"dt\": -1", I, "dt: must be finite and >= 0 (0: automatic) (got -1)"))
+    if (expect_bad(", \"endTime\": 1", "", I, "endTime: missing (a case needs endTime or steps)"))
         return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"threads\": 1000", I, "threads: must be 0..")) return;
+    /* dt is the solver's to judge (the codec no longer checks it twice) */
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"dt\": -1", I,
+                   "dt: must be finite and >= 0 (0: automatic) (got -1)"))
+        return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"threads\": 1000", I,
+                   "threads: must be 0.."))
+        return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"gravity\": [0, -9.8, 0]", I,
-                   "gravity: expected 2 values (one per axis), got 3")) return;
+                   "gravity: expected 2 values (one per axis), got 3"))
+        return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"zLo\": 7}", I,
-                   "boundary.zLo: the grid has no axis 2 (dim 2)")) return;
+                   "boundary.zLo: the grid has no axis 2 (dim 2)"))
+        return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"xHi\": 8}", I,
-                   "boundary.xHi: mask 8 has bits other than")) return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [0, 0]}, {\"ijk\": [3, 11]}]}", I,
-                   "boundary.nodes[1].ijk[1]: 11 is outside the grid (nodes[1] = 11)")) return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [0]}]}", I,
-                   "boundary.nodes[0].ijk: expected 2 indices")) return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"tractions\": [{\"lo\": [0, 0], \"hi\": [1, 1], \"normal\": 2, \"value\": [1, 0]}]", I,
-                   "tractions[0].normal: must be an axis below dim 2 (got 2)")) return;
-    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"tractions\": [{\"lo\": [0, 0], \"hi\": [1, 1]}]", I,
-                   "tractions[0].value: missing")) return;
-    if (expect_bad("\"materials\": [{", "\"materials\": [], \"x\": [{", I, "x: unknown field")) return;
+                   "boundary.xHi: mask 8 has bits other than"))
+        return;
+    if (expect_bad(
+            "\"endTime\": 1",
+            "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [0, 0]}, {\"ijk\": [3, 11]}]}", I,
+            "boundary.nodes[1].ijk[1]: 11 is outside the grid (nodes[1] = 11)"))
+        return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"boundary\": {\"nodes\": [{\"ijk\": [0]}]}",
+                   I, "boundary.nodes[0].ijk: expected 2 indices"))
+        return;
+    if (expect_bad(
+            "\"endTime\": 1",
+            "\"endTime\": 1, \"tractions\": [{\"lo\": [0, 0], \"hi\": [1, 1], \"normal\": 2, \"value\": [1, 0]}]",
+            I, "tractions[0].normal: must be an axis below dim 2 (got 2)"))
+        return;
+    if (expect_bad("\"endTime\": 1",
+                   "\"endTime\": 1, \"tractions\": [{\"lo\": [0, 0], \"hi\": [1, 1]}]", I,
+                   "tractions[0].value: missing"))
+        return;
+    if (expect_bad("\"materials\": [{", "\"materials\": [], \"x\": [{", I, "x: unknown field"))
+        return;
     {
-        const char *nomat = "{\"grid\": {\"dim\": 1, \"spacing\": [1], \"nodes\": [2]}, \"bodies\": [{\"points\": "
-                            "{\"x\": [0.5], \"volume\": [1]}}], \"endTime\": 1}";
+        const char *nomat =
+            "{\"grid\": {\"dim\": 1, \"spacing\": [1], \"nodes\": [2]}, \"bodies\": [{\"points\": "
+            "{\"x\": [0.5], \"volume\": [1]}}], \"endTime\": 1}";
         CHECK(load_text(nomat, err) == I);
         CHECKF(strstr(err, "materials: at least one material is required"), "%s", err);
     }
     /* explicit points: sizes per point */
-    static const struct { const char *to, *want; } pts[] = {
-        {"\"x\": [0.5, 0.5, 0.7], \"volume\": [0.01, 0.01]", "bodies[0].points.x: expected 4 values (per point), got 3"},
-        {"\"x\": [0.5, 0.5], \"volume\": []", "bodies[0].points.volume: at least one point is required"},
+    static const struct {
+        const char *to, *want;
+    } pts[] = {
+        {"\"x\": [0.5, 0.5, 0.7], \"volume\": [0.01, 0.01]",
+         "bodies[0].points.x: expected 4 values (per point), got 3"},
+        {"\"x\": [0.5, 0.5], \"volume\": []",
+         "bodies[0].points.volume: at least one point is required"},
         {"\"x\": [0.5, 0.5], \"volume\": [0]", "bodies[0].points.volume[0]: must be > 0 (got 0)"},
-        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"mass\": [1, 2]", "bodies[0].points.mass: expected 1 values (per point, or none), got 2"},
-        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"v\": [1]", "bodies[0].points.v: expected 2 values"},
-        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"stress\": [1, 2, 3]", "bodies[0].points.stress: expected 6 values"},
-        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"halfLength\": [0.05, -0.05]", "bodies[0].points.halfLength[1]: must be > 0"},
-        {"\"x\": [0.5, \"Infinity\"], \"volume\": [0.01]", "bodies[0].points.x[1]: must be a finite number"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"mass\": [1, 2]",
+         "bodies[0].points.mass: expected 1 values (per point, or none), got 2"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"v\": [1]",
+         "bodies[0].points.v: expected 2 values"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"stress\": [1, 2, 3]",
+         "bodies[0].points.stress: expected 6 values"},
+        {"\"x\": [0.5, 0.5], \"volume\": [0.01], \"halfLength\": [0.05, -0.05]",
+         "bodies[0].points.halfLength[1]: must be > 0"},
+        {"\"x\": [0.5, \"Infinity\"], \"volume\": [0.01]",
+         "bodies[0].points.x[1]: must be a finite number"},
     };
     for (size_t i = 0; i < sizeof pts / sizeof pts[0]; i++) {
         char json[512];
         snprintf(json, sizeof json,
                  "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
                  " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
-                 " \"bodies\": [{\"points\": {%s}}], \"endTime\": 1}", pts[i].to);
+                 " \"bodies\": [{\"points\": {%s}}], \"endTime\": 1}",
+                 pts[i].to);
         int rc = load_text(json, err);
         CHECKF(rc == I && strstr(err, pts[i].want), "rc %d: %s (want %s)", rc, err, pts[i].want);
         TLOG("%s", err);
@@ -516,8 +587,8 @@ TEST(codec_defaults)
     size_t n = 0;
     CHECKF(td_case_load(td_good2d, strlen(td_good2d), &sc, err, sizeof err) == 0, "%s", err);
     CHECKF(sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL,
-           "a case without method/update: method %d, update %d (want GIMP, MUSL)", (int)sc->c.method,
-           (int)sc->c.update);
+           "a case without method/update: method %d, update %d (want GIMP, MUSL)",
+           (int)sc->c.method, (int)sc->c.update);
     mpp_case_destroy(&sc);
 
     /* absent stays absent in JSON until pinned; pinned, the bytes say it */
@@ -538,7 +609,8 @@ TEST(codec_defaults)
     free(json);
     json = NULL;
     {
-        char *mpm = td_patch("\"endTime\": 1", "\"endTime\": 1, \"method\": \"MPM\", \"update\": \"USL\"");
+        char *mpm =
+            td_patch("\"endTime\": 1", "\"endTime\": 1, \"method\": \"MPM\", \"update\": \"USL\"");
         CHECK(mpm);
         int rc = td_case_from_json(mpm, strlen(mpm), &pb, err, sizeof err);
         free(mpm);
@@ -547,20 +619,22 @@ TEST(codec_defaults)
         rc = case_to_json(pb, 0, &json, err);
         mpp_case_pb_free(&pb);
         CHECK(rc == 0);
-        CHECKF(strstr(json, "\"method\":\"MPM\",\"update\":\"USL\""), "explicit MPM USL pinned: %s", json);
+        CHECKF(strstr(json, "\"method\":\"MPM\",\"update\":\"USL\""), "explicit MPM USL pinned: %s",
+               json);
         free(json);
     }
     /* a solver check (GMPM half-width above h) names the field as JSON does */
     {
-        const char *wide = "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
-                           " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
-                           " \"bodies\": [{\"points\": {\"x\": [0.45, 0.55], \"volume\": [0.1, 0.1],"
-                           " \"halfLength\": [0.05, 0.2]}}], \"steps\": 1}";
+        const char *wide =
+            "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+            " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+            " \"bodies\": [{\"points\": {\"x\": [0.45, 0.55], \"volume\": [0.1, 0.1],"
+            " \"halfLength\": [0.05, 0.2]}}], \"steps\": 1}";
         int rc = load_text(wide, err);
         TLOG("half-width above h: %s", err);
         const char *colon = strstr(err, ": ");
-        CHECKF(rc == MPM_EINVAL && !strncmp(err, "bodies[0].", 10) && colon &&
-                   colon - err >= 13 && !strncmp(colon - 13, "halfLength[1]", 13),
+        CHECKF(rc == MPM_EINVAL && !strncmp(err, "bodies[0].", 10) && colon && colon - err >= 13 &&
+                   !strncmp(colon - 13, "halfLength[1]", 13),
                "rc %d: %s (want the path bodies[0]...halfLength[1] first)", rc, err);
     }
 }
@@ -594,7 +668,8 @@ TEST(codec_bad_bytes)
             mpp_case_pb_free(&pb);
         }
     }
-    TLOG("%zu-byte case: %d truncations rejected, %d decode as smaller cases", n, bad_prefix, ok_prefix);
+    TLOG("%zu-byte case: %d truncations rejected, %d decode as smaller cases", n, bad_prefix,
+         ok_prefix);
     CHECK(bad_prefix + ok_prefix == (int)n);
     CHECK(bad_prefix > (int)n / 2);
 
@@ -624,7 +699,8 @@ TEST(codec_bad_bytes)
     TLOG("corrupted bytes: %d rejected, %d decoded", rejected, decoded);
     CHECK(rejected > 0);
 
-    static const uint8_t garbage[] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
+    static const uint8_t garbage[] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff,
+                                      0xff, 0xff, 0xff, 0xff, 0xff};
     rc = td_case_unpack(garbage, sizeof garbage, 0, &pb, err, sizeof err);
     CHECK(rc == MPM_ESYNTAX && pb == NULL);
     /* a field 2 (grid) claiming 100 bytes with 2 present */
@@ -635,11 +711,17 @@ TEST(codec_bad_bytes)
     CHECKF(rc == MPM_ETOOBIG && pb == NULL && strstr(err, "more than the limit"), "%s", err);
     /* unknown enum numbers survive protobuf decoding (appended fields
      * override / extend the valid case) but not the conversion */
-    static const struct { uint8_t tail[8]; size_t n; const char *want; } tails[] = {
-        {{0x18, 0x05}, 2, "method: unknown value 5"},                                 /* method = 5 */
-        {{0x20, 0x03}, 2, "update: unknown value 3"},                                 /* update = 3 */
+    static const struct {
+        uint8_t tail[8];
+        size_t n;
+        const char *want;
+    } tails[] = {
+        {{0x18, 0x05}, 2, "method: unknown value 5"}, /* method = 5 */
+        {{0x20, 0x03}, 2, "update: unknown value 3"}, /* update = 3 */
         {{0x8a, 0x01, 0x03, 0x1a, 0x01, 0x09}, 6, "output.snapshotFields[3]: unknown value 9"},
-        {{0x52, 0x02, 0x08, 0x04}, 4, "materials[1].model: unknown value 4"},         /* materials += {model: 4} */
+        {{0x52, 0x02, 0x08, 0x04},
+         4,
+         "materials[1].model: unknown value 4"}, /* materials += {model: 4} */
     };
     for (size_t i = 0; i < sizeof tails / sizeof tails[0]; i++) {
         uint8_t *b2 = malloc(n + tails[i].n);
@@ -652,7 +734,8 @@ TEST(codec_bad_bytes)
         CHECKF(rc == 0 && pb, "tail %zu: %s", i, err);
         rc = from_pb(pb, &sc, err);
         mpp_case_pb_free(&pb);
-        CHECKF(rc == MPM_EINVAL && sc == NULL && strstr(err, tails[i].want), "tail %zu: %s", i, err);
+        CHECKF(rc == MPM_EINVAL && sc == NULL && strstr(err, tails[i].want), "tail %zu: %s", i,
+               err);
         TLOG("%s", err);
     }
     free(buf);
@@ -701,30 +784,37 @@ TEST(codec_envelopes)
         uint64_t id;
         const char *err;
     } reqs[] = {
-        {"{\"schemaVersion\": 1, \"cancel\": {\"jobId\": \"18446744073709551615\"}}", 0, MPP_REQ_CANCEL,
-         UINT64_MAX, ""},
+        {"{\"schemaVersion\": 1, \"cancel\": {\"jobId\": \"18446744073709551615\"}}", 0,
+         MPP_REQ_CANCEL, UINT64_MAX, ""},
         {"{\"schemaVersion\": 1, \"status\": {\"jobId\": 7}}", 0, MPP_REQ_STATUS, 7, ""},
-        {"{\"schemaVersion\": 1, \"listRuns\": {\"status\": \"FAILED\", \"limit\": 5}}", 0, MPP_REQ_LIST_RUNS, 0, ""},
-        {"{\"schemaVersion\": 1, \"getRun\": {\"runId\": 3, \"withCase\": true}}", 0, MPP_REQ_GET_RUN, 3, ""},
-        {"{\"schemaVersion\": 1, \"getEnergy\": {\"runId\": 3, \"fromSeq\": 10}}", 0, MPP_REQ_GET_ENERGY, 3, ""},
-        {"{\"schemaVersion\": 1, \"getSnapshot\": {\"runId\": 4, \"step\": \"-1\"}}", 0, MPP_REQ_GET_SNAPSHOT, 4, ""},
+        {"{\"schemaVersion\": 1, \"listRuns\": {\"status\": \"FAILED\", \"limit\": 5}}", 0,
+         MPP_REQ_LIST_RUNS, 0, ""},
+        {"{\"schemaVersion\": 1, \"getRun\": {\"runId\": 3, \"withCase\": true}}", 0,
+         MPP_REQ_GET_RUN, 3, ""},
+        {"{\"schemaVersion\": 1, \"getEnergy\": {\"runId\": 3, \"fromSeq\": 10}}", 0,
+         MPP_REQ_GET_ENERGY, 3, ""},
+        {"{\"schemaVersion\": 1, \"getSnapshot\": {\"runId\": 4, \"step\": \"-1\"}}", 0,
+         MPP_REQ_GET_SNAPSHOT, 4, ""},
         {"{\"schemaVersion\": 1, \"ping\": {}}", 0, MPP_REQ_PING, 0, ""},
         {"{\"schemaVersion\": 1, \"version\": {}}", 0, MPP_REQ_VERSION, 0, ""},
-        {"{\"schemaVersion\": 2, \"ping\": {}}", MPM_EVERSION, 0, 0, "schemaVersion: 2; this server speaks 1"},
+        {"{\"schemaVersion\": 2, \"ping\": {}}", MPM_EVERSION, 0, 0,
+         "schemaVersion: 2; this server speaks 1"},
         {"{\"ping\": {}}", MPM_EVERSION, 0, 0, "schemaVersion: missing"},
         {"{\"schemaVersion\": 1}", MPM_EREQUEST, 0, 0, "request: no body"},
         {"{\"schemaVersion\": 1, \"cancel\": {}}", MPM_EREQUEST, 0, 0, "cancel.jobId: missing"},
         {"{\"schemaVersion\": 1, \"submit\": {}}", MPM_EREQUEST, 0, 0, "submit.case: missing"},
     };
     for (size_t i = 0; i < sizeof reqs / sizeof reqs[0]; i++) {
-        rc = td_msg_json_to_bytes(MPP_MSG_REQUEST, reqs[i].json, strlen(reqs[i].json), &buf, &n, err,
-                                   sizeof err);
+        rc = td_msg_json_to_bytes(MPP_MSG_REQUEST, reqs[i].json, strlen(reqs[i].json), &buf, &n,
+                                  err, sizeof err);
         CHECKF(rc == 0, "%s: %s", reqs[i].json, err);
         err[0] = 0;
         rc = req_decode(buf, n, 0, &rq, err);
         free(buf);
-        int ok = rc == reqs[i].rc && strstr(err, reqs[i].err) && (rc || (rq.kind == reqs[i].kind && rq.id == reqs[i].id));
-        if (ok && rq.kind == MPP_REQ_LIST_RUNS) ok = rq.status == MPP_STATUS_FAILED && rq.limit == 5;
+        int ok = rc == reqs[i].rc && strstr(err, reqs[i].err) &&
+                 (rc || (rq.kind == reqs[i].kind && rq.id == reqs[i].id));
+        if (ok && rq.kind == MPP_REQ_LIST_RUNS)
+            ok = rq.status == MPP_STATUS_FAILED && rq.limit == 5;
         if (ok && rq.kind == MPP_REQ_GET_RUN) ok = rq.with_case == 1;
         if (ok && rq.kind == MPP_REQ_GET_ENERGY) ok = rq.from_seq == 10;
         if (ok && rq.kind == MPP_REQ_GET_SNAPSHOT) ok = rq.has_step && rq.step == -1;
@@ -739,8 +829,12 @@ TEST(codec_envelopes)
     mpp_request_clear(&rq);
 
     /* replies, checked through their JSON form */
-    mpm_energy_sample es = {.step = 10, .t = 0.01, .dim = 2, .seq = 3,
-                            .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2, .momentum = {1, -1, 9}}};
+    mpm_energy_sample es = {
+        .step = 10,
+        .t = 0.01,
+        .dim = 2,
+        .seq = 3,
+        .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2, .momentum = {1, -1, 9}}};
     double x[4] = {0.1, 0.2, 0.3, 0.4}, p[2] = {-1, 1};
     mpp_snapshot snap = {.step = 10, .t = 0.01, .n = 2, .dim = 2, .x = x, .pressure = p};
     int64_t ssteps[2] = {0, 100};
@@ -753,10 +847,22 @@ TEST(codec_envelopes)
         CHECK(mpp_case_pack(cpb, &cb, &cn) == 0);
         mpp_case_pb_free(&cpb);
     }
-    mpp_run_info ri = {.run_id = 5, .job_id = 6, .name = "bar", .status = MPP_STATUS_RUNNING,
-                       .submitted_at = 1700000000.5, .steps = 10, .steps_total = 100, .t = 0.01, .dim = 2,
-                       .last_energy = &es, .n_snapshot_steps = 2, .snapshot_steps = ssteps,
-                       .method = MPM_METHOD_GIMP, .update = MPM_USL, .case_bytes = cb, .case_len = cn};
+    mpp_run_info ri = {.run_id = 5,
+                       .job_id = 6,
+                       .name = "bar",
+                       .status = MPP_STATUS_RUNNING,
+                       .submitted_at = 1700000000.5,
+                       .steps = 10,
+                       .steps_total = 100,
+                       .t = 0.01,
+                       .dim = 2,
+                       .last_energy = &es,
+                       .n_snapshot_steps = 2,
+                       .snapshot_steps = ssteps,
+                       .method = MPM_METHOD_GIMP,
+                       .update = MPM_USL,
+                       .case_bytes = cb,
+                       .case_len = cn};
     mpp_run_info two[2] = {ri, ri};
     two[1].run_id = 9;
     two[1].case_bytes = NULL;
@@ -764,7 +870,8 @@ TEST(codec_envelopes)
     two[1].status = MPP_STATUS_FAILED;
     const char *names[2] = {"protobuf-c", "jansson"}, *versions[2] = {"1.4.1", "2.14"};
     mpp_progress pr = {.step = 5, .steps_total = 50, .t = 0.5, .dt = 0.1, .wall_s = 0.25};
-    mpp_finished fin = {.status = MPP_STATUS_FINISHED, .steps = 50, .t = 5, .wall_s = 1, .energy = &es};
+    mpp_finished fin = {
+        .status = MPP_STATUS_FINISHED, .steps = 50, .t = 5, .wall_s = 1, .energy = &es};
 
     static const char *const want[] = {
         "{\"schemaVersion\":1,\"error\":{\"code\":\"INVALID_CASE\",\"message\":\"must be > 0\",\"field\":\"bodies[0].sphere.radius\"}}",
@@ -791,7 +898,10 @@ TEST(codec_envelopes)
     for (size_t i = 0; i < sizeof want / sizeof want[0]; i++) {
         mpp_msg_kind kind = i < 8 ? MPP_MSG_REPLY : MPP_MSG_STREAM;
         switch (i) {
-        case 0: rc = mpp_reply_error(MPP_ERR_INVALID_CASE, "must be > 0", "bodies[0].sphere.radius", &buf, &n); break;
+        case 0:
+            rc = mpp_reply_error(MPP_ERR_INVALID_CASE, "must be > 0", "bodies[0].sphere.radius",
+                                 &buf, &n);
+            break;
         case 1: rc = mpp_reply_submit_ok(12, 13, &buf, &n); break;
         case 2: rc = mpp_reply_run(&ri, &buf, &n); break;
         case 3: rc = mpp_reply_runs(two, 2, &buf, &n); break;
@@ -821,7 +931,8 @@ TEST(codec_envelopes)
     CHECK(mpp_reply_run(&ri, &buf, &n) == MPM_ESYNTAX && buf == NULL);
 
     CHECK(!strcmp(mpp_status_name(MPP_STATUS_INTERRUPTED), "INTERRUPTED") && !mpp_status_name(0));
-    CHECK(mpp_status_from_name("CANCELLED") == MPP_STATUS_CANCELLED && mpp_status_from_name("x") == 0);
+    CHECK(mpp_status_from_name("CANCELLED") == MPP_STATUS_CANCELLED &&
+          mpp_status_from_name("x") == 0);
 }
 
 /* ---- the client decoders: mpp_stream_decode, mpp_reply_decode ---- */
@@ -867,12 +978,16 @@ static int decode_abuse(const uint8_t *msg, size_t n, int reply)
             memcpy(c, b, len);
             mpp_stream si;
             mpp_reply ri;
-            int rc = reply ? mpp_reply_decode(c, len, 0, &ri, NULL) : mpp_stream_decode(c, len, 0, &si, NULL);
-            if (reply) mpp_reply_clear(&ri);
-            else mpp_stream_clear(&si);
+            int rc = reply ? mpp_reply_decode(c, len, 0, &ri, NULL)
+                           : mpp_stream_decode(c, len, 0, &si, NULL);
+            if (reply)
+                mpp_reply_clear(&ri);
+            else
+                mpp_stream_clear(&si);
             free(c);
             if (v >= 0) b[k] = save;
-            if (rc == MPM_ESYNTAX) rejected++;
+            if (rc == MPM_ESYNTAX)
+                rejected++;
             else if (rc) {
                 free(b);
                 return -1;
@@ -922,9 +1037,16 @@ TEST(codec_stream_decode)
     CHECK(decode_abuse(buf, n, 0) > 0);
     free(buf);
 
-    mpm_energy_sample es = {.step = -3, .t = 0.01, .dim = 3, .seq = UINT64_MAX,
-                            .e = {.kinetic = 0.5, .strain = 0.25, .potential = -1e300,
-                                  .external_work = 1e-300, .total = 0.75, .mass = 2,
+    mpm_energy_sample es = {.step = -3,
+                            .t = 0.01,
+                            .dim = 3,
+                            .seq = UINT64_MAX,
+                            .e = {.kinetic = 0.5,
+                                  .strain = 0.25,
+                                  .potential = -1e300,
+                                  .external_work = 1e-300,
+                                  .total = 0.75,
+                                  .mass = 2,
                                   .momentum = {1, -1, 9}}};
     CHECK(mpp_stream_energy(12, 0, &es, &buf, &n) == 0);
     rc = stream_decode(buf, n, &si, err);
@@ -941,9 +1063,16 @@ TEST(codec_stream_decode)
      * hold the very values */
     enum { NP = 3 };
     double x[2 * NP] = {1, 2, 3, 4, 5, 6}, v[2 * NP] = {0, -0.5, 1e-300, 7, 8, 9},
-           st[6 * NP] = {[5] = 3, [17] = -2}, p[NP] = {-1, 0, 1}, vol[NP] = {1, 1, 1};
-    mpp_snapshot snap = {.step = 100, .t = 0.125, .n = NP, .dim = 2, .x = x, .v = v, .stress = st,
-                         .pressure = p, .volume = vol};
+                 st[6 * NP] = {[5] = 3, [17] = -2}, p[NP] = {-1, 0, 1}, vol[NP] = {1, 1, 1};
+    mpp_snapshot snap = {.step = 100,
+                         .t = 0.125,
+                         .n = NP,
+                         .dim = 2,
+                         .x = x,
+                         .v = v,
+                         .stress = st,
+                         .pressure = p,
+                         .volume = vol};
     CHECK(mpp_stream_snapshot(99, 4, &snap, &buf, &n) == 0);
     rc = stream_decode(buf, n, &si, err);
     CHECKF(rc == 0, "%s", err);
@@ -953,8 +1082,8 @@ TEST(codec_stream_decode)
     CHECK(si.snapshot.x && si.snapshot.v && si.snapshot.stress && si.snapshot.pressure &&
           si.snapshot.volume);
     CHECK(same_doubles(si.snapshot.x, x, 2 * NP) && same_doubles(si.snapshot.v, v, 2 * NP) &&
-          same_doubles(si.snapshot.stress, st, 6 * NP) && same_doubles(si.snapshot.pressure, p, NP) &&
-          same_doubles(si.snapshot.volume, vol, NP));
+          same_doubles(si.snapshot.stress, st, 6 * NP) &&
+          same_doubles(si.snapshot.pressure, p, NP) && same_doubles(si.snapshot.volume, vol, NP));
     mpp_stream_clear(&si);
     {
         /* the same bytes through the caller's buffer */
@@ -981,10 +1110,12 @@ TEST(codec_stream_decode)
     mpp_stream_clear(&si);
     {
         /* arrays that do not hold n times their width: refused */
-        static const uint8_t odd[] = {0x2a, 0x0e, 0x18, 0x03, 0x20, 0x02, 0x2a, 0x08,
-                                      0, 0, 0, 0, 0, 0, 0xf0, 0x3f};  /* snapshot {n 3, dim 2, x [1]} */
+        static const uint8_t odd[] = {
+            0x2a, 0x0e, 0x18, 0x03, 0x20, 0x02, 0x2a, 0x08,
+            0,    0,    0,    0,    0,    0,    0xf0, 0x3f}; /* snapshot {n 3, dim 2, x [1]} */
         rc = stream_decode(odd, sizeof odd, &si, err);
-        CHECKF(rc == MPM_ESYNTAX && si.kind == MPP_STREAM_NONE && !si.msg_ && strstr(err, "snapshot.x holds 1 values"),
+        CHECKF(rc == MPM_ESYNTAX && si.kind == MPP_STREAM_NONE && !si.msg_ &&
+                   strstr(err, "snapshot.x holds 1 values"),
                "rc %d: %s", rc, err);
     }
     {
@@ -1000,23 +1131,28 @@ TEST(codec_stream_decode)
         rc = stream_decode(buf, n, &si, err);
         double dt = td_now() - t0;
         free(buf);
-        int ok = rc == 0 && si.snapshot.n == big && si.snapshot.x && si.snapshot.v && si.snapshot.pressure &&
-                 si.snapshot.x[2 * big - 1] == 42 && si.snapshot.v[2 * big - 1] == 42 &&
-                 si.snapshot.pressure[big - 1] == 0;
+        int ok = rc == 0 && si.snapshot.n == big && si.snapshot.x && si.snapshot.v &&
+                 si.snapshot.pressure && si.snapshot.x[2 * big - 1] == 42 &&
+                 si.snapshot.v[2 * big - 1] == 42 && si.snapshot.pressure[big - 1] == 0;
         mpp_stream_clear(&si);
         free(a);
         TLOG("a snapshot of 10^6 particles (40 MB) decoded in %.1f ms", 1e3 * dt);
         CHECK(ok);
     }
 
-    mpp_finished fin = {.status = MPP_STATUS_FAILED, .error = "particle left the grid", .steps = 50,
-                        .t = 5, .wall_s = 1.5, .energy = &es};
+    mpp_finished fin = {.status = MPP_STATUS_FAILED,
+                        .error = "particle left the grid",
+                        .steps = 50,
+                        .t = 5,
+                        .wall_s = 1.5,
+                        .energy = &es};
     CHECK(mpp_stream_finished(12, 3, &fin, &buf, &n) == 0);
     rc = stream_decode(buf, n, &si, err);
     CHECKF(rc == 0, "%s", err);
     CHECK(si.kind == MPP_STREAM_FINISHED && si.job_id == 12 && si.seq == 3);
-    CHECK(si.finished.status == MPP_STATUS_FAILED && !strcmp(si.finished.error, "particle left the grid") &&
-          si.finished.steps == 50 && si.finished.t == 5 && si.finished.wall_s == 1.5 && si.has_energy &&
+    CHECK(si.finished.status == MPP_STATUS_FAILED &&
+          !strcmp(si.finished.error, "particle left the grid") && si.finished.steps == 50 &&
+          si.finished.t == 5 && si.finished.wall_s == 1.5 && si.has_energy &&
           same_energy(&si.energy, &es));
     mpp_stream_clear(&si);
     CHECK(decode_abuse(buf, n, 0) > 0);
@@ -1041,22 +1177,27 @@ TEST(codec_stream_decode)
               si.kind == MPP_STREAM_NONE);
     }
     /* garbage */
-    static const struct { uint8_t b[12]; size_t n; } bad[] = {
-        {{0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff}, 11}, /* endless varint */
-        {{0x08}, 1},                                  /* job_id without its value */
-        {{0x09, 1, 2, 3, 4, 5, 6, 7, 8}, 9},          /* job_id as a 64-bit field */
-        {{0x2a, 100, 0x08, 0x01}, 4},                 /* snapshot claiming 100 bytes */
-        {{0x2a, 3, 0x2a, 1, 0}, 5},                   /* snapshot.x of 1 byte */
-        {{0x2a, 2, 0x10, 1}, 4},                      /* snapshot.t as a varint */
-        {{0x22, 2, 0x11, 1}, 4},                      /* energy.t cut short */
-        {{0x00}, 1},                                  /* field 0 */
-        {{0x0b}, 1},                                  /* a group */
+    static const struct {
+        uint8_t b[12];
+        size_t n;
+    } bad[] = {
+        {{0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff},
+         11},                                /* endless varint */
+        {{0x08}, 1},                         /* job_id without its value */
+        {{0x09, 1, 2, 3, 4, 5, 6, 7, 8}, 9}, /* job_id as a 64-bit field */
+        {{0x2a, 100, 0x08, 0x01}, 4},        /* snapshot claiming 100 bytes */
+        {{0x2a, 3, 0x2a, 1, 0}, 5},          /* snapshot.x of 1 byte */
+        {{0x2a, 2, 0x10, 1}, 4},             /* snapshot.t as a varint */
+        {{0x22, 2, 0x11, 1}, 4},             /* energy.t cut short */
+        {{0x00}, 1},                         /* field 0 */
+        {{0x0b}, 1},                         /* a group */
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         err[0] = 0;
         rc = stream_decode(bad[i].b, bad[i].n, &si, err);
         CHECKF(rc == MPM_ESYNTAX && strstr(err, "not a valid mpmd.StreamMsg") &&
-               si.kind == MPP_STREAM_NONE && !si.msg_, "garbage %zu: rc %d, %s", i, rc, err);
+                   si.kind == MPP_STREAM_NONE && !si.msg_,
+               "garbage %zu: rc %d, %s", i, rc, err);
         mpp_stream_clear(&si);
     }
     /* random bytes */
@@ -1094,7 +1235,8 @@ TEST(codec_reply_decode)
     mpp_reply ri;
     int rc;
 
-    CHECK(mpp_reply_error(MPP_ERR_INVALID_CASE, "must be > 0", "bodies[0].sphere.radius", &buf, &n) == 0);
+    CHECK(mpp_reply_error(MPP_ERR_INVALID_CASE, "must be > 0", "bodies[0].sphere.radius", &buf,
+                          &n) == 0);
     rc = reply_decode(buf, n, 0, &ri, err);
     CHECKF(rc == 0, "%s", err);
     CHECK(ri.kind == MPP_REPLY_ERROR && ri.schema_version == MPP_SCHEMA_VERSION &&
@@ -1130,17 +1272,26 @@ TEST(codec_reply_decode)
         CHECK(rc == 0 && ri.err_code == MPP_ERR_TOO_LARGE && !ri.err_field[0] &&
               !strcmp(ri.err_message, "request of 9 bytes"));
         mpp_reply_clear(&ri);
-        static const struct { int mpm, wire; } map[] = {
-            {MPM_EINVAL, MPP_ERR_INVALID_CASE}, {MPM_ECFL, MPP_ERR_INVALID_CASE},
-            {MPM_EREQUEST, MPP_ERR_BAD_REQUEST}, {MPM_ESYNTAX, MPP_ERR_BAD_REQUEST},
-            {MPM_EVERSION, MPP_ERR_BAD_SCHEMA}, {MPM_ENOTFOUND, MPP_ERR_NOT_FOUND},
-            {MPM_EFULL, MPP_ERR_QUEUE_FULL}, {MPM_ETOOBIG, MPP_ERR_TOO_LARGE},
-            {MPM_ECONFLICT, MPP_ERR_CONFLICT}, {MPM_EUNAVAIL, MPP_ERR_UNAVAILABLE},
-            {MPM_ENOMEM, MPP_ERR_INTERNAL}, {MPM_EIO, MPP_ERR_INTERNAL}, {0, MPP_ERR_INTERNAL},
-            {-1000, MPP_ERR_INTERNAL}};
+        static const struct {
+            int mpm, wire;
+        } map[] = {{MPM_EINVAL, MPP_ERR_INVALID_CASE},
+                   {MPM_ECFL, MPP_ERR_INVALID_CASE},
+                   {MPM_EREQUEST, MPP_ERR_BAD_REQUEST},
+                   {MPM_ESYNTAX, MPP_ERR_BAD_REQUEST},
+                   {MPM_EVERSION, MPP_ERR_BAD_SCHEMA},
+                   {MPM_ENOTFOUND, MPP_ERR_NOT_FOUND},
+                   {MPM_EFULL, MPP_ERR_QUEUE_FULL},
+                   {MPM_ETOOBIG, MPP_ERR_TOO_LARGE},
+                   {MPM_ECONFLICT, MPP_ERR_CONFLICT},
+                   {MPM_EUNAVAIL, MPP_ERR_UNAVAILABLE},
+                   {MPM_ENOMEM, MPP_ERR_INTERNAL},
+                   {MPM_EIO, MPP_ERR_INTERNAL},
+                   {0, MPP_ERR_INTERNAL},
+                   {-1000, MPP_ERR_INTERNAL}};
         for (size_t i = 0; i < sizeof map / sizeof map[0]; i++)
             CHECKF((int)mpp_error_wire_code(map[i].mpm) == map[i].wire, "mpm code %d", map[i].mpm);
-        CHECK(!strcmp(mpp_err_code_name(MPP_ERR_UNAVAILABLE), "UNAVAILABLE") && !mpp_err_code_name(0));
+        CHECK(!strcmp(mpp_err_code_name(MPP_ERR_UNAVAILABLE), "UNAVAILABLE") &&
+              !mpp_err_code_name(0));
     }
 
     CHECK(mpp_reply_submit_ok(UINT64_MAX, 13, &buf, &n) == 0);
@@ -1151,18 +1302,41 @@ TEST(codec_reply_decode)
     CHECK(decode_abuse(buf, n, 1) > 0);
     free(buf);
 
-    mpm_energy_sample es[2] = {{.step = 10, .t = 0.01, .dim = 2, .seq = 3,
-                                .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2,
-                                      .momentum = {1, -1}}},
-                               {.step = 11, .t = 0.011, .dim = 2, .seq = 4,
-                                .e = {.kinetic = 0.4, .potential = -2, .external_work = 3,
-                                      .total = -4.6, .mass = 2, .momentum = {0.5, 7}}}};
+    mpm_energy_sample es[2] = {
+        {.step = 10,
+         .t = 0.01,
+         .dim = 2,
+         .seq = 3,
+         .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2, .momentum = {1, -1}}},
+        {.step = 11,
+         .t = 0.011,
+         .dim = 2,
+         .seq = 4,
+         .e = {.kinetic = 0.4,
+               .potential = -2,
+               .external_work = 3,
+               .total = -4.6,
+               .mass = 2,
+               .momentum = {0.5, 7}}}};
     int64_t ssteps[2] = {0, 100};
-    mpp_run_info run = {.run_id = 5, .job_id = 6, .name = "bar", .status = MPP_STATUS_FAILED,
-                        .error = "diverged", .submitted_at = 1700000000.5, .steps = 10,
-                        .steps_total = 100, .t = 0.01, .wall_s = 2.5, .particles = 1000,
-                        .nodes = 121, .dim = 2, .last_energy = &es[1], .energy_samples = 11,
-                        .n_snapshot_steps = 2, .snapshot_steps = ssteps, .method = MPM_METHOD_MPM,
+    mpp_run_info run = {.run_id = 5,
+                        .job_id = 6,
+                        .name = "bar",
+                        .status = MPP_STATUS_FAILED,
+                        .error = "diverged",
+                        .submitted_at = 1700000000.5,
+                        .steps = 10,
+                        .steps_total = 100,
+                        .t = 0.01,
+                        .wall_s = 2.5,
+                        .particles = 1000,
+                        .nodes = 121,
+                        .dim = 2,
+                        .last_energy = &es[1],
+                        .energy_samples = 11,
+                        .n_snapshot_steps = 2,
+                        .snapshot_steps = ssteps,
+                        .method = MPM_METHOD_MPM,
                         .update = MPM_USL};
     CHECK(mpp_reply_run(&run, &buf, &n) == 0);
     rc = reply_decode(buf, n, 0, &ri, err);
@@ -1208,8 +1382,8 @@ TEST(codec_reply_decode)
     free(buf);
     CHECK(mpp_reply_energy(8, NULL, 0, 0, &buf, &n) == 0);
     rc = reply_decode(buf, n, 0, &ri, err);
-    CHECK(rc == 0 && ri.kind == MPP_REPLY_ENERGY && ri.run_id == 8 && !ri.samples && ri.n_samples == 0 &&
-          ri.more == 0);
+    CHECK(rc == 0 && ri.kind == MPP_REPLY_ENERGY && ri.run_id == 8 && !ri.samples &&
+          ri.n_samples == 0 && ri.more == 0);
     mpp_reply_clear(&ri);
     free(buf);
 
@@ -1219,9 +1393,9 @@ TEST(codec_reply_decode)
     rc = reply_decode(buf, n, 0, &ri, err);
     CHECK(rc == 0 && ri.kind == MPP_REPLY_SNAPSHOT && ri.schema_version == MPP_SCHEMA_VERSION &&
           ri.snapshot.step == 10 && ri.snapshot.t == 0.01 && ri.snapshot.n == 2 &&
-          ri.snapshot.dim == 2 && ri.snapshot.x && same_doubles(ri.snapshot.x, x, 4) && !ri.snapshot.v &&
-          !ri.snapshot.stress && ri.snapshot.pressure && same_doubles(ri.snapshot.pressure, p, 2) &&
-          !ri.snapshot.volume && !ri.samples);
+          ri.snapshot.dim == 2 && ri.snapshot.x && same_doubles(ri.snapshot.x, x, 4) &&
+          !ri.snapshot.v && !ri.snapshot.stress && ri.snapshot.pressure &&
+          same_doubles(ri.snapshot.pressure, p, 2) && !ri.snapshot.volume && !ri.samples);
     mpp_reply_clear(&ri);
     CHECK(decode_abuse(buf, n, 1) > 0);
     free(buf);
@@ -1252,8 +1426,8 @@ TEST(codec_reply_decode)
     mpp_reply_clear(&ri);
 
     static const uint8_t junk[] = {0x12, 0x05, 0x08};
-    CHECK(reply_decode(junk, sizeof junk, 0, &ri, err) == MPM_ESYNTAX && ri.kind == MPP_REPLY_NONE &&
-          strstr(err, "not a valid mpmd.Reply"));
+    CHECK(reply_decode(junk, sizeof junk, 0, &ri, err) == MPM_ESYNTAX &&
+          ri.kind == MPP_REPLY_NONE && strstr(err, "not a valid mpmd.Reply"));
     mpp_reply_clear(&ri);
     CHECK(reply_decode(NULL, 0, 0, &ri, err) == 0 && ri.kind == MPP_REPLY_NONE);
     mpp_reply_clear(&ri);
@@ -1264,13 +1438,19 @@ TEST(codec_reply_decode)
     /* --json output of mpmctl: a sample and a snapshot in the JSON mapping */
     char *json = NULL;
     CHECK(mpp_energy_to_json(&es[0], &json, NULL) == 0);
-    CHECKF(json && !strcmp(json, "{\"step\":\"10\",\"t\":0.01,\"kinetic\":0.5,\"strain\":0.25,\"potential\":0,"
-                                 "\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,\"seq\":\"3\"}"),
-           "%s", json);
+    CHECKF(
+        json &&
+            !strcmp(
+                json,
+                "{\"step\":\"10\",\"t\":0.01,\"kinetic\":0.5,\"strain\":0.25,\"potential\":0,"
+                "\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,\"seq\":\"3\"}"),
+        "%s", json);
     free(json);
     CHECK(mpp_snapshot_to_json(&snap, &json, NULL) == 0);
-    CHECKF(json && !strcmp(json, "{\"step\":\"10\",\"t\":0.01,\"n\":\"2\",\"dim\":2,\"x\":[0.1,0.2,0.3,0.4],"
-                                 "\"pressure\":[-1,1]}"),
+    CHECKF(json &&
+               !strcmp(json,
+                       "{\"step\":\"10\",\"t\":0.01,\"n\":\"2\",\"dim\":2,\"x\":[0.1,0.2,0.3,0.4],"
+                       "\"pressure\":[-1,1]}"),
            "%s", json);
     free(json);
 }
@@ -1279,11 +1459,16 @@ TEST(codec_reply_decode)
 TEST(codec_endpoints)
 {
     char out[64];
-    static const struct { const char *ep; int local, wildcard; } eps[] = {
-        {"ipc:///tmp/x", 1, 0},          {"inproc://a", 1, 0},          {"tcp://127.0.0.1:5555", 1, 0},
-        {"tcp://127.1.2.3:1", 1, 0},     {"tcp://localhost:5555", 1, 0}, {"tcp://[::1]:5555", 1, 0},
-        {"tcp://ip6-localhost:9", 1, 0}, {"tcp://*:5555", 0, 1},        {"tcp://0.0.0.0:5555", 0, 1},
-        {"tcp://[::]:5555", 0, 1},       {"tcp://10.0.0.1:5555", 0, 0}, {"tcp://example.org:5555", 0, 0},
+    static const struct {
+        const char *ep;
+        int local, wildcard;
+    } eps[] = {
+        {"ipc:///tmp/x", 1, 0},          {"inproc://a", 1, 0},
+        {"tcp://127.0.0.1:5555", 1, 0},  {"tcp://127.1.2.3:1", 1, 0},
+        {"tcp://localhost:5555", 1, 0},  {"tcp://[::1]:5555", 1, 0},
+        {"tcp://ip6-localhost:9", 1, 0}, {"tcp://*:5555", 0, 1},
+        {"tcp://0.0.0.0:5555", 0, 1},    {"tcp://[::]:5555", 0, 1},
+        {"tcp://10.0.0.1:5555", 0, 0},   {"tcp://example.org:5555", 0, 0},
         {"udp://127.0.0.1:5", 0, 0},     {"tcp://localhostx:5", 0, 0},
     };
     for (size_t i = 0; i < sizeof eps / sizeof eps[0]; i++)
@@ -1292,7 +1477,8 @@ TEST(codec_endpoints)
                "%s", eps[i].ep);
     CHECK(mpp_stream_endpoint_derive("tcp://127.0.0.1:5555", out, sizeof out) == 0 &&
           !strcmp(out, "tcp://127.0.0.1:5556"));
-    CHECK(mpp_stream_endpoint_derive("ipc:///tmp/m", out, sizeof out) == 0 && !strcmp(out, "ipc:///tmp/m.stream"));
+    CHECK(mpp_stream_endpoint_derive("ipc:///tmp/m", out, sizeof out) == 0 &&
+          !strcmp(out, "ipc:///tmp/m.stream"));
     CHECK(mpp_stream_endpoint_derive("tcp://h:65535", out, sizeof out) == -1);
     CHECK(mpp_stream_endpoint_derive("tcp://h:0", out, sizeof out) == -1);
     CHECK(mpp_stream_endpoint_derive("tcp://h:12x", out, sizeof out) == -1);
@@ -1300,13 +1486,17 @@ TEST(codec_endpoints)
     CHECK(mpp_stream_endpoint_derive("inproc://a", out, sizeof out) == -1);
     CHECK(mpp_stream_endpoint_derive("tcp://127.0.0.1:5555", out, 10) == -1);
     /* a client: the reported endpoint unless only the daemon's machine can use it */
-    CHECK(mpp_stream_endpoint_for_client("tcp://10.0.0.1:7000", "tcp://10.0.0.1:5555", out, sizeof out) == 0 &&
+    CHECK(mpp_stream_endpoint_for_client("tcp://10.0.0.1:7000", "tcp://10.0.0.1:5555", out,
+                                         sizeof out) == 0 &&
           !strcmp(out, "tcp://10.0.0.1:7000"));
-    CHECK(mpp_stream_endpoint_for_client("tcp://*:5556", "tcp://server:5555", out, sizeof out) == 0 &&
+    CHECK(mpp_stream_endpoint_for_client("tcp://*:5556", "tcp://server:5555", out, sizeof out) ==
+              0 &&
           !strcmp(out, "tcp://server:5556"));
-    CHECK(mpp_stream_endpoint_for_client("tcp://127.0.0.1:5556", "tcp://server:5555", out, sizeof out) == 0 &&
+    CHECK(mpp_stream_endpoint_for_client("tcp://127.0.0.1:5556", "tcp://server:5555", out,
+                                         sizeof out) == 0 &&
           !strcmp(out, "tcp://server:5556"));
-    CHECK(mpp_stream_endpoint_for_client("ipc:///tmp/s", "tcp://server:5555", out, sizeof out) == 0 &&
+    CHECK(mpp_stream_endpoint_for_client("ipc:///tmp/s", "tcp://server:5555", out, sizeof out) ==
+              0 &&
           !strcmp(out, "ipc:///tmp/s"));
     CHECK(mpp_stream_endpoint_for_client("", "ipc:///tmp/c", out, sizeof out) == 0 &&
           !strcmp(out, "ipc:///tmp/c.stream"));
@@ -1377,8 +1567,8 @@ TEST(codec_submit_bytes)
  * (installed by make deps). */
 TEST(codec_python_json_format)
 {
-    static const char *names[] = {"point1d", "bar1d_mpm", "bar1d_gimp", "disks2d_coarse", "disks2d_fine",
-                                  "cube3d"};
+    static const char *names[] = {"point1d",        "bar1d_mpm",    "bar1d_gimp",
+                                  "disks2d_coarse", "disks2d_fine", "cube3d"};
     enum { NN = sizeof names / sizeof names[0] };
     char dir[] = "/tmp/mpmpy.XXXXXX", cmd[1024], path[512], err[ERRLEN];
     CHECK(mkdtemp(dir) != NULL);
@@ -1394,7 +1584,8 @@ TEST(codec_python_json_format)
         snprintf(path, sizeof path, "proto/examples/%s.json", names[k]);
         char *text = td_slurp(path, &len);
         CHECKF(text, "cannot read %s", path);
-        CHECKF(!td_case_from_json(text, len, &pb, err, sizeof err) && !mpp_case_pack(pb, &cb[k], &cn[k]),
+        CHECKF(!td_case_from_json(text, len, &pb, err, sizeof err) &&
+                   !mpp_case_pack(pb, &cb[k], &cn[k]),
                "%s: %s", names[k], err);
         free(text);
         mpp_case_pb_free(&pb);
@@ -1406,16 +1597,17 @@ TEST(codec_python_json_format)
     snprintf(path, sizeof path, "%s/conv.py", dir);
     FILE *f = fopen(path, "w");
     CHECK(f);
-    fprintf(f, "import sys\nsys.path.insert(0, sys.argv[1])\nimport mpmd_pb2\n"
-               "from google.protobuf import json_format\n"
-               "for name in sys.argv[2:]:\n"
-               "    c = mpmd_pb2.Case()\n"
-               "    json_format.Parse(open('proto/examples/%%s.json' %% name).read(), c)\n"
-               "    open('%%s/%%s.py.bin' %% (sys.argv[1], name), 'wb').write(c.SerializeToString())\n"
-               "    cb = open('%%s/%%s.c.bin' %% (sys.argv[1], name), 'rb').read()\n"
-               "    d = mpmd_pb2.Case()\n"
-               "    d.ParseFromString(cb)\n"
-               "    print(name, len(cb), 'same' if d.SerializeToString() == cb else 'DIFFERENT')\n");
+    fprintf(f,
+            "import sys\nsys.path.insert(0, sys.argv[1])\nimport mpmd_pb2\n"
+            "from google.protobuf import json_format\n"
+            "for name in sys.argv[2:]:\n"
+            "    c = mpmd_pb2.Case()\n"
+            "    json_format.Parse(open('proto/examples/%%s.json' %% name).read(), c)\n"
+            "    open('%%s/%%s.py.bin' %% (sys.argv[1], name), 'wb').write(c.SerializeToString())\n"
+            "    cb = open('%%s/%%s.c.bin' %% (sys.argv[1], name), 'rb').read()\n"
+            "    d = mpmd_pb2.Case()\n"
+            "    d.ParseFromString(cb)\n"
+            "    print(name, len(cb), 'same' if d.SerializeToString() == cb else 'DIFFERENT')\n");
     CHECK(fclose(f) == 0);
     int n = snprintf(cmd, sizeof cmd, "/usr/bin/python3 %s/conv.py %s", dir, dir);
     for (int k = 0; k < NN; k++) n += snprintf(cmd + n, sizeof cmd - (size_t)n, " %s", names[k]);
@@ -1428,8 +1620,8 @@ TEST(codec_python_json_format)
     for (int k = 0; k < NN; k++) {
         char want[128];
         snprintf(want, sizeof want, "%s %zu same", names[k], cn[k]);
-        CHECKF(out && strstr(out, want), "python re-serialised the C bytes of %s differently: %s", names[k],
-               out ? out : "");
+        CHECKF(out && strstr(out, want), "python re-serialised the C bytes of %s differently: %s",
+               names[k], out ? out : "");
         /* Python's bytes decode with protobuf-c to the C codec's own bytes */
         size_t pl = 0;
         snprintf(path, sizeof path, "%s/%s.py.bin", dir, names[k]);
@@ -1437,12 +1629,15 @@ TEST(codec_python_json_format)
         Mpmd__Case *pb = NULL;
         uint8_t *rb = NULL;
         size_t rn = 0;
-        CHECKF(pbytes && !td_case_unpack(pbytes, pl, 0, &pb, err, sizeof err) && !mpp_case_pack(pb, &rb, &rn),
+        CHECKF(pbytes && !td_case_unpack(pbytes, pl, 0, &pb, err, sizeof err) &&
+                   !mpp_case_pack(pb, &rb, &rn),
                "%s: python's bytes: %s", names[k], err);
-        CHECKF(rn == cn[k] && !memcmp(rb, cb[k], rn), "%s: python %zu bytes -> C %zu bytes, C from JSON %zu bytes",
-               names[k], pl, rn, cn[k]);
-        TLOG("%-15s python json_format -> %5zu bytes -> protobuf-c: equal to the C codec's %zu bytes",
-             names[k], pl, cn[k]);
+        CHECKF(rn == cn[k] && !memcmp(rb, cb[k], rn),
+               "%s: python %zu bytes -> C %zu bytes, C from JSON %zu bytes", names[k], pl, rn,
+               cn[k]);
+        TLOG(
+            "%-15s python json_format -> %5zu bytes -> protobuf-c: equal to the C codec's %zu bytes",
+            names[k], pl, cn[k]);
         free(pbytes);
         free(rb);
         mpp_case_pb_free(&pb);

@@ -53,8 +53,10 @@ static int parse_csv(const char *text, series *s)
     size_t n = copy ? td_lines(copy, &lines) : 0;
     int rc = -1;
     memset(s, 0, sizeof *s);
-    if (n < 1 || strncmp(lines[0], "seq,step,t,kinetic,strain,potential,external_work,total,mass,"
-                                   "momentum_x", 71)) {
+    if (n < 1 || strncmp(lines[0],
+                         "seq,step,t,kinetic,strain,potential,external_work,total,mass,"
+                         "momentum_x",
+                         71)) {
         TLOG("not an energy CSV: first line \"%.80s\"", n ? lines[0] : "");
         goto out;
     }
@@ -136,7 +138,9 @@ static json_t *bar_steps(long long steps, int every)
 static json_t *long_case(int every)
 {
     json_t *c = bar_steps(LONG_STEPS, every);
-    if (c) json_object_del(json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "points"), "v");
+    if (c)
+        json_object_del(json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "points"),
+                        "v");
     return c;
 }
 
@@ -219,8 +223,10 @@ static json_t *show_json(const td_daemon *d, unsigned long long id)
     td_out o;
     json_t *r = NULL;
     snprintf(ids, sizeof ids, "%llu", id);
-    if (td_ctl(d, 30, &o, "show", ids, "--json", NULL) == 0 && o.status == 0) r = parse_line(o.out);
-    else TLOG("show %s --json: exit %d, stderr %s", ids, o.status, o.err ? o.err : "");
+    if (td_ctl(d, 30, &o, "show", ids, "--json", NULL) == 0 && o.status == 0)
+        r = parse_line(o.out);
+    else
+        TLOG("show %s --json: exit %d, stderr %s", ids, o.status, o.err ? o.err : "");
     td_out_free(&o);
     return r;
 }
@@ -276,9 +282,10 @@ static int expect_not_found(const td_daemon *d, mpp_request rq, const char *what
     ok = !strcmp(td_err_code(reply), "NOT_FOUND") && !strcmp(td_err_field(reply), field) &&
          strstr(td_err_msg(reply), id);
     if (!ok)
-        t_fail(__FILE__, __LINE__, "%s: %s, field \"%s\", message \"%s\" (want NOT_FOUND, field %s, "
-               "the id %s in the message)", what, td_err_code(reply), td_err_field(reply),
-               td_err_msg(reply), field, id);
+        t_fail(__FILE__, __LINE__,
+               "%s: %s, field \"%s\", message \"%s\" (want NOT_FOUND, field %s, "
+               "the id %s in the message)",
+               what, td_err_code(reply), td_err_field(reply), td_err_msg(reply), field, id);
     else
         TLOG("%-30s NOT_FOUND, field %-6s %s", what, field, td_err_msg(reply));
     json_decref(reply);
@@ -303,8 +310,10 @@ static int expect_ctl(const td_daemon *d, int status, const char *want, const ch
         char line[256] = "";
         for (int i = 0; args[i]; i++)
             snprintf(line + strlen(line), sizeof line - strlen(line), " %s", args[i]);
-        t_fail(__FILE__, __LINE__, "mpmctl%s: exit %d (want %d), stdout \"%.300s\", stderr \"%.300s\" "
-               "(want \"%s\")", line, o.status, status, o.out, o.err, want);
+        t_fail(__FILE__, __LINE__,
+               "mpmctl%s: exit %d (want %d), stdout \"%.300s\", stderr \"%.300s\" "
+               "(want \"%s\")",
+               line, o.status, status, o.out, o.err, want);
     } else {
         const char *msg = status && o.err[0] ? o.err : o.out;
         const char *nl = strchr(msg, '\n');
@@ -315,10 +324,10 @@ static int expect_ctl(const td_daemon *d, int status, const char *want, const ch
     return ok;
 }
 
-#define EXPECT_CTL(d, st, want, ...)                                      \
-    do {                                                                  \
-        const char *a_[] = {__VA_ARGS__, NULL};                           \
-        if (!expect_ctl(d, st, want, a_)) return;                         \
+#define EXPECT_CTL(d, st, want, ...)              \
+    do {                                          \
+        const char *a_[] = {__VA_ARGS__, NULL};   \
+        if (!expect_ctl(d, st, want, a_)) return; \
     } while (0)
 
 DTEST(daemon_cli_offline)
@@ -370,9 +379,11 @@ DTEST(daemon_cli_offline)
     /* a bad case is reported locally with the field's path; nothing is sent
      * (the endpoint is dead, yet the answer is immediate and names the field) */
     snprintf(bad, sizeof bad, "%s/bad.json", tmp);
-    CHECK(td_write(bad, "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
-                        " \"materials\": [{\"youngsModulus\": -1, \"density\": 1}],"
-                        " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.4]}}], \"endTime\": 1}") == 0);
+    CHECK(td_write(bad,
+                   "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+                   " \"materials\": [{\"youngsModulus\": -1, \"density\": 1}],"
+                   " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.4]}}], \"endTime\": 1}") ==
+          0);
     {
         const char *a[] = {"--endpoint", dead, "--timeout", "5", "submit", bad, NULL};
         CHECK(td_ctlv(NULL, 30, &o, a) == 0);
@@ -383,19 +394,23 @@ DTEST(daemon_cli_offline)
         TLOG("local case check: %s", o.err);
         td_out_free(&o);
     }
-    CHECK(td_write(bad, "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]}, \"method\": \"FOO\"}") == 0);
+    CHECK(
+        td_write(
+            bad,
+            "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]}, \"method\": \"FOO\"}") ==
+        0);
     {
         const char *a[] = {"--endpoint", dead, "--timeout", "5", "submit", bad, NULL};
         CHECK(td_ctlv(NULL, 30, &o, a) == 0);
-        CHECKF(o.status == 1 && strstr(o.err, "method: unknown value"), "exit %d, stderr %s", o.status,
-               o.err);
+        CHECKF(o.status == 1 && strstr(o.err, "method: unknown value"), "exit %d, stderr %s",
+               o.status, o.err);
         td_out_free(&o);
     }
     {
         const char *a[] = {"--endpoint", dead, "submit", "/nonexistent/case.json", NULL};
         CHECK(td_ctlv(NULL, 30, &o, a) == 0);
-        CHECKF(o.status == 1 && strstr(o.err, "cannot read /nonexistent/case.json"), "exit %d, stderr %s",
-               o.status, o.err);
+        CHECKF(o.status == 1 && strstr(o.err, "cannot read /nonexistent/case.json"),
+               "exit %d, stderr %s", o.status, o.err);
         td_out_free(&o);
     }
 }
@@ -455,13 +470,14 @@ DTEST(daemon_basic_run)
             worst_t = fmax(worst_t, rel_diff(mpm_sim_time(sim), s.t[i]));
         }
         TLOG("daemon vs in-process over %zu samples: max relative difference %.3g (energies), "
-             "%.3g (t)", s.n, worst, worst_t);
+             "%.3g (t)",
+             s.n, worst, worst_t);
         CHECK_LT(worst, 1e-12);
         CHECK_LT(worst_t, 1e-12);
 
         /* the stored snapshot at the last step: positions and velocities */
-        CHECK(td_ctl(&d, 30, &e, "snapshot", "1", "-o", (snprintf(snap_csv, sizeof snap_csv,
-                                                                  "%s/snap.csv", dir), snap_csv),
+        CHECK(td_ctl(&d, 30, &e, "snapshot", "1", "-o",
+                     (snprintf(snap_csv, sizeof snap_csv, "%s/snap.csv", dir), snap_csv),
                      NULL) == 0);
         CHECKF(e.status == 0, "snapshot: exit %d: %s", e.status, e.err);
         td_out_free(&e);
@@ -473,8 +489,8 @@ DTEST(daemon_basic_run)
             mpm_snapshot ms = {x, v, NULL, NULL, NULL};
             CHECK(np == 7);
             mpm_sim_snapshot(sim, &ms);
-            CHECKF(nl == np + 1 && !strcmp(lines[0], "i,x,vx"), "snapshot CSV: %zu lines, header %s",
-                   nl, nl ? lines[0] : "");
+            CHECKF(nl == np + 1 && !strcmp(lines[0], "i,x,vx"),
+                   "snapshot CSV: %zu lines, header %s", nl, nl ? lines[0] : "");
             for (size_t i = 0; i < np; i++) {
                 size_t k;
                 double xi, vi;
@@ -497,7 +513,8 @@ DTEST(daemon_basic_run)
         td_out_free(&e);
         sn = td_json_file(snap_json);
         CHECK(sn);
-        CHECKF(jint(sn, "step") == 100 && jint(sn, "n") == 7 && json_array_size(json_object_get(sn, "x")) == 7 &&
+        CHECKF(jint(sn, "step") == 100 && jint(sn, "n") == 7 &&
+                   json_array_size(json_object_get(sn, "x")) == 7 &&
                    json_array_size(json_object_get(sn, "v")) == 7 && !json_object_get(sn, "stress"),
                "snapshot JSON: step %lld, n %lld", jint(sn, "step"), jint(sn, "n"));
         json_decref(sn);
@@ -510,8 +527,8 @@ DTEST(daemon_basic_run)
         json_t *reply = NULL;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         CHECKF(!strcmp(td_err_code(reply), "NOT_FOUND") && !strcmp(td_err_field(reply), "step"),
-               "getSnapshot{runId: 1, step: %lld}: %s, field \"%s\"", (long long)rq.step, td_err_code(reply),
-               td_err_field(reply));
+               "getSnapshot{runId: 1, step: %lld}: %s, field \"%s\"", (long long)rq.step,
+               td_err_code(reply), td_err_field(reply));
         json_decref(reply);
     }
     {
@@ -522,7 +539,8 @@ DTEST(daemon_basic_run)
         en = json_object_get(reply, "energy");
         CHECKF(en && json_array_size(json_object_get(en, "samples")) == 0 &&
                    !json_is_true(json_object_get(en, "more")),
-               "getEnergy{runId: 1, fromSeq: 2^64-1}: %zu samples", json_array_size(json_object_get(en, "samples")));
+               "getEnergy{runId: 1, fromSeq: 2^64-1}: %zu samples",
+               json_array_size(json_object_get(en, "samples")));
         json_decref(reply);
     }
     {
@@ -539,8 +557,10 @@ DTEST(daemon_basic_run)
 
     /* energy --csv gives the very series the watcher printed */
     CHECK(td_ctl(&d, 30, &e, "energy", "1", "--csv", NULL) == 0);
-    CHECKF(e.status == 0 && !strcmp(e.out, o.out), "energy --csv differs from the watched series "
-           "(exit %d, %zu vs %zu bytes)", e.status, strlen(e.out), strlen(o.out));
+    CHECKF(e.status == 0 && !strcmp(e.out, o.out),
+           "energy --csv differs from the watched series "
+           "(exit %d, %zu vs %zu bytes)",
+           e.status, strlen(e.out), strlen(o.out));
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "energy", "1", "--json", NULL) == 0);
     CHECK(e.status == 0 && count_lines(e.out) == s.n);
@@ -562,8 +582,8 @@ DTEST(daemon_basic_run)
 
     /* a watcher arriving after the end gets the whole series too */
     CHECK(td_ctl(&d, 60, &e, "watch", "1", "--csv", NULL) == 0);
-    CHECKF(e.status == 0 && !strcmp(e.out, o.out), "late watch --csv: exit %d, %zu bytes, stderr %s",
-           e.status, strlen(e.out), e.err);
+    CHECKF(e.status == 0 && !strcmp(e.out, o.out),
+           "late watch --csv: exit %d, %zu bytes, stderr %s", e.status, strlen(e.out), e.err);
     td_out_free(&e);
     CHECK(td_ctl(&d, 60, &e, "watch", "1", NULL) == 0);
     CHECKF(e.status == 0 && strstr(e.out, "FINISHED") && strstr(e.out, "energy drift"),
@@ -572,8 +592,8 @@ DTEST(daemon_basic_run)
 
     /* the same case again with --watch --json: bitwise the same energies */
     CHECK(td_ctl(&d, 120, &e, "submit", path, "--watch", "--json", NULL) == 0);
-    CHECKF(e.status == 0 && job_of(e.err) == 2, "submit --watch --json: exit %d, stderr %s", e.status,
-           e.err);
+    CHECKF(e.status == 0 && job_of(e.err) == 2, "submit --watch --json: exit %d, stderr %s",
+           e.status, e.err);
     {
         char **lines = NULL;
         size_t nl = td_lines(e.out, &lines);
@@ -595,10 +615,12 @@ DTEST(daemon_basic_run)
     {
         char **lines = NULL;
         size_t nl = td_lines(e.out, &lines);
-        json_t *r0 = nl == 2 ? parse_line(lines[0]) : NULL, *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
+        json_t *r0 = nl == 2 ? parse_line(lines[0]) : NULL,
+               *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
         free(lines);
         CHECKF(r0 && r1 && jint(r0, "runId") == 2 && jint(r1, "runId") == 1 &&
-                   !strcmp(jstr(r0, "status"), "FINISHED") && !strcmp(jstr(r1, "status"), "FINISHED") &&
+                   !strcmp(jstr(r0, "status"), "FINISHED") &&
+                   !strcmp(jstr(r1, "status"), "FINISHED") &&
                    !strcmp(jstr(r1, "name"), "bar1d_mpm") && jint(r1, "particles") == 7,
                "runs --json: %s", e.out);
         json_decref(r0);
@@ -607,7 +629,8 @@ DTEST(daemon_basic_run)
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "runs", NULL) == 0);
     CHECKF(e.status == 0 && strstr(e.out, "METHOD UPDATE") && strstr(e.out, "bar1d_mpm") &&
-               strstr(e.out, "FINISHED    MPM    USF"), "runs: %s", e.out);
+               strstr(e.out, "FINISHED    MPM    USF"),
+           "runs: %s", e.out);
     TLOG("runs:\n%s", e.out);
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "runs", "--status", "failed", "--json", NULL) == 0);
@@ -622,26 +645,29 @@ DTEST(daemon_basic_run)
     CHECKF(!strcmp(jstr(r, "status"), "FINISHED") && jint(r, "steps") == 500 &&
                jint(r, "energySamples") == (long long)s.n && jint(r, "jobId") == 1 &&
                json_object_get(r, "finishedAt") && !json_object_get(r, "case"),
-           "show 1 --json: status %s, steps %lld, samples %lld", jstr(r, "status"), jint(r, "steps"),
-           jint(r, "energySamples"));
+           "show 1 --json: status %s, steps %lld, samples %lld", jstr(r, "status"),
+           jint(r, "steps"), jint(r, "energySamples"));
     {
         json_t *ss = json_object_get(r, "snapshotSteps");
         size_t ns = json_array_size(ss);
         json_t *last = ns ? json_array_get(ss, ns - 1) : NULL;
-        long long ls = json_is_string(last) ? atoll(json_string_value(last))
-                       : json_is_integer(last) ? json_integer_value(last) : -1;
+        long long ls = json_is_string(last)    ? atoll(json_string_value(last))
+                       : json_is_integer(last) ? json_integer_value(last)
+                                               : -1;
         CHECKF(ns >= 5 && ls == 500, "snapshotSteps: %zu entries, last %lld", ns, ls);
     }
     json_decref(r);
     CHECK(td_ctl(&d, 30, &e, "show", "1", NULL) == 0);
-    CHECKF(e.status == 0 && strstr(e.out, "status      FINISHED") && strstr(e.out, "method      MPM, USF"),
+    CHECKF(e.status == 0 && strstr(e.out, "status      FINISHED") &&
+               strstr(e.out, "method      MPM, USF"),
            "show 1: %s", e.out);
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "show", "1", "--case", NULL) == 0);
     CHECK(e.status == 0);
     {
         mpp_case *sc = NULL;
-        CHECKF(td_case_load(e.out, strlen(e.out), &sc, err, sizeof err) == 0, "show --case: %s", err);
+        CHECKF(td_case_load(e.out, strlen(e.out), &sc, err, sizeof err) == 0, "show --case: %s",
+               err);
         CHECK(!strcmp(sc->name, "bar1d_mpm") && sc->has_end_time && sc->end_time == 0.5 &&
               sc->record_snapshots);
         mpp_case_destroy(&sc);
@@ -660,8 +686,8 @@ DTEST(daemon_basic_run)
     CHECK(write_case(block2d(1000, 10, "runaway"), dir, "runaway.json", path, sizeof path) == 0);
     c = td_json_file(path);
     CHECK(c);
-    json_array_set_new(json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "velocity"), 0,
-                       json_real(5.0));
+    json_array_set_new(json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "velocity"),
+                       0, json_real(5.0));
     CHECK(td_json_write(path, c) == 0);
     json_decref(c);
     CHECK(td_ctl(&d, 60, &e, "submit", path, "--watch", NULL) == 0);
@@ -701,7 +727,8 @@ DTEST(daemon_method_defaults)
     json_object_del(c, "update");
     CHECK(write_case(c, dir, "defaults.json", path, sizeof path) == 0);
     CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
-    CHECKF(o.status == 0 && job_of(o.out) == 1, "submit --watch: exit %d, %s%s", o.status, o.out, o.err);
+    CHECKF(o.status == 0 && job_of(o.out) == 1, "submit --watch: exit %d, %s%s", o.status, o.out,
+           o.err);
     td_out_free(&o);
     /* and one that names MPM with USL */
     c = block2d(40, 10, "explicit");
@@ -709,7 +736,8 @@ DTEST(daemon_method_defaults)
     json_object_set_new(c, "update", json_string("USL"));
     CHECK(write_case(c, dir, "explicit.json", path, sizeof path) == 0);
     CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
-    CHECKF(o.status == 0 && job_of(o.out) == 2, "submit --watch: exit %d, %s%s", o.status, o.out, o.err);
+    CHECKF(o.status == 0 && job_of(o.out) == 2, "submit --watch: exit %d, %s%s", o.status, o.out,
+           o.err);
     td_out_free(&o);
 
     /* decoded replies: RunInfo.method / update, from the run record */
@@ -724,27 +752,31 @@ DTEST(daemon_method_defaults)
             /* the stored case names them too: resubmitted anywhere, it runs the same */
             int ok = run && !strcmp(jstr(run, "method"), want[id][0]) &&
                      !strcmp(jstr(run, "update"), want[id][1]) && cs &&
-                     !strcmp(jstr(cs, "method"), want[id][0]) && !strcmp(jstr(cs, "update"), want[id][1]);
-            TLOG("run %llu: RunInfo method %s, update %s; its stored case: %s, %s", id, jstr(run, "method"),
-                 jstr(run, "update"), jstr(cs, "method"), jstr(cs, "update"));
+                     !strcmp(jstr(cs, "method"), want[id][0]) &&
+                     !strcmp(jstr(cs, "update"), want[id][1]);
+            TLOG("run %llu: RunInfo method %s, update %s; its stored case: %s, %s", id,
+                 jstr(run, "method"), jstr(run, "update"), jstr(cs, "method"), jstr(cs, "update"));
             json_decref(reply);
             CHECKF(ok, "run %llu: want %s, %s", id, want[id][0], want[id][1]);
         }
     }
     /* mpmctl runs (table and --json) and show print them */
     CHECK(td_ctl(&d, 30, &o, "runs", NULL) == 0);
-    CHECKF(o.status == 0 && strstr(o.out, "METHOD UPDATE") && strstr(o.out, "FINISHED    GIMP   MUSL") &&
-               strstr(o.out, "FINISHED    MPM    USL"), "runs: %s", o.out);
+    CHECKF(o.status == 0 && strstr(o.out, "METHOD UPDATE") &&
+               strstr(o.out, "FINISHED    GIMP   MUSL") && strstr(o.out, "FINISHED    MPM    USL"),
+           "runs: %s", o.out);
     TLOG("runs:\n%s", o.out);
     td_out_free(&o);
     CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
     {
         char **lines = NULL;
         size_t nl = td_lines(o.out, &lines);
-        json_t *r2 = nl == 2 ? parse_line(lines[0]) : NULL, *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
+        json_t *r2 = nl == 2 ? parse_line(lines[0]) : NULL,
+               *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
         free(lines);
-        int ok = r1 && r2 && !strcmp(jstr(r1, "method"), "GIMP") && !strcmp(jstr(r1, "update"), "MUSL") &&
-                 !strcmp(jstr(r2, "method"), "MPM") && !strcmp(jstr(r2, "update"), "USL");
+        int ok = r1 && r2 && !strcmp(jstr(r1, "method"), "GIMP") &&
+                 !strcmp(jstr(r1, "update"), "MUSL") && !strcmp(jstr(r2, "method"), "MPM") &&
+                 !strcmp(jstr(r2, "update"), "USL");
         json_decref(r1);
         json_decref(r2);
         CHECKF(ok, "runs --json: %s", o.out);
@@ -755,8 +787,8 @@ DTEST(daemon_method_defaults)
     td_out_free(&o);
     r = show_json(&d, 2);
     CHECK(r);
-    CHECKF(!strcmp(jstr(r, "method"), "MPM") && !strcmp(jstr(r, "update"), "USL"), "show 2 --json: %s, %s",
-           jstr(r, "method"), jstr(r, "update"));
+    CHECKF(!strcmp(jstr(r, "method"), "MPM") && !strcmp(jstr(r, "update"), "USL"),
+           "show 2 --json: %s, %s", jstr(r, "method"), jstr(r, "update"));
     json_decref(r);
     /* show --case gives a case that loads as GIMP + MUSL */
     CHECK(td_ctl(&d, 30, &o, "show", "1", "--case", NULL) == 0);
@@ -764,7 +796,8 @@ DTEST(daemon_method_defaults)
         mpp_case *sc = NULL;
         CHECKF(o.status == 0 && td_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
                "show 1 --case: %s", err);
-        int ok = sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL && strstr(o.out, "\"GIMP\"");
+        int ok = sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL &&
+                 strstr(o.out, "\"GIMP\"");
         mpp_case_destroy(&sc);
         CHECKF(ok, "show 1 --case: %s", o.out);
     }
@@ -790,13 +823,14 @@ DTEST(daemon_concurrency)
     if (td_start(&d, dir, two)) return;
     CHECK(write_case(block2d(4000, 100, "block"), dir, "block.json", path, sizeof path) == 0);
     CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
-    CHECKF(o.status == 0 && !strcmp(o.out, "job 1\n"), "submit: exit %d, %s%s", o.status, o.out, o.err);
+    CHECKF(o.status == 0 && !strcmp(o.out, "job 1\n"), "submit: exit %d, %s%s", o.status, o.out,
+           o.err);
     td_out_free(&o);
     CHECK(td_ctl(&d, 30, &o, "submit", path, "--json", NULL) == 0);
     {
         json_t *j = parse_line(o.out);
-        CHECKF(o.status == 0 && j && jint(j, "jobId") == 2 && jint(j, "runId") == 2, "submit --json: %s",
-               o.out);
+        CHECKF(o.status == 0 && j && jint(j, "jobId") == 2 && jint(j, "runId") == 2,
+               "submit --json: %s", o.out);
         json_decref(j);
     }
     td_out_free(&o);
@@ -804,8 +838,8 @@ DTEST(daemon_concurrency)
     CHECK(td_ctl_bg(&d, &w2, "w2", "watch", "2", "--csv", NULL) == 0);
     CHECK(td_bg_wait(&w1, 120, &o1) == 0);
     CHECK(td_bg_wait(&w2, 120, &o2) == 0);
-    CHECKF(o1.status == 0 && o2.status == 0, "watchers: exit %d / %d: %s / %s", o1.status, o2.status,
-           o1.err, o2.err);
+    CHECKF(o1.status == 0 && o2.status == 0, "watchers: exit %d / %d: %s / %s", o1.status,
+           o2.status, o1.err, o2.err);
     /* same case, same code: identical series; both complete */
     CHECK(count_lines(o1.out) == 42 && !strcmp(o1.out, o2.out));
     td_out_free(&o1);
@@ -840,8 +874,8 @@ DTEST(daemon_concurrency)
     CHECK(td_job_status(&d, 2, st, sizeof st, NULL) == 0);
     CHECKF(!strcmp(st, "QUEUED"), "job 2 is %s, not QUEUED", st);
     CHECK(td_ctl(&d, 30, &o, "submit", longp, NULL) == 0);
-    CHECKF(o.status == 1 && strstr(o.err, "QUEUE_FULL"), "third submit: exit %d, stderr %s", o.status,
-           o.err);
+    CHECKF(o.status == 1 && strstr(o.err, "QUEUE_FULL"), "third submit: exit %d, stderr %s",
+           o.status, o.err);
     TLOG("third submit: %s", o.err);
     td_out_free(&o);
     {
@@ -855,7 +889,8 @@ DTEST(daemon_concurrency)
         mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
         mpp_case_pb_free(&pb);
-        CHECKF(!strcmp(td_err_code(reply), "QUEUE_FULL"), "raw submit: code %s", td_err_code(reply));
+        CHECKF(!strcmp(td_err_code(reply), "QUEUE_FULL"), "raw submit: code %s",
+               td_err_code(reply));
         json_decref(reply);
     }
     /* cancelling the queued job frees the slot at once; then the running one */
@@ -869,8 +904,8 @@ DTEST(daemon_concurrency)
     /* refused submissions left no record and used no id */
     CHECK(write_case(bar_steps(100, 10), dir, "short.json", path, sizeof path) == 0);
     CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
-    CHECKF(o.status == 0 && job_of(o.out) == 3, "submit after the queue emptied: exit %d, %s%s", o.status,
-           o.out, o.err);
+    CHECKF(o.status == 0 && job_of(o.out) == 3, "submit after the queue emptied: exit %d, %s%s",
+           o.status, o.out, o.err);
     td_out_free(&o);
     CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
     CHECKF(o.status == 0 && count_lines(o.out) == 3, "runs --json: %s", o.out);
@@ -914,11 +949,13 @@ DTEST(daemon_cancel)
 
     /* the watcher ends with the run, exit status 4, the series complete */
     CHECK(td_bg_wait(&w, 30, &o) == 0);
-    CHECKF(o.status == 4 && strstr(o.err, "CANCELLED"), "watcher: exit %d, stderr %s", o.status, o.err);
+    CHECKF(o.status == 4 && strstr(o.err, "CANCELLED"), "watcher: exit %d, stderr %s", o.status,
+           o.err);
     CHECK(parse_csv(o.out, &s) == 0);
     CHECK(consecutive(&s) && s.n >= 2);
     CHECK(td_ctl(&d, 30, &e, "energy", "1", "--csv", NULL) == 0);
-    CHECKF(e.status == 0 && !strcmp(e.out, o.out), "energy --csv differs from the watcher's series");
+    CHECKF(e.status == 0 && !strcmp(e.out, o.out),
+           "energy --csv differs from the watcher's series");
     TLOG("cancelled at step %lld, %zu samples", s.step[s.n - 1], s.n);
     td_out_free(&e);
     td_out_free(&o);
@@ -933,7 +970,7 @@ DTEST(daemon_cancel)
     CHECK(td_ctl(&d, 30, &o, "runs", "--status", "CANCELLED", "--json", NULL) == 0);
     CHECK(o.status == 0 && count_lines(o.out) == 1);
     td_out_free(&o);
-    EXPECT_CTL(&d, 4, "CANCELLED", "watch", "1");  /* exit status of a cancelled run */
+    EXPECT_CTL(&d, 4, "CANCELLED", "watch", "1"); /* exit status of a cancelled run */
     EXPECT_CTL(&d, 1, "CONFLICT", "cancel", "1");
     EXPECT_CTL(&d, 1, "NOT_FOUND", "cancel", "42");
     CHECK(td_stop(&d) == 0);
@@ -947,7 +984,7 @@ DTEST(daemon_late_watcher)
     const char *extra[] = {"--solver-threads", "1", NULL};
     /* more samples than one GetEnergy page (10000 by default): paging too */
     enum { NSTEPS = 12000, NW = 4 };
-    const long long start_at[NW] = {0, 0, 3000, 8000};  /* watcher 0 loses messages */
+    const long long start_at[NW] = {0, 0, 3000, 8000}; /* watcher 0 loses messages */
     char dir[300], path[400], tag[16], st[32];
     long long started[NW];
     td_daemon d;
@@ -994,8 +1031,10 @@ DTEST(daemon_late_watcher)
         gaps = strstr(o.err, "stream:");
         if (i == 0 && started[i] < NSTEPS / 2) {
             unsigned long long lost = 0, filled = 0;
-            CHECKF(gaps && sscanf(gaps, "stream: %llu messages dropped, %llu gaps filled", &lost,
-                                  &filled) == 2 && lost > 0 && filled > 0,
+            CHECKF(gaps &&
+                       sscanf(gaps, "stream: %llu messages dropped, %llu gaps filled", &lost,
+                              &filled) == 2 &&
+                       lost > 0 && filled > 0,
                    "lossy watcher: %s", o.err);
         }
         TLOG("watcher %d: %zu samples in order, %.2f s%s%.*s", i, (size_t)NSTEPS + 1, o.secs,
@@ -1025,7 +1064,8 @@ DTEST(daemon_restart)
     CHECK(write_case(long_case(10000), dir, "long.json", longp, sizeof longp) == 0);
     for (int i = 1; i <= 2; i++) {
         CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
-        CHECKF(o.status == 0 && job_of(o.out) == (unsigned long long)i, "submit %d: %s%s", i, o.out, o.err);
+        CHECKF(o.status == 0 && job_of(o.out) == (unsigned long long)i, "submit %d: %s%s", i, o.out,
+               o.err);
         td_out_free(&o);
     }
     CHECK(td_ctl(&d, 30, &before, "energy", "1", "--csv", NULL) == 0 && before.status == 0);
@@ -1034,7 +1074,8 @@ DTEST(daemon_restart)
         series s;
         int ok;
         CHECK(parse_csv(before.out, &s) == 0);
-        ok = s.n == 32 && consecutive(&s) && s.step[0] == 0 && s.step[30] == 300 && s.step[31] == 305;
+        ok = s.n == 32 && consecutive(&s) && s.step[0] == 0 && s.step[30] == 300 &&
+             s.step[31] == 305;
         series_free(&s);
         CHECKF(ok, "energy of a 305-step run, energyEvery 10: %s", before.out);
     }
@@ -1047,8 +1088,9 @@ DTEST(daemon_restart)
         CHECK(td_run_mpmd(a, 30, &o) == 0);
         CHECKF(o.status != 0 && o.status < 128 && strstr(o.err, pid),
                "second mpmd: exit %d, stderr %s (want the holder's pid %s)", o.status, o.err, pid);
-        TLOG("second mpmd refused (exit %d): %.*s", o.status, (int)strcspn(strstr(o.err, "mpmd") ?
-             strstr(o.err, "mpmd") : o.err, "\n"), strstr(o.err, "mpmd") ? strstr(o.err, "mpmd") : o.err);
+        TLOG("second mpmd refused (exit %d): %.*s", o.status,
+             (int)strcspn(strstr(o.err, "mpmd") ? strstr(o.err, "mpmd") : o.err, "\n"),
+             strstr(o.err, "mpmd") ? strstr(o.err, "mpmd") : o.err);
         td_out_free(&o);
     }
     /* the first one is unharmed */
@@ -1096,7 +1138,8 @@ DTEST(daemon_restart)
     {
         char **lines = NULL;
         size_t n = td_lines(o.out, &lines);
-        json_t *j0 = n == 3 ? parse_line(lines[0]) : NULL, *j2 = n == 3 ? parse_line(lines[2]) : NULL;
+        json_t *j0 = n == 3 ? parse_line(lines[0]) : NULL,
+               *j2 = n == 3 ? parse_line(lines[2]) : NULL;
         free(lines);
         CHECKF(j0 && j2 && jint(j0, "runId") == 3 && !strcmp(jstr(j0, "status"), "INTERRUPTED") &&
                    jint(j2, "runId") == 1 && !strcmp(jstr(j2, "status"), "FINISHED"),
@@ -1107,19 +1150,22 @@ DTEST(daemon_restart)
     td_out_free(&o);
     r = show_json(&d, 3);
     CHECK(r);
-    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0] && jint(r, "steps") == last3,
-           "job 3: %s at step %lld (the watcher's last sample: %lld), error \"%s\"", jstr(r, "status"),
-           jint(r, "steps"), last3, jstr(r, "error"));
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0] &&
+               jint(r, "steps") == last3,
+           "job 3: %s at step %lld (the watcher's last sample: %lld), error \"%s\"",
+           jstr(r, "status"), jint(r, "steps"), last3, jstr(r, "error"));
     TLOG("job 3 after restart: INTERRUPTED at step %lld, \"%s\"", last3, jstr(r, "error"));
     json_decref(r);
     /* the watcher's series is the stored one */
     CHECK(td_ctl(&d, 30, &o, "energy", "3", "--csv", NULL) == 0);
-    CHECKF(o.status == 0 && !strcmp(o.out, watched3.out), "job 3: the watcher's series differs from "
+    CHECKF(o.status == 0 && !strcmp(o.out, watched3.out),
+           "job 3: the watcher's series differs from "
            "the stored one");
     td_out_free(&o);
     td_out_free(&watched3);
     CHECK(td_ctl(&d, 30, &o, "energy", "1", "--csv", NULL) == 0);
-    CHECKF(o.status == 0 && !strcmp(o.out, before.out), "job 1's energies changed across the restart");
+    CHECKF(o.status == 0 && !strcmp(o.out, before.out),
+           "job 1's energies changed across the restart");
     td_out_free(&o);
     td_out_free(&before);
     /* ids continue */
@@ -1159,7 +1205,7 @@ DTEST(daemon_shutdown_streams)
     CHECK(td_ctl_bg(&d, &w2, "w2", "watch", "2", "--csv", "--timeout", "3", NULL) == 0);
     CHECK(wait_watched(&d, 1, 20) == 0 && wait_watched(&d, 2, 20) == 0);
     CHECK(td_wait_steps(&d, 1, 20000, 30) == 0);
-    CHECK(wait_lines(&w1, 3, 20) == 0);  /* header and two samples: job 1's watcher is live */
+    CHECK(wait_lines(&w1, 3, 20) == 0); /* header and two samples: job 1's watcher is live */
     td_msleep(300);
     CHECKF(td_stop(&d) == 0, "mpmd did not exit 0 on SIGTERM");
 
@@ -1179,7 +1225,8 @@ DTEST(daemon_shutdown_streams)
     CHECK(td_bg_wait(&w2, 30, &o) == 0);
     CHECKF(o.status == 5 && strstr(o.err, "INTERRUPTED") && !strstr(o.err, "no reply") && !o.out[0],
            "queued job's watcher: exit %d, stdout %s, stderr %s", o.status, o.out, o.err);
-    TLOG("queued job's watcher: exit 5 after %.2f s: %.*s", o.secs, (int)strcspn(o.err, "\n"), o.err);
+    TLOG("queued job's watcher: exit 5 after %.2f s: %.*s", o.secs, (int)strcspn(o.err, "\n"),
+         o.err);
     td_out_free(&o);
 
     /* the record agrees with what the watchers were told */
@@ -1187,14 +1234,15 @@ DTEST(daemon_shutdown_streams)
     r = show_json(&d, 1);
     CHECK(r);
     CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jint(r, "steps") == last1,
-           "job 1: %s at step %lld (its watcher's last sample: %lld)", jstr(r, "status"), jint(r, "steps"),
-           last1);
+           "job 1: %s at step %lld (its watcher's last sample: %lld)", jstr(r, "status"),
+           jint(r, "steps"), last1);
     json_decref(r);
     r = show_json(&d, 2);
     CHECK(r);
     CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jint(r, "steps") == 0 &&
                strstr(jstr(r, "error"), "before the run started"),
-           "job 2: %s at step %lld, error \"%s\"", jstr(r, "status"), jint(r, "steps"), jstr(r, "error"));
+           "job 2: %s at step %lld, error \"%s\"", jstr(r, "status"), jint(r, "steps"),
+           jstr(r, "error"));
     json_decref(r);
     CHECK(td_stop(&d) == 0);
 }
@@ -1240,14 +1288,17 @@ DTEST(daemon_hard_kill)
         long long steps = jint(r, "steps"), last = s.step[s.n - 1];
         double t = jnum(r, "t"), tl = s.t[s.n - 1], total = s.total[s.n - 1];
         series_free(&s);
-        CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0], "job 1: %s, error \"%s\"",
-               jstr(r, "status"), jstr(r, "error"));
-        CHECKF(steps == last && steps > 0 && t == tl && le && jint(le, "step") == steps &&
-                   jnum(le, "total") == total,
-               "job 1 after kill -9: steps %lld, t %.17g, lastEnergy.step %lld (want the last stored "
-               "sample's step %lld > 0, t %.17g)", steps, t, le ? jint(le, "step") : -1, last, tl);
-        TLOG("job 1 after kill -9 and restart: INTERRUPTED at step %lld (its last sample), t %.6g, \"%s\"",
-             steps, t, jstr(r, "error"));
+        CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED") && jstr(r, "error")[0],
+               "job 1: %s, error \"%s\"", jstr(r, "status"), jstr(r, "error"));
+        CHECKF(
+            steps == last && steps > 0 && t == tl && le && jint(le, "step") == steps &&
+                jnum(le, "total") == total,
+            "job 1 after kill -9: steps %lld, t %.17g, lastEnergy.step %lld (want the last stored "
+            "sample's step %lld > 0, t %.17g)",
+            steps, t, le ? jint(le, "step") : -1, last, tl);
+        TLOG(
+            "job 1 after kill -9 and restart: INTERRUPTED at step %lld (its last sample), t %.6g, \"%s\"",
+            steps, t, jstr(r, "error"));
     }
     json_decref(r);
     /* Status (by job id) says the same */
@@ -1257,13 +1308,14 @@ DTEST(daemon_hard_kill)
         CHECK(td_job_status(&d, 1, buf, sizeof buf, &steps) == 0);
         r = show_json(&d, 1);
         CHECK(r);
-        CHECKF(!strcmp(buf, "INTERRUPTED") && steps == jint(r, "steps"), "Status: %s, steps %lld", buf,
-               steps);
+        CHECKF(!strcmp(buf, "INTERRUPTED") && steps == jint(r, "steps"), "Status: %s, steps %lld",
+               buf, steps);
         json_decref(r);
     }
     r = show_json(&d, 2);
     CHECK(r);
-    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED"), "job 2 (queued at the kill): %s", jstr(r, "status"));
+    CHECKF(!strcmp(jstr(r, "status"), "INTERRUPTED"), "job 2 (queued at the kill): %s",
+           jstr(r, "status"));
     json_decref(r);
     CHECK(td_ctl(&d, 30, &o, "runs", "--status", "INTERRUPTED", "--json", NULL) == 0);
     CHECK(o.status == 0 && count_lines(o.out) == 2);
@@ -1295,8 +1347,9 @@ static int submit_expect(const td_daemon *d, Mpmd__Case *pb, const char *what, c
         ok = !strcmp(td_err_code(reply), code) && !strncmp(f, field, n) && (prefix || !f[n]) &&
              !strncmp(m, f, strlen(f)) && m[strlen(f)] == ':';
         if (!ok)
-            t_fail(__FILE__, __LINE__, "%s: got %s, field \"%s\", message \"%s\" (want %s, field %s)",
-                   what, td_err_code(reply), f, m, code, field);
+            t_fail(__FILE__, __LINE__,
+                   "%s: got %s, field \"%s\", message \"%s\" (want %s, field %s)", what,
+                   td_err_code(reply), f, m, code, field);
         else
             TLOG("%-28.28s %s %s", what, td_err_code(reply), m);
     }
@@ -1325,15 +1378,16 @@ static int bad_case(const td_daemon *d, const char *from, const char *to, const 
 }
 
 /* Expects a raw message to get `code` (or, if may_drop, no reply). */
-static int frames_expect(const td_daemon *d, const char *what, const void *const *f, const size_t *l,
-                         int n, const char *code, int may_drop)
+static int frames_expect(const td_daemon *d, const char *what, const void *const *f,
+                         const size_t *l, int n, const char *code, int may_drop)
 {
     json_t *reply = NULL;
     int rc = td_frames(d->ep, f, l, n, may_drop ? 1.5 : 10, &reply), ok;
     ok = rc == 0 ? !strcmp(td_err_code(reply), code) : (rc == 1 && may_drop);
     if (!ok)
-        t_fail(__FILE__, __LINE__, "%s: %s%s (want %s%s)", what, rc == 0 ? "error code " : "no reply",
-               rc == 0 ? td_err_code(reply) : "", code, may_drop ? " or no reply" : "");
+        t_fail(__FILE__, __LINE__, "%s: %s%s (want %s%s)", what,
+               rc == 0 ? "error code " : "no reply", rc == 0 ? td_err_code(reply) : "", code,
+               may_drop ? " or no reply" : "");
     else
         TLOG("%-28.28s %s %s", what, rc == 0 ? td_err_code(reply) : "dropped (no reply)",
              rc == 0 ? td_err_msg(reply) : "");
@@ -1364,28 +1418,33 @@ DTEST(daemon_bad_input)
                    "materials[0].poissonRatio"));
     CHECK(bad_case(&d, "\"poissonRatio\": 0.2", "\"poissonRatio\": -1.5", "INVALID_CASE",
                    "materials[0].poissonRatio"));
-    CHECK(bad_case(&d, "\"center\": [0.3, 0.3]", "\"center\": [3.3, 0.3]", "INVALID_CASE", "bodies[0]*"));
+    CHECK(bad_case(&d, "\"center\": [0.3, 0.3]", "\"center\": [3.3, 0.3]", "INVALID_CASE",
+                   "bodies[0]*"));
     CHECK(bad_case(&d, "\"radius\": 0.1", "\"radius\": 0.001", "INVALID_CASE", "bodies[0]*"));
     CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1, \"dt\": 0.5", "INVALID_CASE", "dt"));
     CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 0", "INVALID_CASE", "endTime"));
     CHECK(bad_case(&d, ", \"endTime\": 1", "", "INVALID_CASE", "endTime"));
-    CHECK(bad_case(&d, "\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"ppc\": 9", "INVALID_CASE",
-                   "bodies[1].ppc"));
+    CHECK(bad_case(&d, "\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"ppc\": 9",
+                   "INVALID_CASE", "bodies[1].ppc"));
     CHECK(bad_case(&d, "\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, 0.1, 0.1]", "INVALID_CASE",
                    "grid.spacing"));
     CHECK(bad_case(&d, "\"dim\": 2", "\"dim\": 4", "INVALID_CASE", "grid.dim"));
     /* too many steps: endTime / dt far beyond any integer is refused, not
      * wrapped into a negative count that passes the limit */
-    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1e300, \"dt\": 0.001", "TOO_LARGE", "endTime"));
-    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1e6, \"dt\": 0.001", "TOO_LARGE", "endTime"));
+    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1e300, \"dt\": 0.001", "TOO_LARGE",
+                   "endTime"));
+    CHECK(
+        bad_case(&d, "\"endTime\": 1", "\"endTime\": 1e6, \"dt\": 0.001", "TOO_LARGE", "endTime"));
     CHECK(bad_case(&d, "\"endTime\": 1", "\"steps\": 200000000", "TOO_LARGE", "steps"));
     /* too large: the codec's node limit, and this server's --max-particles */
-    CHECK(bad_case(&d, "\"nodes\": [11, 11]", "\"nodes\": [5001, 5001]", "TOO_LARGE", "grid.nodes"));
+    CHECK(
+        bad_case(&d, "\"nodes\": [11, 11]", "\"nodes\": [5001, 5001]", "TOO_LARGE", "grid.nodes"));
     {
         /* 6000 explicit points in 1D: 96 KB, under the request limit, over --max-particles */
-        json_t *c = json_pack("{s:{s:i,s:[f],s:[i]},s:[{s:f,s:f}],s:[{s:{s:[],s:[]}}],s:i}", "grid",
-                              "dim", 1, "spacing", 0.001, "nodes", 7001, "materials", "youngsModulus",
-                              1.0, "density", 1.0, "bodies", "points", "x", "volume", "steps", 10);
+        json_t *c =
+            json_pack("{s:{s:i,s:[f],s:[i]},s:[{s:f,s:f}],s:[{s:{s:[],s:[]}}],s:i}", "grid", "dim",
+                      1, "spacing", 0.001, "nodes", 7001, "materials", "youngsModulus", 1.0,
+                      "density", 1.0, "bodies", "points", "x", "volume", "steps", 10);
         json_t *pts = json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "points");
         char *text;
         Mpmd__Case *pb = NULL;
@@ -1428,21 +1487,26 @@ DTEST(daemon_bad_input)
     CHECK(td_write((snprintf(path, sizeof path, "%s/bad.json", dir), path),
                    "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
                    " \"materials\": [{\"youngsModulus\": 1, \"density\": -2}],"
-                   " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.4]}}], \"endTime\": 1}") == 0);
+                   " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.4]}}], \"endTime\": 1}") ==
+          0);
     EXPECT_CTL(&d, 1, "materials[0].density: must be > 0 (got -2)", "submit", path);
-    CHECK(td_write(path, "{\"grid\": {\"dim\": 2, \"spacing\": [0.01, 0.01], \"nodes\": [101, 101]},"
-                         " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
-                         " \"bodies\": [{\"box\": {\"lo\": [0, 0], \"hi\": [1, 1]}}], \"steps\": 1}") == 0);
+    CHECK(td_write(path,
+                   "{\"grid\": {\"dim\": 2, \"spacing\": [0.01, 0.01], \"nodes\": [101, 101]},"
+                   " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+                   " \"bodies\": [{\"box\": {\"lo\": [0, 0], \"hi\": [1, 1]}}], \"steps\": 1}") ==
+          0);
     /* the solver's count stops at this server's --max-particles (the one
      * limit), naming the body that passed it */
-    EXPECT_CTL(&d, 1, "TOO_LARGE: bodies[0]: the case has more than 5000 particles", "submit", path);
+    EXPECT_CTL(&d, 1, "TOO_LARGE: bodies[0]: the case has more than 5000 particles", "submit",
+               path);
     CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
     CHECKF(strstr(o.err, "TOO_LARGE: bodies[0]: "), "mpmctl does not name the field: %s", o.err);
     td_out_free(&o);
 
     /* damaged requests and frames */
     {
-        static const uint8_t garbage[] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
+        static const uint8_t garbage[] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff,
+                                          0xff, 0xff, 0xff, 0xff, 0xff};
         static const uint8_t no_body[] = {0x08, 0x01};
         static const uint8_t v2_ping[] = {0x08, 0x02, 0x4a, 0x00};
         static const uint8_t ping[] = {0x08, 0x01, 0x4a, 0x00};
@@ -1515,8 +1579,8 @@ DTEST(daemon_bad_input)
             {MPP_REQ_CANCEL, 0, "cancel{jobId: 4242}", "jobId"},
         };
         for (size_t i = 0; i < sizeof unknown / sizeof unknown[0]; i++) {
-            mpp_request rq = {.kind = unknown[i].kind, .id = 4242, .has_step = unknown[i].has_step,
-                              .step = 10};
+            mpp_request rq = {
+                .kind = unknown[i].kind, .id = 4242, .has_step = unknown[i].has_step, .step = 10};
             CHECK(expect_not_found(&d, rq, unknown[i].what, unknown[i].field) == 0);
         }
         /* mpmctl shows the field */
@@ -1534,12 +1598,13 @@ DTEST(daemon_bad_input)
         mpp_request rq = {.kind = MPP_REQ_LIST_RUNS, .limit = 20000};
         json_t *reply = NULL;
         CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
-        CHECKF(!strcmp(td_err_code(reply), "TOO_LARGE") && !strcmp(td_err_field(reply), "listRuns.limit") &&
+        CHECKF(!strcmp(td_err_code(reply), "TOO_LARGE") &&
+                   !strcmp(td_err_field(reply), "listRuns.limit") &&
                    strstr(td_err_msg(reply), "10000"),
-               "listRuns{limit: 20000}: %s, field \"%s\", %s", td_err_code(reply), td_err_field(reply),
-               td_err_msg(reply));
-        TLOG("listRuns{limit: 20000}         %s, field %s: %s", td_err_code(reply), td_err_field(reply),
-             td_err_msg(reply));
+               "listRuns{limit: 20000}: %s, field \"%s\", %s", td_err_code(reply),
+               td_err_field(reply), td_err_msg(reply));
+        TLOG("listRuns{limit: 20000}         %s, field %s: %s", td_err_code(reply),
+             td_err_field(reply), td_err_msg(reply));
         json_decref(reply);
     }
     /* a request that cannot be decoded names its missing field too */
@@ -1549,7 +1614,8 @@ DTEST(daemon_bad_input)
         size_t l[] = {0, sizeof status_no_id};
         json_t *reply = NULL;
         CHECK(td_frames(d.ep, f, l, 2, 10, &reply) == 0);
-        CHECKF(!strcmp(td_err_code(reply), "BAD_REQUEST") && !strcmp(td_err_field(reply), "status.jobId"),
+        CHECKF(!strcmp(td_err_code(reply), "BAD_REQUEST") &&
+                   !strcmp(td_err_field(reply), "status.jobId"),
                "status without jobId: %s, field \"%s\"", td_err_code(reply), td_err_field(reply));
         json_decref(reply);
     }
@@ -1673,12 +1739,15 @@ DTEST(daemon_stream_snapshots)
                 break;
             }
             more = zmq_msg_more(&m);
-            if (nparts < 2) part[nparts++] = m;
-            else zmq_msg_close(&m);
+            if (nparts < 2)
+                part[nparts++] = m;
+            else
+                zmq_msg_close(&m);
         }
         mpp_stream si = {0};
         mpm_error pe;
-        int prc = nparts == 2 ? mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0, &si, &pe)
+        int prc = nparts == 2 ? mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0,
+                                                  &si, &pe)
                               : -1;
         if (nparts == 2 && prc) mpm_error_text(&pe, MPM_FIELD_JSON, err, sizeof err);
         int ok = prc == 0 && si.job_id == 2 && si.seq == next_seq;
@@ -1688,8 +1757,8 @@ DTEST(daemon_stream_snapshots)
         } else if (ok && si.kind == MPP_STREAM_SNAPSHOT) {
             const mpp_snapshot *s = &si.snapshot;
             /* the decoder checked that x and v hold n*dim values each */
-            ok = s->n == np && s->dim == 2 && s->x && s->v && !s->stress && !s->pressure && !s->volume &&
-                 s->step == (int64_t)(snaps + 1) * SNAP_EVERY;
+            ok = s->n == np && s->dim == 2 && s->x && s->v && !s->stress && !s->pressure &&
+                 !s->volume && s->step == (int64_t)(snaps + 1) * SNAP_EVERY;
             /* its values, decoded once, against the solver */
             if (ok) {
                 while (mpm_sim_steps(sim) < s->step) ok = ok && mpm_sim_step(sim) == 0;
@@ -1699,8 +1768,8 @@ DTEST(daemon_stream_snapshots)
             }
             snaps++;
         } else if (ok && si.kind == MPP_STREAM_FINISHED) {
-            ok = si.finished.status == MPP_STATUS_FINISHED && si.finished.steps == STEPS && si.has_energy &&
-                 si.energy.seq == STEPS && next_sample == STEPS + 1;
+            ok = si.finished.status == MPP_STATUS_FINISHED && si.finished.steps == STEPS &&
+                 si.has_energy && si.energy.seq == STEPS && next_sample == STEPS + 1;
             finished = 1;
         }
         uint64_t got_seq = si.seq;
@@ -1708,17 +1777,18 @@ DTEST(daemon_stream_snapshots)
         mpp_stream_clear(&si);
         for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
         if (!ok) {
-            t_fail(__FILE__, __LINE__, "stream message seq %llu (expected %llu), kind %d, peek %d "
-                   "%s, samples %llu, snapshots %ld", (unsigned long long)got_seq,
-                   (unsigned long long)next_seq, got_kind, prc, prc ? err : "",
-                   (unsigned long long)next_sample, snaps);
+            t_fail(__FILE__, __LINE__,
+                   "stream message seq %llu (expected %llu), kind %d, peek %d "
+                   "%s, samples %llu, snapshots %ld",
+                   (unsigned long long)got_seq, (unsigned long long)next_seq, got_kind, prc,
+                   prc ? err : "", (unsigned long long)next_sample, snaps);
             goto out;
         }
         next_seq++;
     }
     TLOG("job 2: %llu stream messages, %llu energy samples, %ld snapshots of %zu particles; "
-         "snapshots vs in-process: max relative difference %.3g", (unsigned long long)next_seq,
-         (unsigned long long)next_sample, snaps, np, worst);
+         "snapshots vs in-process: max relative difference %.3g",
+         (unsigned long long)next_seq, (unsigned long long)next_sample, snaps, np, worst);
     if (snaps != STEPS / SNAP_EVERY || worst > 1e-12) {
         t_fail(__FILE__, __LINE__, "%ld snapshots, max difference %.3g", snaps, worst);
         goto out;
@@ -1801,12 +1871,14 @@ DTEST(daemon_pipelined_reads_keep_order)
                 break;
             }
             more = zmq_msg_more(&x);
-            if (np < 2) m[np++] = x;
-            else zmq_msg_close(&x);
+            if (np < 2)
+                m[np++] = x;
+            else
+                zmq_msg_close(&x);
         }
         char *json = NULL, err[256];
-        if (np == 2 && !td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&m[1]), zmq_msg_size(&m[1]),
-                                               0, 0, &json, err, sizeof err))
+        if (np == 2 && !td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&m[1]),
+                                             zmq_msg_size(&m[1]), 0, 0, &json, err, sizeof err))
             rep[got] = json_loads(json, 0, NULL);
         free(json);
         for (int k = 0; k < np; k++) zmq_msg_close(&m[k]);
@@ -1824,8 +1896,8 @@ DTEST(daemon_pipelined_reads_keep_order)
         json_t *smp = json_object_get(json_object_get(rep[k ? 3 : 0], "energy"), "samples");
         n[k] = json_array_size(smp);
         for (size_t i = 0; i < n[k]; i++)
-            CHECKF(jint(json_array_get(smp, i), "seq") == (long long)i, "page %d: sample %zu has seq %lld",
-                   k, i, jint(json_array_get(smp, i), "seq"));
+            CHECKF(jint(json_array_get(smp, i), "seq") == (long long)i,
+                   "page %d: sample %zu has seq %lld", k, i, jint(json_array_get(smp, i), "seq"));
     }
     /* the first page was read before the Status, the second after it */
     json_t *run = json_object_get(rep[2], "run");
@@ -1836,7 +1908,8 @@ DTEST(daemon_pipelined_reads_keep_order)
            "pages of %zu and %zu samples (first ends at step %lld), Status %s at step %lld", n[0],
            n[1], jint(last0, "step"), jstr(run, "status"), jint(run, "steps"));
     TLOG("7 pipelined requests answered in order: pages of %zu and %zu samples around Status at "
-         "step %lld", n[0], n[1], jint(run, "steps"));
+         "step %lld",
+         n[0], n[1], jint(run, "steps"));
     for (int i = 0; i < NREQ; i++) json_decref(rep[i]);
     char st[32];
     CHECK(td_wait_status(&d, 1, "CANCELLED", 10, st, sizeof st) == 0);

@@ -21,25 +21,29 @@
 #include "t.h"
 
 /* A test whose daemons and clients are cleaned up however it returns. */
-#define DTEST(name)                                                       \
-    static void d_##name(void);                                           \
-    TEST(name) { d_##name(); td_cleanup(); }                              \
+#define DTEST(name)             \
+    static void d_##name(void); \
+    TEST(name)                  \
+    {                           \
+        d_##name();             \
+        td_cleanup();           \
+    }                           \
     static void d_##name(void)
 
 /* A running mpmd. */
 typedef struct {
-    pid_t pid;              /* 0 when not running */
-    char dir[256];          /* its directory (endpoint, database, log) */
-    char ep[320];           /* ipc://DIR/ctl */
-    char db[320];           /* DIR/mpmd.db */
-    char log[320];          /* DIR/mpmd.log: its stdout and stderr, appended */
+    pid_t pid;     /* 0 when not running */
+    char dir[256]; /* its directory (endpoint, database, log) */
+    char ep[320];  /* ipc://DIR/ctl */
+    char db[320];  /* DIR/mpmd.db */
+    char log[320]; /* DIR/mpmd.log: its stdout and stderr, appended */
 } td_daemon;
 
 /* Captured output of an mpmctl run. */
 typedef struct {
-    int status;             /* exit status; 128 + signal if killed; -1 if it timed out */
-    char *out, *err;        /* NUL-terminated stdout / stderr */
-    double secs;            /* how long it ran */
+    int status;      /* exit status; 128 + signal if killed; -1 if it timed out */
+    char *out, *err; /* NUL-terminated stdout / stderr */
+    double secs;     /* how long it ran */
 } td_out;
 
 /* A background mpmctl writing to files. */
@@ -100,8 +104,8 @@ int td_msg_bytes_to_json(mpp_msg_kind kind, const void *buf, size_t nbytes, size
  * reply came: returns 1).  Returns 0 with a reply, 1 without, -1 on error. */
 int td_request(const char *ep, const mpp_request *rq, double timeout, json_t **reply);
 /* Raw frames (n of them, lens[i] bytes each) on a fresh DEALER; as above. */
-int td_frames(const char *ep, const void *const *frames, const size_t *lens, int n,
-              double timeout, json_t **reply);
+int td_frames(const char *ep, const void *const *frames, const size_t *lens, int n, double timeout,
+              json_t **reply);
 
 /* Reply helpers.  The error code name of a reply ("" if none). */
 const char *td_err_code(const json_t *reply);

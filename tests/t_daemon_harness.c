@@ -93,7 +93,8 @@ double td_now(void)
 void td_msleep(int ms)
 {
     struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-    while (nanosleep(&ts, &ts) && errno == EINTR) {}
+    while (nanosleep(&ts, &ts) && errno == EINTR) {
+    }
 }
 
 static int decode_status(int ws)
@@ -126,7 +127,8 @@ static int wait_deadline(pid_t pid, double timeout)
 static void kill_reap(pid_t pid)
 {
     kill(pid, SIGKILL);
-    if (wait_deadline(pid, 10) == -2) fprintf(stderr, "harness: pid %d survives SIGKILL\n", (int)pid);
+    if (wait_deadline(pid, 10) == -2)
+        fprintf(stderr, "harness: pid %d survives SIGKILL\n", (int)pid);
 }
 
 static void print_tail(const char *path, int lines)
@@ -158,7 +160,8 @@ void td_cleanup(void)
         }
         if (t_failed() && procs[i].daemon && procs[i].log[0]) {
             int dup = 0;
-            for (int j = 0; j < i; j++) dup |= procs[j].daemon && !strcmp(procs[j].log, procs[i].log);
+            for (int j = 0; j < i; j++)
+                dup |= procs[j].daemon && !strcmp(procs[j].log, procs[i].log);
             if (!dup) print_tail(procs[i].log, 25);
         }
     }
@@ -175,8 +178,10 @@ const char *td_bin(const char *env)
 {
     const char *p = getenv(env);
     if (!p || !*p) {
-        t_fail(__FILE__, __LINE__, "%s is not set: run the daemon tests through `make test` or "
-                                   "`make test-quick` (they set MPMD_BIN and MPMCTL_BIN)", env);
+        t_fail(__FILE__, __LINE__,
+               "%s is not set: run the daemon tests through `make test` or "
+               "`make test-quick` (they set MPMD_BIN and MPMCTL_BIN)",
+               env);
         return NULL;
     }
     if (access(p, X_OK)) {
@@ -262,8 +267,8 @@ int td_request(const char *ep, const mpp_request *rq, double timeout, json_t **r
     return rc;
 }
 
-int td_frames(const char *ep, const void *const *frames, const size_t *lens, int n,
-              double timeout, json_t **reply)
+int td_frames(const char *ep, const void *const *frames, const size_t *lens, int n, double timeout,
+              json_t **reply)
 {
     void *ctx = zmq_ctx_new(), *s = NULL;
     int zero = 0, rc = -1;
@@ -278,7 +283,8 @@ int td_frames(const char *ep, const void *const *frames, const size_t *lens, int
     {
         zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
         int pr;
-        while ((pr = zmq_poll(&it, 1, (long)(timeout * 1000))) < 0 && errno == EINTR) {}
+        while ((pr = zmq_poll(&it, 1, (long)(timeout * 1000))) < 0 && errno == EINTR) {
+        }
         if (pr < 0) goto out;
         if (pr == 0) {
             rc = 1;
@@ -294,8 +300,10 @@ int td_frames(const char *ep, const void *const *frames, const size_t *lens, int
             goto out;
         }
         if (zmq_getsockopt(s, ZMQ_RCVMORE, &more, &ml)) more = 0;
-        if (np < 3) parts[np++] = m;
-        else zmq_msg_close(&m);
+        if (np < 3)
+            parts[np++] = m;
+        else
+            zmq_msg_close(&m);
     }
     if (np == 2 && zmq_msg_size(&parts[0]) == 0) {
         char *json = NULL, err[256];
@@ -345,7 +353,8 @@ int td_start(td_daemon *d, const char *dir, const char *const *extra)
     {
         char line[600];
         int k = snprintf(line, sizeof line, "=== harness: starting mpmd in %s\n", dir);
-        if (write(fd, line, (size_t)k) < 0) {}
+        if (write(fd, line, (size_t)k) < 0) {
+        }
     }
     d->pid = spawn(argv, fd, fd);
     close(fd);
@@ -441,8 +450,10 @@ static int collect(pid_t pid, int ofd, int efd, double t0, double timeout, td_ou
                 cap[i] = nc;
             }
             ssize_t got = read(fds[i], buf[i] + len[i], cap[i] - len[i] - 1);
-            if (got > 0) len[i] += (size_t)got;
-            else if (got == 0 || errno != EINTR) open_[i] = 0;
+            if (got > 0)
+                len[i] += (size_t)got;
+            else if (got == 0 || errno != EINTR)
+                open_[i] = 0;
         }
     }
     close(ofd);
@@ -626,8 +637,7 @@ const char *td_err_msg(const json_t *reply)
     return json_is_string(f) ? json_string_value(f) : "";
 }
 
-int td_job_status(const td_daemon *d, unsigned long long job, char *buf, size_t n,
-                  long long *steps)
+int td_job_status(const td_daemon *d, unsigned long long job, char *buf, size_t n, long long *steps)
 {
     mpp_request rq = {.kind = MPP_REQ_STATUS, .id = job};
     json_t *reply = NULL, *run;

@@ -7,8 +7,8 @@
  * dt, case validation messages, thread reproducibility and cancellation.
  */
 #include "mpm.h"
-#include "t.h"
 #include "mpm_paper.h"
+#include "t.h"
 
 #include <stdlib.h>
 
@@ -86,8 +86,8 @@ TEST(inv_p2g_conserves_mass_and_momentum)
                 rp = fmax(rp, fabs(e1.momentum[d] - e0.momentum[d]) / scale);
             }
             TLOG("%dD %s %zu particles: grid mass %.1e, grid momentum %.1e, particle momentum "
-                 "after 51 steps %.1e (relative errors)", dim, m ? "GMPM" : "MPM ",
-                 mpm_sim_particles(s), rm, rq, rp);
+                 "after 51 steps %.1e (relative errors)",
+                 dim, m ? "GMPM" : "MPM ", mpm_sim_particles(s), rm, rq, rp);
             mpm_sim_destroy(&s);
             mpm_paper_free(&t);
             CHECK(rm < 1e-13); /* round-off of sums over up to 13440 terms */
@@ -134,15 +134,16 @@ TEST(inv_uniform_velocity_translates_rigidly)
                 }
                 if (up == 0)
                     TLOG("%dD %s: after 200 steps (t = %.3f) max |x - x0 - v t| = %.1e, "
-                         "|v - v0| = %.1e, max |sigma| / E = %.1e", dim, m ? "GMPM" : "MPM ", T,
-                         dx, dv, smax / 1000);
+                         "|v - v0| = %.1e, max |sigma| / E = %.1e",
+                         dim, m ? "GMPM" : "MPM ", T, dx, dv, smax / 1000);
                 free(x0);
                 free(x1);
                 free(sig);
                 free(vel);
                 mpm_sim_destroy(&s);
                 CHECKF(rc == 0, "%dD m%d up%d: %s", dim, m, up, rc ? "failed" : "");
-                CHECKF(dx < 1e-12, "%dD m%d up%d: dx %.3e dv %.3e smax %.3e", dim, m, up, dx, dv, smax);
+                CHECKF(dx < 1e-12, "%dD m%d up%d: dx %.3e dv %.3e smax %.3e", dim, m, up, dx, dv,
+                       smax);
                 /* round-off, plus in 3D GMPM the M_TOL cut of sliver corner
                  * nodes (measured dv 8e-13, sigma/E 4e-14) */
                 CHECKF(dv < 1e-11, "%dD m%d up%d: dv %.3e", dim, m, up, dv);
@@ -228,11 +229,11 @@ static double phantom_strain(double shift, double mass_tol)
 
 TEST(inv_phantom_nodes_below_mtol)
 {
-    double ref = phantom_strain(0, 0);          /* support exactly on cell [2, 3] */
-    double with = phantom_strain(1e-7, 0);      /* node mass 5e-15 m_p < M_TOL = 1e-12 m_p */
+    double ref = phantom_strain(0, 0);     /* support exactly on cell [2, 3] */
+    double with = phantom_strain(1e-7, 0); /* node mass 5e-15 m_p < M_TOL = 1e-12 m_p */
     double without = phantom_strain(1e-7, 1e-300);
-    TLOG("strain increment: no sliver %.6e; sliver 1e-7 with M_TOL %.6e; without M_TOL %.6e",
-         ref, with, without);
+    TLOG("strain increment: no sliver %.6e; sliver 1e-7 with M_TOL %.6e; without M_TOL %.6e", ref,
+         with, without);
     CHECK(isfinite(ref) && isfinite(with) && isfinite(without));
     CHECK(fabs(with - ref) < 1e-4 * fabs(ref));
     CHECK(fabs(without - ref) > 0.1 * fabs(ref));
@@ -256,8 +257,8 @@ TEST(inv_gravity_free_fall)
     CHECK(mpm_sim_run(s, 1000) == 0);
     mpm_sim_energy(s, &e1);
     double vy = e1.momentum[1] / e1.mass, T = mpm_sim_time(s);
-    TLOG("t = %.3f: vy = %.12f (g t = %.12f), strain energy %.1e, energy drift %.2e of KE",
-         T, vy, -9.81 * T, e1.strain, (e1.total - e0.total) / e1.kinetic);
+    TLOG("t = %.3f: vy = %.12f (g t = %.12f), strain energy %.1e, energy drift %.2e of KE", T, vy,
+         -9.81 * T, e1.strain, (e1.total - e0.total) / e1.kinetic);
     mpm_sim_destroy(&s);
     CHECK_NEAR(vy, -9.81 * T, 1e-12);
     CHECK(e1.strain < 1e-15 * e1.kinetic);
@@ -286,7 +287,8 @@ TEST(inv_particle_forces_match_gravity)
     mpm_energy e0, ea0;
     mpm_sim_energy(b, &e0);
     mpm_sim_energy(a, &ea0);
-    double *f = calloc(2 * n, sizeof *f), *xa = calloc(2 * n, sizeof *xa), *xb = calloc(2 * n, sizeof *xb);
+    double *f = calloc(2 * n, sizeof *f), *xa = calloc(2 * n, sizeof *xa),
+           *xb = calloc(2 * n, sizeof *xb);
     CHECK(f && xa && xb);
     for (size_t p = 0; p < n; p++) f[2 * p + 1] = -9.81 * e0.mass / (double)n; /* equal masses */
     CHECK(mpm_sim_set_particle_forces(b, f) == 0);
@@ -302,8 +304,8 @@ TEST(inv_particle_forces_match_gravity)
     double drop = 0.5 * 9.81 * T * T; /* the fall */
     TLOG("500 steps: max |x_gravity - x_forces| = %.3g (fall %.4f); work of the forces %.9g, "
          "gravity's potential energy change %.9g; total drifts %.2e / %.2e of KE",
-         worst, drop, eb.external_work, -(ea.potential - ea0.potential), (ea.total - ea0.total) / ea.kinetic,
-         (eb.total - e0.total) / eb.kinetic);
+         worst, drop, eb.external_work, -(ea.potential - ea0.potential),
+         (ea.total - ea0.total) / ea.kinetic, (eb.total - e0.total) / eb.kinetic);
     CHECK(worst < 1e-12 * drop + 1e-15);
     CHECK_NEAR(eb.external_work, -(ea.potential - ea0.potential), 1e-9 * eb.external_work);
     CHECK(fabs(eb.total - e0.total) < 2e-3 * eb.kinetic);
@@ -316,7 +318,8 @@ TEST(inv_particle_forces_match_gravity)
     /* a NaN is refused, named, and changes nothing */
     f[7] = NAN;
     CHECK(mpm_sim_set_particle_forces(b, f) == MPM_EINVAL);
-    CHECKF(strstr(TERR(mpm_sim_error(b)), "particle_forces[7]: must be finite"), "%s", TERR(mpm_sim_error(b)));
+    CHECKF(strstr(TERR(mpm_sim_error(b)), "particle_forces[7]: must be finite"), "%s",
+           TERR(mpm_sim_error(b)));
     CHECK(mpm_sim_step(b) == 0);
     free(f);
     free(xa);
@@ -370,9 +373,10 @@ TEST(inv_initial_stress_release_is_not_divergence)
             peak = fmax(peak, e.kinetic + e.strain);
         }
         if (!rc) rc = mpm_sim_check(s);
-        TLOG("%s: %ld steps to t = %.3f (two periods 2L/c), max (K + S) / U0 = %.3f (continuum: 2); %s",
-             m ? "GIMP MUSL" : "MPM USF", mpm_sim_steps(s), mpm_sim_time(s), peak / u0,
-             rc ? TERR(mpm_sim_error(s)) : "finished");
+        TLOG(
+            "%s: %ld steps to t = %.3f (two periods 2L/c), max (K + S) / U0 = %.3f (continuum: 2); %s",
+            m ? "GIMP MUSL" : "MPM USF", mpm_sim_steps(s), mpm_sim_time(s), peak / u0,
+            rc ? TERR(mpm_sim_error(s)) : "finished");
         CHECKF(rc == 0, "%s", TERR(mpm_sim_error(s)));
         CHECK(peak > 1.5 * u0 && peak < 2.3 * u0);
         mpm_sim_destroy(&s);
@@ -538,8 +542,8 @@ TEST(inv_case_errors_name_the_field)
         mpm_sim *s = mpm_sim_new(&t.c, NULL, NULL);
         mpm_paper_free(&t);
         CHECKF(rc == MPM_EINVAL && s == NULL, "case %zu: rc %d", i, rc);
-        CHECKF(strstr(TERR(&err), cases[i].expect) != NULL, "case %zu: got '%s', want '%s'", i, TERR(&err),
-               cases[i].expect);
+        CHECKF(strstr(TERR(&err), cases[i].expect) != NULL, "case %zu: got '%s', want '%s'", i,
+               TERR(&err), cases[i].expect);
     }
 }
 
@@ -648,7 +652,8 @@ TEST(inv_case_check_once)
     clock_gettime(CLOCK_MONOTONIC, &t1);
     double ms = 1e3 * (t1.tv_sec - t0.tv_sec) + 1e-6 * (t1.tv_nsec - t0.tv_nsec);
     TLOG("10^12-particle box, max_particles 1000: %s after %.3f ms", TERR(&err), ms);
-    CHECK(rc == MPM_ETOOBIG && !strcmp(TERR(&err), "bodies[0]: the case has more than 1000 particles, the limit"));
+    CHECK(rc == MPM_ETOOBIG &&
+          !strcmp(TERR(&err), "bodies[0]: the case has more than 1000 particles, the limit"));
     CHECK(ms < 100);
 }
 
@@ -687,7 +692,8 @@ TEST(inv_threads_reproducible)
         smax = fmax(smax, fabs(sc[i]));
     }
     TLOG("2 threads twice: bitwise equal; 1 vs 2 threads: max |dx| = %.1e, max |dsigma| = %.1e "
-         "(max |sigma| %.2e)", dx, ds, smax);
+         "(max |sigma| %.2e)",
+         dx, ds, smax);
     CHECK(dx < 1e-12);
     CHECK(ds < 1e-9 * smax);
 }

@@ -75,7 +75,8 @@ TEST(perf_gimp_3_nodes_equal_4_nodes)
                 CHECK(mpm_sim_set_gimp_nodes(s4, 4) == 0);
                 CHECK(s4->ns == 4);
                 int rc3 = mpm_sim_run(s3, 40), rc4 = mpm_sim_run(s4, 40);
-                CHECKF(rc3 == 0 && rc4 == 0, "%s / %s", TERR(mpm_sim_error(s3)), TERR(mpm_sim_error(s4)));
+                CHECKF(rc3 == 0 && rc4 == 0, "%s / %s", TERR(mpm_sim_error(s3)),
+                       TERR(mpm_sim_error(s4)));
                 size_t n = mpm_sim_particles(s3);
                 double *buf = malloc(2 * n * (2 * 3 + 6) * sizeof *buf);
                 CHECK(buf);
@@ -83,16 +84,20 @@ TEST(perf_gimp_3_nodes_equal_4_nodes)
                 double *s3g = v4 + n * 3, *s4g = s3g + n * 6;
                 mpm_sim_snapshot(s3, &(mpm_snapshot){.x = x3, .v = v3, .stress = s3g});
                 mpm_sim_snapshot(s4, &(mpm_snapshot){.x = x4, .v = v4, .stress = s4g});
-                double dx = rel_diff(x3, x4, n * (size_t)dim), dv = rel_diff(v3, v4, n * (size_t)dim);
+                double dx = rel_diff(x3, x4, n * (size_t)dim),
+                       dv = rel_diff(v3, v4, n * (size_t)dim);
                 double ds = rel_diff(s3g, s4g, n * 6), smax = 0;
                 for (size_t i = 0; i < n * 6; i++) smax = fmax(smax, fabs(s3g[i]));
                 mpm_energy e3, e4;
                 mpm_sim_energy(s3, &e3);
                 mpm_sim_energy(s4, &e4);
                 TLOG("GIMP %dD %s T=%d, %zu points, 40 steps: 3 vs 4 nodes: rel |dx| %.1e, |dv| "
-                     "%.1e, |dsigma| %.1e (max |sigma| %.3g), energy %.17g vs %.17g", dim,
-                     u == 0 ? "USF" : u == 1 ? "USL" : "MUSL", T, n, dx, dv, ds, smax, e3.total,
-                     e4.total);
+                     "%.1e, |dsigma| %.1e (max |sigma| %.3g), energy %.17g vs %.17g",
+                     dim,
+                     u == 0   ? "USF"
+                     : u == 1 ? "USL"
+                              : "MUSL",
+                     T, n, dx, dv, ds, smax, e3.total, e4.total);
                 free(buf);
                 mpm_sim_destroy(&s3);
                 mpm_sim_destroy(&s4);
@@ -205,7 +210,8 @@ TEST(perf_sorting_keeps_creation_order)
         for (int i = 0; i < NPTS; i++) push = fmax(push, fabs(va[2 * i + 1] + 0.25));
         TLOG("T=%d: %d points in natural / reversed order, 50 steps of rigid translation: max "
              "|x - (x0 + v t)| = %.1e / %.1e; then a force on one point: velocities differ by "
-             "%.1e (relative), largest push %.2e", T, NPTS, wa, wb, dv, push);
+             "%.1e (relative), largest push %.2e",
+             T, NPTS, wa, wb, dv, push);
         CHECK(wa >= 0 && wb >= 0);
         CHECK(sb);  /* the reversed points were sorted */
         CHECK(!sa); /* the natural ones were in cell order already */
@@ -428,8 +434,8 @@ TEST(perf_active_rows_leave_no_stale_nodes)
                         TLOG("%dD %s, %s %s T=%d, 60 steps: %ld node checks outside the supports "
                              "all zero: %s; worst |sum node mass - mass| / mass = %.1e; active "
                              "rows' extents / box = %.2f",
-                             dim, shapes[shape], m ? "GIMP" : "MPM", up ? "MUSL" : "USF", T, checked,
-                             rc ? "NO" : "yes", worst, frac);
+                             dim, shapes[shape], m ? "GIMP" : "MPM", up ? "MUSL" : "USF", T,
+                             checked, rc ? "NO" : "yes", worst, frac);
                         CHECK(rc == 0);
                         CHECK(worst < 1e-12);
                         CHECK(frac < (shape == 0 ? 0.75 : 0.9));
@@ -569,7 +575,8 @@ TEST(perf_team_step_threads_agree_with_loads_and_walls)
             size_t n[4] = {0};
             int rc = 0;
             /* 1, 2, 3 threads, then 2 again */
-            for (int k = 0; k < 4; k++) rc |= loaded_box(dim, ups[u], k < 3 ? k + 1 : 2, x[k], v[k], sg[k], &n[k]);
+            for (int k = 0; k < 4; k++)
+                rc |= loaded_box(dim, ups[u], k < 3 ? k + 1 : 2, x[k], v[k], sg[k], &n[k]);
             CHECK(rc == 0);
             CHECK(n[0] > 0 && n[0] <= MAXP && n[1] == n[0] && n[2] == n[0] && n[3] == n[0]);
             if (rc || n[0] == 0 || n[0] > MAXP) continue;
@@ -581,7 +588,8 @@ TEST(perf_team_step_threads_agree_with_loads_and_walls)
                 double dx = rel_diff(x[0], x[k], nx), dv = rel_diff(v[0], v[k], nx);
                 double ds = rel_diff(sg[0], sg[k], n[0] * 6);
                 TLOG("%dD GIMP %s, gravity, wall, traction, 150 steps: %d vs 1 thread: relative "
-                     "differences x %.1e, v %.1e, stress %.1e", dim, un[u], k + 1, dx, dv, ds);
+                     "differences x %.1e, v %.1e, stress %.1e",
+                     dim, un[u], k + 1, dx, dv, ds);
                 CHECK(dx < 1e-12);
                 CHECK(dv < 1e-9);
                 CHECK(ds < 1e-9);
@@ -628,8 +636,9 @@ TEST(perf_sort_order_independent_of_threads)
     int moved = 0;
     for (int i = 0; i < NPTS; i++) moved |= id[0][i] != (uint32_t)i;
     TLOG("%d points in reversed order, sorted at creation: moved %s; 2 and 3 threads give the "
-         "order of 1: %s, %s", NPTS, moved ? "yes" : "no",
-         memcmp(id[0], id[1], sizeof id[0]) ? "no" : "yes", memcmp(id[0], id[2], sizeof id[0]) ? "no" : "yes");
+         "order of 1: %s, %s",
+         NPTS, moved ? "yes" : "no", memcmp(id[0], id[1], sizeof id[0]) ? "no" : "yes",
+         memcmp(id[0], id[2], sizeof id[0]) ? "no" : "yes");
     CHECK(moved);
     for (int T = 2; T <= 3; T++) {
         CHECK(memcmp(id[0], id[T - 1], sizeof id[0]) == 0);
@@ -702,17 +711,19 @@ TEST(perf_step_energies_equal_energy_pass)
                         int want = k < STEPS; /* the last step: no request */
                         if (want) mpm_sim_want_energy(sa_);
                         int ra = mpm_sim_step(sa_), rb = mpm_sim_step(sb_);
-                        CHECKF(ra == 0 && rb == 0, "%s / %s", TERR(mpm_sim_error(sa_)), TERR(mpm_sim_error(sb_)));
+                        CHECKF(ra == 0 && rb == 0, "%s / %s", TERR(mpm_sim_error(sa_)),
+                               TERR(mpm_sim_error(sb_)));
                         CHECK(sa_->ecache_ok == want && !sb_->ecache_ok);
                         mpm_energy ea, eb;
                         mpm_sim_energy(sa_, &ea);
                         mpm_sim_energy(sb_, &eb);
                         double d = en_diff(&eb, &ea, dim);
-                        CHECKF(d <= 1e-12, "%dD %s %s %d thread(s), step %d: energies differ by "
+                        CHECKF(d <= 1e-12,
+                               "%dD %s %s %d thread(s), step %d: energies differ by "
                                "%.3g relative (kinetic %.17g / %.17g, strain %.17g / %.17g, "
-                               "potential %.17g / %.17g)", dim, m ? "GIMP" : "MPM", un[u], T,
-                               k + 1, d, ea.kinetic, eb.kinetic, ea.strain, eb.strain,
-                               ea.potential, eb.potential);
+                               "potential %.17g / %.17g)",
+                               dim, m ? "GIMP" : "MPM", un[u], T, k + 1, d, ea.kinetic, eb.kinetic,
+                               ea.strain, eb.strain, ea.potential, eb.potential);
                         cw = fmax(cw, d);
                         strain = fmax(strain, fabs(eb.strain));
                     }
@@ -730,5 +741,6 @@ TEST(perf_step_energies_equal_energy_pass)
                 }
     TLOG("%d cases (1D/2D/3D, MPM/GIMP, USF/USL/MUSL, gravity, wall, 1 and 2 threads), %d steps: "
          "energies summed in the step vs the energy pass: worst relative difference %.3g; "
-         "positions, velocities, stresses bitwise equal", cases, STEPS + 1, worst);
+         "positions, velocities, stresses bitwise equal",
+         cases, STEPS + 1, worst);
 }

@@ -67,8 +67,8 @@ TEST(shape_partition_of_unity)
     for (int m = 0; m < 2; m++)
         for (int dim = 1; dim <= 3; dim++) {
             double gerr, serr = pou_error(m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, dim, 20000, &gerr);
-            TLOG("%s %dD: max |sum S - 1| = %.2e, max |sum G| h = %.2e",
-                 m ? "GMPM" : "MPM ", dim, serr, gerr);
+            TLOG("%s %dD: max |sum S - 1| = %.2e, max |sum G| h = %.2e", m ? "GMPM" : "MPM ", dim,
+                 serr, gerr);
             CHECK(serr < 1e-14);
             CHECK(gerr < 1e-14);
         }

@@ -6,8 +6,8 @@
  * errors it measured; the tolerances are stated beside each check.
  */
 #include "mpm.h"
-#include "t.h"
 #include "mpm_paper.h"
+#include "t.h"
 
 #include <stdlib.h>
 
@@ -60,8 +60,8 @@ TEST(verify_point_usf_follows_analytic)
 {
     point_run r;
     CHECK(run_point(MPM_USF, 1e-3, 3.0, &r) == 0);
-    TLOG("MPM USF dt=1e-3, 3 periods: max |v - va| = %.3e (v0 = 0.1), max |x - xa| = %.3e",
-         r.verr, r.xerr);
+    TLOG("MPM USF dt=1e-3, 3 periods: max |v - va| = %.3e (v0 = 0.1), max |x - xa| = %.3e", r.verr,
+         r.xerr);
     /* 3% of v0 and 0.1% of x0 */
     CHECK(r.verr < 3e-3);
     CHECK(r.xerr < 5e-4);
@@ -73,8 +73,8 @@ TEST(verify_point_usl_loses_energy_usf_does_not_drift)
     CHECK(run_point(MPM_USF, 1e-3, 3.0, &f) == 0);
     CHECK(run_point(MPM_USL, 1e-3, 3.0, &l) == 0);
     double df = (f.eend - f.e0) / f.e0, dl = (l.eend - l.e0) / l.e0;
-    TLOG("E0 = %.6e; after 3 periods: USF %+.3e (oscillation %.2e), USL %+.3e (relative)",
-         f.e0, df, (f.emax - f.emin) / f.e0, dl);
+    TLOG("E0 = %.6e; after 3 periods: USF %+.3e (oscillation %.2e), USL %+.3e (relative)", f.e0, df,
+         (f.emax - f.emin) / f.e0, dl);
     /* USF: no drift beyond its bounded oscillation of O(dt); USL: a
      * monotone loss at least 10 times larger (Bardenhagen 2002) */
     CHECK(fabs(df) < 2e-3);
@@ -87,8 +87,8 @@ TEST(verify_point_eq38_error_falls_with_dt)
     point_run a, b;
     CHECK(run_point(MPM_USF, 0.1, 3.0, &a) == 0);
     CHECK(run_point(MPM_USF, 1e-4, 3.0, &b) == 0);
-    TLOG("Eq. 38 error, max over 3 periods: dt=0.1 %.3e, dt=1e-4 %.3e (ratio %.0f)",
-         a.eq38, b.eq38, a.eq38 / b.eq38);
+    TLOG("Eq. 38 error, max over 3 periods: dt=0.1 %.3e, dt=1e-4 %.3e (ratio %.0f)", a.eq38, b.eq38,
+         a.eq38 / b.eq38);
     /* dt = 1e-4 leaves the error of the volume update: the analytic solution
      * holds the density constant, the solver updates the volume (about 1.6%
      * here), which shifts the frequency; hence a factor 20, not 1000 */
@@ -97,8 +97,8 @@ TEST(verify_point_eq38_error_falls_with_dt)
 
 /* ---- 2. bar, first mode ---- */
 
-static double bar_error(mpm_method m, mpm_update up, int ncell, int extra, double dt, double periods,
-                        double v0)
+static double bar_error(mpm_method m, mpm_update up, int ncell, int extra, double dt,
+                        double periods, double v0)
 {
     mpm_paper t;
     mpm_error err;
@@ -132,7 +132,8 @@ TEST(verify_bar_first_mode)
     double eg = bar_error(MPM_METHOD_GIMP, MPM_USF, 13, 0, 1e-3, 2, V0);
     double amp = V0 * 2 / M_PI;
     TLOG("max |vcm - Eq.34| over 2 periods (amplitude %.4f): MPM 7/8 %.3e (%.1f%%), "
-         "GMPM 13/14 %.3e (%.1f%%)", amp, em, 100 * em / amp, eg, 100 * eg / amp);
+         "GMPM 13/14 %.3e (%.1f%%)",
+         amp, em, 100 * em / amp, eg, 100 * eg / amp);
     /* measured 8.9% and 4.6%; the tolerance leaves a third on top */
     CHECK(em < 0.12 * amp);
     CHECK(eg < 0.06 * amp);
@@ -149,8 +150,9 @@ TEST(verify_bar_converges_under_refinement)
         int base = m ? 13 : 7;
         double e[4];
         for (int k = 0; k < 4; k++)
-            e[k] = bar_error(m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, MPM_USF, base << k, 2, 1e-4,
-                             2, v0) / amp;
+            e[k] = bar_error(m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, MPM_USF, base << k, 2, 1e-4, 2,
+                             v0) /
+                   amp;
         for (int k = 0; k < 4; k++) {
             double order = k ? log(e[k - 1] / e[k]) / log(2.0) : 0;
             TLOG("%s %3d cells: relative vcm error %.3e  order %s%.2f", m ? "GMPM" : "MPM ",
@@ -182,8 +184,8 @@ static int run_disks(mpm_method m, mpm_update up, double h, double dt, double te
     }
     mpm_energy e;
     mpm_sim_energy(s, &e);
-    *o = (disk_run){mpm_sim_particles(s) / 2, e.total, e.kinetic, 0, e.total, e.total, 0, 0, 0,
-                    e.mass * 0.1};
+    *o = (disk_run){
+        mpm_sim_particles(s) / 2, e.total, e.kinetic, 0, e.total, e.total, 0, 0, 0, e.mass * 0.1};
     while (mpm_sim_time(s) < tend) {
         if (mpm_sim_step(s)) {
             printf("    %s\n", TERR(mpm_sim_error(s)));
@@ -257,7 +259,8 @@ static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, dou
     double h = 1.0 / ncell, beta = M_PI / 2;
     int per_x = ppc, across = 2 * ppc, nlat = dim == 1 ? 1 : dim == 2 ? across : across * across;
     size_t n = (size_t)ncell * per_x * nlat;
-    double *x = malloc(n * dim * sizeof *x), *vol = malloc(n * sizeof *vol), *v = calloc(n * dim, sizeof *v);
+    double *x = malloc(n * dim * sizeof *x), *vol = malloc(n * sizeof *vol),
+           *v = calloc(n * dim, sizeof *v);
     if (!x || !vol || !v) {
         free(x);
         free(vol);
@@ -308,7 +311,8 @@ TEST(verify_bar_2d_3d_match_1d)
     for (int m = 0; m < 2; m++) {
         mpm_error err;
         mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
-        mpm_sim *s1 = bar_nd(1, meth, 8, 2, V0, 1e-300, &err), *s2 = bar_nd(2, meth, 8, 2, V0, 1e-300, &err),
+        mpm_sim *s1 = bar_nd(1, meth, 8, 2, V0, 1e-300, &err),
+                *s2 = bar_nd(2, meth, 8, 2, V0, 1e-300, &err),
                 *s3 = bar_nd(3, meth, 8, 2, V0, 1e-300, &err);
         CHECKF(s1 && s2 && s3, "%s", TERR(&err));
         long n = lround(2 * 2 * M_PI / mpm_paper_bar_omega() / 1e-3);

@@ -14,9 +14,9 @@
 
 #include <errno.h>
 #include <fcntl.h>
-#include <poll.h>
 #include <float.h>
 #include <math.h>
+#include <poll.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -56,11 +56,14 @@ static void cap_log(void *ud, const char *msg)
     pthread_mutex_unlock(&lc->mu);
 }
 
-static void quiet_log(void *ud, const char *msg) { (void)ud; (void)msg; }
+static void quiet_log(void *ud, const char *msg)
+{
+    (void)ud;
+    (void)msg;
+}
 
-static const unsigned char case_bytes[] = {
-    0x0a, 0x04, 'b', 'a', 'r', 's', 0x00, 0x10, 0x02, 0xff, 0x00, 0x7f, 0x80, 0x01
-};
+static const unsigned char case_bytes[] = {0x0a, 0x04, 'b',  'a',  'r',  's',  0x00,
+                                           0x10, 0x02, 0xff, 0x00, 0x7f, 0x80, 0x01};
 
 static store_run sample_run(const char *name, mpp_status st)
 {
@@ -119,12 +122,12 @@ static int sample_equals(const mpm_energy_sample *es, size_t i, int64_t run, int
 
 static void sleep_ms(int ms)
 {
-    struct timespec ts = { ms / 1000, (long)(ms % 1000) * 1000000L };
+    struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
     nanosleep(&ts, NULL);
 }
 
 /* Options with logging silenced (tests that check log lines use cap_log). */
-static const store_options quiet = { .log = quiet_log };
+static const store_options quiet = {.log = quiet_log};
 
 /* ---- tests ---- */
 
@@ -137,22 +140,21 @@ TEST(store_run_lifecycle)
     store_run in = sample_run("bar \"one\" \xc3\xa9", MPP_STATUS_QUEUED);
     int64_t id = -1;
     CHECK(store_run_insert(s, &in, &id) == 0);
-    CHECK(id == 1);                       /* fresh database: ids start at 1 */
+    CHECK(id == 1); /* fresh database: ids start at 1 */
     CHECK(store_flush(s) == 0);
 
     store_run r;
     CHECK(store_run_get(s, id, &r) == 0);
     int ok = r.id == id && !strcmp(r.name, in.name) && r.case_len == sizeof case_bytes &&
              r.case_pb && !memcmp(r.case_pb, case_bytes, sizeof case_bytes) &&
-             r.method == MPM_METHOD_GIMP &&
-             r.update == MPM_MUSL && r.dim == 2 && r.particles == 12345 &&
-             r.nodes == 678 && r.status == MPP_STATUS_QUEUED &&
+             r.method == MPM_METHOD_GIMP && r.update == MPM_MUSL && r.dim == 2 &&
+             r.particles == 12345 && r.nodes == 678 && r.status == MPP_STATUS_QUEUED &&
              r.submitted_at == 1700000000.25 && r.started_at == 0 && r.finished_at == 0 &&
-             r.steps == 0 && isnan(r.energy.kinetic) && isnan(r.energy.total) &&
-             r.error == NULL && !strcmp(r.server_version, "mpmd 0.1-test");
+             r.steps == 0 && isnan(r.energy.kinetic) && isnan(r.energy.total) && r.error == NULL &&
+             !strcmp(r.server_version, "mpmd 0.1-test");
     store_run_clear(&r);
     CHECKF(ok, "queued run read back differs");
-    CHECK(r.name == NULL && r.case_pb == NULL);    /* cleared */
+    CHECK(r.name == NULL && r.case_pb == NULL); /* cleared */
 
     /* queued -> running */
     CHECK(store_run_set_status(s, id, MPP_STATUS_RUNNING, 1700000001.5, NULL) == 0);
@@ -172,10 +174,13 @@ TEST(store_run_lifecycle)
     CHECKF(ok, "progress not recorded");
 
     /* finish with energies */
-    store_run_end end = { .status = MPP_STATUS_FINISHED, .finished_at = 1700000003.75,
-                          .steps = 100, .wall_s = 2.5, .psteps_per_s = 8.0e6,
-                          .has_energy = 1,
-                          .energy = { 1.5, 2.25, -3.0, 0.125, 0.625 - 1.0 / 3.0 } };
+    store_run_end end = {.status = MPP_STATUS_FINISHED,
+                         .finished_at = 1700000003.75,
+                         .steps = 100,
+                         .wall_s = 2.5,
+                         .psteps_per_s = 8.0e6,
+                         .has_energy = 1,
+                         .energy = {1.5, 2.25, -3.0, 0.125, 0.625 - 1.0 / 3.0}};
     CHECK(store_run_finish(s, id, &end) == 0);
     CHECK(store_flush(s) == 0);
     CHECK(store_run_get(s, id, &r) == 0);
@@ -183,8 +188,8 @@ TEST(store_run_lifecycle)
          r.finished_at == 1700000003.75 && r.steps == 100 && r.wall_s == 2.5 &&
          r.psteps_per_s == 8.0e6 && r.energy.kinetic == 1.5 && r.energy.strain == 2.25 &&
          r.energy.potential == -3.0 && r.energy.external_work == 0.125 &&
-         r.energy.total == 0.625 - 1.0 / 3.0 && r.error == NULL &&
-         !strcmp(r.name, in.name) && !memcmp(r.case_pb, case_bytes, sizeof case_bytes);
+         r.energy.total == 0.625 - 1.0 / 3.0 && r.error == NULL && !strcmp(r.name, in.name) &&
+         !memcmp(r.case_pb, case_bytes, sizeof case_bytes);
     store_run_clear(&r);
     CHECKF(ok, "finished run read back differs");
 
@@ -192,23 +197,24 @@ TEST(store_run_lifecycle)
     in = sample_run("fails", MPP_STATUS_QUEUED);
     in.case_pb = NULL;
     in.case_len = 0;
-    in.submitted_at = 0;                     /* now */
-    in.name = NULL;                          /* "" */
+    in.submitted_at = 0; /* now */
+    in.name = NULL;      /* "" */
     int64_t id2 = 0;
     double t0 = store_time_now();
     CHECK(store_run_insert(s, &in, &id2) == 0);
     CHECK(id2 == 2);
     CHECK(store_run_set_status(s, id2, MPP_STATUS_RUNNING, 0, NULL) == 0);
-    store_run_end fe = { .status = MPP_STATUS_FAILED, .steps = 7, .wall_s = 0.5,
-                         .error = "particle 3 left the grid at step 7" };
+    store_run_end fe = {.status = MPP_STATUS_FAILED,
+                        .steps = 7,
+                        .wall_s = 0.5,
+                        .error = "particle 3 left the grid at step 7"};
     CHECK(store_run_finish(s, id2, &fe) == 0);
     CHECK(store_flush(s) == 0);
     CHECK(store_run_get(s, id2, &r) == 0);
     ok = r.status == MPP_STATUS_FAILED && r.error &&
          !strcmp(r.error, "particle 3 left the grid at step 7") && isnan(r.energy.kinetic) &&
-         isnan(r.energy.total) && r.steps == 7 && !strcmp(r.name, "") &&
-         r.case_len == 0 && r.case_pb == NULL &&
-         r.submitted_at >= t0 - 1 && r.submitted_at <= store_time_now() + 1 &&
+         isnan(r.energy.total) && r.steps == 7 && !strcmp(r.name, "") && r.case_len == 0 &&
+         r.case_pb == NULL && r.submitted_at >= t0 - 1 && r.submitted_at <= store_time_now() + 1 &&
          r.started_at >= r.submitted_at && r.finished_at >= r.started_at;
     store_run_clear(&r);
     CHECKF(ok, "failed run read back differs");
@@ -218,7 +224,8 @@ TEST(store_run_lifecycle)
     int64_t id3 = 0;
     CHECK(store_run_insert(s, &in, &id3) == 0);
     CHECK(store_run_set_status(s, id3, MPP_STATUS_RUNNING, 1700000008.0, NULL) == 0);
-    CHECK(store_run_set_status(s, id3, MPP_STATUS_CANCELLED, 1700000009.0, "cancelled by client") == 0);
+    CHECK(store_run_set_status(s, id3, MPP_STATUS_CANCELLED, 1700000009.0, "cancelled by client") ==
+          0);
     CHECK(store_flush(s) == 0);
     CHECK(store_run_get(s, id3, &r) == 0);
     ok = r.status == MPP_STATUS_CANCELLED && r.started_at == 1700000008.0 &&
@@ -252,7 +259,7 @@ TEST(store_run_lifecycle)
     CHECK(store_run_get(s, 999, &r) == MPM_ENOTFOUND);
     store_close(&s);
     CHECK(s == NULL);
-    store_close(&s);                         /* no-op */
+    store_close(&s); /* no-op */
 }
 
 TEST(store_energy_10k)
@@ -280,7 +287,7 @@ TEST(store_energy_10k)
     CHECK(v);
     for (int i = 0; i < 1000; i++) v[i] = make_sample(id2, i);
     rc = store_energy_append(s, id2, v, 1000);
-    memset(v, 0, 1000 * sizeof *v);          /* the store has its own copy */
+    memset(v, 0, 1000 * sizeof *v); /* the store has its own copy */
     free(v);
     CHECK(rc == 0);
     CHECK(store_flush(s) == 0);
@@ -337,9 +344,12 @@ TEST(store_nonfinite_values)
     e.e.kinetic = INFINITY;
     e.e.strain = -INFINITY;
     CHECK(store_energy_append(s, id, &e, 1) == 0);
-    store_run_end end = { .status = MPP_STATUS_FAILED, .steps = 3, .wall_s = NAN,
-                          .has_energy = 1, .energy = { INFINITY, NAN, 1.0, 0.0, NAN },
-                          .error = "diverged" };
+    store_run_end end = {.status = MPP_STATUS_FAILED,
+                         .steps = 3,
+                         .wall_s = NAN,
+                         .has_energy = 1,
+                         .energy = {INFINITY, NAN, 1.0, 0.0, NAN},
+                         .error = "diverged"};
     CHECK(store_run_finish(s, id, &end) == 0);
     CHECK(store_flush(s) == 0);
     mpm_energy_sample *es = NULL;
@@ -380,14 +390,14 @@ TEST(store_list_filter_limit)
     for (size_t i = 0; ok && i < n; i++) {
         char name[32];
         snprintf(name, sizeof name, "run-%d", (int)(10 - i));
-        ok = v[i].id == (int64_t)(10 - i) && !strcmp(v[i].name, name) &&
-             v[i].case_pb == NULL && v[i].case_len == sizeof case_bytes &&
+        ok = v[i].id == (int64_t)(10 - i) && !strcmp(v[i].name, name) && v[i].case_pb == NULL &&
+             v[i].case_len == sizeof case_bytes &&
              v[i].status == (mpp_status)(MPP_STATUS_MIN + (9 - i) % 5);
     }
     store_run_list_free(v, n);
     CHECKF(ok, "list all: newest first, names, statuses");
 
-    store_run_filter f = { .status_mask = STORE_STATUS_BIT(MPP_STATUS_FINISHED) };
+    store_run_filter f = {.status_mask = STORE_STATUS_BIT(MPP_STATUS_FINISHED)};
     CHECK(store_run_list(s, &f, &v, &n) == 0);
     ok = n == 2 && v[0].id == 8 && v[1].id == 3 && v[0].status == MPP_STATUS_FINISHED;
     store_run_list_free(v, n);
@@ -400,7 +410,7 @@ TEST(store_list_filter_limit)
     store_run_list_free(v, n);
     CHECKF(ok, "failed|queued, limit 3");
 
-    store_run_filter g = { .limit = 2, .before_id = 5, .with_case = 1 };
+    store_run_filter g = {.limit = 2, .before_id = 5, .with_case = 1};
     CHECK(store_run_list(s, &g, &v, &n) == 0);
     ok = n == 2 && v[0].id == 4 && v[1].id == 3 && v[0].case_pb &&
          v[0].case_len == sizeof case_bytes && !memcmp(v[0].case_pb, case_bytes, sizeof case_bytes);
@@ -425,13 +435,15 @@ TEST(store_reopen_ids_continue)
         store_run in = sample_run("persist", MPP_STATUS_QUEUED);
         int64_t id;
         CHECK(store_run_insert(s, &in, &id) == 0);
-        store_run_end end = { .status = MPP_STATUS_FINISHED, .steps = 10 * (i + 1),
-                              .has_energy = 1, .energy = { i, 0, 0, 0, i } };
+        store_run_end end = {.status = MPP_STATUS_FINISHED,
+                             .steps = 10 * (i + 1),
+                             .has_energy = 1,
+                             .energy = {i, 0, 0, 0, i}};
         CHECK(store_run_finish(s, id, &end) == 0);
         mpm_energy_sample e = make_sample(id, 0);
         CHECK(store_energy_append(s, id, &e, 1) == 0);
     }
-    store_close(&s);                            /* no flush: close flushes */
+    store_close(&s); /* no flush: close flushes */
 
     CHECKF(store_open(path, &quiet, &s) == 0, "reopen: %s", store_error()->message);
     store_stats st;
@@ -455,7 +467,7 @@ TEST(store_reopen_ids_continue)
     int64_t id = 0;
     CHECK(store_run_insert(s, &in, &id) == 0);
     CHECK(id == 5);
-    in.id = 100;                                /* explicit id moves the counter */
+    in.id = 100; /* explicit id moves the counter */
     CHECK(store_run_insert(s, &in, &id) == 0);
     CHECK(id == 100);
     in.id = 0;
@@ -483,14 +495,15 @@ TEST(store_crash_recovery)
     if (pid == 0) {
         /* the "daemon": leaves a running and a queued run, then dies */
         store *s = NULL;
-        store_options o = { .log = quiet_log };
+        store_options o = {.log = quiet_log};
         if (store_open(path, &o, &s)) _exit(10);
         store_run a = sample_run("was running", MPP_STATUS_QUEUED);
         store_run b = sample_run("was queued", MPP_STATUS_QUEUED);
         store_run c = sample_run("was finished", MPP_STATUS_QUEUED);
         int64_t ia, ib, ic;
         if (store_run_insert(s, &a, &ia) || store_run_insert(s, &b, &ib) ||
-            store_run_insert(s, &c, &ic)) _exit(11);
+            store_run_insert(s, &c, &ic))
+            _exit(11);
         if (store_run_set_status(s, ia, MPP_STATUS_RUNNING, 1700000100.0, NULL)) _exit(12);
         for (int i = 0; i < 100; i++) {
             mpm_energy_sample e = make_sample(ia, i);
@@ -498,17 +511,17 @@ TEST(store_crash_recovery)
         }
         /* progress recorded past the last sample (step 993) */
         if (store_run_progress(s, ia, 1234, 2.5, 1e6)) _exit(16);
-        store_run_end end = { .status = MPP_STATUS_FINISHED, .steps = 5 };
+        store_run_end end = {.status = MPP_STATUS_FINISHED, .steps = 5};
         if (store_run_finish(s, ic, &end)) _exit(14);
         if (store_flush(s)) _exit(15);
-        _exit(0);                                  /* no store_close */
+        _exit(0); /* no store_close */
     }
     int status = 0;
     CHECK(waitpid(pid, &status, 0) == pid);
     CHECKF(WIFEXITED(status) && WEXITSTATUS(status) == 0, "child status 0x%x", status);
 
-    logcap lc = { .mu = PTHREAD_MUTEX_INITIALIZER };
-    store_options o = { .log = cap_log, .log_ud = &lc };
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "reopen after crash: %s", store_error()->message);
     store_stats st;
@@ -525,13 +538,14 @@ TEST(store_crash_recovery)
     mpm_energy_sample last = make_sample(1, 99);
     int at_last = r.steps == last.step && r.energy.kinetic == last.e.kinetic &&
                   r.energy.strain == last.e.strain && r.energy.potential == last.e.potential &&
-                  r.energy.external_work == last.e.external_work &&
-                  r.energy.total == last.e.total;
+                  r.energy.external_work == last.e.external_work && r.energy.total == last.e.total;
     long long steps_done = (long long)r.steps;
     store_run_clear(&r);
     CHECKF(ok, "running run not marked interrupted");
-    CHECKF(at_last, "interrupted run: steps_done %lld and final energies, want those of its last "
-           "sample (step %lld)", steps_done, (long long)last.step);
+    CHECKF(at_last,
+           "interrupted run: steps_done %lld and final energies, want those of its last "
+           "sample (step %lld)",
+           steps_done, (long long)last.step);
     CHECK(store_run_get(s, 2, &r) == 0);
     ok = r.status == MPP_STATUS_INTERRUPTED && r.error &&
          !strcmp(r.error, STORE_INTERRUPTED_QUEUED) && r.started_at == 0 && r.steps == 0 &&
@@ -550,7 +564,7 @@ TEST(store_crash_recovery)
     free(es);
     CHECKF(ok, "flushed samples lost in the crash");
 
-    store_run_filter f = { .status_mask = STORE_STATUS_BIT(MPP_STATUS_INTERRUPTED) };
+    store_run_filter f = {.status_mask = STORE_STATUS_BIT(MPP_STATUS_INTERRUPTED)};
     store_run *v;
     size_t n;
     CHECK(store_run_list(s, &f, &v, &n) == 0);
@@ -576,7 +590,7 @@ TEST(store_lock_one_daemon)
              (long)getpid());
 
     /* the pid is in the lock file */
-    char lockp[600], buf[32] = { 0 };
+    char lockp[600], buf[32] = {0};
     snprintf(lockp, sizeof lockp, "%s.lock", path);
     int fd = open(lockp, O_RDONLY);
     CHECK(fd >= 0);
@@ -588,7 +602,8 @@ TEST(store_lock_one_daemon)
      * description) */
     int rc = store_open(path, &quiet, &s2);
     CHECKF(rc == MPM_ELOCKED && s2 == NULL, "second open: %d %s", rc, store_error()->message);
-    CHECKF(!strcmp(store_error()->message, want), "message '%s', want '%s'", store_error()->message, want);
+    CHECKF(!strcmp(store_error()->message, want), "message '%s', want '%s'", store_error()->message,
+           want);
 
     /* ... and from another process */
     int pfd[2];
@@ -604,7 +619,7 @@ TEST(store_lock_one_daemon)
         _exit(crc == MPM_ELOCKED && c == NULL && w > 0 ? 0 : 1);
     }
     close(pfd[1]);
-    char cmsg[1024] = { 0 };
+    char cmsg[1024] = {0};
     size_t got = 0;
     ssize_t k;
     while (got < sizeof cmsg - 1 && (k = read(pfd[0], cmsg + got, sizeof cmsg - 1 - got)) > 0)
@@ -633,8 +648,8 @@ TEST(store_lock_one_daemon)
 /* Overwrites 4 bytes (big-endian) of the database header. */
 static int patch_header(const char *path, off_t off, uint32_t v)
 {
-    unsigned char b[4] = { (unsigned char)(v >> 24), (unsigned char)(v >> 16),
-                           (unsigned char)(v >> 8), (unsigned char)v };
+    unsigned char b[4] = {(unsigned char)(v >> 24), (unsigned char)(v >> 16),
+                          (unsigned char)(v >> 8), (unsigned char)v};
     int fd = open(path, O_WRONLY);
     if (fd < 0) return -1;
     ssize_t w = pwrite(fd, b, 4, off);
@@ -648,14 +663,14 @@ TEST(store_schema_versions)
     char path[600];
     snprintf(path, sizeof path, "%s", p);
     store *s = NULL;
-    logcap lc = { .mu = PTHREAD_MUTEX_INITIALIZER };
-    store_options o = { .log = cap_log, .log_ud = &lc };
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
     CHECKF(store_open(path, &o, &s) == 0, "%s", store_error()->message);
     CHECK(lc.n_new == 1);
     int v = -1;
     CHECK(store_schema_version(s, &v) == 0);
     CHECKF(v == STORE_SCHEMA_VERSION, "user_version %d, want %d", v, STORE_SCHEMA_VERSION);
-    store_close(&s);                /* last connection: the WAL is checkpointed */
+    store_close(&s); /* last connection: the WAL is checkpointed */
 
     /* reopening an up-to-date database migrates nothing and keeps it */
     CHECKF(store_open(path, &o, &s) == 0, "%s", store_error()->message);
@@ -667,7 +682,8 @@ TEST(store_schema_versions)
     CHECK(patch_header(path, 60, 99) == 0);
     int rc = store_open(path, &quiet, &s);
     CHECKF(rc == MPM_ESCHEMA && s == NULL, "newer schema: %d %s", rc, store_error()->message);
-    CHECKF(strstr(store_error()->message, "schema version 99"), "message: %s", store_error()->message);
+    CHECKF(strstr(store_error()->message, "schema version 99"), "message: %s",
+           store_error()->message);
     CHECK(patch_header(path, 60, STORE_SCHEMA_VERSION) == 0);
     CHECKF(store_open(path, &quiet, &s) == 0, "restored: %s", store_error()->message);
     store_close(&s);
@@ -675,7 +691,8 @@ TEST(store_schema_versions)
     /* another application's database (application_id at offset 68) */
     CHECK(patch_header(path, 68, 0x12345678) == 0);
     rc = store_open(path, &quiet, &s);
-    CHECKF(rc == MPM_ESCHEMA && strstr(store_error()->message, "not an mpmd database"), "%d %s", rc, store_error()->message);
+    CHECKF(rc == MPM_ESCHEMA && strstr(store_error()->message, "not an mpmd database"), "%d %s", rc,
+           store_error()->message);
 
     /* not a database at all */
     const char *junk = db_path("junk.db");
@@ -687,11 +704,13 @@ TEST(store_schema_versions)
     close(fd);
     CHECK(w == (ssize_t)sizeof garbage);
     rc = store_open(junk, &quiet, &s);
-    CHECKF(rc == MPM_EIO && s == NULL && strstr(store_error()->message, "not a database"), "%d %s", rc, store_error()->message);
+    CHECKF(rc == MPM_EIO && s == NULL && strstr(store_error()->message, "not a database"), "%d %s",
+           rc, store_error()->message);
 
     /* a directory that does not exist */
     rc = store_open("/nonexistent-mpmd-dir/x.db", &quiet, &s);
-    CHECKF(rc == MPM_EIO && strstr(store_error()->message, "lock file"), "%d %s", rc, store_error()->message);
+    CHECKF(rc == MPM_EIO && strstr(store_error()->message, "lock file"), "%d %s", rc,
+           store_error()->message);
 }
 
 TEST(store_snapshots)
@@ -705,20 +724,24 @@ TEST(store_snapshots)
     for (int k = 0; k < 3; k++)
         for (int i = 0; i < 1024; i++) data[k][i] = (unsigned char)((i * (k + 3)) ^ (i >> 3));
     for (int k = 0; k < 3; k++) {
-        store_snapshot sn = { .run_id = id, .step = 10 * k, .t = 0.5 * k, .n = 64 + k,
-                              .dim = 2, .fields = 0x15u + (uint32_t)k,
-                              .data = data[k], .size = sizeof data[k] };
+        store_snapshot sn = {.run_id = id,
+                             .step = 10 * k,
+                             .t = 0.5 * k,
+                             .n = 64 + k,
+                             .dim = 2,
+                             .fields = 0x15u + (uint32_t)k,
+                             .data = data[k],
+                             .size = sizeof data[k]};
         CHECK(store_snapshot_put(s, &sn) == 0);
     }
-    memset(data[1], 0, sizeof data[1]);     /* the store copied it */
+    memset(data[1], 0, sizeof data[1]); /* the store copied it */
     CHECK(store_flush(s) == 0);
     store_snapshot out;
     CHECK(store_snapshot_get(s, id, 10, &out) == 0);
     unsigned char want[1024];
     for (int i = 0; i < 1024; i++) want[i] = (unsigned char)((i * 4) ^ (i >> 3));
-    int ok = out.run_id == id && out.step == 10 && out.t == 0.5 && out.n == 65 &&
-             out.dim == 2 && out.fields == 0x16u && out.size == 1024 &&
-             !memcmp(out.data, want, 1024);
+    int ok = out.run_id == id && out.step == 10 && out.t == 0.5 && out.n == 65 && out.dim == 2 &&
+             out.fields == 0x16u && out.size == 1024 && !memcmp(out.data, want, 1024);
     store_snapshot_clear(&out);
     CHECKF(ok, "snapshot at step 10");
 
@@ -728,10 +751,16 @@ TEST(store_snapshots)
     CHECKF(ok, "last snapshot");
 
     /* replace step 20 with an empty one; add step 30 */
-    store_snapshot e = { .run_id = id, .step = 20, .t = 1, .n = 0, .dim = 2 };
+    store_snapshot e = {.run_id = id, .step = 20, .t = 1, .n = 0, .dim = 2};
     CHECK(store_snapshot_put(s, &e) == 0);
-    store_snapshot e2 = { .run_id = id, .step = 30, .t = 1.5, .n = 1, .dim = 3, .fields = 1,
-                          .data = "xyz", .size = 3 };
+    store_snapshot e2 = {.run_id = id,
+                         .step = 30,
+                         .t = 1.5,
+                         .n = 1,
+                         .dim = 3,
+                         .fields = 1,
+                         .data = "xyz",
+                         .size = 3};
     CHECK(store_snapshot_put(s, &e2) == 0);
     CHECK(store_flush(s) == 0);
     CHECK(store_snapshot_get(s, id, 20, &out) == 0);
@@ -746,17 +775,20 @@ TEST(store_snapshots)
     CHECK(store_snapshot_get(s, id, 5, &out) == MPM_ENOTFOUND);
     CHECK(store_snapshot_get(s, 777, -1, &out) == MPM_ENOTFOUND);
     CHECK(strstr(store_error()->message, "777") != NULL);
-    store_snapshot bad = { .run_id = id, .step = 1, .dim = 4 };
+    store_snapshot bad = {.run_id = id, .step = 1, .dim = 4};
     CHECK(store_snapshot_put(s, &bad) == MPM_EINVAL);
     store_close(&s);
 }
 
 TEST(store_queue_cap)
 {
-    logcap lc = { .mu = PTHREAD_MUTEX_INITIALIZER };
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
     /* nothing commits before store_flush: a 60 s batching window */
-    store_options o = { .batch_ms = 60000, .batch_ops = 1000000, .queue_cap = 256 << 10,
-                        .log = cap_log, .log_ud = &lc };
+    store_options o = {.batch_ms = 60000,
+                       .batch_ops = 1000000,
+                       .queue_cap = 256 << 10,
+                       .log = cap_log,
+                       .log_ud = &lc};
     store *s = NULL;
     CHECKF(store_open(db_path("cap.db"), &o, &s) == 0, "%s", store_error()->message);
     store_run in = sample_run("cap", MPP_STATUS_RUNNING);
@@ -764,8 +796,8 @@ TEST(store_queue_cap)
     CHECK(store_run_insert(s, &in, &id) == 0);
     static unsigned char big[100 << 10];
     memset(big, 0xab, sizeof big);
-    store_snapshot sn = { .run_id = id, .step = 1, .n = 10, .dim = 3, .data = big,
-                          .size = sizeof big };
+    store_snapshot sn = {
+        .run_id = id, .step = 1, .n = 10, .dim = 3, .data = big, .size = sizeof big};
     CHECK(store_snapshot_put(s, &sn) == 0);
     sn.step = 2;
     CHECK(store_snapshot_put(s, &sn) == 0);
@@ -776,7 +808,7 @@ TEST(store_queue_cap)
     store_get_stats(s, &st);
     CHECK(st.snapshots_dropped == 1);
     CHECK(lc.n_dropped == 1);
-    CHECK(st.queue_ops == 3);              /* nothing committed yet */
+    CHECK(st.queue_ops == 3); /* nothing committed yet */
 
     /* energy samples are never dropped: the queue grows past the cap */
     for (int i = 0; i < 5000; i++) {
@@ -787,8 +819,8 @@ TEST(store_queue_cap)
     store_get_stats(s, &st);
     TLOG("queue %zu bytes in %zu ops, cap %zu", st.queue_bytes, st.queue_ops, o.queue_cap);
     CHECK(st.queue_bytes > o.queue_cap);
-    CHECK(lc.n_cap == 1);                  /* logged once */
-    store_snapshot small = { .run_id = id, .step = 4, .n = 1, .dim = 1, .data = "ab", .size = 2 };
+    CHECK(lc.n_cap == 1); /* logged once */
+    store_snapshot small = {.run_id = id, .step = 4, .n = 1, .dim = 1, .data = "ab", .size = 2};
     CHECK(store_snapshot_put(s, &small) == MPM_EFULL);
 
     CHECK(store_flush(s) == 0);
@@ -819,8 +851,8 @@ TEST(store_queue_cap)
 
 TEST(store_write_errors)
 {
-    logcap lc = { .mu = PTHREAD_MUTEX_INITIALIZER };
-    store_options o = { .log = cap_log, .log_ud = &lc };
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
     char msg[512];
     store *s = NULL;
     CHECKF(store_open(db_path("errors.db"), &o, &s) == 0, "%s", store_error()->message);
@@ -830,15 +862,14 @@ TEST(store_write_errors)
     CHECK(store_flush(s) == 0);
 
     /* a bad op between good ones: only it fails, the batch commits */
-    mpm_energy_sample e0 = make_sample(id, 0), bad = make_sample(999, 0),
-                        e1 = make_sample(id, 1);
+    mpm_energy_sample e0 = make_sample(id, 0), bad = make_sample(999, 0), e1 = make_sample(id, 1);
     CHECK(store_energy_append(s, id, &e0, 1) == 0);
-    CHECK(store_energy_append(s, 999, &bad, 1) == 0);      /* accepted: checked on write */
+    CHECK(store_energy_append(s, 999, &bad, 1) == 0); /* accepted: checked on write */
     CHECK(store_energy_append(s, id, &e1, 1) == 0);
     CHECK(store_flush(s) == MPM_EIO);
     store_last_write_error(s, msg, sizeof msg);
     CHECKF(strstr(msg, "FOREIGN KEY") && strstr(msg, "run 999"), "error text: %s", msg);
-    CHECK(store_flush(s) == 0);                    /* reported once */
+    CHECK(store_flush(s) == 0); /* reported once */
     mpm_energy_sample *es = NULL;
     size_t nes = 0;
     CHECK(store_energy_read(s, id, 0, 0, &es, &nes) == 0);
@@ -846,7 +877,7 @@ TEST(store_write_errors)
     free(es);
     CHECKF(ok, "good samples around a bad one");
 
-    CHECK(store_energy_append(s, id, &e1, 1) == 0);       /* duplicate (run, seq) */
+    CHECK(store_energy_append(s, id, &e1, 1) == 0); /* duplicate (run, seq) */
     CHECK(store_flush(s) == MPM_EIO);
     store_last_write_error(s, msg, sizeof msg);
     CHECKF(strstr(msg, "UNIQUE"), "%s", msg);
@@ -857,7 +888,7 @@ TEST(store_write_errors)
     CHECKF(strstr(msg, "no run 7777"), "%s", msg);
     CHECK(strstr(store_error()->message, "no run 7777") != NULL);
 
-    in.id = id;                                    /* duplicate run id */
+    in.id = id; /* duplicate run id */
     CHECK(store_run_insert(s, &in, NULL) == 0);
     CHECK(store_flush(s) == MPM_EIO);
     store_stats st;
@@ -869,7 +900,7 @@ TEST(store_write_errors)
     CHECK(nlog >= 4);
 
     /* argument errors come back at once */
-    store_run_end end = { .status = MPP_STATUS_RUNNING };
+    store_run_end end = {.status = MPP_STATUS_RUNNING};
     CHECK(store_run_finish(s, id, &end) == MPM_EINVAL);
     CHECK(strstr(store_error()->message, "not a final status") != NULL);
     store_run b = sample_run("bad", MPP_STATUS_QUEUED);
@@ -878,7 +909,7 @@ TEST(store_write_errors)
     b = sample_run("bad", (mpp_status)17);
     CHECK(store_run_insert(s, &b, NULL) == MPM_EINVAL);
     CHECK(store_run_set_status(s, id, (mpp_status)-1, 0, NULL) == MPM_EINVAL);
-    CHECK(store_run_set_status(s, id, (mpp_status)0, 0, NULL) == MPM_EINVAL);  /* 1..6 */
+    CHECK(store_run_set_status(s, id, (mpp_status)0, 0, NULL) == MPM_EINVAL); /* 1..6 */
     CHECK(store_flush(s) == 0);
     CHECK(strcmp(mpm_strerror(MPM_ELOCKED), mpm_strerror(MPM_EIO)));
     CHECK(store_error()->code == MPM_EINVAL);
@@ -893,13 +924,17 @@ TEST(store_write_errors)
     store_close(&s);
     char sql[256];
     int64_t cnt = -1;
-    snprintf(sql, sizeof sql, "SELECT count(*) FROM runs WHERE id = %lld AND status ="
-             " 'interrupted' AND method = 'mpm' AND \"update\" = 'usl'", (long long)id2);
+    snprintf(sql, sizeof sql,
+             "SELECT count(*) FROM runs WHERE id = %lld AND status ="
+             " 'interrupted' AND method = 'mpm' AND \"update\" = 'usl'",
+             (long long)id2);
     CHECKF(store_exec_raw(db_path("errors.db"), sql, &cnt) == 0, "%s", store_error()->message);
     CHECK(cnt == 1);
     cnt = -1;
-    snprintf(sql, sizeof sql, "SELECT count(*) FROM runs WHERE id = %lld AND status ="
-             " 'running' AND method = 'gimp' AND \"update\" = 'musl'", (long long)id);
+    snprintf(sql, sizeof sql,
+             "SELECT count(*) FROM runs WHERE id = %lld AND status ="
+             " 'running' AND method = 'gimp' AND \"update\" = 'musl'",
+             (long long)id);
     CHECK(store_exec_raw(db_path("errors.db"), sql, &cnt) == 0 && cnt == 1);
 }
 
@@ -913,8 +948,7 @@ TEST(store_commits_without_flush)
     CHECK(store_run_insert(s, &in, &id) == 0);
     store_run r;
     int rc;
-    while ((rc = store_run_get(s, id, &r)) == MPM_ENOTFOUND && td_now() - t0 < 5)
-        sleep_ms(2);
+    while ((rc = store_run_get(s, id, &r)) == MPM_ENOTFOUND && td_now() - t0 < 5) sleep_ms(2);
     double dt = td_now() - t0;
     CHECKF(rc == 0, "run not committed after %.2f s: %d %s", dt, rc, store_error()->message);
     store_run_clear(&r);
@@ -952,7 +986,10 @@ typedef struct {
     pthread_mutex_t mu;
 } cr_ctx;
 
-typedef struct { cr_ctx *c; int k; } cr_arg;
+typedef struct {
+    cr_ctx *c;
+    int k;
+} cr_arg;
 
 static void cr_error(cr_ctx *c, const char *what)
 {
@@ -970,7 +1007,10 @@ static void *cr_producer(void *p)
         int64_t id = c->ids[r];
         for (int i = 0; i < CR_SAMPLES; i++) {
             mpm_energy_sample e = make_sample(id, i);
-            if (store_energy_append(c->s, id, &e, 1)) { cr_error(c, "append failed"); return NULL; }
+            if (store_energy_append(c->s, id, &e, 1)) {
+                cr_error(c, "append failed");
+                return NULL;
+            }
             if (i % 200 == 199) {
                 if (store_run_progress(c->s, id, i + 1, 0, 0)) cr_error(c, "progress failed");
                 sleep_ms(2);
@@ -984,32 +1024,50 @@ static void *cr_reader(void *p)
 {
     cr_arg *a = p;
     cr_ctx *c = a->c;
-    size_t last_n[CR_RUNS] = { 0 };
+    size_t last_n[CR_RUNS] = {0};
     unsigned seed = (unsigned)a->k * 7919u + 1;
     while (!atomic_load(&c->producers_done)) {
         seed = seed * 1103515245u + 12345u;
         int r = (int)((seed >> 16) % CR_RUNS);
         int64_t id = c->ids[r];
-            mpm_energy_sample *es = NULL;
+        mpm_energy_sample *es = NULL;
         size_t nes = 0;
-        if (store_energy_read(c->s, id, 0, 0, &es, &nes)) { cr_error(c, store_error()->message); break; }
+        if (store_energy_read(c->s, id, 0, 0, &es, &nes)) {
+            cr_error(c, store_error()->message);
+            break;
+        }
         int ok = nes >= last_n[r];
         for (size_t i = 0; ok && i < nes; i++) ok = sample_equals(es, i, id, (int64_t)i);
         if (nes > 0 && nes < CR_SAMPLES) atomic_fetch_add(&c->partial, 1);
         last_n[r] = nes;
         free(es);
-        if (!ok) { cr_error(c, "energy series not a growing exact prefix"); break; }
+        if (!ok) {
+            cr_error(c, "energy series not a growing exact prefix");
+            break;
+        }
         store_run run;
-        if (store_run_get(c->s, id, &run)) { cr_error(c, store_error()->message); break; }
+        if (store_run_get(c->s, id, &run)) {
+            cr_error(c, store_error()->message);
+            break;
+        }
         ok = run.id == id && run.steps <= CR_SAMPLES;
         store_run_clear(&run);
-        if (!ok) { cr_error(c, "run record wrong"); break; }
+        if (!ok) {
+            cr_error(c, "run record wrong");
+            break;
+        }
         if (a->k == 0) {
             store_run *v;
             size_t n;
-            if (store_run_list(c->s, NULL, &v, &n)) { cr_error(c, store_error()->message); break; }
+            if (store_run_list(c->s, NULL, &v, &n)) {
+                cr_error(c, store_error()->message);
+                break;
+            }
             store_run_list_free(v, n);
-            if (n != CR_RUNS) { cr_error(c, "list count"); break; }
+            if (n != CR_RUNS) {
+                cr_error(c, "list count");
+                break;
+            }
         }
         atomic_fetch_add(&c->reads, 1);
     }
@@ -1018,7 +1076,7 @@ static void *cr_reader(void *p)
 
 TEST(store_concurrent_readers)
 {
-    store_options o = { .batch_ms = 5, .log = quiet_log };
+    store_options o = {.batch_ms = 5, .log = quiet_log};
     static cr_ctx c;
     memset(&c, 0, sizeof c);
     pthread_mutex_init(&c.mu, NULL);
@@ -1036,11 +1094,11 @@ TEST(store_concurrent_readers)
     cr_arg pa[NP], ra[NR];
     double t0 = td_now();
     for (int i = 0; i < NR; i++) {
-        ra[i] = (cr_arg){ &c, i };
+        ra[i] = (cr_arg){&c, i};
         CHECK(pthread_create(&rd[i], NULL, cr_reader, &ra[i]) == 0);
     }
     for (int i = 0; i < NP; i++) {
-        pa[i] = (cr_arg){ &c, i };
+        pa[i] = (cr_arg){&c, i};
         CHECK(pthread_create(&prod[i], NULL, cr_producer, &pa[i]) == 0);
     }
     for (int i = 0; i < NP; i++) pthread_join(prod[i], NULL);
@@ -1061,11 +1119,10 @@ TEST(store_concurrent_readers)
     CHECKF(atomic_load(&c.partial) > 0, "readers never saw a batch in progress");
     CHECK(b.transactions - a.transactions > 1);
     for (int r = 0; r < CR_RUNS; r++) {
-            mpm_energy_sample *es = NULL;
+        mpm_energy_sample *es = NULL;
         size_t nes = 0;
         CHECK(store_energy_read(c.s, c.ids[r], 0, 0, &es, &nes) == 0);
-        int ok = nes == CR_SAMPLES && sample_equals(es, CR_SAMPLES - 1, c.ids[r],
-                                                         CR_SAMPLES - 1);
+        int ok = nes == CR_SAMPLES && sample_equals(es, CR_SAMPLES - 1, c.ids[r], CR_SAMPLES - 1);
         free(es);
         CHECKF(ok, "run %d incomplete after flush", r);
     }
@@ -1133,7 +1190,7 @@ static const char old_schema_v1[] =
     "  PRIMARY KEY (run_id, step)"
     ");"
     "PRAGMA user_version = 1;"
-    "PRAGMA application_id = 1836084580;"      /* 0x6d706d64, "mpmd" */
+    "PRAGMA application_id = 1836084580;" /* 0x6d706d64, "mpmd" */
     "PRAGMA journal_mode = WAL;";
 
 /* Rows as the old store wrote them: a finished run (case bytes = case_bytes,
@@ -1169,8 +1226,8 @@ TEST(store_migrate_old_schema)
     CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
     CHECKF(store_exec_raw(path, old_rows_v1, NULL) == 0, "%s", store_error()->message);
 
-    logcap lc = { .mu = PTHREAD_MUTEX_INITIALIZER };
-    store_options o = { .log = cap_log, .log_ud = &lc };
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
            store_error()->message);
@@ -1222,21 +1279,19 @@ TEST(store_migrate_old_schema)
     CHECKF(ok, "the old snapshot reads back differently");
     store_run_extra x;
     CHECK(store_run_extras(s, 1, &x) == 0);
-    ok = x.energy_count == 3 && x.last_seq == 2 && x.n_snapshots == 1 &&
-         x.snapshot_steps[0] == 100;
+    ok = x.energy_count == 3 && x.last_seq == 2 && x.n_snapshots == 1 && x.snapshot_steps[0] == 100;
     store_run_extra_clear(&x);
     CHECK(ok);
 
     /* the run left running: interrupted at its last sample (step 17) */
     CHECK(store_run_get(s, 2, &r) == 0);
-    ok = r.status == MPP_STATUS_INTERRUPTED && r.method == MPM_METHOD_MPM &&
-         r.update == MPM_USL && r.dim == 1 && r.steps == 17 && r.energy.kinetic == 3.0 &&
-         r.energy.strain == 6.0 && r.energy.total == 8.0 && r.finished_at == 0 &&
-         r.started_at == 1700000011.0 && r.case_len == 0 && r.error &&
-         !strcmp(r.error, STORE_INTERRUPTED_RUNNING);
+    ok = r.status == MPP_STATUS_INTERRUPTED && r.method == MPM_METHOD_MPM && r.update == MPM_USL &&
+         r.dim == 1 && r.steps == 17 && r.energy.kinetic == 3.0 && r.energy.strain == 6.0 &&
+         r.energy.total == 8.0 && r.finished_at == 0 && r.started_at == 1700000011.0 &&
+         r.case_len == 0 && r.error && !strcmp(r.error, STORE_INTERRUPTED_RUNNING);
     store_run_clear(&r);
     CHECKF(ok, "the old running run after migration and recovery");
-    store_run_filter f = { .status_mask = STORE_STATUS_BIT(MPP_STATUS_FINISHED) };
+    store_run_filter f = {.status_mask = STORE_STATUS_BIT(MPP_STATUS_FINISHED)};
     store_run *list;
     size_t n;
     CHECK(store_run_list(s, &f, &list, &n) == 0);
@@ -1249,30 +1304,43 @@ TEST(store_migrate_old_schema)
     int64_t id = 0;
     CHECK(store_run_insert(s, &in, &id) == 0);
     CHECK(id == 3);
-    store_run_end end = { .status = MPP_STATUS_FINISHED, .finished_at = 1700000020.0,
-                          .steps = 9 };
+    store_run_end end = {.status = MPP_STATUS_FINISHED, .finished_at = 1700000020.0, .steps = 9};
     CHECK(store_run_finish(s, id, &end) == 0);
     CHECK(store_flush(s) == 0);
     CHECK(store_run_get(s, id, &r) == 0);
-    ok = r.update == MPM_MUSL && r.status == MPP_STATUS_FINISHED &&
-         r.finished_at == 1700000020.0 && r.steps == 9;
+    ok = r.update == MPM_MUSL && r.status == MPP_STATUS_FINISHED && r.finished_at == 1700000020.0 &&
+         r.steps == 9;
     store_run_clear(&r);
     CHECK(ok);
     store_close(&s);
 
     /* on disk: the hash column and its index are gone, the columns renamed */
     int64_t cnt = -1;
-    CHECK(store_exec_raw(path, "SELECT count(*) FROM pragma_table_info('runs') WHERE name IN"
-                         " ('case_hash', 'update_scheme', 'ended_at', 'steps_done')", &cnt) == 0);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_table_info('runs') WHERE name IN"
+                         " ('case_hash', 'update_scheme', 'ended_at', 'steps_done')",
+                         &cnt) == 0);
     CHECKF(cnt == 0, "%lld old columns left", (long long)cnt);
-    CHECK(store_exec_raw(path, "SELECT count(*) FROM pragma_table_info('runs') WHERE name IN"
-                         " ('update', 'finished_at', 'steps')", &cnt) == 0 && cnt == 3);
-    CHECK(store_exec_raw(path, "SELECT count(*) FROM sqlite_master WHERE name ="
-                         " 'runs_by_case_hash'", &cnt) == 0 && cnt == 0);
-    CHECK(store_exec_raw(path, "SELECT count(*) FROM sqlite_master WHERE name ="
-                         " 'runs_by_status'", &cnt) == 0 && cnt == 1);
-    CHECK(store_exec_raw(path, "SELECT count(*) FROM pragma_integrity_check WHERE"
-                         " integrity_check != 'ok'", &cnt) == 0 && cnt == 0);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_table_info('runs') WHERE name IN"
+                         " ('update', 'finished_at', 'steps')",
+                         &cnt) == 0 &&
+          cnt == 3);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM sqlite_master WHERE name ="
+                         " 'runs_by_case_hash'",
+                         &cnt) == 0 &&
+          cnt == 0);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM sqlite_master WHERE name ="
+                         " 'runs_by_status'",
+                         &cnt) == 0 &&
+          cnt == 1);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
     /* the renamed column keeps its CHECK constraint */
     int rc = store_exec_raw(path, "UPDATE runs SET \"update\" = 'bogus' WHERE id = 1", NULL);
     CHECKF(rc == MPM_EIO && strstr(store_error()->message, "CHECK"), "%d %s", rc,
@@ -1291,7 +1359,7 @@ TEST(store_migrate_old_schema)
 /* 1 when fd becomes readable within ms milliseconds. */
 static int readable_within(int fd, int ms)
 {
-    struct pollfd p = { .fd = fd, .events = POLLIN };
+    struct pollfd p = {.fd = fd, .events = POLLIN};
     return poll(&p, 1, ms) == 1 && (p.revents & POLLIN);
 }
 
@@ -1309,7 +1377,7 @@ TEST(store_tickets)
 {
     /* nothing commits on its own for 60 s: whatever commits does so because
      * a ticket (or a flush) asked for it */
-    store_options o = { .batch_ms = 60000, .log = quiet_log };
+    store_options o = {.batch_ms = 60000, .log = quiet_log};
     store *s = NULL;
     CHECKF(store_open(db_path("tickets.db"), &o, &s) == 0, "%s", store_error()->message);
     int fd = store_notify_fd(s);
@@ -1321,10 +1389,10 @@ TEST(store_tickets)
     in.name = "B";
     CHECK(store_run_insert(s, &in, &b) == 0);
     CHECK(store_flush(s) == 0);
-    CHECK(readable_within(fd, 0));            /* the flush's commit */
+    CHECK(readable_within(fd, 0)); /* the flush's commit */
     store_notify_drain(s);
-    CHECK(!readable_within(fd, 0));           /* drained */
-    store_notify_drain(s);                    /* draining an empty fd: no-op */
+    CHECK(!readable_within(fd, 0)); /* drained */
+    store_notify_drain(s);          /* draining an empty fd: no-op */
 
     /* nothing pending: tickets are done at once */
     CHECK(store_ticket(s, a) == 0 && store_ticket_done(s, 0));
@@ -1356,10 +1424,10 @@ TEST(store_tickets)
     store_notify_drain(s);
 
     /* a write for B only: A's ticket does not wait for it */
-    CHECK(wait_ticket(s, store_ticket(s, b)));  /* B's first sample is in */
+    CHECK(wait_ticket(s, store_ticket(s, b))); /* B's first sample is in */
     mpm_energy_sample eb1 = make_sample(b, 1);
     CHECK(store_energy_append(s, b, &eb1, 1) == 0);
-    CHECK(store_ticket(s, a) == 0);           /* A has nothing pending */
+    CHECK(store_ticket(s, a) == 0); /* A has nothing pending */
     store_stats st1;
     store_get_stats(s, &st1);
     CHECKF(st1.queue_ops == 1, "%zu writes pending, want B's", st1.queue_ops);
@@ -1403,7 +1471,7 @@ TEST(store_tickets_many_runs)
 {
     /* more runs than the ticket map's first size: it is rebuilt, and every
      * run's ticket stays that of its last write */
-    store_options o = { .batch_ms = 60000, .log = quiet_log };
+    store_options o = {.batch_ms = 60000, .log = quiet_log};
     store *s = NULL;
     CHECKF(store_open(db_path("tickets2.db"), &o, &s) == 0, "%s", store_error()->message);
     enum { NRUNS = 300 };
@@ -1418,7 +1486,7 @@ TEST(store_tickets_many_runs)
     for (int i = 0; i < NRUNS; i += 2) CHECK(store_run_progress(s, ids[i], i, 1, 1) == 0);
     store_stats st1;
     store_get_stats(s, &st1);
-    CHECK(st1.queue_ops == NRUNS + NRUNS / 2);    /* nothing committed yet */
+    CHECK(st1.queue_ops == NRUNS + NRUNS / 2); /* nothing committed yet */
     /* run_ticket(i): insert i is op base + i + 1, progress of 2k op base + NRUNS + k + 1 */
     uint64_t base = st0.ops_enqueued;
     int pending = 0;
@@ -1432,7 +1500,7 @@ TEST(store_tickets_many_runs)
         pending += t != 0;
     }
     TLOG("%d of %d tickets taken while their writes were pending", pending, NRUNS);
-    CHECK(pending > 0);                 /* the first at least: nothing had committed */
+    CHECK(pending > 0); /* the first at least: nothing had committed */
     CHECK(store_flush(s) == 0);
     for (int i = 0; i < NRUNS; i++) CHECK(store_ticket(s, ids[i]) == 0);
     /* after the commits, the map is rebuilt without them */

@@ -126,7 +126,8 @@ static int wave_case(wave *w, int dim, mpm_method m, mpm_update u, double C, int
             w->v[p * dim + d] = (dim == 1 ? v0 * sin(M_PI / 2 * X) : v0 * sin(M_PI * X)) + noise;
         }
     }
-    w->mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, dim == 1 ? 10.0 : 1.0, dim == 1 ? 0 : 0.3, 1.0};
+    w->mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, dim == 1 ? 10.0 : 1.0,
+                                 dim == 1 ? 0 : 0.3, 1.0};
     w->b.n_points = n;
     w->b.x = w->x;
     w->b.volume = w->vol;
@@ -152,12 +153,12 @@ static int wave_case(wave *w, int dim, mpm_method m, mpm_update u, double C, int
 }
 
 typedef struct {
-    int rc;          /* 0 or MPM_E* */
-    int stable;      /* the definition: finished, growth <= 1% */
-    int bounded;     /* finished and never above 2 E0: no blow-up */
+    int rc;      /* 0 or MPM_E* */
+    int stable;  /* the definition: finished, growth <= 1% */
+    int bounded; /* finished and never above 2 E0: no blow-up */
     long steps;
-    double growth;   /* mean E over the last period / over the first - 1 */
-    double end;      /* E at the end / E0 */
+    double growth; /* mean E over the last period / over the first - 1 */
+    double end;    /* E at the end / E0 */
     char msg[300];
 } cfl_out;
 
@@ -192,8 +193,10 @@ static void cfl_run(int dim, mpm_method m, mpm_update u, double C, double v0, cf
     while (mpm_sim_time(s) < tend) {
         if (mpm_sim_steps(s) >= budget) {
             o->rc = MPM_EDIVERGED;
-            snprintf(o->msg, sizeof o->msg, "step budget %ld spent at t = %.4g of %.4g (dt fell to "
-                     "%.3g: the speed grew)", budget, mpm_sim_time(s), tend, mpm_sim_dt(s));
+            snprintf(o->msg, sizeof o->msg,
+                     "step budget %ld spent at t = %.4g of %.4g (dt fell to "
+                     "%.3g: the speed grew)",
+                     budget, mpm_sim_time(s), tend, mpm_sim_dt(s));
             break;
         }
         if ((o->rc = mpm_sim_step(s))) {
@@ -214,7 +217,8 @@ static void cfl_run(int dim, mpm_method m, mpm_update u, double C, double v0, cf
         }
     }
     /* as the daemon does before it reports a run finished */
-    if (!o->rc && (o->rc = mpm_sim_check(s))) snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
+    if (!o->rc && (o->rc = mpm_sim_check(s)))
+        snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
     mpm_sim_energy(s, &e);
     o->end = e.total / e0.total;
     o->growth = nlast ? (last / nlast) / (first / nfirst) - 1 : 0;
@@ -227,65 +231,74 @@ static void cfl_run(int dim, mpm_method m, mpm_update u, double C, double v0, cf
 
 TEST(stress_cfl_sweep)
 {
-    static const double full_c[] = {0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95,
-                                    1.0, 1.05, 1.1, 1.2, 1.3, 1.4, 1.5};
+    static const double full_c[] = {0.05, 0.1,  0.2, 0.3,  0.4, 0.5, 0.6, 0.7, 0.8,
+                                    0.9,  0.95, 1.0, 1.05, 1.1, 1.2, 1.3, 1.4, 1.5};
     static const double quick_c[] = {0.1, 0.5, 0.9, 1.0, 1.1, 1.5};
     int full = full_mode(), nc = full ? 18 : 6, maxdim = full ? 3 : 1;
     const double *cs = full ? full_c : quick_c;
-    TLOG("Courant factor C of the automatic dt = C h / (c + |v|max) over 10 periods.  Stable "
-         "(the issue's definition): finished, mean energy of the last period <= 1.01 x that of "
-         "the first.  '.' stable; 'g' finished, grew by more than 1%% but stayed below 2 E0 "
-         "(drift); 'b' finished below 2 E0 but went above it on the way; 'X' finished above 2 "
-         "E0 (a blow-up the solver did not flag: asserted never); "
-         "'D' diverged (the divergence guard or a NaN) or its dt collapsed; 'L' a particle left the grid");
+    TLOG(
+        "Courant factor C of the automatic dt = C h / (c + |v|max) over 10 periods.  Stable "
+        "(the issue's definition): finished, mean energy of the last period <= 1.01 x that of "
+        "the first.  '.' stable; 'g' finished, grew by more than 1%% but stayed below 2 E0 "
+        "(drift); 'b' finished below 2 E0 but went above it on the way; 'X' finished above 2 "
+        "E0 (a blow-up the solver did not flag: asserted never); "
+        "'D' diverged (the divergence guard or a NaN) or its dt collapsed; 'L' a particle left the grid");
     char hdr[256] = "", *hp = hdr;
     for (int k = 0; k < nc; k++) hp += snprintf(hp, sizeof hdr - (size_t)(hp - hdr), "%5g", cs[k]);
     for (int big = 0; big <= full; big++) {
-    double v0 = big ? 0.1 : 1e-3;
-    TLOG("v0 = %g (%s):", v0, big ? "the paper's amplitude, points cross cells" : "no cell crossing");
-    TLOG("%-14s %s   largest stable C / without blow-up", "", hdr);
-    for (int dim = 1; dim <= maxdim; dim++)
-        for (int m = 0; m < 2; m++)
-            for (int u = 0; u < 3; u++) {
-                mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
-                char row[128] = "", *rp = row, first_fail[400] = "";
-                double largest = 0, largest_b = 0;
-                int all_stable_so_far = 1, all_bounded_so_far = 1, default_ok = 1;
-                for (int k = 0; k < nc; k++) {
-                    cfl_out o;
-                    cfl_run(dim, meth, (mpm_update)u, cs[k], v0, &o);
-                    /* never anything but a finished run or a recorded failure */
-                    CHECKF(o.rc == 0 || o.rc == MPM_EDIVERGED || o.rc == MPM_ELEFTGRID,
-                           "%dD %s %s C=%g: rc %d (%s)", dim, mname(meth), upd_name((mpm_update)u),
-                           cs[k], o.rc, o.msg);
-                    CHECKF(o.rc == 0 || strlen(o.msg) > 10, "failure without a reason");
-                    char mark = o.stable ? '.' : o.rc == MPM_ELEFTGRID ? 'L' : o.rc ? 'D'
-                                : o.end > 2 ? 'X' : o.bounded ? 'g' : 'b';
-                    rp += snprintf(rp, sizeof row - (size_t)(rp - row), "%5c", mark);
-                    /* the divergence guard: a blow-up is a recorded failure */
-                    CHECKF(mark != 'X', "%dD %s %s C=%g finished at %.3g E0 without a failure (%ld steps)",
-                           dim, mname(meth), upd_name((mpm_update)u), cs[k], o.end, o.steps);
-                    if (o.stable && all_stable_so_far) largest = cs[k];
-                    if (o.bounded && all_bounded_so_far) largest_b = cs[k];
-                    all_bounded_so_far &= o.bounded;
-                    if (!o.stable && all_stable_so_far) {
-                        all_stable_so_far = 0;
-                        snprintf(first_fail, sizeof first_fail, "first unstable C=%g: %s",
-                                 cs[k], o.rc ? o.msg : "energy grew");
-                        if (!o.rc)
-                            snprintf(first_fail, sizeof first_fail,
-                                     "first unstable C=%g: energy +%.3g%%", cs[k], 100 * o.growth);
+        double v0 = big ? 0.1 : 1e-3;
+        TLOG("v0 = %g (%s):", v0,
+             big ? "the paper's amplitude, points cross cells" : "no cell crossing");
+        TLOG("%-14s %s   largest stable C / without blow-up", "", hdr);
+        for (int dim = 1; dim <= maxdim; dim++)
+            for (int m = 0; m < 2; m++)
+                for (int u = 0; u < 3; u++) {
+                    mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+                    char row[128] = "", *rp = row, first_fail[400] = "";
+                    double largest = 0, largest_b = 0;
+                    int all_stable_so_far = 1, all_bounded_so_far = 1, default_ok = 1;
+                    for (int k = 0; k < nc; k++) {
+                        cfl_out o;
+                        cfl_run(dim, meth, (mpm_update)u, cs[k], v0, &o);
+                        /* never anything but a finished run or a recorded failure */
+                        CHECKF(o.rc == 0 || o.rc == MPM_EDIVERGED || o.rc == MPM_ELEFTGRID,
+                               "%dD %s %s C=%g: rc %d (%s)", dim, mname(meth),
+                               upd_name((mpm_update)u), cs[k], o.rc, o.msg);
+                        CHECKF(o.rc == 0 || strlen(o.msg) > 10, "failure without a reason");
+                        char mark = o.stable                ? '.'
+                                    : o.rc == MPM_ELEFTGRID ? 'L'
+                                    : o.rc                  ? 'D'
+                                    : o.end > 2             ? 'X'
+                                    : o.bounded             ? 'g'
+                                                            : 'b';
+                        rp += snprintf(rp, sizeof row - (size_t)(rp - row), "%5c", mark);
+                        /* the divergence guard: a blow-up is a recorded failure */
+                        CHECKF(mark != 'X',
+                               "%dD %s %s C=%g finished at %.3g E0 without a failure (%ld steps)",
+                               dim, mname(meth), upd_name((mpm_update)u), cs[k], o.end, o.steps);
+                        if (o.stable && all_stable_so_far) largest = cs[k];
+                        if (o.bounded && all_bounded_so_far) largest_b = cs[k];
+                        all_bounded_so_far &= o.bounded;
+                        if (!o.stable && all_stable_so_far) {
+                            all_stable_so_far = 0;
+                            snprintf(first_fail, sizeof first_fail, "first unstable C=%g: %s",
+                                     cs[k], o.rc ? o.msg : "energy grew");
+                            if (!o.rc)
+                                snprintf(first_fail, sizeof first_fail,
+                                         "first unstable C=%g: energy +%.3g%%", cs[k],
+                                         100 * o.growth);
+                        }
+                        if (cs[k] == MPM_DEFAULT_CFL) default_ok = o.stable;
                     }
-                    if (cs[k] == MPM_DEFAULT_CFL) default_ok = o.stable;
+                    TLOG("%dD %-4s %-4s   %s   %g / %g%s%s", dim, mname(meth),
+                         upd_name((mpm_update)u), row, largest, largest_b,
+                         first_fail[0] ? "; " : "", first_fail);
+                    /* the solver's default (0.5) must be safe wherever the
+                     * scheme is stable at all (without cell crossing) */
+                    if (!big && !(meth == MPM_METHOD_MPM && u == MPM_USL))
+                        CHECKF(default_ok, "%dD %s %s is not stable at the default C = 0.5", dim,
+                               mname(meth), upd_name((mpm_update)u));
                 }
-                TLOG("%dD %-4s %-4s   %s   %g / %g%s%s", dim, mname(meth), upd_name((mpm_update)u), row,
-                     largest, largest_b, first_fail[0] ? "; " : "", first_fail);
-                /* the solver's default (0.5) must be safe wherever the
-                 * scheme is stable at all (without cell crossing) */
-                if (!big && !(meth == MPM_METHOD_MPM && u == MPM_USL))
-                    CHECKF(default_ok, "%dD %s %s is not stable at the default C = 0.5", dim,
-                           mname(meth), upd_name((mpm_update)u));
-            }
     }
     /* the refusal: cfl > 1 and a given dt above the limit, unless allowed */
     for (int dim = 1; dim <= 2; dim++) {
@@ -304,9 +317,11 @@ TEST(stress_cfl_sweep)
         w.c.cfl = 0;
         w.c.dt = 1.01 * lim;
         rc = mpm_case_check(&w.c, NULL, &err);
-        CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "above the CFL limit"), "rc %d: %s", rc, TERR(&err));
+        CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "above the CFL limit"), "rc %d: %s", rc,
+               TERR(&err));
         TLOG("%dD refusal: cfl 1.05 -> \"cfl: 1.05 is above the stability limit 1; ...\"; "
-             "dt = 1.01 x limit -> \"%.60s...\"", dim, TERR(&err));
+             "dt = 1.01 x limit -> \"%.60s...\"",
+             dim, TERR(&err));
         w.c.dt = 0.99 * lim;
         CHECK(mpm_case_check(&w.c, NULL, &err) == 0);
         wave_free(&w);
@@ -318,7 +333,8 @@ TEST(stress_cfl_sweep)
         mpm_error err;
         CHECK(wave_case(&w, 1, MPM_METHOD_GIMP, MPM_USL, 0.6, 0, 1e-3) == 0);
         int rc = mpm_case_check(&w.c, NULL, &err);
-        CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "cfl: 0.6 is above the stability limit 0.5 of USL"),
+        CHECKF(rc == MPM_ECFL &&
+                   strstr(TERR(&err), "cfl: 0.6 is above the stability limit 0.5 of USL"),
                "rc %d: %s", rc, TERR(&err));
         w.c.cfl = 0.5;
         CHECKF(mpm_case_check(&w.c, NULL, &err) == 0, "%s", TERR(&err));
@@ -331,7 +347,8 @@ TEST(stress_cfl_sweep)
         rc = mpm_case_check(&w.c, NULL, &err);
         CHECKF(rc == MPM_ECFL && strstr(TERR(&err), "(USL)"), "rc %d: %s", rc, TERR(&err));
         TLOG("USL refusal: cfl 0.6 -> \"cfl: 0.6 is above the stability limit 0.5 of USL; ...\"; "
-             "dt = 0.51 x h/(c+|v|) -> \"%.80s...\"", TERR(&err));
+             "dt = 0.51 x h/(c+|v|) -> \"%.80s...\"",
+             TERR(&err));
         w.c.dt = 0.49 * lim;
         CHECKF(mpm_case_check(&w.c, NULL, &err) == 0, "%s", TERR(&err));
         w.c.allow_unstable_dt = 1;
@@ -348,7 +365,7 @@ typedef struct {
     int rc;
     long steps;
     double t, e0, emin, emax;
-    double first, last;  /* mean energy over the first and the last window */
+    double first, last; /* mean energy over the first and the last window */
     char msg[300];
 } long_out;
 
@@ -484,11 +501,11 @@ TEST(stress_long_runs)
  * time. */
 typedef struct {
     int rc;
-    double rest;     /* time noise of sigma_xx of the copy at rest */
-    double cross;    /* the same for the copy that crosses cells (rigid: max |sigma|) */
-    double amp;      /* RMS |sigma_xx - exact| at rest (the mode's phase and amplitude error) */
-    double other;    /* max |sigma_yy|, |sigma_xy| of the moving copy */
-    double moved;    /* cells travelled */
+    double rest;  /* time noise of sigma_xx of the copy at rest */
+    double cross; /* the same for the copy that crosses cells (rigid: max |sigma|) */
+    double amp;   /* RMS |sigma_xx - exact| at rest (the mode's phase and amplitude error) */
+    double other; /* max |sigma_yy|, |sigma_xy| of the moving copy */
+    double moved; /* cells travelled */
     char msg[300];
 } cross_out;
 
@@ -513,7 +530,8 @@ static mpm_sim *block_sim(mpm_method m, mpm_update u, double V, double v0, int p
     double h = 1.0 / 32, L = nx * h;
     int px = nx * ppc, py = ny * ppc;
     size_t n = (size_t)px * py;
-    double *x = malloc(2 * n * sizeof *x), *vol = malloc(n * sizeof *vol), *v = malloc(2 * n * sizeof *v);
+    double *x = malloc(2 * n * sizeof *x), *vol = malloc(n * sizeof *vol),
+           *v = malloc(2 * n * sizeof *v);
     mpm_sim *s = NULL;
     if (!x || !vol || !v) {
         mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
@@ -558,10 +576,12 @@ static void crossing(mpm_method m, mpm_update u, double v0, int ppc, cross_out *
     const double h = 1.0 / 32, L = 8 * h, c = 1.0, V = 0.2 * c, w = M_PI * c / L;
     double dt = 0.4 * h / (c + 1.2 * V), tend = 20 * h / V, scale = c * (v0 > 0 ? v0 : V);
     mpm_error err;
-    mpm_sim *a = block_sim(m, u, 0.0, v0, ppc, dt, &err), *b = a ? block_sim(m, u, V, v0, ppc, dt, &err) : NULL;
+    mpm_sim *a = block_sim(m, u, 0.0, v0, ppc, dt, &err),
+            *b = a ? block_sim(m, u, V, v0, ppc, dt, &err) : NULL;
     size_t n = a ? mpm_sim_particles(a) : 0;
     /* stress histories: sa[k], sb[k] hold steps i - 2 + k (ring of 3) */
-    double *sa[3], *sb[3], *x0 = malloc(2 * n * sizeof *x0 + 1), *x1 = malloc(2 * n * sizeof *x1 + 1);
+    double *sa[3], *sb[3], *x0 = malloc(2 * n * sizeof *x0 + 1),
+                           *x1 = malloc(2 * n * sizeof *x1 + 1);
     int okm = x0 && x1;
     for (int k = 0; k < 3; k++) {
         sa[k] = calloc(6 * n + 1, sizeof(double));
@@ -578,7 +598,8 @@ static void crossing(mpm_method m, mpm_update u, double v0, int ppc, cross_out *
         int ra = mpm_sim_step(a), rb = mpm_sim_step(b);
         if (ra || rb) {
             o->rc = ra ? ra : rb;
-            snprintf(o->msg, sizeof o->msg, "%s%s", ra ? "at rest: " : "", TERR(mpm_sim_error(ra ? a : b)));
+            snprintf(o->msg, sizeof o->msg, "%s%s", ra ? "at rest: " : "",
+                     TERR(mpm_sim_error(ra ? a : b)));
             break;
         }
         double *ta = sa[0], *tb = sb[0];
@@ -632,7 +653,7 @@ TEST(stress_cell_crossing)
             mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
             mpm_update up = (mpm_update)u;
             cross_out r, tr;
-            crossing(meth, up, 0.0, 2, &r);  /* rigid translation: exact stress 0 */
+            crossing(meth, up, 0.0, 2, &r);   /* rigid translation: exact stress 0 */
             crossing(meth, up, 1e-3, 2, &tr); /* the wave, at rest and crossing */
             char a[64], b[64];
             snprintf(a, sizeof a, r.rc ? "FAILED" : "|sigma| <= %.1e", fmax(r.cross, r.other));
@@ -648,13 +669,14 @@ TEST(stress_cell_crossing)
             /* rigid translation is exact to round-off except with MPM + USL,
              * the README's known instability */
             if (!(meth == MPM_METHOD_MPM && up == MPM_USL))
-                CHECKF(r.rc == 0 && r.cross < 1e-10 && r.other < 1e-10, "%s %s translation: %g %g %s",
-                       mname(meth), upd_name(up), r.cross, r.other, r.msg);
+                CHECKF(r.rc == 0 && r.cross < 1e-10 && r.other < 1e-10,
+                       "%s %s translation: %g %g %s", mname(meth), upd_name(up), r.cross, r.other,
+                       r.msg);
             /* GMPM's point: crossing cells adds little noise (measured
              * 1.1x the smooth level at rest; MPM 3-7x, USL 119x) */
             if (meth == MPM_METHOD_GIMP)
-                CHECKF(tr.rc == 0 && tr.cross < 2 * tr.rest, "GIMP %s: crossing noise %g, at rest %g",
-                       upd_name(up), tr.cross, tr.rest);
+                CHECKF(tr.rc == 0 && tr.cross < 2 * tr.rest,
+                       "GIMP %s: crossing noise %g, at rest %g", upd_name(up), tr.cross, tr.rest);
         }
     if (full)
         for (int ppc = 1; ppc <= 4; ppc++)
@@ -664,8 +686,8 @@ TEST(stress_cell_crossing)
                     mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
                     crossing(meth, (mpm_update)u, 1e-3, ppc, &tr);
                     TLOG("  ppc %d %-4s %-4s: noise at rest %.3e, crossing %.3e (%.1fx)%s%s", ppc,
-                         mname(meth), upd_name((mpm_update)u), tr.rest, tr.cross, tr.cross / tr.rest,
-                         tr.rc ? " FAILED: " : "", tr.msg);
+                         mname(meth), upd_name((mpm_update)u), tr.rest, tr.cross,
+                         tr.cross / tr.rest, tr.rc ? " FAILED: " : "", tr.msg);
                 }
 }
 
@@ -673,15 +695,15 @@ TEST(stress_cell_crossing)
 
 typedef struct {
     char name[48];
-    char *json;       /* malloc'd case */
-    int expect;       /* X_FINISH, X_EITHER or X_LEAVE */
-    double tol;       /* a finished run's energy may not exceed (1 + tol) E0 */
+    char *json; /* malloc'd case */
+    int expect; /* X_FINISH, X_EITHER or X_LEAVE */
+    double tol; /* a finished run's energy may not exceed (1 + tol) E0 */
 } xcase;
 
 enum {
-    X_FINISH = 0,     /* must finish within tolerance */
-    X_LEAVE = 1,      /* must fail: a particle leaves the grid */
-    X_EITHER = 2      /* finish within tolerance, or a recorded failure */
+    X_FINISH = 0, /* must finish within tolerance */
+    X_LEAVE = 1,  /* must fail: a particle leaves the grid */
+    X_EITHER = 2  /* finish within tolerance, or a recorded failure */
 };
 
 /* Energy tolerances of a finished run: the paper's disks at C = 0.5 on
@@ -692,7 +714,7 @@ enum {
 #define TOL_HARSH 0.5
 
 typedef struct {
-    int rc;           /* 0 finished, else MPM_E* (or 1: the step limit) */
+    int rc; /* 0 finished, else MPM_E* (or 1: the step limit) */
     long steps;
     double t, e0, emax, eend, pmax;
     char msg[512];
@@ -721,15 +743,16 @@ static char *disks_json(const char *method, const char *update, double E, double
                         double v, int ppc, double tend)
 {
     double s = v / sqrt(2.0);
-    return xjson("{\"name\":\"stress\",\"grid\":{\"dim\":2,\"origin\":[0,0],\"spacing\":[0.05,0.05],"
-                 "\"nodes\":[21,21]},\"method\":\"%s\",\"update\":\"%s\","
-                 "\"materials\":[{\"youngsModulus\":%.17g,\"poissonRatio\":%.17g,\"density\":1},"
-                 "{\"youngsModulus\":%.17g,\"poissonRatio\":%.17g,\"density\":%.17g}],"
-                 "\"bodies\":[{\"material\":0,\"velocity\":[%.17g,%.17g],\"sphere\":{\"center\":"
-                 "[0.25,0.25],\"radius\":0.14},\"ppc\":%d},{\"material\":1,\"velocity\":[%.17g,%.17g],"
-                 "\"sphere\":{\"center\":[0.75,0.75],\"radius\":0.14},\"ppc\":%d}],"
-                 "\"endTime\":%.17g,\"output\":{\"energyEvery\":50}}",
-                 method, update, E, nu, E, nu, rho2, s, s, ppc, -s, -s, ppc, tend);
+    return xjson(
+        "{\"name\":\"stress\",\"grid\":{\"dim\":2,\"origin\":[0,0],\"spacing\":[0.05,0.05],"
+        "\"nodes\":[21,21]},\"method\":\"%s\",\"update\":\"%s\","
+        "\"materials\":[{\"youngsModulus\":%.17g,\"poissonRatio\":%.17g,\"density\":1},"
+        "{\"youngsModulus\":%.17g,\"poissonRatio\":%.17g,\"density\":%.17g}],"
+        "\"bodies\":[{\"material\":0,\"velocity\":[%.17g,%.17g],\"sphere\":{\"center\":"
+        "[0.25,0.25],\"radius\":0.14},\"ppc\":%d},{\"material\":1,\"velocity\":[%.17g,%.17g],"
+        "\"sphere\":{\"center\":[0.75,0.75],\"radius\":0.14},\"ppc\":%d}],"
+        "\"endTime\":%.17g,\"output\":{\"energyEvery\":50}}",
+        method, update, E, nu, E, nu, rho2, s, s, ppc, -s, -s, ppc, tend);
 }
 
 static int add_case(xcase *xs, int *n, int max, const char *name, char *json, int expect,
@@ -769,12 +792,13 @@ static int extreme_cases(xcase *xs, int max, const char *me, const char *up, int
     for (int i = 0; i < nE; i++) {
         double c = c1 * sqrt(Es[i]);
         snprintf(name, sizeof name, "E=%g (Mach fixed)", Es[i]);
-        err |= add_case(xs, &n, max, name, disks_json(me, up, Es[i], 0.2, 1, 0.1 * c / c1, 2, 4 * c1 / c),
-                        X_FINISH, TOL_STD);
+        err |= add_case(xs, &n, max, name,
+                        disks_json(me, up, Es[i], 0.2, 1, 0.1 * c / c1, 2, 4 * c1 / c), X_FINISH,
+                        TOL_STD);
     }
     /* E = 1e-3 at the paper's speed 0.1: Mach 3 */
-    err |= add_case(xs, &n, max, "E=1e-3 v=0.1 (Mach 3)", disks_json(me, up, 1e-3, 0.2, 1, 0.1, 2, 4),
-                    X_EITHER, TOL_HARSH);
+    err |= add_case(xs, &n, max, "E=1e-3 v=0.1 (Mach 3)",
+                    disks_json(me, up, 1e-3, 0.2, 1, 0.1, 2, 4), X_EITHER, TOL_HARSH);
     err |= add_case(xs, &n, max, "nu=0.499", disks_json(me, up, 1, 0.499, 1, 0.1, 2, 4), X_FINISH,
                     TOL_HARSH);
     err |= add_case(xs, &n, max, "density 1:1000", disks_json(me, up, 1, 0.2, 1000, 0.1, 2, 4),
@@ -785,8 +809,8 @@ static int extreme_cases(xcase *xs, int max, const char *me, const char *up, int
         err |= add_case(xs, &n, max, name, disks_json(me, up, 1, 0.2, 1, 0.1, ppc, 4), X_FINISH,
                         ppc == 1 ? TOL_HARSH : TOL_STD);
     }
-    err |= add_case(xs, &n, max, "impact 0.9c each", disks_json(me, up, 1, 0.2, 1, 0.9 * c1, 2, 1.0),
-                    X_EITHER, TOL_HARSH);
+    err |= add_case(xs, &n, max, "impact 0.9c each",
+                    disks_json(me, up, 1, 0.2, 1, 0.9 * c1, 2, 1.0), X_EITHER, TOL_HARSH);
     /* a plate one particle thick dropping at 0.5 onto a frictionless floor */
     err |= add_case(xs, &n, max, "one-particle-thick plate",
                     xjson("{\"grid\":{\"dim\":2,\"spacing\":[0.05,0.05],\"nodes\":[21,21]},"
@@ -794,14 +818,17 @@ static int extreme_cases(xcase *xs, int max, const char *me, const char *up, int
                           "\"poissonRatio\":0.3,\"density\":1}],\"bodies\":[{\"velocity\":[0,-0.5],"
                           "\"box\":{\"lo\":[0.2,0.3],\"hi\":[0.8,0.35]},\"ppc\":1}],"
                           "\"boundary\":{\"yLo\":2},\"endTime\":2,\"output\":{\"energyEvery\":50}}",
-                          me, up), X_EITHER, TOL_HARSH);
+                          me, up),
+                    X_EITHER, TOL_HARSH);
     /* a block thrown out of a grid without walls */
     err |= add_case(xs, &n, max, "thrown out of the grid",
                     xjson("{\"grid\":{\"dim\":2,\"spacing\":[0.05,0.05],\"nodes\":[21,21]},"
                           "\"method\":\"%s\",\"update\":\"%s\",\"materials\":[{\"youngsModulus\":1,"
                           "\"poissonRatio\":0.3,\"density\":1}],\"bodies\":[{\"velocity\":[2,0.5],"
                           "\"box\":{\"lo\":[0.3,0.3],\"hi\":[0.5,0.5]},\"ppc\":2}],\"endTime\":2,"
-                          "\"output\":{\"energyEvery\":50}}", me, up), X_LEAVE, 0);
+                          "\"output\":{\"energyEvery\":50}}",
+                          me, up),
+                    X_LEAVE, 0);
     if (err) {
         free_cases(xs, n);
         return -1;
@@ -853,7 +880,8 @@ static int run_case(const char *json, xout *o)
             o->pmax = fmax(o->pmax, fabs(e.momentum[0] + e.momentum[1]));
         }
     }
-    if (!o->rc && (o->rc = mpm_sim_check(s))) snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
+    if (!o->rc && (o->rc = mpm_sim_check(s)))
+        snprintf(o->msg, sizeof o->msg, "%s", TERR(mpm_sim_error(s)));
     if (!o->rc) {
         mpm_sim_energy(s, &e);
         o->emax = fmax(o->emax, e.total);
@@ -874,8 +902,10 @@ static const char *judge(const xcase *x, const xout *o)
         if (x->expect == X_LEAVE) return "finished, but the body should have left the grid";
         if (!isfinite(o->eend) || !isfinite(o->emax)) return "finished with a non-finite energy";
         if (o->emax > o->e0 * (1 + x->tol)) {
-            snprintf(why, sizeof why, "finished, but the total energy grew by %.3g%% (tolerance "
-                     "%g%%)", 100 * (o->emax / o->e0 - 1), 100 * x->tol);
+            snprintf(why, sizeof why,
+                     "finished, but the total energy grew by %.3g%% (tolerance "
+                     "%g%%)",
+                     100 * (o->emax / o->e0 - 1), 100 * x->tol);
             return why;
         }
         return NULL;
@@ -895,7 +925,8 @@ TEST(stress_extremes)
     TLOG("automatic dt (C = 0.5), two disks (h = 0.05) unless said; E: max over the run and "
          "end of E/E0 - 1; a finish must keep E <= (1 + tol) E0, tol %g (standard) or %g (harsh: "
          "Mach 3, nu 0.499, 1 ppc, plate, impact); MPM + USL is run in full mode and reported, "
-         "not asserted (README: unstable)", TOL_STD, TOL_HARSH);
+         "not asserted (README: unstable)",
+         TOL_STD, TOL_HARSH);
     double ref_scaled = NAN;
     char first_bad[2048] = "";
     for (int m = 0; m < 2; m++)
@@ -928,8 +959,8 @@ TEST(stress_extremes)
                     bad = NULL;
                 }
                 if (bad && !first_bad[0])
-                    snprintf(first_bad, sizeof first_bad, "%s %s %.47s: %.300s (%.200s)", me[m], up[u],
-                             xs[i].name, bad, o.msg);
+                    snprintf(first_bad, sizeof first_bad, "%s %s %.47s: %.300s (%.200s)", me[m],
+                             up[u], xs[i].name, bad, o.msg);
                 /* the Mach-fixed family is one problem in other units */
                 if (strstr(xs[i].name, "(Mach fixed)") && o.rc == 0) {
                     double rel = (o.eend - o.e0) / o.e0;
@@ -977,8 +1008,8 @@ static json_t *request(void *zctx, const char *ep, const char *req, double timeo
                 zmq_msg_init(&part);
                 if (zmq_msg_recv(&part, sock, 0) >= 0) {
                     char *js = NULL;
-                    if (td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&part), zmq_msg_size(&part),
-                                              0, 0, &js, err, sizeof err) == 0)
+                    if (td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&part),
+                                             zmq_msg_size(&part), 0, 0, &js, err, sizeof err) == 0)
                         out = json_loads(js, 0, NULL);
                     free(js);
                 }
@@ -1013,7 +1044,11 @@ typedef struct {
 } djob;
 
 /* Fails the test with a message and jumps to `out` (so replies are freed). */
-#define DFAIL(...) do { t_fail(__FILE__, __LINE__, __VA_ARGS__); goto out; } while (0)
+#define DFAIL(...)                               \
+    do {                                         \
+        t_fail(__FILE__, __LINE__, __VA_ARGS__); \
+        goto out;                                \
+    } while (0)
 
 static void daemon_extremes(void *zctx, const td_daemon *d, djob *jobs, int nj)
 {
@@ -1070,8 +1105,8 @@ static void daemon_extremes(void *zctx, const td_daemon *d, djob *jobs, int nj)
         const char *er = json_string_value(json_object_get(found, "error"));
         const char *want = jobs[i].o.rc ? "FAILED" : "FINISHED";
         long long steps = json_id(json_object_get(found, "steps"));
-        TLOG("  run %2lld %-26s %-8s steps %7lld%s%.110s", jobs[i].run, jobs[i].x.name, st ? st : "?",
-             steps, er ? ": " : "", er ? er : "");
+        TLOG("  run %2lld %-26s %-8s steps %7lld%s%.110s", jobs[i].run, jobs[i].x.name,
+             st ? st : "?", steps, er ? ": " : "", er ? er : "");
         if (!st || strcmp(st, want))
             DFAIL("%s: status %s, in-process %s (%s)", jobs[i].x.name, st ? st : "?", want,
                   jobs[i].o.msg);
@@ -1093,8 +1128,10 @@ out:
 DTEST(stress_daemon_extremes)
 {
     const char *bin = getenv("MPMD_BIN");
-    CHECKF(bin && access(bin, X_OK) == 0, "MPMD_BIN (%s) is not an executable mpmd; make test "
-           "and make stress set it", bin ? bin : "unset");
+    CHECKF(bin && access(bin, X_OK) == 0,
+           "MPMD_BIN (%s) is not an executable mpmd; make test "
+           "and make stress set it",
+           bin ? bin : "unset");
     int full = full_mode();
     xcase xs[48];
     int n = extreme_cases(xs, 24, "MPM", "USF", full);
@@ -1114,19 +1151,22 @@ DTEST(stress_daemon_extremes)
     }
     void *zctx = zmq_ctx_new();
     td_daemon d = {0};
-    static const char *const extra[] = {"--workers", "2", "--queue-max", "100", "--max-steps",
-                                        "400000", "--max-wall-s", "120", NULL};
+    static const char *const extra[] = {"--workers",    "2",           "--queue-max",
+                                        "100",          "--max-steps", "400000",
+                                        "--max-wall-s", "120",         NULL};
     int started = zctx && td_start(&d, t_tmpdir(), extra) == 0;
     if (started) {
         TLOG("mpmd %s; %d cases (MPM USF%s), 2 workers", d.ep, n, full ? "; GIMP MUSL" : "");
         daemon_extremes(zctx, &d, jobs, n);
         if (!t_failed()) {
             /* the refusal of cfl > 1 without allow_unstable_dt */
-            json_t *r = request(zctx, d.ep,
-                                "{\"schemaVersion\":1,\"submit\":{\"case\":{\"grid\":{\"dim\":1,"
-                                "\"spacing\":[0.1],\"nodes\":[11]},\"cfl\":1.2,\"materials\":"
-                                "[{\"youngsModulus\":1,\"density\":1}],\"bodies\":[{\"box\":{\"lo\":"
-                                "[0.2],\"hi\":[0.8]}}],\"steps\":10}}}", 20);
+            json_t *r =
+                request(zctx, d.ep,
+                        "{\"schemaVersion\":1,\"submit\":{\"case\":{\"grid\":{\"dim\":1,"
+                        "\"spacing\":[0.1],\"nodes\":[11]},\"cfl\":1.2,\"materials\":"
+                        "[{\"youngsModulus\":1,\"density\":1}],\"bodies\":[{\"box\":{\"lo\":"
+                        "[0.2],\"hi\":[0.8]}}],\"steps\":10}}}",
+                        20);
             json_t *e = r ? json_object_get(r, "error") : NULL;
             const char *code = e ? json_string_value(json_object_get(e, "code")) : NULL;
             const char *msg = e ? json_string_value(json_object_get(e, "message")) : NULL;
@@ -1141,8 +1181,10 @@ DTEST(stress_daemon_extremes)
         int alive = ping(zctx, d.ep);
         int st = td_stop(&d);
         if (!alive) t_fail(__FILE__, __LINE__, "the daemon does not answer Ping after the cases");
-        if (st != 0) t_fail(__FILE__, __LINE__, "mpmd exited with %d on SIGTERM", st);
-        else TLOG("  the daemon answered Ping after them and exited 0 on SIGTERM");
+        if (st != 0)
+            t_fail(__FILE__, __LINE__, "mpmd exited with %d on SIGTERM", st);
+        else
+            TLOG("  the daemon answered Ping after them and exited 0 on SIGTERM");
     } else {
         t_fail(__FILE__, __LINE__, "mpmd did not start");
     }

@@ -32,8 +32,8 @@ void mpm_paper_point(mpm_paper *t, mpm_update up, double dt, double v0);
  * memory. */
 int mpm_paper_bar(mpm_paper *t, mpm_method m, mpm_update up, int ncell, int ppc, int extra,
                   double dt, double v0);
-double mpm_paper_bar_omega(void);                  /* omega_1 = pi/2 sqrt(E/rho) */
-double mpm_paper_bar_vcm(double v0, double t);     /* centre-of-mass velocity, Eq. 34 */
+double mpm_paper_bar_omega(void);              /* omega_1 = pi/2 sqrt(E/rho) */
+double mpm_paper_bar_vcm(double v0, double t); /* centre-of-mass velocity, Eq. 34 */
 
 /* Disks: radius 0.14 in the unit square, centres (0.25, 0.25) and
  * (0.75, 0.75), speed 0.1 towards each other along the diagonal, E = 1,

@@ -72,14 +72,22 @@ int main(int argc, char **argv)
         }
         const char *v = argv[++i];
         int rc = 0;
-        if (!strcmp(a, "--case")) cname = v;
-        else if (!strcmp(a, "--method")) method = v;
-        else if (!strcmp(a, "--update")) update = v;
-        else if (!strcmp(a, "--dt")) rc = parse_double(a, v, 0, &dt);
-        else if (!strcmp(a, "--cfl")) rc = parse_double(a, v, 0, &cfl);
-        else if (!strcmp(a, "--t-end")) rc = parse_double(a, v, 0, &tend);
-        else if (!strcmp(a, "--every")) rc = parse_double(a, v, 1, &every);
-        else if (!strcmp(a, "--threads")) rc = parse_double(a, v, 1, &threads);
+        if (!strcmp(a, "--case"))
+            cname = v;
+        else if (!strcmp(a, "--method"))
+            method = v;
+        else if (!strcmp(a, "--update"))
+            update = v;
+        else if (!strcmp(a, "--dt"))
+            rc = parse_double(a, v, 0, &dt);
+        else if (!strcmp(a, "--cfl"))
+            rc = parse_double(a, v, 0, &cfl);
+        else if (!strcmp(a, "--t-end"))
+            rc = parse_double(a, v, 0, &tend);
+        else if (!strcmp(a, "--every"))
+            rc = parse_double(a, v, 1, &every);
+        else if (!strcmp(a, "--threads"))
+            rc = parse_double(a, v, 1, &threads);
         else {
             fprintf(stderr, "mpmrun: unknown option '%s' (see --help)\n", a);
             return 2;
@@ -87,9 +95,12 @@ int main(int argc, char **argv)
         if (rc) return 2;
     }
     mpm_update up;
-    if (!strcmp(update, "usf")) up = MPM_USF;
-    else if (!strcmp(update, "usl")) up = MPM_USL;
-    else if (!strcmp(update, "musl")) up = MPM_MUSL;
+    if (!strcmp(update, "usf"))
+        up = MPM_USF;
+    else if (!strcmp(update, "usl"))
+        up = MPM_USL;
+    else if (!strcmp(update, "musl"))
+        up = MPM_MUSL;
     else {
         fprintf(stderr, "mpmrun: --update: expected usf, usl or musl, got '%s'\n", update);
         return 2;
@@ -105,8 +116,8 @@ int main(int argc, char **argv)
     } else if (!strcmp(cname, "bar-mpm") || !strcmp(cname, "bar-gimp")) {
         kind = 1;
         int gimp = !strcmp(cname, "bar-gimp");
-        if (mpm_paper_bar(&P, gimp ? MPM_METHOD_GIMP : MPM_METHOD_MPM, up, gimp ? 13 : 7, 1, 0,
-                          dt, v0)) {
+        if (mpm_paper_bar(&P, gimp ? MPM_METHOD_GIMP : MPM_METHOD_MPM, up, gimp ? 13 : 7, 1, 0, dt,
+                          v0)) {
             fprintf(stderr, "mpmrun: out of memory\n");
             return 1;
         }
@@ -117,13 +128,17 @@ int main(int argc, char **argv)
         P.c.dt = dt;
         if (tend < 0) tend = 4.0;
     } else {
-        fprintf(stderr, "mpmrun: --case: unknown case '%s' (point, bar-mpm, bar-gimp, "
-                "disks-coarse, disks-fine)\n", cname);
+        fprintf(stderr,
+                "mpmrun: --case: unknown case '%s' (point, bar-mpm, bar-gimp, "
+                "disks-coarse, disks-fine)\n",
+                cname);
         return 2;
     }
     if (method) {
-        if (!strcmp(method, "mpm")) P.c.method = MPM_METHOD_MPM;
-        else if (!strcmp(method, "gimp")) P.c.method = MPM_METHOD_GIMP;
+        if (!strcmp(method, "mpm"))
+            P.c.method = MPM_METHOD_MPM;
+        else if (!strcmp(method, "gimp"))
+            P.c.method = MPM_METHOD_GIMP;
         else {
             fprintf(stderr, "mpmrun: --method: expected mpm or gimp, got '%s'\n", method);
             mpm_paper_free(&P);
@@ -139,17 +154,19 @@ int main(int argc, char **argv)
     mpm_sim *s = mpm_sim_new(&P.c, NULL, &me);
     mpm_paper_free(&P);
     if (!s) {
-        fprintf(stderr, "mpmrun: invalid case: %s\n", mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
+        fprintf(stderr, "mpmrun: invalid case: %s\n",
+                mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
         return 1;
     }
     long nsteps = (long)ceil(tend / mpm_sim_dt(s) - 1e-9);
     long step_every = every > 0 ? (long)every : (nsteps / 20 > 0 ? nsteps / 20 : 1);
     int tty = isatty(STDERR_FILENO);
     printf("# case %s: %s %s, %zu particles, %zu nodes, dt %g, t_end %g (%ld steps)\n", cname,
-           mname, update, mpm_sim_particles(s),
-           mpm_sim_nodes(s), mpm_sim_dt(s), tend, nsteps);
-    if (csv) printf("step,t,kinetic,strain,total\n");
-    else printf("%8s %10s %13s %13s %13s\n", "step", "t", "kinetic", "strain", "total");
+           mname, update, mpm_sim_particles(s), mpm_sim_nodes(s), mpm_sim_dt(s), tend, nsteps);
+    if (csv)
+        printf("step,t,kinetic,strain,total\n");
+    else
+        printf("%8s %10s %13s %13s %13s\n", "step", "t", "kinetic", "strain", "total");
 
     mpm_energy e0, e;
     mpm_sim_energy(s, &e0);
@@ -168,8 +185,10 @@ int main(int argc, char **argv)
         if (csv || k % step_every == 0) {
             mpm_sim_energy(s, &e);
             if (tty && !csv) fputs("\r\033[K", stderr);
-            if (csv) printf("%ld,%.9g,%.9e,%.9e,%.9e\n", k, t, e.kinetic, e.strain, e.total);
-            else printf("%8ld %10.4f %13.6e %13.6e %13.6e\n", k, t, e.kinetic, e.strain, e.total);
+            if (csv)
+                printf("%ld,%.9g,%.9e,%.9e,%.9e\n", k, t, e.kinetic, e.strain, e.total);
+            else
+                printf("%8ld %10.4f %13.6e %13.6e %13.6e\n", k, t, e.kinetic, e.strain, e.total);
             fflush(stdout);
         }
         double w = now() - t0;
@@ -177,8 +196,8 @@ int main(int argc, char **argv)
             last_draw = w;
             double frac = t / tend, eta = frac > 0 ? w * (1 - frac) / frac : 0;
             int bar = (int)(30 * frac);
-            fprintf(stderr, "\r\033[K[%.*s%*s] %5.1f%%  step %ld  t %.4f  ETA %.1f s",
-                    bar, "##############################", 30 - bar, "", 100 * frac, k, t, eta);
+            fprintf(stderr, "\r\033[K[%.*s%*s] %5.1f%%  step %ld  t %.4f  ETA %.1f s", bar,
+                    "##############################", 30 - bar, "", 100 * frac, k, t, eta);
         }
     }
     double wall = now() - t0;
@@ -191,7 +210,9 @@ int main(int argc, char **argv)
     printf("# total energy %.6e -> %.6e (%+.3f%%), momentum (%.2e, %.2e)\n", e0.total, e.total,
            100 * (e.total - e0.total) / e0.total, e.momentum[0], e.momentum[1]);
     if (kind != 2) printf("# max Eq. 38 error of the centre-of-mass velocity: %.3e\n", err_max);
-    if (rc) fprintf(stderr, "mpmrun: %s\n", mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, err, sizeof err));
+    if (rc)
+        fprintf(stderr, "mpmrun: %s\n",
+                mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, err, sizeof err));
     mpm_sim_destroy(&s);
     return rc ? 1 : 0;
 }

@@ -40,18 +40,18 @@ typedef enum { MPM_SHAPE_BOX = 0, MPM_SHAPE_SPHERE = 1 } mpm_shape;
 /* Structured grid: nodes[d] nodes along axis d, spacing h[d], first node at
  * origin[d].  Only the first `dim` entries are used. */
 typedef struct {
-    int dim;                      /* 1, 2 or 3 */
+    int dim; /* 1, 2 or 3 */
     double origin[MPM_MAX_DIM];
     double h[MPM_MAX_DIM];
-    int nodes[MPM_MAX_DIM];       /* >= 2 per axis */
+    int nodes[MPM_MAX_DIM]; /* >= 2 per axis */
 } mpm_grid_desc;
 
 /* Material.  1D: uniaxial (E only); 2D: plane strain; 3D: isotropic. */
 typedef struct {
     mpm_model_kind model;
-    double youngs_modulus;        /* E > 0 */
-    double poisson_ratio;         /* -1 < nu < 0.5 (ignored in 1D) */
-    double density;               /* rho > 0 */
+    double youngs_modulus; /* E > 0 */
+    double poisson_ratio;  /* -1 < nu < 0.5 (ignored in 1D) */
+    double density;        /* rho > 0 */
 } mpm_material_desc;
 
 /* Essential boundary conditions.  Direction masks: bit d fixes axis d. */
@@ -76,9 +76,9 @@ typedef struct {
 
     /* Generated particles (used when n_points == 0). */
     mpm_shape shape;
-    double lo[MPM_MAX_DIM], hi[MPM_MAX_DIM];  /* box */
-    double center[MPM_MAX_DIM], radius;       /* sphere (disk in 2D) */
-    int ppc;                      /* particles per cell per axis (1..8) */
+    double lo[MPM_MAX_DIM], hi[MPM_MAX_DIM]; /* box */
+    double center[MPM_MAX_DIM], radius;      /* sphere (disk in 2D) */
+    int ppc;                                 /* particles per cell per axis (1..8) */
 
     /* Explicit particles (used when n_points > 0).  Arrays of n_points
      * entries (x, v: n_points * dim; stress: n_points * 6); volume is
@@ -96,9 +96,9 @@ typedef struct {
  * particle with `force` given instead of `traction` (is_force = 1). */
 typedef struct {
     double lo[MPM_MAX_DIM], hi[MPM_MAX_DIM];
-    int normal;                   /* axis of the surface normal */
-    int is_force;                 /* 1: `value` is a total force */
-    double value[MPM_MAX_DIM];    /* traction (force / area) or force */
+    int normal;                /* axis of the surface normal */
+    int is_force;              /* 1: `value` is a total force */
+    double value[MPM_MAX_DIM]; /* traction (force / area) or force */
 } mpm_traction_desc;
 
 /* A whole simulation case.  The library copies what it needs in
@@ -108,10 +108,10 @@ typedef struct {
     mpm_method method;
     mpm_update update;
 
-    double dt;            /* > 0: fixed time step; 0: automatic (CFL) */
-    double cfl;           /* Courant factor C for automatic dt (0: default) */
-    int allow_unstable_dt;/* accept a given dt above the CFL limit */
-    double mass_tol;      /* M_TOL relative to the mean particle mass (0: default) */
+    double dt;             /* > 0: fixed time step; 0: automatic (CFL) */
+    double cfl;            /* Courant factor C for automatic dt (0: default) */
+    int allow_unstable_dt; /* accept a given dt above the CFL limit */
+    double mass_tol;       /* M_TOL relative to the mean particle mass (0: default) */
 
     double gravity[MPM_MAX_DIM];
 
@@ -175,11 +175,11 @@ typedef struct mpm_sim mpm_sim;
 /* What mpm_case_check() learnt about a valid case: enough for
  * mpm_sim_new() to build it without checking it again. */
 typedef struct {
-    size_t particles;     /* particles the case makes */
-    size_t nodes;         /* real grid nodes */
+    size_t particles; /* particles the case makes */
+    size_t nodes;     /* real grid nodes */
     int dim;
-    double vmax;          /* largest initial particle speed */
-    double cmax;          /* largest p-wave speed of the materials */
+    double vmax; /* largest initial particle speed */
+    double cmax; /* largest p-wave speed of the materials */
 } mpm_case_info;
 
 /* Validates every field of a case and counts its particles, in one pass
@@ -218,8 +218,8 @@ void mpm_sim_cancel(mpm_sim *sim);
 
 long mpm_sim_steps(const mpm_sim *sim);
 double mpm_sim_time(const mpm_sim *sim);
-double mpm_sim_dt(const mpm_sim *sim);          /* dt of the next step */
-double mpm_sim_dt_limit(const mpm_sim *sim);    /* CFL limit (C = 1) now */
+double mpm_sim_dt(const mpm_sim *sim);       /* dt of the next step */
+double mpm_sim_dt_limit(const mpm_sim *sim); /* CFL limit (C = 1) now */
 
 /* Per-particle external forces for the following steps: f[p*dim + d] is the
  * force (not per unit mass) on particle p, in the order the particles were
@@ -231,7 +231,7 @@ double mpm_sim_dt_limit(const mpm_sim *sim);    /* CFL limit (C = 1) now */
  * Not to be called while mpm_sim_run() runs. */
 int mpm_sim_set_particle_forces(mpm_sim *sim, const double *f);
 size_t mpm_sim_particles(const mpm_sim *sim);
-size_t mpm_sim_nodes(const mpm_sim *sim);       /* real grid nodes */
+size_t mpm_sim_nodes(const mpm_sim *sim); /* real grid nodes */
 int mpm_sim_dim(const mpm_sim *sim);
 /* The error that stopped the simulation or refused the last call (code 0
  * when none).  Valid as long as the simulation. */
@@ -260,8 +260,7 @@ void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);
 
 /* Grid state after the last step, for tests and diagnostics: node mass and
  * momentum of real node (i, j, k) (unused indices 0). */
-void mpm_sim_node(const mpm_sim *sim, const int ijk[3], double *mass,
-                  double q[MPM_MAX_DIM]);
+void mpm_sim_node(const mpm_sim *sim, const int ijk[3], double *mass, double q[MPM_MAX_DIM]);
 
 /* p-wave speed of a material: sqrt(E/rho) in 1D, sqrt((lambda+2mu)/rho)
  * otherwise. */
@@ -271,7 +270,6 @@ double mpm_material_wave_speed(const mpm_material_desc *m, int dim);
  * at reference-cell-relative coordinate, fills the nn = 2 (MPM) or 4 (GIMP)
  * weights and gradients of consecutive nodes starting at the reference node
  * (Eq. 21 / 22); returns the reference node index. */
-int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp,
-                 double *w, double *g);
+int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, double *w, double *g);
 
 #endif

@@ -24,12 +24,12 @@
 
 typedef struct {
     const mpm_case *c;
-    mpm_particles *P;     /* NULL: count only */
+    mpm_particles *P; /* NULL: count only */
     const mpm_mat_params *mats;
     size_t n;
-    size_t limit;         /* the count may not exceed it (filling: P->n) */
+    size_t limit; /* the count may not exceed it (filling: P->n) */
     double vmax;
-    size_t *load_count;   /* per traction: particles inside its region */
+    size_t *load_count; /* per traction: particles inside its region */
 } gen_ctx;
 
 /* "bodies[%zu]..." into a field path buffer */
@@ -53,7 +53,8 @@ static int too_many(const gen_ctx *g, size_t bi, mpm_error *err)
     if (g->P)
         return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu]", bi),
                         "the case makes another number of particles than when it was checked "
-                        "(%zu)", g->limit);
+                        "(%zu)",
+                        g->limit);
     return mpm_fail(err, MPM_ETOOBIG, PATH("bodies[%zu]", bi),
                     "the case has more than %zu particles, the limit", g->limit);
 }
@@ -65,8 +66,8 @@ static int in_region(const mpm_traction_desc *t, int dim, const double *x)
     return 1;
 }
 
-static void emit(gen_ctx *g, const mpm_body_desc *b, const double *x, double vol,
-                 double mass, const double *v, const double *stress, const double *lp)
+static void emit(gen_ctx *g, const mpm_body_desc *b, const double *x, double vol, double mass,
+                 const double *v, const double *stress, const double *lp)
 {
     int dim = g->c->grid.dim;
     double v2 = 0;
@@ -173,7 +174,7 @@ static int gen_points(gen_ctx *g, const mpm_body_desc *b, size_t bi, mpm_error *
         if (d >= 0)
             return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].points.x[%zu]", bi, p * dim + d),
                             "point at %c = %g is outside the grid [%g, %g)", "xyz"[d], x[d],
-                            gr->origin[d], gr->origin[d] + (gr->nodes[d] - 1) * gr->h[d]);
+                            gr -> origin[d], gr -> origin[d] + (gr->nodes[d] - 1) * gr -> h[d]);
         if (!(vol > 0) || !isfinite(vol))
             return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].points.volume[%zu]", bi, p),
                             "must be finite and > 0 (got %g)", vol);
@@ -194,10 +195,9 @@ static int gen_points(gen_ctx *g, const mpm_body_desc *b, size_t bi, mpm_error *
         for (int e = 0; e < dim; e++) {
             lp[e] = b->half_length ? b->half_length[p * dim + e] : 0.5 * pow(vol, 1.0 / dim);
             if (g->c->method == MPM_METHOD_GIMP && !(lp[e] > 0 && lp[e] <= gr->h[e]))
-                return mpm_fail(err, MPM_EINVAL,
-                                PATH("bodies[%zu].points.half_length[%zu]", bi, p * dim + e),
-                                "the GMPM half-width must be in (0, h] = (0, %g] (got %g)",
-                                gr->h[e], lp[e]);
+                return mpm_fail(
+                    err, MPM_EINVAL, PATH("bodies[%zu].points.half_length[%zu]", bi, p * dim + e),
+                    "the GMPM half-width must be in (0, h] = (0, %g] (got %g)", gr->h[e], lp[e]);
         }
         emit(g, b, x, vol, mass, v, b->stress ? b->stress + p * 6 : NULL, lp);
     }
@@ -222,8 +222,7 @@ static int check_body(const mpm_case *c, const mpm_body_desc *b, size_t bi, mpm_
                         (int)b->shape);
     if (b->ppc < 1 || b->ppc > MAX_PPC)
         return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].ppc", bi),
-                        "particles per cell per axis must be in [1, %d] (got %d)", MAX_PPC,
-                        b->ppc);
+                        "particles per cell per axis must be in [1, %d] (got %d)", MAX_PPC, b->ppc);
     if (b->shape == MPM_SHAPE_SPHERE && (!(b->radius > 0) || !isfinite(b->radius)))
         return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].sphere.radius", bi),
                         "must be finite and > 0 (got %g)", b->radius);
@@ -290,9 +289,9 @@ static int check_grid(const mpm_case *c, mpm_error *err)
 }
 
 /* the field of face 2 d + s in the .proto (Boundary.x_lo ...) */
-static const char *const face_path[2 * MPM_MAX_DIM] = {
-    "boundary.x_lo", "boundary.x_hi", "boundary.y_lo",
-    "boundary.y_hi", "boundary.z_lo", "boundary.z_hi"};
+static const char *const face_path[2 * MPM_MAX_DIM] = {"boundary.x_lo", "boundary.x_hi",
+                                                       "boundary.y_lo", "boundary.y_hi",
+                                                       "boundary.z_lo", "boundary.z_hi"};
 
 static int check_bc(const mpm_case *c, mpm_error *err)
 {
@@ -308,8 +307,8 @@ static int check_bc(const mpm_case *c, mpm_error *err)
                             "direction mask %u is not within 0 for a %dD grid", m, dim);
     }
     if (c->bc.n_nodes && (!c->bc.node_ijk || !c->bc.node_mask))
-        return mpm_fail(err, MPM_EINVAL, "boundary.nodes", "%zu nodes given without indices or masks",
-                        c->bc.n_nodes);
+        return mpm_fail(err, MPM_EINVAL, "boundary.nodes",
+                        "%zu nodes given without indices or masks", c->bc.n_nodes);
     for (size_t i = 0; i < c->bc.n_nodes; i++) {
         for (int d = 0; d < dim; d++) {
             int v = c->bc.node_ijk[3 * i + d];

@@ -33,7 +33,7 @@ void mpm_error_push(mpm_error *e, const char *name, long index)
 void mpm_error_prefix(mpm_error *e, const char *name, long index)
 {
     if (!e) return;
-    if (e->depth == MPM_PATH_MAX) e->depth--;  /* the innermost is cut */
+    if (e->depth == MPM_PATH_MAX) e->depth--; /* the innermost is cut */
     memmove(&e->path[1], &e->path[0], (size_t)e->depth * sizeof e->path[0]);
     e->depth++;
     set_elem(&e->path[0], name, strlen(name), index);
@@ -100,8 +100,10 @@ char *mpm_error_field(const mpm_error *e, mpm_field_style style, char *buf, size
     buf[0] = 0;
     for (int i = 0; e && i < e->depth && k < n; i++) {
         char name[MPM_PATH_NAME_MAX];
-        if (style == MPM_FIELD_JSON) mpm_camel_case(e->path[i].name, name, sizeof name);
-        else snprintf(name, sizeof name, "%s", e->path[i].name);
+        if (style == MPM_FIELD_JSON)
+            mpm_camel_case(e->path[i].name, name, sizeof name);
+        else
+            snprintf(name, sizeof name, "%s", e->path[i].name);
         int w = e->path[i].index >= 0
                     ? snprintf(buf + k, n - k, "%s%s[%ld]", i ? "." : "", name, e->path[i].index)
                     : snprintf(buf + k, n - k, "%s%s", i ? "." : "", name);
@@ -118,8 +120,10 @@ char *mpm_error_text(const mpm_error *e, mpm_field_style style, char *buf, size_
     if (!n) return buf;
     mpm_error_field(e, style, field, sizeof field);
     const char *msg = e && e->message[0] ? e->message : mpm_strerror(e ? e->code : 0);
-    if (field[0]) snprintf(buf, n, "%s: %s", field, msg);
-    else snprintf(buf, n, "%s", msg);
+    if (field[0])
+        snprintf(buf, n, "%s: %s", field, msg);
+    else
+        snprintf(buf, n, "%s", msg);
     return buf;
 }
 

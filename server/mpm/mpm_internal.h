@@ -54,10 +54,10 @@ typedef struct {
 /* One grid's worth of scatter targets (the main grid, or a thread's private
  * copy when several threads scatter). */
 typedef struct {
-    double *m;          /* mass */
-    double *q[3];       /* momentum */
-    double *f[3];       /* rate of momentum f_ext - f_int (Eq. 13) */
-    double *q2[3];      /* MUSL: momentum of the updated particle velocities */
+    double *m;     /* mass */
+    double *q[3];  /* momentum */
+    double *f[3];  /* rate of momentum f_ext - f_int (Eq. 13) */
+    double *q2[3]; /* MUSL: momentum of the updated particle velocities */
 } mpm_gridbuf;
 
 typedef struct mpm_kernels mpm_kernels;
@@ -65,15 +65,15 @@ typedef struct mpm_model_ops mpm_model_ops;
 
 /* Per-thread results of a particle pass, padded to a cache line. */
 typedef struct {
-    double vmax2;          /* max |v|^2 seen */
-    size_t bad;            /* first particle that left the grid or blew up */
-    double *deps[6];       /* MPM_BLOCK strain increments (scratch) */
-    void *wblk;            /* MPM_BLOCK per-axis weights (mpm_kernels_scratch bytes) */
-    int blo[3], bhi[3];    /* padded nodes touched by the slice's supports
-                            * (inclusive; empty: blo > bhi) */
-    int *rlo, *rhi;        /* per row (y + z np[1]): first and last x node
-                            * touched (empty: rlo > rhi); rows outside the
-                            * box blo..bhi are always empty */
+    double vmax2;            /* max |v|^2 seen */
+    size_t bad;              /* first particle that left the grid or blew up */
+    double *deps[6];         /* MPM_BLOCK strain increments (scratch) */
+    void *wblk;              /* MPM_BLOCK per-axis weights (mpm_kernels_scratch bytes) */
+    int blo[3], bhi[3];      /* padded nodes touched by the slice's supports
+                              * (inclusive; empty: blo > bhi) */
+    int *rlo, *rhi;          /* per row (y + z np[1]): first and last x node
+                              * touched (empty: rlo > rhi); rows outside the
+                              * box blo..bhi are always empty */
     double ekin, estr, epot; /* partial energies (guard, mpm_sim_energy, and
                               * the step's passes when energies are wanted) */
     double emom[3], emass;   /* partial momentum and mass (mpm_sim_energy) */
@@ -86,18 +86,18 @@ struct mpm_sim {
     int dim;
     mpm_method method;
     mpm_update update;
-    int ns;                        /* nodes per axis per particle: 2 (MPM), 3 or 4 (GMPM) */
+    int ns; /* nodes per axis per particle: 2 (MPM), 3 or 4 (GMPM) */
 
     /* grid */
-    int nreal[3];                  /* real nodes per axis (1 for unused axes) */
-    int pad;                       /* ghost layers per side: 0 MPM, 2 GMPM */
-    int np[3];                     /* padded nodes per axis */
-    size_t stride[3];              /* 1, np[0], np[0]*np[1] */
-    size_t nn;                     /* padded node count */
+    int nreal[3];     /* real nodes per axis (1 for unused axes) */
+    int pad;          /* ghost layers per side: 0 MPM, 2 GMPM */
+    int np[3];        /* padded nodes per axis */
+    size_t stride[3]; /* 1, np[0], np[0]*np[1] */
+    size_t nn;        /* padded node count */
     double x0[3], h[3], inv_h[3];
-    double lo[3], hi[3];           /* particle centres must stay in [lo, hi) */
-    mpm_gridbuf g;                 /* the grid */
-    double *minv;                  /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
+    double lo[3], hi[3]; /* particle centres must stay in [lo, hi) */
+    mpm_gridbuf g;       /* the grid */
+    double *minv;        /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
     double mtol;
 
     /* fixed degrees of freedom: node (padded index) and direction mask */
@@ -108,12 +108,12 @@ struct mpm_sim {
     /* loads */
     int has_gravity;
     double gravity[3];
-    size_t nload;                  /* particles with a point force */
+    size_t nload; /* particles with a point force */
     size_t *load_p;
     double *load_f[3];
     double *load_xold[3];
     double external_work;
-    double external_work_abs;      /* sum of |f . dx|: the guard's bound */
+    double external_work_abs; /* sum of |f . dx|: the guard's bound */
     /* mpm_sim_set_particle_forces(): once called, one load slot per
      * particle (load_p[i] = i) and trac_f keeps the tractions' shares */
     int pforces;
@@ -124,20 +124,20 @@ struct mpm_sim {
     size_t nmat;
     mpm_mat_params *mats;
     const mpm_model_ops *model;
-    double cmax;                   /* largest p-wave speed */
+    double cmax; /* largest p-wave speed */
 
     /* time */
-    double dt_fixed;               /* > 0: given */
+    double dt_fixed; /* > 0: given */
     double cfl;
-    double dt;                     /* dt of the next step */
+    double dt; /* dt of the next step */
     double t;
     long steps;
-    double vmax;                   /* max particle speed after the last step */
+    double vmax; /* max particle speed after the last step */
 
     /* divergence guard (finish_step): total energy at creation, and the
      * floor below which an energy is noise */
     double e_total0, e_floor;
-    double guard_v2;               /* max |v|^2 at the last check */
+    double guard_v2; /* max |v|^2 at the last check */
 
     /* energies summed inside the step (mpm_sim_want_energy()): want asks
      * for them in the next step, step_energy says the running step sums
@@ -157,7 +157,7 @@ struct mpm_sim {
      * ulo > uhi), and blo..bhi (inclusive) the box of the rows in use; the
      * main grid is all zero outside the rows' extents */
     int blo[3], bhi[3];
-    size_t nrows;                  /* np[1] np[2] */
+    size_t nrows; /* np[1] np[2] */
     int *ulo, *uhi;
     /* node passes split the nodes of the extents evenly among the threads:
      * acc[r] is the number of nodes in the extents of the rows before row
@@ -174,22 +174,22 @@ struct mpm_sim {
 
     /* threads */
     int nthreads;
-    mpm_gridbuf *tbuf;             /* per-thread scatter buffers (nthreads > 1; thread
-                                    * 0 scatters into g, tbuf[0] stays empty) */
+    mpm_gridbuf *tbuf; /* per-thread scatter buffers (nthreads > 1; thread
+                        * 0 scatters into g, tbuf[0] stays empty) */
     mpm_thread_out *tout;
     pthread_t *threads;
     pthread_barrier_t bar_start, bar_end; /* bar_end also parts the passes
-                                    * of a step (mpm_team_sync()) */
+                                           * of a step (mpm_team_sync()) */
     void (*phase)(mpm_sim *, int tid);
     int quit;
-    pthread_mutex_t gate_mu;       /* start gate for the team */
+    pthread_mutex_t gate_mu; /* start gate for the team */
     pthread_cond_t gate_cv;
-    int gate;                      /* 0 closed, 1 open, -1 abort */
-    int sync_init;                 /* 1: gate made, 2: barriers made too */
+    int gate;      /* 0 closed, 1 open, -1 abort */
+    int sync_init; /* 1: gate made, 2: barriers made too */
 
     atomic_int cancel;
-    int failed;                    /* 0 or the MPM_E* code that froze the run */
-    mpm_error err;                 /* mpm_sim_error() */
+    int failed;    /* 0 or the MPM_E* code that froze the run */
+    mpm_error err; /* mpm_sim_error() */
 };
 
 /* Kernel family for one (dimension, method).  Each runs over the particles
@@ -204,7 +204,8 @@ struct mpm_kernels {
     void (*p2g_mqf)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
     void (*p2g_q2)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
     /* USF: strain from grid velocity, stress update, then internal forces */
-    void (*stress_force)(mpm_sim *, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1, int en);
+    void (*stress_force)(mpm_sim *, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1,
+                         int en);
     /* position and velocity update (Eqs. 30-31) */
     void (*g2p_xv)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1, int en);
     /* USL: position and velocity update, then strain and stress */
@@ -238,15 +239,15 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
  * the kernels. */
 struct mpm_model_ops {
     const char *name;
-    void (*update[3])(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
-                      size_t n, double *const deps[6]);
+    void (*update[3])(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
+                      double *const deps[6]);
 };
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
 /* Fills derived constants; returns 0 or MPM_EINVAL with err naming
  * materials[i]'s field and the limit. */
-int mpm_model_params(const mpm_material_desc *d, int dim, size_t i,
-                     mpm_mat_params *out, mpm_error *err);
+int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,
+                     mpm_error *err);
 
 /* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
  * eps_zz array, its term is zero) */
@@ -344,7 +345,11 @@ enum { MPM_F_M = 1, MPM_F_Q = 2, MPM_F_F = 4, MPM_F_Q2 = 8 };
  * (after the reduction of the fields named): inverse mass with phantom
  * nodes at 0, gravity f += m g, BC1 on q or on q2, BC2 on f, q += f dt. */
 enum {
-    MPM_N_MINV = 16, MPM_N_GRAV = 32, MPM_N_BC1 = 64, MPM_N_BC1Q2 = 128, MPM_N_BC2 = 256,
+    MPM_N_MINV = 16,
+    MPM_N_GRAV = 32,
+    MPM_N_BC1 = 64,
+    MPM_N_BC1Q2 = 128,
+    MPM_N_BC2 = 256,
     MPM_N_UPD = 512
 };
 

@@ -91,8 +91,7 @@ INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
     return n0;
 }
 
-int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp,
-                 double *w, double *g)
+int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, double *w, double *g)
 {
     double inv_h = 1.0 / h, r = (x - x0) * inv_h;
     if (method == MPM_METHOD_GIMP) return axis(r, inv_h, lp, 4, w, g);
@@ -144,8 +143,8 @@ INLINE int cell_of(const mpm_sim *s, size_t p, int d, double *rr)
  * to a neighbouring row (a superset is harmless: the extents only say what
  * to zero, reduce and update). */
 typedef struct {
-    int cy, cz;          /* row of cells of the run (cy = INT_MIN: none) */
-    int lo[3], hi[3];    /* its node box, clamped to the padded grid */
+    int cy, cz;       /* row of cells of the run (cy = INT_MIN: none) */
+    int lo[3], hi[3]; /* its node box, clamped to the padded grid */
 } rowrun;
 
 INLINE void run_init(rowrun *a)
@@ -226,30 +225,27 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
 }
 
 /* Gradient weight k of axis d: MPM's are the constants -1/h, 1/h. */
-#define GRAD(s, W, NS, d, k) \
-    ((NS) == 2 ? ((k) ? (s)->inv_h[d] : -(s)->inv_h[d]) : (W).g[d][k])
+#define GRAD(s, W, NS, d, k) ((NS) == 2 ? ((k) ? (s)->inv_h[d] : -(s)->inv_h[d]) : (W).g[d][k])
 
 /* Loop over the support of one particle row by row: for each (ky, kz) the
  * body sees row (flat index of node kx = 0), A = wy wz, B = gy wz and
  * C = wy gz (the factors of S, G_y and G_z apart from the x axis). */
-#define ROWS(D, NS, W, s, ...)                                                           \
-    do {                                                                                 \
-        const size_t sy_ = (s)->stride[1], sz_ = (s)->stride[2];                         \
-        for (int kz = 0; kz < ((D) > 2 ? (NS) : 1); kz++)                         \
-        {                                                                                \
+#define ROWS(D, NS, W, s, ...)                                                                    \
+    do {                                                                                          \
+        const size_t sy_ = (s)->stride[1], sz_ = (s)->stride[2];                                  \
+        for (int kz = 0; kz < ((D) > 2 ? (NS) : 1); kz++) {                                       \
             double wz = (D) > 2 ? (W).w[2][kz] : 1.0, gz = (D) > 2 ? GRAD(s, W, NS, 2, kz) : 0.0; \
-            for (int ky = 0; ky < ((D) > 1 ? (NS) : 1); ky++)                     \
-            {                                                                            \
-                double wy = (D) > 1 ? (W).w[1][ky] : 1.0;                                \
-                double gy = (D) > 1 ? GRAD(s, W, NS, 1, ky) : 0.0;                        \
-                double A = wy * wz, B = gy * wz, C = wy * gz;                            \
-                size_t row = (W).base + (D > 1 ? (size_t)ky * sy_ : 0) +                 \
-                             (D > 2 ? (size_t)kz * sz_ : 0);                             \
-                (void)B;                                                                 \
-                (void)C;                                                                 \
-                __VA_ARGS__                                                              \
-            }                                                                            \
-        }                                                                                \
+            for (int ky = 0; ky < ((D) > 1 ? (NS) : 1); ky++) {                                   \
+                double wy = (D) > 1 ? (W).w[1][ky] : 1.0;                                         \
+                double gy = (D) > 1 ? GRAD(s, W, NS, 1, ky) : 0.0;                                \
+                double A = wy * wz, B = gy * wz, C = wy * gz;                                     \
+                size_t row =                                                                      \
+                    (W).base + (D > 1 ? (size_t)ky * sy_ : 0) + (D > 2 ? (size_t)kz * sz_ : 0);   \
+                (void)B;                                                                          \
+                (void)C;                                                                          \
+                __VA_ARGS__                                                                       \
+            }                                                                                     \
+        }                                                                                         \
     } while (0)
 
 /* Mass and momentum (Eqs. 25-26: momentum extrapolated directly). */
@@ -262,7 +258,8 @@ INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p,
     double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
     ROWS(D, NS, *W, s, {
         double am = A * mp, a0 = A * mv0, a1 = A * mv1, a2 = A * mv2;
-        UNROLL for (int kx = 0; kx < NS; kx++) {
+        UNROLL
+        for (int kx = 0; kx < NS; kx++) {
             double S = W->w[0][kx];
             size_t n = row + (size_t)kx;
             m[n] += S * am;
@@ -287,7 +284,8 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t
     ROWS(D, NS, *W, s, {
         double P0 = sxx * A, P1 = sxy * A, P2 = sxz * A;
         double Q0 = sxy * B + sxz * C, Q1 = syy * B + syz * C, Q2 = syz * B + szz * C;
-        UNROLL for (int kx = 0; kx < NS; kx++) {
+        UNROLL
+        for (int kx = 0; kx < NS; kx++) {
             double gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx];
             size_t n = row + (size_t)kx;
             if (D == 1)
@@ -313,7 +311,8 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
     double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
     ROWS(D, NS, *W, s, {
         double r0[3] = {0, 0, 0}, r1[3] = {0, 0, 0}, rx[3] = {0, 0, 0}, rv[3] = {0, 0, 0};
-        UNROLL for (int kx = 0; kx < NS; kx++) {
+        UNROLL
+        for (int kx = 0; kx < NS; kx++) {
             size_t n = row + (size_t)kx;
             double mi = minv[n], gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx], sm = wx * mi;
             for (int a = 0; a < D; a++) {
@@ -448,7 +447,8 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
         double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
         ROWS(D, NS, W, s, {
             double a0 = A * mv0, a1 = A * mv1, a2 = A * mv2;
-            UNROLL for (int kx = 0; kx < NS; kx++) {
+            UNROLL
+            for (int kx = 0; kx < NS; kx++) {
                 double S = W.w[0][kx];
                 size_t n = row + (size_t)kx;
                 q0[n] += S * a0;
@@ -461,8 +461,8 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
 
 /* USF: strain and stress from the grid velocity, then internal forces with
  * the new stress; the weights of the block are kept between the two. */
-INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0,
-                           size_t p1, int D, int NS, int EN)
+INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1,
+                           int D, int NS, int EN)
 {
     pw *Wb = o->wblk;
     esum e;
@@ -657,7 +657,8 @@ INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, size_t p0, size_t p1, i
             double r;
             c[d] = cell_of(s, p, d, &r);
         }
-        for (int d = 1; d < 3; d++) c[d] = c[d] < s->blo[d] ? s->blo[d] : c[d] > s->bhi[d] ? s->bhi[d] : c[d];
+        for (int d = 1; d < 3; d++)
+            c[d] = c[d] < s->blo[d] ? s->blo[d] : c[d] > s->bhi[d] ? s->bhi[d] : c[d];
         size_t row = (size_t)c[1] + (size_t)c[2] * ny;
         int lo = s->ulo[row], w = s->uhi[row] - lo;
         int x = c[0] - lo;
@@ -677,7 +678,8 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
         double l0 = s->load_f[0][i], l1 = D > 1 ? s->load_f[1][i] : 0.0;
         double l2 = D > 2 ? s->load_f[2][i] : 0.0;
         ROWS(D, NS, W, s, {
-            UNROLL for (int kx = 0; kx < NS; kx++) {
+            UNROLL
+            for (int kx = 0; kx < NS; kx++) {
                 double S = W.w[0][kx] * A;
                 size_t n = row + (size_t)kx;
                 s->g.f[0][n] += S * l0;
@@ -687,55 +689,80 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
         });
     }
 }
-#define LOADS(D, NS) \
-    static void scatter_loads_##D##_##NS(mpm_sim *s) { scatter_loads_t(s, D, NS); }
+#define LOADS(D, NS)                                 \
+    static void scatter_loads_##D##_##NS(mpm_sim *s) \
+    {                                                \
+        scatter_loads_t(s, D, NS);                   \
+    }
 #else
-#define LOADS(D, NS) \
-    static void scatter_loads_##D##_##NS(mpm_sim *s) { (void)s; }
+#define LOADS(D, NS)                                 \
+    static void scatter_loads_##D##_##NS(mpm_sim *s) \
+    {                                                \
+        (void)s;                                     \
+    }
 #endif
 
-#define FAMILY(D, NS)                                                                          \
-    static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)             \
-    { p2g_mq_t(s, gb, a, b, D, NS); }                                                          \
-    static void p2g_mqf_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)            \
-    { p2g_mqf_t(s, gb, a, b, D, NS); }                                                         \
-    static void p2g_q2_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)             \
-    { p2g_q2_t(s, gb, a, b, D, NS); }                                                          \
-    static void stress_force_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o,        \
-                                        size_t a, size_t b, int en)                            \
-    {                                                                                          \
-        if (en) stress_force_t(s, gb, o, a, b, D, NS, 1);                                      \
-        else stress_force_t(s, gb, o, a, b, D, NS, 0);                                         \
-    }                                                                                          \
-    static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)   \
-    {                                                                                          \
-        if (en) g2p_xv_t(s, o, a, b, D, NS, 1);                                                \
-        else g2p_xv_t(s, o, a, b, D, NS, 0);                                                   \
-    }                                                                                          \
-    static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,    \
-                                         int en)                                               \
-    {                                                                                          \
-        if (en) g2p_xv_stress_t(s, o, a, b, D, NS, 1);                                         \
-        else g2p_xv_stress_t(s, o, a, b, D, NS, 0);                                            \
-    }                                                                                          \
-    static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)            \
-    { g2p_v_t(s, o, a, b, D, NS); }                                                            \
-    static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,     \
-                                        int en)                                                \
-    {                                                                                          \
-        if (en) g2p_x_stress_t(s, o, a, b, D, NS, 1);                                          \
-        else g2p_x_stress_t(s, o, a, b, D, NS, 0);                                             \
-    }                                                                                          \
-    LOADS(D, NS)                                                                               \
-    static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)             \
-    { bbox_t(s, o, a, b, D, NS); }                                                             \
-    static void cell_keys_##D##_##NS(const mpm_sim *s, uint32_t *key, size_t a, size_t b)      \
-    { cell_keys_t(s, key, a, b, D); }                                                          \
-    static const mpm_kernels family_##D##_##NS = {                                             \
-        p2g_mq_##D##_##NS, p2g_mqf_##D##_##NS, p2g_q2_##D##_##NS, stress_force_##D##_##NS,     \
-        g2p_xv_##D##_##NS, g2p_xv_stress_##D##_##NS, g2p_v_##D##_##NS,                         \
-        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS, bbox_##D##_##NS,                    \
-        cell_keys_##D##_##NS};
+#define FAMILY(D, NS)                                                                              \
+    static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
+    {                                                                                              \
+        p2g_mq_t(s, gb, a, b, D, NS);                                                              \
+    }                                                                                              \
+    static void p2g_mqf_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                \
+    {                                                                                              \
+        p2g_mqf_t(s, gb, a, b, D, NS);                                                             \
+    }                                                                                              \
+    static void p2g_q2_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
+    {                                                                                              \
+        p2g_q2_t(s, gb, a, b, D, NS);                                                              \
+    }                                                                                              \
+    static void stress_force_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t a,  \
+                                        size_t b, int en)                                          \
+    {                                                                                              \
+        if (en)                                                                                    \
+            stress_force_t(s, gb, o, a, b, D, NS, 1);                                              \
+        else                                                                                       \
+            stress_force_t(s, gb, o, a, b, D, NS, 0);                                              \
+    }                                                                                              \
+    static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)       \
+    {                                                                                              \
+        if (en)                                                                                    \
+            g2p_xv_t(s, o, a, b, D, NS, 1);                                                        \
+        else                                                                                       \
+            g2p_xv_t(s, o, a, b, D, NS, 0);                                                        \
+    }                                                                                              \
+    static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
+                                         int en)                                                   \
+    {                                                                                              \
+        if (en)                                                                                    \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1);                                                 \
+        else                                                                                       \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0);                                                 \
+    }                                                                                              \
+    static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                \
+    {                                                                                              \
+        g2p_v_t(s, o, a, b, D, NS);                                                                \
+    }                                                                                              \
+    static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
+    {                                                                                              \
+        if (en)                                                                                    \
+            g2p_x_stress_t(s, o, a, b, D, NS, 1);                                                  \
+        else                                                                                       \
+            g2p_x_stress_t(s, o, a, b, D, NS, 0);                                                  \
+    }                                                                                              \
+    LOADS(D, NS)                                                                                   \
+    static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                 \
+    {                                                                                              \
+        bbox_t(s, o, a, b, D, NS);                                                                 \
+    }                                                                                              \
+    static void cell_keys_##D##_##NS(const mpm_sim *s, uint32_t *key, size_t a, size_t b)          \
+    {                                                                                              \
+        cell_keys_t(s, key, a, b, D);                                                              \
+    }                                                                                              \
+    static const mpm_kernels family_##D##_##NS = {                                                 \
+        p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                       \
+        stress_force_##D##_##NS, g2p_xv_##D##_##NS,       g2p_xv_stress_##D##_##NS,                \
+        g2p_v_##D##_##NS,        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,                \
+        bbox_##D##_##NS,         cell_keys_##D##_##NS};
 
 FAMILY(1, 2)
 FAMILY(1, 3)
@@ -749,9 +776,8 @@ FAMILY(3, 4)
 
 const mpm_kernels *mpm_kernels_select(int dim, int ns)
 {
-    static const mpm_kernels *const table[3][3] = {
-        {&family_1_2, &family_1_3, &family_1_4},
-        {&family_2_2, &family_2_3, &family_2_4},
-        {&family_3_2, &family_3_3, &family_3_4}};
+    static const mpm_kernels *const table[3][3] = {{&family_1_2, &family_1_3, &family_1_4},
+                                                   {&family_2_2, &family_2_3, &family_2_4},
+                                                   {&family_3_2, &family_3_3, &family_3_4}};
     return table[dim - 1][ns - 2];
 }

@@ -29,8 +29,10 @@ void mpm_bc_zero(const mpm_sim *s, double *const field[3], size_t first, size_t 
     if (!b) return;
     while (a < b) { /* first entry >= first */
         size_t mid = a + (b - a) / 2;
-        if (s->fixed_node[mid] < first) a = mid + 1;
-        else b = mid;
+        if (s->fixed_node[mid] < first)
+            a = mid + 1;
+        else
+            b = mid;
     }
     for (size_t i = a; i < s->nfixed && s->fixed_node[i] <= last; i++) {
         size_t n = s->fixed_node[i];
@@ -100,7 +102,8 @@ int mpm_loads_build(mpm_sim *s, const mpm_case *c)
         for (size_t t = 0; t < c->n_tractions; t++) {
             int in = 1;
             for (int d = 0; d < dim; d++)
-                in &= s->P.x[d][p] >= c->tractions[t].lo[d] && s->P.x[d][p] <= c->tractions[t].hi[d];
+                in &=
+                    s->P.x[d][p] >= c->tractions[t].lo[d] && s->P.x[d][p] <= c->tractions[t].hi[d];
             if (in) {
                 cnt++;
                 break;
@@ -108,14 +111,15 @@ int mpm_loads_build(mpm_sim *s, const mpm_case *c)
         }
     s->load_p = malloc(cnt * sizeof *s->load_p);
     if (!s->load_p) return MPM_ENOMEM;
-    /* gcc 12's -fanalyzer forgets s->load_xold[0] when the next pass stores at
-     * a symbolic d, and calls it leaked; on failure mpm_sim_destroy frees all */
+        /* gcc 12's -fanalyzer forgets s->load_xold[0] when the next pass stores at
+         * a symbolic d, and calls it leaked; on failure mpm_sim_destroy frees all */
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wanalyzer-malloc-leak"
 #endif
     for (int d = 0; d < dim; d++)
-        if (!(s->load_f[d] = mpm_dalloc(cnt)) || !(s->load_xold[d] = mpm_dalloc(cnt))) return MPM_ENOMEM;
+        if (!(s->load_f[d] = mpm_dalloc(cnt)) || !(s->load_xold[d] = mpm_dalloc(cnt)))
+            return MPM_ENOMEM;
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
@@ -204,8 +208,7 @@ int mpm_loads_set_forces(mpm_sim *s, const double *f)
     }
     for (size_t i = 0; i < n; i++)
         for (int d = 0; d < dim; d++)
-            s->load_f[d][i] = s->trac_f[d][i] +
-                              (f ? f[(size_t)s->P.id[s->load_p[i]] * (size_t)dim + d] : 0);
+            s->load_f[d][i] =
+                s->trac_f[d][i] + (f ? f[(size_t)s->P.id[s->load_p[i]] * (size_t)dim + d] : 0);
     return 0;
 }
-

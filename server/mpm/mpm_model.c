@@ -14,8 +14,8 @@
 #include <math.h>
 #include <stdio.h>
 
-static void elastic_1d(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
-                       size_t n, double *const deps[6])
+static void elastic_1d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
+                       double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
     double *sxx = P->sig[0] + p0, *exx = P->eps[0] + p0;
@@ -26,8 +26,8 @@ static void elastic_1d(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
     }
 }
 
-static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
-                       size_t n, double *const deps[6])
+static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
+                       double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
     double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s2 = P->sig[2] + p0, *s3 = P->sig[3] + p0;
@@ -46,8 +46,8 @@ static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
     }
 }
 
-static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
-                       size_t n, double *const deps[6])
+static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
+                       double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
     double *restrict s[6], *restrict e[6];
@@ -77,17 +77,16 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0,
     }
 }
 
-static const mpm_model_ops linear_elastic = {
-    "linear_elastic", { elastic_1d, elastic_2d, elastic_3d }
-};
+static const mpm_model_ops linear_elastic = {"linear_elastic",
+                                             {elastic_1d, elastic_2d, elastic_3d}};
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
 {
     return kind == MPM_MODEL_LINEAR_ELASTIC ? &linear_elastic : NULL;
 }
 
-int mpm_model_params(const mpm_material_desc *d, int dim, size_t i,
-                     mpm_mat_params *out, mpm_error *err)
+int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,
+                     mpm_error *err)
 {
     char path[64];
     if (!mpm_model_get(d->model)) {
@@ -96,7 +95,8 @@ int mpm_model_params(const mpm_material_desc *d, int dim, size_t i,
     }
     if (!(d->youngs_modulus > 0) || !isfinite(d->youngs_modulus)) {
         snprintf(path, sizeof path, "materials[%zu].youngs_modulus", i);
-        return mpm_fail(err, MPM_EINVAL, path, "must be finite and > 0 (got %g)", d->youngs_modulus);
+        return mpm_fail(err, MPM_EINVAL, path, "must be finite and > 0 (got %g)",
+                        d->youngs_modulus);
     }
     if (!(d->density > 0) || !isfinite(d->density)) {
         snprintf(path, sizeof path, "materials[%zu].density", i);

@@ -19,7 +19,8 @@
 int mpm_rows_init(mpm_sim *s)
 {
     s->nrows = (size_t)s->np[1] * (size_t)s->np[2];
-    if (!(s->ulo = malloc(s->nrows * sizeof *s->ulo)) || !(s->uhi = malloc(s->nrows * sizeof *s->uhi)) ||
+    if (!(s->ulo = malloc(s->nrows * sizeof *s->ulo)) ||
+        !(s->uhi = malloc(s->nrows * sizeof *s->uhi)) ||
         !(s->rowoff = malloc((s->nrows + 1) * sizeof *s->rowoff)) ||
         !(s->acc = calloc(s->nrows + 1, sizeof *s->acc)))
         return MPM_ENOMEM;
@@ -83,7 +84,8 @@ static void union_box(const mpm_sim *s, int lo[3], int hi[3])
 static void zero_span(const mpm_sim *s, double *const *f, int nf, size_t row, int a, int b)
 {
     if (a > b) return;
-    for (int i = 0; i < nf; i++) memset(f[i] + mpm_row_node(s, row, a), 0, (size_t)(b - a + 1) * sizeof(double));
+    for (int i = 0; i < nf; i++)
+        memset(f[i] + mpm_row_node(s, row, a), 0, (size_t)(b - a + 1) * sizeof(double));
 }
 
 /* Makes the active rows the union of the threads' rows as the last
@@ -170,8 +172,10 @@ static void seg_begin(const mpm_sim *s, int tid, seg_iter *it)
     it->nr = hi;
     while (lo < hi) { /* the first row r with acc[r + 1] > n0 */
         size_t mid = lo + (hi - lo) / 2;
-        if (s->acc[mid + 1] > n0) hi = mid;
-        else lo = mid + 1;
+        if (s->acc[mid + 1] > n0)
+            hi = mid;
+        else
+            lo = mid + 1;
     }
     it->r = lo;
     it->n = n0;
@@ -320,4 +324,3 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
             }
     }
 }
-

@@ -117,7 +117,8 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int gimp)
     }
     for (int c = 0; c < MPM_NCOMP(dim); c++) {
         if (!(P->sig[c] = mpm_dalloc(n))) return MPM_ENOMEM;
-        if (!(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n))) return MPM_ENOMEM; /* eps_zz = 0 */
+        if (!(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
+            return MPM_ENOMEM; /* eps_zz = 0 */
     }
     if (!(P->m = mpm_dalloc(n)) || !(P->vol = mpm_dalloc(n))) return MPM_ENOMEM;
     if (!(P->mat = calloc(n ? n : 1, sizeof *P->mat))) return MPM_ENOMEM;
@@ -469,12 +470,14 @@ static int finish_step(mpm_sim *s)
         if (!finite) {
             s->failed = mpm_fail(&s->err, MPM_EDIVERGED, NULL,
                                  "diverged at step %ld, time %.9g: particle %zu has a non-finite "
-                                 "position or velocity", step, t, (size_t)s->P.id[bad]);
+                                 "position or velocity",
+                                 step, t, (size_t)s->P.id[bad]);
         } else {
             s->failed = mpm_fail(&s->err, MPM_ELEFTGRID, NULL,
                                  "particle %zu left the grid at step %ld, time %.9g: position "
-                                 "(%s), %c outside [%g, %g)", (size_t)s->P.id[bad], step, t, pos,
-                                 "xyz"[axis], s->lo[axis], s->hi[axis]);
+                                 "(%s), %c outside [%g, %g)",
+                                 (size_t)s->P.id[bad], step, t, pos, "xyz"[axis], s -> lo[axis],
+                                 s -> hi[axis]);
         }
         return s->failed;
     }
@@ -551,8 +554,7 @@ int mpm_sim_set_particle_forces(mpm_sim *s, const double *f)
                 return mpm_fail(&s->err, MPM_EINVAL, path, "must be finite (got %g)", f[i]);
             }
     if (mpm_loads_set_forces(s, f))
-        return mpm_fail(&s->err, MPM_ENOMEM, NULL, "out of memory for %zu particle forces",
-                        s->P.n);
+        return mpm_fail(&s->err, MPM_ENOMEM, NULL, "out of memory for %zu particle forces", s->P.n);
     return 0;
 }
 
@@ -563,12 +565,30 @@ void mpm_sim_cancel(mpm_sim *s)
 
 /* ---- results ---- */
 
-long mpm_sim_steps(const mpm_sim *s) { return s->steps; }
-double mpm_sim_time(const mpm_sim *s) { return s->t; }
-double mpm_sim_dt(const mpm_sim *s) { return s->dt; }
-size_t mpm_sim_particles(const mpm_sim *s) { return s->P.n; }
-int mpm_sim_dim(const mpm_sim *s) { return s->dim; }
-const mpm_error *mpm_sim_error(const mpm_sim *s) { return &s->err; }
+long mpm_sim_steps(const mpm_sim *s)
+{
+    return s->steps;
+}
+double mpm_sim_time(const mpm_sim *s)
+{
+    return s->t;
+}
+double mpm_sim_dt(const mpm_sim *s)
+{
+    return s->dt;
+}
+size_t mpm_sim_particles(const mpm_sim *s)
+{
+    return s->P.n;
+}
+int mpm_sim_dim(const mpm_sim *s)
+{
+    return s->dim;
+}
+const mpm_error *mpm_sim_error(const mpm_sim *s)
+{
+    return &s->err;
+}
 
 size_t mpm_sim_nodes(const mpm_sim *s)
 {
@@ -579,9 +599,9 @@ size_t mpm_sim_nodes(const mpm_sim *s)
 
 /* On the thread team (mpm_ph_energy()), partial sums combined in thread order:
  * reproducible for a given thread count; or, when the last step was asked
- * to (mpm_sim_want_energy()), the same sums that step made in its passes.  The team's scratch (tout) is
- * written, nothing of the simulation's state; the object was not defined
- * const, so the cast is sound, and the team is idle between steps. */
+ * to (mpm_sim_want_energy()), the same sums that step made in its passes.  The team's scratch
+ * (tout) is written, nothing of the simulation's state; the object was not defined const, so the
+ * cast is sound, and the team is idle between steps. */
 void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
 {
     mpm_sim *s = (mpm_sim *)cs;

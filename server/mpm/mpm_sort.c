@@ -134,4 +134,3 @@ void mpm_sort_particles(mpm_sim *s)
         s->sscr = old;
     }
 }
-

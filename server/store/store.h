@@ -59,16 +59,16 @@
  * struct and freed by store_run_clear().  Field names are the schema's
  * (mpmd.RunInfo). */
 typedef struct {
-    int64_t id;                 /* job id; <= 0 on insert: allocate one */
-    const char *name;           /* NULL on insert: "" */
-    const void *case_pb;        /* the case's protobuf bytes */
+    int64_t id;          /* job id; <= 0 on insert: allocate one */
+    const char *name;    /* NULL on insert: "" */
+    const void *case_pb; /* the case's protobuf bytes */
     size_t case_len;
     mpm_method method;
     mpm_update update;
-    int dim;                    /* 1..3 */
+    int dim; /* 1..3 */
     int64_t particles, nodes;
     mpp_status status;
-    double submitted_at;        /* 0 on insert: now */
+    double submitted_at; /* 0 on insert: now */
     double started_at, finished_at;
     int64_t steps;              /* steps done */
     double wall_s;              /* wall-clock seconds of the run */
@@ -84,13 +84,13 @@ typedef struct {
 
 /* How a run ended (store_run_finish). */
 typedef struct {
-    mpp_status status;          /* FINISHED, FAILED, CANCELLED or INTERRUPTED */
-    double finished_at;         /* 0: now */
+    mpp_status status;  /* FINISHED, FAILED, CANCELLED or INTERRUPTED */
+    double finished_at; /* 0: now */
     int64_t steps;
     double wall_s, psteps_per_s;
-    int has_energy;             /* 0: leave the final energies unset */
-    mpm_energy energy;          /* kinetic .. total are stored */
-    const char *error;          /* NULL = none */
+    int has_energy;    /* 0: leave the final energies unset */
+    mpm_energy energy; /* kinetic .. total are stored */
+    const char *error; /* NULL = none */
 } store_run_end;
 
 /* A particle snapshot: data is opaque to the store (the caller's encoding of
@@ -108,37 +108,37 @@ typedef struct {
 
 /* Filter for store_run_list.  All-zero: every run, newest first. */
 typedef struct {
-    unsigned status_mask;       /* OR of STORE_STATUS_BIT(); 0 = any */
-    size_t limit;               /* 0 = no limit */
-    int64_t before_id;          /* > 0: only runs with id < before_id */
-    int with_case;              /* 1: also load case_pb (else NULL; case_len
-                                   is set either way) */
+    unsigned status_mask; /* OR of STORE_STATUS_BIT(); 0 = any */
+    size_t limit;         /* 0 = no limit */
+    int64_t before_id;    /* > 0: only runs with id < before_id */
+    int with_case;        /* 1: also load case_pb (else NULL; case_len
+                             is set either way) */
 } store_run_filter;
 
 typedef void (*store_log_fn)(void *ud, const char *msg);
 
 /* Options for store_open; NULL or zero fields take the defaults. */
 typedef struct {
-    double batch_ms;            /* commit at least this often while writes
-                                   are pending (default 50 ms) */
-    size_t batch_ops;           /* ... or as soon as this many are pending;
-                                   also the most ops per transaction
-                                   (default 1024) */
-    size_t queue_cap;           /* bytes of pending writes above which
-                                   snapshots are dropped (default 64 MiB) */
-    int busy_timeout_ms;        /* SQLite busy timeout (default 5000) */
-    store_log_fn log;           /* log lines (default: stderr); called from
-                                   any thread, so it must be thread-safe */
+    double batch_ms;     /* commit at least this often while writes
+                            are pending (default 50 ms) */
+    size_t batch_ops;    /* ... or as soon as this many are pending;
+                            also the most ops per transaction
+                            (default 1024) */
+    size_t queue_cap;    /* bytes of pending writes above which
+                            snapshots are dropped (default 64 MiB) */
+    int busy_timeout_ms; /* SQLite busy timeout (default 5000) */
+    store_log_fn log;    /* log lines (default: stderr); called from
+                            any thread, so it must be thread-safe */
     void *log_ud;
 } store_options;
 
 typedef struct {
     uint64_t ops_enqueued, ops_committed, transactions;
-    uint64_t write_errors;      /* failed asynchronous operations, total */
+    uint64_t write_errors; /* failed asynchronous operations, total */
     uint64_t snapshots_dropped;
     size_t queue_ops, queue_bytes, queue_bytes_max;
-    int64_t recovered_running;  /* runs set 'interrupted' at open ... */
-    int64_t recovered_queued;   /* ... by state they were left in */
+    int64_t recovered_running; /* runs set 'interrupted' at open ... */
+    int64_t recovered_queued;  /* ... by state they were left in */
 } store_stats;
 
 typedef struct store store;
@@ -208,12 +208,10 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out);
  * replaces the run's error text.  Like progress and finish, it applies only
  * to a run still 'queued' or 'running': a terminal status is final, and an
  * update of an ended run fails (as a write error: "run N already ended"). */
-int store_run_set_status(store *s, int64_t id, mpp_status status,
-                         double at, const char *error);
+int store_run_set_status(store *s, int64_t id, mpp_status status, double at, const char *error);
 
 /* Records progress: steps done, wall seconds so far, particle-steps/s. */
-int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s,
-                       double psteps_per_s);
+int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s, double psteps_per_s);
 
 /* Ends a run: terminal status, end time, final counters, energies, error. */
 int store_run_finish(store *s, int64_t id, const store_run_end *end);
@@ -222,8 +220,7 @@ int store_run_finish(store *s, int64_t id, const store_run_end *end);
  * its seq).  Every field is stored but dim: reads give the run's dim.
  * Never dropped: when the queue is above its cap it grows instead (see
  * store_writer.c). */
-int store_energy_append(store *s, int64_t run_id, const mpm_energy_sample *e,
-                        size_t n);
+int store_energy_append(store *s, int64_t run_id, const mpm_energy_sample *e, size_t n);
 
 /* Stores a snapshot (replacing one at the same run and step).  Returns
  * MPM_EFULL, logging a line, if the pending writes would exceed the queue
@@ -239,8 +236,7 @@ void store_run_clear(store_run *r);
 
 /* Lists runs newest first (by id).  f may be NULL.  *runs is an array of
  * *n records (NULL when n is 0), released with store_run_list_free(). */
-int store_run_list(store *s, const store_run_filter *f, store_run **runs,
-                   size_t *n);
+int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t *n);
 void store_run_list_free(store_run *runs, size_t n);
 
 /* Reads the energy samples of a run with seq >= from_seq, at most max of
@@ -265,8 +261,7 @@ void store_run_extra_clear(store_run_extra *x);
 
 /* Reads the snapshot of a run at step (step < 0: the one with the highest
  * step).  MPM_ENOTFOUND if none. */
-int store_snapshot_get(store *s, int64_t run_id, int64_t step,
-                       store_snapshot *out);
+int store_snapshot_get(store *s, int64_t run_id, int64_t step, store_snapshot *out);
 void store_snapshot_clear(store_snapshot *snap);
 
 /* The database's schema version (PRAGMA user_version). */

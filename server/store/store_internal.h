@@ -21,12 +21,12 @@
 #include <pthread.h>
 #include <sqlite3.h>
 
-#define STORE_APP_ID 0x6d706d64            /* "mpmd" in PRAGMA application_id */
+#define STORE_APP_ID 0x6d706d64 /* "mpmd" in PRAGMA application_id */
 #define DEFAULT_BATCH_MS 50.0
 #define DEFAULT_BATCH_OPS 1024
 #define DEFAULT_QUEUE_CAP ((size_t)64 << 20)
 #define DEFAULT_BUSY_MS 5000
-#define READER_POOL_MAX 8                  /* idle read connections kept */
+#define READER_POOL_MAX 8 /* idle read connections kept */
 #define BEGIN_RETRIES 3
 
 /* ---- queue entries (store_writer.c) ---- */
@@ -43,26 +43,43 @@ typedef enum {
 typedef struct op {
     struct op *next;
     op_kind kind;
-    int64_t run_id;      /* the run it writes (commit tracking) */
-    uint64_t seq;        /* enqueue number */
-    double t_enq;        /* monotonic time of enqueue */
-    size_t bytes;        /* size of this allocation (queue accounting) */
+    int64_t run_id; /* the run it writes (commit tracking) */
+    uint64_t seq;   /* enqueue number */
+    double t_enq;   /* monotonic time of enqueue */
+    size_t bytes;   /* size of this allocation (queue accounting) */
     union {
-        store_run run;                                   /* RUN_INSERT */
-        struct { mpp_status status; double at;
-                 const char *error; } st;                /* RUN_STATUS */
-        struct { int64_t steps; double wall, rate; } prog;
-        store_run_end fin;                               /* RUN_FINISH */
-        struct { size_t n; mpm_energy_sample *v; } en;   /* ENERGY */
-        store_snapshot snap;                             /* SNAPSHOT */
+        store_run run; /* RUN_INSERT */
+        struct {
+            mpp_status status;
+            double at;
+            const char *error;
+        } st; /* RUN_STATUS */
+        struct {
+            int64_t steps;
+            double wall, rate;
+        } prog;
+        store_run_end fin; /* RUN_FINISH */
+        struct {
+            size_t n;
+            mpm_energy_sample *v;
+        } en;                /* ENERGY */
+        store_snapshot snap; /* SNAPSHOT */
     } u;
     /* copies of strings / blobs / samples follow, at OP_HDR */
 } op;
 
 /* Prepared statements of the writer connection. */
 enum {
-    WS_BEGIN, WS_COMMIT, WS_ROLLBACK, WS_INS_RUN, WS_UPD_STATUS,
-    WS_UPD_PROGRESS, WS_FINISH, WS_INS_ENERGY, WS_PUT_SNAP, WS_GET_STATUS,
+    WS_BEGIN,
+    WS_COMMIT,
+    WS_ROLLBACK,
+    WS_INS_RUN,
+    WS_UPD_STATUS,
+    WS_UPD_PROGRESS,
+    WS_FINISH,
+    WS_INS_ENERGY,
+    WS_PUT_SNAP,
+    WS_GET_STATUS,
     WS_COUNT
 };
 
@@ -77,7 +94,7 @@ struct store {
     char *path;
     char *lock_path;
     int lock_fd;
-    int notify_fd;               /* eventfd, written after each commit */
+    int notify_fd; /* eventfd, written after each commit */
 
     /* options */
     double batch_s;
@@ -93,18 +110,18 @@ struct store {
 
     /* queue and writer state, under mu */
     pthread_mutex_t mu;
-    pthread_cond_t cv_work;      /* writer waits: work, flush, stop */
-    pthread_cond_t cv_done;      /* flushers wait: done_seq advanced */
+    pthread_cond_t cv_work; /* writer waits: work, flush, stop */
+    pthread_cond_t cv_done; /* flushers wait: done_seq advanced */
     int sync_ready;
     pthread_t writer;
     int writer_running;
     op *head, *tail;
-    size_t qops;                 /* ops in the queue (not yet taken) */
-    size_t qbytes;               /* bytes of ops not yet committed */
+    size_t qops;   /* ops in the queue (not yet taken) */
+    size_t qbytes; /* bytes of ops not yet committed */
     size_t qbytes_max;
     uint64_t enq_seq, done_seq, flush_target;
     int stopping;
-    int over_cap;                /* logged that the queue passed the cap */
+    int over_cap; /* logged that the queue passed the cap */
     int64_t next_id;
     uint64_t ops_committed, transactions, write_errors, unreported;
     uint64_t snapshots_dropped;
@@ -114,8 +131,8 @@ struct store {
      * committed entries when half full) */
     run_seq *rmap;
     size_t rmap_cap, rmap_used;
-    uint64_t unmapped_seq;       /* an op whose run could not be recorded:
-                                    every ticket covers it */
+    uint64_t unmapped_seq; /* an op whose run could not be recorded:
+                              every ticket covers it */
 
     /* idle read connections, under pool_mu */
     pthread_mutex_t pool_mu;
@@ -133,7 +150,7 @@ extern const char *const sti_update_names[3];
 int sti_status_ok(mpp_status st);
 int sti_method_ok(mpm_method m);
 int sti_update_ok(mpm_update u);
-const char *sti_status_name(mpp_status st);    /* "queued", ...; "?" */
+const char *sti_status_name(mpp_status st); /* "queued", ...; "?" */
 /* Index of name in names[0..n), or -1. */
 int sti_parse_name(const char *name, const char *const *names, int n);
 

@@ -113,8 +113,14 @@ _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,
 
 static _Thread_local mpm_error tl_err;
 
-const mpm_error *store_error(void) { return &tl_err; }
-mpm_error *sti_error(void) { return &tl_err; }
+const mpm_error *store_error(void)
+{
+    return &tl_err;
+}
+mpm_error *sti_error(void)
+{
+    return &tl_err;
+}
 
 int sti_fail(int code, const char *fmt, ...)
 {
@@ -129,8 +135,7 @@ int sti_fail(int code, const char *fmt, ...)
 int sti_sql_fail(sqlite3 *db, int rc, const char *what)
 {
     const char *msg = db ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
-    if (db && sqlite3_errcode(db) == SQLITE_OK)
-        msg = sqlite3_errstr(rc);
+    if (db && sqlite3_errcode(db) == SQLITE_OK) msg = sqlite3_errstr(rc);
     return sti_fail((rc & 0xff) == SQLITE_NOMEM ? MPM_ENOMEM : MPM_EIO, "%s: %s", what, msg);
 }
 
@@ -180,22 +185,30 @@ const char *store_sqlite_version(void)
 /* ---------------------------------------------------------------------- */
 /* On-disk names of the enums */
 
-const char *const sti_status_names[STORE_NSTATUS] = {
-    "queued", "running", "finished", "failed", "cancelled", "interrupted"
-};
-const char *const sti_method_names[2] = { "mpm", "gimp" };
-const char *const sti_update_names[3] = { "usf", "usl", "musl" };
+const char *const sti_status_names[STORE_NSTATUS] = {"queued", "running",   "finished",
+                                                     "failed", "cancelled", "interrupted"};
+const char *const sti_method_names[2] = {"mpm", "gimp"};
+const char *const sti_update_names[3] = {"usf", "usl", "musl"};
 
 _Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
-               MPP_STATUS_FINISHED == 3 && MPP_STATUS_FAILED == 4 &&
-               MPP_STATUS_CANCELLED == 5 && MPP_STATUS_INTERRUPTED == MPP_STATUS_MAX,
+                   MPP_STATUS_FINISHED == 3 && MPP_STATUS_FAILED == 4 &&
+                   MPP_STATUS_CANCELLED == 5 && MPP_STATUS_INTERRUPTED == MPP_STATUS_MAX,
                "sti_status_names follows mpp_status");
 _Static_assert(MPM_METHOD_MPM == 0 && MPM_METHOD_GIMP == 1, "sti_method_names");
 _Static_assert(MPM_USF == 0 && MPM_USL == 1 && MPM_MUSL == 2, "sti_update_names");
 
-int sti_status_ok(mpp_status st) { return st >= MPP_STATUS_MIN && st <= MPP_STATUS_MAX; }
-int sti_method_ok(mpm_method m) { return (unsigned)m < 2; }
-int sti_update_ok(mpm_update u) { return (unsigned)u < 3; }
+int sti_status_ok(mpp_status st)
+{
+    return st >= MPP_STATUS_MIN && st <= MPP_STATUS_MAX;
+}
+int sti_method_ok(mpm_method m)
+{
+    return (unsigned)m < 2;
+}
+int sti_update_ok(mpm_update u)
+{
+    return (unsigned)u < 3;
+}
 
 const char *sti_status_name(mpp_status st)
 {
@@ -232,9 +245,9 @@ int sti_query1(sqlite3 *db, const char *sql, int64_t *v, char *txt, size_t txtle
     if (rc != SQLITE_OK) return sti_sql_fail(db, rc, sql);
     rc = sqlite3_step(st);
     if (rc != SQLITE_ROW) {
-        int r = rc == SQLITE_DONE ? sti_fail(MPM_EIO, "%s: no result", sql)
-                                  : sti_sql_fail(db, rc, sql);
-        sqlite3_finalize(st);   /* returns the step's error, reported above */
+        int r =
+            rc == SQLITE_DONE ? sti_fail(MPM_EIO, "%s: no result", sql) : sti_sql_fail(db, rc, sql);
+        sqlite3_finalize(st); /* returns the step's error, reported above */
         return r;
     }
     if (v) *v = sqlite3_column_int64(st, 0);
@@ -300,12 +313,11 @@ static int lock_acquire(store *s)
 {
     int fd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd < 0)
-        return sti_fail(MPM_EIO, "cannot open lock file %s: %s", s->lock_path,
-                        strerror(errno));
+        return sti_fail(MPM_EIO, "cannot open lock file %s: %s", s->lock_path, strerror(errno));
     if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
         int e = errno;
         if (e == EWOULDBLOCK) {
-            char buf[32] = { 0 };
+            char buf[32] = {0};
             ssize_t n = pread(fd, buf, sizeof buf - 1, 0);
             long pid = 0;
             char *end = NULL;
@@ -338,7 +350,7 @@ static void lock_release(store *s)
      * file races with a process that has just opened it) */
     if (ftruncate(s->lock_fd, 0) != 0)
         sti_log(s, "cannot truncate %s: %s", s->lock_path, strerror(errno));
-    close(s->lock_fd);        /* releases the flock */
+    close(s->lock_fd); /* releases the flock */
     s->lock_fd = -1;
 }
 
@@ -347,9 +359,8 @@ static void lock_release(store *s)
 
 static int open_writer(store *s)
 {
-    int rc = sqlite3_open_v2(s->path, &s->wdb,
-                             SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE |
-                             SQLITE_OPEN_NOMUTEX, NULL);
+    int rc = sqlite3_open_v2(
+        s->path, &s->wdb, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX, NULL);
     if (rc != SQLITE_OK) {
         int r = sti_fail(MPM_EIO, "cannot open database %s: %s", s->path,
                          s->wdb ? sqlite3_errmsg(s->wdb) : sqlite3_errstr(rc));
@@ -361,10 +372,10 @@ static int open_writer(store *s)
     if (r) return r;
     char mode[16];
     r = sti_query1(s->wdb, "PRAGMA journal_mode = WAL", NULL, mode, sizeof mode);
-    if (r) return fail_in(s->path, r);   /* e.g. "file is not a database": name the file */
+    if (r) return fail_in(s->path, r); /* e.g. "file is not a database": name the file */
     if (strcmp(mode, "wal"))
-        return sti_fail(MPM_EIO, "database %s: cannot enable WAL journal mode (got '%s')",
-                        s->path, mode);
+        return sti_fail(MPM_EIO, "database %s: cannot enable WAL journal mode (got '%s')", s->path,
+                        mode);
     r = sti_exec(s->wdb, "PRAGMA synchronous = NORMAL", "synchronous");
     if (r) return r;
     int64_t fk = 0;
@@ -406,13 +417,17 @@ static int migrate(store *s)
         return rollback_keep(s, r, "a failed migration");
     }
     if (uv == 0 && ntables > 0) {
-        r = sti_fail(MPM_ESCHEMA, "%s is not an mpmd database (it has tables but no schema "
-                     "version)", s->path);
+        r = sti_fail(MPM_ESCHEMA,
+                     "%s is not an mpmd database (it has tables but no schema "
+                     "version)",
+                     s->path);
         return rollback_keep(s, r, "a failed migration");
     }
     if (uv > STORE_SCHEMA_VERSION || uv < 0) {
-        r = sti_fail(MPM_ESCHEMA, "database %s has schema version %" PRId64
-                     ", newer than this mpmd supports (%d)", s->path, uv, STORE_SCHEMA_VERSION);
+        r = sti_fail(MPM_ESCHEMA,
+                     "database %s has schema version %" PRId64
+                     ", newer than this mpmd supports (%d)",
+                     s->path, uv, STORE_SCHEMA_VERSION);
         return rollback_keep(s, r, "a failed migration");
     }
     for (int64_t v = uv; v < STORE_SCHEMA_VERSION; v++) {
@@ -448,13 +463,15 @@ static int migrate(store *s)
 static int recover_status(store *s, const char *from, const char *error, int64_t *count)
 {
     sqlite3_stmt *st = NULL;
-#define LAST_SAMPLE(cols) "(SELECT " cols " FROM energy WHERE run_id = runs.id ORDER BY seq DESC LIMIT 1)"
+#define LAST_SAMPLE(cols) \
+    "(SELECT " cols " FROM energy WHERE run_id = runs.id ORDER BY seq DESC LIMIT 1)"
     const char *sql =
         "UPDATE runs SET status = 'interrupted', error = ?1,"
-        " steps = COALESCE(" LAST_SAMPLE("step") ", steps),"
-        " (kinetic, strain, potential, external_work, total) ="
-        " " LAST_SAMPLE("kinetic, strain, potential, external_work, total")
-        " WHERE status = ?2";
+        " steps = COALESCE(" LAST_SAMPLE(
+            "step") ", steps),"
+                    " (kinetic, strain, potential, external_work, total) ="
+                    " " LAST_SAMPLE(
+                        "kinetic, strain, potential, external_work, total") " WHERE status = ?2";
 #undef LAST_SAMPLE
     int rc = sqlite3_prepare_v2(s->wdb, sql, -1, &st, NULL);
     if (rc != SQLITE_OK) return sti_sql_fail(s->wdb, rc, "crash recovery");
@@ -477,7 +494,8 @@ static int recover(store *s)
         (r = sti_exec(s->wdb, "COMMIT", "crash recovery")))
         return rollback_keep(s, r, "failed recovery");
     if (s->rec_running || s->rec_queued)
-        sti_log(s, "%s: marked %" PRId64 " running and %" PRId64
+        sti_log(s,
+                "%s: marked %" PRId64 " running and %" PRId64
                 " queued runs of a previous daemon 'interrupted'",
                 s->path, s->rec_running, s->rec_queued);
     return 0;
@@ -491,7 +509,7 @@ static void destroy(store *s)
 {
     sti_readers_close(s);
     sti_writer_free(s);
-    if (s->wdb) sti_close_db(s, s->wdb);   /* last connection: checkpoints, drops the WAL */
+    if (s->wdb) sti_close_db(s, s->wdb); /* last connection: checkpoints, drops the WAL */
     s->wdb = NULL;
     lock_release(s);
     if (s->notify_fd >= 0) close(s->notify_fd);
@@ -522,10 +540,14 @@ static int init_sync(store *s)
     pthread_condattr_destroy(&ca);
     s->sync_ready = 1;
     return 0;
-f3: pthread_cond_destroy(&s->cv_work);
-f2: pthread_mutex_destroy(&s->pool_mu);
-f1: pthread_mutex_destroy(&s->mu);
-f0: pthread_condattr_destroy(&ca);
+f3:
+    pthread_cond_destroy(&s->cv_work);
+f2:
+    pthread_mutex_destroy(&s->pool_mu);
+f1:
+    pthread_mutex_destroy(&s->mu);
+f0:
+    pthread_condattr_destroy(&ca);
     return sti_fail(MPM_ENOMEM, "cannot initialise the store's mutexes");
 }
 
@@ -584,8 +606,8 @@ int store_open(const char *path, const store_options *opt, store **out)
     store *s = store_alloc(path, opt);
     if (!s) return sti_fail(MPM_ENOMEM, "out of memory opening %s", path);
 
-    if ((r = init_sync(s)) || (r = lock_acquire(s)) || (r = open_writer(s)) ||
-        (r = migrate(s)) || (r = recover(s)) || (r = open_notify(s)))
+    if ((r = init_sync(s)) || (r = lock_acquire(s)) || (r = open_writer(s)) || (r = migrate(s)) ||
+        (r = recover(s)) || (r = open_notify(s)))
         goto fail;
     int64_t next = 1;
     if ((r = sti_query1(s->wdb, "SELECT COALESCE(MAX(id), 0) + 1 FROM runs", &next, NULL, 0)))
@@ -598,7 +620,7 @@ int store_open(const char *path, const store_options *opt, store **out)
         goto fail;
     }
     s->writer_running = 1;
-    (void)pthread_setname_np(s->writer, "mpmd-store");   /* cosmetic */
+    (void)pthread_setname_np(s->writer, "mpmd-store"); /* cosmetic */
     *out = s;
     return 0;
 fail:
@@ -613,7 +635,7 @@ void store_close(store **sp)
     *sp = NULL;
     if (s->writer_running) {
         pthread_mutex_lock(&s->mu);
-        s->stopping = 1;                 /* the writer drains the queue first */
+        s->stopping = 1; /* the writer drains the queue first */
         pthread_cond_broadcast(&s->cv_work);
         pthread_mutex_unlock(&s->mu);
         pthread_join(s->writer, NULL);

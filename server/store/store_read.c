@@ -119,8 +119,7 @@ static int col_strdup(sqlite3 *db, sqlite3_stmt *st, int i, const char **out)
 }
 
 /* Copies a blob column into new memory (NULL when empty). */
-static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out,
-                       size_t *len)
+static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out, size_t *len)
 {
     *out = NULL;
     *len = 0;
@@ -164,11 +163,10 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     r->case_len = (size_t)sqlite3_column_int64(st, 2);
     int m = sti_parse_name((const char *)sqlite3_column_text(st, 3), sti_method_names, 2);
     int u = sti_parse_name((const char *)sqlite3_column_text(st, 4), sti_update_names, 3);
-    int stt = sti_parse_name((const char *)sqlite3_column_text(st, 8), sti_status_names,
-                             STORE_NSTATUS);
+    int stt =
+        sti_parse_name((const char *)sqlite3_column_text(st, 8), sti_status_names, STORE_NSTATUS);
     if (m < 0 || u < 0 || stt < 0)
-        return sti_fail(MPM_EIO, "run %" PRId64 ": bad method, update or status value",
-                        r->id);
+        return sti_fail(MPM_EIO, "run %" PRId64 ": bad method, update or status value", r->id);
     r->method = (mpm_method)m;
     r->update = (mpm_update)u;
     r->status = (mpp_status)(MPP_STATUS_MIN + stt);
@@ -187,8 +185,7 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     r->energy.external_work = col_real_nan(st, 18);
     r->energy.total = col_real_nan(st, 19);
     int rc;
-    if ((rc = col_strdup(db, st, 1, &r->name)) ||
-        (rc = col_strdup(db, st, 20, &r->error)) ||
+    if ((rc = col_strdup(db, st, 1, &r->name)) || (rc = col_strdup(db, st, 20, &r->error)) ||
         (rc = col_strdup(db, st, 21, &r->server_version))) {
         store_run_clear(r);
         return rc;
@@ -217,17 +214,20 @@ int store_run_get(store *s, int64_t id, store_run *out)
     int r = reader_get(s, &db);
     if (r) return r;
     sqlite3_stmt *st = NULL;
-    int rc = sqlite3_prepare_v2(db, "SELECT " RUN_COLS ", case_pb FROM runs WHERE id = ?1",
-                                -1, &st, NULL);
+    int rc = sqlite3_prepare_v2(db, "SELECT " RUN_COLS ", case_pb FROM runs WHERE id = ?1", -1, &st,
+                                NULL);
     if (rc != SQLITE_OK) {
         r = sti_sql_fail(db, rc, "reading a run");
         goto out;
     }
     rc = sqlite3_bind_int64(st, 1, id);
     if (rc == SQLITE_OK) rc = sqlite3_step(st);
-    if (rc == SQLITE_ROW) r = read_run_row(db, st, out, 1);
-    else if (rc == SQLITE_DONE) r = sti_fail(MPM_ENOTFOUND, "no run %" PRId64, id);
-    else r = sti_sql_fail(db, rc, "reading a run");
+    if (rc == SQLITE_ROW)
+        r = read_run_row(db, st, out, 1);
+    else if (rc == SQLITE_DONE)
+        r = sti_fail(MPM_ENOTFOUND, "no run %" PRId64, id);
+    else
+        r = sti_sql_fail(db, rc, "reading a run");
     rc = sqlite3_finalize(st);
     if (!r && rc != SQLITE_OK) {
         r = sti_sql_fail(db, rc, "reading a run");
@@ -265,8 +265,8 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t
         int first = 1;
         for (int st = MPP_STATUS_MIN; st <= MPP_STATUS_MAX; st++)
             if (f->status_mask & STORE_STATUS_BIT(st)) {
-                len += (size_t)snprintf(sql + len, sizeof sql - len, "%s'%s'",
-                                        first ? "" : ",", sti_status_name((mpp_status)st));
+                len += (size_t)snprintf(sql + len, sizeof sql - len, "%s'%s'", first ? "" : ",",
+                                        sti_status_name((mpp_status)st));
                 first = 0;
             }
         len += (size_t)snprintf(sql + len, sizeof sql - len, ")");
@@ -342,8 +342,8 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
     int rc;
     /* count and rows in one read transaction: the same snapshot */
     if ((r = sti_exec(db, "BEGIN", "reading energy samples"))) goto out;
-    rc = sqlite3_prepare_v2(db, "SELECT count(*) FROM energy WHERE run_id = ?1 AND seq >= ?2",
-                            -1, &st, NULL);
+    rc = sqlite3_prepare_v2(db, "SELECT count(*) FROM energy WHERE run_id = ?1 AND seq >= ?2", -1,
+                            &st, NULL);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, run_id);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 2, from_seq);
     if (rc == SQLITE_OK) rc = sqlite3_step(st);
@@ -371,7 +371,8 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
         goto out;
     }
     /* the run's dim: a sample holds it, the energy table does not */
-    rc = sqlite3_prepare_v2(db,
+    rc = sqlite3_prepare_v2(
+        db,
         "SELECT e.seq, e.step, e.t, e.kinetic, e.strain, e.potential, e.external_work,"
         " e.total, e.momentum_x, e.momentum_y, e.momentum_z, e.mass,"
         " (SELECT dim FROM runs WHERE id = ?1)"
@@ -406,7 +407,7 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
     }
     *out = v;
     *n = i;
-    v = NULL;                    /* owned by the caller */
+    v = NULL; /* owned by the caller */
 out:
     if (st) {
         rc = sqlite3_finalize(st);
@@ -438,8 +439,8 @@ int store_run_extras(store *s, int64_t run_id, store_run_extra *out)
     int rc;
     size_t cap = 0;
     if ((r = sti_exec(db, "BEGIN", "reading a run's extras"))) goto out;
-    rc = sqlite3_prepare_v2(db, "SELECT count(*), max(seq) FROM energy WHERE run_id = ?1", -1,
-                            &st, NULL);
+    rc = sqlite3_prepare_v2(db, "SELECT count(*), max(seq) FROM energy WHERE run_id = ?1", -1, &st,
+                            NULL);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, run_id);
     if (rc == SQLITE_OK) rc = sqlite3_step(st);
     if (rc != SQLITE_ROW) {
@@ -505,11 +506,10 @@ int store_snapshot_get(store *s, int64_t run_id, int64_t step, store_snapshot *o
     int r = reader_get(s, &db);
     if (r) return r;
     sqlite3_stmt *st = NULL;
-    const char *sql = step >= 0
-        ? "SELECT run_id, step, t, n, dim, fields, data FROM snapshots"
-          " WHERE run_id = ?1 AND step = ?2"
-        : "SELECT run_id, step, t, n, dim, fields, data FROM snapshots"
-          " WHERE run_id = ?1 ORDER BY step DESC LIMIT 1";
+    const char *sql = step >= 0 ? "SELECT run_id, step, t, n, dim, fields, data FROM snapshots"
+                                  " WHERE run_id = ?1 AND step = ?2"
+                                : "SELECT run_id, step, t, n, dim, fields, data FROM snapshots"
+                                  " WHERE run_id = ?1 ORDER BY step DESC LIMIT 1";
     int rc = sqlite3_prepare_v2(db, sql, -1, &st, NULL);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, run_id);
     if (rc == SQLITE_OK && step >= 0) rc = sqlite3_bind_int64(st, 2, step);
@@ -523,10 +523,9 @@ int store_snapshot_get(store *s, int64_t run_id, int64_t step, store_snapshot *o
         out->fields = (uint32_t)sqlite3_column_int64(st, 5);
         r = col_blobdup(db, st, 6, &out->data, &out->size);
     } else if (rc == SQLITE_DONE) {
-        r = step >= 0
-            ? sti_fail(MPM_ENOTFOUND, "no snapshot of run %" PRId64 " at step %" PRId64,
-                       run_id, step)
-            : sti_fail(MPM_ENOTFOUND, "no snapshot of run %" PRId64, run_id);
+        r = step >= 0 ? sti_fail(MPM_ENOTFOUND, "no snapshot of run %" PRId64 " at step %" PRId64,
+                                 run_id, step)
+                      : sti_fail(MPM_ENOTFOUND, "no snapshot of run %" PRId64, run_id);
     } else {
         r = sti_sql_fail(db, rc, "reading a snapshot");
     }

@@ -86,34 +86,28 @@ static const char *const writer_sql[WS_COUNT] = {
     [WS_BEGIN] = "BEGIN IMMEDIATE",
     [WS_COMMIT] = "COMMIT",
     [WS_ROLLBACK] = "ROLLBACK",
-    [WS_INS_RUN] =
-        "INSERT INTO runs (id, name, case_pb, method, \"update\","
-        " dim, particles, nodes, status, submitted_at, started_at, finished_at,"
-        " steps, wall_s, psteps_per_s, error, server_version)"
-        " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14,"
-        " ?15, ?16, ?17)",
-    [WS_UPD_STATUS] =
-        "UPDATE runs SET status = ?2,"
-        " started_at = CASE WHEN ?2 = 'running' THEN ?3 ELSE started_at END,"
-        " finished_at = CASE WHEN ?2 IN ('finished','failed','cancelled',"
-        "   'interrupted') THEN ?3 ELSE finished_at END,"
-        " error = COALESCE(?4, error)"
-        " WHERE id = ?1" NOT_ENDED,
-    [WS_UPD_PROGRESS] =
-        "UPDATE runs SET steps = ?2, wall_s = ?3, psteps_per_s = ?4"
-        " WHERE id = ?1" NOT_ENDED,
-    [WS_FINISH] =
-        "UPDATE runs SET status = ?2, finished_at = ?3, steps = ?4,"
-        " wall_s = ?5, psteps_per_s = ?6, kinetic = ?7, strain = ?8,"
-        " potential = ?9, external_work = ?10, total = ?11, error = ?12"
-        " WHERE id = ?1" NOT_ENDED,
-    [WS_INS_ENERGY] =
-        "INSERT INTO energy (run_id, seq, step, t, kinetic, strain, potential,"
-        " external_work, total, momentum_x, momentum_y, momentum_z, mass)"
-        " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
-    [WS_PUT_SNAP] =
-        "INSERT OR REPLACE INTO snapshots (run_id, step, t, n, dim, fields, data)"
-        " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+    [WS_INS_RUN] = "INSERT INTO runs (id, name, case_pb, method, \"update\","
+                   " dim, particles, nodes, status, submitted_at, started_at, finished_at,"
+                   " steps, wall_s, psteps_per_s, error, server_version)"
+                   " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14,"
+                   " ?15, ?16, ?17)",
+    [WS_UPD_STATUS] = "UPDATE runs SET status = ?2,"
+                      " started_at = CASE WHEN ?2 = 'running' THEN ?3 ELSE started_at END,"
+                      " finished_at = CASE WHEN ?2 IN ('finished','failed','cancelled',"
+                      "   'interrupted') THEN ?3 ELSE finished_at END,"
+                      " error = COALESCE(?4, error)"
+                      " WHERE id = ?1" NOT_ENDED,
+    [WS_UPD_PROGRESS] = "UPDATE runs SET steps = ?2, wall_s = ?3, psteps_per_s = ?4"
+                        " WHERE id = ?1" NOT_ENDED,
+    [WS_FINISH] = "UPDATE runs SET status = ?2, finished_at = ?3, steps = ?4,"
+                  " wall_s = ?5, psteps_per_s = ?6, kinetic = ?7, strain = ?8,"
+                  " potential = ?9, external_work = ?10, total = ?11, error = ?12"
+                  " WHERE id = ?1" NOT_ENDED,
+    [WS_INS_ENERGY] = "INSERT INTO energy (run_id, seq, step, t, kinetic, strain, potential,"
+                      " external_work, total, momentum_x, momentum_y, momentum_z, mass)"
+                      " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
+    [WS_PUT_SNAP] = "INSERT OR REPLACE INTO snapshots (run_id, step, t, n, dim, fields, data)"
+                    " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
     [WS_GET_STATUS] = "SELECT status FROM runs WHERE id = ?1",
 };
 
@@ -123,7 +117,10 @@ static struct timespec to_timespec(double t)
     if (t < 0) t = 0;
     ts.tv_sec = (time_t)t;
     ts.tv_nsec = (long)((t - (double)ts.tv_sec) * 1e9);
-    if (ts.tv_nsec >= 1000000000L) { ts.tv_sec++; ts.tv_nsec -= 1000000000L; }
+    if (ts.tv_nsec >= 1000000000L) {
+        ts.tv_sec++;
+        ts.tv_nsec -= 1000000000L;
+    }
     if (ts.tv_nsec < 0) ts.tv_nsec = 0;
     return ts;
 }
@@ -164,8 +161,8 @@ static int bind_static(sqlite3_stmt *st, int i, const char *v)
 /* The writer thread */
 
 /* Records a failed asynchronous write: logged, counted, reported by flush. */
-__attribute__((format(printf, 3, 4)))
-static void write_error(store *s, uint64_t nops, const char *fmt, ...)
+__attribute__((format(printf, 3, 4))) static void write_error(store *s, uint64_t nops,
+                                                              const char *fmt, ...)
 {
     char buf[512];
     va_list ap;
@@ -189,8 +186,7 @@ static void run_state(store *s, int64_t id, char *buf, size_t len)
     if (rc == SQLITE_OK) rc = sqlite3_step(st);
     if (rc == SQLITE_ROW) {
         const unsigned char *t = sqlite3_column_text(st, 0);
-        snprintf(buf, len, "run %" PRId64 " already ended (%s)", id,
-                 t ? (const char *)t : "?");
+        snprintf(buf, len, "run %" PRId64 " already ended (%s)", id, t ? (const char *)t : "?");
     } else if (rc == SQLITE_DONE) {
         snprintf(buf, len, "no run %" PRId64, id);
     } else {
@@ -200,14 +196,17 @@ static void run_state(store *s, int64_t id, char *buf, size_t len)
         sti_log(s, "reading the status of run %" PRId64 ": %s", id, sqlite3_errmsg(s->wdb));
 }
 
-#define BIND(call) do { if (rc == SQLITE_OK) rc = (call); } while (0)
+#define BIND(call)                        \
+    do {                                  \
+        if (rc == SQLITE_OK) rc = (call); \
+    } while (0)
 
 /* Steps a bound writer statement to completion and resets it.  Returns the
  * SQLite code of the step (SQLITE_DONE on success) or of a failed bind. */
 static int ws_run(sqlite3_stmt *st, int bind_rc)
 {
     int rc = bind_rc == SQLITE_OK ? sqlite3_step(st) : bind_rc;
-    int rrc = sqlite3_reset(st);   /* repeats a step error; else must be OK */
+    int rrc = sqlite3_reset(st); /* repeats a step error; else must be OK */
     int crc = sqlite3_clear_bindings(st);
     if (rc == SQLITE_DONE && rrc != SQLITE_OK) rc = rrc;
     if (rc == SQLITE_DONE && crc != SQLITE_OK) rc = crc;
@@ -239,9 +238,9 @@ static int apply_energy(store *s, const op *o)
         rc = ws_run(st, rc);
         if (rc != SQLITE_DONE) {
             if (!bad++)
-                snprintf(msg, sizeof msg, "run %" PRId64 " seq %" PRIu64 ": %s", o->run_id,
-                         e->seq, sqlite3_errmsg(s->wdb));
-            if (sqlite3_get_autocommit(s->wdb)) break;   /* txn gone */
+                snprintf(msg, sizeof msg, "run %" PRId64 " seq %" PRIu64 ": %s", o->run_id, e->seq,
+                         sqlite3_errmsg(s->wdb));
+            if (sqlite3_get_autocommit(s->wdb)) break; /* txn gone */
         }
     }
     if (bad) {
@@ -323,8 +322,7 @@ static int apply_op(store *s, op *o)
         BIND(bind_text_or_null(st, 12, e->error));
         break;
     }
-    case OP_ENERGY:
-        return apply_energy(s, o);
+    case OP_ENERGY: return apply_energy(s, o);
     case OP_SNAPSHOT: {
         const store_snapshot *sn = &o->u.snap;
         st = s->ws[WS_PUT_SNAP];
@@ -338,9 +336,7 @@ static int apply_op(store *s, op *o)
         BIND(bind_blob(st, 7, sn->data, sn->size));
         break;
     }
-    default:
-        write_error(s, 1, "unknown queue entry kind %d", (int)o->kind);
-        return -1;
+    default: write_error(s, 1, "unknown queue entry kind %d", (int)o->kind); return -1;
     }
     rc = ws_run(st, rc);
     if (rc != SQLITE_DONE) {
@@ -372,7 +368,7 @@ static void apply_batch(store *s, op *batch, size_t n)
         if (rc == SQLITE_OK) break;
         if ((rc & 0xff) == SQLITE_BUSY && attempt < BEGIN_RETRIES) {
             sti_log(s, "database busy, retrying a batch of %zu writes", n);
-            struct timespec ts = { 0, 100 * 1000 * 1000 };
+            struct timespec ts = {0, 100 * 1000 * 1000};
             nanosleep(&ts, NULL);
             continue;
         }
@@ -417,13 +413,11 @@ void *sti_writer_main(void *arg)
     store *s = arg;
     pthread_mutex_lock(&s->mu);
     for (;;) {
-        while (!s->head && !s->stopping)
-            pthread_cond_wait(&s->cv_work, &s->mu);
-        if (!s->head) break;                     /* stopping, queue drained */
+        while (!s->head && !s->stopping) pthread_cond_wait(&s->cv_work, &s->mu);
+        if (!s->head) break; /* stopping, queue drained */
         /* batching window: until the oldest op is batch_s old */
         struct timespec dl = to_timespec(s->head->t_enq + s->batch_s);
-        while (!s->stopping && s->flush_target <= s->done_seq &&
-               s->qops < s->batch_ops) {
+        while (!s->stopping && s->flush_target <= s->done_seq && s->qops < s->batch_ops) {
             if (pthread_cond_timedwait(&s->cv_work, &s->mu, &dl) == ETIMEDOUT) break;
         }
         op *batch = s->head, *last = batch;
@@ -461,8 +455,8 @@ void *sti_writer_main(void *arg)
 int sti_writer_prepare(store *s)
 {
     for (int i = 0; i < WS_COUNT; i++) {
-        int rc = sqlite3_prepare_v3(s->wdb, writer_sql[i], -1, SQLITE_PREPARE_PERSISTENT,
-                                    &s->ws[i], NULL);
+        int rc = sqlite3_prepare_v3(s->wdb, writer_sql[i], -1, SQLITE_PREPARE_PERSISTENT, &s->ws[i],
+                                    NULL);
         if (rc != SQLITE_OK) return sti_sql_fail(s->wdb, rc, writer_sql[i]);
     }
     return 0;
@@ -526,7 +520,7 @@ static void rmap_set(store *s, int64_t run_id, uint64_t seq)
         }
     }
     if (2 * (s->rmap_used + 1) > s->rmap_cap && rmap_rebuild(s)) {
-        s->unmapped_seq = seq;      /* every ticket covers it: conservative */
+        s->unmapped_seq = seq; /* every ticket covers it: conservative */
         return;
     }
     size_t i = rmap_slot(s->rmap, s->rmap_cap, run_id);
@@ -574,15 +568,20 @@ static const char *tail_str(char **cur, const char *str)
     return str ? tail_put(cur, str, strlen(str) + 1) : NULL;
 }
 
-static size_t str_room(const char *str) { return str ? strlen(str) + 1 : 0; }
+static size_t str_room(const char *str)
+{
+    return str ? strlen(str) + 1 : 0;
+}
 
 /* Refuses a snapshot because the queue is above its cap: counts and logs. */
 static int drop_snapshot(store *s, const store_snapshot *snap, size_t qb)
 {
-    sti_log(s, "snapshot of run %" PRId64 " at step %" PRId64 " (%zu bytes) dropped:"
-            " %zu bytes of writes pending, cap %zu", snap->run_id, snap->step,
-            snap->size, qb, s->cap);
-    return sti_fail(MPM_EFULL, "snapshot of run %" PRId64 " at step %" PRId64
+    sti_log(s,
+            "snapshot of run %" PRId64 " at step %" PRId64 " (%zu bytes) dropped:"
+            " %zu bytes of writes pending, cap %zu",
+            snap->run_id, snap->step, snap->size, qb, s->cap);
+    return sti_fail(MPM_EFULL,
+                    "snapshot of run %" PRId64 " at step %" PRId64
                     " dropped: write queue full (%zu bytes pending, cap %zu)",
                     snap->run_id, snap->step, qb, s->cap);
 }
@@ -612,8 +611,10 @@ static int submit(store *s, op *o, int droppable)
     o->next = NULL;
     rmap_set(s, o->run_id, o->seq);
     int was_empty = !s->head;
-    if (s->tail) s->tail->next = o;
-    else s->head = o;
+    if (s->tail)
+        s->tail->next = o;
+    else
+        s->head = o;
     s->tail = o;
     s->qops++;
     s->qbytes += o->bytes;
@@ -628,8 +629,10 @@ static int submit(store *s, op *o, int droppable)
     if (was_empty || s->qops == s->batch_ops) pthread_cond_signal(&s->cv_work);
     pthread_mutex_unlock(&s->mu);
     if (log_cap)
-        sti_log(s, "write queue above its cap (%zu > %zu bytes): the disk is behind;"
-                " growing (only snapshots are dropped)", qb, s->cap);
+        sti_log(s,
+                "write queue above its cap (%zu > %zu bytes): the disk is behind;"
+                " growing (only snapshots are dropped)",
+                qb, s->cap);
     return 0;
 }
 
@@ -662,8 +665,8 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out)
     const char *name = run->name ? run->name : "";
     const char *ver = run->server_version ? run->server_version : "";
     char *cur;
-    op *o = op_new(OP_RUN_INSERT, 0, str_room(name) + str_room(ver) +
-                   str_room(run->error) + run->case_len, &cur);
+    op *o = op_new(OP_RUN_INSERT, 0,
+                   str_room(name) + str_room(ver) + str_room(run->error) + run->case_len, &cur);
     if (!o) return MPM_ENOMEM;
     store_run *r = &o->u.run;
     *r = *run;
@@ -674,8 +677,10 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out)
     if (r->submitted_at == 0) r->submitted_at = store_time_now();
 
     pthread_mutex_lock(&s->mu);
-    if (r->id <= 0) r->id = s->next_id++;
-    else if (r->id >= s->next_id) s->next_id = r->id + 1;
+    if (r->id <= 0)
+        r->id = s->next_id++;
+    else if (r->id >= s->next_id)
+        s->next_id = r->id + 1;
     pthread_mutex_unlock(&s->mu);
 
     int64_t id = o->run_id = r->id;
@@ -684,12 +689,10 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out)
     return rc;
 }
 
-int store_run_set_status(store *s, int64_t id, mpp_status status, double at,
-                         const char *error)
+int store_run_set_status(store *s, int64_t id, mpp_status status, double at, const char *error)
 {
     if (!s) return sti_fail(MPM_EINVAL, "store_run_set_status: NULL store");
-    if (!sti_status_ok(status))
-        return sti_fail(MPM_EINVAL, "unknown run status %d", (int)status);
+    if (!sti_status_ok(status)) return sti_fail(MPM_EINVAL, "unknown run status %d", (int)status);
     if (isnan(at) || at < 0) return sti_fail(MPM_EINVAL, "bad status time");
     char *cur;
     op *o = op_new(OP_RUN_STATUS, id, str_room(error), &cur);
@@ -700,8 +703,7 @@ int store_run_set_status(store *s, int64_t id, mpp_status status, double at,
     return submit(s, o, 0);
 }
 
-int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s,
-                       double psteps_per_s)
+int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s, double psteps_per_s)
 {
     if (!s) return sti_fail(MPM_EINVAL, "store_run_progress: NULL store");
     if (steps < 0) return sti_fail(MPM_EINVAL, "negative steps");
@@ -783,12 +785,11 @@ int store_flush(store *s)
     uint64_t target = s->enq_seq;
     if (target > s->flush_target) s->flush_target = target;
     pthread_cond_signal(&s->cv_work);
-    while (s->done_seq < target)
-        pthread_cond_wait(&s->cv_done, &s->mu);
+    while (s->done_seq < target) pthread_cond_wait(&s->cv_done, &s->mu);
     int rc = 0;
     if (s->unreported) {
-        rc = sti_fail(MPM_EIO, "%" PRIu64 " asynchronous write(s) failed; last: %s",
-                      s->unreported, s->last_werr);
+        rc = sti_fail(MPM_EIO, "%" PRIu64 " asynchronous write(s) failed; last: %s", s->unreported,
+                      s->last_werr);
         s->unreported = 0;
     }
     pthread_mutex_unlock(&s->mu);
@@ -804,7 +805,7 @@ uint64_t store_ticket(store *s, int64_t run_id)
     if (t <= s->done_seq) {
         t = 0;
     } else if (t > s->flush_target) {
-        s->flush_target = t;              /* someone waits: skip the window */
+        s->flush_target = t; /* someone waits: skip the window */
         pthread_cond_signal(&s->cv_work);
     }
     pthread_mutex_unlock(&s->mu);

@@ -37,14 +37,14 @@
 
 typedef struct {
     bench_cfg c;
-    int space;          /* member of the space sweep at this C */
-    int time;           /* member of a time sweep */
-    int ref;            /* the time sweep's reference */
-    int front;          /* on its problem's Pareto front */
+    int space; /* member of the space sweep at this C */
+    int time;  /* member of a time sweep */
+    int ref;   /* the time sweep's reference */
+    int front; /* on its problem's Pareto front */
     bench_res r;
     double wall_med, wall_min;
     int repeats;
-    double terr;        /* time error: distance to the reference / scale */
+    double terr; /* time error: distance to the reference / scale */
 } entry;
 
 static entry *E;
@@ -86,12 +86,12 @@ static entry *add(bench_problem pb, mpm_method m, mpm_update u, int cells, int p
 
 typedef struct {
     bench_problem pb;
-    int cells[8], ncells;       /* space sweep */
+    int cells[8], ncells; /* space sweep */
     int ppc[4], nppc;
-    double cfl[3];              /* space sweep Courant numbers (0-terminated) */
-    int extra_ppc_max_cells;    /* ppc other than DEF_PPC only up to this many cells */
-    int tcells, tppc;           /* time sweep grid */
-    double tcfl[10];            /* time sweep (0-terminated), then the reference */
+    double cfl[3];           /* space sweep Courant numbers (0-terminated) */
+    int extra_ppc_max_cells; /* ppc other than DEF_PPC only up to this many cells */
+    int tcells, tppc;        /* time sweep grid */
+    double tcfl[10];         /* time sweep (0-terminated), then the reference */
     double tref;
 } sweep;
 
@@ -117,17 +117,20 @@ static void plan_one(const sweep *s)
 static void plan(const int *only)
 {
     /* point: no grid to refine (one cell, one point) */
-    sweep pt = {BP_POINT, {1}, 1, {1}, 1, {0}, 1, 1, 1,
-                {1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0}, 0.00125};
-    sweep bar = {BP_BAR, {8, 16, 32, 64, 128}, 5, {1, 2, 4}, 3, {0.5, 0.1}, 1 << 20, 32, 2,
-                 {0.8, 0.4, 0.2, 0.1, 0.05, 0}, 0.0125};
-    sweep m1 = {BP_MMS1, {8, 16, 32, 64, 128, 256}, 6, {1, 2, 4}, 3, {0.5, 0.1}, 1 << 20, 32, 2,
-                {0.8, 0.4, 0.2, 0.1, 0.05, 0}, 0.0125};
-    sweep m2 = {BP_MMS2, {8, 16, 32, 64}, 4, {1, 2, 3}, 3, {0.5}, 32, 16, 2,
-                {0.8, 0.4, 0.2, 0.1, 0}, 0.025};
+    sweep pt = {BP_POINT, {1}, 1, {1}, 1,
+                {0},      1,   1, 1,   {1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0},
+                0.00125};
+    sweep bar = {
+        BP_BAR, {8, 16, 32, 64, 128},          5,     {1, 2, 4}, 3, {0.5, 0.1}, 1 << 20, 32,
+        2,      {0.8, 0.4, 0.2, 0.1, 0.05, 0}, 0.0125};
+    sweep m1 = {
+        BP_MMS1, {8, 16, 32, 64, 128, 256},     6,     {1, 2, 4}, 3, {0.5, 0.1}, 1 << 20, 32,
+        2,       {0.8, 0.4, 0.2, 0.1, 0.05, 0}, 0.0125};
+    sweep m2 = {BP_MMS2, {8, 16, 32, 64},         4,    {1, 2, 3}, 3, {0.5}, 32, 16,
+                2,       {0.8, 0.4, 0.2, 0.1, 0}, 0.025};
     sweep m3 = {BP_MMS3, {4, 8, 16}, 3, {1, 2}, 2, {0.5}, 16, 8, 2, {0.8, 0.4, 0.2, 0}, 0.05};
-    sweep dk = {BP_DISKS, {10, 20, 40, 80}, 4, {1, 2, 3}, 3, {0.5}, 40, 20, 2,
-                {0.8, 0.4, 0.2, 0.1, 0}, 0.025};
+    sweep dk = {BP_DISKS, {10, 20, 40, 80},        4,    {1, 2, 3}, 3, {0.5}, 40, 20,
+                2,        {0.8, 0.4, 0.2, 0.1, 0}, 0.025};
     if (quick) {
         pt.tcfl[4] = 0;
         pt.tref = 0.0125;
@@ -225,11 +228,13 @@ static void time_errors(void)
         if (!e->time || e->r.rc || !e->r.xf) continue;
         for (int j = 0; j < nE; j++) {
             entry *f = &E[j];
-            if (!f->ref || f->r.rc || !f->r.xf || f->c.pb != e->c.pb || f->c.method != e->c.method ||
-                f->c.update != e->c.update || f->c.cells != e->c.cells || f->c.ppc != e->c.ppc ||
+            if (!f->ref || f->r.rc || !f->r.xf || f->c.pb != e->c.pb ||
+                f->c.method != e->c.method || f->c.update != e->c.update ||
+                f->c.cells != e->c.cells || f->c.ppc != e->c.ppc ||
                 f->r.particles != e->r.particles)
                 continue;
-            e->terr = bench_rms_diff(e->r.xf, f->r.xf, e->r.particles, e->r.dim, bench_scale(e->c.pb));
+            e->terr =
+                bench_rms_diff(e->r.xf, f->r.xf, e->r.particles, e->r.dim, bench_scale(e->c.pb));
         }
     }
 }
@@ -324,13 +329,14 @@ static const int order_ppc = DEF_PPC;
 
 static void print_orders(const int *only)
 {
-    printf("\n== Observed orders ==\n"
-           "space: slope of log(err) against log(h) over the sweep at ppc %d and a fixed Courant "
-           "number C\n       (dt = C h / c shrinks with h), [the last pair]; time: slope of the "
-           "distance to a run\n       with a 4x smaller dt on the same grid against dt; time vs exact: the error against dt\n"
-           "       on that grid (it stalls at the spatial error; only the point has none).  Errors\n"
-           "       >= %g (no solution) are left out.  Negative: the error grows under refinement.\n\n",
-           order_ppc, ERR_USELESS);
+    printf(
+        "\n== Observed orders ==\n"
+        "space: slope of log(err) against log(h) over the sweep at ppc %d and a fixed Courant "
+        "number C\n       (dt = C h / c shrinks with h), [the last pair]; time: slope of the "
+        "distance to a run\n       with a 4x smaller dt on the same grid against dt; time vs exact: the error against dt\n"
+        "       on that grid (it stalls at the spatial error; only the point has none).  Errors\n"
+        "       >= %g (no solution) are left out.  Negative: the error grows under refinement.\n\n",
+        order_ppc, ERR_USELESS);
     printf("%-6s %-4s %-4s | %-13s %-13s | %-13s | %-13s %-13s\n", "", "", "", "space C=0.5",
            "space C=0.1", "space err2", "time", "time vs exact");
     for (int pb = 0; pb < BP_COUNT; pb++) {
@@ -339,11 +345,14 @@ static void print_orders(const int *only)
             for (int u = 0; u < 3; u++) {
                 series s;
                 char a[32], b[32], c2[32], d[32], f[32];
-                space_series((bench_problem)pb, (mpm_method)m, (mpm_update)u, order_ppc, 0.5, 0, &s);
+                space_series((bench_problem)pb, (mpm_method)m, (mpm_update)u, order_ppc, 0.5, 0,
+                             &s);
                 fmt_order(&s, a, sizeof a);
-                space_series((bench_problem)pb, (mpm_method)m, (mpm_update)u, order_ppc, 0.1, 0, &s);
+                space_series((bench_problem)pb, (mpm_method)m, (mpm_update)u, order_ppc, 0.1, 0,
+                             &s);
                 fmt_order(&s, b, sizeof b);
-                space_series((bench_problem)pb, (mpm_method)m, (mpm_update)u, order_ppc, 0.5, 1, &s);
+                space_series((bench_problem)pb, (mpm_method)m, (mpm_update)u, order_ppc, 0.5, 1,
+                             &s);
                 fmt_order(&s, c2, sizeof c2);
                 time_series((bench_problem)pb, (mpm_method)m, (mpm_update)u, 0, &s);
                 fmt_order(&s, d, sizeof d);
@@ -372,7 +381,8 @@ static void print_pareto(const int *only)
 {
     static entry *list[MAX_ENTRIES];
     printf("\n== Pareto fronts: the fastest configuration at each error level (err, median wall; "
-           "runs with err >= %g left out) ==\n", ERR_USELESS);
+           "runs with err >= %g left out) ==\n",
+           ERR_USELESS);
     for (int pb = 0; pb < BP_COUNT; pb++) {
         if (only && !only[pb]) continue;
         int n = 0;
@@ -411,7 +421,8 @@ static void print_pareto(const int *only)
                        d->r.err, d->wall_med);
             else if (who)
                 printf("  defaults at %3d cells: err %.3e in %.3e s: off the front, %.1fx slower "
-                       "than %s\n", d->c.cells, d->r.err, d->wall_med, d->wall_med / tbest, lab);
+                       "than %s\n",
+                       d->c.cells, d->r.err, d->wall_med, d->wall_med / tbest, lab);
         }
     }
 }
@@ -434,9 +445,11 @@ static double front_factor(const entry *d)
  * resolutions of front_factor(), and how many runs failed. */
 static void print_candidates(const int *only)
 {
-    printf("\n== Settings against the fronts (ppc 2, C = 0.5, every resolution of the space sweep): "
-           "time / time of the fastest front configuration at least as accurate, geometric mean "
-           "(1.0 = on the front); (n) runs that failed ==\n%-16s", "");
+    printf(
+        "\n== Settings against the fronts (ppc 2, C = 0.5, every resolution of the space sweep): "
+        "time / time of the fastest front configuration at least as accurate, geometric mean "
+        "(1.0 = on the front); (n) runs that failed ==\n%-16s",
+        "");
     for (int pb = 0; pb < BP_COUNT; pb++)
         if (!only || only[pb]) printf(" %-11s", bench_problem_name((bench_problem)pb));
     printf("\n");
@@ -452,8 +465,9 @@ static void print_candidates(const int *only)
                 int n = 0, failed = 0;
                 for (int i = 0; i < nE; i++) {
                     const entry *e = &E[i];
-                    if ((int)e->c.pb != pb || e->c.method != (mpm_method)m || e->c.update != (mpm_update)u ||
-                        e->c.cfl != DEF_CFL || !(e->space || e->c.pb == BP_POINT) ||
+                    if ((int)e->c.pb != pb || e->c.method != (mpm_method)m ||
+                        e->c.update != (mpm_update)u || e->c.cfl != DEF_CFL ||
+                        !(e->space || e->c.pb == BP_POINT) ||
                         (e->c.pb != BP_POINT && e->c.ppc != DEF_PPC))
                         continue;
                     double f = e->r.rc ? NAN : front_factor(e);
@@ -466,7 +480,8 @@ static void print_candidates(const int *only)
                 }
                 char cell[32];
                 if (n)
-                    snprintf(cell, sizeof cell, failed ? "%.1f (%d)" : "%.1f", exp(lsum / n), failed);
+                    snprintf(cell, sizeof cell, failed ? "%.1f (%d)" : "%.1f", exp(lsum / n),
+                             failed);
                 else
                     snprintf(cell, sizeof cell, failed ? "fail (%d)" : "-", failed);
                 printf(" %-11s", cell);
@@ -493,21 +508,21 @@ static int write_csv(const char *path)
         snprintf(msg, sizeof msg, "%s", e->r.msg);
         for (char *p = msg; *p; p++)
             if (*p == '"' || *p == ',') *p = ';';
-        fprintf(f, "%s,%s,%s,%d,%d,%g,%.6e,%ld,%zu,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%d,%d,%d,%d,%d,"
-                   "%s,%s\n",
+        fprintf(f,
+                "%s,%s,%s,%d,%d,%g,%.6e,%ld,%zu,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%d,%d,%d,%d,%d,"
+                "%s,%s\n",
                 bench_problem_name(e->c.pb), bench_method_name(e->c.method),
-                bench_update_name(e->c.update), e->c.cells, e->c.ppc, e->c.cfl, e->r.dt,
-                e->r.steps, e->r.particles, e->r.err, e->r.err2, e->r.err3, e->terr, e->wall_med,
-                e->wall_min,
+                bench_update_name(e->c.update), e->c.cells, e->c.ppc, e->c.cfl, e->r.dt, e->r.steps,
+                e->r.particles, e->r.err, e->r.err2, e->r.err3, e->terr, e->wall_med, e->wall_min,
                 e->repeats, e->space, e->time, e->ref, e->front,
                 e->r.rc ? mpm_strerror(e->r.rc) : "ok", msg);
     }
     return fclose(f);
 }
 
-static const char *const series_style[6] = {
-    "lc rgb '#1f77b4' pt 7", "lc rgb '#2ca02c' pt 5", "lc rgb '#9467bd' pt 9",
-    "lc rgb '#d62728' pt 6", "lc rgb '#ff7f0e' pt 4", "lc rgb '#8c564b' pt 8"};
+static const char *const series_style[6] = {"lc rgb '#1f77b4' pt 7", "lc rgb '#2ca02c' pt 5",
+                                            "lc rgb '#9467bd' pt 9", "lc rgb '#d62728' pt 6",
+                                            "lc rgb '#ff7f0e' pt 4", "lc rgb '#8c564b' pt 8"};
 
 /* One panel: six series (method x update) of (x, y) pairs from the entries
  * selected by kind (0: all runs err vs wall; 1: space sweep C=0.5 ppc 2,
@@ -518,7 +533,8 @@ static void gp_panel(FILE *f, bench_problem pb, int kind, const char *title)
     for (int s = 0; s < 6; s++) {
         fprintf(f, "$d%d_%d_%d << EOD\n", pb, kind, s);
         series sr = {{0}, {0}, 0};
-        if (kind == 1) space_series(pb, (mpm_method)(s / 3), (mpm_update)(s % 3), order_ppc, 0.5, 0, &sr);
+        if (kind == 1)
+            space_series(pb, (mpm_method)(s / 3), (mpm_update)(s % 3), order_ppc, 0.5, 0, &sr);
         if (kind == 2) time_series(pb, (mpm_method)(s / 3), (mpm_update)(s % 3), 0, &sr);
         if (kind == 0) {
             for (int i = 0; i < nE; i++) {
@@ -557,9 +573,9 @@ static void gp_panel(FILE *f, bench_problem pb, int kind, const char *title)
     fprintf(f, "plot ");
     for (int s = 0, first = 1; s < 6; s++) {
         if (!cnt[s]) continue;
-        fprintf(f, "%s$d%d_%d_%d using 1:2 with %s %s title '%s %s'", first ? "" : ", ", pb, kind, s,
-                kind ? "linespoints" : "points", series_style[s], bench_method_name((mpm_method)(s / 3)),
-                bench_update_name((mpm_update)(s % 3)));
+        fprintf(f, "%s$d%d_%d_%d using 1:2 with %s %s title '%s %s'", first ? "" : ", ", pb, kind,
+                s, kind ? "linespoints" : "points", series_style[s],
+                bench_method_name((mpm_method)(s / 3)), bench_update_name((mpm_update)(s % 3)));
         first = 0;
     }
     if (kind == 0) fprintf(f, ", $f%d using 1:2 with steps lc rgb 'black' dt 2 title 'front'", pb);
@@ -575,8 +591,10 @@ static int write_gnuplot(const char *dir, const int *only)
         fprintf(stderr, "mpmbench-accuracy: %s: %s\n", path, strerror(errno));
         return -1;
     }
-    fprintf(f, "# written by mpmbench-accuracy: gnuplot %s makes accuracy_{time,space,dt}.png "
-               "in %s\n", path, dir);
+    fprintf(f,
+            "# written by mpmbench-accuracy: gnuplot %s makes accuracy_{time,space,dt}.png "
+            "in %s\n",
+            path, dir);
     fprintf(f, "set terminal pngcairo size 1200,760 font ',8'\nset logscale xy\n"
                "set format x '10^{%%L}'\nset format y '10^{%%L}'\nset grid\n");
     static const char *const what[3] = {"time", "space", "dt"};
@@ -587,7 +605,7 @@ static int write_gnuplot(const char *dir, const int *only)
     for (int k = 0; k < 3; k++) {
         fprintf(f, "set output '%s/accuracy_%s.png'\n", dir, what[k]);
         fprintf(f, "set multiplot layout 2,3 title '%s'\n",
-                k == 0 ? "error against run time (all configurations; dashed: Pareto front)"
+                k == 0   ? "error against run time (all configurations; dashed: Pareto front)"
                 : k == 1 ? "error against cell size at a fixed Courant number"
                          : "time convergence on a fixed grid");
         /* the empty corner: fast and accurate (bottom left) does not
@@ -615,8 +633,10 @@ static int parse_only(const char *s, int *only)
         for (int pb = 0; pb < BP_COUNT; pb++)
             if (!strcmp(tok, bench_problem_name((bench_problem)pb))) only[pb] = found = 1;
         if (!found) {
-            fprintf(stderr, "mpmbench-accuracy: --only: unknown problem '%s' (point, bar, mms1d, "
-                            "mms2d, mms3d, disks)\n", tok);
+            fprintf(stderr,
+                    "mpmbench-accuracy: --only: unknown problem '%s' (point, bar, mms1d, "
+                    "mms2d, mms3d, disks)\n",
+                    tok);
             return -1;
         }
     }
@@ -645,7 +665,8 @@ int main(int argc, char **argv)
             printf("usage: %s [--quick] [--repeats N] [--out DIR] [--only NAME[,NAME...]]\n"
                    "  sweeps method, update, cells, ppc and dt/CFL on problems with known answers\n"
                    "  (point, bar, mms1d, mms2d, mms3d, disks); writes DIR/accuracy.csv and\n"
-                   "  DIR/accuracy.gp (default DIR: build/bench)\n", argv[0]);
+                   "  DIR/accuracy.gp (default DIR: build/bench)\n",
+                   argv[0]);
             return strcmp(argv[i], "--help") && strcmp(argv[i], "-h") ? 2 : 0;
         }
     }
@@ -663,8 +684,10 @@ int main(int argc, char **argv)
     int st = bench_force_selftest(msg, sizeof msg);
     printf("%s\n", msg);
     if (st) {
-        fprintf(stderr, "mpmbench-accuracy: mpm_sim_set_particle_forces does not match public point loads; the "
-                        "manufactured solutions would be wrong\n");
+        fprintf(
+            stderr,
+            "mpmbench-accuracy: mpm_sim_set_particle_forces does not match public point loads; the "
+            "manufactured solutions would be wrong\n");
         free(E);
         return 1;
     }
@@ -672,8 +695,8 @@ int main(int argc, char **argv)
     plan(sel);
     printf("%d configurations, %d repeats each for timing (median), one solver thread\n\n", nE,
            repeats);
-    printf("%-6s %-4s %-4s %-9s %-5s %-9s %8s %9s %9s %9s\n", "", "", "", "", "", "", "steps", "err",
-           "err2", "wall (s)");
+    printf("%-6s %-4s %-4s %-9s %-5s %-9s %8s %9s %9s %9s\n", "", "", "", "", "", "", "steps",
+           "err", "err2", "wall (s)");
     double t0 = bench_now();
     for (int i = 0; i < nE; i++) {
         run_entry(&E[i], repeats);

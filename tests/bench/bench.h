@@ -47,21 +47,21 @@ typedef struct {
     bench_problem pb;
     mpm_method method;
     mpm_update update;
-    int cells;   /* cells per unit length (point: 1; disks: 1/h) */
-    int ppc;     /* particles per cell per axis (point: 1) */
-    double cfl;  /* dt as a fraction of h / c */
+    int cells;  /* cells per unit length (point: 1; disks: 1/h) */
+    int ppc;    /* particles per cell per axis (point: 1) */
+    double cfl; /* dt as a fraction of h / c */
 } bench_cfg;
 
 typedef struct {
-    int rc;             /* 0, or the MPM_E* code that stopped the run */
-    char msg[256];      /* the solver's message when rc != 0 */
-    double err, err2;   /* see above; INFINITY when the run failed */
-    double err3;        /* disks: the momentum error; 0 otherwise */
-    double wall;        /* seconds spent stepping (wall clock) */
+    int rc;           /* 0, or the MPM_E* code that stopped the run */
+    char msg[256];    /* the solver's message when rc != 0 */
+    double err, err2; /* see above; INFINITY when the run failed */
+    double err3;      /* disks: the momentum error; 0 otherwise */
+    double wall;      /* seconds spent stepping (wall clock) */
     long steps;
     size_t particles;
     double dt;
-    double *xf;         /* final positions (particles * dim) when asked */
+    double *xf; /* final positions (particles * dim) when asked */
     int dim;
 } bench_res;
 

@@ -141,8 +141,9 @@ int bench_force_selftest(char *msg, size_t n)
             for (int p = 0; p < ST_N; p++)
                 worst = fmax(worst, fmax(fabs(xa[p] - xb[p]), fabs(va[p] - vb[p])));
         }
-    snprintf(msg, n, "mpm_sim_set_particle_forces vs point forces rebuilt every step: max |difference| "
-             "%.3g over %d steps, 6 method/update pairs (%s)", worst, ST_STEPS,
-             worst == 0 ? "bitwise equal" : "DIFFERENT");
+    snprintf(msg, n,
+             "mpm_sim_set_particle_forces vs point forces rebuilt every step: max |difference| "
+             "%.3g over %d steps, 6 method/update pairs (%s)",
+             worst, ST_STEPS, worst == 0 ? "bitwise equal" : "DIFFERENT");
     return worst == 0 ? 0 : -1;
 }

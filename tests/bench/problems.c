@@ -21,9 +21,8 @@
  * Wallstedt & Guilkey 2008 choose it) this is
  *     b_i = A sin(2 pi X_i) s_i(t) pi^2 c^2 (4 prod_{j != i} F_j / F_i - 1).
  * The force m_p b(X_p, t_n) is given to every particle before each step
- * through bench_force_set() (mpm_sim_set_particle_forces).  u = 0 on every face, where rollers hold the
- * normal velocity; initial u = 0, v_i = A omega sin(2 pi X_i) (+-1),
- * stress 0.
+ * through bench_force_set() (mpm_sim_set_particle_forces).  u = 0 on every face, where rollers hold
+ * the normal velocity; initial u = 0, v_i = A omega sin(2 pi X_i) (+-1), stress 0.
  */
 #include "bench.h"
 #include "mpm_paper.h"
@@ -133,8 +132,10 @@ static mpm_sim *make_sim(const mpm_case *c, bench_res *r)
 {
     mpm_error err;
     mpm_sim *s = mpm_sim_new(c, NULL, &err);
-    if (s) r->particles = mpm_sim_particles(s);
-    else mpm_error_text(&err, MPM_FIELD_PROTO, r->msg, sizeof r->msg);
+    if (s)
+        r->particles = mpm_sim_particles(s);
+    else
+        mpm_error_text(&err, MPM_FIELD_PROTO, r->msg, sizeof r->msg);
     return s;
 }
 
@@ -208,7 +209,8 @@ static int run_bar(const bench_cfg *cf, int keep, bench_res *r)
         double tt = mpm_sim_time(s), se = 0;
         mpm_energy e;
         mpm_sim_energy(s, &e);
-        r->err2 = fmax(r->err2, fabs(e.momentum[0] / e.mass - mpm_paper_bar_vcm(BAR_V0, tt)) / amp_v);
+        r->err2 =
+            fmax(r->err2, fabs(e.momentum[0] / e.mass - mpm_paper_bar_vcm(BAR_V0, tt)) / amp_v);
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = x});
         for (size_t p = 0; p < np; p++) {
             double d = x[p] - X[p] - amp_u * sin(w * tt) * sin(M_PI / 2 * X[p]);
@@ -298,7 +300,8 @@ static int run_mms(const bench_cfg *cf, int keep, bench_res *r)
     p.c2 = c * c;
     for (int d = 0; d < 3; d++) p.sign[d] = d % 2 ? -1.0 : 1.0;
     size_t nd = p.n * (size_t)D;
-    double *vol = malloc(p.n * sizeof *vol), *v = malloc(nd * sizeof *v), *hl = malloc(nd * sizeof *hl);
+    double *vol = malloc(p.n * sizeof *vol), *v = malloc(nd * sizeof *v),
+           *hl = malloc(nd * sizeof *hl);
     p.X = malloc(nd * sizeof *p.X);
     p.sx = malloc(nd * sizeof *p.sx);
     p.cx = malloc(nd * sizeof *p.cx);

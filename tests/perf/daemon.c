@@ -72,14 +72,15 @@ int pb_daemon_scene(mpm_method m, mpm_update u, long particles, long steps, int 
 #include <unistd.h>
 #include <zmq.h>
 
-#define DEFAULT_STEPS 100  /* ~3 s at the target speed; the watched job's one snapshot is its last step */
+#define DEFAULT_STEPS \
+    100 /* ~3 s at the target speed; the watched job's one snapshot is its last step */
 #define SNAPSHOT_EVERY 100
-#define WARM_STEPS 20      /* the warm-up job: every job builds a fresh simulation anyway */
-#define READY_S 20.0      /* mpmd must answer a Ping within this */
-#define STOP_S 20.0       /* and exit this long after SIGTERM */
-#define CALL_S 30.0       /* a reply within this */
-#define IDLE_S 1.0        /* no stream message this long: ask Status */
-#define TOPIC_LEN 21      /* "job:%016llx:" */
+#define WARM_STEPS 20 /* the warm-up job: every job builds a fresh simulation anyway */
+#define READY_S 20.0  /* mpmd must answer a Ping within this */
+#define STOP_S 20.0   /* and exit this long after SIGTERM */
+#define CALL_S 30.0   /* a reply within this */
+#define IDLE_S 1.0    /* no stream message this long: ask Status */
+#define TOPIC_LEN 21  /* "job:%016llx:" */
 
 typedef struct {
     pid_t pid;
@@ -89,11 +90,11 @@ typedef struct {
 } dmn;
 
 typedef struct {
-    double wall;          /* client: Submit sent -> Finished received */
-    double worker_wall;   /* Finished.wall_s */
+    double wall;        /* client: Submit sent -> Finished received */
+    double worker_wall; /* Finished.wall_s */
     long energies, snapshots, progress, lost;
-    long snap_bad;        /* snapshots whose size is not what was asked */
-    double cpu;           /* CPU seconds mpmd used meanwhile (all its threads) */
+    long snap_bad; /* snapshots whose size is not what was asked */
+    double cpu;    /* CPU seconds mpmd used meanwhile (all its threads) */
 } job_res;
 
 /* ---- the daemon process ---- */
@@ -139,7 +140,8 @@ static void close_zmq(dmn *d)
     if (d->dealer) zmq_close(d->dealer);
     d->sub = d->dealer = NULL;
     if (d->zctx)
-        while (zmq_ctx_term(d->zctx) && errno == EINTR) {}
+        while (zmq_ctx_term(d->zctx) && errno == EINTR) {
+        }
     d->zctx = NULL;
 }
 
@@ -165,7 +167,8 @@ static int stop_daemon(dmn *d)
             fprintf(stderr, "mpmbench: mpmd (pid %d) ignored SIGTERM for %.0f s; killing it\n",
                     (int)d->pid, STOP_S);
             kill(d->pid, SIGKILL);
-            while (wait4(d->pid, &st, 0, &ru) < 0 && errno == EINTR) {}
+            while (wait4(d->pid, &st, 0, &ru) < 0 && errno == EINTR) {
+            }
             rc = -1;
             break;
         }
@@ -194,7 +197,8 @@ static int call(dmn *d, const mpp_request *rq, mpp_reply *out, double timeout, c
         snprintf(err, errlen, "cannot encode a request");
         return -1;
     }
-    int sent = zmq_send(d->dealer, "", 0, ZMQ_SNDMORE) >= 0 && zmq_send(d->dealer, buf, len, 0) >= 0;
+    int sent =
+        zmq_send(d->dealer, "", 0, ZMQ_SNDMORE) >= 0 && zmq_send(d->dealer, buf, len, 0) >= 0;
     free(buf);
     if (!sent) {
         snprintf(err, errlen, "zmq_send: %s", zmq_strerror(errno));
@@ -235,7 +239,8 @@ static int call(dmn *d, const mpp_request *rq, mpp_reply *out, double timeout, c
             break;
         }
         more = zmq_msg_more(&m);
-        if (nparts < 2) part[nparts++] = m;
+        if (nparts < 2)
+            part[nparts++] = m;
         else {
             zmq_msg_close(&m);
             rc = -1;
@@ -252,8 +257,9 @@ static int call(dmn *d, const mpp_request *rq, mpp_reply *out, double timeout, c
                      mpm_error_text(&e, MPM_FIELD_JSON, why, sizeof why));
             rc = -1;
         } else if (out->kind == MPP_REPLY_ERROR) {
-            snprintf(err, errlen, "mpmd: error %d: %.300s%s%.100s%s", out->err_code, out->err_message,
-                     *out->err_field ? " (field " : "", out->err_field, *out->err_field ? ")" : "");
+            snprintf(err, errlen, "mpmd: error %d: %.300s%s%.100s%s", out->err_code,
+                     out->err_message, *out->err_field ? " (field " : "", out->err_field,
+                     *out->err_field ? ")" : "");
             rc = -1;
         }
     }
@@ -264,11 +270,15 @@ static int call(dmn *d, const mpp_request *rq, mpp_reply *out, double timeout, c
 static int mpmd_path(char *out, size_t n)
 {
     const char *env = getenv("MPMD_BIN");
-    if (env && *env) snprintf(out, n, "%s", env);
-    else snprintf(out, n, "%s/mpmd", pb_exe_dir());
+    if (env && *env)
+        snprintf(out, n, "%s", env);
+    else
+        snprintf(out, n, "%s/mpmd", pb_exe_dir());
     if (access(out, X_OK)) {
-        fprintf(stderr, "mpmbench: daemon scene: %s is not an executable (make bin/mpmd, or set "
-                "MPMD_BIN)\n", out);
+        fprintf(stderr,
+                "mpmbench: daemon scene: %s is not an executable (make bin/mpmd, or set "
+                "MPMD_BIN)\n",
+                out);
         return -1;
     }
     return 0;
@@ -294,8 +304,8 @@ static int start_daemon(dmn *d, const char *bin, int threads)
     snprintf(d->log, sizeof d->log, "%s/mpmd.log", dir);
     char sthreads[16];
     snprintf(sthreads, sizeof sthreads, "%d", threads);
-    char *argv[] = {(char *)bin, "--endpoint", d->ep, "--db", d->db, "--workers", "1",
-                    "--solver-threads", sthreads, "--queue-max", "4", NULL};
+    char *argv[] = {(char *)bin, "--endpoint",       d->ep,    "--db",        d->db, "--workers",
+                    "1",         "--solver-threads", sthreads, "--queue-max", "4",   NULL};
     fflush(NULL);
     d->pid = fork();
     if (d->pid < 0) {
@@ -358,7 +368,8 @@ static double proc_cpu(pid_t pid)
     buf[n] = 0;
     char *p = strrchr(buf, ')'); /* the command name may hold spaces */
     unsigned long long ut = 0, st = 0;
-    if (!p || sscanf(p + 1, " %*c %*d %*d %*d %*d %*d %*u %*u %*u %*u %*u %llu %llu", &ut, &st) != 2)
+    if (!p ||
+        sscanf(p + 1, " %*c %*d %*d %*d %*d %*d %*u %*u %*u %*u %*u %llu %llu", &ut, &st) != 2)
         return 0;
     long tck = sysconf(_SC_CLK_TCK);
     return (double)(ut + st) / (double)(tck > 0 ? tck : 100);
@@ -390,8 +401,10 @@ static int recv_stream(void *sub, mpp_stream *msg, int *ok)
             break;
         }
         more = zmq_msg_more(&m);
-        if (nparts < 2) part[nparts++] = m;
-        else zmq_msg_close(&m);
+        if (nparts < 2)
+            part[nparts++] = m;
+        else
+            zmq_msg_close(&m);
     }
     if (!rc && nparts == 2 && zmq_msg_size(&part[0]) == TOPIC_LEN)
         *ok = mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0, msg, NULL) == 0;
@@ -443,15 +456,18 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
                 rc = -1;
             } else if (now - last > IDLE_S) {
                 int st = 0;
-                if (job_status(d, job, &st, err, errlen)) rc = -1;
+                if (job_status(d, job, &st, err, errlen))
+                    rc = -1;
                 else if (st == MPP_STATUS_FINISHED && warmup) {
                     /* the SUB of a fresh daemon may connect after a short
                      * first job is over; only the warm-up can be that one */
                     jr->wall = pb_now() - t0;
                     rc = 0;
                 } else if (st >= MPP_STATUS_FINISHED) {
-                    snprintf(err, errlen, "job %llu ended (%s) but its Finished message never "
-                             "arrived", (unsigned long long)job, mpp_status_name(st));
+                    snprintf(err, errlen,
+                             "job %llu ended (%s) but its Finished message never "
+                             "arrived",
+                             (unsigned long long)job, mpp_status_name(st));
                     rc = -1;
                 }
                 last = pb_now();
@@ -473,21 +489,16 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
         if (m.seq > next) jr->lost += (long)(m.seq - next);
         if (m.seq >= next) next = m.seq + 1;
         switch (m.kind) {
-        case MPP_STREAM_ENERGY:
-            jr->energies++;
-            break;
+        case MPP_STREAM_ENERGY: jr->energies++; break;
         case MPP_STREAM_SNAPSHOT: {
             /* the decoder checked that each array present holds n times
              * its width */
             const mpp_snapshot *s = &m.snapshot;
             jr->snapshots++;
-            if (s->n != particles || s->dim != 2 || !s->x || !s->v || !s->pressure)
-                jr->snap_bad++;
+            if (s->n != particles || s->dim != 2 || !s->x || !s->v || !s->pressure) jr->snap_bad++;
             break;
         }
-        case MPP_STREAM_PROGRESS:
-            jr->progress++;
-            break;
+        case MPP_STREAM_PROGRESS: jr->progress++; break;
         case MPP_STREAM_FINISHED:
             jr->wall = pb_now() - t0;
             jr->cpu = proc_cpu(d->pid) - c0;
@@ -502,8 +513,7 @@ static int run_job(dmn *d, const uint8_t *case_bytes, size_t case_len, int watch
                 rc = 0;
             }
             break;
-        default:
-            break;
+        default: break;
         }
         mpp_stream_clear(&m);
     }
@@ -543,7 +553,9 @@ static int ref_job(const char *json, pb_row *r)
     r->nodes = mpm_sim_nodes(sim);
     r->dim = mpm_sim_dim(sim);
     r->steps = (long)sc->steps;
-    if (rc) snprintf(r->msg, sizeof r->msg, "%s (%.200s)", mpm_strerror(rc), mpm_sim_error(sim)->message);
+    if (rc)
+        snprintf(r->msg, sizeof r->msg, "%s (%.200s)", mpm_strerror(rc),
+                 mpm_sim_error(sim)->message);
     mpm_sim_destroy(&sim);
     mpp_case_destroy(&sc);
     r->wall_s = t2 - t0;
@@ -569,8 +581,10 @@ static char *case_json(int cells, mpm_method m, mpm_update u, long steps, int th
         "\"steps\":%ld,\"threads\":%d%s}";
     char out_sec[160] = "";
     if (output)
-        snprintf(out_sec, sizeof out_sec, ",\"output\":{\"energyEvery\":1,\"snapshotEvery\":%d,"
-                 "\"snapshotFields\":[\"X\",\"V\",\"PRESSURE\"]}", SNAPSHOT_EVERY);
+        snprintf(out_sec, sizeof out_sec,
+                 ",\"output\":{\"energyEvery\":1,\"snapshotEvery\":%d,"
+                 "\"snapshotFields\":[\"X\",\"V\",\"PRESSURE\"]}",
+                 SNAPSHOT_EVERY);
     const char *mn = m == MPM_METHOD_GIMP ? "GIMP" : "MPM";
     const char *un = u == MPM_USL ? "USL" : u == MPM_MUSL ? "MUSL" : "USF";
     int n = snprintf(NULL, 0, fmt, output ? "-watched" : "", h, h, cells + 1, cells + 1, mn, un, s,
@@ -614,7 +628,8 @@ static int cases_make(cases *c, int cells, mpm_method m, mpm_update u, long step
                 fprintf(stderr, "mpmbench: out of memory\n");
                 return -1;
             }
-            if (mpp_msg_json_to_bytes(MPP_MSG_CASE, js, strlen(js), &c->bytes[w][j], &c->len[w][j], &e)) {
+            if (mpp_msg_json_to_bytes(MPP_MSG_CASE, js, strlen(js), &c->bytes[w][j], &c->len[w][j],
+                                      &e)) {
                 fprintf(stderr, "mpmbench: the bench's own case: %s\n",
                         mpm_error_text(&e, MPM_FIELD_JSON, err, sizeof err));
                 return -1;
@@ -714,7 +729,8 @@ static void ref_stop(refproc *p)
 {
     if (p->cmd >= 0) {
         char q = 'q';
-        if (pb_write_all(p->cmd, &q, 1)) {}
+        if (pb_write_all(p->cmd, &q, 1)) {
+        }
         close(p->cmd);
     }
     if (p->res >= 0) close(p->res);
@@ -723,7 +739,8 @@ static void ref_stop(refproc *p)
         struct rusage ru;
         int st;
         memset(&ru, 0, sizeof ru);
-        while (wait4(p->pid, &st, 0, &ru) < 0 && errno == EINTR) {}
+        while (wait4(p->pid, &st, 0, &ru) < 0 && errno == EINTR) {
+        }
         p->rss_kb = ru.ru_maxrss;
     }
     p->pid = 0;
@@ -855,10 +872,11 @@ out:
     double wa = pb_median(worker[0], PB_RUNS), wb = pb_median(worker[1], PB_RUNS);
     pb_note("daemon: jobs interleaved (in-process, no watcher, watcher) x %d; medians:", PB_RUNS);
     pb_note("daemon: in-process %.3f s per job (mpm_sim_new %.3f s + %ld steps), %d thread%s, "
-            "%zu particles", ref.wall_s, ref.setup_s, steps, threads, threads > 1 ? "s" : "",
-            ref.particles);
+            "%zu particles",
+            ref.wall_s, ref.setup_s, steps, threads, threads > 1 ? "s" : "", ref.particles);
     pb_note("daemon: no watcher: client %.3f s = worker loop %.3f s (Finished.wallS) + %.3f s "
-            "submit/queue/stream", rows[0].wall_s, wa, rows[0].wall_s - wa);
+            "submit/queue/stream",
+            rows[0].wall_s, wa, rows[0].wall_s - wa);
     pb_note("daemon: watcher:    client %.3f s = worker loop %.3f s + %.3f s; received %ld "
             "energies, %ld snapshots (expected %ld, %ld), %ld stream messages lost%s",
             rows[1].wall_s, wb, rows[1].wall_s - wb, sum[1].energies, sum[1].snapshots,
@@ -870,8 +888,8 @@ out:
     pb_result("daemon, no watcher: %.3fx in-process wall (overhead %+.1f%%, target <= 5%%): %s", qa,
               100 * (qa - 1), qa <= 1.05 ? "ok" : "MISSED");
     pb_result("daemon, watcher (energies every step, snapshots every %d): %.3fx in-process wall "
-              "(overhead %+.1f%%, target <= 10%%): %s", SNAPSHOT_EVERY, qb, 100 * (qb - 1),
-              qb <= 1.10 ? "ok" : "MISSED");
+              "(overhead %+.1f%%, target <= 10%%): %s",
+              SNAPSHOT_EVERY, qb, 100 * (qb - 1), qb <= 1.10 ? "ok" : "MISSED");
     return 0;
 }
 

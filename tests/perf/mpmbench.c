@@ -26,7 +26,7 @@
 
 static int csv_mode;
 static int header_done;
-static int collecting;            /* --all: keep result lines for the summary */
+static int collecting; /* --all: keep result lines for the summary */
 static char *summary[MAX_SUMMARY];
 static int nsummary;
 static int progress_shown;
@@ -123,12 +123,14 @@ static void append_csv(const pb_row *r)
 {
     static int warned;
     if ((mkdir("build", 0777) && errno != EEXIST) || (mkdir(PB_CSV_DIR, 0777) && errno != EEXIST)) {
-        if (!warned++) fprintf(stderr, "mpmbench: cannot create %s: %s\n", PB_CSV_DIR, strerror(errno));
+        if (!warned++)
+            fprintf(stderr, "mpmbench: cannot create %s: %s\n", PB_CSV_DIR, strerror(errno));
         return;
     }
     FILE *f = fopen(PB_CSV_PATH, "a");
     if (!f) {
-        if (!warned++) fprintf(stderr, "mpmbench: cannot open %s: %s\n", PB_CSV_PATH, strerror(errno));
+        if (!warned++)
+            fprintf(stderr, "mpmbench: cannot open %s: %s\n", PB_CSV_PATH, strerror(errno));
         return;
     }
     if (ftell(f) == 0) fprintf(f, "%s\n", PB_CSV_HEADER);
@@ -152,8 +154,7 @@ static void show_row(const pb_row *r)
                 "dim", "particles", "nodes", "steps", "thr", "wall_s", "Mpsteps/s", "B/part",
                 "runs (Mpsteps/s), notes");
     char notes[200] = "";
-    if (r->runs > 1)
-        snprintf(notes, sizeof notes, "%.3g..%.3g", r->rate_lo, r->rate_hi);
+    if (r->runs > 1) snprintf(notes, sizeof notes, "%.3g..%.3g", r->rate_lo, r->rate_hi);
     if (r->cpus > 0) {
         size_t k = strlen(notes);
         snprintf(notes + k, sizeof notes - k, "%scpu %.2f", k ? "; " : "", r->cpus);
@@ -199,8 +200,10 @@ const char *pb_exe_dir(void)
         } else {
             dir[n] = 0;
             char *s = strrchr(dir, '/');
-            if (s && s != dir) *s = 0;
-            else snprintf(dir, sizeof dir, "%s", s ? "/" : ".");
+            if (s && s != dir)
+                *s = 0;
+            else
+                snprintf(dir, sizeof dir, "%s", s ? "/" : ".");
         }
     }
     return dir;
@@ -223,8 +226,8 @@ static int parse_long(const char *flag, const char *s, long lo, long hi, long *o
     errno = 0;
     double d = strtod(s, &end); /* accepts 1e6 */
     if (errno || end == s || *end || d < (double)lo || d > (double)hi || d != (double)(long)d) {
-        fprintf(stderr, "mpmbench: %s: expected a whole number in [%ld, %ld], got '%s'\n", flag,
-                lo, hi, s);
+        fprintf(stderr, "mpmbench: %s: expected a whole number in [%ld, %ld], got '%s'\n", flag, lo,
+                hi, s);
         return -1;
     }
     *out = (long)d;
@@ -266,8 +269,10 @@ static int parse_args(int argc, char **argv, opts *o)
             int ok = 0;
             for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) ok |= !strcmp(v, names[k]);
             if (!ok) {
-                fprintf(stderr, "mpmbench: --scene: expected disks2d, cube3d, bar1d, sparse2d or "
-                        "daemon, got '%s'\n", v);
+                fprintf(stderr,
+                        "mpmbench: --scene: expected disks2d, cube3d, bar1d, sparse2d or "
+                        "daemon, got '%s'\n",
+                        v);
                 return -1;
             }
             o->scene = v;
@@ -281,17 +286,22 @@ static int parse_args(int argc, char **argv, opts *o)
             o->threads = (int)x;
             o->have_threads = 1;
         } else if (!strcmp(a, "--method")) {
-            if (!strcmp(v, "mpm")) o->method = MPM_METHOD_MPM;
-            else if (!strcmp(v, "gimp")) o->method = MPM_METHOD_GIMP;
+            if (!strcmp(v, "mpm"))
+                o->method = MPM_METHOD_MPM;
+            else if (!strcmp(v, "gimp"))
+                o->method = MPM_METHOD_GIMP;
             else {
                 fprintf(stderr, "mpmbench: --method: expected mpm or gimp, got '%s'\n", v);
                 return -1;
             }
             o->have_method = 1;
         } else {
-            if (!strcmp(v, "usf")) o->update = MPM_USF;
-            else if (!strcmp(v, "usl")) o->update = MPM_USL;
-            else if (!strcmp(v, "musl")) o->update = MPM_MUSL;
+            if (!strcmp(v, "usf"))
+                o->update = MPM_USF;
+            else if (!strcmp(v, "usl"))
+                o->update = MPM_USL;
+            else if (!strcmp(v, "musl"))
+                o->update = MPM_MUSL;
             else {
                 fprintf(stderr, "mpmbench: --update: expected usf, usl or musl, got '%s'\n", v);
                 return -1;
@@ -301,7 +311,7 @@ static int parse_args(int argc, char **argv, opts *o)
     }
     if (o->all && (o->have_scene || o->have_threads || o->have_method || o->have_update)) {
         fprintf(stderr, "mpmbench: --all runs every scene, method and thread count; it takes "
-                "only --particles, --steps and --csv\n");
+                        "only --particles, --steps and --csv\n");
         return -1;
     }
     if (!o->all && !o->have_scene) {
@@ -309,8 +319,10 @@ static int parse_args(int argc, char **argv, opts *o)
         return -1;
     }
     if (o->have_scene && !strcmp(o->scene, "daemon") && o->particles > 10000000L) {
-        fprintf(stderr, "mpmbench: --particles: the daemon scene takes at most 10000000 "
-                "(the daemon's case limit), got %ld\n", o->particles);
+        fprintf(stderr,
+                "mpmbench: --particles: the daemon scene takes at most 10000000 "
+                "(the daemon's case limit), got %ld\n",
+                o->particles);
         return -1;
     }
     return 0;
@@ -350,7 +362,8 @@ static int run_one(const opts *o)
     pb_row r, r2;
     if (!strcmp(o->scene, "daemon")) {
 #if PB_LEAN
-        fprintf(stderr, "mpmbench: the daemon scene is not in the lean build (bin/mpmbench has it)\n");
+        fprintf(stderr,
+                "mpmbench: the daemon scene is not in the lean build (bin/mpmbench has it)\n");
         return 1;
 #else
         return pb_daemon_scene(o->method, o->update, o->particles, o->steps, o->threads) ? 1 : 0;
@@ -365,8 +378,9 @@ static int run_one(const opts *o)
         sparse_ratio(&r, &r2);
         return 0;
     }
-    c.scene = !strcmp(o->scene, "cube3d") ? PB_CUBE3D : !strcmp(o->scene, "bar1d") ? PB_BAR1D
-                                                                                   : PB_DISKS2D;
+    c.scene = !strcmp(o->scene, "cube3d")  ? PB_CUBE3D
+              : !strcmp(o->scene, "bar1d") ? PB_BAR1D
+                                           : PB_DISKS2D;
     return measure(&c, &r) ? 1 : 0;
 }
 
@@ -377,17 +391,32 @@ static int run_lean(const pb_cfg *c, long steps, pb_row *r)
 {
     char path[PATH_MAX + 32];
     const char *env = getenv("MPMBENCH_LEAN");
-    if (env && *env) snprintf(path, sizeof path, "%s", env);
-    else snprintf(path, sizeof path, "%s/mpmbench-lean", pb_exe_dir());
+    if (env && *env)
+        snprintf(path, sizeof path, "%s", env);
+    else
+        snprintf(path, sizeof path, "%s/mpmbench-lean", pb_exe_dir());
     if (access(path, X_OK)) return 1;
     char sthreads[16], ssteps[32], sparts[32];
     snprintf(sthreads, sizeof sthreads, "%d", c->threads);
     snprintf(ssteps, sizeof ssteps, "%ld", steps);
     snprintf(sparts, sizeof sparts, "%ld", c->particles ? c->particles : 1000000L);
-    char *argv[] = {path, "--scene", "disks2d", "--method",
-                    c->method == MPM_METHOD_GIMP ? "gimp" : "mpm", "--update",
-                    c->update == MPM_USL ? "usl" : c->update == MPM_MUSL ? "musl" : "usf",
-                    "--threads", sthreads, "--steps", ssteps, "--particles", sparts, "--csv", NULL};
+    char *argv[] = {path,
+                    "--scene",
+                    "disks2d",
+                    "--method",
+                    c->method == MPM_METHOD_GIMP ? "gimp" : "mpm",
+                    "--update",
+                    c->update == MPM_USL    ? "usl"
+                    : c->update == MPM_MUSL ? "musl"
+                                            : "usf",
+                    "--threads",
+                    sthreads,
+                    "--steps",
+                    ssteps,
+                    "--particles",
+                    sparts,
+                    "--csv",
+                    NULL};
     int fds[2];
     if (pipe(fds)) {
         snprintf(r->msg, sizeof r->msg, "pipe: %.200s", strerror(errno));
@@ -422,7 +451,8 @@ static int run_lean(const pb_cfg *c, long steps, pb_row *r)
     out[n] = 0;
     close(fds[0]);
     int st = 0;
-    while (waitpid(pid, &st, 0) < 0 && errno == EINTR) {}
+    while (waitpid(pid, &st, 0) < 0 && errno == EINTR) {
+    }
     if (!WIFEXITED(st) || WEXITSTATUS(st)) {
         snprintf(r->msg, sizeof r->msg, "%.200s failed (status %d)", path,
                  WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st));
@@ -488,14 +518,18 @@ static void preamble(void)
     machine_info();
     long base = pb_baseline_rss_kb();
     pb_note("Mpsteps/s: millions of particle-steps per second, the median of %d timed runs after a "
-            "warm-up run of", PB_RUNS);
+            "warm-up run of",
+            PB_RUNS);
     pb_note("  the same length (the range of the timed runs follows the row); steps default to "
-            "~%.0f s per run at", PB_RUN_S);
-    pb_note("  the issue's target speed (2D MPM 30, GIMP 12; 3D MPM 16, GIMP 3; 1D assumed 60/30).");
+            "~%.0f s per run at",
+            PB_RUN_S);
+    pb_note(
+        "  the issue's target speed (2D MPM 30, GIMP 12; 3D MPM 16, GIMP 3; 1D assumed 60/30).");
     pb_note("B/part: peak RSS of a forked child that builds and runs only that configuration "
             "(ru_maxrss via");
     pb_note("  wait4), divided by the particles; a child that exits at once peaks at %ld KB. "
-            "Daemon rows: the peak", base);
+            "Daemon rows: the peak",
+            base);
     pb_note("  RSS of that row's own mpmd process.");
     pb_note("cpu: CPU time over wall time of the timed runs (all threads; daemon rows: the whole "
             "mpmd), i.e. the");
@@ -525,7 +559,8 @@ static int run_all(const opts *o)
     for (int s = 0; s < 3; s++)
         for (int m = 0; m < 2; m++) {
             if (!ok[s][m][0] || !ok[s][m][1]) continue;
-            double q = rows[s][m][0].mpsteps > 0 ? rows[s][m][1].mpsteps / rows[s][m][0].mpsteps : 0;
+            double q =
+                rows[s][m][0].mpsteps > 0 ? rows[s][m][1].mpsteps / rows[s][m][0].mpsteps : 0;
             pb_result("%s %s: 1 -> 2 threads %.2fx (target >= 1.7x): %s", pb_scene_name(scenes[s]),
                       pb_method_name(methods[m]), q, verdict(q >= 1.7));
         }
@@ -536,8 +571,9 @@ static int run_all(const opts *o)
             if (ok[s][m][1]) {
                 const pb_row *r = &rows[s][m][1];
                 pb_result("%s %s, 2 threads: %.2f M particle-steps/s (target >= %.0f): %s (%.2f of "
-                          "target)", pb_scene_name(scenes[s]), pb_method_name(methods[m]),
-                          r->mpsteps, target, verdict(r->mpsteps >= target), r->mpsteps / target);
+                          "target)",
+                          pb_scene_name(scenes[s]), pb_method_name(methods[m]), r->mpsteps, target,
+                          verdict(r->mpsteps >= target), r->mpsteps / target);
             }
             double worst = 0;
             for (int t = 0; t < 2; t++)
@@ -591,8 +627,8 @@ static int run_all(const opts *o)
         }
         show_row(&lr);
         pb_result("disks2d %s, 1 thread: lean / normal = %.3f (a feature unused should cost "
-                  "nothing: ~1.0)", pb_method_name(methods[m]),
-                  nr.mpsteps > 0 ? lr.mpsteps / nr.mpsteps : 0);
+                  "nothing: ~1.0)",
+                  pb_method_name(methods[m]), nr.mpsteps > 0 ? lr.mpsteps / nr.mpsteps : 0);
     }
     pb_note("%s", "");
 
@@ -600,8 +636,8 @@ static int run_all(const opts *o)
 #if PB_LEAN
     pb_note("daemon scene: not in the lean build");
 #else
-    if (pb_daemon_scene(MPM_METHOD_MPM, MPM_USF, o->particles > 10000000L ? 10000000L : o->particles,
-                        o->steps, 2))
+    if (pb_daemon_scene(MPM_METHOD_MPM, MPM_USF,
+                        o->particles > 10000000L ? 10000000L : o->particles, o->steps, 2))
         failures++;
 #endif
 

@@ -21,14 +21,14 @@
 
 #define PB_CSV_DIR "build/bench"
 #define PB_CSV_PATH PB_CSV_DIR "/throughput.csv"
-#define PB_CSV_HEADER                                                                    \
-    "scene,method,update,dim,particles,nodes,steps,threads,wall_s,mpsteps_per_s,"        \
+#define PB_CSV_HEADER                                                             \
+    "scene,method,update,dim,particles,nodes,steps,threads,wall_s,mpsteps_per_s," \
     "bytes_per_particle"
 
-#define PB_RUNS 3            /* timed runs per row (the median is reported) */
+#define PB_RUNS 3 /* timed runs per row (the median is reported) */
 #define PB_MAX_RUNS 8
-#define PB_RUN_S 2.0         /* aimed length of one timed run at the target speed */
-#define PB_WARM_CAP_S 6.0    /* a default-length warm-up longer than this cuts the steps */
+#define PB_RUN_S 2.0      /* aimed length of one timed run at the target speed */
+#define PB_WARM_CAP_S 6.0 /* a default-length warm-up longer than this cuts the steps */
 
 #define PB_MIN_PARTICLES 1000L
 #define PB_MAX_PARTICLES 100000000L
@@ -49,8 +49,8 @@ typedef enum {
     PB_DISKS2D = 0,
     PB_CUBE3D,
     PB_BAR1D,
-    PB_SPARSE_WIDE,   /* the sparse2d body in a 4096 x 4096 node grid */
-    PB_SPARSE_TIGHT,  /* the same body in a grid just large enough for it */
+    PB_SPARSE_WIDE,  /* the sparse2d body in a 4096 x 4096 node grid */
+    PB_SPARSE_TIGHT, /* the same body in a grid just large enough for it */
     PB_NSCENES
 } pb_scene;
 
@@ -59,8 +59,8 @@ typedef struct {
     pb_scene scene;
     mpm_method method;
     mpm_update update;
-    long particles;   /* aimed particle count; 0: the scene's default */
-    long steps;       /* steps per run; 0: the default for the target speed */
+    long particles; /* aimed particle count; 0: the scene's default */
+    long steps;     /* steps per run; 0: the default for the target speed */
     int threads;
 } pb_cfg;
 
@@ -72,18 +72,18 @@ typedef struct {
     int dim, threads;
     size_t particles, nodes;
     long steps;
-    double wall_s;       /* median wall time of one timed run */
-    double mpsteps;      /* median millions of particle-steps per second */
+    double wall_s;           /* median wall time of one timed run */
+    double mpsteps;          /* median millions of particle-steps per second */
     double rate_lo, rate_hi; /* slowest and fastest timed run, M particle-steps/s */
-    double bytes_pp;     /* peak RSS / particles */
-    long rss_kb;         /* the peak RSS behind it */
-    double setup_s;      /* building the case and the simulation */
-    double cpus;         /* CPU time / wall time of the timed runs: CPUs kept busy */
-    long default_steps;  /* what the defaults asked for */
-    int reduced;         /* 1: the default steps were cut (slow warm-up) */
-    int tcapped;         /* 1: the default steps were capped by the scene's simulated time */
+    double bytes_pp;         /* peak RSS / particles */
+    long rss_kb;             /* the peak RSS behind it */
+    double setup_s;          /* building the case and the simulation */
+    double cpus;             /* CPU time / wall time of the timed runs: CPUs kept busy */
+    long default_steps;      /* what the defaults asked for */
+    int reduced;             /* 1: the default steps were cut (slow warm-up) */
+    int tcapped;             /* 1: the default steps were capped by the scene's simulated time */
     int runs;
-    int rc;              /* 0, or -1 with msg */
+    int rc; /* 0, or -1 with msg */
     char msg[256];
 } pb_row;
 

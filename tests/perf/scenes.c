@@ -54,15 +54,15 @@
 
 #define DISK_R 0.14
 #define SPARSE_WIDE_NODES 4096
-#define SPARSE_MARGIN 4      /* cells around the tight grid's disk */
+#define SPARSE_MARGIN 4 /* cells around the tight grid's disk */
 #define SPARSE_H 0.001
-#define SPARSE_OMEGA 0.15    /* rad per unit time: <= 1.8 rad in the scene's TMAX */
-#define BAR_V0 1e-5         /* amplitude v0 / omega_1 = 2e-6: no cell crossing below 10^6 particles */
-#define CUBE_MARGIN 3        /* cells beside the cube */
-#define CUBE_TOP 14          /* cells above it: room for the rebound (v0^2 / 2g ~ 10 cells) */
+#define SPARSE_OMEGA 0.15 /* rad per unit time: <= 1.8 rad in the scene's TMAX */
+#define BAR_V0 1e-5       /* amplitude v0 / omega_1 = 2e-6: no cell crossing below 10^6 particles */
+#define CUBE_MARGIN 3     /* cells beside the cube */
+#define CUBE_TOP 14       /* cells above it: room for the rebound (v0^2 / 2g ~ 10 cells) */
 
-static const char *const scene_names[PB_NSCENES] = {
-    "disks2d", "cube3d", "bar1d", "sparse2d-4096", "sparse2d-tight"};
+static const char *const scene_names[PB_NSCENES] = {"disks2d", "cube3d", "bar1d", "sparse2d-4096",
+                                                    "sparse2d-tight"};
 
 const char *pb_scene_name(pb_scene s)
 {
@@ -159,7 +159,8 @@ static int build_cube(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
     memset(t, 0, sizeof *t);
 #ifdef MPM_LEAN
     (void)c;
-    snprintf(err, errlen, "cube3d needs gravity and a fixed floor, which MPM_LEAN compiles out "
+    snprintf(err, errlen,
+             "cube3d needs gravity and a fixed floor, which MPM_LEAN compiles out "
              "(run it with bin/mpmbench)");
     return -1;
 #else
@@ -199,7 +200,8 @@ static int build_sparse(const pb_cfg *c, int wide, mpm_paper *t, char *err, size
     int rc = (int)ceil(R / h);
     int tight = 2 * rc + 2 * SPARSE_MARGIN + 1;
     if (tight > SPARSE_WIDE_NODES) {
-        snprintf(err, errlen, "--particles: sparse2d takes at most %ld particles (a disk that "
+        snprintf(err, errlen,
+                 "--particles: sparse2d takes at most %ld particles (a disk that "
                  "fits its %d x %d grid), got %ld",
                  (long)(M_PI * pow((SPARSE_WIDE_NODES - 1) / 2.0 - SPARSE_MARGIN, 2) * 4) - 1,
                  SPARSE_WIDE_NODES, SPARSE_WIDE_NODES, want);
@@ -256,12 +258,8 @@ static int build(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
     long np = c->particles ? c->particles : pb_scene_default_particles(c->scene);
     int rc = 0;
     switch (c->scene) {
-    case PB_DISKS2D:
-        mpm_paper_disks(t, c->method, c->update, 1.0 / pb_disks_cells(np));
-        break;
-    case PB_CUBE3D:
-        rc = build_cube(c, t, err, errlen);
-        break;
+    case PB_DISKS2D: mpm_paper_disks(t, c->method, c->update, 1.0 / pb_disks_cells(np)); break;
+    case PB_CUBE3D: rc = build_cube(c, t, err, errlen); break;
     case PB_BAR1D: {
         int ncell = (int)(np / 2 > 1 ? np / 2 : 1);
         int extra = (int)ceil(0.01 * ncell) + 2; /* the free end moves by up to v0 / omega */
@@ -272,12 +270,8 @@ static int build(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
         break;
     }
     case PB_SPARSE_WIDE:
-    case PB_SPARSE_TIGHT:
-        rc = build_sparse(c, c->scene == PB_SPARSE_WIDE, t, err, errlen);
-        break;
-    default:
-        snprintf(err, errlen, "unknown scene %d", (int)c->scene);
-        rc = -1;
+    case PB_SPARSE_TIGHT: rc = build_sparse(c, c->scene == PB_SPARSE_WIDE, t, err, errlen); break;
+    default: snprintf(err, errlen, "unknown scene %d", (int)c->scene); rc = -1;
     }
     if (!rc) {
         t->c.method = c->method;
@@ -310,8 +304,8 @@ static int timed_runs(mpm_sim *sim, const pb_cfg *c, pb_row *r)
     while (k < steps) {
         int rc = mpm_sim_step(sim);
         if (rc) {
-            snprintf(r->msg, sizeof r->msg, "warm-up step %ld: %s (%.200s)", k + 1, mpm_strerror(rc),
-                     mpm_sim_error(sim)->message);
+            snprintf(r->msg, sizeof r->msg, "warm-up step %ld: %s (%.200s)", k + 1,
+                     mpm_strerror(rc), mpm_sim_error(sim)->message);
             return -1;
         }
         k++;
@@ -454,7 +448,8 @@ int pb_in_child(pb_work_fn fn, void *arg, pb_row *row)
     struct rusage ru;
     memset(&ru, 0, sizeof ru);
     pid_t w;
-    while ((w = wait4(pid, &st, 0, &ru)) < 0 && errno == EINTR) {}
+    while ((w = wait4(pid, &st, 0, &ru)) < 0 && errno == EINTR) {
+    }
     if (w < 0) {
         snprintf(row->msg, sizeof row->msg, "wait4: %s", strerror(errno));
         return row->rc = -1;
@@ -464,8 +459,10 @@ int pb_in_child(pb_work_fn fn, void *arg, pb_row *row)
             snprintf(row->msg, sizeof row->msg, "the measuring child was killed by signal %d (%s)",
                      WTERMSIG(st), strsignal(WTERMSIG(st)));
         else
-            snprintf(row->msg, sizeof row->msg, "the measuring child exited with status %d "
-                     "without a result", WIFEXITED(st) ? WEXITSTATUS(st) : -1);
+            snprintf(row->msg, sizeof row->msg,
+                     "the measuring child exited with status %d "
+                     "without a result",
+                     WIFEXITED(st) ? WEXITSTATUS(st) : -1);
         return row->rc = -1;
     }
     *row = got;
