@@ -34,7 +34,7 @@ static const setting settings[] = {
     {"solver-threads", NULL, T_INT, F(solver_threads), 1, 64, "solver threads per job (default 1)"},
     {"queue-max", NULL, T_INT, F(queue_max), 0, 1000000,
      "queued jobs beyond the running ones (default 16)"},
-    {"max-particles", NULL, T_LL, F(max_particles), 1, 1e10,
+    {"max-particles", NULL, T_LL, F(max_particles), 1, (double)MPM_MAX_PARTICLES,
      "particles per job (default 10000000)"},
     {"max-steps", NULL, T_LL, F(max_steps), 1, 1e15, "steps per job (default 100000000)"},
     {"max-wall-s", NULL, T_DBL, F(max_wall_s), 0, 1e9,
