@@ -98,8 +98,12 @@ static int set(srv_config *c, const setting *s, const char *val, const char *src
     double d = strtod(val, &end);
     if (errno || end == val || *end || !isfinite(d) || d < s->lo || d > s->hi ||
         (s->type != T_DBL && d != floor(d))) {
-        snprintf(err, errlen, "%s: %s expects %s in [%g, %g], got '%s'", src, s->key,
-                 s->type == T_DBL ? "a number" : "a whole number", s->lo, s->hi, val);
+        if (s->type == T_DBL)
+            snprintf(err, errlen, "%s: %s expects a number in [%g, %g], got '%s'", src, s->key,
+                     s->lo, s->hi, val);
+        else
+            snprintf(err, errlen, "%s: %s expects a whole number in [%.0f, %.0f], got '%s'", src,
+                     s->key, s->lo, s->hi, val);
         return -1;
     }
     if (s->type == T_INT) {
