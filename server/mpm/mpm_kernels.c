@@ -298,24 +298,62 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t
     });
 }
 
+/* Phantom nodes in the velocity gradient.  A phantom node (m <= M_TOL,
+ * minv 0) has no velocity, but its gradient weight need not be small: with
+ * MPM tents it is +-1/h however small the weight S (a particle on a grid
+ * line, exactly or to round-off).  Taking its velocity as 0 breaks
+ * sum_n G_n = 0, and a uniform velocity u gives L = -u sum_phantom G ~ u/h
+ * (issue #10).  So a phantom node takes, in the gradient only, the velocity
+ * interpolated at the particle from the other nodes, u_p = sum' S q/m /
+ * sum' S (sum': non-phantom nodes): L = sum' v G + u_p sum_phantom G, the
+ * gradient of the interpolation renormalised over the nodes that have a
+ * velocity (up to a factor 1 + O(M_TOL)).  A uniform field stays uniform to
+ * round-off, and nothing divides by a node's tiny mass (the divisor is
+ * sum' S >= 1 - O(M_TOL / m_p)).  gather() only counts phantom nodes; this
+ * second pass over the support runs for the few particles that have one,
+ * and leaves L bit for bit as it was when their gradient weights are 0
+ * (the zero-weight nodes of a GIMP support). */
+typedef struct {
+    double u[3], g[3]; /* L += u g^T; g = 0 when there is nothing to add */
+} phantom_corr;
+
+__attribute__((noinline, cold)) static phantom_corr
+phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS)
+{
+    const double *restrict minv = s->minv;
+    double U[3] = {0, 0, 0}, Gp[3] = {0, 0, 0}, Sp = 0;
+    ROWS(D, NS, *W, s, {
+        double r1[3] = {0, 0, 0}, pg = 0, ps = 0;
+        UNROLL
+        for (int kx = 0; kx < NS; kx++) {
+            size_t n = row + (size_t)kx;
+            double mi = minv[n], gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx];
+            double ph = mi == 0.0 ? 1.0 : 0.0;
+            pg += ph * gx;
+            ps += ph * wx;
+            for (int a = 0; a < D; a++) r1[a] += qg[a][n] * mi * wx;
+        }
+        Gp[0] += A * pg;
+        if (D > 1) Gp[1] += B * ps;
+        if (D > 2) Gp[2] += C * ps;
+        Sp += A * ps;
+        for (int a = 0; a < D; a++) U[a] += A * r1[a];
+    });
+    phantom_corr c = {{0, 0, 0}, {0, 0, 0}};
+    double sa = 1.0 - Sp; /* sum' S; <= 0 only if every node is phantom */
+    if (sa <= 0) return c;
+    for (int a = 0; a < 3; a++) {
+        c.u[a] = U[a] / sa;
+        c.g[a] = Gp[a];
+    }
+    return c;
+}
+
 /* Strain increment (Eq. 29) from grid momenta qg (velocity q/m, zero at
  * phantom nodes: Fig. 7) into block slot i.  Optionally (DX) also the
  * position increment sum S q/m from the momenta qx of the same nodes, and
- * (DV) the velocity increment sum S f/m.
- *
- * Phantom nodes in the gradient.  A phantom node (m <= M_TOL, minv 0) has
- * no velocity, but its gradient weight need not be small: with MPM tents it
- * is +-1/h however small the weight S (a particle on a grid line, exactly
- * or to round-off).  Taking its velocity as 0 breaks sum_n G_n = 0, and a
- * uniform velocity u gives L = -u G_phantom ~ u/h.  So a phantom node takes,
- * in the gradient only, the velocity interpolated at the particle from the
- * other nodes, u_p = sum' S q/m / sum' S (sum': non-phantom nodes): L =
- * sum' v G + u_p sum_phantom G.  This is the gradient of the interpolation
- * renormalised over the nodes that have a velocity (up to a factor 1 +
- * O(M_TOL)), so a uniform field stays uniform to round-off, and nothing
- * divides by a node's tiny mass (sum' S >= 1 - O(M_TOL / m_p) is the
- * divisor).  Without phantom nodes in the support the phantom sums are
- * exactly 0 and the branch leaves L as it was, bit for bit. */
+ * (DV) the velocity increment sum S f/m.  Phantom
+ * nodes in the support go through phantom_grad(). */
 INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
                    double *const deps[6], size_t i, int DS, int DX, double *const qx[3],
                    double dx[3], int DV, double dv[3])
@@ -323,19 +361,14 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
     const double *restrict minv = s->minv;
     double L[3][3] = {{0}};
     double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
-    double U[3] = {0, 0, 0}, Gp[3] = {0, 0, 0}, Sp = 0; /* interpolant, phantom sums */
+    int nph = 0; /* phantom nodes in the support */
     ROWS(D, NS, *W, s, {
         double r0[3] = {0, 0, 0}, r1[3] = {0, 0, 0}, rx[3] = {0, 0, 0}, rv[3] = {0, 0, 0};
-        double pg = 0, ps = 0;
         UNROLL
         for (int kx = 0; kx < NS; kx++) {
             size_t n = row + (size_t)kx;
             double mi = minv[n], gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx], sm = wx * mi;
-            if (DS) {
-                double ph = mi == 0.0 ? 1.0 : 0.0;
-                pg += ph * gx;
-                ps += ph * wx;
-            }
+            if (DS) nph += mi == 0.0;
             for (int a = 0; a < D; a++) {
                 if (DS) {
                     double va = qg[a][n] * mi;
@@ -346,18 +379,11 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
                 if (DV) rv[a] += sm * s->g.f[a][n];
             }
         }
-        if (DS) {
-            Gp[0] += A * pg;
-            if (D > 1) Gp[1] += B * ps;
-            if (D > 2) Gp[2] += C * ps;
-            Sp += A * ps;
-        }
         for (int a = 0; a < D; a++) {
             if (DS) {
                 L[a][0] += A * r0[a];
                 if (D > 1) L[a][1] += B * r1[a];
                 if (D > 2) L[a][2] += C * r1[a];
-                U[a] += A * r1[a];
             }
             if (DX) X[a] += A * rx[a];
             if (DV) Vv[a] += A * rv[a];
@@ -368,13 +394,12 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
         if (DV) dv[a] = Vv[a];
     }
     if (!DS) return;
-    if ((Gp[0] != 0.0) | (Gp[1] != 0.0) | (Gp[2] != 0.0)) {
-        double sa = 1.0 - Sp; /* sum' S; <= 0 only if every node is phantom */
-        if (sa > 0)
-            for (int a = 0; a < D; a++) {
-                double u = U[a] / sa;
-                for (int b = 0; b < D; b++) L[a][b] += u * Gp[b];
-            }
+    if (__builtin_expect(nph != 0, 0)) {
+        /* a copy, so that L never has its address taken */
+        phantom_corr c = phantom_grad(s, qg, W, D, NS);
+        if ((c.g[0] != 0.0) | (c.g[1] != 0.0) | (c.g[2] != 0.0))
+            for (int a = 0; a < D; a++)
+                for (int b = 0; b < D; b++) L[a][b] += c.u[a] * c.g[b];
     }
     double dt = s->dt;
     deps[0][i] = L[0][0] * dt;
