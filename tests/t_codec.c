@@ -357,6 +357,28 @@ TEST(codec_json_mapping)
     CHECK(sc->c.materials[0].youngs_modulus == 2);
     mpp_case_destroy(&sc);
 
+    /* picFraction (or pic_fraction) arrives in mpm_case; absent is 0, pure FLIP */
+    const char *in3 =
+        "{\"grid\": {\"dim\": 1, \"spacing\": [\"0.5\"], \"nodes\": [3]}, \"picFraction\": 0.25,"
+        " \"materials\": [{\"youngs_modulus\": 2, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.25], \"hi\": [0.75]}, \"ppc\": 3}], \"steps\": \"100\"}";
+    rc = td_case_load(in3, strlen(in3), &sc, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(sc->c.pic_fraction == 0.25);
+    mpp_case_destroy(&sc);
+    rc = td_case_load(in2, strlen(in2), &sc, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(sc->c.pic_fraction == 0);
+    mpp_case_destroy(&sc);
+    /* out of range: refused with the field named in the JSON spelling */
+    char in4[1024];
+    snprintf(in4, sizeof in4, "%s", in3);
+    memcpy(strstr(in4, "0.25"), "1.50", 4);
+    rc = td_case_load(in4, strlen(in4), &sc, err, sizeof err);
+    CHECK(rc == MPM_EINVAL && sc == NULL);
+    CHECKF(strstr(err, "must be in [0, 1]") && strstr(err, "(got 1.5)"), "%s", err);
+    TLOG("picFraction 1.5: %s", err);
+
     CHECK(mpp_json_name("youngs_modulus", err, sizeof err) == 13 && !strcmp(err, "youngsModulus"));
     CHECK(mpp_json_name("x_lo", err, 3) == 3 && !strcmp(err, "xL"));
 }

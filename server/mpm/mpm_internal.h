@@ -99,6 +99,7 @@ struct mpm_sim {
     mpm_gridbuf g;       /* the grid */
     double *minv;        /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
     double mtol;
+    double pic; /* PIC fraction of the velocity update (0: pure FLIP) */
 
     /* fixed degrees of freedom: node (padded index) and direction mask */
     size_t nfixed;
@@ -224,8 +225,10 @@ struct mpm_kernels {
 };
 
 /* The family of dimension dim with ns nodes per axis: 2 (MPM), 3 (uGIMP,
- * every lp <= h/2) or 4 (uGIMP, lp up to h). */
-const mpm_kernels *mpm_kernels_select(int dim, int ns);
+ * every lp <= h/2) or 4 (uGIMP, lp up to h); blend nonzero: the particle
+ * velocity update blends PIC into FLIP by s->pic (pure FLIP, blend 0, does
+ * no extra work). */
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend);
 /* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
 size_t mpm_kernels_scratch(void);
 /* Tests and benchmarks: switches a GMPM simulation that has not stepped yet

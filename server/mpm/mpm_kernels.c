@@ -11,7 +11,9 @@
  *           covers at most 3 nodes per axis;
  *   NS = 4: uGIMP with wider particles (explicit points, lp up to h).
  * mpm_kernels_select() picks the family once per job, so no particle loop
- * branches on dimension, method, update scheme or features.  The 3-node
+ * branches on dimension, method, update scheme or features.  A PIC/FLIP
+ * blend (mpm_case.pic_fraction > 0) selects the family's blend twin, whose
+ * velocity updates alone differ; pure FLIP runs the code it always ran.  The 3-node
  * family evaluates the same weights of the same nodes as the 4-node one and
  * only leaves out a node whose weight and gradient are exactly zero, so
  * both give the same results.
@@ -514,14 +516,28 @@ INLINE void box_reset(const mpm_sim *s, mpm_thread_out *o, int D)
     }
 }
 
-/* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0). */
-INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int EN)
+/* The particle velocity (Eq. 31), FLIP: v += dt sum S qdot/m; blended
+ * with PIC (BL): v = (1 - al) (v + dt sum S qdot/m) + al sum S q/m, with
+ * the momentum q after the nodal update, so vpic = sum S v_I^{n+1} (the
+ * position increment's sum; phantom nodes: 0).  bl = 1 - al. */
+INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, double al, double bl)
+{
+    if (BL)
+        *v = bl * (*v + dt * dv) + al * vpic;
+    else
+        *v += dt * dv;
+}
+
+/* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0);
+ * BL: the velocity blended with PIC (v_update()). */
+INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int EN,
+                     int BL)
 {
     pw W;
     rowrun a;
     boxc bc;
     esum e;
-    double dt = s->dt;
+    double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     if (EN) esum_init(s, &e);
     box_reset(s, o, D);
     run_init(&a);
@@ -533,7 +549,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
         for (int d = 0; d < D; d++) {
             xn[d] = s->P.x[d][p] + dt * dx[d];
             s->P.x[d][p] = xn[d];
-            s->P.v[d][p] += dt * dv[d];
+            v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
         }
         check_particle(s, o, p, D);
         if (EN) esum_particle(s, &e, p, D);
@@ -546,13 +562,13 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
  * weights of the step's start positions serve both, in one gather. */
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                            int EN)
+                            int EN, int BL)
 {
     pw W;
     rowrun a;
     boxc bc;
     esum e;
-    double dt = s->dt;
+    double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     if (EN) esum_init(s, &e);
     box_reset(s, o, D);
     run_init(&a);
@@ -567,7 +583,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
                 s->P.x[d][p] = xn[d];
-                s->P.v[d][p] += dt * dv[d];
+                v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
             }
             check_particle(s, o, p, D);
             if (EN) esum_particle(s, &e, p, D);
@@ -580,16 +596,18 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     if (EN) esum_store(&e, o, 1, 1);
 }
 
-INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
+/* MUSL: the velocity only (BL: blended with PIC; the blended velocity is
+ * what p2g_q2 maps back to the grid). */
+INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BL)
 {
     pw W;
-    double dt = s->dt;
+    double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     (void)o;
     for (size_t p = p0; p < p1; p++) {
-        double dv[3];
+        double dv[3], vp[3] = {0, 0, 0};
         weights(s, p, D, NS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, 0, NULL, NULL, 1, dv);
-        for (int d = 0; d < D; d++) s->P.v[d][p] += dt * dv[d];
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv);
+        for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
     }
 }
 
@@ -702,6 +720,34 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     }
 #endif
 
+/* The PIC/FLIP blend of family (D, NS): its own velocity updates, every
+ * other pass shared. */
+#define BLEND(D, NS)                                                                            \
+    static void g2p_xv_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 1);                                                  \
+        else                                                                                    \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 1);                                                  \
+    }                                                                                           \
+    static void g2p_xv_stress_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
+                                            int en)                                             \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 1);                                           \
+        else                                                                                    \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 1);                                           \
+    }                                                                                           \
+    static void g2p_v_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
+    {                                                                                           \
+        g2p_v_t(s, o, a, b, D, NS, 1);                                                          \
+    }                                                                                           \
+    static const mpm_kernels family_bl_##D##_##NS = {                                           \
+        p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                    \
+        stress_force_##D##_##NS, g2p_xv_bl_##D##_##NS,    g2p_xv_stress_bl_##D##_##NS,          \
+        g2p_v_bl_##D##_##NS,     g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,             \
+        bbox_##D##_##NS,         cell_keys_##D##_##NS};
+
 #define FAMILY(D, NS)                                                                              \
     static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
     {                                                                                              \
@@ -726,21 +772,21 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)       \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 1);                                                        \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 0);                                                     \
         else                                                                                       \
-            g2p_xv_t(s, o, a, b, D, NS, 0);                                                        \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 0);                                                     \
     }                                                                                              \
     static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
                                          int en)                                                   \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1);                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0);                                              \
         else                                                                                       \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0);                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0);                                              \
     }                                                                                              \
     static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                \
     {                                                                                              \
-        g2p_v_t(s, o, a, b, D, NS);                                                                \
+        g2p_v_t(s, o, a, b, D, NS, 0);                                                             \
     }                                                                                              \
     static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
     {                                                                                              \
@@ -762,7 +808,8 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
         p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                       \
         stress_force_##D##_##NS, g2p_xv_##D##_##NS,       g2p_xv_stress_##D##_##NS,                \
         g2p_v_##D##_##NS,        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,                \
-        bbox_##D##_##NS,         cell_keys_##D##_##NS};
+        bbox_##D##_##NS,         cell_keys_##D##_##NS};                                            \
+    BLEND(D, NS)
 
 FAMILY(1, 2)
 FAMILY(1, 3)
@@ -774,10 +821,14 @@ FAMILY(3, 2)
 FAMILY(3, 3)
 FAMILY(3, 4)
 
-const mpm_kernels *mpm_kernels_select(int dim, int ns)
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend)
 {
     static const mpm_kernels *const table[3][3] = {{&family_1_2, &family_1_3, &family_1_4},
                                                    {&family_2_2, &family_2_3, &family_2_4},
                                                    {&family_3_2, &family_3_3, &family_3_4}};
-    return table[dim - 1][ns - 2];
+    static const mpm_kernels *const table_bl[3][3] = {
+        {&family_bl_1_2, &family_bl_1_3, &family_bl_1_4},
+        {&family_bl_2_2, &family_bl_2_3, &family_bl_2_4},
+        {&family_bl_3_2, &family_bl_3_3, &family_bl_3_4}};
+    return blend ? table_bl[dim - 1][ns - 2] : table[dim - 1][ns - 2];
 }
