@@ -1812,20 +1812,7 @@ DTEST(daemon_stream_snapshots)
         }
         if (zmq_poll(&it, 1, 200) <= 0) continue;
         zmq_msg_t part[2];
-        int nparts = 0, more = 1;
-        while (more) {
-            zmq_msg_t m;
-            zmq_msg_init(&m);
-            if (zmq_msg_recv(&m, sub, 0) < 0) {
-                zmq_msg_close(&m);
-                break;
-            }
-            more = zmq_msg_more(&m);
-            if (nparts < 2)
-                part[nparts++] = m;
-            else
-                zmq_msg_close(&m);
-        }
+        int nparts = td_recv_parts(sub, part, 2);
         mpp_stream si = {0};
         mpm_error pe;
         int prc = nparts == 2 ? mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0,
@@ -1944,20 +1931,7 @@ DTEST(daemon_pipelined_reads_keep_order)
         zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
         if (zmq_poll(&it, 1, 20000) != 1) break;
         zmq_msg_t m[2];
-        int np = 0, more = 1;
-        while (more) {
-            zmq_msg_t x;
-            zmq_msg_init(&x);
-            if (zmq_msg_recv(&x, s, 0) < 0) {
-                zmq_msg_close(&x);
-                break;
-            }
-            more = zmq_msg_more(&x);
-            if (np < 2)
-                m[np++] = x;
-            else
-                zmq_msg_close(&x);
-        }
+        int np = td_recv_parts(s, m, 2);
         char *json = NULL, err[256];
         if (np == 2 && !td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&m[1]),
                                              zmq_msg_size(&m[1]), 0, 0, &json, err, sizeof err))
