@@ -155,6 +155,12 @@ typedef struct {
     double total;         /* kinetic + strain + potential - external_work */
     double mass;
     double momentum[MPM_MAX_DIM];
+    /* sum m x × v about the origin of coordinates (x = 0, not the centre of
+     * mass): x, y, z components.  2D (motion in the x-y plane): only [2],
+     * the z component, is non-zero; 1D: all zero.  MPM and GIMP with the
+     * FLIP update do not conserve it exactly (the grid transfers lose the
+     * particles' rotation within a cell): its drift is the loss. */
+    double angular_momentum[3];
 } mpm_energy;
 
 /* One energy sample, the one shape it has from the solver to the store to

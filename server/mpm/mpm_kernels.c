@@ -369,11 +369,12 @@ INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6]
 
 /* Energy sums of a slice (EN: the step wants them), in the order and with
  * the arithmetic of the energy pass (mpm_energy.c, mpm_ph_energy), so that the
- * sums are the same: kinetic, potential, momentum and mass of particle p
+ * sums are the same: kinetic, potential, momentum, angular momentum
+ * (mpm_angmom_add) and mass of particle p
  * once its position and velocity are final, strain energy of a block once
  * its stress, strain and volume are. */
 typedef struct {
-    double ek, es, ep, mom[3], ms;
+    double ek, es, ep, mom[3], ms, L[3];
     double g[3];
 } esum;
 
@@ -381,7 +382,7 @@ INLINE void esum_init(const mpm_sim *s, esum *e)
 {
     e->ek = e->es = e->ep = e->ms = 0;
     for (int d = 0; d < 3; d++) {
-        e->mom[d] = 0;
+        e->mom[d] = e->L[d] = 0;
         e->g[d] = s->gravity[d];
     }
 }
@@ -396,6 +397,7 @@ INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
         e->mom[d] += m * v;
         e->ep -= m * e->g[d] * P->x[d][p];
     }
+    mpm_angmom_add(P, D, p, m, e->L);
     e->ek += 0.5 * m * v2;
     e->ms += m;
 }
@@ -413,7 +415,10 @@ INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
         o->ekin = e->ek;
         o->epot = e->ep;
         o->emass = e->ms;
-        for (int d = 0; d < 3; d++) o->emom[d] = e->mom[d];
+        for (int d = 0; d < 3; d++) {
+            o->emom[d] = e->mom[d];
+            o->eang[d] = e->L[d];
+        }
     }
     if (S) o->estr = e->es;
 }
