@@ -9,6 +9,7 @@
  * always prints 17 significant digits), compact or indented.
  */
 #include "ctl.h"
+#include "mpp_json.h"
 
 #include <errno.h>
 #include <math.h>
@@ -18,22 +19,7 @@
 /* A string member holding a number as the JSON mapping writes it. */
 static int str_num(const char *s, double *v)
 {
-    char *end;
-    if (!strcmp(s, "NaN")) {
-        *v = NAN;
-        return 0;
-    }
-    if (!strcmp(s, "Infinity")) {
-        *v = INFINITY;
-        return 0;
-    }
-    if (!strcmp(s, "-Infinity")) {
-        *v = -INFINITY;
-        return 0;
-    }
-    errno = 0;
-    *v = strtod(s, &end);
-    return (end == s || *end || errno == ERANGE) ? -1 : 0;
+    return mpp_json_double_text(s, v) ? -1 : 0;
 }
 
 double cj_num(const json_t *o, const char *key, double dflt)

@@ -2,7 +2,9 @@
  * ctl_out.c - how mpmctl writes energy series and times.  An energy series
  * goes out as a readable table, as CSV (a header, then one row per sample,
  * numbers in their shortest exact form so a reader gets the very doubles
- * the daemon computed) or as JSON lines (one EnergySample object per line,
+ * the daemon computed; the angular momentum columns come last, after the
+ * momentum: angular_momentum_x, _y, _z in 3D, angular_momentum_z in 2D,
+ * none in 1D) or as JSON lines (one EnergySample object per line,
  * in the protobuf JSON mapping).  The same writer serves `energy` and
  * `watch`, so both print identical rows for identical samples.
  */
@@ -46,6 +48,13 @@ static int json_row(FILE *f, const mpm_energy_sample *s)
     return rc;
 }
 
+/* The first angular momentum component a dimension has (the wire's and
+ * the CSV's columns): 3D x (0), 2D z alone (2), 1D none (3). */
+static int ang_first(int dim)
+{
+    return dim == 3 ? 0 : dim == 2 ? 2 : 3;
+}
+
 int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
 {
     static const char axis[3] = {'x', 'y', 'z'};
@@ -59,6 +68,7 @@ int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
         if (!o->header_done) {
             fputs("seq,step,t,kinetic,strain,potential,external_work,total,mass", f);
             for (int d = 0; d < o->dim; d++) fprintf(f, ",momentum_%c", axis[d]);
+            for (int d = ang_first(o->dim); d < 3; d++) fprintf(f, ",angular_momentum_%c", axis[d]);
             fputc('\n', f);
         }
         fprintf(f, "%llu,%lld", (unsigned long long)s->seq, (long long)s->step);
@@ -70,6 +80,7 @@ int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
         csv_num(f, cj_norm(s->e.total));
         csv_num(f, cj_norm(s->e.mass));
         for (int d = 0; d < o->dim; d++) csv_num(f, d < s->dim ? cj_norm(s->e.momentum[d]) : 0);
+        for (int d = ang_first(o->dim); d < 3; d++) csv_num(f, cj_norm(s->e.angular_momentum[d]));
         fputc('\n', f);
         break;
     case CTL_OUT_TEXT:

@@ -23,7 +23,8 @@
  * lossy stream would; the series must come out complete all the same.
  *
  * Text mode on a terminal redraws one status line in place (step, t,
- * energies, a progress bar with ETA); elsewhere it writes one line per
+ * energies, |L| the magnitude of the angular momentum in 2D and 3D, a
+ * progress bar with ETA); elsewhere it writes one line per
  * sample.  CSV / JSON modes write only the series on stdout (the summary
  * goes to stderr).
  */
@@ -57,6 +58,8 @@ typedef struct {
     uint64_t gaps_filled; /* times the stream skipped samples */
     double first_total, last_total;
     double kinetic, strain;
+    double angmom; /* |angular momentum| of the last sample (2D, 3D) */
+    int have_angmom;
     int have_first;
 
     int status; /* mpp_status as last known */
@@ -134,6 +137,8 @@ static size_t status_line(const watch_t *w, int compact, char *line, size_t cap)
     if (w->have_first)
         append(line, cap, &n, compact ? " K %.3e S %.3e E %.3e" : "  K %.4e  S %.4e  E %.6e",
                w->kinetic, w->strain, w->last_total);
+    if (w->have_first && w->have_angmom)
+        append(line, cap, &n, compact ? " |L| %.3e" : "  |L| %.6e", w->angmom);
     if (w->steps_total > 0) {
         double frac = (double)w->step / (double)w->steps_total;
         if (frac < 0) frac = 0;
@@ -183,6 +188,11 @@ static int emit(watch_t *w, const mpm_energy_sample *s)
     w->last_total = total;
     w->kinetic = cj_norm(s->e.kinetic);
     w->strain = cj_norm(s->e.strain);
+    w->have_angmom = s->dim >= 2;
+    if (w->have_angmom) {
+        const double *L = s->e.angular_momentum;
+        w->angmom = cj_norm(sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2]));
+    }
     if (!w->have_progress || s->step > w->step) {
         w->step = s->step;
         w->t = cj_norm(s->t);

@@ -195,6 +195,10 @@ void mpp_fill_energy(Mpmd__EnergySample *es, const mpm_energy_sample *s)
     es->seq = s->seq;
     es->n_momentum = s->dim < 0 ? 0 : s->dim > MPM_MAX_DIM ? MPM_MAX_DIM : (size_t)s->dim;
     es->momentum = (double *)s->e.momentum;
+    /* 3D: x, y, z; 2D: z alone; 1D: none (see mpmd.proto) */
+    es->n_angular_momentum = s->dim == 3 ? 3 : s->dim == 2 ? 1 : 0;
+    es->angular_momentum =
+        (double *)(s->dim == 2 ? &s->e.angular_momentum[2] : s->e.angular_momentum);
 }
 
 void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e)
@@ -211,6 +215,13 @@ void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e)
     s->e.mass = e->mass;
     s->dim = e->n_momentum > MPM_MAX_DIM ? MPM_MAX_DIM : (int)e->n_momentum;
     for (int d = 0; d < s->dim; d++) s->e.momentum[d] = e->momentum[d];
+    /* one entry: z (2D); otherwise x, y, z in order (extra entries ignored,
+     * missing ones 0) */
+    if (e->n_angular_momentum == 1)
+        s->e.angular_momentum[2] = e->angular_momentum[0];
+    else
+        for (size_t d = 0; d < e->n_angular_momentum && d < 3; d++)
+            s->e.angular_momentum[d] = e->angular_momentum[d];
     s->seq = e->seq;
 }
 

@@ -27,8 +27,9 @@ int mpp_pack(const ProtobufCMessage *m, uint8_t **buf, size_t *len);
 int mpp_unpack(const ProtobufCMessageDescriptor *d, const void *buf, size_t len, size_t max,
                ProtobufCMessage **out, mpm_error *err);
 
-/* An EnergySample message for s, every field present (momentum points
- * into s). */
+/* An EnergySample message for s, every field present (momentum and
+ * angular_momentum point into s: dim momentum entries; angular momentum
+ * x, y, z in 3D, z alone in 2D, none in 1D). */
 void mpp_fill_energy(Mpmd__EnergySample *es, const mpm_energy_sample *s);
 /* The sample an EnergySample message holds (NULL: all zero). */
 void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e);

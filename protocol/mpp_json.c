@@ -403,6 +403,30 @@ static int parse_int(jctx *c, ProtobufCType t, const json_t *v, void *dst)
     return 0;
 }
 
+int mpp_json_double_text(const char *s, double *out)
+{
+    char *end;
+    if (!strcmp(s, "NaN")) {
+        *out = NAN;
+        return 0;
+    }
+    if (!strcmp(s, "Infinity")) {
+        *out = INFINITY;
+        return 0;
+    }
+    if (!strcmp(s, "-Infinity")) {
+        *out = -INFINITY;
+        return 0;
+    }
+    if (!numeric_text(s)) return MPM_ESYNTAX;
+    errno = 0;
+    double x = strtod(s, &end);
+    if (end == s || *end) return MPM_ESYNTAX;
+    if (errno == ERANGE && isinf(x)) return MPM_ETOOBIG;
+    *out = x;
+    return 0;
+}
+
 /* Reads a number (or "NaN", "Infinity", "-Infinity", numeric string). */
 static int parse_double(jctx *c, const json_t *v, double *out)
 {
@@ -416,29 +440,9 @@ static int parse_double(jctx *c, const json_t *v, double *out)
     }
     if (json_is_string(v)) {
         const char *s = json_string_value(v);
-        char *end;
-        if (!strcmp(s, "NaN")) {
-            *out = NAN;
-            return 0;
-        }
-        if (!strcmp(s, "Infinity")) {
-            *out = INFINITY;
-            return 0;
-        }
-        if (!strcmp(s, "-Infinity")) {
-            *out = -INFINITY;
-            return 0;
-        }
-        if (numeric_text(s)) {
-            errno = 0;
-            double x = strtod(s, &end);
-            if (end != s && !*end) {
-                if (errno == ERANGE && isinf(x))
-                    return fail(c, MPM_EINVAL, "number \"%s\" out of range", s);
-                *out = x;
-                return 0;
-            }
-        }
+        int rc = mpp_json_double_text(s, out);
+        if (rc == MPM_ETOOBIG) return fail(c, MPM_EINVAL, "number \"%s\" out of range", s);
+        if (!rc) return 0;
     }
     return fail_type(c, "a number", v);
 }

@@ -69,4 +69,9 @@ size_t mpp_json_name(const char *proto_name, char *buf, size_t len);
  * no surrogates), as JSON text requires. */
 int mpp_json_utf8_valid(const char *s);
 
+/* A double written as the JSON mapping writes it in a string: "NaN",
+ * "Infinity", "-Infinity" or a decimal number.  Returns 0 with *out set,
+ * MPM_ESYNTAX for other text, MPM_ETOOBIG when the number overflows. */
+int mpp_json_double_text(const char *s, double *out);
+
 #endif

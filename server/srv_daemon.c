@@ -162,6 +162,8 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
         e->step = r->steps;
         e->dim = r->dim;
         e->e = r->energy;
+        /* the run row keeps no angular momentum: not recorded (NaN) */
+        for (int k = 0; k < 3; k++) e->e.angular_momentum[k] = NAN;
         ri->last_energy = e;
     }
     if (store_run_extras(d->st, r->id, x) == 0) {

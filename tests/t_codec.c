@@ -357,6 +357,28 @@ TEST(codec_json_mapping)
     CHECK(sc->c.materials[0].youngs_modulus == 2);
     mpp_case_destroy(&sc);
 
+    /* picFraction (or pic_fraction) arrives in mpm_case; absent is 0, pure FLIP */
+    const char *in3 =
+        "{\"grid\": {\"dim\": 1, \"spacing\": [\"0.5\"], \"nodes\": [3]}, \"picFraction\": 0.25,"
+        " \"materials\": [{\"youngs_modulus\": 2, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.25], \"hi\": [0.75]}, \"ppc\": 3}], \"steps\": \"100\"}";
+    rc = td_case_load(in3, strlen(in3), &sc, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(sc->c.pic_fraction == 0.25);
+    mpp_case_destroy(&sc);
+    rc = td_case_load(in2, strlen(in2), &sc, err, sizeof err);
+    CHECKF(rc == 0, "%s", err);
+    CHECK(sc->c.pic_fraction == 0);
+    mpp_case_destroy(&sc);
+    /* out of range: refused with the field named in the JSON spelling */
+    char in4[1024];
+    snprintf(in4, sizeof in4, "%s", in3);
+    memcpy(strstr(in4, "0.25"), "1.50", 4);
+    rc = td_case_load(in4, strlen(in4), &sc, err, sizeof err);
+    CHECK(rc == MPM_EINVAL && sc == NULL);
+    CHECKF(strstr(err, "must be in [0, 1]") && strstr(err, "(got 1.5)"), "%s", err);
+    TLOG("picFraction 1.5: %s", err);
+
     CHECK(mpp_json_name("youngs_modulus", err, sizeof err) == 13 && !strcmp(err, "youngsModulus"));
     CHECK(mpp_json_name("x_lo", err, 3) == 3 && !strcmp(err, "xL"));
 }
@@ -829,12 +851,16 @@ TEST(codec_envelopes)
     mpp_request_clear(&rq);
 
     /* replies, checked through their JSON form */
-    mpm_energy_sample es = {
-        .step = 10,
-        .t = 0.01,
-        .dim = 2,
-        .seq = 3,
-        .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2, .momentum = {1, -1, 9}}};
+    mpm_energy_sample es = {.step = 10,
+                            .t = 0.01,
+                            .dim = 2,
+                            .seq = 3,
+                            .e = {.kinetic = 0.5,
+                                  .strain = 0.25,
+                                  .total = 0.75,
+                                  .mass = 2,
+                                  .momentum = {1, -1, 9},
+                                  .angular_momentum = {7, 8, -0.125}}}; /* 2D: z alone goes out */
     double x[4] = {0.1, 0.2, 0.3, 0.4}, p[2] = {-1, 1};
     mpp_snapshot snap = {.step = 10, .t = 0.01, .n = 2, .dim = 2, .x = x, .pressure = p};
     int64_t ssteps[2] = {0, 100};
@@ -880,7 +906,7 @@ TEST(codec_envelopes)
         "\"submittedAt\":1700000000.5,\"steps\":\"10\",\"stepsTotal\":\"100\",\"t\":0.01,\"wallS\":0,"
         "\"particles\":\"0\",\"nodes\":\"0\",\"dim\":2,\"lastEnergy\":{\"step\":\"10\",\"t\":0.01,\"kinetic\":0.5,"
         "\"strain\":0.25,\"potential\":0,\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,"
-        "\"seq\":\"3\"},\"energySamples\":\"0\",\"snapshotSteps\":[\"0\",\"100\"],\"case\":{\"name\":\"c\","
+        "\"seq\":\"3\",\"angularMomentum\":[-0.125]},\"energySamples\":\"0\",\"snapshotSteps\":[\"0\",\"100\"],\"case\":{\"name\":\"c\","
         "\"method\":\"GIMP\",\"update\":\"USL\",\"steps\":\"3\"},\"method\":\"GIMP\",\"update\":\"USL\"}}",
         "\"runId\":\"9\",\"jobId\":\"6\",\"name\":\"bar\",\"status\":\"FAILED\",\"error\":\"particle left the grid\"",
         "{\"schemaVersion\":1,\"energy\":{\"runId\":\"5\",\"samples\":[{\"step\":\"10\"",
@@ -946,6 +972,9 @@ static int same_energy(const mpm_energy_sample *a, const mpm_energy_sample *b)
         return 0;
     for (int d = 0; d < a->dim; d++)
         if (a->e.momentum[d] != b->e.momentum[d]) return 0;
+    /* the components the dimension has (2D: z; 1D: none); bitwise */
+    for (int d = a->dim == 3 ? 0 : a->dim == 2 ? 2 : 3; d < 3; d++)
+        if (memcmp(&a->e.angular_momentum[d], &b->e.angular_momentum[d], sizeof(double))) return 0;
     return 1;
 }
 
@@ -1047,7 +1076,8 @@ TEST(codec_stream_decode)
                                   .external_work = 1e-300,
                                   .total = 0.75,
                                   .mass = 2,
-                                  .momentum = {1, -1, 9}}};
+                                  .momentum = {1, -1, 9},
+                                  .angular_momentum = {-0.25, 4.9e-324, 1e300}}};
     CHECK(mpp_stream_energy(12, 0, &es, &buf, &n) == 0);
     rc = stream_decode(buf, n, &si, err);
     CHECKF(rc == 0, "%s", err);
@@ -1302,22 +1332,27 @@ TEST(codec_reply_decode)
     CHECK(decode_abuse(buf, n, 1) > 0);
     free(buf);
 
-    mpm_energy_sample es[2] = {
-        {.step = 10,
-         .t = 0.01,
-         .dim = 2,
-         .seq = 3,
-         .e = {.kinetic = 0.5, .strain = 0.25, .total = 0.75, .mass = 2, .momentum = {1, -1}}},
-        {.step = 11,
-         .t = 0.011,
-         .dim = 2,
-         .seq = 4,
-         .e = {.kinetic = 0.4,
-               .potential = -2,
-               .external_work = 3,
-               .total = -4.6,
-               .mass = 2,
-               .momentum = {0.5, 7}}}};
+    mpm_energy_sample es[2] = {{.step = 10,
+                                .t = 0.01,
+                                .dim = 2,
+                                .seq = 3,
+                                .e = {.kinetic = 0.5,
+                                      .strain = 0.25,
+                                      .total = 0.75,
+                                      .mass = 2,
+                                      .momentum = {1, -1},
+                                      .angular_momentum = {0, 0, 0.375}}},
+                               {.step = 11,
+                                .t = 0.011,
+                                .dim = 2,
+                                .seq = 4,
+                                .e = {.kinetic = 0.4,
+                                      .potential = -2,
+                                      .external_work = 3,
+                                      .total = -4.6,
+                                      .mass = 2,
+                                      .momentum = {0.5, 7},
+                                      .angular_momentum = {0, 0, -1e-5}}}};
     int64_t ssteps[2] = {0, 100};
     mpp_run_info run = {.run_id = 5,
                         .job_id = 6,
@@ -1443,7 +1478,7 @@ TEST(codec_reply_decode)
             !strcmp(
                 json,
                 "{\"step\":\"10\",\"t\":0.01,\"kinetic\":0.5,\"strain\":0.25,\"potential\":0,"
-                "\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,\"seq\":\"3\"}"),
+                "\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,\"seq\":\"3\",\"angularMomentum\":[0.375]}"),
         "%s", json);
     free(json);
     CHECK(mpp_snapshot_to_json(&snap, &json, NULL) == 0);
@@ -1650,4 +1685,49 @@ TEST(codec_python_json_format)
     free(out);
     snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
     CHECK(system(cmd) == 0);
+}
+
+/* EnergySample.angular_momentum (field 11): 3D sends x, y, z; 2D the z
+ * component alone; 1D nothing.  Each round-trips bitwise (NaN, the value of
+ * samples stored before the field, included), the JSON mapping carries it as
+ * angularMomentum, and a message without the field (an older daemon) decodes
+ * to zeros. */
+TEST(codec_energy_angular_momentum)
+{
+    char err[256];
+    for (int dim = 1; dim <= 3; dim++) {
+        mpm_energy_sample es = {.step = 4,
+                                .t = 0.5,
+                                .dim = dim,
+                                .seq = 1,
+                                .e = {.kinetic = 1, .mass = 3, .momentum = {1, 2, 3}}};
+        if (dim == 2) es.e.angular_momentum[2] = -0.1;
+        if (dim == 3) {
+            es.e.angular_momentum[0] = 1.0 / 3;
+            es.e.angular_momentum[1] = NAN;
+            es.e.angular_momentum[2] = -5e-20;
+        }
+        uint8_t *buf = NULL;
+        size_t n = 0;
+        CHECK(mpp_stream_energy(7, 2, &es, &buf, &n) == 0);
+        mpp_stream si;
+        int rc = stream_decode(buf, n, &si, err);
+        CHECKF(rc == 0, "%s", err);
+        CHECK(si.kind == MPP_STREAM_ENERGY && same_energy(&si.energy, &es));
+        if (dim < 3)
+            CHECK(si.energy.e.angular_momentum[0] == 0 && si.energy.e.angular_momentum[1] == 0);
+        if (dim == 1) CHECK(si.energy.e.angular_momentum[2] == 0);
+        mpp_stream_clear(&si);
+        char *json = NULL;
+        rc = td_msg_bytes_to_json(MPP_MSG_STREAM, buf, n, 0, 0, &json, err, sizeof err);
+        free(buf);
+        CHECKF(rc == 0, "%s", err);
+        const char *want = dim == 1   ? NULL
+                           : dim == 2 ? "\"angularMomentum\":[-0.1]"
+                                      : "\"angularMomentum\":[0.3333333333333333,\"NaN\",-5e-20]";
+        int ok = want ? strstr(json, want) != NULL : strstr(json, "angularMomentum") == NULL;
+        if (!ok) TLOG("%dD: got %s", dim, json);
+        free(json);
+        CHECKF(ok, "%dD JSON", dim);
+    }
 }

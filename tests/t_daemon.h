@@ -16,6 +16,7 @@
 #include <sys/types.h>
 
 #include <jansson.h>
+#include <zmq.h>
 
 #include "mpp_msg.h"
 #include "t.h"
@@ -121,6 +122,11 @@ int td_wait_status(const td_daemon *d, unsigned long long job, const char *want,
                    char *got, size_t n);
 /* Polls Status until the job has taken at least steps steps (or ended). */
 int td_wait_steps(const td_daemon *d, unsigned long long job, long long steps, double timeout);
+
+/* Receives one multipart message from s (blocking): up to max frames into
+ * part (the caller closes them), any further frames dropped.  Returns the
+ * frames kept (0 when the receive failed). */
+int td_recv_parts(void *s, zmq_msg_t *part, int max);
 
 /* Files. */
 char *td_slurp(const char *path, size_t *len);

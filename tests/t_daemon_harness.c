@@ -253,6 +253,25 @@ int td_msg_bytes_to_json(mpp_msg_kind kind, const void *buf, size_t nbytes, size
     return td_err(mpp_msg_bytes_to_json(kind, buf, nbytes, max, flags, json, &e), &e, err, n);
 }
 
+int td_recv_parts(void *s, zmq_msg_t *part, int max)
+{
+    int n = 0, more = 1;
+    while (more) {
+        zmq_msg_t m;
+        zmq_msg_init(&m);
+        if (zmq_msg_recv(&m, s, 0) < 0) {
+            zmq_msg_close(&m);
+            break;
+        }
+        more = zmq_msg_more(&m);
+        if (n < max)
+            part[n++] = m;
+        else
+            zmq_msg_close(&m);
+    }
+    return n;
+}
+
 int td_request(const char *ep, const mpp_request *rq, double timeout, json_t **reply)
 {
     uint8_t *buf = NULL;
@@ -273,7 +292,7 @@ int td_frames(const char *ep, const void *const *frames, const size_t *lens, int
     void *ctx = zmq_ctx_new(), *s = NULL;
     int zero = 0, rc = -1;
     zmq_msg_t parts[3];
-    int np = 0, more = 1;
+    int np = 0;
     *reply = NULL;
     if (!ctx) return -1;
     s = zmq_socket(ctx, ZMQ_DEALER);
@@ -291,20 +310,8 @@ int td_frames(const char *ep, const void *const *frames, const size_t *lens, int
             goto out;
         }
     }
-    while (more) {
-        zmq_msg_t m;
-        size_t ml = sizeof more;
-        zmq_msg_init(&m);
-        if (zmq_msg_recv(&m, s, 0) < 0) {
-            zmq_msg_close(&m);
-            goto out;
-        }
-        if (zmq_getsockopt(s, ZMQ_RCVMORE, &more, &ml)) more = 0;
-        if (np < 3)
-            parts[np++] = m;
-        else
-            zmq_msg_close(&m);
-    }
+    np = td_recv_parts(s, parts, 3);
+    if (!np) goto out;
     if (np == 2 && zmq_msg_size(&parts[0]) == 0) {
         char *json = NULL, err[256];
         if (!td_msg_bytes_to_json(MPP_MSG_REPLY, zmq_msg_data(&parts[1]), zmq_msg_size(&parts[1]),

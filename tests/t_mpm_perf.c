@@ -651,7 +651,10 @@ TEST(perf_sort_order_independent_of_threads)
  * and once calling mpm_sim_energy() alone (the separate team pass): the
  * energies agree (the same sums in the same order) and the physics is
  * untouched (positions, velocities and stresses bitwise equal).  One more
- * step without the request then falls back to the pass: no stale sums. */
+ * step without the request then falls back to the pass: no stale sums.  The
+ * angular momentum (about the origin; the falling box is off it, so it is
+ * not zero in 2D and 3D) is the one expression in both (mpm_angmom_add):
+ * bitwise equal. */
 static double en_diff(const mpm_energy *a, const mpm_energy *b, int dim)
 {
     double esc = fmax(fabs(a->kinetic) + fabs(a->strain) + fabs(a->potential), 1e-300);
@@ -662,6 +665,11 @@ static double en_diff(const mpm_energy *a, const mpm_energy *b, int dim)
     d = fmax(d, fabs(a->total - b->total) / esc);
     d = fmax(d, fabs(a->mass - b->mass) / msc);
     for (int k = 0; k < dim; k++) d = fmax(d, fabs(a->momentum[k] - b->momentum[k]) / msc);
+    double lsc = fmax(fabs(a->angular_momentum[0]) + fabs(a->angular_momentum[1]) +
+                          fabs(a->angular_momentum[2]),
+                      1e-300);
+    for (int k = 0; k < 3; k++)
+        d = fmax(d, fabs(a->angular_momentum[k] - b->angular_momentum[k]) / lsc);
     return d;
 }
 
@@ -706,7 +714,7 @@ TEST(perf_step_energies_equal_energy_pass)
                     CHECKF(sb_, "%s", TERR(&err));
                     size_t n = mpm_sim_particles(sa_);
                     CHECK(n > 0 && n <= MAXP);
-                    double cw = 0, strain = 0;
+                    double cw = 0, strain = 0, lmax = 0;
                     for (int k = 0; k <= STEPS; k++) {
                         int want = k < STEPS; /* the last step: no request */
                         if (want) mpm_sim_want_energy(sa_);
@@ -724,10 +732,20 @@ TEST(perf_step_energies_equal_energy_pass)
                                "potential %.17g / %.17g)",
                                dim, m ? "GIMP" : "MPM", un[u], T, k + 1, d, ea.kinetic, eb.kinetic,
                                ea.strain, eb.strain, ea.potential, eb.potential);
+                        CHECKF(memcmp(ea.angular_momentum, eb.angular_momentum,
+                                      sizeof ea.angular_momentum) == 0,
+                               "%dD %s %s %d thread(s), step %d: angular momentum "
+                               "(%.17g, %.17g, %.17g) / (%.17g, %.17g, %.17g)",
+                               dim, m ? "GIMP" : "MPM", un[u], T, k + 1, ea.angular_momentum[0],
+                               ea.angular_momentum[1], ea.angular_momentum[2],
+                               eb.angular_momentum[0], eb.angular_momentum[1],
+                               eb.angular_momentum[2]);
                         cw = fmax(cw, d);
                         strain = fmax(strain, fabs(eb.strain));
+                        lmax = fmax(lmax, fabs(eb.angular_momentum[2]));
                     }
-                    CHECK(strain > 0); /* the strain term is exercised */
+                    CHECK(strain > 0);                      /* the strain term is exercised */
+                    CHECK(dim == 1 ? lmax == 0 : lmax > 0); /* and the angular momentum */
                     mpm_sim_snapshot(sa_, &(mpm_snapshot){.x = xa, .v = va, .stress = sa});
                     mpm_sim_snapshot(sb_, &(mpm_snapshot){.x = xb, .v = vb, .stress = sb});
                     size_t nx = n * (size_t)dim;
@@ -740,7 +758,7 @@ TEST(perf_step_energies_equal_energy_pass)
                     cases++;
                 }
     TLOG("%d cases (1D/2D/3D, MPM/GIMP, USF/USL/MUSL, gravity, wall, 1 and 2 threads), %d steps: "
-         "energies summed in the step vs the energy pass: worst relative difference %.3g; "
-         "positions, velocities, stresses bitwise equal",
+         "energies summed in the step vs the energy pass: worst relative difference %.3g "
+         "(angular momentum bitwise equal); positions, velocities, stresses bitwise equal",
          cases, STEPS + 1, worst);
 }

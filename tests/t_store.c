@@ -39,6 +39,7 @@ static const char *db_path(const char *name)
 typedef struct {
     pthread_mutex_t mu;
     int n_dropped, n_cap, n_interrupted, n_new, n_migrated, n_total;
+    char migrated[200]; /* the last "schema migrated" line */
     char last[512];
 } logcap;
 
@@ -51,7 +52,10 @@ static void cap_log(void *ud, const char *msg)
     if (strstr(msg, "above its cap")) lc->n_cap++;
     if (strstr(msg, "'interrupted'")) lc->n_interrupted++;
     if (strstr(msg, "new database, schema version")) lc->n_new++;
-    if (strstr(msg, "schema migrated from version 1 to 2")) lc->n_migrated++;
+    if (strstr(msg, "schema migrated from version")) {
+        lc->n_migrated++;
+        snprintf(lc->migrated, sizeof lc->migrated, "%s", msg);
+    }
     snprintf(lc->last, sizeof lc->last, "%s", msg);
     pthread_mutex_unlock(&lc->mu);
 }
@@ -104,6 +108,9 @@ static mpm_energy_sample make_sample(int64_t run, int64_t i)
     e.e.momentum[1] = -exp(-x / 100);
     e.e.momentum[2] = i % 2 ? 5e-324 : -2.5;
     e.e.mass = 2.0 + x * 1e-9;
+    e.e.angular_momentum[0] = 1.0 / (x + 3);
+    e.e.angular_momentum[1] = -x * x * 1e200;
+    e.e.angular_momentum[2] = i % 2 ? 5e-324 : 7.5 + x;
     return e;
 }
 
@@ -117,7 +124,9 @@ static int sample_equals(const mpm_energy_sample *es, size_t i, int64_t run, int
            g->e.potential == e.e.potential && g->e.external_work == e.e.external_work &&
            g->e.total == e.e.total && g->e.momentum[0] == e.e.momentum[0] &&
            g->e.momentum[1] == e.e.momentum[1] && g->e.momentum[2] == e.e.momentum[2] &&
-           g->e.mass == e.e.mass;
+           g->e.mass == e.e.mass && g->e.angular_momentum[0] == e.e.angular_momentum[0] &&
+           g->e.angular_momentum[1] == e.e.angular_momentum[1] &&
+           g->e.angular_momentum[2] == e.e.angular_momentum[2];
 }
 
 static void sleep_ms(int ms)
@@ -1231,10 +1240,11 @@ TEST(store_migrate_old_schema)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
            store_error()->message);
-    CHECK(lc.n_migrated == 1 && lc.n_new == 0);
+    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 3"), "%s",
+           lc.migrated);
     int v = -1;
     CHECK(store_schema_version(s, &v) == 0);
-    CHECKF(v == 2 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
+    CHECKF(v == 3 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
     store_stats st;
     store_get_stats(s, &st);
     CHECK(st.recovered_running == 1 && st.recovered_queued == 0);
@@ -1267,7 +1277,10 @@ TEST(store_migrate_old_schema)
              es[i].e.potential == 2.5 && es[i].e.external_work == 0.125 * x &&
              es[i].e.total == 2.75 - 0.125 * x && es[i].e.momentum[0] == x &&
              es[i].e.momentum[1] == -x && es[i].e.mass == 2.0 &&
-             (i == 2 ? isnan(es[i].e.momentum[2]) : es[i].e.momentum[2] == 0.0);
+             (i == 2 ? isnan(es[i].e.momentum[2]) : es[i].e.momentum[2] == 0.0) &&
+             /* not recorded before schema 3: NaN */
+             isnan(es[i].e.angular_momentum[0]) && isnan(es[i].e.angular_momentum[1]) &&
+             isnan(es[i].e.angular_momentum[2]);
     }
     free(es);
     CHECKF(ok, "the old run's energy samples read back differently");
@@ -1305,6 +1318,8 @@ TEST(store_migrate_old_schema)
     CHECK(store_run_insert(s, &in, &id) == 0);
     CHECK(id == 3);
     store_run_end end = {.status = MPP_STATUS_FINISHED, .finished_at = 1700000020.0, .steps = 9};
+    mpm_energy_sample ne[2] = {make_sample(id, 0), make_sample(id, 1)};
+    CHECK(store_energy_append(s, id, ne, 2) == 0);
     CHECK(store_run_finish(s, id, &end) == 0);
     CHECK(store_flush(s) == 0);
     CHECK(store_run_get(s, id, &r) == 0);
@@ -1312,7 +1327,20 @@ TEST(store_migrate_old_schema)
          r.steps == 9;
     store_run_clear(&r);
     CHECK(ok);
+    /* and its samples with their angular momentum, bit for bit */
+    CHECK(store_energy_read(s, id, 0, 0, &es, &nes) == 0);
+    ok = nes == 2 && sample_equals(es, 0, id, 0) && sample_equals(es, 1, id, 1);
+    free(es);
+    CHECKF(ok, "new samples in the migrated database");
     store_close(&s);
+
+    /* on disk: the energy table has the angular momentum columns */
+    int64_t na = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_table_info('energy') WHERE name IN"
+                         " ('angular_momentum_x', 'angular_momentum_y', 'angular_momentum_z')",
+                         &na) == 0 &&
+          na == 3);
 
     /* on disk: the hash column and its index are gone, the columns renamed */
     int64_t cnt = -1;
@@ -1352,6 +1380,86 @@ TEST(store_migrate_old_schema)
     CHECK(store_schema_version(s, &v) == 0 && v == STORE_SCHEMA_VERSION);
     store_close(&s);
     CHECK(lc.n_migrated == 0);
+}
+
+/* A version-2 database (the version-1 script, then 1 -> 2 as it was
+ * released): a finished 3D run with two energy samples.  Opening it migrates
+ * 2 -> 3 alone: the old samples read back with every other field intact and
+ * the angular momentum NaN (not recorded); new samples keep theirs. */
+static const char migrate_v1_to_v2[] = "DROP INDEX runs_by_case_hash;"
+                                       "ALTER TABLE runs DROP COLUMN case_hash;"
+                                       "ALTER TABLE runs RENAME COLUMN update_scheme TO \"update\";"
+                                       "ALTER TABLE runs RENAME COLUMN ended_at TO finished_at;"
+                                       "ALTER TABLE runs RENAME COLUMN steps_done TO steps;"
+                                       "PRAGMA user_version = 2;";
+
+static const char old_rows_v2[] =
+    "INSERT INTO runs (id, name, case_pb, method, \"update\", dim, particles, nodes, status,"
+    " submitted_at, started_at, finished_at, steps, wall_s, psteps_per_s, kinetic, strain,"
+    " potential, external_work, total, error, server_version) VALUES"
+    " (4, 'v2 run', X'0a0162', 'gimp', 'usf', 3, 8, 27, 'finished', 1700000100.0,"
+    "  1700000101.0, 1700000102.0, 20, 1.0, 160.0, 0.5, 0.25, 0.0, 0.0, 0.75, NULL, '0.4.0');"
+    "INSERT INTO energy VALUES"
+    " (4, 0, 0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.5, 1.0, 2.0, 3.0, 4.0),"
+    " (4, 1, 20, 0.25, 0.5, 0.25, 0.0, 0.0, 0.75, 1.5, 2.5, 3.5, 4.0);";
+
+TEST(store_migrate_v2)
+{
+    const char *p = db_path("v2.db");
+    char path[600];
+    snprintf(path, sizeof path, "%s", p);
+    CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v1_to_v2, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, old_rows_v2, NULL) == 0, "%s", store_error()->message);
+
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
+    store *s = NULL;
+    CHECKF(store_open(path, &o, &s) == 0, "opening a version-2 database: %s",
+           store_error()->message);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 3"), "%s", lc.migrated);
+    int v = -1;
+    CHECK(store_schema_version(s, &v) == 0 && v == 3);
+
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
+    CHECK(store_energy_read(s, 4, 0, 0, &es, &nes) == 0);
+    int ok = nes == 2;
+    for (size_t i = 0; ok && i < nes; i++) {
+        double x = (double)i;
+        ok = es[i].seq == i && es[i].step == 20 * (int64_t)i && es[i].dim == 3 &&
+             es[i].e.kinetic == 0.5 && es[i].e.total == 0.5 + 0.25 * x &&
+             es[i].e.momentum[0] == 1 + 0.5 * x && es[i].e.momentum[1] == 2 + 0.5 * x &&
+             es[i].e.momentum[2] == 3 + 0.5 * x && es[i].e.mass == 4 &&
+             isnan(es[i].e.angular_momentum[0]) && isnan(es[i].e.angular_momentum[1]) &&
+             isnan(es[i].e.angular_momentum[2]);
+    }
+    free(es);
+    CHECKF(ok, "the version-2 samples read back differently");
+    store_run r;
+    CHECK(store_run_get(s, 4, &r) == 0);
+    ok = r.status == MPP_STATUS_FINISHED && r.dim == 3 && r.steps == 20 && r.energy.total == 0.75;
+    store_run_clear(&r);
+    CHECK(ok);
+
+    /* a new run's samples carry their angular momentum */
+    store_run in = sample_run("new", MPP_STATUS_RUNNING);
+    int64_t id = 0;
+    CHECK(store_run_insert(s, &in, &id) == 0 && id == 5);
+    mpm_energy_sample ne = make_sample(id, 0);
+    CHECK(store_energy_append(s, id, &ne, 1) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_energy_read(s, id, 0, 0, &es, &nes) == 0);
+    ok = nes == 1 && sample_equals(es, 0, id, 0) && es[0].e.angular_momentum[2] == 7.5;
+    free(es);
+    CHECK(ok);
+    store_close(&s);
+    int64_t cnt = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
 }
 
 /* ---- commit tracking without blocking ---- */

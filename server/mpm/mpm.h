@@ -112,6 +112,12 @@ typedef struct {
     double cfl;            /* Courant factor C for automatic dt (0: default) */
     int allow_unstable_dt; /* accept a given dt above the CFL limit */
     double mass_tol;       /* M_TOL relative to the mean particle mass (0: default) */
+    /* PIC/FLIP blend of the particle velocity update, alpha in [0, 1]:
+     * v_p <- (1 - alpha) (v_p + dt sum S a_I) + alpha sum S v_I^{n+1}, with
+     * a_I = qdot_I/m_I and v_I^{n+1} = q_I/m_I after the nodal update (both
+     * 0 at phantom nodes).  0: pure FLIP (the default, Eq. 31); 1: pure
+     * PIC, which damps the velocity modes the grid cannot represent. */
+    double pic_fraction;
 
     double gravity[MPM_MAX_DIM];
 
@@ -149,6 +155,12 @@ typedef struct {
     double total;         /* kinetic + strain + potential - external_work */
     double mass;
     double momentum[MPM_MAX_DIM];
+    /* sum m x × v about the origin of coordinates (x = 0, not the centre of
+     * mass): x, y, z components.  2D (motion in the x-y plane): only [2],
+     * the z component, is non-zero; 1D: all zero.  MPM and GIMP with the
+     * FLIP update do not conserve it exactly (the grid transfers lose the
+     * particles' rotation within a cell): its drift is the loss. */
+    double angular_momentum[3];
 } mpm_energy;
 
 /* One energy sample, the one shape it has from the solver to the store to

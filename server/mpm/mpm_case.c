@@ -376,6 +376,9 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
         return mpm_fail(err, MPM_EINVAL, "mass_tol",
                         "must be finite and >= 0 (0: default %g) (got %g)", MPM_DEFAULT_MASS_TOL,
                         c->mass_tol);
+    if (!(c->pic_fraction >= 0 && c->pic_fraction <= 1))
+        return mpm_fail(err, MPM_EINVAL, "pic_fraction",
+                        "must be in [0, 1] (0: pure FLIP, 1: pure PIC) (got %g)", c->pic_fraction);
     if (c->threads < 0 || c->threads > MPM_MAX_THREADS)
         return mpm_fail(err, MPM_EINVAL, "threads", "must be in [0, %d] (got %d)", MPM_MAX_THREADS,
                         c->threads);

@@ -77,6 +77,7 @@ typedef struct {
     double ekin, estr, epot; /* partial energies (guard, mpm_sim_energy, and
                               * the step's passes when energies are wanted) */
     double emom[3], emass;   /* partial momentum and mass (mpm_sim_energy) */
+    double eang[3];          /* partial angular momentum (mpm_sim_energy) */
     int ksorted;             /* sort keys of the slice non-decreasing */
     uint32_t kfirst, klast;  /* the slice's first and last sort key */
     char pad[64];
@@ -99,6 +100,7 @@ struct mpm_sim {
     mpm_gridbuf g;       /* the grid */
     double *minv;        /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
     double mtol;
+    double pic; /* PIC fraction of the velocity update (0: pure FLIP) */
 
     /* fixed degrees of freedom: node (padded index) and direction mask */
     size_t nfixed;
@@ -197,7 +199,7 @@ struct mpm_sim {
  * write a particle field's last value of the step take en: nonzero, they
  * also sum the slice's energies into o (the pass writing the final stress,
  * strain and volume: o->estr; the one writing the final position and
- * velocity: o->ekin, epot, emom, emass), exactly as the energy pass does.
+ * velocity: o->ekin, epot, emom, eang, emass), exactly as the energy pass does.
  * en is tested once per call (two instantiations), never per particle. */
 struct mpm_kernels {
     void (*p2g_mq)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
@@ -224,8 +226,10 @@ struct mpm_kernels {
 };
 
 /* The family of dimension dim with ns nodes per axis: 2 (MPM), 3 (uGIMP,
- * every lp <= h/2) or 4 (uGIMP, lp up to h). */
-const mpm_kernels *mpm_kernels_select(int dim, int ns);
+ * every lp <= h/2) or 4 (uGIMP, lp up to h); blend nonzero: the particle
+ * velocity update blends PIC into FLIP by s->pic (pure FLIP, blend 0, does
+ * no extra work). */
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend);
 /* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
 size_t mpm_kernels_scratch(void);
 /* Tests and benchmarks: switches a GMPM simulation that has not stepped yet
@@ -257,6 +261,23 @@ static inline double mpm_strain_density(const mpm_particles *P, int dim, size_t 
     for (int c = 0; c < MPM_NCOMP(dim); c++)
         if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];
     return se;
+}
+
+/* Adds particle p's angular momentum about the origin, m x × v, to L (D:
+ * the dimension; 2D adds to L[2] only, 1D adds nothing).  The one
+ * expression the energy pass and the step's in-pass sums share, so both give
+ * the same bits. */
+static inline void mpm_angmom_add(const mpm_particles *P, int D, size_t p, double m, double L[3])
+{
+    if (D == 2) {
+        L[2] += m * (P->x[0][p] * P->v[1][p] - P->x[1][p] * P->v[0][p]);
+    } else if (D == 3) {
+        double x = P->x[0][p], y = P->x[1][p], z = P->x[2][p];
+        double vx = P->v[0][p], vy = P->v[1][p], vz = P->v[2][p];
+        L[0] += m * (y * vz - z * vy);
+        L[1] += m * (z * vx - x * vz);
+        L[2] += m * (x * vy - y * vx);
+    }
 }
 
 /* Writes the particles of a case that passed mpm_case_check() into P, whose
@@ -394,7 +415,8 @@ int mpm_loads_set_forces(mpm_sim *s, const double *f);
 /* ---- energies and the divergence guard (mpm_energy.c) ---- */
 
 #define MPM_GUARD_EVERY 16
-/* Phase: the energies of the thread's slice into its tout. */
+/* Phase: the energies of the thread's slice into its tout (all of them,
+ * angular momentum included). */
 void mpm_ph_energy(mpm_sim *s, int tid);
 /* The partial sums in tout combined in thread order (external work and
  * total left out). */

@@ -11,7 +11,9 @@
  *           covers at most 3 nodes per axis;
  *   NS = 4: uGIMP with wider particles (explicit points, lp up to h).
  * mpm_kernels_select() picks the family once per job, so no particle loop
- * branches on dimension, method, update scheme or features.  The 3-node
+ * branches on dimension, method, update scheme or features.  A PIC/FLIP
+ * blend (mpm_case.pic_fraction > 0) selects the family's blend twin, whose
+ * velocity updates alone differ; pure FLIP runs the code it always ran.  The 3-node
  * family evaluates the same weights of the same nodes as the 4-node one and
  * only leaves out a node whose weight and gradient are exactly zero, so
  * both give the same results.
@@ -428,11 +430,12 @@ INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6]
 
 /* Energy sums of a slice (EN: the step wants them), in the order and with
  * the arithmetic of the energy pass (mpm_energy.c, mpm_ph_energy), so that the
- * sums are the same: kinetic, potential, momentum and mass of particle p
+ * sums are the same: kinetic, potential, momentum, angular momentum
+ * (mpm_angmom_add) and mass of particle p
  * once its position and velocity are final, strain energy of a block once
  * its stress, strain and volume are. */
 typedef struct {
-    double ek, es, ep, mom[3], ms;
+    double ek, es, ep, mom[3], ms, L[3];
     double g[3];
 } esum;
 
@@ -440,7 +443,7 @@ INLINE void esum_init(const mpm_sim *s, esum *e)
 {
     e->ek = e->es = e->ep = e->ms = 0;
     for (int d = 0; d < 3; d++) {
-        e->mom[d] = 0;
+        e->mom[d] = e->L[d] = 0;
         e->g[d] = s->gravity[d];
     }
 }
@@ -455,6 +458,7 @@ INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
         e->mom[d] += m * v;
         e->ep -= m * e->g[d] * P->x[d][p];
     }
+    mpm_angmom_add(P, D, p, m, e->L);
     e->ek += 0.5 * m * v2;
     e->ms += m;
 }
@@ -472,7 +476,10 @@ INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
         o->ekin = e->ek;
         o->epot = e->ep;
         o->emass = e->ms;
-        for (int d = 0; d < 3; d++) o->emom[d] = e->mom[d];
+        for (int d = 0; d < 3; d++) {
+            o->emom[d] = e->mom[d];
+            o->eang[d] = e->L[d];
+        }
     }
     if (S) o->estr = e->es;
 }
@@ -575,14 +582,28 @@ INLINE void box_reset(const mpm_sim *s, mpm_thread_out *o, int D)
     }
 }
 
-/* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0). */
-INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int EN)
+/* The particle velocity (Eq. 31), FLIP: v += dt sum S qdot/m; blended
+ * with PIC (BL): v = (1 - al) (v + dt sum S qdot/m) + al sum S q/m, with
+ * the momentum q after the nodal update, so vpic = sum S v_I^{n+1} (the
+ * position increment's sum; phantom nodes: 0).  bl = 1 - al. */
+INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, double al, double bl)
+{
+    if (BL)
+        *v = bl * (*v + dt * dv) + al * vpic;
+    else
+        *v += dt * dv;
+}
+
+/* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0);
+ * BL: the velocity blended with PIC (v_update()). */
+INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int EN,
+                     int BL)
 {
     pw W;
     rowrun a;
     boxc bc;
     esum e;
-    double dt = s->dt;
+    double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     if (EN) esum_init(s, &e);
     box_reset(s, o, D);
     run_init(&a);
@@ -594,7 +615,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
         for (int d = 0; d < D; d++) {
             xn[d] = s->P.x[d][p] + dt * dx[d];
             s->P.x[d][p] = xn[d];
-            s->P.v[d][p] += dt * dv[d];
+            v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
         }
         check_particle(s, o, p, D);
         if (EN) esum_particle(s, &e, p, D);
@@ -607,13 +628,13 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
  * weights of the step's start positions serve both, in one gather. */
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                            int EN)
+                            int EN, int BL)
 {
     pw W;
     rowrun a;
     boxc bc;
     esum e;
-    double dt = s->dt;
+    double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     if (EN) esum_init(s, &e);
     box_reset(s, o, D);
     run_init(&a);
@@ -628,7 +649,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
                 s->P.x[d][p] = xn[d];
-                s->P.v[d][p] += dt * dv[d];
+                v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
             }
             check_particle(s, o, p, D);
             if (EN) esum_particle(s, &e, p, D);
@@ -641,16 +662,18 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     if (EN) esum_store(&e, o, 1, 1);
 }
 
-INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
+/* MUSL: the velocity only (BL: blended with PIC; the blended velocity is
+ * what p2g_q2 maps back to the grid). */
+INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BL)
 {
     pw W;
-    double dt = s->dt;
+    double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     (void)o;
     for (size_t p = p0; p < p1; p++) {
-        double dv[3];
+        double dv[3], vp[3] = {0, 0, 0};
         weights(s, p, D, NS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, 0, NULL, NULL, 1, dv);
-        for (int d = 0; d < D; d++) s->P.v[d][p] += dt * dv[d];
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv);
+        for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
     }
 }
 
@@ -763,6 +786,34 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     }
 #endif
 
+/* The PIC/FLIP blend of family (D, NS): its own velocity updates, every
+ * other pass shared. */
+#define BLEND(D, NS)                                                                            \
+    static void g2p_xv_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 1);                                                  \
+        else                                                                                    \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 1);                                                  \
+    }                                                                                           \
+    static void g2p_xv_stress_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
+                                            int en)                                             \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 1);                                           \
+        else                                                                                    \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 1);                                           \
+    }                                                                                           \
+    static void g2p_v_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
+    {                                                                                           \
+        g2p_v_t(s, o, a, b, D, NS, 1);                                                          \
+    }                                                                                           \
+    static const mpm_kernels family_bl_##D##_##NS = {                                           \
+        p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                    \
+        stress_force_##D##_##NS, g2p_xv_bl_##D##_##NS,    g2p_xv_stress_bl_##D##_##NS,          \
+        g2p_v_bl_##D##_##NS,     g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,             \
+        bbox_##D##_##NS,         cell_keys_##D##_##NS};
+
 #define FAMILY(D, NS)                                                                              \
     static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
     {                                                                                              \
@@ -787,21 +838,21 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)       \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 1);                                                        \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 0);                                                     \
         else                                                                                       \
-            g2p_xv_t(s, o, a, b, D, NS, 0);                                                        \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 0);                                                     \
     }                                                                                              \
     static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
                                          int en)                                                   \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1);                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0);                                              \
         else                                                                                       \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0);                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0);                                              \
     }                                                                                              \
     static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                \
     {                                                                                              \
-        g2p_v_t(s, o, a, b, D, NS);                                                                \
+        g2p_v_t(s, o, a, b, D, NS, 0);                                                             \
     }                                                                                              \
     static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
     {                                                                                              \
@@ -823,7 +874,8 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
         p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                       \
         stress_force_##D##_##NS, g2p_xv_##D##_##NS,       g2p_xv_stress_##D##_##NS,                \
         g2p_v_##D##_##NS,        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,                \
-        bbox_##D##_##NS,         cell_keys_##D##_##NS};
+        bbox_##D##_##NS,         cell_keys_##D##_##NS};                                            \
+    BLEND(D, NS)
 
 FAMILY(1, 2)
 FAMILY(1, 3)
@@ -835,10 +887,14 @@ FAMILY(3, 2)
 FAMILY(3, 3)
 FAMILY(3, 4)
 
-const mpm_kernels *mpm_kernels_select(int dim, int ns)
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend)
 {
     static const mpm_kernels *const table[3][3] = {{&family_1_2, &family_1_3, &family_1_4},
                                                    {&family_2_2, &family_2_3, &family_2_4},
                                                    {&family_3_2, &family_3_3, &family_3_4}};
-    return table[dim - 1][ns - 2];
+    static const mpm_kernels *const table_bl[3][3] = {
+        {&family_bl_1_2, &family_bl_1_3, &family_bl_1_4},
+        {&family_bl_2_2, &family_bl_2_3, &family_bl_2_4},
+        {&family_bl_3_2, &family_bl_3_3, &family_bl_3_4}};
+    return blend ? table_bl[dim - 1][ns - 2] : table[dim - 1][ns - 2];
 }

@@ -304,7 +304,7 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
         (ns == 3 && !gimp_fits3(s)))
         return MPM_EINVAL;
     s->ns = ns;
-    s->k = mpm_kernels_select(s->dim, ns);
+    s->k = mpm_kernels_select(s->dim, ns, s->pic != 0);
     init_order(s);
     return 0;
 }
@@ -358,7 +358,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (alloc_particles(&s->P, np, dim, c->method == MPM_METHOD_GIMP)) goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
     if (s->ns == 4 && gimp_fits3(s)) s->ns = 3;
-    s->k = mpm_kernels_select(dim, s->ns);
+    s->pic = c->pic_fraction;
+    s->k = mpm_kernels_select(dim, s->ns, s->pic != 0);
     if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
         goto nomem;

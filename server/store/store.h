@@ -45,7 +45,7 @@
 #include <stdint.h>
 
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 2
+#define STORE_SCHEMA_VERSION 3
 
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))
@@ -242,7 +242,9 @@ void store_run_list_free(store_run *runs, size_t n);
 /* Reads the energy samples of a run with seq >= from_seq, at most max of
  * them (0: all), in seq order, into *out: a malloc'd array of *n samples
  * (free() it; NULL when there are none, which is not an error).  Each
- * sample's dim is its run's. */
+ * sample's dim is its run's.  A value stored as NULL reads back as NaN: the
+ * angular momentum of samples written before schema version 3 is NaN (not
+ * recorded), all three components. */
 int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
                       mpm_energy_sample **out, size_t *n);
 

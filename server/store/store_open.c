@@ -103,6 +103,12 @@ static const char *const migrations[] = {
     "ALTER TABLE runs RENAME COLUMN update_scheme TO \"update\";"
     "ALTER TABLE runs RENAME COLUMN ended_at TO finished_at;"
     "ALTER TABLE runs RENAME COLUMN steps_done TO steps;",
+    /* 2 -> 3: the angular momentum of each energy sample (about the origin
+     * of coordinates; mpmd.EnergySample.angular_momentum).  Rows written
+     * before stay NULL, read back as NaN: not recorded, which 0 would hide. */
+    "ALTER TABLE energy ADD COLUMN angular_momentum_x REAL;"
+    "ALTER TABLE energy ADD COLUMN angular_momentum_y REAL;"
+    "ALTER TABLE energy ADD COLUMN angular_momentum_z REAL;",
 };
 
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,

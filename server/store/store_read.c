@@ -375,7 +375,8 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
         db,
         "SELECT e.seq, e.step, e.t, e.kinetic, e.strain, e.potential, e.external_work,"
         " e.total, e.momentum_x, e.momentum_y, e.momentum_z, e.mass,"
-        " (SELECT dim FROM runs WHERE id = ?1)"
+        " (SELECT dim FROM runs WHERE id = ?1),"
+        " e.angular_momentum_x, e.angular_momentum_y, e.angular_momentum_z"
         " FROM energy e WHERE e.run_id = ?1 AND e.seq >= ?2 ORDER BY e.seq LIMIT ?3",
         -1, &st, NULL);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, run_id);
@@ -400,6 +401,7 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
         for (int k = 0; k < 3; k++) e->e.momentum[k] = col_real_nan(st, 8 + k);
         e->e.mass = col_real_nan(st, 11);
         e->dim = sqlite3_column_int(st, 12);
+        for (int k = 0; k < 3; k++) e->e.angular_momentum[k] = col_real_nan(st, 13 + k);
     }
     if (i < cnt && rc != SQLITE_DONE) {
         r = sti_sql_fail(db, rc, "reading energy samples");

@@ -104,8 +104,10 @@ static const char *const writer_sql[WS_COUNT] = {
                   " potential = ?9, external_work = ?10, total = ?11, error = ?12"
                   " WHERE id = ?1" NOT_ENDED,
     [WS_INS_ENERGY] = "INSERT INTO energy (run_id, seq, step, t, kinetic, strain, potential,"
-                      " external_work, total, momentum_x, momentum_y, momentum_z, mass)"
-                      " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
+                      " external_work, total, momentum_x, momentum_y, momentum_z, mass,"
+                      " angular_momentum_x, angular_momentum_y, angular_momentum_z)"
+                      " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15,"
+                      " ?16)",
     [WS_PUT_SNAP] = "INSERT OR REPLACE INTO snapshots (run_id, step, t, n, dim, fields, data)"
                     " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
     [WS_GET_STATUS] = "SELECT status FROM runs WHERE id = ?1",
@@ -235,6 +237,9 @@ static int apply_energy(store *s, const op *o)
         BIND(bind_real(st, 11, e->e.momentum[1]));
         BIND(bind_real(st, 12, e->e.momentum[2]));
         BIND(bind_real(st, 13, e->e.mass));
+        BIND(bind_real(st, 14, e->e.angular_momentum[0]));
+        BIND(bind_real(st, 15, e->e.angular_momentum[1]));
+        BIND(bind_real(st, 16, e->e.angular_momentum[2]));
         rc = ws_run(st, rc);
         if (rc != SQLITE_DONE) {
             if (!bad++)

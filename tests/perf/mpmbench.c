@@ -33,7 +33,7 @@ static int progress_shown;
 
 static const char usage[] =
     "usage: mpmbench --scene NAME [--particles N] [--steps S] [--threads T]\n"
-    "                [--method mpm|gimp] [--update usf|usl|musl] [--csv]\n"
+    "                [--method mpm|gimp] [--update usf|usl|musl] [--pic F] [--csv]\n"
     "       mpmbench --all [--particles N] [--steps S] [--csv]\n"
     "Throughput of the mpmd solver (issue #5): millions of particle-steps per second,\n"
     "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
@@ -54,6 +54,8 @@ static const char usage[] =
     "  --threads T    solver threads (default 2), 1..64\n"
     "  --method M     mpm | gimp (default mpm)\n"
     "  --update U     usf | usl | musl (default usf)\n"
+    "  --pic F        PIC fraction of the velocity update, 0..1 (default 0: pure FLIP);\n"
+    "                 not with the daemon scene or --all\n"
     "  --csv          print CSV rows instead of the table\n"
     "  --all          every scene, MPM and GIMP, 1 and 2 threads; the lean build; the daemon\n"
     "  -h, --help     this text\n"
@@ -218,6 +220,8 @@ typedef struct {
     int threads, have_threads, have_method, have_update;
     mpm_method method;
     mpm_update update;
+    double pic;
+    int have_pic;
 } opts;
 
 static int parse_long(const char *flag, const char *s, long lo, long hi, long *out)
@@ -253,7 +257,8 @@ static int parse_args(int argc, char **argv, opts *o)
             continue;
         }
         int known = !strcmp(a, "--scene") || !strcmp(a, "--particles") || !strcmp(a, "--steps") ||
-                    !strcmp(a, "--threads") || !strcmp(a, "--method") || !strcmp(a, "--update");
+                    !strcmp(a, "--threads") || !strcmp(a, "--method") || !strcmp(a, "--update") ||
+                    !strcmp(a, "--pic");
         if (!known) {
             fprintf(stderr, "mpmbench: unknown option '%s' (see --help)\n", a);
             return -1;
@@ -295,6 +300,15 @@ static int parse_args(int argc, char **argv, opts *o)
                 return -1;
             }
             o->have_method = 1;
+        } else if (!strcmp(a, "--pic")) {
+            char *end;
+            errno = 0;
+            o->pic = strtod(v, &end);
+            if (errno || end == v || *end || !(o->pic >= 0 && o->pic <= 1)) {
+                fprintf(stderr, "mpmbench: --pic: expected a number in [0, 1], got '%s'\n", v);
+                return -1;
+            }
+            o->have_pic = 1;
         } else {
             if (!strcmp(v, "usf"))
                 o->update = MPM_USF;
@@ -309,13 +323,18 @@ static int parse_args(int argc, char **argv, opts *o)
             o->have_update = 1;
         }
     }
-    if (o->all && (o->have_scene || o->have_threads || o->have_method || o->have_update)) {
+    if (o->all &&
+        (o->have_scene || o->have_threads || o->have_method || o->have_update || o->have_pic)) {
         fprintf(stderr, "mpmbench: --all runs every scene, method and thread count; it takes "
                         "only --particles, --steps and --csv\n");
         return -1;
     }
     if (!o->all && !o->have_scene) {
         fprintf(stderr, "mpmbench: give --scene NAME or --all (see --help)\n");
+        return -1;
+    }
+    if (o->have_pic && o->have_scene && !strcmp(o->scene, "daemon")) {
+        fprintf(stderr, "mpmbench: --pic: not with the daemon scene\n");
         return -1;
     }
     if (o->have_scene && !strcmp(o->scene, "daemon") && o->particles > 10000000L) {
@@ -358,7 +377,7 @@ static void sparse_ratio(const pb_row *wide, const pb_row *tight)
 
 static int run_one(const opts *o)
 {
-    pb_cfg c = {PB_DISKS2D, o->method, o->update, o->particles, o->steps, o->threads};
+    pb_cfg c = {PB_DISKS2D, o->method, o->update, o->particles, o->steps, o->threads, o->pic};
     pb_row r, r2;
     if (!strcmp(o->scene, "daemon")) {
 #if PB_LEAN
@@ -551,7 +570,7 @@ static int run_all(const opts *o)
     for (int s = 0; s < 3; s++)
         for (int m = 0; m < 2; m++)
             for (int t = 0; t < 2; t++) {
-                pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles, o->steps, t + 1};
+                pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles, o->steps, t + 1, 0.0};
                 ok[s][m][t] = measure(&c, &rows[s][m][t]) == 0;
                 failures += !ok[s][m][t];
             }
@@ -589,7 +608,7 @@ static int run_all(const opts *o)
     for (int m = 0; m < 2; m++)
         for (int t = 1; t <= 2; t++) {
             pb_row w, ti;
-            pb_cfg c = {PB_SPARSE_WIDE, methods[m], MPM_USF, 0, o->steps, t};
+            pb_cfg c = {PB_SPARSE_WIDE, methods[m], MPM_USF, 0, o->steps, t, 0.0};
             if (o->particles && o->particles <= 1000000L) c.particles = o->particles;
             if (measure(&c, &w)) {
                 failures++;
@@ -608,7 +627,7 @@ static int run_all(const opts *o)
     /* the lean build on disks2d, next to a fresh normal run of the same steps */
     for (int m = 0; m < 2; m++) {
         pb_row nr, lr;
-        pb_cfg c = {PB_DISKS2D, methods[m], MPM_USF, o->particles, o->steps, 1};
+        pb_cfg c = {PB_DISKS2D, methods[m], MPM_USF, o->particles, o->steps, 1, 0.0};
         if (measure(&c, &nr)) {
             failures++;
             continue;

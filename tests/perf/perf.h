@@ -62,6 +62,7 @@ typedef struct {
     long particles; /* aimed particle count; 0: the scene's default */
     long steps;     /* steps per run; 0: the default for the target speed */
     int threads;
+    double pic; /* mpm_case.pic_fraction (0: pure FLIP) */
 } pb_cfg;
 
 /* One measured row. */

@@ -277,6 +277,7 @@ static int build(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
         t->c.method = c->method;
         t->c.update = c->update;
         t->c.threads = c->threads;
+        t->c.pic_fraction = c->pic;
     }
     return rc;
 }
