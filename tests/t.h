@@ -71,6 +71,15 @@ const char *t_tmpdir(void);
 
 /* An mpm_error as "field: message" (the proto's spelling), in a buffer
  * that lives to the end of the enclosing block: for TLOG and CHECKF. */
+/* Renders e into err (T_ERRLEN bytes) in the JSON mapping's spelling when rc
+ * is an error; returns rc. */
+#define T_ERRLEN 512
+static inline int t_errtext(int rc, const mpm_error *e, char *err)
+{
+    if (rc) mpm_error_text(e, MPM_FIELD_JSON, err, T_ERRLEN);
+    return rc;
+}
+
 #define TERR(e) mpm_error_text((e), MPM_FIELD_PROTO, (char[512]){0}, 512)
 
 #endif

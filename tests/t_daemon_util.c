@@ -1,0 +1,295 @@
+/*
+ * t_daemon_util.c - helpers shared by the daemon tests (see
+ * t_daemon_util.h).
+ */
+#include "t_daemon_util.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void series_free(series *s)
+{
+    free(s->seq);
+    free(s->step);
+    free(s->t);
+    free(s->kinetic);
+    free(s->strain);
+    free(s->total);
+    memset(s, 0, sizeof *s);
+}
+
+/* Parses mpmctl's energy CSV (header + rows); 0 or -1 with the reason. */
+int parse_csv(const char *text, series *s)
+{
+    char *copy = strdup(text), **lines = NULL;
+    size_t n = copy ? td_lines(copy, &lines) : 0;
+    int rc = -1;
+    memset(s, 0, sizeof *s);
+    if (n < 1 || strncmp(lines[0],
+                         "seq,step,t,kinetic,strain,potential,external_work,total,mass,"
+                         "momentum_x",
+                         71)) {
+        TLOG("not an energy CSV: first line \"%.80s\"", n ? lines[0] : "");
+        goto out;
+    }
+    s->seq = calloc(n, sizeof *s->seq);
+    s->step = calloc(n, sizeof *s->step);
+    s->t = calloc(n, sizeof *s->t);
+    s->kinetic = calloc(n, sizeof *s->kinetic);
+    s->strain = calloc(n, sizeof *s->strain);
+    s->total = calloc(n, sizeof *s->total);
+    if (!s->seq || !s->step || !s->t || !s->kinetic || !s->strain || !s->total) goto out;
+    for (size_t i = 1; i < n; i++) {
+        double pot, work;
+        if (sscanf(lines[i], "%lld,%lld,%lf,%lf,%lf,%lf,%lf,%lf", &s->seq[s->n], &s->step[s->n],
+                   &s->t[s->n], &s->kinetic[s->n], &s->strain[s->n], &pot, &work,
+                   &s->total[s->n]) != 8) {
+            TLOG("bad CSV row %zu: \"%.80s\"", i, lines[i]);
+            goto out;
+        }
+        s->n++;
+    }
+    rc = 0;
+out:
+    free(lines);
+    free(copy);
+    if (rc) series_free(s);
+    return rc;
+}
+
+/* seq[i] == i for every row (complete, ordered, no duplicate). */
+int consecutive(const series *s)
+{
+    for (size_t i = 0; i < s->n; i++)
+        if (s->seq[i] != (long long)i) {
+            TLOG("row %zu has seq %lld", i, s->seq[i]);
+            return 0;
+        }
+    return 1;
+}
+
+double rel_diff(double a, double b)
+{
+    double m = fmax(fabs(a), fabs(b));
+    return m > 0 ? fabs(a - b) / m : 0;
+}
+
+/* Case files: an example with a few members replaced. */
+json_t *example(const char *name)
+{
+    char path[128];
+    snprintf(path, sizeof path, "proto/examples/%s.json", name);
+    return td_json_file(path);
+}
+
+/* Sets output.<key> = v (creating output). */
+void set_output(json_t *c, const char *key, json_t *v)
+{
+    json_t *out = json_object_get(c, "output");
+    if (!out) {
+        out = json_object();
+        json_object_set_new(c, "output", out);
+    }
+    json_object_set_new(out, key, v);
+}
+
+/* The 1D bar running `steps` steps (not endTime), energy every `every`. */
+json_t *bar_steps(long long steps, int every)
+{
+    json_t *c = example("bar1d_mpm");
+    if (!c) return NULL;
+    json_object_del(c, "endTime");
+    json_object_set_new(c, "steps", json_integer(steps));
+    set_output(c, "energyEvery", json_integer(every));
+    return c;
+}
+
+/* A job that runs until cancelled: the bar at rest (nothing moves, so
+ * nothing drifts out of the grid however long it runs), 99 million steps. */
+json_t *long_case(int every)
+{
+    json_t *c = bar_steps(LONG_STEPS, every);
+    if (c)
+        json_object_del(json_object_get(json_array_get(json_object_get(c, "bodies"), 0), "points"),
+                        "v");
+    return c;
+}
+
+/* A 2D elastic block drifting in a box: 256 particles. */
+json_t *block2d(long long steps, int every, const char *name)
+{
+    json_error_t je;
+    json_t *c = json_loads(
+        "{\"grid\": {\"dim\": 2, \"spacing\": [0.05, 0.05], \"nodes\": [21, 21]},"
+        " \"method\": \"MPM\", \"update\": \"USF\", \"dt\": 0.001,"
+        " \"materials\": [{\"youngsModulus\": 1, \"poissonRatio\": 0.2, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.3, 0.3], \"hi\": [0.7, 0.7]},"
+        "               \"velocity\": [0.01, 0.005], \"ppc\": 2}]}",
+        0, &je);
+    if (!c) return NULL;
+    json_object_set_new(c, "name", json_string(name));
+    json_object_set_new(c, "steps", json_integer(steps));
+    set_output(c, "energyEvery", json_integer(every));
+    return c;
+}
+
+/* Writes case c (consumed) to dir/file; path out. */
+int write_case(json_t *c, const char *dir, const char *file, char *path, size_t n)
+{
+    int rc;
+    if (!c) return -1;
+    snprintf(path, n, "%s/%s", dir, file);
+    rc = td_json_write(path, c);
+    json_decref(c);
+    return rc;
+}
+
+/* "job N" in text -> N (0 if absent). */
+unsigned long long job_of(const char *text)
+{
+    const char *p = text ? strstr(text, "job ") : NULL;
+    return p ? strtoull(p + 4, NULL, 10) : 0;
+}
+
+/* A member of a JSON text line (parsed), as text: string value or number. */
+json_t *parse_line(const char *line)
+{
+    return json_loads(line, 0, NULL);
+}
+
+long long jint(const json_t *o, const char *key)
+{
+    const json_t *v = json_object_get(o, key);
+    if (json_is_integer(v)) return json_integer_value(v);
+    if (json_is_string(v)) return atoll(json_string_value(v));
+    return -1;
+}
+
+const char *jstr(const json_t *o, const char *key)
+{
+    const json_t *v = json_object_get(o, key);
+    return json_is_string(v) ? json_string_value(v) : "";
+}
+
+double jnum(const json_t *o, const char *key)
+{
+    const json_t *v = json_object_get(o, key);
+    if (json_is_number(v)) return json_number_value(v);
+    if (json_is_string(v)) return strtod(json_string_value(v), NULL);
+    return NAN;
+}
+
+/* Number of lines of a text. */
+size_t count_lines(const char *t)
+{
+    size_t n = 0;
+    for (; t && *t; t++) n += *t == '\n';
+    return n;
+}
+
+/* mpmctl show ID --json, parsed (NULL on failure). */
+json_t *show_json(const td_daemon *d, unsigned long long id)
+{
+    char ids[32];
+    td_out o;
+    json_t *r = NULL;
+    snprintf(ids, sizeof ids, "%llu", id);
+    if (td_ctl(d, 30, &o, "show", ids, "--json", NULL) == 0 && o.status == 0)
+        r = parse_line(o.out);
+    else
+        TLOG("show %s --json: exit %d, stderr %s", ids, o.status, o.err ? o.err : "");
+    td_out_free(&o);
+    return r;
+}
+
+/* Waits up to timeout s until the daemon's log (mpmd --verbose) shows that
+ * job's stream subscribed ("job N: stream watched"); 0 or -1. */
+int wait_watched(const td_daemon *d, unsigned long long job, double timeout)
+{
+    char want[64];
+    double end = td_now() + timeout;
+    snprintf(want, sizeof want, "job %llu: stream watched", job);
+    do {
+        size_t len = 0;
+        char *log = td_slurp(d->log, &len);
+        int found = log && strstr(log, want);
+        free(log);
+        if (found) return 0;
+        td_msleep(20);
+    } while (td_now() < end);
+    TLOG("no \"%s\" in %s after %.0f s", want, d->log, timeout);
+    return -1;
+}
+
+/* Waits up to timeout s until a background client's output file has at
+ * least n lines; 0 or -1. */
+int wait_lines(const td_bg *b, size_t n, double timeout)
+{
+    double end = td_now() + timeout;
+    do {
+        size_t len = 0;
+        char *out = td_slurp(b->out_path, &len);
+        size_t have = count_lines(out);
+        free(out);
+        if (have >= n) return 0;
+        td_msleep(20);
+    } while (td_now() < end);
+    return -1;
+}
+
+/* The error of a raw request for id: 0 if it is NOT_FOUND naming `field`,
+ * with a message naming the id; else fails the test. */
+int expect_not_found(const td_daemon *d, mpp_request rq, const char *what, const char *field)
+{
+    json_t *reply = NULL;
+    char id[32];
+    int ok;
+    snprintf(id, sizeof id, "%llu", (unsigned long long)rq.id);
+    if (td_request(d->ep, &rq, 10, &reply) != 0) {
+        t_fail(__FILE__, __LINE__, "%s: no reply", what);
+        json_decref(reply);
+        return -1;
+    }
+    ok = !strcmp(td_err_code(reply), "NOT_FOUND") && !strcmp(td_err_field(reply), field) &&
+         strstr(td_err_msg(reply), id);
+    if (!ok)
+        t_fail(__FILE__, __LINE__,
+               "%s: %s, field \"%s\", message \"%s\" (want NOT_FOUND, field %s, "
+               "the id %s in the message)",
+               what, td_err_code(reply), td_err_field(reply), td_err_msg(reply), field, id);
+    else
+        TLOG("%-30s NOT_FOUND, field %-6s %s", what, field, td_err_msg(reply));
+    json_decref(reply);
+    return ok ? 0 : -1;
+}
+
+/* Expects mpmctl ARGS to exit with `status` and its stdout (or, for a
+ * non-zero status, its stdout or stderr) to contain want. */
+int expect_ctl(const td_daemon *d, int status, const char *want, const char *const *args)
+{
+    td_out o;
+    int ok;
+    if (td_ctlv(d, 30, &o, args)) {
+        t_fail(__FILE__, __LINE__, "cannot run mpmctl %s", args[0]);
+        td_out_free(&o);
+        return 0;
+    }
+    ok = o.status == status && (strstr(o.out, want) || (status && strstr(o.err, want)));
+    if (!ok) {
+        char line[256] = "";
+        for (int i = 0; args[i]; i++)
+            snprintf(line + strlen(line), sizeof line - strlen(line), " %s", args[i]);
+        t_fail(__FILE__, __LINE__,
+               "mpmctl%s: exit %d (want %d), stdout \"%.300s\", stderr \"%.300s\" "
+               "(want \"%s\")",
+               line, o.status, status, o.out, o.err, want);
+    } else {
+        const char *msg = status && o.err[0] ? o.err : o.out;
+        const char *nl = strchr(msg, '\n');
+        TLOG("%-34.34s exit %d: %.*s", args[0] ? args[0] : "", o.status,
+             (int)(nl ? nl - msg : (long)strlen(msg)), msg);
+    }
+    td_out_free(&o);
+    return ok;
+}

@@ -1,0 +1,96 @@
+/*
+ * t_daemon_util.h - helpers shared by the daemon tests (t_daemon*.c): case
+ * builders from the examples, energy CSV parsing, JSON field access, and
+ * waits on a daemon's state.
+ */
+#ifndef T_DAEMON_UTIL_H
+#define T_DAEMON_UTIL_H
+
+#include <jansson.h>
+#include <stddef.h>
+
+#include "mpp_msg.h"
+#include "t_daemon.h"
+
+/* An energy series read back from CSV. */
+typedef struct {
+    size_t n;
+    long long *seq, *step;
+    double *t, *kinetic, *strain, *total;
+} series;
+
+/* Steps of a case that runs until it is cancelled or interrupted. */
+#define LONG_STEPS 99000000LL
+
+void series_free(series *s);
+
+/* Parses mpmctl's energy CSV (header + rows); 0 or -1 with the reason. */
+int parse_csv(const char *text, series *s);
+
+/* seq[i] == i for every row (complete, ordered, no duplicate). */
+int consecutive(const series *s);
+
+double rel_diff(double a, double b);
+
+/* Case files: an example with a few members replaced. */
+json_t *example(const char *name);
+
+/* Sets output.<key> = v (creating output). */
+void set_output(json_t *c, const char *key, json_t *v);
+
+/* The 1D bar running `steps` steps (not endTime), energy every `every`. */
+json_t *bar_steps(long long steps, int every);
+
+/* A job that runs until cancelled: the bar at rest (nothing moves, so
+ * nothing drifts out of the grid however long it runs), 99 million steps. */
+json_t *long_case(int every);
+
+/* A 2D elastic block drifting in a box: 256 particles. */
+json_t *block2d(long long steps, int every, const char *name);
+
+/* Writes case c (consumed) to dir/file; path out. */
+int write_case(json_t *c, const char *dir, const char *file, char *path, size_t n);
+
+/* "job N" in text -> N (0 if absent). */
+unsigned long long job_of(const char *text);
+
+/* A member of a JSON text line (parsed), as text: string value or number. */
+json_t *parse_line(const char *line);
+
+long long jint(const json_t *o, const char *key);
+
+const char *jstr(const json_t *o, const char *key);
+
+double jnum(const json_t *o, const char *key);
+
+/* Number of lines of a text. */
+size_t count_lines(const char *t);
+
+/* mpmctl show ID --json, parsed (NULL on failure). */
+json_t *show_json(const td_daemon *d, unsigned long long id);
+
+/* Waits up to timeout s until the daemon's log (mpmd --verbose) shows that
+ * job's stream subscribed ("job N: stream watched"); 0 or -1. */
+int wait_watched(const td_daemon *d, unsigned long long job, double timeout);
+
+/* Waits up to timeout s until a background client's output file has at
+ * least n lines; 0 or -1. */
+int wait_lines(const td_bg *b, size_t n, double timeout);
+
+/* The error of a raw request for id: 0 if it is NOT_FOUND naming `field`,
+ * with a message naming the id; else fails the test. */
+int expect_not_found(const td_daemon *d, mpp_request rq, const char *what, const char *field);
+
+/* Expects mpmctl ARGS to exit with `status` and its stdout (or, for a
+ * non-zero status, its stdout or stderr) to contain want. */
+int expect_ctl(const td_daemon *d, int status, const char *want, const char *const *args);
+#define EXPECT_CTL(d, st, want, ...)              \
+    do {                                          \
+        const char *a_[] = {__VA_ARGS__, NULL};   \
+        if (!expect_ctl(d, st, want, a_)) return; \
+    } while (0)
+
+/* Room for an error text in the daemon tests. */
+#define ERRLEN 1024
+
+#endif

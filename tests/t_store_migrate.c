@@ -1,0 +1,336 @@
+/*
+ * t_store_migrate.c - the store opens databases written by earlier mpmd
+ * releases: a schema-1 database (built here from that release's DDL,
+ * verbatim) and a schema-2 one are migrated in place, and every run,
+ * energy sample and snapshot reads back as it was written.
+ */
+#include "store.h"
+#include "t.h"
+#include "t_store.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- a database written by the store of schema version 1 ---- */
+
+/* Schema version 1 as the store before the vocabulary change created it
+ * (its migration 0 -> 1, copied verbatim), with the header fields it set. */
+static const char old_schema_v1[] =
+    "CREATE TABLE runs ("
+    "  id             INTEGER PRIMARY KEY,"
+    "  name           TEXT NOT NULL DEFAULT '',"
+    "  case_pb        BLOB NOT NULL,"
+    "  case_hash      TEXT NOT NULL,"
+    "  method         TEXT NOT NULL CHECK (method IN ('mpm','gimp')),"
+    "  update_scheme  TEXT NOT NULL CHECK (update_scheme IN ('usf','usl','musl')),"
+    "  dim            INTEGER NOT NULL CHECK (dim BETWEEN 1 AND 3),"
+    "  particles      INTEGER NOT NULL DEFAULT 0,"
+    "  nodes          INTEGER NOT NULL DEFAULT 0,"
+    "  status         TEXT NOT NULL CHECK (status IN ('queued','running',"
+    "                   'finished','failed','cancelled','interrupted')),"
+    "  submitted_at   REAL NOT NULL,"
+    "  started_at     REAL,"
+    "  ended_at       REAL,"
+    "  steps_done     INTEGER NOT NULL DEFAULT 0,"
+    "  wall_s         REAL,"
+    "  psteps_per_s   REAL,"
+    "  kinetic        REAL,"
+    "  strain         REAL,"
+    "  potential      REAL,"
+    "  external_work  REAL,"
+    "  total          REAL,"
+    "  error          TEXT,"
+    "  server_version TEXT NOT NULL DEFAULT ''"
+    ");"
+    "CREATE INDEX runs_by_status ON runs(status, id);"
+    "CREATE INDEX runs_by_case_hash ON runs(case_hash);"
+    "CREATE TABLE energy ("
+    "  run_id        INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,"
+    "  seq           INTEGER NOT NULL,"
+    "  step          INTEGER NOT NULL,"
+    "  t             REAL,"
+    "  kinetic       REAL,"
+    "  strain        REAL,"
+    "  potential     REAL,"
+    "  external_work REAL,"
+    "  total         REAL,"
+    "  momentum_x    REAL,"
+    "  momentum_y    REAL,"
+    "  momentum_z    REAL,"
+    "  mass          REAL,"
+    "  PRIMARY KEY (run_id, seq)"
+    ") WITHOUT ROWID;"
+    "CREATE TABLE snapshots ("
+    "  run_id INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,"
+    "  step   INTEGER NOT NULL,"
+    "  t      REAL,"
+    "  n      INTEGER NOT NULL CHECK (n >= 0),"
+    "  dim    INTEGER NOT NULL CHECK (dim BETWEEN 1 AND 3),"
+    "  fields INTEGER NOT NULL,"
+    "  data   BLOB NOT NULL,"
+    "  PRIMARY KEY (run_id, step)"
+    ");"
+    "PRAGMA user_version = 1;"
+    "PRAGMA application_id = 1836084580;" /* 0x6d706d64, "mpmd" */
+    "PRAGMA journal_mode = WAL;";
+
+/* Rows as the old store wrote them: a finished run (case bytes = case_bytes,
+ * its SHA-256 in case_hash) with 3 energy samples and a snapshot, and a run
+ * left 'running' by a daemon that died, with 2 samples. */
+static const char old_rows_v1[] =
+    "INSERT INTO runs (id, name, case_pb, case_hash, method, update_scheme, dim,"
+    " particles, nodes, status, submitted_at, started_at, ended_at, steps_done, wall_s,"
+    " psteps_per_s, kinetic, strain, potential, external_work, total, error,"
+    " server_version) VALUES"
+    " (1, 'old run', X'0a0462617273001002ff007f8001', "
+    "  '02889ebafb3a820c7cc3d95866a4e025251e2164330e197de95f145922d98af9',"
+    "  'gimp', 'musl', 2, 12345, 678, 'finished', 1700000000.25, 1700000001.5,"
+    "  1700000003.75, 100, 2.5, 8000000.0, 1.5, 2.25, -3.0, 0.125, 0.625, NULL,"
+    "  '0.3.0'),"
+    " (2, 'old running', X'', "
+    "  'e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855',"
+    "  'mpm', 'usl', 1, 10, 11, 'running', 1700000010.0, 1700000011.0, NULL, 1234,"
+    "  0.5, 1000.0, NULL, NULL, NULL, NULL, NULL, NULL, '0.3.0');"
+    "INSERT INTO energy VALUES"
+    " (1, 0, 3, 0.0, 0.25, 0.0, 2.5, 0.0, 2.75, 0.0, 0.0, 0.0, 2.0),"
+    " (1, 1, 13, 0.5, 1.25, -1.0, 2.5, 0.125, 2.625, 1.0, -1.0, 0.0, 2.0),"
+    " (1, 2, 23, 1.0, 2.25, -2.0, 2.5, 0.25, 2.5, 2.0, -2.0, NULL, 2.0),"
+    " (2, 0, 7, 0.0625, 4.0, 5.0, 0.0, 1.0, 8.0, 0.5, 0.0, 0.0, 1.0),"
+    " (2, 1, 17, 0.125, 3.0, 6.0, 0.0, 1.0, 8.0, 0.25, 0.0, 0.0, 1.0);"
+    "INSERT INTO snapshots VALUES (1, 100, 0.125, 1, 2, 3, X'0102030405');";
+
+TEST(store_migrate_old_schema)
+{
+    const char *p = db_path("old.db");
+    char path[600];
+    snprintf(path, sizeof path, "%s", p);
+    CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, old_rows_v1, NULL) == 0, "%s", store_error()->message);
+
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
+    store *s = NULL;
+    CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
+           store_error()->message);
+    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 3"), "%s",
+           lc.migrated);
+    int v = -1;
+    CHECK(store_schema_version(s, &v) == 0);
+    CHECKF(v == 3 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
+    store_stats st;
+    store_get_stats(s, &st);
+    CHECK(st.recovered_running == 1 && st.recovered_queued == 0);
+
+    /* the finished run, every field */
+    store_run r;
+    CHECK(store_run_get(s, 1, &r) == 0);
+    int ok = r.id == 1 && !strcmp(r.name, "old run") && r.case_len == case_bytes_len && r.case_pb &&
+             !memcmp(r.case_pb, case_bytes, case_bytes_len) && r.method == MPM_METHOD_GIMP &&
+             r.update == MPM_MUSL && r.dim == 2 && r.particles == 12345 && r.nodes == 678 &&
+             r.status == MPP_STATUS_FINISHED && r.submitted_at == 1700000000.25 &&
+             r.started_at == 1700000001.5 && r.finished_at == 1700000003.75 && r.steps == 100 &&
+             r.wall_s == 2.5 && r.psteps_per_s == 8.0e6 && r.energy.kinetic == 1.5 &&
+             r.energy.strain == 2.25 && r.energy.potential == -3.0 &&
+             r.energy.external_work == 0.125 && r.energy.total == 0.625 && r.energy.mass == 0 &&
+             r.error == NULL && !strcmp(r.server_version, "0.3.0");
+    store_run_clear(&r);
+    CHECKF(ok, "the old finished run reads back differently");
+
+    /* its energy samples (the run's dim) and its snapshot */
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
+    CHECK(store_energy_read(s, 1, 0, 0, &es, &nes) == 0);
+    ok = nes == 3;
+    for (size_t i = 0; ok && i < nes; i++) {
+        double x = (double)i;
+        ok = es[i].seq == i && es[i].step == 10 * (int64_t)i + 3 && es[i].t == 0.5 * x &&
+             es[i].dim == 2 && es[i].e.kinetic == x + 0.25 && es[i].e.strain == -x &&
+             es[i].e.potential == 2.5 && es[i].e.external_work == 0.125 * x &&
+             es[i].e.total == 2.75 - 0.125 * x && es[i].e.momentum[0] == x &&
+             es[i].e.momentum[1] == -x && es[i].e.mass == 2.0 &&
+             (i == 2 ? isnan(es[i].e.momentum[2]) : es[i].e.momentum[2] == 0.0) &&
+             /* not recorded before schema 3: NaN */
+             isnan(es[i].e.angular_momentum[0]) && isnan(es[i].e.angular_momentum[1]) &&
+             isnan(es[i].e.angular_momentum[2]);
+    }
+    free(es);
+    CHECKF(ok, "the old run's energy samples read back differently");
+    store_snapshot sn;
+    CHECK(store_snapshot_get(s, 1, -1, &sn) == 0);
+    ok = sn.run_id == 1 && sn.step == 100 && sn.t == 0.125 && sn.n == 1 && sn.dim == 2 &&
+         sn.fields == 3 && sn.size == 5 && !memcmp(sn.data, "\1\2\3\4\5", 5);
+    store_snapshot_clear(&sn);
+    CHECKF(ok, "the old snapshot reads back differently");
+    store_run_extra x;
+    CHECK(store_run_extras(s, 1, &x) == 0);
+    ok = x.energy_count == 3 && x.last_seq == 2 && x.n_snapshots == 1 && x.snapshot_steps[0] == 100;
+    store_run_extra_clear(&x);
+    CHECK(ok);
+
+    /* the run left running: interrupted at its last sample (step 17) */
+    CHECK(store_run_get(s, 2, &r) == 0);
+    ok = r.status == MPP_STATUS_INTERRUPTED && r.method == MPM_METHOD_MPM && r.update == MPM_USL &&
+         r.dim == 1 && r.steps == 17 && r.energy.kinetic == 3.0 && r.energy.strain == 6.0 &&
+         r.energy.total == 8.0 && r.finished_at == 0 && r.started_at == 1700000011.0 &&
+         r.case_len == 0 && r.error && !strcmp(r.error, STORE_INTERRUPTED_RUNNING);
+    store_run_clear(&r);
+    CHECKF(ok, "the old running run after migration and recovery");
+    store_run_filter f = {.status_mask = STORE_STATUS_BIT(MPP_STATUS_FINISHED)};
+    store_run *list;
+    size_t n;
+    CHECK(store_run_list(s, &f, &list, &n) == 0);
+    ok = n == 1 && list[0].id == 1;
+    store_run_list_free(list, n);
+    CHECK(ok);
+
+    /* the migrated database takes new runs, ids continuing */
+    store_run in = sample_run("new", MPP_STATUS_QUEUED);
+    int64_t id = 0;
+    CHECK(store_run_insert(s, &in, &id) == 0);
+    CHECK(id == 3);
+    store_run_end end = {.status = MPP_STATUS_FINISHED, .finished_at = 1700000020.0, .steps = 9};
+    mpm_energy_sample ne[2] = {make_sample(id, 0), make_sample(id, 1)};
+    CHECK(store_energy_append(s, id, ne, 2) == 0);
+    CHECK(store_run_finish(s, id, &end) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_run_get(s, id, &r) == 0);
+    ok = r.update == MPM_MUSL && r.status == MPP_STATUS_FINISHED && r.finished_at == 1700000020.0 &&
+         r.steps == 9;
+    store_run_clear(&r);
+    CHECK(ok);
+    /* and its samples with their angular momentum, bit for bit */
+    CHECK(store_energy_read(s, id, 0, 0, &es, &nes) == 0);
+    ok = nes == 2 && sample_equals(es, 0, id, 0) && sample_equals(es, 1, id, 1);
+    free(es);
+    CHECKF(ok, "new samples in the migrated database");
+    store_close(&s);
+
+    /* on disk: the energy table has the angular momentum columns */
+    int64_t na = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_table_info('energy') WHERE name IN"
+                         " ('angular_momentum_x', 'angular_momentum_y', 'angular_momentum_z')",
+                         &na) == 0 &&
+          na == 3);
+
+    /* on disk: the hash column and its index are gone, the columns renamed */
+    int64_t cnt = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_table_info('runs') WHERE name IN"
+                         " ('case_hash', 'update_scheme', 'ended_at', 'steps_done')",
+                         &cnt) == 0);
+    CHECKF(cnt == 0, "%lld old columns left", (long long)cnt);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_table_info('runs') WHERE name IN"
+                         " ('update', 'finished_at', 'steps')",
+                         &cnt) == 0 &&
+          cnt == 3);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM sqlite_master WHERE name ="
+                         " 'runs_by_case_hash'",
+                         &cnt) == 0 &&
+          cnt == 0);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM sqlite_master WHERE name ="
+                         " 'runs_by_status'",
+                         &cnt) == 0 &&
+          cnt == 1);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
+    /* the renamed column keeps its CHECK constraint */
+    int rc = store_exec_raw(path, "UPDATE runs SET \"update\" = 'bogus' WHERE id = 1", NULL);
+    CHECKF(rc == MPM_EIO && strstr(store_error()->message, "CHECK"), "%d %s", rc,
+           store_error()->message);
+
+    /* a second open migrates nothing */
+    lc.n_migrated = 0;
+    CHECKF(store_open(path, &o, &s) == 0, "%s", store_error()->message);
+    CHECK(store_schema_version(s, &v) == 0 && v == STORE_SCHEMA_VERSION);
+    store_close(&s);
+    CHECK(lc.n_migrated == 0);
+}
+
+/* A version-2 database (the version-1 script, then 1 -> 2 as it was
+ * released): a finished 3D run with two energy samples.  Opening it migrates
+ * 2 -> 3 alone: the old samples read back with every other field intact and
+ * the angular momentum NaN (not recorded); new samples keep theirs. */
+static const char migrate_v1_to_v2[] = "DROP INDEX runs_by_case_hash;"
+                                       "ALTER TABLE runs DROP COLUMN case_hash;"
+                                       "ALTER TABLE runs RENAME COLUMN update_scheme TO \"update\";"
+                                       "ALTER TABLE runs RENAME COLUMN ended_at TO finished_at;"
+                                       "ALTER TABLE runs RENAME COLUMN steps_done TO steps;"
+                                       "PRAGMA user_version = 2;";
+
+static const char old_rows_v2[] =
+    "INSERT INTO runs (id, name, case_pb, method, \"update\", dim, particles, nodes, status,"
+    " submitted_at, started_at, finished_at, steps, wall_s, psteps_per_s, kinetic, strain,"
+    " potential, external_work, total, error, server_version) VALUES"
+    " (4, 'v2 run', X'0a0162', 'gimp', 'usf', 3, 8, 27, 'finished', 1700000100.0,"
+    "  1700000101.0, 1700000102.0, 20, 1.0, 160.0, 0.5, 0.25, 0.0, 0.0, 0.75, NULL, '0.4.0');"
+    "INSERT INTO energy VALUES"
+    " (4, 0, 0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.5, 1.0, 2.0, 3.0, 4.0),"
+    " (4, 1, 20, 0.25, 0.5, 0.25, 0.0, 0.0, 0.75, 1.5, 2.5, 3.5, 4.0);";
+
+TEST(store_migrate_v2)
+{
+    const char *p = db_path("v2.db");
+    char path[600];
+    snprintf(path, sizeof path, "%s", p);
+    CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v1_to_v2, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, old_rows_v2, NULL) == 0, "%s", store_error()->message);
+
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
+    store *s = NULL;
+    CHECKF(store_open(path, &o, &s) == 0, "opening a version-2 database: %s",
+           store_error()->message);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 3"), "%s", lc.migrated);
+    int v = -1;
+    CHECK(store_schema_version(s, &v) == 0 && v == 3);
+
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
+    CHECK(store_energy_read(s, 4, 0, 0, &es, &nes) == 0);
+    int ok = nes == 2;
+    for (size_t i = 0; ok && i < nes; i++) {
+        double x = (double)i;
+        ok = es[i].seq == i && es[i].step == 20 * (int64_t)i && es[i].dim == 3 &&
+             es[i].e.kinetic == 0.5 && es[i].e.total == 0.5 + 0.25 * x &&
+             es[i].e.momentum[0] == 1 + 0.5 * x && es[i].e.momentum[1] == 2 + 0.5 * x &&
+             es[i].e.momentum[2] == 3 + 0.5 * x && es[i].e.mass == 4 &&
+             isnan(es[i].e.angular_momentum[0]) && isnan(es[i].e.angular_momentum[1]) &&
+             isnan(es[i].e.angular_momentum[2]);
+    }
+    free(es);
+    CHECKF(ok, "the version-2 samples read back differently");
+    store_run r;
+    CHECK(store_run_get(s, 4, &r) == 0);
+    ok = r.status == MPP_STATUS_FINISHED && r.dim == 3 && r.steps == 20 && r.energy.total == 0.75;
+    store_run_clear(&r);
+    CHECK(ok);
+
+    /* a new run's samples carry their angular momentum */
+    store_run in = sample_run("new", MPP_STATUS_RUNNING);
+    int64_t id = 0;
+    CHECK(store_run_insert(s, &in, &id) == 0 && id == 5);
+    mpm_energy_sample ne = make_sample(id, 0);
+    CHECK(store_energy_append(s, id, &ne, 1) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_energy_read(s, id, 0, 0, &es, &nes) == 0);
+    ok = nes == 1 && sample_equals(es, 0, id, 0) && es[0].e.angular_momentum[2] == 7.5;
+    free(es);
+    CHECK(ok);
+    store_close(&s);
+    int64_t cnt = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
+}
