@@ -42,6 +42,15 @@
 #define MMS_E 1.0
 #define MMS_NU 0.3
 #define DISK_TEND 4.0
+#define SPIN_R 0.2
+#define SPIN_MACH 0.03 /* rim speed / p-wave speed */
+#define COL_L 50.0
+#define COL_E 1e6
+#define COL_RHO 80.0
+#ifndef COL_G
+#define COL_G 10.0 /* -DCOL_G=... for a heavier column (the answer holds at any load) */
+#endif
+#define COL_RAMP 4
 
 double bench_now(void)
 {
@@ -52,13 +61,58 @@ double bench_now(void)
 
 const char *bench_problem_name(bench_problem pb)
 {
-    static const char *const names[BP_COUNT] = {"point", "bar", "mms1d", "mms2d", "mms3d", "disks"};
+    static const char *const names[BP_COUNT] = {"point", "bar",   "mms1d", "mms2d",
+                                                "mms3d", "disks", "spin",  "column"};
     return (unsigned)pb < BP_COUNT ? names[pb] : "?";
+}
+
+/* The methods and transfers (bench.h): one row each.  cost: the sweep
+ * depth's guide, per point-step relative to GIMP times 4 (MPM is about a
+ * quarter of GIMP; the others are guesses until measured). */
+const bench_method_row bench_methods[] = {
+    {"MPM", 0, 1, 1, 1},
+    {"GIMP", 1, 1, 4, 1},
+    /* ---- issue 10, enabled by the switches in bench.h ---- */
+    {"BSPL2", 2, BENCH_HAVE_BSPLINE, 4, 1}, /* MPM_METHOD_BSPLINE2 */
+    {"BSPL3", 3, BENCH_HAVE_BSPLINE, 8, 1}, /* MPM_METHOD_BSPLINE3 */
+    {"CPDI", 4, BENCH_HAVE_CPDI, 10, 0},    /* MPM_METHOD_CPDI: F per point */
+};
+const int bench_n_methods = (int)(sizeof bench_methods / sizeof bench_methods[0]);
+
+const bench_transfer_row bench_transfers[] = {
+    {"FLIP", 0, 0.0, 1},               /* BT_FLIP: the default */
+    {"PIC", 0, 1.0, 1},                /* BT_PIC: pic_fraction = 1 */
+    {"APIC", 1, 0.0, BENCH_HAVE_APIC}, /* BT_APIC: MPM_TRANSFER_APIC */
+};
+const int bench_n_transfers = (int)(sizeof bench_transfers / sizeof bench_transfers[0]);
+
+int bench_method_index(mpm_method m)
+{
+    for (int i = 0; i < bench_n_methods; i++)
+        if (bench_methods[i].value == (int)m) return i;
+    return -1;
 }
 
 const char *bench_method_name(mpm_method m)
 {
-    return m == MPM_METHOD_GIMP ? "GIMP" : "MPM";
+    int i = bench_method_index(m);
+    return i < 0 ? "?" : bench_methods[i].name;
+}
+
+const char *bench_transfer_name(int transfer)
+{
+    return transfer >= 0 && transfer < bench_n_transfers ? bench_transfers[transfer].name : "?";
+}
+
+void bench_apply_scheme(mpm_case *c, const bench_cfg *cf)
+{
+    const bench_transfer_row *t = &bench_transfers[cf->transfer];
+    c->method = cf->method;
+    c->update = cf->update;
+    c->pic_fraction = t->pic_fraction;
+#if BENCH_HAVE_APIC
+    c->transfer = (mpm_transfer)t->value;
+#endif
 }
 
 const char *bench_update_name(mpm_update u)
@@ -68,7 +122,7 @@ const char *bench_update_name(mpm_update u)
 
 int bench_problem_dim(bench_problem pb)
 {
-    return pb == BP_MMS2 || pb == BP_DISKS ? 2 : pb == BP_MMS3 ? 3 : 1;
+    return pb == BP_MMS2 || pb == BP_DISKS || pb == BP_SPIN ? 2 : pb == BP_MMS3 ? 3 : 1;
 }
 
 double bench_scale(bench_problem pb)
@@ -77,6 +131,8 @@ double bench_scale(bench_problem pb)
     case BP_POINT: return 0.5 * POINT_V0 / (2 * M_PI); /* x0 v0 / (L omega) */
     case BP_BAR: return BAR_V0 / mpm_paper_bar_omega();
     case BP_DISKS: return 0.14;
+    case BP_SPIN: return SPIN_R;
+    case BP_COLUMN: return COL_L * 0.02; /* about the top's displacement */
     default: return MMS_A;
     }
 }
@@ -147,7 +203,7 @@ static int run_point(const bench_cfg *cf, int keep, bench_res *r)
     double dt, c = 2 * M_PI, tend = 3.0;
     long n = steps_for(tend, cf->cfl, 1.0, c, &dt);
     mpm_paper_point(&t, cf->update, dt, POINT_V0);
-    t.c.method = cf->method;
+    bench_apply_scheme(&t.c, cf);
     t.c.allow_unstable_dt = 1;
     mpm_sim *s = make_sim(&t.c, r);
     mpm_paper_free(&t);
@@ -186,6 +242,7 @@ static int run_bar(const bench_cfg *cf, int keep, bench_res *r)
         return -1;
     }
     t.c.allow_unstable_dt = 1;
+    bench_apply_scheme(&t.c, cf);
     size_t np = t.body[0].n_points;
     double *X = malloc(np * sizeof *X), *x = malloc(np * sizeof *x);
     if (!X || !x) {
@@ -347,8 +404,7 @@ static int run_mms(const bench_cfg *cf, int keep, bench_res *r)
         cs.grid.nodes[d] = N + 1;
         cs.bc.face_mask[2 * d] = cs.bc.face_mask[2 * d + 1] = 1u << d; /* rollers */
     }
-    cs.method = cf->method;
-    cs.update = cf->update;
+    bench_apply_scheme(&cs, cf);
     cs.dt = dt;
     cs.allow_unstable_dt = 1;
     cs.n_materials = 1;
@@ -403,6 +459,7 @@ static int run_disks(const bench_cfg *cf, int keep, bench_res *r)
     t.c.dt = dt;
     t.c.allow_unstable_dt = 1;
     t.body[0].ppc = t.body[1].ppc = cf->ppc;
+    bench_apply_scheme(&t.c, cf);
     mpm_sim *s = make_sim(&t.c, r);
     mpm_paper_free(&t);
     if (!s) return -1;
@@ -430,6 +487,181 @@ static int run_disks(const bench_cfg *cf, int keep, bench_res *r)
     return rc;
 }
 
+/* ---- spinning disk ---- */
+
+static int run_spin(const bench_cfg *cf, int keep, bench_res *r)
+{
+    int N = cf->cells, per = N * cf->ppc;
+    double h = 1.0 / N, d = h / cf->ppc;
+    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.3, 1.0};
+    double c = mpm_material_wave_speed(&mat, 2), w = SPIN_MACH * c / SPIN_R;
+    size_t cap = (size_t)per * (size_t)per, n = 0;
+    double *x = malloc(2 * cap * sizeof *x), *v = malloc(2 * cap * sizeof *v),
+           *vol = malloc(cap * sizeof *vol);
+    mpm_sim *s = NULL;
+    int rc = -1;
+    if (!x || !v || !vol) {
+        snprintf(r->msg, sizeof r->msg, "out of memory");
+        goto out;
+    }
+    for (int i = 0; i < per; i++)
+        for (int j = 0; j < per; j++) {
+            double px = (i + 0.5) * d - 0.5, py = (j + 0.5) * d - 0.5;
+            if (px * px + py * py >= SPIN_R * SPIN_R) continue;
+            x[2 * n] = 0.5 + px;
+            x[2 * n + 1] = 0.5 + py;
+            v[2 * n] = -w * py; /* rigid rotation about the centre */
+            v[2 * n + 1] = w * px;
+            vol[n++] = d * d;
+        }
+    double dt, tend = M_PI / w; /* half a revolution */
+    long steps = steps_for(tend, cf->cfl, h, c, &dt);
+    mpm_body_desc b = {0};
+    b.n_points = n;
+    b.x = x;
+    b.volume = vol;
+    b.v = v;
+    mpm_case cs = {0};
+    cs.grid.dim = 2;
+    for (int k = 0; k < 2; k++) {
+        cs.grid.h[k] = h;
+        cs.grid.nodes[k] = N + 1;
+    }
+    bench_apply_scheme(&cs, cf);
+    cs.dt = dt;
+    cs.allow_unstable_dt = 1;
+    cs.n_materials = 1;
+    cs.materials = &mat;
+    cs.n_bodies = 1;
+    cs.bodies = &b;
+    if (!(s = make_sim(&cs, r))) goto out;
+    r->dt = dt;
+    mpm_energy e0, e;
+    mpm_sim_energy(s, &e0);
+    if (!timed_run(s, steps, r)) {
+        mpm_sim_energy(s, &e);
+        r->dL = (e.angular_momentum[2] - e0.angular_momentum[2]) / fabs(e0.angular_momentum[2]);
+        r->dK = (e.kinetic - e0.kinetic) / e0.kinetic;
+        r->err = fabs(r->dL);
+        r->err2 = fabs(r->dK);
+    }
+    r->steps = mpm_sim_steps(s);
+    rc = keep && !r->rc ? keep_positions(s, r) : 0;
+out:
+    mpm_sim_destroy(&s);
+    free(x);
+    free(v);
+    free(vol);
+    return rc;
+}
+
+/* ---- column under its own weight ----
+ * Coombs & Augarde 2020 (AMPLE), Section 5.1: l0 = 50 m, E = 1 MPa,
+ * nu = 0, rho0 = 80 kg/m^3, g = 10 m/s^2.  In 1D (and in their
+ * laterally confined plane-strain column with nu = 0) equilibrium in the
+ * reference configuration is dP/dY = rho0 g with P = sigma (J = F), so the
+ * Cauchy stress at the point that started at height Y is
+ *     sigma_a(Y) = -rho0 g (l0 - Y)
+ * for any elastic law: the published answer.  The solver's 1D law
+ * integrates to sigma = E ln F (see the manufactured solution above), so
+ * F(Y) = exp(-a (l0 - Y)), a = rho0 g / E, and the displacement is
+ *     u_a(Y) = (exp(-a (l0 - Y)) - exp(-a l0)) / a - Y.
+ * The weight m_p g is given as a point force ramped in with (1 - cos)/2 over
+ * COL_RAMP periods T = 4 l0 / c of the first mode (a smooth ramp leaves a
+ * residual vibration of about (T / 2 T_ramp)^2 of the static answer), then
+ * held for one period while stress and position are averaged over every
+ * step: the column's modes have periods T / (2k - 1), so a one-period mean
+ * removes what vibration is left. */
+
+static int run_column(const bench_cfg *cf, int keep, bench_res *r)
+{
+    int N = cf->cells, P = cf->ppc;
+    size_t n = (size_t)N * (size_t)P;
+    double h = COL_L / N, d = h / P;
+    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, COL_E, 0.0, COL_RHO};
+    double c = mpm_material_wave_speed(&mat, 1), T = 4 * COL_L / c;
+    double *X = malloc(n * sizeof *X), *vol = malloc(n * sizeof *vol), *m = malloc(n * sizeof *m),
+           *f = malloc(n * sizeof *f), *x = malloc(n * sizeof *x),
+           *sig = malloc(6 * n * sizeof *sig), *xs = calloc(n, sizeof *xs),
+           *ss = calloc(n, sizeof *ss);
+    mpm_sim *s = NULL;
+    int rc = -1;
+    if (!X || !vol || !m || !f || !x || !sig || !xs || !ss) {
+        snprintf(r->msg, sizeof r->msg, "out of memory");
+        goto out;
+    }
+    for (size_t p = 0; p < n; p++) {
+        X[p] = (p + 0.5) * d;
+        vol[p] = d;
+        m[p] = COL_RHO * d;
+    }
+    double dt;
+    long per = steps_for(T, cf->cfl, h, c, &dt), ramp = COL_RAMP * per;
+    mpm_body_desc b = {0};
+    b.n_points = n;
+    b.x = X;
+    b.volume = vol;
+    b.mass = m;
+    mpm_case cs = {0};
+    cs.grid.dim = 1;
+    cs.grid.h[0] = h;
+    cs.grid.nodes[0] = N + 3; /* room above the top for every kernel's support */
+    cs.bc.face_mask[0] = 1;   /* the base on rollers; the top is free */
+    bench_apply_scheme(&cs, cf);
+    cs.dt = dt;
+    cs.allow_unstable_dt = 1;
+    cs.n_materials = 1;
+    cs.materials = &mat;
+    cs.n_bodies = 1;
+    cs.bodies = &b;
+    if (!(s = make_sim(&cs, r))) goto out;
+    r->dt = dt;
+    for (long k = 0; k < ramp + per && !r->rc; k++) {
+        double t = k * dt, q = k < ramp ? 0.5 * (1 - cos(M_PI * t / (ramp * dt))) : 1.0;
+        if (k <= ramp) { /* constant once the ramp is done */
+            for (size_t p = 0; p < n; p++) f[p] = -m[p] * COL_G * q;
+            if ((r->rc = bench_force_set(s, f))) {
+                mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, r->msg, sizeof r->msg);
+                break;
+            }
+        }
+        if (timed_run(s, 1, r)) break;
+        if (k >= ramp) {
+            mpm_sim_snapshot(s, &(mpm_snapshot){.x = x, .stress = sig});
+            for (size_t p = 0; p < n; p++) {
+                xs[p] += x[p];
+                ss[p] += sig[6 * p];
+            }
+        }
+    }
+    if (!r->rc) {
+        double a = COL_RHO * COL_G / COL_E, el = 0, eu = 0;
+        double utop = (1 - exp(-a * COL_L)) / a - COL_L;
+        for (size_t p = 0; p < n; p++) {
+            double sa = -COL_RHO * COL_G * (COL_L - X[p]);
+            double ua = (exp(-a * (COL_L - X[p])) - exp(-a * COL_L)) / a - X[p];
+            double du = xs[p] / per - X[p] - ua;
+            el += vol[p] * fabs(ss[p] / per - sa);
+            eu += du * du;
+        }
+        r->err = el / (COL_RHO * COL_G * COL_L * COL_L);
+        r->err2 = sqrt(eu / (double)n) / fabs(utop);
+    }
+    r->steps = mpm_sim_steps(s);
+    rc = keep && !r->rc ? keep_positions(s, r) : 0;
+out:
+    mpm_sim_destroy(&s);
+    free(X);
+    free(vol);
+    free(m);
+    free(f);
+    free(x);
+    free(sig);
+    free(xs);
+    free(ss);
+    return rc;
+}
+
 int bench_run(const bench_cfg *c, int keep_final, bench_res *r)
 {
     memset(r, 0, sizeof *r);
@@ -439,6 +671,8 @@ int bench_run(const bench_cfg *c, int keep_final, bench_res *r)
     case BP_POINT: rc = run_point(c, keep_final, r); break;
     case BP_BAR: rc = run_bar(c, keep_final, r); break;
     case BP_DISKS: rc = run_disks(c, keep_final, r); break;
+    case BP_SPIN: rc = run_spin(c, keep_final, r); break;
+    case BP_COLUMN: rc = run_column(c, keep_final, r); break;
     default: rc = run_mms(c, keep_final, r); break;
     }
     if (r->rc) {
