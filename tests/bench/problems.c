@@ -50,7 +50,9 @@
 #ifndef COL_G
 #define COL_G 10.0 /* -DCOL_G=... for a heavier column (the answer holds at any load) */
 #endif
-#define COL_RAMP 4
+#ifndef COL_RAMP
+#define COL_RAMP 4 /* periods of the load ramp (-DCOL_RAMP=... to check it) */
+#endif
 
 double bench_now(void)
 {
