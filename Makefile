@@ -225,11 +225,11 @@ lint: deps | $(GEN_H)
 
 # ---- the accuracy benchmark and the stability suite -----------------------------
 # make bench-accuracy  runs bin/mpmbench-accuracy (tests/bench/): method, update,
-#                      cells, particles per cell and dt/CFL swept on problems with
+#                      transfer, cells, particles per cell and dt/CFL swept on problems with
 #                      known answers; table on the terminal, build/bench/accuracy.csv,
 #                      and build/bench/accuracy_{time,space,dt}.png when gnuplot is
 #                      there (installed through `deploy/install-deps.sh bench`).
-#                      BENCH_ARGS=--quick for a short run.
+#                      BENCH_ARGS=--quick for a short run (--help for the rest).
 # make stress          the full stability suite (the stress_* tests with
 #                      MPM_STRESS=full) on the release build; `make test` runs
 #                      their quick form.
