@@ -370,6 +370,13 @@ static int fit_point(double y)
     return y > 0 && y < ERR_USELESS;
 }
 
+/* An answer at all (fronts, the defaults table): zero counts, e.g. an
+ * angular momentum conserved to the last bit. */
+static int usable(double y)
+{
+    return y >= 0 && y < ERR_USELESS;
+}
+
 /* Least-squares slope of log y against log x over the points fit_point()
  * accepts. */
 static double slope(const double *x, const double *y, int n, int *used)
@@ -499,7 +506,7 @@ static void print_orders(const int *only)
 static void print_pairs(const int *only)
 {
     printf("\n== Orders per refinement pair (space sweep, ppc %d, C = %g; cells coarse -> fine; "
-           "x: an error >= %g) ==\n",
+           "x: an error >= %g; exact: an error of 0) ==\n",
            order_ppc, DEF_CFL, ERR_USELESS);
     for (int pb = 0; pb < BP_COUNT; pb++) {
         if ((only && !only[pb]) || pb == BP_POINT) continue;
@@ -528,6 +535,10 @@ static void print_pairs(const int *only)
             printf("%-6s %-15s |", "", lab);
             double mn = INFINITY;
             for (int i = 1; i < s.n; i++) {
+                if (s.y[i - 1] == 0 || s.y[i] == 0) {
+                    printf(" %8s", "exact"); /* no order: an error of zero */
+                    continue;
+                }
                 if (!fit_point(s.y[i - 1]) || !fit_point(s.y[i])) {
                     printf(" %8s", "x");
                     mn = -INFINITY;
@@ -540,7 +551,7 @@ static void print_pairs(const int *only)
             if (isfinite(mn))
                 printf(" | %5.2f\n", mn);
             else
-                printf(" | %5s\n", "x");
+                printf(" | %5s\n", mn > 0 ? "exact" : "x");
         }
     }
 }
@@ -607,7 +618,7 @@ static void print_pareto(const int *only)
         int n = 0;
         /* a run whose error is ERR_USELESS or more answered nothing */
         for (int i = 0; i < nE; i++)
-            if ((int)E[i].c.pb == pb && !E[i].r.rc && fit_point(E[i].r.err)) list[n++] = &E[i];
+            if ((int)E[i].c.pb == pb && !E[i].r.rc && usable(E[i].r.err)) list[n++] = &E[i];
         if (!n) continue;
         qsort(list, (size_t)n, sizeof list[0], cmp_wall);
         printf("\n%s (%d configurations):\n", bench_problem_name((bench_problem)pb), n);
@@ -755,7 +766,7 @@ static void print_defaults(const int *only)
         for (int i = 0; i < nE; i++) {
             const entry *d = &E[i];
             if ((int)d->c.pb != pb || !is_default(&d->c) || !setting_entry(d)) continue;
-            if (d->r.rc || !fit_point(d->r.err)) {
+            if (d->r.rc || !usable(d->r.err)) {
                 printf("%-7s %5d %10s %10s %7s  %s\n", bench_problem_name((bench_problem)pb),
                        d->c.cells, d->r.rc ? "failed" : "useless", "", "", "");
                 failed++;
