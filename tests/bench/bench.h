@@ -102,7 +102,9 @@ typedef struct {
     const char *name; /* as in the tables and the CSV */
     int value;        /* the mpm_method value */
     int enabled;
-    int cost;        /* rough cost per point-step relative to GIMP, x4 (sweep depth) */
+    int cost;        /* cost per point-step relative to GIMP, times 4: documentation
+                      * only, the guess behind the run-time estimate of
+                      * docs/accuracy.md (the code does not read it) */
     int rebuildable; /* the state is positions, velocities, stresses and volumes
                       * only (the force self-test rebuilds the case each step) */
 } bench_method_row;

@@ -68,9 +68,9 @@ const char *bench_problem_name(bench_problem pb)
     return (unsigned)pb < BP_COUNT ? names[pb] : "?";
 }
 
-/* The methods and transfers (bench.h): one row each.  cost: the sweep
- * depth's guide, per point-step relative to GIMP times 4 (MPM is about a
- * quarter of GIMP; the others are guesses until measured). */
+/* The methods and transfers (bench.h): one row each.  cost: per
+ * point-step relative to GIMP times 4; MPM and GIMP measured (MPM is a
+ * quarter of GIMP in 1D/2D), the others guesses until measured. */
 const bench_method_row bench_methods[] = {
     {"MPM", 0, 1, 1, 1},
     {"GIMP", 1, 1, 4, 1},
