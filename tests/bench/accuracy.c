@@ -158,15 +158,18 @@ enum { DEPTH_NONE = 0, DEPTH_REDUCED = 1, DEPTH_FULL = 2 };
  * C = 0.5 only (the orders, the pairs, the front and the defaults table
  * need no more).  The rules aim at `make bench-accuracy` within about 10
  * minutes with every method of issue 10 enabled (MPM and GIMP alone: about
- * 3 minutes; a GIMP-cost scheme costs about 32 s in full and 14 s reduced):
+ * 3 minutes; a GIMP-cost scheme costs about 32 s in full, 14 s reduced and
+ * 4 s on the spinning disk):
  *   - FLIP: MPM and GIMP in full with every update (as before issue 10);
  *     the new methods in full with MUSL (the defaults' update), reduced
  *     with USL, not with USF (first order in time: at C = 0.5 its space
- *     orders are time-limited, and it was off every front);
+ *     orders are time-limited);
  *   - PIC (pic_fraction = 1): MPM and GIMP, reduced, MUSL only (the blend
  *     does not depend on the shape function);
- *   - APIC: every method, reduced, USL and MUSL;
- *   - the spinning disk (what APIC is for): every scheme, its one sweep.
+ *   - APIC: every method, reduced, MUSL;
+ *   - the spinning disk (what APIC is for), its one sweep: MPM and GIMP
+ *     with every update and transfer; the new methods with FLIP and APIC
+ *     (USL, MUSL) and PIC (MUSL).
  * Edit here to trade time for coverage. */
 static int sweep_depth(bench_problem pb, int mi, int u, int t)
 {
@@ -175,13 +178,17 @@ static int sweep_depth(bench_problem pb, int mi, int u, int t)
         return DEPTH_NONE;
     int classic = bench_methods[mi].value == (int)MPM_METHOD_MPM ||
                   bench_methods[mi].value == (int)MPM_METHOD_GIMP;
-    if (pb == BP_SPIN) return DEPTH_FULL;
+    if (pb == BP_SPIN) {
+        if (classic) return DEPTH_FULL;
+        if (t == BT_PIC) return u == MPM_MUSL ? DEPTH_FULL : DEPTH_NONE;
+        return u != MPM_USF ? DEPTH_FULL : DEPTH_NONE;
+    }
     switch (t) {
     case BT_FLIP:
         if (classic || u == MPM_MUSL) return DEPTH_FULL;
         return u == MPM_USL ? DEPTH_REDUCED : DEPTH_NONE;
     case BT_PIC: return classic && u == MPM_MUSL ? DEPTH_REDUCED : DEPTH_NONE;
-    case BT_APIC: return u != MPM_USF ? DEPTH_REDUCED : DEPTH_NONE;
+    case BT_APIC: return u == MPM_MUSL ? DEPTH_REDUCED : DEPTH_NONE;
     default: return DEPTH_NONE;
     }
 }
@@ -312,9 +319,9 @@ static void run_entry(entry *e, int repeats)
     int n = 1;
     /* repeats only for timing: the runs are deterministic (one thread).
      * A failed run is not repeated; runs over 0.5 s are timed once more at
-     * most and runs over 2 s only once, to keep the sweep within minutes
+     * most and runs over 1 s only once, to keep the sweep within minutes
      * (the long runs, whose timing noise is smallest, dominate it). */
-    int want = e->r.rc || e->r.wall > 2.0 ? 1
+    int want = e->r.rc || e->r.wall > 1.0 ? 1
                : e->r.wall > 0.5          ? (repeats > 2 ? 2 : repeats)
                                           : repeats;
     for (; n < want && n < 16; n++) {
