@@ -63,7 +63,10 @@ static int full_mode(void)
 
 static const char *mname(mpm_method m)
 {
-    return m == MPM_METHOD_GIMP ? "GIMP" : "MPM";
+    return m == MPM_METHOD_GIMP       ? "GIMP"
+           : m == MPM_METHOD_BSPLINE2 ? "BSP2"
+           : m == MPM_METHOD_BSPLINE3 ? "BSP3"
+                                      : "MPM";
 }
 
 static const char *upd_name(mpm_update u)
@@ -251,9 +254,9 @@ TEST(stress_cfl_sweep)
              big ? "the paper's amplitude, points cross cells" : "no cell crossing");
         TLOG("%-14s %s   largest stable C / without blow-up", "", hdr);
         for (int dim = 1; dim <= maxdim; dim++)
-            for (int m = 0; m < 2; m++)
+            for (int m = 0; m < 4; m++) /* MPM, GIMP, BSPLINE2, BSPLINE3 */
                 for (int u = 0; u < 3; u++) {
-                    mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+                    mpm_method meth = (mpm_method)m;
                     char row[128] = "", *rp = row, first_fail[400] = "";
                     double largest = 0, largest_b = 0;
                     int all_stable_so_far = 1, all_bounded_so_far = 1, default_ok = 1;
