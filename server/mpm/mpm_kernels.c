@@ -3,13 +3,17 @@
  * dimension and nodes per axis.
  *
  * Each loop is written once as an always-inline template taking the
- * dimension D and the nodes per axis NS as compile-time constants, and
- * instantiated for the nine (D, NS) pairs:
+ * dimension D, the nodes per axis NS and the shape kind BS as compile-time
+ * constants, and instantiated for fifteen (D, NS, BS) families:
  *   NS = 2: linear MPM tents;
  *   NS = 3: uGIMP when every particle's half-width lp <= h/2 (always true
  *           for generated particles): the support |x - x_i| < h + lp then
  *           covers at most 3 nodes per axis;
- *   NS = 4: uGIMP with wider particles (explicit points, lp up to h).
+ *   NS = 4: uGIMP with wider particles (explicit points, lp up to h);
+ *   BS = 1: B-splines of degree NS - 1 (BSPLINE2: NS = 3, BSPLINE3:
+ *           NS = 4) on the open knot vector, control points c .. c + p.
+ * BS only changes the per-axis weights (weights(), bs_axis()) and the
+ * support's first node (box_add()); the node loops are shared.
  * mpm_kernels_select() picks the family once per job, so no particle loop
  * branches on dimension, method, update scheme or features.  A PIC/FLIP
  * blend (mpm_case.pic_fraction > 0) selects the family's blend twin, whose
@@ -35,6 +39,9 @@
  *     G_bar = (N(s+a) - N(s-a)) / (2 lp)    (Eq. 18)
  *   where N is the unit tent and F its antiderivative, so that sum S_bar = 1
  *   and sum G_bar = 0 telescope exactly.
+ *   B-splines: control points c .. c + p; the uniform B-splines in the
+ *     interior spans, the clamped spans' pieces (mpm_bspline.c) in the p - 1
+ *     cells at each end; G = dN/df / h.
  *
  * The passes that move the particles also record, per thread, the box of
  * padded nodes that the new positions' supports touch and, for each row of
