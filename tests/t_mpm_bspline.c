@@ -417,6 +417,7 @@ TEST(bspline_conservation_2d_3d)
         CHECKF(s, "%s", TERR(&err));
         mpm_energy e0, e1;
         mpm_sim_energy(s, &e0);
+        e1 = e0;
         double pmax = 0, dip = 0;
         while (mpm_sim_time(s) < 4.0 && !t_failed()) {
             int rc = mpm_sim_run(s, 10);
