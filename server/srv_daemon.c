@@ -329,7 +329,10 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         return;
     }
     srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %zu particles", namebuf, (long)r.dim,
-            r.method == MPM_METHOD_GIMP ? "GMPM" : "MPM",
+            r.method == MPM_METHOD_GIMP       ? "GMPM"
+            : r.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
+            : r.method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
+                                              : "MPM",
             r.update == MPM_MUSL  ? "musl"
             : r.update == MPM_USL ? "usl"
                                   : "usf",

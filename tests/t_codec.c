@@ -192,6 +192,19 @@ TEST(codec_example_bar1d_gimp)
     check_bar("bar1d_gimp", 13, MPM_METHOD_GIMP);
 }
 
+/* the bar with quadratic B-splines: 16 cells of 2 points, 2 empty cells
+ * beyond the free end */
+TEST(codec_example_bar1d_bspline2)
+{
+    mpp_case *sc = load_example("bar1d_bspline2");
+    CHECK(sc);
+    const mpm_case *c = &sc->c;
+    CHECK(c->method == MPM_METHOD_BSPLINE2 && c->update == MPM_USF);
+    CHECK(c->grid.dim == 1 && c->grid.nodes[0] == 19 && c->bc.face_mask[0] == 1);
+    CHECK(sim_particles(sc) == 32);
+    mpp_case_destroy(&sc);
+}
+
 static void check_disks(const char *name, int nodes, double h, int per_disk)
 {
     mpp_case *sc = load_example(name);
@@ -265,8 +278,9 @@ TEST(codec_example_cube3d)
 /* JSON -> pb -> bytes -> pb -> JSON -> pb -> bytes: same bytes. */
 TEST(codec_roundtrip)
 {
-    static const char *const names[] = {"point1d",        "bar1d_mpm",    "bar1d_gimp",
-                                        "disks2d_coarse", "disks2d_fine", "cube3d"};
+    static const char *const names[] = {"point1d",        "bar1d_mpm",       "bar1d_gimp",
+                                        "disks2d_coarse", "disks2d_fine",    "cube3d",
+                                        "bar1d_bspline2", "disks2d_bspline2"};
     for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
         char path[256], err[T_ERRLEN];
         size_t len = 0, n1 = 0, n2 = 0;
@@ -391,7 +405,7 @@ TEST(codec_bad_json)
         return;
     if (expect_bad(
             "\"endTime\": 1", "\"endTime\": 1, \"method\": \"FEM\"", S,
-            "method: unknown value string \"FEM\" for enum mpmd.Case.Method (expected one of: MPM, GIMP)"))
+            "method: unknown value string \"FEM\" for enum mpmd.Case.Method (expected one of: MPM, GIMP, BSPLINE2, BSPLINE3)"))
         return;
     if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"update\": 7", S,
                    "update: unknown value number 7 for enum mpmd.Case.Update"))
@@ -1064,8 +1078,9 @@ TEST(codec_submit_bytes)
  * (installed by make deps). */
 TEST(codec_python_json_format)
 {
-    static const char *names[] = {"point1d",        "bar1d_mpm",    "bar1d_gimp",
-                                  "disks2d_coarse", "disks2d_fine", "cube3d"};
+    static const char *names[] = {"point1d",        "bar1d_mpm",       "bar1d_gimp",
+                                  "disks2d_coarse", "disks2d_fine",    "cube3d",
+                                  "bar1d_bspline2", "disks2d_bspline2"};
     enum { NN = sizeof names / sizeof names[0] };
     char dir[] = "/tmp/mpmpy.XXXXXX", cmd[1024], path[512], err[T_ERRLEN];
     CHECK(mkdtemp(dir) != NULL);

@@ -40,6 +40,18 @@ static void block_case(mpm_paper *t, int dim, mpm_method m, mpm_update up, const
     t->c.bodies = t->body;
 }
 
+/* the methods the invariants hold for, and their names */
+static const mpm_method inv_methods[4] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2,
+                                          MPM_METHOD_BSPLINE3};
+static const char *const inv_mname[4] = {"MPM ", "GMPM", "BSP2", "BSP3"};
+
+/* grid "nodes" per axis of a grid of n nodes: B-spline control points are
+ * n + p - 1 */
+static int grid_points(mpm_method m, int n)
+{
+    return m == MPM_METHOD_BSPLINE2 ? n + 1 : m == MPM_METHOD_BSPLINE3 ? n + 2 : n;
+}
+
 static size_t real_nodes(const mpm_sim *s, int ijk[][3], int dim, int n)
 {
     size_t cnt = 0;
@@ -58,19 +70,19 @@ static size_t real_nodes(const mpm_sim *s, int ijk[][3], int dim, int n)
 
 TEST(inv_p2g_conserves_mass_and_momentum)
 {
-    static int ijk[21 * 21 * 21][3];
+    static int ijk[23 * 23 * 23][3];
     for (int dim = 1; dim <= 3; dim++)
-        for (int m = 0; m < 2; m++) {
+        for (int m = 0; m < 4; m++) {
             mpm_paper t;
             double v[3] = {0.7, -0.4, 0.25};
-            block_case(&t, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, MPM_USF, v);
+            block_case(&t, dim, inv_methods[m], MPM_USF, v);
             mpm_error err;
             mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
             CHECKF(s, "%s", TERR(&err));
             mpm_energy e0, e1;
             mpm_sim_energy(s, &e0);
             CHECK(mpm_sim_step(s) == 0);
-            size_t nn = real_nodes(s, ijk, dim, 21);
+            size_t nn = real_nodes(s, ijk, dim, grid_points(inv_methods[m], 21));
             double mg = 0, qg[3] = {0, 0, 0}, q[3];
             for (size_t i = 0; i < nn; i++) {
                 double mn;
@@ -87,7 +99,7 @@ TEST(inv_p2g_conserves_mass_and_momentum)
             }
             TLOG("%dD %s %zu particles: grid mass %.1e, grid momentum %.1e, particle momentum "
                  "after 51 steps %.1e (relative errors)",
-                 dim, m ? "GMPM" : "MPM ", mpm_sim_particles(s), rm, rq, rp);
+                 dim, inv_mname[m], mpm_sim_particles(s), rm, rq, rp);
             mpm_sim_destroy(&s);
             mpm_paper_free(&t);
             CHECK(rm < 1e-13); /* round-off of sums over up to 13440 terms */
@@ -106,12 +118,12 @@ TEST(inv_p2g_conserves_mass_and_momentum)
 TEST(inv_uniform_velocity_translates_rigidly)
 {
     for (int dim = 1; dim <= 3; dim++)
-        for (int m = 0; m < 2; m++)
+        for (int m = 0; m < 4; m++)
             for (int up = 0; up < 3; up++) {
                 if (m == 0 && up == MPM_USL) continue;
                 mpm_paper t;
                 double v[3] = {0.3, -0.2, 0.1};
-                block_case(&t, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, (mpm_update)up, v);
+                block_case(&t, dim, inv_methods[m], (mpm_update)up, v);
                 mpm_error err;
                 mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
                 mpm_paper_free(&t);
@@ -135,7 +147,7 @@ TEST(inv_uniform_velocity_translates_rigidly)
                 if (up == 0)
                     TLOG("%dD %s: after 200 steps (t = %.3f) max |x - x0 - v t| = %.1e, "
                          "|v - v0| = %.1e, max |sigma| / E = %.1e",
-                         dim, m ? "GMPM" : "MPM ", T, dx, dv, smax / 1000);
+                         dim, inv_mname[m], T, dx, dv, smax / 1000);
                 free(x0);
                 free(x1);
                 free(sig);
@@ -154,14 +166,17 @@ TEST(inv_uniform_velocity_translates_rigidly)
 
 /* The paper's "correct" BC order (BC1 at grid initialisation, BC2 before
  * the nodal update): the momentum of every fixed DOF is exactly 0.0 after
- * every step, for every update scheme and method. */
+ * every step, for every update scheme and method (B-splines: the faces'
+ * control points). */
 TEST(inv_fixed_dofs_keep_zero_momentum)
 {
-    for (int m = 0; m < 2; m++)
+    for (int m = 0; m < 4; m++)
         for (int up = 0; up < 3; up++) {
             if (m == 0 && up == MPM_USL) continue; /* unstable: see above */
             mpm_paper t;
-            mpm_paper_disks(&t, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, (mpm_update)up, 0.05);
+            mpm_paper_disks(&t, inv_methods[m], (mpm_update)up, 0.05);
+            /* the face's nodes (B-splines: control points, 0 .. last) */
+            int last = grid_points(inv_methods[m], 21) - 1;
             for (int f = 0; f < 4; f++) t.c.bc.face_mask[f] = 3; /* walls */
             /* push the disks into the walls: throw them apart */
             t.body[0].velocity[0] = t.body[0].velocity[1] = -0.5;
@@ -176,10 +191,10 @@ TEST(inv_fixed_dofs_keep_zero_momentum)
             double worst = 0, touched = 0;
             for (int k = 0; k < 300; k++) {
                 CHECKF(mpm_sim_step(s) == 0, "%s", TERR(mpm_sim_error(s)));
-                for (int i = 0; i < 21; i++)
+                for (int i = 0; i <= last; i++)
                     for (int side = 0; side < 4; side++) {
-                        int ijk[3] = {side < 2 ? i : (side == 2 ? 0 : 20),
-                                      side < 2 ? (side ? 20 : 0) : i, 0};
+                        int ijk[3] = {side < 2 ? i : (side == 2 ? 0 : last),
+                                      side < 2 ? (side ? last : 0) : i, 0};
                         double mn, q[3];
                         mpm_sim_node(s, ijk, &mn, q);
                         worst = fmax(worst, fabs(q[0]) + fabs(q[1]));

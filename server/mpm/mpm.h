@@ -32,7 +32,15 @@
  * MPM_ENOMEM, MPM_ELEFTGRID, MPM_EDIVERGED, MPM_ECANCELLED, MPM_ECFL,
  * MPM_ESTATE and MPM_ETOOBIG from the solver). */
 
-typedef enum { MPM_METHOD_MPM = 0, MPM_METHOD_GIMP = 1 } mpm_method;
+/* Shape functions: linear tents (MPM), uGIMP (GMPM), or B-splines of
+ * degree 2 (C1, 3 nodes per axis) or 3 (C2, 4 nodes per axis) on an open
+ * (clamped) knot vector with knots at the grid nodes (docs/solver.md). */
+typedef enum {
+    MPM_METHOD_MPM = 0,
+    MPM_METHOD_GIMP = 1,
+    MPM_METHOD_BSPLINE2 = 2,
+    MPM_METHOD_BSPLINE3 = 3
+} mpm_method;
 typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
 typedef enum { MPM_MODEL_LINEAR_ELASTIC = 0 } mpm_model_kind;
 typedef enum { MPM_SHAPE_BOX = 0, MPM_SHAPE_SPHERE = 1 } mpm_shape;
@@ -62,7 +70,8 @@ typedef struct {
      * axes the grid lacks are ignored; faces of such axes must be 0. */
     unsigned face_mask[2 * MPM_MAX_DIM];
     /* An explicit node set: node_ijk[3*i + d] is the grid index of node i
-     * along axis d; node_mask[i] its fixed directions. */
+     * along axis d; node_mask[i] its fixed directions.  MPM and GIMP only
+     * (B-spline control points are not grid nodes: refused). */
     size_t n_nodes;
     const int *node_ijk;
     const unsigned *node_mask;
@@ -271,17 +280,24 @@ void mpm_sim_want_energy(mpm_sim *sim);
 void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);
 
 /* Grid state after the last step, for tests and diagnostics: node mass and
- * momentum of real node (i, j, k) (unused indices 0). */
+ * momentum of real node (i, j, k) (unused indices 0).  B-splines: the
+ * values of control point (i, j, k), i in [0, nodes + p - 1) along an axis
+ * of `nodes` grid nodes (degree p); mpm_sim_nodes() counts control points. */
 void mpm_sim_node(const mpm_sim *sim, const int ijk[3], double *mass, double q[MPM_MAX_DIM]);
 
 /* p-wave speed of a material: sqrt(E/rho) in 1D, sqrt((lambda+2mu)/rho)
  * otherwise. */
 double mpm_material_wave_speed(const mpm_material_desc *m, int dim);
 
-/* uGIMP / linear weights along one axis (exposed for tests).  For a particle
- * at reference-cell-relative coordinate, fills the nn = 2 (MPM) or 4 (GIMP)
- * weights and gradients of consecutive nodes starting at the reference node
- * (Eq. 21 / 22); returns the reference node index. */
-int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, double *w, double *g);
+/* Shape weights along one axis (exposed for tests).  For a particle at x on
+ * an axis whose first node is at x0 with spacing h, fills the nn = 2 (MPM),
+ * 4 (GIMP, half-width lp), 3 (BSPLINE2) or 4 (BSPLINE3) weights and
+ * gradients of consecutive nodes starting at the reference node (Eq. 21 /
+ * 22; B-splines: control points c .. c + p of cell c), and returns that
+ * node's index.  nodes: the grid nodes along the axis, which the B-splines'
+ * clamped boundary spans need (ignored by MPM and GIMP); x must lie in
+ * [x0, x0 + (nodes - 1) h] for B-splines. */
+int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, int nodes, double *w,
+                 double *g);
 
 #endif

@@ -306,6 +306,13 @@ static int check_bc(const mpm_case *c, mpm_error *err)
             return mpm_fail(err, MPM_EINVAL, face_path[f],
                             "direction mask %u is not within 0 for a %dD grid", m, dim);
     }
+    /* B-spline control points are not grid nodes (only the end ones lie on
+     * the grid, on its faces): a node set has no meaning there */
+    if (c->bc.n_nodes && (c->method == MPM_METHOD_BSPLINE2 || c->method == MPM_METHOD_BSPLINE3))
+        return mpm_fail(
+            err, MPM_EINVAL, "boundary.nodes",
+            "explicit boundary nodes are not supported with BSPLINE2/BSPLINE3 (B-spline "
+            "control points are not grid nodes); fix whole faces instead");
     if (c->bc.n_nodes && (!c->bc.node_ijk || !c->bc.node_mask))
         return mpm_fail(err, MPM_EINVAL, "boundary.nodes",
                         "%zu nodes given without indices or masks", c->bc.n_nodes);
@@ -355,9 +362,10 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     int rc = check_grid(c, err);
     if (rc) return rc;
     int dim = c->grid.dim;
-    if (c->method != MPM_METHOD_MPM && c->method != MPM_METHOD_GIMP)
-        return mpm_fail(err, MPM_EINVAL, "method", "unknown value %d (MPM or GIMP)",
-                        (int)c->method);
+    if (c->method != MPM_METHOD_MPM && c->method != MPM_METHOD_GIMP &&
+        c->method != MPM_METHOD_BSPLINE2 && c->method != MPM_METHOD_BSPLINE3)
+        return mpm_fail(err, MPM_EINVAL, "method",
+                        "unknown value %d (MPM, GIMP, BSPLINE2 or BSPLINE3)", (int)c->method);
     if (c->update != MPM_USF && c->update != MPM_USL && c->update != MPM_MUSL)
         return mpm_fail(err, MPM_EINVAL, "update", "unknown value %d (USF, USL or MUSL)",
                         (int)c->update);

@@ -9,14 +9,18 @@
  *   mpm_energy.c   the energy sums and the divergence guard
  *   mpm_kernels.c  the particle loops;  mpm_model.c  the constitutive models
  *   mpm_case.c     checking a case and generating its particles
+ *   mpm_bspline.c  the B-splines' clamped boundary spans, node positions
  *
  * Hot data is struct-of-arrays: particle field c of particle p is
  * P.field[c][p].  The grid is padded by two ghost layers per side for GMPM,
  * so that the 4 nodes per axis of Eq. 22 never index outside the arrays: a
  * particle in real cell c touches real nodes c-1 .. c+2 (padded c+1 ..
  * c+4), and its centre may be anywhere from the first ghost cell below the
- * grid to the first above it (c = -1 .. nodes-1).  Nothing here is
- * allocated inside a time step.
+ * grid to the first above it (c = -1 .. nodes-1).  B-splines of degree p
+ * have no ghost layers: the grid's "nodes" along an axis of n cells are the
+ * n + p control points of the open knot vector, and a particle in cell c
+ * touches control points c .. c + p.  Nothing here is allocated inside a
+ * time step.
  */
 #ifndef MPM_INTERNAL_H
 #define MPM_INTERNAL_H
@@ -60,6 +64,25 @@ typedef struct {
     double *q2[3]; /* MUSL: momentum of the updated particle velocities */
 } mpm_gridbuf;
 
+/* One axis of a B-spline grid: n cells (knot spans) of the open knot vector
+ * t_k = clamp(k - p, 0, n), k = 0 .. n + 2p (cell units), and the
+ * polynomial coefficients of the p + 1 functions on the clamped spans next
+ * to the ends: span c < p - 1 in lo[c], span c > n - p in
+ * hi[c - (n - p + 1)]; C[k][i] is the coefficient of f^i of function
+ * c + k, f = r - c.  Interior spans are the uniform B-splines. */
+#define MPM_BS_EDGE 2 /* clamped spans per end, at most (p - 1, p <= 3) */
+typedef struct {
+    int p, n;
+    double lo[MPM_BS_EDGE][4][4], hi[MPM_BS_EDGE][4][4];
+} mpm_bspline_axis;
+
+/* Fills ax for degree p (2 or 3) and n >= 1 cells. */
+void mpm_bspline_axis_init(mpm_bspline_axis *ax, int p, int n);
+/* The coefficients C[k][i] (f^i of function c + k, k = 0 .. p) of the
+ * B-splines of degree p on span c of n cells, by Cox-de Boor on the open
+ * knot vector (cold: creation and tests). */
+void mpm_bspline_span(int p, int n, int c, double C[4][4]);
+
 typedef struct mpm_kernels mpm_kernels;
 typedef struct mpm_model_ops mpm_model_ops;
 
@@ -87,18 +110,23 @@ struct mpm_sim {
     int dim;
     mpm_method method;
     mpm_update update;
-    int ns; /* nodes per axis per particle: 2 (MPM), 3 or 4 (GMPM) */
+    int ns;  /* nodes per axis per particle: 2 (MPM), 3 or 4 (GMPM, B-splines) */
+    int bsp; /* B-spline degree (2 or 3), 0 for MPM and GMPM */
 
     /* grid */
-    int nreal[3];     /* real nodes per axis (1 for unused axes) */
+    int nreal[3];     /* real nodes per axis (1 for unused axes; B-splines:
+                       * control points, nodes + p - 1) */
     int pad;          /* ghost layers per side: 0 MPM, 2 GMPM */
     int np[3];        /* padded nodes per axis */
     size_t stride[3]; /* 1, np[0], np[0]*np[1] */
     size_t nn;        /* padded node count */
     double x0[3], h[3], inv_h[3];
-    double lo[3], hi[3]; /* particle centres must stay in [lo, hi) */
-    mpm_gridbuf g;       /* the grid */
-    double *minv;        /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
+    double lo[3], hi[3];    /* particle centres must stay in [lo, hi) */
+    double rmax[3];         /* largest r = (x - x0)/h the support boxes and sort
+                             * keys take (np - 1; B-splines: cells - 1) */
+    mpm_bspline_axis bs[3]; /* B-splines: per axis */
+    mpm_gridbuf g;          /* the grid */
+    double *minv;           /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
     double mtol;
     double pic; /* PIC fraction of the velocity update (0: pure FLIP) */
 
@@ -226,10 +254,11 @@ struct mpm_kernels {
 };
 
 /* The family of dimension dim with ns nodes per axis: 2 (MPM), 3 (uGIMP,
- * every lp <= h/2) or 4 (uGIMP, lp up to h); blend nonzero: the particle
+ * every lp <= h/2) or 4 (uGIMP, lp up to h); bspline nonzero: the B-spline
+ * family of degree ns - 1 (ns 3 or 4); blend nonzero: the particle
  * velocity update blends PIC into FLIP by s->pic (pure FLIP, blend 0, does
  * no extra work). */
-const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend);
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend);
 /* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
 size_t mpm_kernels_scratch(void);
 /* Tests and benchmarks: switches a GMPM simulation that has not stepped yet
@@ -314,6 +343,22 @@ static inline size_t mpm_node_index(const mpm_sim *s, const int ijk[3])
     size_t n = 0;
     for (int d = 0; d < s->dim; d++) n += (size_t)(ijk[d] + s->pad) * s->stride[d];
     return n;
+}
+
+/* Position along axis d of padded node i: x0 + i h for MPM and GMPM; for
+ * B-splines the Greville abscissa of control point i, x0 + h (t_{i+1} +
+ * ... + t_{i+p}) / p, with which the B-splines reproduce linear functions
+ * exactly (sum_i N_i(x) xi_i = x). */
+static inline double mpm_node_coord(const mpm_sim *s, int axis, int padded_index)
+{
+    if (!s->bsp) return s->x0[axis] + padded_index * s->h[axis];
+    int p = s->bsp, n = s->bs[axis].n;
+    double sum = 0;
+    for (int k = padded_index + 1; k <= padded_index + p; k++) {
+        int t = k - p;
+        sum += t < 0 ? 0 : t > n ? n : t;
+    }
+    return s->x0[axis] + s->h[axis] * sum / p;
 }
 
 /* ---- the thread team (mpm_team.c) ----

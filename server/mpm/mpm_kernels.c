@@ -3,13 +3,17 @@
  * dimension and nodes per axis.
  *
  * Each loop is written once as an always-inline template taking the
- * dimension D and the nodes per axis NS as compile-time constants, and
- * instantiated for the nine (D, NS) pairs:
+ * dimension D, the nodes per axis NS and the shape kind BS as compile-time
+ * constants, and instantiated for fifteen (D, NS, BS) families:
  *   NS = 2: linear MPM tents;
  *   NS = 3: uGIMP when every particle's half-width lp <= h/2 (always true
  *           for generated particles): the support |x - x_i| < h + lp then
  *           covers at most 3 nodes per axis;
- *   NS = 4: uGIMP with wider particles (explicit points, lp up to h).
+ *   NS = 4: uGIMP with wider particles (explicit points, lp up to h);
+ *   BS = 1: B-splines of degree NS - 1 (BSPLINE2: NS = 3, BSPLINE3:
+ *           NS = 4) on the open knot vector, control points c .. c + p.
+ * BS only changes the per-axis weights (weights(), bs_axis()) and the
+ * support's first node (box_add()); the node loops are shared.
  * mpm_kernels_select() picks the family once per job, so no particle loop
  * branches on dimension, method, update scheme or features.  A PIC/FLIP
  * blend (mpm_case.pic_fraction > 0) selects the family's blend twin, whose
@@ -35,6 +39,9 @@
  *     G_bar = (N(s+a) - N(s-a)) / (2 lp)    (Eq. 18)
  *   where N is the unit tent and F its antiderivative, so that sum S_bar = 1
  *   and sum G_bar = 0 telescope exactly.
+ *   B-splines: control points c .. c + p; the uniform B-splines in the
+ *     interior spans, the clamped spans' pieces (mpm_bspline.c) in the p - 1
+ *     cells at each end; G = dN/df / h.
  *
  * The passes that move the particles also record, per thread, the box of
  * padded nodes that the new positions' supports touch and, for each row of
@@ -93,9 +100,58 @@ INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
     return n0;
 }
 
-int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, double *w, double *g)
+/* B-spline weights of one axis for r = (x - x0)/h in [0, n] (r = n, a
+ * rounding at the top face, is taken in the last cell); returns the first
+ * control point, c.  Interior spans: the uniform B-splines in closed form;
+ * the p - 1 clamped spans at each end (rare, and contiguous once the
+ * particles are sorted by cell, so the branch predicts well): Horner on the
+ * coefficients made at creation (mpm_bspline.c). */
+INLINE int bs_axis(const mpm_bspline_axis *ax, double r, double inv_h, int NS, double *w, double *g)
+{
+    int n = ax->n, c = (int)r;
+    c = c < n - 1 ? c : n - 1;
+    double f = r - c;
+    if (__builtin_expect((c < NS - 2) | (c > n - NS + 1), 0)) {
+        const double(*C)[4] = c < NS - 2 ? ax->lo[c] : ax->hi[c - (n - NS + 2)];
+        UNROLL
+        for (int k = 0; k < NS; k++) {
+            w[k] = ((C[k][3] * f + C[k][2]) * f + C[k][1]) * f + C[k][0];
+            g[k] = ((3.0 * C[k][3] * f + 2.0 * C[k][2]) * f + C[k][1]) * inv_h;
+        }
+        return c;
+    }
+    double a = 1.0 - f;
+    if (NS == 3) { /* (1-f)^2/2, 1/2 + f(1-f), f^2/2 */
+        w[0] = 0.5 * a * a;
+        w[1] = 0.5 + f * a;
+        w[2] = 0.5 * f * f;
+        g[0] = -a * inv_h;
+        g[1] = (a - f) * inv_h;
+        g[2] = f * inv_h;
+    } else { /* (1-f)^3/6, 2/3 - f^2 + f^3/2, its mirror, f^3/6 */
+        double f2 = f * f, a2 = a * a;
+        w[0] = a2 * a * (1.0 / 6.0);
+        w[1] = 2.0 / 3.0 - f2 * (1.0 - 0.5 * f);
+        w[2] = 2.0 / 3.0 - a2 * (1.0 - 0.5 * a);
+        w[3] = f2 * f * (1.0 / 6.0);
+        g[0] = -0.5 * a2 * inv_h;
+        g[1] = f * (1.5 * f - 2.0) * inv_h;
+        g[2] = -a * (1.5 * a - 2.0) * inv_h;
+        g[3] = 0.5 * f2 * inv_h;
+    }
+    return c;
+}
+
+int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, int nodes, double *w,
+                 double *g)
 {
     double inv_h = 1.0 / h, r = (x - x0) * inv_h;
+    if (method == MPM_METHOD_BSPLINE2 || method == MPM_METHOD_BSPLINE3) {
+        int p = method == MPM_METHOD_BSPLINE2 ? 2 : 3;
+        mpm_bspline_axis ax;
+        mpm_bspline_axis_init(&ax, p, nodes - 1);
+        return p == 2 ? bs_axis(&ax, r, inv_h, 3, w, g) : bs_axis(&ax, r, inv_h, 4, w, g);
+    }
     if (method == MPM_METHOD_GIMP) return axis(r, inv_h, lp, 4, w, g);
     return axis(r, inv_h, lp, 2, w, g);
 }
@@ -112,13 +168,19 @@ size_t mpm_kernels_scratch(void)
     return MPM_BLOCK * sizeof(pw);
 }
 
-INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, pw *o)
+/* BS: B-spline family (NS = p + 1) instead of tents / uGIMP. */
+INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
 {
     size_t base = 0;
     for (int d = 0; d < D; d++) {
         double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
-        double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
-        int c = axis(r, s->inv_h[d], lp, NS, o->w[d], o->g[d]);
+        int c;
+        if (BS) {
+            c = bs_axis(&s->bs[d], r, s->inv_h[d], NS, o->w[d], o->g[d]);
+        } else {
+            double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
+            c = axis(r, s->inv_h[d], lp, NS, o->w[d], o->g[d]);
+        }
         base += (size_t)c * s->stride[d];
     }
     o->base = base;
@@ -130,7 +192,7 @@ INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, pw *o)
 INLINE int cell_of(const mpm_sim *s, size_t p, int d, double *rr)
 {
     double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
-    double rmax = (double)(s->np[d] - 1);
+    double rmax = s->rmax[d];
     r = r >= 0 ? (r < rmax ? r : rmax) : 0.0;
     *rr = r;
     return (int)r;
@@ -191,7 +253,7 @@ INLINE void boxc_init(const mpm_sim *s, boxc *b)
     for (int d = 0; d < 3; d++) {
         b->x0[d] = s->x0[d];
         b->ih[d] = s->inv_h[d];
-        b->rmax[d] = (double)(s->np[d] - 1);
+        b->rmax[d] = s->rmax[d];
     }
 }
 
@@ -199,16 +261,17 @@ INLINE void boxc_init(const mpm_sim *s, boxc *b)
  * new one).  The cell is clamped to the padded grid as in cell_of(); the
  * support's first and last nodes (n0 - 1 .. n0 + 2 at most) are clamped
  * when the run is flushed.  Within a run the rows of the support change
- * only with 3-node uGIMP. */
+ * only with 3-node uGIMP.  B-splines (BS): nodes c .. c + NS - 1, the
+ * cell clamped to the last one as in bs_axis(). */
 INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *a,
-                    const double x[3], int D, int NS)
+                    const double x[3], int D, int NS, int BS)
 {
     int c[3] = {0, 0, 0}, n0[3] = {0, 0, 0};
     for (int d = 0; d < D; d++) {
         double r = (x[d] - b->x0[d]) * b->ih[d];
         r = r >= 0 ? (r < b->rmax[d] ? r : b->rmax[d]) : 0.0;
         c[d] = (int)r;
-        n0[d] = NS == 2 ? c[d] : NS == 4 ? c[d] - 1 : c[d] - 1 + (r - c[d] >= 0.5);
+        n0[d] = NS == 2 || BS ? c[d] : NS == 4 ? c[d] - 1 : c[d] - 1 + (r - c[d] >= 0.5);
     }
     if (c[1] != a->cy || (D > 2 && c[2] != a->cz)) {
         run_flush(s, o, a, D);
@@ -220,7 +283,7 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
         }
         return;
     }
-    for (int d = 0; d < (NS == 3 ? D : 1); d++) {
+    for (int d = 0; d < (NS == 3 && !BS ? D : 1); d++) {
         a->lo[d] = n0[d] < a->lo[d] ? n0[d] : a->lo[d];
         a->hi[d] = n0[d] + NS - 1 > a->hi[d] ? n0[d] + NS - 1 : a->hi[d];
     }
@@ -484,32 +547,32 @@ INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
     if (S) o->estr = e->es;
 }
 
-INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS)
 {
     pw W;
     for (size_t p = p0; p < p1; p++) {
-        weights(s, p, D, NS, &W);
+        weights(s, p, D, NS, BS, &W);
         scatter_mq(s, gb, &W, p, D, NS);
     }
 }
 
-INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS)
 {
     pw W;
     for (size_t p = p0; p < p1; p++) {
-        weights(s, p, D, NS, &W);
+        weights(s, p, D, NS, BS, &W);
         scatter_mq(s, gb, &W, p, D, NS);
         scatter_force(s, gb, &W, p, D, NS);
     }
 }
 
 /* MUSL: momentum of the updated particle velocities. */
-INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS)
 {
     pw W;
     double *restrict q0 = gb->q2[0], *restrict q1 = gb->q2[1], *restrict q2 = gb->q2[2];
     for (size_t p = p0; p < p1; p++) {
-        weights(s, p, D, NS, &W);
+        weights(s, p, D, NS, BS, &W);
         double mp = s->P.m[p];
         double mv0 = mp * s->P.v[0][p];
         double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
@@ -530,7 +593,7 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
 /* USF: strain and stress from the grid velocity, then internal forces with
  * the new stress; the weights of the block are kept between the two. */
 INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1,
-                           int D, int NS, int EN)
+                           int D, int NS, int BS, int EN)
 {
     pw *Wb = o->wblk;
     esum e;
@@ -538,7 +601,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
-            weights(s, b0 + i, D, NS, &Wb[i]);
+            weights(s, b0 + i, D, NS, BS, &Wb[i]);
             gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL);
         }
         block_update(s, b0, nb, o->deps, D);
@@ -596,8 +659,8 @@ INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, doubl
 
 /* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0);
  * BL: the velocity blended with PIC (v_update()). */
-INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int EN,
-                     int BL)
+INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS,
+                     int EN, int BL)
 {
     pw W;
     rowrun a;
@@ -610,7 +673,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
     boxc_init(s, &bc);
     for (size_t p = p0; p < p1; p++) {
         double dx[3], dv[3], xn[3];
-        weights(s, p, D, NS, &W);
+        weights(s, p, D, NS, BS, &W);
         gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv);
         for (int d = 0; d < D; d++) {
             xn[d] = s->P.x[d][p] + dt * dx[d];
@@ -619,7 +682,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
         }
         check_particle(s, o, p, D);
         if (EN) esum_particle(s, &e, p, D);
-        box_add(s, &bc, o, &a, xn, D, NS);
+        box_add(s, &bc, o, &a, xn, D, NS, BS);
     }
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 0);
@@ -628,7 +691,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
  * weights of the step's start positions serve both, in one gather. */
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                            int EN, int BL)
+                            int BS, int EN, int BL)
 {
     pw W;
     rowrun a;
@@ -644,7 +707,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3], dv[3], xn[3];
-            weights(s, p, D, NS, &W);
+            weights(s, p, D, NS, BS, &W);
             gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv);
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
@@ -653,7 +716,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             }
             check_particle(s, o, p, D);
             if (EN) esum_particle(s, &e, p, D);
-            box_add(s, &bc, o, &a, xn, D, NS);
+            box_add(s, &bc, o, &a, xn, D, NS, BS);
         }
         block_update(s, b0, nb, o->deps, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -664,14 +727,15 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
 
 /* MUSL: the velocity only (BL: blended with PIC; the blended velocity is
  * what p2g_q2 maps back to the grid). */
-INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BL)
+INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS,
+                    int BL)
 {
     pw W;
     double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     (void)o;
     for (size_t p = p0; p < p1; p++) {
         double dv[3], vp[3] = {0, 0, 0};
-        weights(s, p, D, NS, &W);
+        weights(s, p, D, NS, BS, &W);
         gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv);
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
     }
@@ -680,7 +744,7 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, 
 /* MUSL: positions from the updated grid momentum, strain from the momentum
  * of the updated particle velocities (q2). */
 INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                           int EN)
+                           int BS, int EN)
 {
     pw W;
     rowrun a;
@@ -696,7 +760,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3], xn[3];
-            weights(s, p, D, NS, &W);
+            weights(s, p, D, NS, BS, &W);
             gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL);
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
@@ -704,7 +768,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             }
             check_particle(s, o, p, D);
             if (EN) esum_particle(s, &e, p, D);
-            box_add(s, &bc, o, &a, xn, D, NS);
+            box_add(s, &bc, o, &a, xn, D, NS, BS);
         }
         block_update(s, b0, nb, o->deps, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -714,7 +778,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
 }
 
 /* The support box of particles [p0, p1) without moving them. */
-INLINE void bbox_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS)
+INLINE void bbox_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS)
 {
     rowrun a;
     boxc bc;
@@ -724,7 +788,7 @@ INLINE void bbox_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, i
     for (size_t p = p0; p < p1; p++) {
         double x[3] = {0, 0, 0};
         for (int d = 0; d < D; d++) x[d] = s->P.x[d][p];
-        box_add(s, &bc, o, &a, x, D, NS);
+        box_add(s, &bc, o, &a, x, D, NS, BS);
     }
     run_flush(s, o, &a, D);
 }
@@ -754,11 +818,11 @@ INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, size_t p0, size_t p1, i
 
 #ifndef MPM_LEAN
 /* Point forces of the loaded particles (tractions), f += S f_p (Eq. 14). */
-INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
+INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
 {
     pw W;
     for (size_t i = 0; i < s->nload; i++) {
-        weights(s, s->load_p[i], D, NS, &W);
+        weights(s, s->load_p[i], D, NS, BS, &W);
         double l0 = s->load_f[0][i], l1 = D > 1 ? s->load_f[1][i] : 0.0;
         double l2 = D > 2 ? s->load_f[2][i] : 0.0;
         ROWS(D, NS, W, s, {
@@ -773,128 +837,152 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
         });
     }
 }
-#define LOADS(D, NS)                                 \
-    static void scatter_loads_##D##_##NS(mpm_sim *s) \
-    {                                                \
-        scatter_loads_t(s, D, NS);                   \
+#define LOADS(D, NS, BS)                                    \
+    static void scatter_loads_##D##_##NS##_##BS(mpm_sim *s) \
+    {                                                       \
+        scatter_loads_t(s, D, NS, BS);                      \
     }
 #else
-#define LOADS(D, NS)                                 \
-    static void scatter_loads_##D##_##NS(mpm_sim *s) \
-    {                                                \
-        (void)s;                                     \
+#define LOADS(D, NS, BS)                                    \
+    static void scatter_loads_##D##_##NS##_##BS(mpm_sim *s) \
+    {                                                       \
+        (void)s;                                            \
     }
 #endif
 
-/* The PIC/FLIP blend of family (D, NS): its own velocity updates, every
- * other pass shared. */
-#define BLEND(D, NS)                                                                            \
-    static void g2p_xv_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
-    {                                                                                           \
-        if (en)                                                                                 \
-            g2p_xv_t(s, o, a, b, D, NS, 1, 1);                                                  \
-        else                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 0, 1);                                                  \
-    }                                                                                           \
-    static void g2p_xv_stress_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
-                                            int en)                                             \
-    {                                                                                           \
-        if (en)                                                                                 \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 1);                                           \
-        else                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 1);                                           \
-    }                                                                                           \
-    static void g2p_v_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
-    {                                                                                           \
-        g2p_v_t(s, o, a, b, D, NS, 1);                                                          \
-    }                                                                                           \
-    static const mpm_kernels family_bl_##D##_##NS = {                                           \
-        p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                    \
-        stress_force_##D##_##NS, g2p_xv_bl_##D##_##NS,    g2p_xv_stress_bl_##D##_##NS,          \
-        g2p_v_bl_##D##_##NS,     g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,             \
-        bbox_##D##_##NS,         cell_keys_##D##_##NS};
+/* Family (D, NS, BS): D dimensions, NS nodes per axis, BS 0 for tents (NS
+ * 2) and uGIMP (NS 3, 4), 1 for B-splines of degree NS - 1. */
 
-#define FAMILY(D, NS)                                                                              \
-    static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
+/* The PIC/FLIP blend of family (D, NS, BS): its own velocity updates,
+ * every other pass shared. */
+#define BLEND(D, NS, BS)                                                                       \
+    static void g2p_xv_bl_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, \
+                                            int en)                                            \
+    {                                                                                          \
+        if (en)                                                                                \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 1);                                             \
+        else                                                                                   \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 1);                                             \
+    }                                                                                          \
+    static void g2p_xv_stress_bl_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a,    \
+                                                   size_t b, int en)                           \
+    {                                                                                          \
+        if (en)                                                                                \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 1);                                      \
+        else                                                                                   \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 1);                                      \
+    }                                                                                          \
+    static void g2p_v_bl_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)  \
+    {                                                                                          \
+        g2p_v_t(s, o, a, b, D, NS, BS, 1);                                                     \
+    }                                                                                          \
+    static const mpm_kernels family_bl_##D##_##NS##_##BS = {                                   \
+        p2g_mq_##D##_##NS##_##BS,        p2g_mqf_##D##_##NS##_##BS,                            \
+        p2g_q2_##D##_##NS##_##BS,        stress_force_##D##_##NS##_##BS,                       \
+        g2p_xv_bl_##D##_##NS##_##BS,     g2p_xv_stress_bl_##D##_##NS##_##BS,                   \
+        g2p_v_bl_##D##_##NS##_##BS,      g2p_x_stress_##D##_##NS##_##BS,                       \
+        scatter_loads_##D##_##NS##_##BS, bbox_##D##_##NS##_##BS,                               \
+        cell_keys_##D##_##NS##_##BS};
+
+#define FAMILY(D, NS, BS)                                                                          \
+    static void p2g_mq_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)          \
     {                                                                                              \
-        p2g_mq_t(s, gb, a, b, D, NS);                                                              \
+        p2g_mq_t(s, gb, a, b, D, NS, BS);                                                          \
     }                                                                                              \
-    static void p2g_mqf_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                \
+    static void p2g_mqf_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)         \
     {                                                                                              \
-        p2g_mqf_t(s, gb, a, b, D, NS);                                                             \
+        p2g_mqf_t(s, gb, a, b, D, NS, BS);                                                         \
     }                                                                                              \
-    static void p2g_q2_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
+    static void p2g_q2_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)          \
     {                                                                                              \
-        p2g_q2_t(s, gb, a, b, D, NS);                                                              \
+        p2g_q2_t(s, gb, a, b, D, NS, BS);                                                          \
     }                                                                                              \
-    static void stress_force_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t a,  \
-                                        size_t b, int en)                                          \
+    static void stress_force_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o,     \
+                                               size_t a, size_t b, int en)                         \
     {                                                                                              \
         if (en)                                                                                    \
-            stress_force_t(s, gb, o, a, b, D, NS, 1);                                              \
+            stress_force_t(s, gb, o, a, b, D, NS, BS, 1);                                          \
         else                                                                                       \
-            stress_force_t(s, gb, o, a, b, D, NS, 0);                                              \
+            stress_force_t(s, gb, o, a, b, D, NS, BS, 0);                                          \
     }                                                                                              \
-    static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)       \
-    {                                                                                              \
-        if (en)                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 1, 0);                                                     \
-        else                                                                                       \
-            g2p_xv_t(s, o, a, b, D, NS, 0, 0);                                                     \
-    }                                                                                              \
-    static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
+    static void g2p_xv_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
                                          int en)                                                   \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0);                                              \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 0);                                                 \
         else                                                                                       \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0);                                              \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 0);                                                 \
     }                                                                                              \
-    static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                \
-    {                                                                                              \
-        g2p_v_t(s, o, a, b, D, NS, 0);                                                             \
-    }                                                                                              \
-    static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
+    static void g2p_xv_stress_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, \
+                                                int en)                                            \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_x_stress_t(s, o, a, b, D, NS, 1);                                                  \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 0);                                          \
         else                                                                                       \
-            g2p_x_stress_t(s, o, a, b, D, NS, 0);                                                  \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 0);                                          \
     }                                                                                              \
-    LOADS(D, NS)                                                                                   \
-    static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                 \
+    static void g2p_v_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)         \
     {                                                                                              \
-        bbox_t(s, o, a, b, D, NS);                                                                 \
+        g2p_v_t(s, o, a, b, D, NS, BS, 0);                                                         \
     }                                                                                              \
-    static void cell_keys_##D##_##NS(const mpm_sim *s, uint32_t *key, size_t a, size_t b)          \
+    static void g2p_x_stress_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
+                                               int en)                                             \
+    {                                                                                              \
+        if (en)                                                                                    \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1);                                              \
+        else                                                                                       \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0);                                              \
+    }                                                                                              \
+    LOADS(D, NS, BS)                                                                               \
+    static void bbox_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
+    {                                                                                              \
+        bbox_t(s, o, a, b, D, NS, BS);                                                             \
+    }                                                                                              \
+    static void cell_keys_##D##_##NS##_##BS(const mpm_sim *s, uint32_t *key, size_t a, size_t b)   \
     {                                                                                              \
         cell_keys_t(s, key, a, b, D);                                                              \
     }                                                                                              \
-    static const mpm_kernels family_##D##_##NS = {                                                 \
-        p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                       \
-        stress_force_##D##_##NS, g2p_xv_##D##_##NS,       g2p_xv_stress_##D##_##NS,                \
-        g2p_v_##D##_##NS,        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,                \
-        bbox_##D##_##NS,         cell_keys_##D##_##NS};                                            \
-    BLEND(D, NS)
+    static const mpm_kernels family_##D##_##NS##_##BS = {                                          \
+        p2g_mq_##D##_##NS##_##BS,        p2g_mqf_##D##_##NS##_##BS,                                \
+        p2g_q2_##D##_##NS##_##BS,        stress_force_##D##_##NS##_##BS,                           \
+        g2p_xv_##D##_##NS##_##BS,        g2p_xv_stress_##D##_##NS##_##BS,                          \
+        g2p_v_##D##_##NS##_##BS,         g2p_x_stress_##D##_##NS##_##BS,                           \
+        scatter_loads_##D##_##NS##_##BS, bbox_##D##_##NS##_##BS,                                   \
+        cell_keys_##D##_##NS##_##BS};                                                              \
+    BLEND(D, NS, BS)
 
-FAMILY(1, 2)
-FAMILY(1, 3)
-FAMILY(1, 4)
-FAMILY(2, 2)
-FAMILY(2, 3)
-FAMILY(2, 4)
-FAMILY(3, 2)
-FAMILY(3, 3)
-FAMILY(3, 4)
+FAMILY(1, 2, 0)
+FAMILY(1, 3, 0)
+FAMILY(1, 4, 0)
+FAMILY(2, 2, 0)
+FAMILY(2, 3, 0)
+FAMILY(2, 4, 0)
+FAMILY(3, 2, 0)
+FAMILY(3, 3, 0)
+FAMILY(3, 4, 0)
+/* B-splines: quadratic (NS 3) and cubic (NS 4) */
+FAMILY(1, 3, 1)
+FAMILY(1, 4, 1)
+FAMILY(2, 3, 1)
+FAMILY(2, 4, 1)
+FAMILY(3, 3, 1)
+FAMILY(3, 4, 1)
 
-const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend)
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend)
 {
-    static const mpm_kernels *const table[3][3] = {{&family_1_2, &family_1_3, &family_1_4},
-                                                   {&family_2_2, &family_2_3, &family_2_4},
-                                                   {&family_3_2, &family_3_3, &family_3_4}};
+    static const mpm_kernels *const table[3][3] = {{&family_1_2_0, &family_1_3_0, &family_1_4_0},
+                                                   {&family_2_2_0, &family_2_3_0, &family_2_4_0},
+                                                   {&family_3_2_0, &family_3_3_0, &family_3_4_0}};
     static const mpm_kernels *const table_bl[3][3] = {
-        {&family_bl_1_2, &family_bl_1_3, &family_bl_1_4},
-        {&family_bl_2_2, &family_bl_2_3, &family_bl_2_4},
-        {&family_bl_3_2, &family_bl_3_3, &family_bl_3_4}};
+        {&family_bl_1_2_0, &family_bl_1_3_0, &family_bl_1_4_0},
+        {&family_bl_2_2_0, &family_bl_2_3_0, &family_bl_2_4_0},
+        {&family_bl_3_2_0, &family_bl_3_3_0, &family_bl_3_4_0}};
+    static const mpm_kernels *const table_bs[3][2] = {{&family_1_3_1, &family_1_4_1},
+                                                      {&family_2_3_1, &family_2_4_1},
+                                                      {&family_3_3_1, &family_3_4_1}};
+    static const mpm_kernels *const table_bs_bl[3][2] = {{&family_bl_1_3_1, &family_bl_1_4_1},
+                                                         {&family_bl_2_3_1, &family_bl_2_4_1},
+                                                         {&family_bl_3_3_1, &family_bl_3_4_1}};
+    if (bspline) return blend ? table_bs_bl[dim - 1][ns - 3] : table_bs[dim - 1][ns - 3];
     return blend ? table_bl[dim - 1][ns - 2] : table[dim - 1][ns - 2];
 }

@@ -304,7 +304,7 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
         (ns == 3 && !gimp_fits3(s)))
         return MPM_EINVAL;
     s->ns = ns;
-    s->k = mpm_kernels_select(s->dim, ns, s->pic != 0);
+    s->k = mpm_kernels_select(s->dim, ns, 0, s->pic != 0);
     init_order(s);
     return 0;
 }
@@ -328,13 +328,15 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     int dim = s->dim = c->grid.dim;
     s->method = c->method;
     s->update = c->update;
-    s->ns = c->method == MPM_METHOD_GIMP ? 4 : 2;
+    s->bsp = c->method == MPM_METHOD_BSPLINE2 ? 2 : c->method == MPM_METHOD_BSPLINE3 ? 3 : 0;
+    s->ns = c->method == MPM_METHOD_GIMP ? 4 : s->bsp ? s->bsp + 1 : 2;
     s->pad = c->method == MPM_METHOD_GIMP ? 2 : 0;
     s->nthreads = c->threads > 1 ? c->threads : 1;
     atomic_init(&s->cancel, 0);
     s->nn = 1;
     for (int d = 0; d < 3; d++) {
-        s->nreal[d] = d < dim ? c->grid.nodes[d] : 1;
+        /* B-splines: n cells, n + p control points (no ghost layers) */
+        s->nreal[d] = d < dim ? c->grid.nodes[d] + (s->bsp ? s->bsp - 1 : 0) : 1;
         s->np[d] = d < dim ? s->nreal[d] + 2 * s->pad : 1;
         s->stride[d] = s->nn;
         s->nn *= (size_t)s->np[d];
@@ -345,6 +347,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         /* a GMPM centre may enter the first ghost cell (see mpm_bc_build()) */
         s->lo[d] = d < dim ? c->grid.origin[d] - (s->pad / 2) * s->h[d] : 0;
         s->hi[d] = d < dim ? c->grid.origin[d] + (c->grid.nodes[d] - 1 + s->pad / 2) * s->h[d] : 0;
+        /* B-splines: the last cell is nodes - 2 (bs_axis() clamps to it) */
+        s->rmax[d] = s->bsp && d < dim ? (double)(c->grid.nodes[d] - 2) : (double)(s->np[d] - 1);
+        if (s->bsp) mpm_bspline_axis_init(&s->bs[d], s->bsp, d < dim ? c->grid.nodes[d] - 1 : 1);
     }
     s->model = mpm_model_get(c->materials[0].model);
     s->nmat = c->n_materials;
@@ -357,9 +362,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     int musl = c->update == MPM_MUSL;
     if (alloc_particles(&s->P, np, dim, c->method == MPM_METHOD_GIMP)) goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
-    if (s->ns == 4 && gimp_fits3(s)) s->ns = 3;
+    if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
-    s->k = mpm_kernels_select(dim, s->ns, s->pic != 0);
+    s->k = mpm_kernels_select(dim, s->ns, s->bsp != 0, s->pic != 0);
     if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
         goto nomem;

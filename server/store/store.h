@@ -45,7 +45,7 @@
 #include <stdint.h>
 
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 3
+#define STORE_SCHEMA_VERSION 4
 
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))

@@ -109,6 +109,19 @@ static const char *const migrations[] = {
     "ALTER TABLE energy ADD COLUMN angular_momentum_x REAL;"
     "ALTER TABLE energy ADD COLUMN angular_momentum_y REAL;"
     "ALTER TABLE energy ADD COLUMN angular_momentum_z REAL;",
+    /* 3 -> 4: runs.method takes the B-spline methods ('bspline2',
+     * 'bspline3') and, reserved for the CPDI method, 'cpdi'.  SQLite cannot
+     * alter a CHECK constraint, and rebuilding runs would cascade-delete its
+     * energy and snapshot rows (foreign keys are on, and cannot be turned
+     * off inside the migration's transaction), so the constraint's text is
+     * widened in place: every stored value still satisfies it, which is
+     * the case SQLite documents as safe for writable_schema; RESET reloads
+     * the schema. */
+    "PRAGMA writable_schema = ON;"
+    "UPDATE sqlite_schema SET sql = replace(sql, 'CHECK (method IN (''mpm'',''gimp''))',"
+    " 'CHECK (method IN (''mpm'',''gimp'',''bspline2'',''bspline3'',''cpdi''))')"
+    " WHERE type = 'table' AND name = 'runs';"
+    "PRAGMA writable_schema = RESET;",
 };
 
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,
@@ -193,14 +206,16 @@ const char *store_sqlite_version(void)
 
 const char *const sti_status_names[STORE_NSTATUS] = {"queued", "running",   "finished",
                                                      "failed", "cancelled", "interrupted"};
-const char *const sti_method_names[2] = {"mpm", "gimp"};
+const char *const sti_method_names[STORE_NMETHOD] = {"mpm", "gimp", "bspline2", "bspline3"};
 const char *const sti_update_names[3] = {"usf", "usl", "musl"};
 
 _Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
                    MPP_STATUS_FINISHED == 3 && MPP_STATUS_FAILED == 4 &&
                    MPP_STATUS_CANCELLED == 5 && MPP_STATUS_INTERRUPTED == MPP_STATUS_MAX,
                "sti_status_names follows mpp_status");
-_Static_assert(MPM_METHOD_MPM == 0 && MPM_METHOD_GIMP == 1, "sti_method_names");
+_Static_assert(MPM_METHOD_MPM == 0 && MPM_METHOD_GIMP == 1 && MPM_METHOD_BSPLINE2 == 2 &&
+                   MPM_METHOD_BSPLINE3 == 3,
+               "sti_method_names");
 _Static_assert(MPM_USF == 0 && MPM_USL == 1 && MPM_MUSL == 2, "sti_update_names");
 
 int sti_status_ok(mpp_status st)
@@ -209,7 +224,7 @@ int sti_status_ok(mpp_status st)
 }
 int sti_method_ok(mpm_method m)
 {
-    return (unsigned)m < 2;
+    return (unsigned)m < STORE_NMETHOD;
 }
 int sti_update_ok(mpm_update u)
 {

@@ -161,7 +161,8 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     memset(r, 0, sizeof *r);
     r->id = sqlite3_column_int64(st, 0);
     r->case_len = (size_t)sqlite3_column_int64(st, 2);
-    int m = sti_parse_name((const char *)sqlite3_column_text(st, 3), sti_method_names, 2);
+    int m =
+        sti_parse_name((const char *)sqlite3_column_text(st, 3), sti_method_names, STORE_NMETHOD);
     int u = sti_parse_name((const char *)sqlite3_column_text(st, 4), sti_update_names, 3);
     int stt =
         sti_parse_name((const char *)sqlite3_column_text(st, 8), sti_status_names, STORE_NSTATUS);

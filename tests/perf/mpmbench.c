@@ -33,8 +33,10 @@ static int progress_shown;
 
 static const char usage[] =
     "usage: mpmbench --scene NAME [--particles N] [--steps S] [--threads T]\n"
-    "                [--method mpm|gimp] [--update usf|usl|musl] [--pic F] [--csv]\n"
+    "                [--method mpm|gimp|bspline2|bspline3] [--update usf|usl|musl]\n"
+    "                [--pic F] [--csv]\n"
     "       mpmbench --all [--particles N] [--steps S] [--csv]\n"
+    "       mpmbench --bspline [--particles N] [--steps S] [--csv]\n"
     "Throughput of the mpmd solver (issue #5): millions of particle-steps per second,\n"
     "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
     "Scenes:\n"
@@ -52,12 +54,14 @@ static const char usage[] =
     "                 capped by the simulated time a scene stays valid for, and cut to ~2 s\n"
     "                 when the warm-up shows the solver 2x slower than the target)\n"
     "  --threads T    solver threads (default 2), 1..64\n"
-    "  --method M     mpm | gimp (default mpm)\n"
+    "  --method M     mpm | gimp | bspline2 | bspline3 (default mpm)\n"
     "  --update U     usf | usl | musl (default usf)\n"
     "  --pic F        PIC fraction of the velocity update, 0..1 (default 0: pure FLIP);\n"
     "                 not with the daemon scene or --all\n"
     "  --csv          print CSV rows instead of the table\n"
     "  --all          every scene, MPM and GIMP, 1 and 2 threads; the lean build; the daemon\n"
+    "  --bspline      disks2d and cube3d at 1 and 2 threads, GIMP, BSPLINE2 and BSPLINE3\n"
+    "                 interleaved (two rounds): the B-splines' speed as ratios to GIMP\n"
     "  -h, --help     this text\n"
     "Rows are appended to build/bench/throughput.csv:\n  " PB_CSV_HEADER "\n"
     "bytes_per_particle is the peak RSS of a forked child that builds and runs the one\n"
@@ -214,7 +218,7 @@ const char *pb_exe_dir(void)
 /* ---- the command line ---- */
 
 typedef struct {
-    int all, csv, have_scene;
+    int all, bspline, csv, have_scene;
     const char *scene;
     long particles, steps;
     int threads, have_threads, have_method, have_update;
@@ -256,6 +260,10 @@ static int parse_args(int argc, char **argv, opts *o)
             o->all = 1;
             continue;
         }
+        if (!strcmp(a, "--bspline")) {
+            o->bspline = 1;
+            continue;
+        }
         int known = !strcmp(a, "--scene") || !strcmp(a, "--particles") || !strcmp(a, "--steps") ||
                     !strcmp(a, "--threads") || !strcmp(a, "--method") || !strcmp(a, "--update") ||
                     !strcmp(a, "--pic");
@@ -295,8 +303,14 @@ static int parse_args(int argc, char **argv, opts *o)
                 o->method = MPM_METHOD_MPM;
             else if (!strcmp(v, "gimp"))
                 o->method = MPM_METHOD_GIMP;
+            else if (!strcmp(v, "bspline2"))
+                o->method = MPM_METHOD_BSPLINE2;
+            else if (!strcmp(v, "bspline3"))
+                o->method = MPM_METHOD_BSPLINE3;
             else {
-                fprintf(stderr, "mpmbench: --method: expected mpm or gimp, got '%s'\n", v);
+                fprintf(stderr,
+                        "mpmbench: --method: expected mpm, gimp, bspline2 or bspline3, got '%s'\n",
+                        v);
                 return -1;
             }
             o->have_method = 1;
@@ -323,13 +337,13 @@ static int parse_args(int argc, char **argv, opts *o)
             o->have_update = 1;
         }
     }
-    if (o->all &&
+    if ((o->all || o->bspline) &&
         (o->have_scene || o->have_threads || o->have_method || o->have_update || o->have_pic)) {
         fprintf(stderr, "mpmbench: --all runs every scene, method and thread count; it takes "
                         "only --particles, --steps and --csv\n");
         return -1;
     }
-    if (!o->all && !o->have_scene) {
+    if (!o->all && !o->bspline && !o->have_scene) {
         fprintf(stderr, "mpmbench: give --scene NAME or --all (see --help)\n");
         return -1;
     }
@@ -423,7 +437,10 @@ static int run_lean(const pb_cfg *c, long steps, pb_row *r)
                     "--scene",
                     "disks2d",
                     "--method",
-                    c->method == MPM_METHOD_GIMP ? "gimp" : "mpm",
+                    c->method == MPM_METHOD_GIMP       ? "gimp"
+                    : c->method == MPM_METHOD_BSPLINE2 ? "bspline2"
+                    : c->method == MPM_METHOD_BSPLINE3 ? "bspline3"
+                                                       : "mpm",
                     "--update",
                     c->update == MPM_USL    ? "usl"
                     : c->update == MPM_MUSL ? "musl"
@@ -478,14 +495,17 @@ static int run_lean(const pb_cfg *c, long steps, pb_row *r)
         return -1;
     }
     for (char *line = strtok(out, "\n"); line; line = strtok(NULL, "\n")) {
-        char scene[40], meth[8], upd[8];
+        char scene[40], meth[12], upd[8];
         memset(r, 0, sizeof *r);
-        if (sscanf(line, "%39[^,],%7[^,],%7[^,],%d,%zu,%zu,%ld,%d,%lf,%lf,%lf", scene, meth, upd,
+        if (sscanf(line, "%39[^,],%11[^,],%7[^,],%d,%zu,%zu,%ld,%d,%lf,%lf,%lf", scene, meth, upd,
                    &r->dim, &r->particles, &r->nodes, &r->steps, &r->threads, &r->wall_s,
                    &r->mpsteps, &r->bytes_pp) == 11 &&
             strcmp(scene, "scene")) {
             snprintf(r->scene, sizeof r->scene, "%s", scene);
-            r->method = strcmp(meth, "GIMP") ? MPM_METHOD_MPM : MPM_METHOD_GIMP;
+            r->method = !strcmp(meth, "GIMP")       ? MPM_METHOD_GIMP
+                        : !strcmp(meth, "BSPLINE2") ? MPM_METHOD_BSPLINE2
+                        : !strcmp(meth, "BSPLINE3") ? MPM_METHOD_BSPLINE3
+                                                    : MPM_METHOD_MPM;
             r->update = !strcmp(upd, "USL") ? MPM_USL : !strcmp(upd, "MUSL") ? MPM_MUSL : MPM_USF;
             r->runs = 1; /* the spread is not in the CSV */
             return 0;
@@ -668,6 +688,50 @@ static int run_all(const opts *o)
     return failures ? 1 : 0;
 }
 
+/* --bspline: the B-splines against GIMP in the same run, interleaved (GIMP,
+ * BSPLINE2, BSPLINE3 for each configuration, two rounds, the better of the
+ * two kept), as speed ratios (the issue: quadratic >= 0.9x GIMP, cubic >=
+ * 0.5x) and bytes per particle. */
+static int run_bspline(const opts *o)
+{
+    static const pb_scene scenes[] = {PB_DISKS2D, PB_CUBE3D};
+    static const mpm_method methods[] = {MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_BSPLINE3};
+    static const double target[] = {1.0, 0.9, 0.5};
+    pb_row best[2][2][3];
+    int ok[2][2][3], failures = 0;
+    memset(ok, 0, sizeof ok);
+    memset(best, 0, sizeof best);
+    collecting = 1;
+    preamble();
+    for (int round = 0; round < 2; round++)
+        for (int s = 0; s < 2; s++)
+            for (int t = 0; t < 2; t++)
+                for (int m = 0; m < 3; m++) {
+                    pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles, o->steps, t + 1, 0.0};
+                    pb_row r;
+                    if (measure(&c, &r)) {
+                        failures++;
+                        continue;
+                    }
+                    if (!ok[s][t][m] || r.mpsteps > best[s][t][m].mpsteps) best[s][t][m] = r;
+                    ok[s][t][m] = 1;
+                }
+    pb_note("%s", "");
+    for (int s = 0; s < 2; s++)
+        for (int t = 0; t < 2; t++)
+            for (int m = 1; m < 3; m++) {
+                if (!ok[s][t][0] || !ok[s][t][m]) continue;
+                const pb_row *g = &best[s][t][0], *b = &best[s][t][m];
+                double q = g->mpsteps > 0 ? b->mpsteps / g->mpsteps : 0;
+                pb_result("%s %s, %d thread%s: %.2f M particle-steps/s = %.2fx GIMP's %.2f "
+                          "(target >= %.1fx): %s; %.0f B/particle (GIMP %.0f)",
+                          pb_scene_name(scenes[s]), pb_method_name(methods[m]), t + 1, t ? "s" : "",
+                          b->mpsteps, q, g->mpsteps, target[m], verdict(q >= target[m]),
+                          b->bytes_pp, g->bytes_pp);
+            }
+    return failures ? 1 : 0;
+}
+
 int main(int argc, char **argv)
 {
     opts o;
@@ -677,6 +741,8 @@ int main(int argc, char **argv)
     csv_mode = o.csv;
     if (o.all) {
         rc = run_all(&o);
+    } else if (o.bspline) {
+        rc = run_bspline(&o);
     } else {
         if (!csv_mode) preamble();
         rc = run_one(&o);

@@ -81,7 +81,10 @@ long pb_scene_default_particles(pb_scene s)
 
 const char *pb_method_name(mpm_method m)
 {
-    return m == MPM_METHOD_GIMP ? "GIMP" : "MPM";
+    return m == MPM_METHOD_GIMP       ? "GIMP"
+           : m == MPM_METHOD_BSPLINE2 ? "BSPLINE2"
+           : m == MPM_METHOD_BSPLINE3 ? "BSPLINE3"
+                                      : "MPM";
 }
 
 const char *pb_update_name(mpm_update u)
@@ -91,7 +94,7 @@ const char *pb_update_name(mpm_update u)
 
 double pb_target_rate(int dim, mpm_method m)
 {
-    int g = m == MPM_METHOD_GIMP;
+    int g = m != MPM_METHOD_MPM; /* B-splines: GIMP's (step counts only) */
     if (dim == 3) return g ? 3.0 : 16.0;
     if (dim == 2) return g ? 12.0 : 30.0;
     return g ? 30.0 : 60.0; /* 1D: no target in the issue; for step counts only */
