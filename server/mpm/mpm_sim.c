@@ -298,6 +298,19 @@ static void init_order(mpm_sim *s)
     mpm_team_run(s, mpm_ph_bbox);
 }
 
+/* The bounds lo[d] <= x < hi[d] of a particle centre, tightened to the
+ * doubles whose cell coordinate r = (x - x0) inv_h, computed as the
+ * kernels compute it, lies in [pad/2, last cell + 1): rounding could
+ * otherwise put a centre just below hi in the cell past the last (its
+ * support one node beyond the grid) or one just above lo in the cell below
+ * the first ghost cell.  A step of at most a few ulps; nothing else moves. */
+static void clamp_bounds(mpm_sim *s, int d, int nodes)
+{
+    double rlo = (double)(s->pad / 2), rhi = (double)(nodes - 1 + s->pad / 2 + s->pad);
+    while ((s->lo[d] - s->x0[d]) * s->inv_h[d] < rlo) s->lo[d] = nextafter(s->lo[d], INFINITY);
+    while ((s->hi[d] - s->x0[d]) * s->inv_h[d] >= rhi) s->hi[d] = nextafter(s->hi[d], -INFINITY);
+}
+
 int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
 {
     if (s->method != MPM_METHOD_GIMP || s->steps > 0 || (ns != 3 && ns != 4) ||
@@ -347,6 +360,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         /* a GMPM centre may enter the first ghost cell (see mpm_bc_build()) */
         s->lo[d] = d < dim ? c->grid.origin[d] - (s->pad / 2) * s->h[d] : 0;
         s->hi[d] = d < dim ? c->grid.origin[d] + (c->grid.nodes[d] - 1 + s->pad / 2) * s->h[d] : 0;
+        if (d < dim) clamp_bounds(s, d, c->grid.nodes[d]);
         /* B-splines: the last cell is nodes - 2 (bs_axis() clamps to it) */
         s->rmax[d] = s->bsp && d < dim ? (double)(c->grid.nodes[d] - 2) : (double)(s->np[d] - 1);
         if (s->bsp) mpm_bspline_axis_init(&s->bs[d], s->bsp, d < dim ? c->grid.nodes[d] - 1 : 1);

@@ -89,7 +89,7 @@ typedef enum {
  * before the enumerators exist; mpm_case.transfer is only written when
  * BENCH_HAVE_APIC is 1 (bench_apply_scheme in problems.c). */
 #ifndef BENCH_HAVE_BSPLINE
-#define BENCH_HAVE_BSPLINE 0
+#define BENCH_HAVE_BSPLINE 1
 #endif
 #ifndef BENCH_HAVE_CPDI
 #define BENCH_HAVE_CPDI 0
