@@ -65,8 +65,12 @@ static void translate(const mpm_case *c, const double v[3], long steps, tr_resul
 
 static const char *mname(mpm_method m)
 {
-    return m == MPM_METHOD_GIMP ? "GIMP" : "MPM ";
+    return m == MPM_METHOD_GIMP ? "GIMP" : m == MPM_METHOD_CPDI ? "CPDI" : "MPM ";
 }
+
+/* the methods every case runs: MPM, GIMP and CPDI (whose corners meet
+ * grid lines as the centres do) */
+static const mpm_method methods[3] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_CPDI};
 
 static const char *uname(int up)
 {
@@ -82,7 +86,7 @@ static const char *uname(int up)
  * 4.2e-13.  After: at most 5.2e-15 (MPM USL), 2.2e-16 otherwise. */
 TEST(phantom_issue_cube_translates_without_stress)
 {
-    for (int m = 0; m < 2; m++)
+    for (int m = 0; m < 3; m++)
         for (int up = 0; up < 3; up++) {
             mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, E_MOD, 0.3, 2.0};
             double v[3] = {0.3, 0.2, -0.1};
@@ -96,7 +100,7 @@ TEST(phantom_issue_cube_translates_without_stress)
             }
             mpm_case c = {0};
             c.grid = (mpm_grid_desc){3, {0, 0, 0}, {0.1, 0.1, 0.1}, {16, 16, 16}};
-            c.method = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+            c.method = methods[m];
             c.update = (mpm_update)up;
             c.dt = 0.002;
             c.n_materials = 1;
@@ -174,7 +178,7 @@ TEST(phantom_uniform_velocity_on_grid_lines)
     double worst = 0;
     int runs = 0;
     for (int dim = 1; dim <= 3; dim++)
-        for (int m = 0; m < 2; m++)
+        for (int m = 0; m < 3; m++)
             for (int up = 0; up < 3; up++)
                 for (int iv = 0; iv < 5; iv++) {
                     if (dim < 3 && iv == 4) continue; /* only z moves */
@@ -182,7 +186,7 @@ TEST(phantom_uniform_velocity_on_grid_lines)
                     mpm_body_desc b;
                     mpm_material_desc mat;
                     lines_case(&c, &b, &mat, x, vol, dim, 6, vs[iv]);
-                    c.method = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
+                    c.method = methods[m];
                     c.update = (mpm_update)up;
                     c.dt = dts[iv];
                     tr_result r;
