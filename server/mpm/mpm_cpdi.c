@@ -64,7 +64,6 @@
 #include <string.h>
 
 #define INLINE static inline __attribute__((always_inline))
-#define UNROLL _Pragma("GCC unroll 8")
 #define NCORN(D) (1 << (D))
 
 /* Weights of one particle: corner c's first node base[c], tent weights
@@ -122,7 +121,6 @@ INLINE void cweights(const mpm_sim *s, size_t p, int D, cw *o)
     inv_t(J, det, D, T);
     for (int d = 0; d < D; d++) xp[d] = s->P.x[d][p];
     const double sc = 1.0 / NCORN(D);
-    UNROLL
     for (int c = 0; c < NCORN(D); c++) {
         size_t base = 0;
         for (int d = 0; d < D; d++) {
@@ -168,7 +166,6 @@ INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const cw *W, size_t p,
     double mp = s->P.m[p];
     double mv0 = mp * s->P.v[0][p];
     double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
-    UNROLL
     for (int c = 0; c < NCORN(D); c++)
         CROWS(D, *W, c, s, {
             double am = A * mp, a0 = A * mv0, a1 = A * mv1, a2 = A * mv2;
@@ -194,7 +191,6 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const cw *W, size_t
     double syy = D > 1 ? V * P->sig[1][p] : 0.0, sxy = D > 1 ? V * P->sig[3][p] : 0.0;
     double szz = D > 2 ? V * P->sig[2][p] : 0.0, syz = D > 2 ? V * P->sig[4][p] : 0.0;
     double sxz = D > 2 ? V * P->sig[5][p] : 0.0;
-    UNROLL
     for (int c = 0; c < NCORN(D); c++) {
         const double *g = W->g[c];
         double gy = D > 1 ? g[1] : 0.0, gz = D > 2 ? g[2] : 0.0;
@@ -265,7 +261,6 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const cw *W, int D, in
     int nph = 0;
     if (DS)
         for (int a = 0; a < 3; a++) L[a][0] = L[a][1] = L[a][2] = 0;
-    UNROLL
     for (int c = 0; c < NCORN(D); c++) {
         double u[3] = {0, 0, 0};
         CROWS(D, *W, c, s, {
