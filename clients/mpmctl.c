@@ -54,6 +54,8 @@ static const command commands[] = {
      "a bad case is reported with the JSON path of the field and nothing is sent.\n"
      "A case without \"method\" / \"update\" runs GIMP (uGIMP) with MUSL, the schema's\n"
      "defaults (docs/accuracy.md); both are sent explicitly, so any mpmd runs the same.\n"
+     "\"method\": \"MPM\" (linear tents), \"GIMP\" (uGIMP) or \"CPDI\" (CPDI1, the particle\n"
+     "domain follows its deformation gradient: for large deformation; docs/solver.md).\n"
      "Prints \"job N\" (--json: the SubmitOk object).  --watch continues as `watch N`\n"
      "(with --csv/--json the job line goes to stderr and stdout carries the series).\n"},
     {"watch", C_WATCH, "ID [--csv|--json]", "live view of a job until it ends",

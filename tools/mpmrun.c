@@ -21,7 +21,7 @@ static const char *usage =
     "Runs a verification case of the GMPM paper in-process and shows it live.\n"
     "  --case NAME     point | bar-mpm | bar-gimp | disks-coarse | disks-fine\n"
     "                  (default disks-fine)\n"
-    "  --method M      mpm | gimp (default: the case's)\n"
+    "  --method M      mpm | gimp | cpdi (default: the case's)\n"
     "  --update U      usf | usl | musl (default usf)\n"
     "  --dt DT         fixed time step (default 0.001; 0 = automatic from CFL)\n"
     "  --cfl C         Courant factor for automatic dt (default 0.5)\n"
@@ -139,8 +139,10 @@ int main(int argc, char **argv)
             P.c.method = MPM_METHOD_MPM;
         else if (!strcmp(method, "gimp"))
             P.c.method = MPM_METHOD_GIMP;
+        else if (!strcmp(method, "cpdi"))
+            P.c.method = MPM_METHOD_CPDI;
         else {
-            fprintf(stderr, "mpmrun: --method: expected mpm or gimp, got '%s'\n", method);
+            fprintf(stderr, "mpmrun: --method: expected mpm, gimp or cpdi, got '%s'\n", method);
             mpm_paper_free(&P);
             return 2;
         }
@@ -150,7 +152,9 @@ int main(int argc, char **argv)
 
     char err[512];
     mpm_error me;
-    const char *mname = P.c.method == MPM_METHOD_GIMP ? "GMPM" : "MPM";
+    const char *mname = P.c.method == MPM_METHOD_GIMP   ? "GMPM"
+                        : P.c.method == MPM_METHOD_CPDI ? "CPDI"
+                                                        : "MPM";
     mpm_sim *s = mpm_sim_new(&P.c, NULL, &me);
     mpm_paper_free(&P);
     if (!s) {
