@@ -250,19 +250,25 @@ __attribute__((noinline, cold)) static int phantom_corr(const mpm_sim *s, double
     return 1;
 }
 
-/* One gather over the support: the velocity gradient L from the momenta qg
- * (DS; OLD: the velocity before the nodal update), the position increment
- * sum S q/m from qx (DX) and the velocity increment sum S f/m (DV). */
+/* One gather over the support: the velocity gradient L (DS) from the
+ * momenta qg, the position increment sum S q/m from qx (DX) and the
+ * velocity increment sum S f/m (DV).  The gradient's velocity per corner,
+ * u_c = sum S v over the corner's nodes, comes from qg; or, when qg is qx
+ * (SAME: USL), it is the corner's share of the position sum; or with OLD
+ * (USF's position pass: the velocity before the nodal update, (q - dt
+ * f)/m, qg = qx = q) the position share less dt times the velocity
+ * increment's, so that neither costs a third sum per node. */
 INLINE void gather(const mpm_sim *s, double *const qg[3], const cw *W, int D, int DS, int OLD,
-                   int DX, double *const qx[3], double dx[3], int DV, double dv[3], double L[3][3])
+                   int SAME, int DX, double *const qx[3], double dx[3], int DV, double dv[3],
+                   double L[3][3])
 {
     const double *restrict minv = s->minv;
-    double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
-    int nph = 0;
+    double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0}, dt = s->dt;
+    int nph = 0, RU = DS && !OLD && !SAME; /* u_c needs its own sum */
     if (DS)
         for (int a = 0; a < 3; a++) L[a][0] = L[a][1] = L[a][2] = 0;
     for (int c = 0; c < NCORN(D); c++) {
-        double u[3] = {0, 0, 0};
+        double u[3] = {0, 0, 0}, xc[3] = {0, 0, 0}, vc[3] = {0, 0, 0};
         CROWS(D, *W, c, s, {
             double ru[3] = {0, 0, 0}, rx[3] = {0, 0, 0}, rv[3] = {0, 0, 0};
             for (int kx = 0; kx < 2; kx++) {
@@ -270,17 +276,23 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const cw *W, int D, in
                 double mi = minv[n], wx = W->w[c][0][kx], sm = wx * mi;
                 if (DS) nph += mi == 0.0;
                 for (int a = 0; a < D; a++) {
-                    if (DS) ru[a] += wx * gvel(s, qg, a, n, mi, OLD);
+                    if (RU) ru[a] += sm * qg[a][n];
                     if (DX) rx[a] += sm * qx[a][n];
                     if (DV) rv[a] += sm * s->g.f[a][n];
                 }
             }
             for (int a = 0; a < D; a++) {
-                if (DS) u[a] += A * ru[a];
-                if (DX) X[a] += A * rx[a];
-                if (DV) Vv[a] += A * rv[a];
+                if (RU) u[a] += A * ru[a];
+                if (DX) xc[a] += A * rx[a];
+                if (DV) vc[a] += A * rv[a];
             }
         });
+        for (int a = 0; a < D; a++) {
+            if (DX) X[a] += xc[a];
+            if (DV) Vv[a] += vc[a];
+            if (DS && SAME) u[a] = xc[a];
+            if (DS && OLD) u[a] = xc[a] - dt * vc[a];
+        }
         if (DS)
             for (int a = 0; a < D; a++)
                 for (int b = 0; b < D; b++) L[a][b] += u[a] * W->g[c][b];
@@ -578,7 +590,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             cweights(s, b0 + i, D, &Wb[i]);
-            gather(s, s->g.q, &Wb[i], D, 1, 0, 0, NULL, NULL, 0, NULL, L);
+            gather(s, s->g.q, &Wb[i], D, 1, 0, 0, 0, NULL, NULL, 0, NULL, L);
             strain_of(s, L, o->deps, i, D);
         }
         block_update(s, b0, nb, o->deps, D);
@@ -602,7 +614,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
     for (size_t p = p0; p < p1; p++) {
         double dx[3], dv[3];
         cweights(s, p, D, &W);
-        gather(s, s->g.q, &W, D, 1, 1, 1, s->g.q, dx, 1, dv, L);
+        gather(s, s->g.q, &W, D, 1, 1, 0, 1, s->g.q, dx, 1, dv, L);
         f_update(s, L, p, D);
         for (int d = 0; d < D; d++) {
             s->P.x[d][p] += dt * dx[d];
@@ -633,7 +645,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             size_t p = b0 + i;
             double dx[3], dv[3];
             cweights(s, p, D, &W);
-            gather(s, s->g.q, &W, D, 1, 0, 1, s->g.q, dx, 1, dv, L);
+            gather(s, s->g.q, &W, D, 1, 0, 1, 1, s->g.q, dx, 1, dv, L);
             strain_of(s, L, o->deps, i, D);
             f_update(s, L, p, D);
             for (int d = 0; d < D; d++) {
@@ -658,7 +670,7 @@ INLINE void g2p_v_t(mpm_sim *s, size_t p0, size_t p1, int D, int BL)
     for (size_t p = p0; p < p1; p++) {
         double dv[3], vp[3] = {0, 0, 0};
         cweights(s, p, D, &W);
-        gather(s, NULL, &W, D, 0, 0, BL, s->g.q, vp, 1, dv, NULL);
+        gather(s, NULL, &W, D, 0, 0, 0, BL, s->g.q, vp, 1, dv, NULL);
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
     }
 }
@@ -680,7 +692,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             size_t p = b0 + i;
             double dx[3];
             cweights(s, p, D, &W);
-            gather(s, s->g.q2, &W, D, 1, 0, 1, s->g.q, dx, 0, NULL, L);
+            gather(s, s->g.q2, &W, D, 1, 0, 0, 1, s->g.q, dx, 0, NULL, L);
             strain_of(s, L, o->deps, i, D);
             f_update(s, L, p, D);
             for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
