@@ -263,6 +263,15 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         return;
     }
     size_t nparticles = sc->info.particles;
+    /* the store's runs.method column takes 'mpm' and 'gimp' only (schema 3):
+     * refused here, clearly, until a migration widens it */
+    if (sc->c.method == MPM_METHOD_CPDI) {
+        reply_error(d, id, MPM_EINVAL, "method",
+                    "this mpmd cannot record CPDI runs yet (its store's schema); the solver "
+                    "library, mpmrun and mpmbench run them");
+        mpp_case_destroy(&sc);
+        return;
+    }
     /* in floating point: endTime / dt can be far beyond any integer type */
     double steps = !sc->has_end_time ? (double)sc->steps
                    : sc->c.dt > 0    ? ceil(sc->end_time / sc->c.dt - 0.5)
