@@ -536,7 +536,7 @@ TEST(cpdi_errors)
     int rc = mpm_sim_run(s, 2000);
     TLOG("%s", TERR(mpm_sim_error(s)));
     CHECK(rc == MPM_ELEFTGRID);
-    double xs[8];
+    double xs[8] = {0};
     mpm_sim_snapshot(s, &(mpm_snapshot){.x = xs});
     CHECK(xs[0] > 0 && xs[4] > 0);
     mpm_sim_destroy(&s);
