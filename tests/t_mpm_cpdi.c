@@ -11,7 +11,8 @@
  * stretches its top particles over more than a cell, with a stress-noise
  * metric against MPM and GIMP; and the errors.  (The rigid translation
  * with crossing, sigma/E <= 1e-12, is in t_mpm_phantom.c, and the step's
- * in-pass energies in t_mpm_perf.c, both for CPDI too.)
+ * in-pass energies in t_mpm_perf.c, both for CPDI too.)  Two threads are
+ * bitwise reproducible.
  */
 #include "mpm.h"
 #include "mpm_internal.h"
@@ -541,4 +542,35 @@ TEST(cpdi_errors)
     CHECK(xs[0] > 0 && xs[4] > 0);
     mpm_sim_destroy(&s);
     lattice_free(&t);
+}
+
+/* The same CPDI case on two threads twice: bitwise the same positions,
+ * velocities and stresses (sorting included: 200 steps). */
+TEST(cpdi_two_threads_reproducible)
+{
+    enum { N = 12 * 12 };
+    static double xa[N * 2], xb[N * 2], va[N * 2], vb[N * 2], sa[N * 6], sb[N * 6];
+    double *xs[2] = {xa, xb}, *vs[2] = {va, vb}, *ss[2] = {sa, sb};
+    for (int run = 0; run < 2; run++) {
+        lat_case t;
+        const int n[3] = {12, 12, 1};
+        const double L0[3][3] = {{1.5, 1.0, 0}, {-0.5, -0.8, 0}, {0, 0, 0}};
+        const double x0[3] = {0.8, 0.8, 0}, v0[3] = {0.4, -0.3, 0}, xc[3] = {1.1, 1.1, 0};
+        CHECK(lattice(&t, 2, n, 0.05, x0, v0, L0, xc) == 0);
+        t.c.grid = (mpm_grid_desc){2, {0, 0, 0}, {0.1, 0.1, 0}, {25, 25, 0}};
+        t.c.update = MPM_MUSL;
+        t.c.threads = 2;
+        mpm_error err;
+        mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
+        lattice_free(&t);
+        CHECKF(s, "%s", TERR(&err));
+        CHECK(mpm_sim_particles(s) == N);
+        int rc = mpm_sim_run(s, 200);
+        mpm_sim_snapshot(s, &(mpm_snapshot){.x = xs[run], .v = vs[run], .stress = ss[run]});
+        mpm_sim_destroy(&s);
+        CHECK(rc == 0);
+    }
+    CHECK(memcmp(xa, xb, sizeof xa) == 0);
+    CHECK(memcmp(va, vb, sizeof va) == 0);
+    CHECK(memcmp(sa, sb, sizeof sa) == 0);
 }
