@@ -16,8 +16,10 @@
  * so that the 4 nodes per axis of Eq. 22 never index outside the arrays: a
  * particle in real cell c touches real nodes c-1 .. c+2 (padded c+1 ..
  * c+4), and its centre may be anywhere from the first ghost cell below the
- * grid to the first above it (c = -1 .. nodes-1).  Nothing here is
- * allocated inside a time step.
+ * grid to the first above it (c = -1 .. nodes-1).  CPDI pads one layer:
+ * centres stay in the real grid, the corners of their domains within one
+ * cell of it (mpm_cpdi.c).  Nothing here is allocated inside a time
+ * step.
  */
 #ifndef MPM_INTERNAL_H
 #define MPM_INTERNAL_H
