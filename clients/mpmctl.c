@@ -54,8 +54,9 @@ static const command commands[] = {
      "a bad case is reported with the JSON path of the field and nothing is sent.\n"
      "A case without \"method\" / \"update\" runs GIMP (uGIMP) with MUSL, the schema's\n"
      "defaults (docs/accuracy.md); both are sent explicitly, so any mpmd runs the same.\n"
-     "Methods: MPM, GIMP, BSPLINE2 (quadratic B-splines), BSPLINE3 (cubic); updates:\n"
-     "USF, USL, MUSL.\n"
+     "Methods: MPM, GIMP, BSPLINE2 (quadratic B-splines), BSPLINE3 (cubic), CPDI (CPDI1:\n"
+     "the particle domain follows its deformation gradient, for large deformation;\n"
+     "docs/solver.md); updates: USF, USL, MUSL.\n"
      "Prints \"job N\" (--json: the SubmitOk object).  --watch continues as `watch N`\n"
      "(with --csv/--json the job line goes to stderr and stdout carries the series).\n"},
     {"watch", C_WATCH, "ID [--csv|--json]", "live view of a job until it ends",

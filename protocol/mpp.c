@@ -34,6 +34,7 @@ _Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
                    SAME(MPM_METHOD_GIMP, MPMD__CASE__METHOD__GIMP) &&
                    SAME(MPM_METHOD_BSPLINE2, MPMD__CASE__METHOD__BSPLINE2) &&
                    SAME(MPM_METHOD_BSPLINE3, MPMD__CASE__METHOD__BSPLINE3) &&
+                   SAME(MPM_METHOD_CPDI, MPMD__CASE__METHOD__CPDI) &&
                    SAME(MPM_USF, MPMD__CASE__UPDATE__USF) &&
                    SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
                    SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),

@@ -41,9 +41,9 @@ static void block_case(mpm_paper *t, int dim, mpm_method m, mpm_update up, const
 }
 
 /* the methods the invariants hold for, and their names */
-static const mpm_method inv_methods[4] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2,
-                                          MPM_METHOD_BSPLINE3};
-static const char *const inv_mname[4] = {"MPM ", "GMPM", "BSP2", "BSP3"};
+static const mpm_method inv_methods[5] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2,
+                                          MPM_METHOD_BSPLINE3, MPM_METHOD_CPDI};
+static const char *const inv_mname[5] = {"MPM ", "GMPM", "BSP2", "BSP3", "CPDI"};
 
 /* grid "nodes" per axis of a grid of n nodes: B-spline control points are
  * n + p - 1 */
@@ -72,7 +72,7 @@ TEST(inv_p2g_conserves_mass_and_momentum)
 {
     static int ijk[23 * 23 * 23][3];
     for (int dim = 1; dim <= 3; dim++)
-        for (int m = 0; m < 4; m++) {
+        for (int m = 0; m < 5; m++) {
             mpm_paper t;
             double v[3] = {0.7, -0.4, 0.25};
             block_case(&t, dim, inv_methods[m], MPM_USF, v);
@@ -118,7 +118,7 @@ TEST(inv_p2g_conserves_mass_and_momentum)
 TEST(inv_uniform_velocity_translates_rigidly)
 {
     for (int dim = 1; dim <= 3; dim++)
-        for (int m = 0; m < 4; m++)
+        for (int m = 0; m < 5; m++)
             for (int up = 0; up < 3; up++) {
                 if (m == 0 && up == MPM_USL) continue;
                 mpm_paper t;
@@ -170,7 +170,7 @@ TEST(inv_uniform_velocity_translates_rigidly)
  * control points). */
 TEST(inv_fixed_dofs_keep_zero_momentum)
 {
-    for (int m = 0; m < 4; m++)
+    for (int m = 0; m < 5; m++)
         for (int up = 0; up < 3; up++) {
             if (m == 0 && up == MPM_USL) continue; /* unstable: see above */
             mpm_paper t;
@@ -189,7 +189,12 @@ TEST(inv_fixed_dofs_keep_zero_momentum)
             mpm_paper_free(&t);
             CHECKF(s, "%s", TERR(&err));
             double worst = 0, touched = 0;
-            for (int k = 0; k < 300; k++) {
+            /* CPDI: 120 steps.  These soft disks are crushed flat against
+             * the walls (det F down to 0.002 by step 140) and a CPDI domain
+             * turns inside out at step 173 (USF) to 221 (USL, MUSL), which
+             * CPDI refuses (MPM_ELEFTGRID; MPM and GIMP have no domain) */
+            int steps = inv_methods[m] == MPM_METHOD_CPDI ? 120 : 300;
+            for (int k = 0; k < steps; k++) {
                 CHECKF(mpm_sim_step(s) == 0, "%s", TERR(mpm_sim_error(s)));
                 for (int i = 0; i <= last; i++)
                     for (int side = 0; side < 4; side++) {

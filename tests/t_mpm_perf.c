@@ -699,14 +699,16 @@ TEST(perf_step_energies_equal_energy_pass)
     static double sa[MAXP * 6], sb[MAXP * 6];
     double worst = 0;
     int cases = 0;
+    static const mpm_method ms[3] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_CPDI};
+    static const char *const mn[3] = {"MPM", "GIMP", "CPDI"};
     for (int dim = 1; dim <= 3; dim++)
-        for (int m = 0; m < 2; m++)
+        for (int m = 0; m < 3; m++)
             for (int u = 0; u < 3; u++)
                 for (int T = 1; T <= 2; T++) {
                     mpm_case c;
                     mpm_material_desc mat;
                     mpm_body_desc b;
-                    energy_case(&c, &mat, &b, dim, m ? MPM_METHOD_GIMP : MPM_METHOD_MPM, ups[u], T);
+                    energy_case(&c, &mat, &b, dim, ms[m], ups[u], T);
                     mpm_error err;
                     mpm_sim *sa_ = mpm_sim_new(&c, NULL, &err);
                     CHECKF(sa_, "%s", TERR(&err));
@@ -730,13 +732,13 @@ TEST(perf_step_energies_equal_energy_pass)
                                "%dD %s %s %d thread(s), step %d: energies differ by "
                                "%.3g relative (kinetic %.17g / %.17g, strain %.17g / %.17g, "
                                "potential %.17g / %.17g)",
-                               dim, m ? "GIMP" : "MPM", un[u], T, k + 1, d, ea.kinetic, eb.kinetic,
-                               ea.strain, eb.strain, ea.potential, eb.potential);
+                               dim, mn[m], un[u], T, k + 1, d, ea.kinetic, eb.kinetic, ea.strain,
+                               eb.strain, ea.potential, eb.potential);
                         CHECKF(memcmp(ea.angular_momentum, eb.angular_momentum,
                                       sizeof ea.angular_momentum) == 0,
                                "%dD %s %s %d thread(s), step %d: angular momentum "
                                "(%.17g, %.17g, %.17g) / (%.17g, %.17g, %.17g)",
-                               dim, m ? "GIMP" : "MPM", un[u], T, k + 1, ea.angular_momentum[0],
+                               dim, mn[m], un[u], T, k + 1, ea.angular_momentum[0],
                                ea.angular_momentum[1], ea.angular_momentum[2],
                                eb.angular_momentum[0], eb.angular_momentum[1],
                                eb.angular_momentum[2]);
@@ -757,8 +759,9 @@ TEST(perf_step_energies_equal_energy_pass)
                     worst = fmax(worst, cw);
                     cases++;
                 }
-    TLOG("%d cases (1D/2D/3D, MPM/GIMP, USF/USL/MUSL, gravity, wall, 1 and 2 threads), %d steps: "
-         "energies summed in the step vs the energy pass: worst relative difference %.3g "
-         "(angular momentum bitwise equal); positions, velocities, stresses bitwise equal",
-         cases, STEPS + 1, worst);
+    TLOG(
+        "%d cases (1D/2D/3D, MPM/GIMP/CPDI, USF/USL/MUSL, gravity, wall, 1 and 2 threads), %d steps: "
+        "energies summed in the step vs the energy pass: worst relative difference %.3g "
+        "(angular momentum bitwise equal); positions, velocities, stresses bitwise equal",
+        cases, STEPS + 1, worst);
 }

@@ -68,12 +68,14 @@ static const char *mname(mpm_method m)
     return m == MPM_METHOD_GIMP       ? "GIMP"
            : m == MPM_METHOD_BSPLINE2 ? "BSPLINE2"
            : m == MPM_METHOD_BSPLINE3 ? "BSPLINE3"
+           : m == MPM_METHOD_CPDI     ? "CPDI"
                                       : "MPM ";
 }
 
-/* the methods every case runs: MPM, GIMP and the B-splines */
-static const mpm_method methods[4] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2,
-                                      MPM_METHOD_BSPLINE3};
+/* the methods every case runs: MPM, GIMP, the B-splines and CPDI (whose
+ * corners meet grid lines as the centres do) */
+static const mpm_method methods[5] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2,
+                                      MPM_METHOD_BSPLINE3, MPM_METHOD_CPDI};
 
 static const char *uname(int up)
 {
@@ -90,7 +92,7 @@ static const char *uname(int up)
  * B-splines (BSPLINE2, BSPLINE3) run the same cases. */
 TEST(phantom_issue_cube_translates_without_stress)
 {
-    for (int m = 0; m < 4; m++)
+    for (int m = 0; m < 5; m++)
         for (int up = 0; up < 3; up++) {
             mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, E_MOD, 0.3, 2.0};
             double v[3] = {0.3, 0.2, -0.1};
@@ -182,7 +184,7 @@ TEST(phantom_uniform_velocity_on_grid_lines)
     double worst = 0;
     int runs = 0;
     for (int dim = 1; dim <= 3; dim++)
-        for (int m = 0; m < 4; m++)
+        for (int m = 0; m < 5; m++)
             for (int up = 0; up < 3; up++)
                 for (int iv = 0; iv < 5; iv++) {
                     if (dim < 3 && iv == 4) continue; /* only z moves */

@@ -21,7 +21,7 @@ static const char *usage =
     "Runs a verification case of the GMPM paper in-process and shows it live.\n"
     "  --case NAME     point | bar-mpm | bar-gimp | disks-coarse | disks-fine\n"
     "                  (default disks-fine)\n"
-    "  --method M      mpm | gimp | bspline2 | bspline3 (default: the case's)\n"
+    "  --method M      mpm | gimp | bspline2 | bspline3 | cpdi (default: the case's)\n"
     "  --update U      usf | usl | musl (default usf)\n"
     "  --dt DT         fixed time step (default 0.001; 0 = automatic from CFL)\n"
     "  --cfl C         Courant factor for automatic dt (default 0.5)\n"
@@ -143,9 +143,11 @@ int main(int argc, char **argv)
             P.c.method = MPM_METHOD_BSPLINE2;
         else if (!strcmp(method, "bspline3"))
             P.c.method = MPM_METHOD_BSPLINE3;
+        else if (!strcmp(method, "cpdi"))
+            P.c.method = MPM_METHOD_CPDI;
         else {
             fprintf(stderr,
-                    "mpmrun: --method: expected mpm, gimp, bspline2 or bspline3, got '%s'\n",
+                    "mpmrun: --method: expected mpm, gimp, bspline2, bspline3 or cpdi, got '%s'\n",
                     method);
             mpm_paper_free(&P);
             return 2;
@@ -159,6 +161,7 @@ int main(int argc, char **argv)
     const char *mname = P.c.method == MPM_METHOD_GIMP       ? "GMPM"
                         : P.c.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
                         : P.c.method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
+                        : P.c.method == MPM_METHOD_CPDI     ? "CPDI"
                                                             : "MPM";
     mpm_sim *s = mpm_sim_new(&P.c, NULL, &me);
     mpm_paper_free(&P);

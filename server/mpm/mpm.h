@@ -32,14 +32,18 @@
  * MPM_ENOMEM, MPM_ELEFTGRID, MPM_EDIVERGED, MPM_ECANCELLED, MPM_ECFL,
  * MPM_ESTATE and MPM_ETOOBIG from the solver). */
 
-/* Shape functions: linear tents (MPM), uGIMP (GMPM), or B-splines of
- * degree 2 (C1, 3 nodes per axis) or 3 (C2, 4 nodes per axis) on an open
- * (clamped) knot vector with knots at the grid nodes (docs/solver.md). */
+/* Shape functions: linear tents (MPM), uGIMP (GMPM), B-splines of degree 2
+ * (C1, 3 nodes per axis) or 3 (C2, 4 nodes per axis) on an open (clamped)
+ * knot vector with knots at the grid nodes, or CPDI1, the convected
+ * particle domain of Sadeghirad et al. 2011 (the particle domain follows a
+ * per-particle deformation gradient F; 1D is its two-corner, cpGIMP-like
+ * form); docs/solver.md. */
 typedef enum {
     MPM_METHOD_MPM = 0,
     MPM_METHOD_GIMP = 1,
     MPM_METHOD_BSPLINE2 = 2,
-    MPM_METHOD_BSPLINE3 = 3
+    MPM_METHOD_BSPLINE3 = 3,
+    MPM_METHOD_CPDI = 4
 } mpm_method;
 typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
 typedef enum { MPM_MODEL_LINEAR_ELASTIC = 0 } mpm_model_kind;
@@ -299,5 +303,15 @@ double mpm_material_wave_speed(const mpm_material_desc *m, int dim);
  * [x0, x0 + (nodes - 1) h] for B-splines. */
 int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, int nodes, double *w,
                  double *g);
+
+/* CPDI1 weights of one particle (exposed for tests): centre x, deformation
+ * gradient F (row-major 3x3, F[3 i + j], the first dim rows and columns
+ * used) and initial half-widths lp, on grid g (no ghost layers).  Fills one
+ * entry per (corner, node) pair, 4^dim in all (a node shared by corners
+ * appears once per corner): real node ijk[k], weight S[k] and gradient
+ * G[k]; returns 4^dim, or -1 when a corner lies outside the grid or
+ * det F <= 0. */
+int mpm_cpdi_shape(const mpm_grid_desc *g, const double x[3], const double F[9], const double lp[3],
+                   int ijk[64][3], double S[64], double G[64][3]);
 
 #endif

@@ -11,7 +11,8 @@
  * writes them into the solver's struct-of-arrays (mpm_case_fill(), the one
  * pass of mpm_sim_new()).  Generated bodies put
  * ppc^dim particles per cell at the sub-cell centres that fall inside the
- * shape, each with volume prod(h/ppc) and uGIMP half-width h/(2 ppc).
+ * shape, each with volume prod(h/ppc) and uGIMP half-width h/(2 ppc) (also
+ * the initial CPDI domain).
  */
 #include "mpm_internal.h"
 
@@ -198,6 +199,15 @@ static int gen_points(gen_ctx *g, const mpm_body_desc *b, size_t bi, mpm_error *
                 return mpm_fail(
                     err, MPM_EINVAL, PATH("bodies[%zu].points.half_length[%zu]", bi, p * dim + e),
                     "the GMPM half-width must be in (0, h] = (0, %g] (got %g)", gr->h[e], lp[e]);
+            /* CPDI: the domain's corners within one (ghost) cell of the grid */
+            double glo = gr->origin[e] - gr->h[e], ghi = gr->origin[e] + gr->nodes[e] * gr->h[e];
+            if (g->c->method == MPM_METHOD_CPDI &&
+                !(lp[e] > 0 && x[e] - lp[e] >= glo && x[e] + lp[e] < ghi))
+                return mpm_fail(
+                    err, MPM_EINVAL, PATH("bodies[%zu].points.half_length[%zu]", bi, p * dim + e),
+                    "the CPDI half-width must be > 0 with the domain x +- half_length within one "
+                    "cell of the grid, [%g, %g) (got %g at %c = %g)",
+                    glo, ghi, lp[e], "xyz"[e], x[e]);
         }
         emit(g, b, x, vol, mass, v, b->stress ? b->stress + p * 6 : NULL, lp);
     }
@@ -363,9 +373,10 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (rc) return rc;
     int dim = c->grid.dim;
     if (c->method != MPM_METHOD_MPM && c->method != MPM_METHOD_GIMP &&
-        c->method != MPM_METHOD_BSPLINE2 && c->method != MPM_METHOD_BSPLINE3)
+        c->method != MPM_METHOD_BSPLINE2 && c->method != MPM_METHOD_BSPLINE3 &&
+        c->method != MPM_METHOD_CPDI)
         return mpm_fail(err, MPM_EINVAL, "method",
-                        "unknown value %d (MPM, GIMP, BSPLINE2 or BSPLINE3)", (int)c->method);
+                        "unknown value %d (MPM, GIMP, BSPLINE2, BSPLINE3 or CPDI)", (int)c->method);
     if (c->update != MPM_USF && c->update != MPM_USL && c->update != MPM_MUSL)
         return mpm_fail(err, MPM_EINVAL, "update", "unknown value %d (USF, USL or MUSL)",
                         (int)c->update);

@@ -7,7 +7,8 @@
  *   mpm_sort.c     the particles' sort by cell
  *   mpm_loads.c    essential boundary conditions, tractions, particle forces
  *   mpm_energy.c   the energy sums and the divergence guard
- *   mpm_kernels.c  the particle loops;  mpm_model.c  the constitutive models
+ *   mpm_kernels.c  the particle loops (MPM, uGIMP);  mpm_cpdi.c  CPDI1's
+ *   mpm_model.c    the constitutive models
  *   mpm_case.c     checking a case and generating its particles
  *   mpm_bspline.c  the B-splines' clamped boundary spans, node positions
  *
@@ -19,8 +20,9 @@
  * grid to the first above it (c = -1 .. nodes-1).  B-splines of degree p
  * have no ghost layers: the grid's "nodes" along an axis of n cells are the
  * n + p control points of the open knot vector, and a particle in cell c
- * touches control points c .. c + p.  Nothing here is allocated inside a
- * time step.
+ * touches control points c .. c + p.  CPDI pads one layer: centres stay in
+ * the real grid, the corners of their domains within one cell of it
+ * (mpm_cpdi.c).  Nothing here is allocated inside a time step.
  */
 #ifndef MPM_INTERNAL_H
 #define MPM_INTERNAL_H
@@ -42,9 +44,18 @@
 
 typedef struct {
     size_t n;
-    double *x[3], *v[3];     /* position, velocity (dim arrays) */
-    double *m, *vol;         /* mass, current volume */
-    double *lp[3];           /* GMPM half-width per axis (NULL for MPM) */
+    double *x[3], *v[3]; /* position, velocity (dim arrays) */
+    double *m, *vol;     /* mass, current volume */
+    double *lp[3];       /* GMPM / CPDI half-width per axis (NULL for MPM);
+                          * CPDI: the initial domain's, r_a0 = lp_a e_a */
+    /* Deformation gradient, F_ij = F[i * dim + j][p] (dim * dim arrays, the
+     * rest NULL), allocated only when mpm_needs_F() says the case reads it
+     * (today: CPDI), else all NULL.  Initialised to I at creation; updated
+     * F <- (I + dt L) F once a step by the pass that moves the particle,
+     * with the full velocity gradient L of its gather (mpm_cpdi.c: USL and
+     * MUSL the gather of the strain increment; USF the position pass, from
+     * the velocity before the nodal update).  Sorted with the particles. */
+    double *F[9];
     double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL) */
     uint16_t *mat;           /* material index */
     uint32_t *id;            /* creation index (particles are kept sorted by cell) */
@@ -110,13 +121,15 @@ struct mpm_sim {
     int dim;
     mpm_method method;
     mpm_update update;
-    int ns;  /* nodes per axis per particle: 2 (MPM), 3 or 4 (GMPM, B-splines) */
-    int bsp; /* B-spline degree (2 or 3), 0 for MPM and GMPM */
+    int ns;  /* nodes per axis per particle: 2 (MPM; CPDI: per corner), 3 or 4
+              * (GMPM, B-splines) */
+    int bsp; /* B-spline degree (2 or 3), 0 otherwise */
 
     /* grid */
     int nreal[3];     /* real nodes per axis (1 for unused axes; B-splines:
                        * control points, nodes + p - 1) */
-    int pad;          /* ghost layers per side: 0 MPM, 2 GMPM */
+    int pad;          /* ghost layers per side: 0 MPM and B-splines, 2 GMPM,
+                       * 1 CPDI */
     int np[3];        /* padded nodes per axis */
     size_t stride[3]; /* 1, np[0], np[0]*np[1] */
     size_t nn;        /* padded node count */
@@ -261,6 +274,13 @@ struct mpm_kernels {
 const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend);
 /* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
 size_t mpm_kernels_scratch(void);
+/* CPDI1's family of dimension dim (mpm_cpdi.c), blend as above, and its
+ * weight scratch (wblk holds the larger of the two). */
+const mpm_kernels *mpm_cpdi_select(int dim, int blend);
+size_t mpm_cpdi_scratch(void);
+/* Whether the case reads a deformation gradient per particle (P.F): the
+ * one place that decides its allocation (mpm_sim.c). */
+int mpm_needs_F(const mpm_case *c);
 /* Tests and benchmarks: switches a GMPM simulation that has not stepped yet
  * to the ns-node family (3 only if every lp <= h/2).  Returns 0 or
  * MPM_EINVAL. */

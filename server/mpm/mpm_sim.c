@@ -96,6 +96,7 @@ static void free_particles(mpm_particles *P)
         free(P->v[d]);
         free(P->lp[d]);
     }
+    for (int c = 0; c < 9; c++) free(P->F[c]);
     for (int c = 0; c < 6; c++) {
         free(P->sig[c]);
         free(P->eps[c]);
@@ -107,13 +108,24 @@ static void free_particles(mpm_particles *P)
     memset(P, 0, sizeof *P);
 }
 
-static int alloc_particles(mpm_particles *P, size_t n, int dim, int gimp)
+int mpm_needs_F(const mpm_case *c)
+{
+    return c->method == MPM_METHOD_CPDI;
+}
+
+/* lp: the half-widths (GMPM, CPDI); F: the deformation gradient, set to I */
+static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F)
 {
     memset(P, 0, sizeof *P);
     P->n = n;
     for (int d = 0; d < dim; d++) {
         if (!(P->x[d] = mpm_dalloc(n)) || !(P->v[d] = mpm_dalloc(n))) return MPM_ENOMEM;
-        if (gimp && !(P->lp[d] = mpm_dalloc(n))) return MPM_ENOMEM;
+        if (lp && !(P->lp[d] = mpm_dalloc(n))) return MPM_ENOMEM;
+    }
+    for (int c = 0; F && c < dim * dim; c++) {
+        if (!(P->F[c] = mpm_dalloc(n))) return MPM_ENOMEM;
+        if (c % (dim + 1) == 0)
+            for (size_t p = 0; p < n; p++) P->F[c][p] = 1.0;
     }
     for (int c = 0; c < MPM_NCOMP(dim); c++) {
         if (!(P->sig[c] = mpm_dalloc(n))) return MPM_ENOMEM;
@@ -343,7 +355,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->update = c->update;
     s->bsp = c->method == MPM_METHOD_BSPLINE2 ? 2 : c->method == MPM_METHOD_BSPLINE3 ? 3 : 0;
     s->ns = c->method == MPM_METHOD_GIMP ? 4 : s->bsp ? s->bsp + 1 : 2;
-    s->pad = c->method == MPM_METHOD_GIMP ? 2 : 0;
+    /* CPDI: the corners may reach one cell outside the grid */
+    s->pad = c->method == MPM_METHOD_GIMP ? 2 : c->method == MPM_METHOD_CPDI ? 1 : 0;
     s->nthreads = c->threads > 1 ? c->threads : 1;
     atomic_init(&s->cancel, 0);
     s->nn = 1;
@@ -374,11 +387,15 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     }
 
     int musl = c->update == MPM_MUSL;
-    if (alloc_particles(&s->P, np, dim, c->method == MPM_METHOD_GIMP)) goto nomem;
+    if (alloc_particles(&s->P, np, dim,
+                        c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
+                        mpm_needs_F(c)))
+        goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
-    s->k = mpm_kernels_select(dim, s->ns, s->bsp != 0, s->pic != 0);
+    s->k = c->method == MPM_METHOD_CPDI ? mpm_cpdi_select(dim, s->pic != 0)
+                                        : mpm_kernels_select(dim, s->ns, s->bsp != 0, s->pic != 0);
     if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
         goto nomem;
@@ -394,7 +411,10 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         for (int cc = 0; cc < 6; cc++)
             if (!(s->tout[t].deps[cc] = line_alloc(MPM_BLOCK * sizeof(double)))) goto nomem;
     for (int t = 0; t < s->nthreads; t++)
-        if (!(s->tout[t].wblk = line_alloc(mpm_kernels_scratch()))) goto nomem;
+        if (!(s->tout[t].wblk =
+                  line_alloc(mpm_kernels_scratch() > mpm_cpdi_scratch() ? mpm_kernels_scratch()
+                                                                        : mpm_cpdi_scratch())))
+            goto nomem;
     if (mpm_rows_init(s)) goto nomem; /* row extents, all empty */
 
     if (mpm_bc_build(s, &c->bc)) goto nomem;
@@ -479,7 +499,7 @@ static int finish_step(mpm_sim *s)
     long step = s->steps + 1;
     double t = s->t + s->dt;
     if (bad != SIZE_MAX) {
-        int finite = 1, axis = 0;
+        int finite = 1, axis = -1;
         char pos[128] = "", *w = pos;
         for (int d = 0; d < s->dim; d++) {
             double x = s->P.x[d][bad];
@@ -487,7 +507,13 @@ static int finish_step(mpm_sim *s)
             if (!(x >= s->lo[d] && x < s->hi[d])) axis = d;
             w += snprintf(w, sizeof pos - (size_t)(w - pos), "%s%.9g", d ? ", " : "", x);
         }
-        if (!finite) {
+        if (finite && axis < 0) { /* CPDI: the centre is in, a corner is not */
+            s->failed = mpm_fail(&s->err, MPM_ELEFTGRID, NULL,
+                                 "particle %zu's domain left the grid or turned inside out at "
+                                 "step %ld, time %.9g: centre (%s); with CPDI every corner "
+                                 "x_p +- F r_0 must stay within one cell of the grid and det F > 0",
+                                 (size_t)s->P.id[bad], step, t, pos);
+        } else if (!finite) {
             s->failed = mpm_fail(&s->err, MPM_EDIVERGED, NULL,
                                  "diverged at step %ld, time %.9g: particle %zu has a non-finite "
                                  "position or velocity",

@@ -206,7 +206,7 @@ const char *store_sqlite_version(void)
 
 const char *const sti_status_names[STORE_NSTATUS] = {"queued", "running",   "finished",
                                                      "failed", "cancelled", "interrupted"};
-const char *const sti_method_names[STORE_NMETHOD] = {"mpm", "gimp", "bspline2", "bspline3"};
+const char *const sti_method_names[STORE_NMETHOD] = {"mpm", "gimp", "bspline2", "bspline3", "cpdi"};
 const char *const sti_update_names[3] = {"usf", "usl", "musl"};
 
 _Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
@@ -214,7 +214,7 @@ _Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
                    MPP_STATUS_CANCELLED == 5 && MPP_STATUS_INTERRUPTED == MPP_STATUS_MAX,
                "sti_status_names follows mpp_status");
 _Static_assert(MPM_METHOD_MPM == 0 && MPM_METHOD_GIMP == 1 && MPM_METHOD_BSPLINE2 == 2 &&
-                   MPM_METHOD_BSPLINE3 == 3,
+                   MPM_METHOD_BSPLINE3 == 3 && MPM_METHOD_CPDI == 4,
                "sti_method_names");
 _Static_assert(MPM_USF == 0 && MPM_USL == 1 && MPM_MUSL == 2, "sti_update_names");
 

@@ -92,7 +92,7 @@ typedef enum {
 #define BENCH_HAVE_BSPLINE 1
 #endif
 #ifndef BENCH_HAVE_CPDI
-#define BENCH_HAVE_CPDI 0
+#define BENCH_HAVE_CPDI 1
 #endif
 #ifndef BENCH_HAVE_APIC
 #define BENCH_HAVE_APIC 0

@@ -33,10 +33,11 @@ static int progress_shown;
 
 static const char usage[] =
     "usage: mpmbench --scene NAME [--particles N] [--steps S] [--threads T]\n"
-    "                [--method mpm|gimp|bspline2|bspline3] [--update usf|usl|musl]\n"
+    "                [--method mpm|gimp|bspline2|bspline3|cpdi] [--update usf|usl|musl]\n"
     "                [--pic F] [--csv]\n"
     "       mpmbench --all [--particles N] [--steps S] [--csv]\n"
     "       mpmbench --bspline [--particles N] [--steps S] [--csv]\n"
+    "       mpmbench --cpdi-vs-gimp [--particles N] [--steps S] [--update U] [--csv]\n"
     "Throughput of the mpmd solver (issue #5): millions of particle-steps per second,\n"
     "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
     "Scenes:\n"
@@ -54,7 +55,8 @@ static const char usage[] =
     "                 capped by the simulated time a scene stays valid for, and cut to ~2 s\n"
     "                 when the warm-up shows the solver 2x slower than the target)\n"
     "  --threads T    solver threads (default 2), 1..64\n"
-    "  --method M     mpm | gimp | bspline2 | bspline3 (default mpm)\n"
+    "  --method M     mpm | gimp | bspline2 | bspline3 | cpdi (default mpm; cpdi: not with\n"
+    "                 the daemon scene)\n"
     "  --update U     usf | usl | musl (default usf)\n"
     "  --pic F        PIC fraction of the velocity update, 0..1 (default 0: pure FLIP);\n"
     "                 not with the daemon scene or --all\n"
@@ -62,6 +64,9 @@ static const char usage[] =
     "  --all          every scene, MPM and GIMP, 1 and 2 threads; the lean build; the daemon\n"
     "  --bspline      disks2d and cube3d at 1 and 2 threads, GIMP, BSPLINE2 and BSPLINE3\n"
     "                 interleaved (two rounds): the B-splines' speed as ratios to GIMP\n"
+    "  --cpdi-vs-gimp disks2d and cube3d at 1 and 2 threads, GIMP and CPDI interleaved\n"
+    "                 (GIMP, CPDI, GIMP, CPDI, the same steps), then CPDI / GIMP throughput\n"
+    "                 (issue #10: >= 0.4) and CPDI's bytes per particle (<= 300 2D, 450 3D)\n"
     "  -h, --help     this text\n"
     "Rows are appended to build/bench/throughput.csv:\n  " PB_CSV_HEADER "\n"
     "bytes_per_particle is the peak RSS of a forked child that builds and runs the one\n"
@@ -218,7 +223,7 @@ const char *pb_exe_dir(void)
 /* ---- the command line ---- */
 
 typedef struct {
-    int all, bspline, csv, have_scene;
+    int all, bspline, csv, have_scene, cpdi_vs_gimp;
     const char *scene;
     long particles, steps;
     int threads, have_threads, have_method, have_update;
@@ -264,6 +269,10 @@ static int parse_args(int argc, char **argv, opts *o)
             o->bspline = 1;
             continue;
         }
+        if (!strcmp(a, "--cpdi-vs-gimp")) {
+            o->cpdi_vs_gimp = 1;
+            continue;
+        }
         int known = !strcmp(a, "--scene") || !strcmp(a, "--particles") || !strcmp(a, "--steps") ||
                     !strcmp(a, "--threads") || !strcmp(a, "--method") || !strcmp(a, "--update") ||
                     !strcmp(a, "--pic");
@@ -307,9 +316,12 @@ static int parse_args(int argc, char **argv, opts *o)
                 o->method = MPM_METHOD_BSPLINE2;
             else if (!strcmp(v, "bspline3"))
                 o->method = MPM_METHOD_BSPLINE3;
+            else if (!strcmp(v, "cpdi"))
+                o->method = MPM_METHOD_CPDI;
             else {
                 fprintf(stderr,
-                        "mpmbench: --method: expected mpm, gimp, bspline2 or bspline3, got '%s'\n",
+                        "mpmbench: --method: expected mpm, gimp, bspline2, bspline3 or cpdi, got "
+                        "'%s'\n",
                         v);
                 return -1;
             }
@@ -343,8 +355,19 @@ static int parse_args(int argc, char **argv, opts *o)
                         "only --particles, --steps and --csv\n");
         return -1;
     }
+    if (o->cpdi_vs_gimp && (o->all || o->have_scene || o->have_threads || o->have_method)) {
+        fprintf(stderr, "mpmbench: --cpdi-vs-gimp runs its own scenes, methods and threads; it "
+                        "takes only --particles, --steps, --update and --csv\n");
+        return -1;
+    }
+    if (o->cpdi_vs_gimp) return 0;
     if (!o->all && !o->bspline && !o->have_scene) {
         fprintf(stderr, "mpmbench: give --scene NAME or --all (see --help)\n");
+        return -1;
+    }
+    if (o->method == MPM_METHOD_CPDI && o->have_scene && !strcmp(o->scene, "daemon")) {
+        fprintf(stderr, "mpmbench: --method cpdi: not with the daemon scene (the store does "
+                        "not take CPDI runs yet)\n");
         return -1;
     }
     if (o->have_pic && o->have_scene && !strcmp(o->scene, "daemon")) {
@@ -732,6 +755,57 @@ static int run_bspline(const opts *o)
     return failures ? 1 : 0;
 }
 
+/* --cpdi-vs-gimp: per scene and thread count, GIMP and CPDI rows
+ * interleaved (G, C, G, C; CPDI runs the steps GIMP's first row chose, so
+ * both cover the same simulated time), then the throughput ratio (the
+ * mean of the two CPDI rows over the mean of the two GIMP rows) and CPDI's
+ * peak bytes per particle against issue #10's targets. */
+static int run_cpdi_vs_gimp(const opts *o)
+{
+    static const pb_scene scenes[] = {PB_DISKS2D, PB_CUBE3D};
+    int failures = 0;
+    collecting = 1;
+    preamble();
+    for (int si = 0; si < 2; si++)
+        for (int T = 1; T <= 2; T++) {
+            pb_row r[4];
+            double rate[2] = {0, 0}, bpp = 0;
+            long steps = o->steps;
+            int bad = 0;
+            for (int k = 0; k < 4 && !bad; k++) {
+                pb_cfg c = {scenes[si],
+                            k % 2 ? MPM_METHOD_CPDI : MPM_METHOD_GIMP,
+                            o->have_update ? o->update : MPM_USF,
+                            o->particles,
+                            steps,
+                            T,
+                            0.0};
+                if (measure(&c, &r[k])) {
+                    bad = 1;
+                    break;
+                }
+                if (!steps) steps = r[k].steps;
+                rate[k % 2] += 0.5 * r[k].mpsteps;
+                if (k % 2 && r[k].bytes_pp > bpp) bpp = r[k].bytes_pp;
+            }
+            if (bad) {
+                failures++;
+                continue;
+            }
+            int dim = pb_scene_dim(scenes[si]);
+            double q = rate[0] > 0 ? rate[1] / rate[0] : 0, lim = dim == 3 ? 450 : 300;
+            pb_result("%s %s, %d thread%s: CPDI / GIMP throughput %.3f (%.2f / %.2f Mpsteps/s; "
+                      "target >= 0.4): %s; CPDI %.0f B/particle (target <= %.0f): %s",
+                      pb_scene_name(scenes[si]), pb_update_name(r[0].update), T, T > 1 ? "s" : "",
+                      q, rate[1], rate[0], verdict(q >= 0.4), bpp, lim, verdict(bpp <= lim));
+        }
+    if (nsummary) {
+        pb_note("\nSummary:");
+        for (int i = 0; i < nsummary; i++) pb_note("  %s", summary[i]);
+    }
+    return failures ? 1 : 0;
+}
+
 int main(int argc, char **argv)
 {
     opts o;
@@ -743,6 +817,8 @@ int main(int argc, char **argv)
         rc = run_all(&o);
     } else if (o.bspline) {
         rc = run_bspline(&o);
+    } else if (o.cpdi_vs_gimp) {
+        rc = run_cpdi_vs_gimp(&o);
     } else {
         if (!csv_mode) preamble();
         rc = run_one(&o);

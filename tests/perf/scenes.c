@@ -84,6 +84,7 @@ const char *pb_method_name(mpm_method m)
     return m == MPM_METHOD_GIMP       ? "GIMP"
            : m == MPM_METHOD_BSPLINE2 ? "BSPLINE2"
            : m == MPM_METHOD_BSPLINE3 ? "BSPLINE3"
+           : m == MPM_METHOD_CPDI     ? "CPDI"
                                       : "MPM";
 }
 
@@ -95,6 +96,7 @@ const char *pb_update_name(mpm_update u)
 double pb_target_rate(int dim, mpm_method m)
 {
     int g = m != MPM_METHOD_MPM; /* B-splines: GIMP's (step counts only) */
+    if (m == MPM_METHOD_CPDI) return 0.4 * pb_target_rate(dim, MPM_METHOD_GIMP); /* issue #10 */
     if (dim == 3) return g ? 3.0 : 16.0;
     if (dim == 2) return g ? 12.0 : 30.0;
     return g ? 30.0 : 60.0; /* 1D: no target in the issue; for step counts only */
