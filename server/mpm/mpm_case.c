@@ -379,6 +379,14 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (!(c->pic_fraction >= 0 && c->pic_fraction <= 1))
         return mpm_fail(err, MPM_EINVAL, "pic_fraction",
                         "must be in [0, 1] (0: pure FLIP, 1: pure PIC) (got %g)", c->pic_fraction);
+    if (c->transfer != MPM_TRANSFER_FLIP && c->transfer != MPM_TRANSFER_APIC)
+        return mpm_fail(err, MPM_EINVAL, "transfer", "unknown value %d (FLIP or APIC)",
+                        (int)c->transfer);
+    if (c->transfer == MPM_TRANSFER_APIC && c->pic_fraction != 0)
+        return mpm_fail(err, MPM_EINVAL, "pic_fraction",
+                        "must be 0 (or absent) with transfer APIC, itself a PIC transfer whose "
+                        "affine part keeps what PIC damps (got %g)",
+                        c->pic_fraction);
     if (c->threads < 0 || c->threads > MPM_MAX_THREADS)
         return mpm_fail(err, MPM_EINVAL, "threads", "must be in [0, %d] (got %d)", MPM_MAX_THREADS,
                         c->threads);

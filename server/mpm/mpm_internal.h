@@ -44,6 +44,9 @@ typedef struct {
     double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL) */
     uint16_t *mat;           /* material index */
     uint32_t *id;            /* creation index (particles are kept sorted by cell) */
+    /* APIC only (NULL with FLIP): affine matrix B_ab = sum_i S_ip v_ia
+     * (x_i - x_p)_b at B[3a + b] (a, b < dim; the others NULL) */
+    double *B[9];
 } mpm_particles;
 
 /* Per-material constants for the constitutive models. */
@@ -101,6 +104,7 @@ struct mpm_sim {
     double *minv;        /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
     double mtol;
     double pic; /* PIC fraction of the velocity update (0: pure FLIP) */
+    mpm_transfer transfer;
 
     /* fixed degrees of freedom: node (padded index) and direction mask */
     size_t nfixed;
@@ -230,6 +234,10 @@ struct mpm_kernels {
  * velocity update blends PIC into FLIP by s->pic (pure FLIP, blend 0, does
  * no extra work). */
 const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend);
+/* The APIC family of dimension dim with ns nodes per axis (mpm_case.transfer
+ * APIC): its own scatters of momentum (with the affine part) and velocity
+ * updates (PIC velocity and B_p), every other pass shared. */
+const mpm_kernels *mpm_kernels_select_apic(int dim, int ns);
 /* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
 size_t mpm_kernels_scratch(void);
 /* Tests and benchmarks: switches a GMPM simulation that has not stepped yet
@@ -280,6 +288,21 @@ static inline void mpm_angmom_add(const mpm_particles *P, int D, size_t p, doubl
     }
 }
 
+/* APIC: the spin of particle p's affine field, m eps : B^T (mpm.h,
+ * mpm_energy.angular_momentum), added to L after mpm_angmom_add() by the
+ * energy pass and the step's in-pass sums alike (the same bits). */
+static inline void mpm_angmom_add_affine(const mpm_particles *P, int D, size_t p, double m,
+                                         double L[3])
+{
+    if (D == 2) {
+        L[2] += m * (P->B[3][p] - P->B[1][p]);
+    } else if (D == 3) {
+        L[0] += m * (P->B[7][p] - P->B[5][p]);
+        L[1] += m * (P->B[2][p] - P->B[6][p]);
+        L[2] += m * (P->B[3][p] - P->B[1][p]);
+    }
+}
+
 /* Writes the particles of a case that passed mpm_case_check() into P, whose
  * arrays are allocated for the count the check found (P->n), with material
  * constants mats, in one pass; *vmax (if not NULL) gets the largest initial
@@ -306,6 +329,13 @@ static inline void mpm_slice(size_t n, int T, int tid, size_t *a, size_t *b)
 static inline void mpm_particle_slice(const mpm_sim *s, int tid, size_t *a, size_t *b)
 {
     mpm_slice(s->P.n, s->nthreads, tid, a, b);
+}
+
+/* Position along axis `axis` of the node with padded index padded_index
+ * (the one place the kernels take node coordinates from). */
+static inline double mpm_node_coord(const mpm_sim *s, int axis, int padded_index)
+{
+    return s->x0[axis] + padded_index * s->h[axis];
 }
 
 /* flat padded index of real node ijk */

@@ -13,7 +13,10 @@
  * mpm_kernels_select() picks the family once per job, so no particle loop
  * branches on dimension, method, update scheme or features.  A PIC/FLIP
  * blend (mpm_case.pic_fraction > 0) selects the family's blend twin, whose
- * velocity updates alone differ; pure FLIP runs the code it always ran.  The 3-node
+ * velocity updates alone differ; pure FLIP runs the code it always ran.
+ * APIC (mpm_case.transfer) selects the family's APIC twin: its scatters of
+ * momentum carry the particles' affine matrices B_p and its velocity
+ * updates are PIC's plus B_p (docs/solver.md, "APIC").  The 3-node
  * family evaluates the same weights of the same nodes as the 4-node one and
  * only leaves out a node whose weight and gradient are exactly zero, so
  * both give the same results.
@@ -112,16 +115,40 @@ size_t mpm_kernels_scratch(void)
     return MPM_BLOCK * sizeof(pw);
 }
 
-INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, pw *o)
+/* n0 (APIC; NULL otherwise): the first node of each axis, padded index */
+INLINE void weights_n0(const mpm_sim *s, size_t p, int D, int NS, pw *o, int *n0)
 {
     size_t base = 0;
     for (int d = 0; d < D; d++) {
         double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
         double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
         int c = axis(r, s->inv_h[d], lp, NS, o->w[d], o->g[d]);
+        if (n0) n0[d] = c;
         base += (size_t)c * s->stride[d];
     }
     o->base = base;
+}
+
+INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, pw *o)
+{
+    weights_n0(s, p, D, NS, o, NULL);
+}
+
+/* APIC: the weights of particle p and the offsets x_i - x_p of its
+ * support's nodes, r[d][k] along axis d for node k of the axis (node
+ * coordinates from mpm_node_coord()). */
+typedef struct {
+    double r[3][4];
+} aoff;
+
+INLINE void weights_ap(const mpm_sim *s, size_t p, int D, int NS, pw *o, aoff *R)
+{
+    int n0[3] = {0, 0, 0};
+    weights_n0(s, p, D, NS, o, n0);
+    for (int d = 0; d < D; d++) {
+        double x = s->P.x[d][p];
+        for (int k = 0; k < NS; k++) R->r[d][k] = mpm_node_coord(s, d, n0[d] + k) - x;
+    }
 }
 
 /* Cell of p along axis d (trunc of r), clamped to the padded grid: a
@@ -272,6 +299,72 @@ INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p,
     });
 }
 
+/* APIC: the matrix the scatter applies, times the particle mass mp.
+ * NS = 2 (MPM tents): B_p itself, scattered with the gradient as
+ * mp B_p grad S_ip (Jiang's multilinear form: D_p grad S_ip = S_ip
+ * (x_i - x_p) for tents, so it equals mp S_ip B_p D_p^-1 (x_i - x_p)
+ * wherever D_p is invertible, and it stays defined on grid lines, where
+ * D_p is singular).  Otherwise: C_p = B_p D_p^-1 with D_p diagonal (a
+ * tensor-product shape with linear precision), D_dd = sum_k S_dk r_dk^2
+ * per axis, > 0 for uGIMP (lp > 0 spreads every particle over two nodes
+ * or more). */
+INLINE void affine_matrix(const mpm_sim *s, const pw *W, const aoff *R, size_t p, double mp,
+                          int D, int NS, double Cm[3][3])
+{
+    double dinv[3] = {mp, mp, mp};
+    if (NS != 2)
+        for (int d = 0; d < D; d++) {
+            double dd = 0;
+            for (int k = 0; k < NS; k++) dd += W->w[d][k] * R->r[d][k] * R->r[d][k];
+            dinv[d] = mp / dd;
+        }
+    for (int a = 0; a < D; a++)
+        for (int b = 0; b < D; b++) Cm[a][b] = s->P.B[3 * a + b][p] * dinv[b];
+}
+
+/* APIC momentum (and mass when m is not NULL) of particle p into q:
+ * sum_i S_ip mp (v_p + C_p (x_i - x_p)), or for MPM tents
+ * mp (S_ip v_p + B_p grad S_ip) (affine_matrix()).  Row by row, with
+ * (x_i - x_p) = (r0[kx], r1[ky], r2[kz]) and grad S = (gx A, wx B, wx C):
+ * q_a += wx t_a + e u_a, e = wx r0[kx] (or gx), u_a = A Cm_a0. */
+INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q[3], const pw *W,
+                           const aoff *R, size_t p, int D, int NS)
+{
+    double *restrict q0 = q[0], *restrict q1 = q[1], *restrict q2 = q[2];
+    double mp = s->P.m[p], Cm[3][3];
+    double mv[3] = {0, 0, 0};
+    for (int a = 0; a < D; a++) mv[a] = mp * s->P.v[a][p];
+    affine_matrix(s, W, R, p, mp, D, NS, Cm);
+    ROWS(D, NS, *W, s, {
+        double t[3] = {0, 0, 0}, u[3] = {0, 0, 0};
+        for (int a = 0; a < D; a++) {
+            double ta = mv[a];
+            if (NS == 2) {
+                ta *= A;
+                if (D > 1) ta += B * Cm[a][1];
+                if (D > 2) ta += C * Cm[a][2];
+            } else {
+                if (D > 1) ta += Cm[a][1] * R->r[1][ky];
+                if (D > 2) ta += Cm[a][2] * R->r[2][kz];
+                ta *= A;
+            }
+            t[a] = ta;
+            u[a] = A * Cm[a][0];
+        }
+        double am = A * mp;
+        UNROLL
+        for (int kx = 0; kx < NS; kx++) {
+            double S = W->w[0][kx];
+            double e = NS == 2 ? GRAD(s, *W, NS, 0, kx) : S * R->r[0][kx];
+            size_t n = row + (size_t)kx;
+            if (m) m[n] += S * am;
+            q0[n] += S * t[0] + e * u[0];
+            if (D > 1) q1[n] += S * t[1] + e * u[1];
+            if (D > 2) q2[n] += S * t[2] + e * u[2];
+        }
+    });
+}
+
 /* Internal force of particle p onto its nodes: f -= V sigma . G (Eq. 15).
  * With G = (gx A, wx B, wx C): f_a -= gx (V s_a0 A) + wx (V s_a1 B + V s_a2 C). */
 INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p, int D, int NS)
@@ -358,14 +451,16 @@ phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS)
  * nodes in the support go through phantom_grad(). */
 INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
                    double *const deps[6], size_t i, int DS, int DX, double *const qx[3],
-                   double dx[3], int DV, double dv[3])
+                   double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3])
 {
     const double *restrict minv = s->minv;
     double L[3][3] = {{0}};
     double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
+    double Bm[3][3] = {{0}};
     int nph = 0; /* phantom nodes in the support */
     ROWS(D, NS, *W, s, {
         double r0[3] = {0, 0, 0}, r1[3] = {0, 0, 0}, rx[3] = {0, 0, 0}, rv[3] = {0, 0, 0};
+        double rb[3] = {0, 0, 0};
         UNROLL
         for (int kx = 0; kx < NS; kx++) {
             size_t n = row + (size_t)kx;
@@ -378,6 +473,7 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
                     r1[a] += va * wx;
                 }
                 if (DX) rx[a] += sm * qx[a][n];
+                if (AF) rb[a] += sm * qx[a][n] * R->r[0][kx];
                 if (DV) rv[a] += sm * s->g.f[a][n];
             }
         }
@@ -389,11 +485,18 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
             }
             if (DX) X[a] += A * rx[a];
             if (DV) Vv[a] += A * rv[a];
+            if (AF) {
+                Bm[a][0] += A * rb[a];
+                if (D > 1) Bm[a][1] += A * R->r[1][ky] * rx[a];
+                if (D > 2) Bm[a][2] += A * R->r[2][kz] * rx[a];
+            }
         }
     });
     for (int a = 0; a < D; a++) {
         if (DX) dx[a] = X[a];
         if (DV) dv[a] = Vv[a];
+        if (AF)
+            for (int b = 0; b < D; b++) Bo[a][b] = Bm[a][b];
     }
     if (!DS) return;
     if (__builtin_expect(nph != 0, 0)) {
@@ -448,7 +551,7 @@ INLINE void esum_init(const mpm_sim *s, esum *e)
     }
 }
 
-INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
+INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP)
 {
     const mpm_particles *P = &s->P;
     double m = P->m[p], v2 = 0;
@@ -459,6 +562,7 @@ INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
         e->ep -= m * e->g[d] * P->x[d][p];
     }
     mpm_angmom_add(P, D, p, m, e->L);
+    if (AP) mpm_angmom_add_affine(P, D, p, m, e->L);
     e->ek += 0.5 * m * v2;
     e->ms += m;
 }
@@ -484,31 +588,51 @@ INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
     if (S) o->estr = e->es;
 }
 
-INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+/* AP: APIC, the momentum with the affine part (scatter_affine()). */
+INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int AP)
 {
     pw W;
+    aoff R;
     for (size_t p = p0; p < p1; p++) {
-        weights(s, p, D, NS, &W);
-        scatter_mq(s, gb, &W, p, D, NS);
+        if (AP) {
+            weights_ap(s, p, D, NS, &W, &R);
+            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS);
+        } else {
+            weights(s, p, D, NS, &W);
+            scatter_mq(s, gb, &W, p, D, NS);
+        }
     }
 }
 
-INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int AP)
 {
     pw W;
+    aoff R;
     for (size_t p = p0; p < p1; p++) {
-        weights(s, p, D, NS, &W);
-        scatter_mq(s, gb, &W, p, D, NS);
+        if (AP) {
+            weights_ap(s, p, D, NS, &W, &R);
+            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS);
+        } else {
+            weights(s, p, D, NS, &W);
+            scatter_mq(s, gb, &W, p, D, NS);
+        }
         scatter_force(s, gb, &W, p, D, NS);
     }
 }
 
-/* MUSL: momentum of the updated particle velocities. */
-INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS)
+/* MUSL: momentum of the updated particle velocities (AP: APIC, with the
+ * affine part of the updated B_p, as the step's first scatter). */
+INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int AP)
 {
     pw W;
+    aoff R;
     double *restrict q0 = gb->q2[0], *restrict q1 = gb->q2[1], *restrict q2 = gb->q2[2];
     for (size_t p = p0; p < p1; p++) {
+        if (AP) {
+            weights_ap(s, p, D, NS, &W, &R);
+            scatter_affine(s, NULL, gb->q2, &W, &R, p, D, NS);
+            continue;
+        }
         weights(s, p, D, NS, &W);
         double mp = s->P.m[p];
         double mv0 = mp * s->P.v[0][p];
@@ -539,7 +663,8 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             weights(s, b0 + i, D, NS, &Wb[i]);
-            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL);
+            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL,
+                   NULL);
         }
         block_update(s, b0, nb, o->deps, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -594,12 +719,24 @@ INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, doubl
         *v += dt * dv;
 }
 
+/* APIC's velocity update: the PIC velocity vpic = sum S v_I^{n+1} (the
+ * position increment's sum) and the affine matrix Bm into B_p. */
+INLINE void ap_store(mpm_sim *s, size_t p, int D, const double vpic[3], double Bm[3][3])
+{
+    for (int a = 0; a < D; a++) {
+        s->P.v[a][p] = vpic[a];
+        for (int b = 0; b < D; b++) s->P.B[3 * a + b][p] = Bm[a][b];
+    }
+}
+
 /* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0);
- * BL: the velocity blended with PIC (v_update()). */
+ * BL: the velocity blended with PIC (v_update()); AP: APIC, v = sum S q/m
+ * and B_p = sum S q/m (x_I - x_p)^T (ap_store()). */
 INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int EN,
-                     int BL)
+                     int BL, int AP)
 {
     pw W;
+    aoff R;
     rowrun a;
     boxc bc;
     esum e;
@@ -609,16 +746,22 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
     run_init(&a);
     boxc_init(s, &bc);
     for (size_t p = p0; p < p1; p++) {
-        double dx[3], dv[3], xn[3];
-        weights(s, p, D, NS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv);
+        double dx[3], dv[3], xn[3], Bm[3][3];
+        if (AP) {
+            weights_ap(s, p, D, NS, &W, &R);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
+            ap_store(s, p, D, dx, Bm);
+        } else {
+            weights(s, p, D, NS, &W);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+        }
         for (int d = 0; d < D; d++) {
             xn[d] = s->P.x[d][p] + dt * dx[d];
             s->P.x[d][p] = xn[d];
-            v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
+            if (!AP) v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
         }
         check_particle(s, o, p, D);
-        if (EN) esum_particle(s, &e, p, D);
+        if (EN) esum_particle(s, &e, p, D, AP);
         box_add(s, &bc, o, &a, xn, D, NS);
     }
     run_flush(s, o, &a, D);
@@ -628,9 +771,10 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
  * weights of the step's start positions serve both, in one gather. */
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                            int EN, int BL)
+                            int EN, int BL, int AP)
 {
     pw W;
+    aoff R;
     rowrun a;
     boxc bc;
     esum e;
@@ -643,16 +787,22 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
-            double dx[3], dv[3], xn[3];
-            weights(s, p, D, NS, &W);
-            gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv);
+            double dx[3], dv[3], xn[3], Bm[3][3];
+            if (AP) {
+                weights_ap(s, p, D, NS, &W, &R);
+                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
+                ap_store(s, p, D, dx, Bm);
+            } else {
+                weights(s, p, D, NS, &W);
+                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+            }
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
                 s->P.x[d][p] = xn[d];
-                v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
+                if (!AP) v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
             }
             check_particle(s, o, p, D);
-            if (EN) esum_particle(s, &e, p, D);
+            if (EN) esum_particle(s, &e, p, D, AP);
             box_add(s, &bc, o, &a, xn, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
@@ -662,25 +812,34 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     if (EN) esum_store(&e, o, 1, 1);
 }
 
-/* MUSL: the velocity only (BL: blended with PIC; the blended velocity is
- * what p2g_q2 maps back to the grid). */
-INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BL)
+/* MUSL: the velocity only (BL: blended with PIC; AP: APIC's velocity and
+ * B_p; what p2g_q2 maps back to the grid). */
+INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BL,
+                    int AP)
 {
     pw W;
+    aoff R;
     double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     (void)o;
     for (size_t p = p0; p < p1; p++) {
-        double dv[3], vp[3] = {0, 0, 0};
+        double dv[3], vp[3] = {0, 0, 0}, Bm[3][3];
+        if (AP) {
+            weights_ap(s, p, D, NS, &W, &R);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm);
+            ap_store(s, p, D, vp, Bm);
+            continue;
+        }
         weights(s, p, D, NS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv);
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL);
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
     }
 }
 
 /* MUSL: positions from the updated grid momentum, strain from the momentum
- * of the updated particle velocities (q2). */
+ * of the updated particle velocities (q2).  AP: the in-pass angular
+ * momentum counts B_p. */
 INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                           int EN)
+                           int EN, int AP)
 {
     pw W;
     rowrun a;
@@ -697,13 +856,13 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             size_t p = b0 + i;
             double dx[3], xn[3];
             weights(s, p, D, NS, &W);
-            gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL);
+            gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL);
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
                 s->P.x[d][p] = xn[d];
             }
             check_particle(s, o, p, D);
-            if (EN) esum_particle(s, &e, p, D);
+            if (EN) esum_particle(s, &e, p, D, AP);
             box_add(s, &bc, o, &a, xn, D, NS);
         }
         block_update(s, b0, nb, o->deps, D);
@@ -792,21 +951,21 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     static void g2p_xv_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
     {                                                                                           \
         if (en)                                                                                 \
-            g2p_xv_t(s, o, a, b, D, NS, 1, 1);                                                  \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 1, 0);                                                  \
         else                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 0, 1);                                                  \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 1, 0);                                                  \
     }                                                                                           \
     static void g2p_xv_stress_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
                                             int en)                                             \
     {                                                                                           \
         if (en)                                                                                 \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 1);                                           \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 1, 0);                                           \
         else                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 1);                                           \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 1, 0);                                           \
     }                                                                                           \
     static void g2p_v_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
     {                                                                                           \
-        g2p_v_t(s, o, a, b, D, NS, 1);                                                          \
+        g2p_v_t(s, o, a, b, D, NS, 1, 0);                                                          \
     }                                                                                           \
     static const mpm_kernels family_bl_##D##_##NS = {                                           \
         p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                    \
@@ -814,18 +973,67 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
         g2p_v_bl_##D##_##NS,     g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,             \
         bbox_##D##_##NS,         cell_keys_##D##_##NS};
 
+/* The APIC family of (D, NS): its own scatters of momentum and velocity
+ * updates, and the in-pass angular momentum with B_p; the stress pass,
+ * loads, boxes and sort keys shared. */
+#define APIC(D, NS)                                                                             \
+    static void p2g_mq_ap_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)           \
+    {                                                                                           \
+        p2g_mq_t(s, gb, a, b, D, NS, 1);                                                        \
+    }                                                                                           \
+    static void p2g_mqf_ap_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)          \
+    {                                                                                           \
+        p2g_mqf_t(s, gb, a, b, D, NS, 1);                                                       \
+    }                                                                                           \
+    static void p2g_q2_ap_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)           \
+    {                                                                                           \
+        p2g_q2_t(s, gb, a, b, D, NS, 1);                                                        \
+    }                                                                                           \
+    static void g2p_xv_ap_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 0, 1);                                               \
+        else                                                                                    \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 0, 1);                                               \
+    }                                                                                           \
+    static void g2p_xv_stress_ap_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
+                                            int en)                                             \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0, 1);                                        \
+        else                                                                                    \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0, 1);                                        \
+    }                                                                                           \
+    static void g2p_v_ap_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
+    {                                                                                           \
+        g2p_v_t(s, o, a, b, D, NS, 0, 1);                                                       \
+    }                                                                                           \
+    static void g2p_x_stress_ap_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,   \
+                                           int en)                                              \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_x_stress_t(s, o, a, b, D, NS, 1, 1);                                            \
+        else                                                                                    \
+            g2p_x_stress_t(s, o, a, b, D, NS, 0, 1);                                            \
+    }                                                                                           \
+    static const mpm_kernels family_ap_##D##_##NS = {                                           \
+        p2g_mq_ap_##D##_##NS,    p2g_mqf_ap_##D##_##NS,      p2g_q2_ap_##D##_##NS,              \
+        stress_force_##D##_##NS, g2p_xv_ap_##D##_##NS,       g2p_xv_stress_ap_##D##_##NS,       \
+        g2p_v_ap_##D##_##NS,     g2p_x_stress_ap_##D##_##NS, scatter_loads_##D##_##NS,          \
+        bbox_##D##_##NS,         cell_keys_##D##_##NS};
+
 #define FAMILY(D, NS)                                                                              \
     static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
     {                                                                                              \
-        p2g_mq_t(s, gb, a, b, D, NS);                                                              \
+        p2g_mq_t(s, gb, a, b, D, NS, 0);                                                              \
     }                                                                                              \
     static void p2g_mqf_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                \
     {                                                                                              \
-        p2g_mqf_t(s, gb, a, b, D, NS);                                                             \
+        p2g_mqf_t(s, gb, a, b, D, NS, 0);                                                             \
     }                                                                                              \
     static void p2g_q2_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
     {                                                                                              \
-        p2g_q2_t(s, gb, a, b, D, NS);                                                              \
+        p2g_q2_t(s, gb, a, b, D, NS, 0);                                                              \
     }                                                                                              \
     static void stress_force_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t a,  \
                                         size_t b, int en)                                          \
@@ -838,28 +1046,28 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)       \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 1, 0);                                                     \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 0, 0);                                                     \
         else                                                                                       \
-            g2p_xv_t(s, o, a, b, D, NS, 0, 0);                                                     \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 0, 0);                                                     \
     }                                                                                              \
     static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
                                          int en)                                                   \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0);                                              \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0, 0);                                              \
         else                                                                                       \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0);                                              \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0, 0);                                              \
     }                                                                                              \
     static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                \
     {                                                                                              \
-        g2p_v_t(s, o, a, b, D, NS, 0);                                                             \
+        g2p_v_t(s, o, a, b, D, NS, 0, 0);                                                             \
     }                                                                                              \
     static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_x_stress_t(s, o, a, b, D, NS, 1);                                                  \
+            g2p_x_stress_t(s, o, a, b, D, NS, 1, 0);                                                  \
         else                                                                                       \
-            g2p_x_stress_t(s, o, a, b, D, NS, 0);                                                  \
+            g2p_x_stress_t(s, o, a, b, D, NS, 0, 0);                                                  \
     }                                                                                              \
     LOADS(D, NS)                                                                                   \
     static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                 \
@@ -875,7 +1083,8 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
         stress_force_##D##_##NS, g2p_xv_##D##_##NS,       g2p_xv_stress_##D##_##NS,                \
         g2p_v_##D##_##NS,        g2p_x_stress_##D##_##NS, scatter_loads_##D##_##NS,                \
         bbox_##D##_##NS,         cell_keys_##D##_##NS};                                            \
-    BLEND(D, NS)
+    BLEND(D, NS)                                                                                   \
+    APIC(D, NS)
 
 FAMILY(1, 2)
 FAMILY(1, 3)
@@ -897,4 +1106,13 @@ const mpm_kernels *mpm_kernels_select(int dim, int ns, int blend)
         {&family_bl_2_2, &family_bl_2_3, &family_bl_2_4},
         {&family_bl_3_2, &family_bl_3_3, &family_bl_3_4}};
     return blend ? table_bl[dim - 1][ns - 2] : table[dim - 1][ns - 2];
+}
+
+const mpm_kernels *mpm_kernels_select_apic(int dim, int ns)
+{
+    static const mpm_kernels *const table[3][3] = {
+        {&family_ap_1_2, &family_ap_1_3, &family_ap_1_4},
+        {&family_ap_2_2, &family_ap_2_3, &family_ap_2_4},
+        {&family_ap_3_2, &family_ap_3_3, &family_ap_3_4}};
+    return table[dim - 1][ns - 2];
 }

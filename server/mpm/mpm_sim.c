@@ -100,6 +100,7 @@ static void free_particles(mpm_particles *P)
         free(P->sig[c]);
         free(P->eps[c]);
     }
+    for (int c = 0; c < 9; c++) free(P->B[c]);
     free(P->m);
     free(P->vol);
     free(P->mat);
@@ -107,7 +108,7 @@ static void free_particles(mpm_particles *P)
     memset(P, 0, sizeof *P);
 }
 
-static int alloc_particles(mpm_particles *P, size_t n, int dim, int gimp)
+static int alloc_particles(mpm_particles *P, size_t n, int dim, int gimp, int apic)
 {
     memset(P, 0, sizeof *P);
     P->n = n;
@@ -120,6 +121,9 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int gimp)
         if (!(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
             return MPM_ENOMEM; /* eps_zz = 0 */
     }
+    for (int a = 0; a < dim && apic; a++)
+        for (int b = 0; b < dim; b++)
+            if (!(P->B[3 * a + b] = mpm_dalloc(n))) return MPM_ENOMEM; /* B_p = 0 */
     if (!(P->m = mpm_dalloc(n)) || !(P->vol = mpm_dalloc(n))) return MPM_ENOMEM;
     if (!(P->mat = calloc(n ? n : 1, sizeof *P->mat))) return MPM_ENOMEM;
     if (!(P->id = malloc((n ? n : 1) * sizeof *P->id))) return MPM_ENOMEM;
@@ -289,6 +293,13 @@ static int gimp_fits3(const mpm_sim *s)
     return 1;
 }
 
+/* The kernel family of the case, chosen once per job. */
+static const mpm_kernels *select_kernels(const mpm_sim *s)
+{
+    if (s->transfer == MPM_TRANSFER_APIC) return mpm_kernels_select_apic(s->dim, s->ns);
+    return mpm_kernels_select(s->dim, s->ns, s->pic != 0);
+}
+
 /* The first box and the first sort, once the team runs. */
 static void init_order(mpm_sim *s)
 {
@@ -304,7 +315,7 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
         (ns == 3 && !gimp_fits3(s)))
         return MPM_EINVAL;
     s->ns = ns;
-    s->k = mpm_kernels_select(s->dim, ns, s->pic != 0);
+    s->k = select_kernels(s);
     init_order(s);
     return 0;
 }
@@ -355,11 +366,14 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     }
 
     int musl = c->update == MPM_MUSL;
-    if (alloc_particles(&s->P, np, dim, c->method == MPM_METHOD_GIMP)) goto nomem;
+    s->transfer = c->transfer;
+    if (alloc_particles(&s->P, np, dim, c->method == MPM_METHOD_GIMP,
+                        c->transfer == MPM_TRANSFER_APIC))
+        goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
     if (s->ns == 4 && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
-    s->k = mpm_kernels_select(dim, s->ns, s->pic != 0);
+    s->k = select_kernels(s);
     if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
         goto nomem;
