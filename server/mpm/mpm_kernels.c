@@ -308,8 +308,8 @@ INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p,
  * tensor-product shape with linear precision), D_dd = sum_k S_dk r_dk^2
  * per axis, > 0 for uGIMP (lp > 0 spreads every particle over two nodes
  * or more). */
-INLINE void affine_matrix(const mpm_sim *s, const pw *W, const aoff *R, size_t p, double mp,
-                          int D, int NS, double Cm[3][3])
+INLINE void affine_matrix(const mpm_sim *s, const pw *W, const aoff *R, size_t p, double mp, int D,
+                          int NS, double Cm[3][3])
 {
     double dinv[3] = {mp, mp, mp};
     if (NS != 2)
@@ -663,8 +663,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             weights(s, b0 + i, D, NS, &Wb[i]);
-            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL,
-                   NULL);
+            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL);
         }
         block_update(s, b0, nb, o->deps, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -951,21 +950,21 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     static void g2p_xv_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
     {                                                                                           \
         if (en)                                                                                 \
-            g2p_xv_t(s, o, a, b, D, NS, 1, 1, 0);                                                  \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 1, 0);                                               \
         else                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 0, 1, 0);                                                  \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 1, 0);                                               \
     }                                                                                           \
     static void g2p_xv_stress_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
                                             int en)                                             \
     {                                                                                           \
         if (en)                                                                                 \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 1, 0);                                           \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 1, 0);                                        \
         else                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 1, 0);                                           \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 1, 0);                                        \
     }                                                                                           \
     static void g2p_v_bl_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
     {                                                                                           \
-        g2p_v_t(s, o, a, b, D, NS, 1, 0);                                                          \
+        g2p_v_t(s, o, a, b, D, NS, 1, 0);                                                       \
     }                                                                                           \
     static const mpm_kernels family_bl_##D##_##NS = {                                           \
         p2g_mq_##D##_##NS,       p2g_mqf_##D##_##NS,      p2g_q2_##D##_##NS,                    \
@@ -1025,15 +1024,15 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
 #define FAMILY(D, NS)                                                                              \
     static void p2g_mq_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
     {                                                                                              \
-        p2g_mq_t(s, gb, a, b, D, NS, 0);                                                              \
+        p2g_mq_t(s, gb, a, b, D, NS, 0);                                                           \
     }                                                                                              \
     static void p2g_mqf_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                \
     {                                                                                              \
-        p2g_mqf_t(s, gb, a, b, D, NS, 0);                                                             \
+        p2g_mqf_t(s, gb, a, b, D, NS, 0);                                                          \
     }                                                                                              \
     static void p2g_q2_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)                 \
     {                                                                                              \
-        p2g_q2_t(s, gb, a, b, D, NS, 0);                                                              \
+        p2g_q2_t(s, gb, a, b, D, NS, 0);                                                           \
     }                                                                                              \
     static void stress_force_##D##_##NS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t a,  \
                                         size_t b, int en)                                          \
@@ -1046,28 +1045,28 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS)
     static void g2p_xv_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en)       \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, 1, 0, 0);                                                     \
+            g2p_xv_t(s, o, a, b, D, NS, 1, 0, 0);                                                  \
         else                                                                                       \
-            g2p_xv_t(s, o, a, b, D, NS, 0, 0, 0);                                                     \
+            g2p_xv_t(s, o, a, b, D, NS, 0, 0, 0);                                                  \
     }                                                                                              \
     static void g2p_xv_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
                                          int en)                                                   \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0, 0);                                              \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 1, 0, 0);                                           \
         else                                                                                       \
-            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0, 0);                                              \
+            g2p_xv_stress_t(s, o, a, b, D, NS, 0, 0, 0);                                           \
     }                                                                                              \
     static void g2p_v_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                \
     {                                                                                              \
-        g2p_v_t(s, o, a, b, D, NS, 0, 0);                                                             \
+        g2p_v_t(s, o, a, b, D, NS, 0, 0);                                                          \
     }                                                                                              \
     static void g2p_x_stress_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, int en) \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_x_stress_t(s, o, a, b, D, NS, 1, 0);                                                  \
+            g2p_x_stress_t(s, o, a, b, D, NS, 1, 0);                                               \
         else                                                                                       \
-            g2p_x_stress_t(s, o, a, b, D, NS, 0, 0);                                                  \
+            g2p_x_stress_t(s, o, a, b, D, NS, 0, 0);                                               \
     }                                                                                              \
     LOADS(D, NS)                                                                                   \
     static void bbox_##D##_##NS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)                 \

@@ -403,6 +403,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->mtol = (c->mass_tol > 0 ? c->mass_tol : MPM_DEFAULT_MASS_TOL) * msum / (double)s->P.n;
     s->dt_fixed = c->dt;
     s->cfl = c->cfl > 0 ? c->cfl : MPM_DEFAULT_CFL;
+    if (c->cfl <= 0 && c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC)
+        s->cfl = MPM_APIC_MPM_MAX_CFL; /* its stability limit (mpm.h) */
     next_dt(s);
     mpm_energy e0;
     mpm_sim_energy(s, &e0);
