@@ -54,6 +54,9 @@ static const command commands[] = {
      "a bad case is reported with the JSON path of the field and nothing is sent.\n"
      "A case without \"method\" / \"update\" runs GIMP (uGIMP) with MUSL, the schema's\n"
      "defaults (docs/accuracy.md); both are sent explicitly, so any mpmd runs the same.\n"
+     "\"transfer\": \"APIC\" selects the affine particle-in-cell transfer (angular momentum\n"
+     "kept; \"picFraction\" must then be 0), absent or \"FLIP\" the FLIP update\n"
+     "(docs/solver.md; example: proto/examples/disk2d_apic.json).\n"
      "Prints \"job N\" (--json: the SubmitOk object).  --watch continues as `watch N`\n"
      "(with --csv/--json the job line goes to stderr and stdout carries the series).\n"},
     {"watch", C_WATCH, "ID [--csv|--json]", "live view of a job until it ends",
