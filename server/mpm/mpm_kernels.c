@@ -588,6 +588,16 @@ INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
     if (S) o->estr = e->es;
 }
 
+/* APIC's scatter weights: MPM tents scatter with the gradients and need
+ * no node offsets (affine_matrix()). */
+INLINE void p2g_weights(const mpm_sim *s, size_t p, int D, int NS, pw *W, aoff *R)
+{
+    if (NS == 2)
+        weights(s, p, D, NS, W);
+    else
+        weights_ap(s, p, D, NS, W, R);
+}
+
 /* AP: APIC, the momentum with the affine part (scatter_affine()). */
 INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int AP)
 {
@@ -595,7 +605,7 @@ INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
     aoff R;
     for (size_t p = p0; p < p1; p++) {
         if (AP) {
-            weights_ap(s, p, D, NS, &W, &R);
+            p2g_weights(s, p, D, NS, &W, &R);
             scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS);
         } else {
             weights(s, p, D, NS, &W);
@@ -610,7 +620,7 @@ INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, 
     aoff R;
     for (size_t p = p0; p < p1; p++) {
         if (AP) {
-            weights_ap(s, p, D, NS, &W, &R);
+            p2g_weights(s, p, D, NS, &W, &R);
             scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS);
         } else {
             weights(s, p, D, NS, &W);
@@ -629,7 +639,7 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
     double *restrict q0 = gb->q2[0], *restrict q1 = gb->q2[1], *restrict q2 = gb->q2[2];
     for (size_t p = p0; p < p1; p++) {
         if (AP) {
-            weights_ap(s, p, D, NS, &W, &R);
+            p2g_weights(s, p, D, NS, &W, &R);
             scatter_affine(s, NULL, gb->q2, &W, &R, p, D, NS);
             continue;
         }
