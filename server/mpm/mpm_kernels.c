@@ -322,13 +322,13 @@ INLINE void affine_matrix(const mpm_sim *s, const pw *W, const aoff *R, size_t p
         for (int b = 0; b < D; b++) Cm[a][b] = s->P.B[3 * a + b][p] * dinv[b];
 }
 
-/* APIC momentum (and mass when m is not NULL) of particle p into q:
+/* APIC momentum (and mass into m when WM) of particle p into q:
  * sum_i S_ip mp (v_p + C_p (x_i - x_p)), or for MPM tents
  * mp (S_ip v_p + B_p grad S_ip) (affine_matrix()).  Row by row, with
  * (x_i - x_p) = (r0[kx], r1[ky], r2[kz]) and grad S = (gx A, wx B, wx C):
  * q_a += wx t_a + e u_a, e = wx r0[kx] (or gx), u_a = A Cm_a0. */
 INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q[3], const pw *W,
-                           const aoff *R, size_t p, int D, int NS)
+                           const aoff *R, size_t p, int D, int NS, int WM)
 {
     double *restrict q0 = q[0], *restrict q1 = q[1], *restrict q2 = q[2];
     double mp = s->P.m[p], Cm[3][3];
@@ -357,7 +357,7 @@ INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q
             double S = W->w[0][kx];
             double e = NS == 2 ? GRAD(s, *W, NS, 0, kx) : S * R->r[0][kx];
             size_t n = row + (size_t)kx;
-            if (m) m[n] += S * am;
+            if (WM) m[n] += S * am;
             q0[n] += S * t[0] + e * u[0];
             if (D > 1) q1[n] += S * t[1] + e * u[1];
             if (D > 2) q2[n] += S * t[2] + e * u[2];
@@ -606,7 +606,7 @@ INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
     for (size_t p = p0; p < p1; p++) {
         if (AP) {
             p2g_weights(s, p, D, NS, &W, &R);
-            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS);
+            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS, 1);
         } else {
             weights(s, p, D, NS, &W);
             scatter_mq(s, gb, &W, p, D, NS);
@@ -621,7 +621,7 @@ INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, 
     for (size_t p = p0; p < p1; p++) {
         if (AP) {
             p2g_weights(s, p, D, NS, &W, &R);
-            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS);
+            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS, 1);
         } else {
             weights(s, p, D, NS, &W);
             scatter_mq(s, gb, &W, p, D, NS);
@@ -640,7 +640,7 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
     for (size_t p = p0; p < p1; p++) {
         if (AP) {
             p2g_weights(s, p, D, NS, &W, &R);
-            scatter_affine(s, NULL, gb->q2, &W, &R, p, D, NS);
+            scatter_affine(s, NULL, gb->q2, &W, &R, p, D, NS, 0);
             continue;
         }
         weights(s, p, D, NS, &W);
