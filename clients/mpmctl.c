@@ -57,6 +57,9 @@ static const command commands[] = {
      "Methods: MPM, GIMP, BSPLINE2 (quadratic B-splines), BSPLINE3 (cubic), CPDI (CPDI1:\n"
      "the particle domain follows its deformation gradient, for large deformation;\n"
      "docs/solver.md); updates: USF, USL, MUSL.\n"
+     "\"transfer\": \"APIC\" selects the affine particle-in-cell transfer (angular momentum\n"
+     "kept; \"picFraction\" must then be 0), absent or \"FLIP\" the FLIP update\n"
+     "(docs/solver.md; example: proto/examples/disk2d_apic.json).\n"
      "Prints \"job N\" (--json: the SubmitOk object).  --watch continues as `watch N`\n"
      "(with --csv/--json the job line goes to stderr and stdout carries the series).\n"},
     {"watch", C_WATCH, "ID [--csv|--json]", "live view of a job until it ends",

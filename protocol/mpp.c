@@ -39,6 +39,9 @@ _Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
                    SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
                    SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),
                "mpm_method / mpm_update must match mpmd.Case.Method / Update");
+_Static_assert(SAME(MPM_TRANSFER_FLIP, MPMD__CASE__TRANSFER__FLIP) &&
+                   SAME(MPM_TRANSFER_APIC, MPMD__CASE__TRANSFER__APIC),
+               "mpm_transfer must match mpmd.Case.Transfer");
 _Static_assert(SAME(MPP_STREAM_PROGRESS, MPMD__STREAM_MSG__BODY_PROGRESS) &&
                    SAME(MPP_STREAM_ENERGY, MPMD__STREAM_MSG__BODY_ENERGY) &&
                    SAME(MPP_STREAM_SNAPSHOT, MPMD__STREAM_MSG__BODY_SNAPSHOT) &&

@@ -497,6 +497,7 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
     c->cfl = pb->has_cfl ? pb->cfl : 0;
     c->mass_tol = pb->has_mass_tol ? pb->mass_tol : 0;
     c->pic_fraction = pb->has_pic_fraction ? pb->pic_fraction : 0;
+    c->transfer = pb->has_transfer ? (mpm_transfer)pb->transfer : MPM_TRANSFER_FLIP;
     c->allow_unstable_dt = pb->has_allow_unstable_dt && pb->allow_unstable_dt;
     if ((rc = get_vec("gravity", pb->gravity, pb->n_gravity, c->grid.dim, 1, c->gravity, err)))
         return rc;

@@ -250,6 +250,30 @@ TEST(codec_example_disks2d)
     check_disks("disks2d_fine", 41, 0.025, 392);
 }
 
+/* The spinning disk with APIC: the transfer's JSON spelling, explicit
+ * points turning rigidly about (0.5, 0.5). */
+TEST(codec_example_disk2d_apic)
+{
+    mpp_case *sc = load_example("disk2d_apic");
+    CHECK(sc);
+    const mpm_case *c = &sc->c;
+    const mpm_body_desc *b = &c->bodies[0];
+    CHECK(c->transfer == MPM_TRANSFER_APIC && c->pic_fraction == 0);
+    CHECK(c->method == MPM_METHOD_GIMP && c->update == MPM_MUSL);
+    CHECK(b->n_points == 208 && b->v && b->x);
+    for (size_t i = 0; i < b->n_points; i++) {
+        double rx = b->x[2 * i] - 0.5, ry = b->x[2 * i + 1] - 0.5;
+        CHECK_NEAR(b->v[2 * i] * rx + b->v[2 * i + 1] * ry, 0, 1e-8); /* tangential */
+    }
+    CHECK(sim_particles(sc) == 208);
+    mpp_case_destroy(&sc);
+    /* absent: FLIP */
+    sc = load_example("disks2d_coarse");
+    CHECK(sc);
+    CHECK(sc->c.transfer == MPM_TRANSFER_FLIP);
+    mpp_case_destroy(&sc);
+}
+
 TEST(codec_example_cube3d)
 {
     mpp_case *sc = load_example("cube3d");
@@ -278,9 +302,9 @@ TEST(codec_example_cube3d)
 /* JSON -> pb -> bytes -> pb -> JSON -> pb -> bytes: same bytes. */
 TEST(codec_roundtrip)
 {
-    static const char *const names[] = {"point1d",        "bar1d_mpm",        "bar1d_gimp",
-                                        "disks2d_coarse", "disks2d_fine",     "cube3d",
-                                        "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi"};
+    static const char *const names[] = {
+        "point1d", "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse", "disks2d_fine",
+        "cube3d",  "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi", "disk2d_apic"};
     for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
         char path[256], err[T_ERRLEN];
         size_t len = 0, n1 = 0, n2 = 0;
@@ -498,6 +522,13 @@ TEST(codec_bad_case)
         return;
     if (expect_bad("{\"box\": {\"lo\": [0.6, 0.6], \"hi\": [0.8, 0.8]}, ", "{", I,
                    "bodies[1]: needs one of box, sphere or points"))
+        return;
+    if (expect_bad("\"endTime\": 1", "\"endTime\": 1, \"transfer\": \"APIC\", \"picFraction\": 0.5",
+                   I, "picFraction: must be 0 (or absent) with transfer APIC"))
+        return;
+    if (expect_bad(
+            "\"endTime\": 1", "\"endTime\": 1, \"transfer\": \"RPIC\"", I,
+            "transfer: unknown value string \"RPIC\" for enum mpmd.Case.Transfer (expected one of: FLIP, APIC)"))
         return;
     if (expect_bad("\"dim\": 2", "\"dim\": 4", I, "grid.dim: must be 1, 2 or 3 (got 4)")) return;
     if (expect_bad("\"dim\": 2, ", "", I, "grid.dim: missing")) return;
@@ -1078,9 +1109,9 @@ TEST(codec_submit_bytes)
  * (installed by make deps). */
 TEST(codec_python_json_format)
 {
-    static const char *names[] = {"point1d",        "bar1d_mpm",       "bar1d_gimp",
-                                  "disks2d_coarse", "disks2d_fine",    "cube3d",
-                                  "bar1d_bspline2", "disks2d_bspline2"};
+    static const char *names[] = {
+        "point1d", "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse", "disks2d_fine",
+        "cube3d",  "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi", "disk2d_apic"};
     enum { NN = sizeof names / sizeof names[0] };
     char dir[] = "/tmp/mpmpy.XXXXXX", cmd[1024], path[512], err[T_ERRLEN];
     CHECK(mkdtemp(dir) != NULL);

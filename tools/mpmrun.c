@@ -23,6 +23,7 @@ static const char *usage =
     "                  (default disks-fine)\n"
     "  --method M      mpm | gimp | bspline2 | bspline3 | cpdi (default: the case's)\n"
     "  --update U      usf | usl | musl (default usf)\n"
+    "  --transfer T    flip | apic (default flip)\n"
     "  --dt DT         fixed time step (default 0.001; 0 = automatic from CFL)\n"
     "  --cfl C         Courant factor for automatic dt (default 0.5)\n"
     "  --t-end T       end time (default: the case's)\n"
@@ -53,7 +54,7 @@ static int parse_double(const char *opt, const char *s, double lo, double *out)
 
 int main(int argc, char **argv)
 {
-    const char *cname = "disks-fine", *method = NULL, *update = "usf";
+    const char *cname = "disks-fine", *method = NULL, *update = "usf", *transfer = "flip";
     double dt = 1e-3, cfl = 0, tend = -1, every = 0, threads = 1;
     int csv = 0;
     for (int i = 1; i < argc; i++) {
@@ -78,6 +79,8 @@ int main(int argc, char **argv)
             method = v;
         else if (!strcmp(a, "--update"))
             update = v;
+        else if (!strcmp(a, "--transfer"))
+            transfer = v;
         else if (!strcmp(a, "--dt"))
             rc = parse_double(a, v, 0, &dt);
         else if (!strcmp(a, "--cfl"))
@@ -152,6 +155,13 @@ int main(int argc, char **argv)
             mpm_paper_free(&P);
             return 2;
         }
+    }
+    if (!strcmp(transfer, "apic"))
+        P.c.transfer = MPM_TRANSFER_APIC;
+    else if (strcmp(transfer, "flip")) {
+        fprintf(stderr, "mpmrun: --transfer: expected flip or apic, got '%s'\n", transfer);
+        mpm_paper_free(&P);
+        return 2;
     }
     P.c.cfl = cfl;
     P.c.threads = (int)threads;

@@ -48,6 +48,18 @@ typedef enum {
 typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
 typedef enum { MPM_MODEL_LINEAR_ELASTIC = 0 } mpm_model_kind;
 typedef enum { MPM_SHAPE_BOX = 0, MPM_SHAPE_SPHERE = 1 } mpm_shape;
+/* Particle-grid velocity transfer.  FLIP: the update of Eq. 31 (blended
+ * with PIC by mpm_case.pic_fraction).  APIC: the affine particle-in-cell
+ * transfer of Jiang et al. 2015 (docs/solver.md, "APIC"): each particle
+ * carries an affine matrix B_p = sum_i S_ip v_i (x_i - x_p)^T besides its
+ * velocity, which takes the PIC value sum_i S_ip v_i; the scatter adds
+ * m_p C_p (x_i - x_p) to the momentum, C_p = B_p D_p^-1 (uGIMP; D_p =
+ * sum_i S_ip (x_i - x_p)(x_i - x_p)^T, diagonal per axis), or
+ * m_p B_p grad S_ip (MPM tents, Jiang's multilinear form, the same where
+ * D_p is invertible and defined on grid lines too).  APIC conserves the
+ * angular momentum exactly (to round-off) and keeps affine velocity fields
+ * without the dissipation of PIC. */
+typedef enum { MPM_TRANSFER_FLIP = 0, MPM_TRANSFER_APIC = 1 } mpm_transfer;
 
 /* Structured grid: nodes[d] nodes along axis d, spacing h[d], first node at
  * origin[d].  Only the first `dim` entries are used. */
@@ -129,8 +141,11 @@ typedef struct {
      * v_p <- (1 - alpha) (v_p + dt sum S a_I) + alpha sum S v_I^{n+1}, with
      * a_I = qdot_I/m_I and v_I^{n+1} = q_I/m_I after the nodal update (both
      * 0 at phantom nodes).  0: pure FLIP (the default, Eq. 31); 1: pure
-     * PIC, which damps the velocity modes the grid cannot represent. */
+     * PIC, which damps the velocity modes the grid cannot represent.
+     * Must be 0 with APIC, itself a PIC transfer (refused otherwise). */
     double pic_fraction;
+    /* FLIP (0, the default: every earlier release) or APIC */
+    mpm_transfer transfer;
 
     double gravity[MPM_MAX_DIM];
 
@@ -154,6 +169,15 @@ typedef struct {
  * to the same fraction of h_min / (c + |v|max). */
 #define MPM_MAX_CFL 1.0
 #define MPM_USL_MAX_CFL 0.5
+/* APIC with MPM tents (any update scheme): the largest Courant factor
+ * accepted, and the default.  APIC keeps the grid's velocity modes that
+ * FLIP's and PIC's transfers smooth away, and with tents a node that only
+ * the edge of a particle's support reaches has a tiny mass but the full
+ * gradient 1/h: the spinning disk and the disks' impact (tests/
+ * t_mpm_apic.c) blow up from C = 0.25 (USL) and 0.3 (USF, MUSL), and run
+ * at 0.2 and below.  uGIMP, whose gradients vanish with the weights, keeps
+ * the general limits. */
+#define MPM_APIC_MPM_MAX_CFL 0.2
 #define MPM_DEFAULT_MASS_TOL 1e-12
 #define MPM_MAX_PARTICLES ((size_t)1 << 31)
 #define MPM_MAX_NODES ((size_t)1 << 31)
@@ -172,7 +196,14 @@ typedef struct {
      * mass): x, y, z components.  2D (motion in the x-y plane): only [2],
      * the z component, is non-zero; 1D: all zero.  MPM and GIMP with the
      * FLIP update do not conserve it exactly (the grid transfers lose the
-     * particles' rotation within a cell): its drift is the loss. */
+     * particles' rotation within a cell): its drift is the loss.  With APIC
+     * each particle also carries the spin of its affine velocity field:
+     * l_p = m_p x_p × v_p + m_p eps : B_p^T, i.e. (l_p)_a = m_p (x_p × v_p)_a
+     * + m_p eps_abc B_p,cb (2D: m_p (B_yx - B_xy); 3D: m_p (B_zy - B_yz,
+     * B_xz - B_zx, B_yx - B_xy)), the angular momentum the particle gives
+     * the grid in the scatter (sum_i x_i × m_p C_p (x_i - x_p) S_ip =
+     * m_p eps : (C_p D_p)^T = m_p eps : B_p^T).  It is what APIC conserves,
+     * and what is reported. */
     double angular_momentum[3];
 } mpm_energy;
 

@@ -366,6 +366,24 @@ static size_t particle_limit(const mpm_case *c)
                                                                     : MPM_MAX_PARTICLES;
 }
 
+/* The largest Courant factor of the case's scheme (mpm.h), and what sets
+ * it (NULL: the general limit). */
+static double max_cfl(const mpm_case *c, const char **why)
+{
+    double f = MPM_MAX_CFL;
+    *why = NULL;
+    if (c->update == MPM_USL) {
+        f = MPM_USL_MAX_CFL;
+        *why = "USL";
+    }
+    if (c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC &&
+        MPM_APIC_MPM_MAX_CFL < f) {
+        f = MPM_APIC_MPM_MAX_CFL;
+        *why = "APIC with MPM tents";
+    }
+    return f;
+}
+
 int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
 {
     char path[64];
@@ -386,11 +404,13 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (!(c->cfl >= 0) || !isfinite(c->cfl))
         return mpm_fail(err, MPM_EINVAL, "cfl", "must be finite and >= 0 (0: default %g) (got %g)",
                         MPM_DEFAULT_CFL, c->cfl);
-    double cmaxf = c->update == MPM_USL ? MPM_USL_MAX_CFL : MPM_MAX_CFL;
+    const char *why;
+    double cmaxf = max_cfl(c, &why);
     if (c->cfl > cmaxf && !c->allow_unstable_dt)
-        return mpm_fail(err, MPM_ECFL, "cfl",
-                        "%g is above the stability limit %g%s; set allow_unstable_dt to run anyway",
-                        c->cfl, cmaxf, c->update == MPM_USL ? " of USL" : "");
+        return mpm_fail(
+            err, MPM_ECFL, "cfl",
+            "%g is above the stability limit %g%s%s; set allow_unstable_dt to run anyway", c->cfl,
+            cmaxf, why ? " of " : "", why ? why : "");
     if (!(c->mass_tol >= 0) || !isfinite(c->mass_tol))
         return mpm_fail(err, MPM_EINVAL, "mass_tol",
                         "must be finite and >= 0 (0: default %g) (got %g)", MPM_DEFAULT_MASS_TOL,
@@ -398,6 +418,18 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (!(c->pic_fraction >= 0 && c->pic_fraction <= 1))
         return mpm_fail(err, MPM_EINVAL, "pic_fraction",
                         "must be in [0, 1] (0: pure FLIP, 1: pure PIC) (got %g)", c->pic_fraction);
+    if (c->transfer != MPM_TRANSFER_FLIP && c->transfer != MPM_TRANSFER_APIC)
+        return mpm_fail(err, MPM_EINVAL, "transfer", "unknown value %d (FLIP or APIC)",
+                        (int)c->transfer);
+    if (c->transfer == MPM_TRANSFER_APIC && c->method == MPM_METHOD_CPDI)
+        return mpm_fail(err, MPM_EINVAL, "transfer",
+                        "APIC is not implemented for method CPDI (use FLIP, or APIC with GIMP, "
+                        "BSPLINE2 or BSPLINE3)");
+    if (c->transfer == MPM_TRANSFER_APIC && c->pic_fraction != 0)
+        return mpm_fail(err, MPM_EINVAL, "pic_fraction",
+                        "must be 0 (or absent) with transfer APIC, itself a PIC transfer whose "
+                        "affine part keeps what PIC damps (got %g)",
+                        c->pic_fraction);
     if (c->threads < 0 || c->threads > MPM_MAX_THREADS)
         return mpm_fail(err, MPM_EINVAL, "threads", "must be in [0, %d] (got %d)", MPM_MAX_THREADS,
                         c->threads);
@@ -449,13 +481,14 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (c->dt > 0) {
         double hmin = c->grid.h[0];
         for (int d = 1; d < dim; d++) hmin = fmin(hmin, c->grid.h[d]);
-        double f = c->update == MPM_USL ? MPM_USL_MAX_CFL : MPM_MAX_CFL;
+        double f = max_cfl(c, &why);
         double lim = f * hmin / (cmax + g.vmax);
         if (c->dt > lim && !c->allow_unstable_dt)
             return mpm_fail(err, MPM_ECFL, "dt",
                             "%g is above the CFL limit %g = %g h_min / (c + |v|max) = "
-                            "%g x %g / (%g + %g)%s; set allow_unstable_dt to run anyway",
-                            c->dt, lim, f, f, hmin, cmax, g.vmax, f < 1 ? " (USL)" : "");
+                            "%g x %g / (%g + %g)%s%s%s; set allow_unstable_dt to run anyway",
+                            c->dt, lim, f, f, hmin, cmax, g.vmax, why ? " (" : "", why ? why : "",
+                            why ? ")" : "");
     }
     if (info) {
         memset(info, 0, sizeof *info);

@@ -38,7 +38,7 @@
 static inline void energy_slice(mpm_sim *s, int tid, int ang)
 {
     const mpm_particles *P = &s->P;
-    int dim = s->dim;
+    int dim = s->dim, apic = s->transfer == MPM_TRANSFER_APIC;
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     double ek = 0, es = 0, ep = 0, mom[3] = {0, 0, 0}, ms = 0, L[3] = {0, 0, 0};
@@ -49,7 +49,10 @@ static inline void energy_slice(mpm_sim *s, int tid, int ang)
             mom[d] += m * P->v[d][p];
             ep -= m * s->gravity[d] * P->x[d][p];
         }
-        if (ang) mpm_angmom_add(P, dim, p, m, L);
+        if (ang) {
+            mpm_angmom_add(P, dim, p, m, L);
+            if (apic) mpm_angmom_add_affine(P, dim, p, m, L);
+        }
         ek += 0.5 * m * v2;
         es += 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
         ms += m;

@@ -59,6 +59,9 @@ typedef struct {
     double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL) */
     uint16_t *mat;           /* material index */
     uint32_t *id;            /* creation index (particles are kept sorted by cell) */
+    /* APIC only (NULL with FLIP): affine matrix B_ab = sum_i S_ip v_ia
+     * (x_i - x_p)_b at B[3a + b] (a, b < dim; the others NULL) */
+    double *B[9];
 } mpm_particles;
 
 /* Per-material constants for the constitutive models. */
@@ -142,6 +145,7 @@ struct mpm_sim {
     double *minv;           /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
     double mtol;
     double pic; /* PIC fraction of the velocity update (0: pure FLIP) */
+    mpm_transfer transfer;
 
     /* fixed degrees of freedom: node (padded index) and direction mask */
     size_t nfixed;
@@ -271,7 +275,10 @@ struct mpm_kernels {
  * family of degree ns - 1 (ns 3 or 4); blend nonzero: the particle
  * velocity update blends PIC into FLIP by s->pic (pure FLIP, blend 0, does
  * no extra work). */
-const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend);
+/* apic nonzero: the APIC family (mpm_case.transfer APIC), with its own
+ * scatters of momentum (with the affine part) and velocity updates (PIC
+ * velocity and B_p), every other pass shared; blend is then ignored. */
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, int apic);
 /* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
 size_t mpm_kernels_scratch(void);
 /* CPDI1's family of dimension dim (mpm_cpdi.c), blend as above, and its
@@ -326,6 +333,21 @@ static inline void mpm_angmom_add(const mpm_particles *P, int D, size_t p, doubl
         L[0] += m * (y * vz - z * vy);
         L[1] += m * (z * vx - x * vz);
         L[2] += m * (x * vy - y * vx);
+    }
+}
+
+/* APIC: the spin of particle p's affine field, m eps : B^T (mpm.h,
+ * mpm_energy.angular_momentum), added to L after mpm_angmom_add() by the
+ * energy pass and the step's in-pass sums alike (the same bits). */
+static inline void mpm_angmom_add_affine(const mpm_particles *P, int D, size_t p, double m,
+                                         double L[3])
+{
+    if (D == 2) {
+        L[2] += m * (P->B[3][p] - P->B[1][p]);
+    } else if (D == 3) {
+        L[0] += m * (P->B[7][p] - P->B[5][p]);
+        L[1] += m * (P->B[2][p] - P->B[6][p]);
+        L[2] += m * (P->B[3][p] - P->B[1][p]);
     }
 }
 

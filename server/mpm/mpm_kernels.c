@@ -17,7 +17,10 @@
  * mpm_kernels_select() picks the family once per job, so no particle loop
  * branches on dimension, method, update scheme or features.  A PIC/FLIP
  * blend (mpm_case.pic_fraction > 0) selects the family's blend twin, whose
- * velocity updates alone differ; pure FLIP runs the code it always ran.  The 3-node
+ * velocity updates alone differ; pure FLIP runs the code it always ran.
+ * APIC (mpm_case.transfer) selects the family's APIC twin: its scatters of
+ * momentum carry the particles' affine matrices B_p and its velocity
+ * updates are PIC's plus B_p (docs/solver.md, "APIC").  The 3-node
  * family evaluates the same weights of the same nodes as the 4-node one and
  * only leaves out a node whose weight and gradient are exactly zero, so
  * both give the same results.
@@ -168,8 +171,9 @@ size_t mpm_kernels_scratch(void)
     return MPM_BLOCK * sizeof(pw);
 }
 
-/* BS: B-spline family (NS = p + 1) instead of tents / uGIMP. */
-INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
+/* BS: B-spline family (NS = p + 1) instead of tents / uGIMP.  n0 (APIC;
+ * NULL otherwise): the first node of each axis, padded index */
+INLINE void weights_n0(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o, int *n0)
 {
     size_t base = 0;
     for (int d = 0; d < D; d++) {
@@ -181,9 +185,32 @@ INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
             double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
             c = axis(r, s->inv_h[d], lp, NS, o->w[d], o->g[d]);
         }
+        if (n0) n0[d] = c;
         base += (size_t)c * s->stride[d];
     }
     o->base = base;
+}
+
+INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
+{
+    weights_n0(s, p, D, NS, BS, o, NULL);
+}
+
+/* APIC: the weights of particle p and the offsets x_i - x_p of its
+ * support's nodes, r[d][k] along axis d for node k of the axis (node
+ * coordinates from mpm_node_coord()). */
+typedef struct {
+    double r[3][4];
+} aoff;
+
+INLINE void weights_ap(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o, aoff *R)
+{
+    int n0[3] = {0, 0, 0};
+    weights_n0(s, p, D, NS, BS, o, n0);
+    for (int d = 0; d < D; d++) {
+        double x = s->P.x[d][p];
+        for (int k = 0; k < NS; k++) R->r[d][k] = mpm_node_coord(s, d, n0[d] + k) - x;
+    }
 }
 
 /* Cell of p along axis d (trunc of r), clamped to the padded grid: a
@@ -335,6 +362,72 @@ INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p,
     });
 }
 
+/* APIC: the matrix the scatter applies, times the particle mass mp.
+ * NS = 2 (MPM tents): B_p itself, scattered with the gradient as
+ * mp B_p grad S_ip (Jiang's multilinear form: D_p grad S_ip = S_ip
+ * (x_i - x_p) for tents, so it equals mp S_ip B_p D_p^-1 (x_i - x_p)
+ * wherever D_p is invertible, and it stays defined on grid lines, where
+ * D_p is singular).  Otherwise: C_p = B_p D_p^-1 with D_p diagonal (a
+ * tensor-product shape with linear precision), D_dd = sum_k S_dk r_dk^2
+ * per axis, > 0 for uGIMP (lp > 0 spreads every particle over two nodes
+ * or more). */
+INLINE void affine_matrix(const mpm_sim *s, const pw *W, const aoff *R, size_t p, double mp, int D,
+                          int NS, double Cm[3][3])
+{
+    double dinv[3] = {mp, mp, mp};
+    if (NS != 2)
+        for (int d = 0; d < D; d++) {
+            double dd = 0;
+            for (int k = 0; k < NS; k++) dd += W->w[d][k] * R->r[d][k] * R->r[d][k];
+            dinv[d] = mp / dd;
+        }
+    for (int a = 0; a < D; a++)
+        for (int b = 0; b < D; b++) Cm[a][b] = s->P.B[3 * a + b][p] * dinv[b];
+}
+
+/* APIC momentum (and mass into m when WM) of particle p into q:
+ * sum_i S_ip mp (v_p + C_p (x_i - x_p)), or for MPM tents
+ * mp (S_ip v_p + B_p grad S_ip) (affine_matrix()).  Row by row, with
+ * (x_i - x_p) = (r0[kx], r1[ky], r2[kz]) and grad S = (gx A, wx B, wx C):
+ * q_a += wx t_a + e u_a, e = wx r0[kx] (or gx), u_a = A Cm_a0. */
+INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q[3], const pw *W,
+                           const aoff *R, size_t p, int D, int NS, int WM)
+{
+    double *restrict q0 = q[0], *restrict q1 = q[1], *restrict q2 = q[2];
+    double mp = s->P.m[p], Cm[3][3];
+    double mv[3] = {0, 0, 0};
+    for (int a = 0; a < D; a++) mv[a] = mp * s->P.v[a][p];
+    affine_matrix(s, W, R, p, mp, D, NS, Cm);
+    ROWS(D, NS, *W, s, {
+        double t[3] = {0, 0, 0}, u[3] = {0, 0, 0};
+        for (int a = 0; a < D; a++) {
+            double ta = mv[a];
+            if (NS == 2) {
+                ta *= A;
+                if (D > 1) ta += B * Cm[a][1];
+                if (D > 2) ta += C * Cm[a][2];
+            } else {
+                if (D > 1) ta += Cm[a][1] * R->r[1][ky];
+                if (D > 2) ta += Cm[a][2] * R->r[2][kz];
+                ta *= A;
+            }
+            t[a] = ta;
+            u[a] = A * Cm[a][0];
+        }
+        double am = A * mp;
+        UNROLL
+        for (int kx = 0; kx < NS; kx++) {
+            double S = W->w[0][kx];
+            double e = NS == 2 ? GRAD(s, *W, NS, 0, kx) : S * R->r[0][kx];
+            size_t n = row + (size_t)kx;
+            if (WM) m[n] += S * am;
+            q0[n] += S * t[0] + e * u[0];
+            if (D > 1) q1[n] += S * t[1] + e * u[1];
+            if (D > 2) q2[n] += S * t[2] + e * u[2];
+        }
+    });
+}
+
 /* Internal force of particle p onto its nodes: f -= V sigma . G (Eq. 15).
  * With G = (gx A, wx B, wx C): f_a -= gx (V s_a0 A) + wx (V s_a1 B + V s_a2 C). */
 INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p, int D, int NS)
@@ -421,14 +514,16 @@ phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS)
  * nodes in the support go through phantom_grad(). */
 INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
                    double *const deps[6], size_t i, int DS, int DX, double *const qx[3],
-                   double dx[3], int DV, double dv[3])
+                   double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3])
 {
     const double *restrict minv = s->minv;
     double L[3][3] = {{0}};
     double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
+    double Bm[3][3] = {{0}};
     int nph = 0; /* phantom nodes in the support */
     ROWS(D, NS, *W, s, {
         double r0[3] = {0, 0, 0}, r1[3] = {0, 0, 0}, rx[3] = {0, 0, 0}, rv[3] = {0, 0, 0};
+        double rb[3] = {0, 0, 0};
         UNROLL
         for (int kx = 0; kx < NS; kx++) {
             size_t n = row + (size_t)kx;
@@ -441,6 +536,7 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
                     r1[a] += va * wx;
                 }
                 if (DX) rx[a] += sm * qx[a][n];
+                if (AF) rb[a] += sm * qx[a][n] * R->r[0][kx];
                 if (DV) rv[a] += sm * s->g.f[a][n];
             }
         }
@@ -452,11 +548,18 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
             }
             if (DX) X[a] += A * rx[a];
             if (DV) Vv[a] += A * rv[a];
+            if (AF) {
+                Bm[a][0] += A * rb[a];
+                if (D > 1) Bm[a][1] += A * R->r[1][ky] * rx[a];
+                if (D > 2) Bm[a][2] += A * R->r[2][kz] * rx[a];
+            }
         }
     });
     for (int a = 0; a < D; a++) {
         if (DX) dx[a] = X[a];
         if (DV) dv[a] = Vv[a];
+        if (AF)
+            for (int b = 0; b < D; b++) Bo[a][b] = Bm[a][b];
     }
     if (!DS) return;
     if (__builtin_expect(nph != 0, 0)) {
@@ -511,7 +614,7 @@ INLINE void esum_init(const mpm_sim *s, esum *e)
     }
 }
 
-INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
+INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP)
 {
     const mpm_particles *P = &s->P;
     double m = P->m[p], v2 = 0;
@@ -522,6 +625,7 @@ INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
         e->ep -= m * e->g[d] * P->x[d][p];
     }
     mpm_angmom_add(P, D, p, m, e->L);
+    if (AP) mpm_angmom_add_affine(P, D, p, m, e->L);
     e->ek += 0.5 * m * v2;
     e->ms += m;
 }
@@ -547,31 +651,64 @@ INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
     if (S) o->estr = e->es;
 }
 
-INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS)
+/* APIC's scatter weights: MPM tents scatter with the gradients and need
+ * no node offsets (affine_matrix()). */
+INLINE void p2g_weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *W, aoff *R)
+{
+    if (NS == 2)
+        weights(s, p, D, NS, 0, W);
+    else
+        weights_ap(s, p, D, NS, BS, W, R);
+}
+
+/* AP: APIC, the momentum with the affine part (scatter_affine()). */
+INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
+                     int AP)
 {
     pw W;
+    aoff R;
     for (size_t p = p0; p < p1; p++) {
-        weights(s, p, D, NS, BS, &W);
-        scatter_mq(s, gb, &W, p, D, NS);
+        if (AP) {
+            p2g_weights(s, p, D, NS, BS, &W, &R);
+            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS, 1);
+        } else {
+            weights(s, p, D, NS, BS, &W);
+            scatter_mq(s, gb, &W, p, D, NS);
+        }
     }
 }
 
-INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS)
+INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
+                      int AP)
 {
     pw W;
+    aoff R;
     for (size_t p = p0; p < p1; p++) {
-        weights(s, p, D, NS, BS, &W);
-        scatter_mq(s, gb, &W, p, D, NS);
+        if (AP) {
+            p2g_weights(s, p, D, NS, BS, &W, &R);
+            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS, 1);
+        } else {
+            weights(s, p, D, NS, BS, &W);
+            scatter_mq(s, gb, &W, p, D, NS);
+        }
         scatter_force(s, gb, &W, p, D, NS);
     }
 }
 
-/* MUSL: momentum of the updated particle velocities. */
-INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS)
+/* MUSL: momentum of the updated particle velocities (AP: APIC, with the
+ * affine part of the updated B_p, as the step's first scatter). */
+INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
+                     int AP)
 {
     pw W;
+    aoff R;
     double *restrict q0 = gb->q2[0], *restrict q1 = gb->q2[1], *restrict q2 = gb->q2[2];
     for (size_t p = p0; p < p1; p++) {
+        if (AP) {
+            p2g_weights(s, p, D, NS, BS, &W, &R);
+            scatter_affine(s, NULL, gb->q2, &W, &R, p, D, NS, 0);
+            continue;
+        }
         weights(s, p, D, NS, BS, &W);
         double mp = s->P.m[p];
         double mv0 = mp * s->P.v[0][p];
@@ -602,7 +739,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             weights(s, b0 + i, D, NS, BS, &Wb[i]);
-            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL);
+            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL);
         }
         block_update(s, b0, nb, o->deps, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -657,12 +794,24 @@ INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, doubl
         *v += dt * dv;
 }
 
+/* APIC's velocity update: the PIC velocity vpic = sum S v_I^{n+1} (the
+ * position increment's sum) and the affine matrix Bm into B_p. */
+INLINE void ap_store(mpm_sim *s, size_t p, int D, const double vpic[3], double Bm[3][3])
+{
+    for (int a = 0; a < D; a++) {
+        s->P.v[a][p] = vpic[a];
+        for (int b = 0; b < D; b++) s->P.B[3 * a + b][p] = Bm[a][b];
+    }
+}
+
 /* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0);
- * BL: the velocity blended with PIC (v_update()). */
+ * BL: the velocity blended with PIC (v_update()); AP: APIC, v = sum S q/m
+ * and B_p = sum S q/m (x_I - x_p)^T (ap_store()). */
 INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS,
-                     int EN, int BL)
+                     int EN, int BL, int AP)
 {
     pw W;
+    aoff R;
     rowrun a;
     boxc bc;
     esum e;
@@ -672,16 +821,22 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
     run_init(&a);
     boxc_init(s, &bc);
     for (size_t p = p0; p < p1; p++) {
-        double dx[3], dv[3], xn[3];
-        weights(s, p, D, NS, BS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv);
+        double dx[3], dv[3], xn[3], Bm[3][3];
+        if (AP) {
+            weights_ap(s, p, D, NS, BS, &W, &R);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
+            ap_store(s, p, D, dx, Bm);
+        } else {
+            weights(s, p, D, NS, BS, &W);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+        }
         for (int d = 0; d < D; d++) {
             xn[d] = s->P.x[d][p] + dt * dx[d];
             s->P.x[d][p] = xn[d];
-            v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
+            if (!AP) v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
         }
         check_particle(s, o, p, D);
-        if (EN) esum_particle(s, &e, p, D);
+        if (EN) esum_particle(s, &e, p, D, AP);
         box_add(s, &bc, o, &a, xn, D, NS, BS);
     }
     run_flush(s, o, &a, D);
@@ -691,9 +846,10 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
  * weights of the step's start positions serve both, in one gather. */
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                            int BS, int EN, int BL)
+                            int BS, int EN, int BL, int AP)
 {
     pw W;
+    aoff R;
     rowrun a;
     boxc bc;
     esum e;
@@ -706,16 +862,22 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
-            double dx[3], dv[3], xn[3];
-            weights(s, p, D, NS, BS, &W);
-            gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv);
+            double dx[3], dv[3], xn[3], Bm[3][3];
+            if (AP) {
+                weights_ap(s, p, D, NS, BS, &W, &R);
+                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
+                ap_store(s, p, D, dx, Bm);
+            } else {
+                weights(s, p, D, NS, BS, &W);
+                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+            }
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
                 s->P.x[d][p] = xn[d];
-                v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
+                if (!AP) v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
             }
             check_particle(s, o, p, D);
-            if (EN) esum_particle(s, &e, p, D);
+            if (EN) esum_particle(s, &e, p, D, AP);
             box_add(s, &bc, o, &a, xn, D, NS, BS);
         }
         block_update(s, b0, nb, o->deps, D);
@@ -725,26 +887,34 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     if (EN) esum_store(&e, o, 1, 1);
 }
 
-/* MUSL: the velocity only (BL: blended with PIC; the blended velocity is
- * what p2g_q2 maps back to the grid). */
+/* MUSL: the velocity only (BL: blended with PIC; AP: APIC's velocity and
+ * B_p; what p2g_q2 maps back to the grid). */
 INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS,
-                    int BL)
+                    int BL, int AP)
 {
     pw W;
+    aoff R;
     double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
     (void)o;
     for (size_t p = p0; p < p1; p++) {
-        double dv[3], vp[3] = {0, 0, 0};
+        double dv[3], vp[3] = {0, 0, 0}, Bm[3][3];
+        if (AP) {
+            weights_ap(s, p, D, NS, BS, &W, &R);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm);
+            ap_store(s, p, D, vp, Bm);
+            continue;
+        }
         weights(s, p, D, NS, BS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv);
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL);
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
     }
 }
 
 /* MUSL: positions from the updated grid momentum, strain from the momentum
- * of the updated particle velocities (q2). */
+ * of the updated particle velocities (q2).  AP: the in-pass angular
+ * momentum counts B_p. */
 INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                           int BS, int EN)
+                           int BS, int EN, int AP)
 {
     pw W;
     rowrun a;
@@ -761,13 +931,13 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             size_t p = b0 + i;
             double dx[3], xn[3];
             weights(s, p, D, NS, BS, &W);
-            gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL);
+            gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL);
             for (int d = 0; d < D; d++) {
                 xn[d] = s->P.x[d][p] + dt * dx[d];
                 s->P.x[d][p] = xn[d];
             }
             check_particle(s, o, p, D);
-            if (EN) esum_particle(s, &e, p, D);
+            if (EN) esum_particle(s, &e, p, D, AP);
             box_add(s, &bc, o, &a, xn, D, NS, BS);
         }
         block_update(s, b0, nb, o->deps, D);
@@ -851,105 +1021,153 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
 #endif
 
 /* Family (D, NS, BS): D dimensions, NS nodes per axis, BS 0 for tents (NS
- * 2) and uGIMP (NS 3, 4), 1 for B-splines of degree NS - 1. */
+ * 2) and uGIMP (NS 3, 4), 1 for B-splines of degree NS - 1.  Template
+ * arguments after them: EN (energies), BL (PIC/FLIP blend), AP (APIC). */
+#define K(name, D, NS, BS) name##_##D##_##NS##_##BS
 
 /* The PIC/FLIP blend of family (D, NS, BS): its own velocity updates,
  * every other pass shared. */
-#define BLEND(D, NS, BS)                                                                       \
-    static void g2p_xv_bl_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, \
-                                            int en)                                            \
-    {                                                                                          \
-        if (en)                                                                                \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 1);                                             \
-        else                                                                                   \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 1);                                             \
-    }                                                                                          \
-    static void g2p_xv_stress_bl_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a,    \
-                                                   size_t b, int en)                           \
-    {                                                                                          \
-        if (en)                                                                                \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 1);                                      \
-        else                                                                                   \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 1);                                      \
-    }                                                                                          \
-    static void g2p_v_bl_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)  \
-    {                                                                                          \
-        g2p_v_t(s, o, a, b, D, NS, BS, 1);                                                     \
-    }                                                                                          \
-    static const mpm_kernels family_bl_##D##_##NS##_##BS = {                                   \
-        p2g_mq_##D##_##NS##_##BS,        p2g_mqf_##D##_##NS##_##BS,                            \
-        p2g_q2_##D##_##NS##_##BS,        stress_force_##D##_##NS##_##BS,                       \
-        g2p_xv_bl_##D##_##NS##_##BS,     g2p_xv_stress_bl_##D##_##NS##_##BS,                   \
-        g2p_v_bl_##D##_##NS##_##BS,      g2p_x_stress_##D##_##NS##_##BS,                       \
-        scatter_loads_##D##_##NS##_##BS, bbox_##D##_##NS##_##BS,                               \
-        cell_keys_##D##_##NS##_##BS};
+#define BLEND(D, NS, BS)                                                                        \
+    static void K(g2p_xv_bl, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,    \
+                                        int en)                                                 \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 1, 0);                                           \
+        else                                                                                    \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 1, 0);                                           \
+    }                                                                                           \
+    static void K(g2p_xv_stress_bl, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a,       \
+                                               size_t b, int en)                                \
+    {                                                                                           \
+        if (en)                                                                                 \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 1, 0);                                    \
+        else                                                                                    \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 1, 0);                                    \
+    }                                                                                           \
+    static void K(g2p_v_bl, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)     \
+    {                                                                                           \
+        g2p_v_t(s, o, a, b, D, NS, BS, 1, 0);                                                   \
+    }                                                                                           \
+    static const mpm_kernels K(family_bl, D, NS, BS) = {                                        \
+        K(p2g_mq, D, NS, BS),       K(p2g_mqf, D, NS, BS),      K(p2g_q2, D, NS, BS),           \
+        K(stress_force, D, NS, BS), K(g2p_xv_bl, D, NS, BS),    K(g2p_xv_stress_bl, D, NS, BS), \
+        K(g2p_v_bl, D, NS, BS),     K(g2p_x_stress, D, NS, BS), K(scatter_loads, D, NS, BS),    \
+        K(bbox, D, NS, BS),         K(cell_keys, D, NS, BS)};
 
-#define FAMILY(D, NS, BS)                                                                          \
-    static void p2g_mq_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)          \
+/* The APIC family of (D, NS, BS): its own scatters of momentum and
+ * velocity updates, and the in-pass angular momentum with B_p; the stress
+ * pass, loads, boxes and sort keys shared. */
+#define APIC(D, NS, BS)                                                                            \
+    static void K(p2g_mq_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)         \
     {                                                                                              \
-        p2g_mq_t(s, gb, a, b, D, NS, BS);                                                          \
+        p2g_mq_t(s, gb, a, b, D, NS, BS, 1);                                                       \
     }                                                                                              \
-    static void p2g_mqf_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)         \
+    static void K(p2g_mqf_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)        \
     {                                                                                              \
-        p2g_mqf_t(s, gb, a, b, D, NS, BS);                                                         \
+        p2g_mqf_t(s, gb, a, b, D, NS, BS, 1);                                                      \
     }                                                                                              \
-    static void p2g_q2_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, size_t a, size_t b)          \
+    static void K(p2g_q2_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)         \
     {                                                                                              \
-        p2g_q2_t(s, gb, a, b, D, NS, BS);                                                          \
+        p2g_q2_t(s, gb, a, b, D, NS, BS, 1);                                                       \
     }                                                                                              \
-    static void stress_force_##D##_##NS##_##BS(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o,     \
-                                               size_t a, size_t b, int en)                         \
-    {                                                                                              \
-        if (en)                                                                                    \
-            stress_force_t(s, gb, o, a, b, D, NS, BS, 1);                                          \
-        else                                                                                       \
-            stress_force_t(s, gb, o, a, b, D, NS, BS, 0);                                          \
-    }                                                                                              \
-    static void g2p_xv_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,        \
-                                         int en)                                                   \
+    static void K(g2p_xv_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,       \
+                                        int en)                                                    \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 0);                                                 \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 0, 1);                                              \
         else                                                                                       \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 0);                                                 \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 0, 1);                                              \
     }                                                                                              \
-    static void g2p_xv_stress_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b, \
-                                                int en)                                            \
+    static void K(g2p_xv_stress_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a,          \
+                                               size_t b, int en)                                   \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 0);                                          \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 0, 1);                                       \
         else                                                                                       \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 0);                                          \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 0, 1);                                       \
     }                                                                                              \
-    static void g2p_v_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)         \
+    static void K(g2p_v_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)        \
     {                                                                                              \
-        g2p_v_t(s, o, a, b, D, NS, BS, 0);                                                         \
+        g2p_v_t(s, o, a, b, D, NS, BS, 0, 1);                                                      \
     }                                                                                              \
-    static void g2p_x_stress_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b,  \
-                                               int en)                                             \
+    static void K(g2p_x_stress_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b, \
+                                              int en)                                              \
     {                                                                                              \
         if (en)                                                                                    \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1);                                              \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1, 1);                                           \
         else                                                                                       \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0);                                              \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0, 1);                                           \
     }                                                                                              \
-    LOADS(D, NS, BS)                                                                               \
-    static void bbox_##D##_##NS##_##BS(mpm_sim *s, mpm_thread_out *o, size_t a, size_t b)          \
-    {                                                                                              \
-        bbox_t(s, o, a, b, D, NS, BS);                                                             \
-    }                                                                                              \
-    static void cell_keys_##D##_##NS##_##BS(const mpm_sim *s, uint32_t *key, size_t a, size_t b)   \
-    {                                                                                              \
-        cell_keys_t(s, key, a, b, D);                                                              \
-    }                                                                                              \
-    static const mpm_kernels family_##D##_##NS##_##BS = {                                          \
-        p2g_mq_##D##_##NS##_##BS,        p2g_mqf_##D##_##NS##_##BS,                                \
-        p2g_q2_##D##_##NS##_##BS,        stress_force_##D##_##NS##_##BS,                           \
-        g2p_xv_##D##_##NS##_##BS,        g2p_xv_stress_##D##_##NS##_##BS,                          \
-        g2p_v_##D##_##NS##_##BS,         g2p_x_stress_##D##_##NS##_##BS,                           \
-        scatter_loads_##D##_##NS##_##BS, bbox_##D##_##NS##_##BS,                                   \
-        cell_keys_##D##_##NS##_##BS};                                                              \
-    BLEND(D, NS, BS)
+    static const mpm_kernels K(family_ap, D, NS, BS) = {                                           \
+        K(p2g_mq_ap, D, NS, BS),    K(p2g_mqf_ap, D, NS, BS),      K(p2g_q2_ap, D, NS, BS),        \
+        K(stress_force, D, NS, BS), K(g2p_xv_ap, D, NS, BS),       K(g2p_xv_stress_ap, D, NS, BS), \
+        K(g2p_v_ap, D, NS, BS),     K(g2p_x_stress_ap, D, NS, BS), K(scatter_loads, D, NS, BS),    \
+        K(bbox, D, NS, BS),         K(cell_keys, D, NS, BS)};
+
+#define FAMILY(D, NS, BS)                                                                         \
+    static void K(p2g_mq, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)           \
+    {                                                                                             \
+        p2g_mq_t(s, gb, a, b, D, NS, BS, 0);                                                      \
+    }                                                                                             \
+    static void K(p2g_mqf, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)          \
+    {                                                                                             \
+        p2g_mqf_t(s, gb, a, b, D, NS, BS, 0);                                                     \
+    }                                                                                             \
+    static void K(p2g_q2, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)           \
+    {                                                                                             \
+        p2g_q2_t(s, gb, a, b, D, NS, BS, 0);                                                      \
+    }                                                                                             \
+    static void K(stress_force, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, mpm_thread_out * o,     \
+                                           size_t a, size_t b, int en)                            \
+    {                                                                                             \
+        if (en)                                                                                   \
+            stress_force_t(s, gb, o, a, b, D, NS, BS, 1);                                         \
+        else                                                                                      \
+            stress_force_t(s, gb, o, a, b, D, NS, BS, 0);                                         \
+    }                                                                                             \
+    static void K(g2p_xv, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b, int en) \
+    {                                                                                             \
+        if (en)                                                                                   \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 0, 0);                                             \
+        else                                                                                      \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 0, 0);                                             \
+    }                                                                                             \
+    static void K(g2p_xv_stress, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,  \
+                                            int en)                                               \
+    {                                                                                             \
+        if (en)                                                                                   \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 0, 0);                                      \
+        else                                                                                      \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 0, 0);                                      \
+    }                                                                                             \
+    static void K(g2p_v, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)          \
+    {                                                                                             \
+        g2p_v_t(s, o, a, b, D, NS, BS, 0, 0);                                                     \
+    }                                                                                             \
+    static void K(g2p_x_stress, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,   \
+                                           int en)                                                \
+    {                                                                                             \
+        if (en)                                                                                   \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1, 0);                                          \
+        else                                                                                      \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0, 0);                                          \
+    }                                                                                             \
+    LOADS(D, NS, BS)                                                                              \
+    static void K(bbox, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)           \
+    {                                                                                             \
+        bbox_t(s, o, a, b, D, NS, BS);                                                            \
+    }                                                                                             \
+    static void K(cell_keys, D, NS, BS)(const mpm_sim *s, uint32_t *key, size_t a, size_t b)      \
+    {                                                                                             \
+        cell_keys_t(s, key, a, b, D);                                                             \
+    }                                                                                             \
+    static const mpm_kernels K(family, D, NS, BS) = {                                             \
+        K(p2g_mq, D, NS, BS),       K(p2g_mqf, D, NS, BS),      K(p2g_q2, D, NS, BS),             \
+        K(stress_force, D, NS, BS), K(g2p_xv, D, NS, BS),       K(g2p_xv_stress, D, NS, BS),      \
+        K(g2p_v, D, NS, BS),        K(g2p_x_stress, D, NS, BS), K(scatter_loads, D, NS, BS),      \
+        K(bbox, D, NS, BS),         K(cell_keys, D, NS, BS)};                                     \
+    BLEND(D, NS, BS)                                                                              \
+    APIC(D, NS, BS)
 
 FAMILY(1, 2, 0)
 FAMILY(1, 3, 0)
@@ -968,21 +1186,21 @@ FAMILY(2, 4, 1)
 FAMILY(3, 3, 1)
 FAMILY(3, 4, 1)
 
-const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend)
+/* tables[variant][dim - 1][ns - 2 + 3 bspline]: variant 0 FLIP, 1 blend,
+ * 2 APIC; the B-spline columns are ns 3 and 4 (ns - 2 + 3: 4, 5) */
+#define ROW(V, D)                                                                            \
+    {                                                                                        \
+        &K(V, D, 2, 0), &K(V, D, 3, 0), &K(V, D, 4, 0), NULL, &K(V, D, 3, 1), &K(V, D, 4, 1) \
+    }
+#define TABLE(V)                        \
+    {                                   \
+        ROW(V, 1), ROW(V, 2), ROW(V, 3) \
+    }
+
+const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, int apic)
 {
-    static const mpm_kernels *const table[3][3] = {{&family_1_2_0, &family_1_3_0, &family_1_4_0},
-                                                   {&family_2_2_0, &family_2_3_0, &family_2_4_0},
-                                                   {&family_3_2_0, &family_3_3_0, &family_3_4_0}};
-    static const mpm_kernels *const table_bl[3][3] = {
-        {&family_bl_1_2_0, &family_bl_1_3_0, &family_bl_1_4_0},
-        {&family_bl_2_2_0, &family_bl_2_3_0, &family_bl_2_4_0},
-        {&family_bl_3_2_0, &family_bl_3_3_0, &family_bl_3_4_0}};
-    static const mpm_kernels *const table_bs[3][2] = {{&family_1_3_1, &family_1_4_1},
-                                                      {&family_2_3_1, &family_2_4_1},
-                                                      {&family_3_3_1, &family_3_4_1}};
-    static const mpm_kernels *const table_bs_bl[3][2] = {{&family_bl_1_3_1, &family_bl_1_4_1},
-                                                         {&family_bl_2_3_1, &family_bl_2_4_1},
-                                                         {&family_bl_3_3_1, &family_bl_3_4_1}};
-    if (bspline) return blend ? table_bs_bl[dim - 1][ns - 3] : table_bs[dim - 1][ns - 3];
-    return blend ? table_bl[dim - 1][ns - 2] : table[dim - 1][ns - 2];
+    static const mpm_kernels *const tables[3][3][6] = {TABLE(family), TABLE(family_bl),
+                                                       TABLE(family_ap)};
+    int v = apic ? 2 : blend ? 1 : 0;
+    return tables[v][dim - 1][ns - 2 + (bspline ? 3 : 0)];
 }

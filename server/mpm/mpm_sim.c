@@ -101,6 +101,7 @@ static void free_particles(mpm_particles *P)
         free(P->sig[c]);
         free(P->eps[c]);
     }
+    for (int c = 0; c < 9; c++) free(P->B[c]);
     free(P->m);
     free(P->vol);
     free(P->mat);
@@ -113,8 +114,9 @@ int mpm_needs_F(const mpm_case *c)
     return c->method == MPM_METHOD_CPDI;
 }
 
-/* lp: the half-widths (GMPM, CPDI); F: the deformation gradient, set to I */
-static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F)
+/* lp: the half-widths (GMPM, CPDI); F: the deformation gradient, set to I;
+ * apic: the affine matrices B_p, set to 0 */
+static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic)
 {
     memset(P, 0, sizeof *P);
     P->n = n;
@@ -132,6 +134,9 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F)
         if (!(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
             return MPM_ENOMEM; /* eps_zz = 0 */
     }
+    for (int a = 0; a < dim && apic; a++)
+        for (int b = 0; b < dim; b++)
+            if (!(P->B[3 * a + b] = mpm_dalloc(n))) return MPM_ENOMEM; /* B_p = 0 */
     if (!(P->m = mpm_dalloc(n)) || !(P->vol = mpm_dalloc(n))) return MPM_ENOMEM;
     if (!(P->mat = calloc(n ? n : 1, sizeof *P->mat))) return MPM_ENOMEM;
     if (!(P->id = malloc((n ? n : 1) * sizeof *P->id))) return MPM_ENOMEM;
@@ -301,6 +306,14 @@ static int gimp_fits3(const mpm_sim *s)
     return 1;
 }
 
+/* The kernel family of the case, chosen once per job. */
+static const mpm_kernels *select_kernels(const mpm_sim *s)
+{
+    if (s->method == MPM_METHOD_CPDI) return mpm_cpdi_select(s->dim, s->pic != 0);
+    return mpm_kernels_select(s->dim, s->ns, s->bsp != 0, s->pic != 0,
+                              s->transfer == MPM_TRANSFER_APIC);
+}
+
 /* The first box and the first sort, once the team runs. */
 static void init_order(mpm_sim *s)
 {
@@ -329,7 +342,7 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
         (ns == 3 && !gimp_fits3(s)))
         return MPM_EINVAL;
     s->ns = ns;
-    s->k = mpm_kernels_select(s->dim, ns, 0, s->pic != 0);
+    s->k = select_kernels(s);
     init_order(s);
     return 0;
 }
@@ -387,15 +400,15 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     }
 
     int musl = c->update == MPM_MUSL;
+    s->transfer = c->transfer;
     if (alloc_particles(&s->P, np, dim,
                         c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
-                        mpm_needs_F(c)))
+                        mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC))
         goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
-    s->k = c->method == MPM_METHOD_CPDI ? mpm_cpdi_select(dim, s->pic != 0)
-                                        : mpm_kernels_select(dim, s->ns, s->bsp != 0, s->pic != 0);
+    s->k = select_kernels(s);
     if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
         goto nomem;
@@ -428,6 +441,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->mtol = (c->mass_tol > 0 ? c->mass_tol : MPM_DEFAULT_MASS_TOL) * msum / (double)s->P.n;
     s->dt_fixed = c->dt;
     s->cfl = c->cfl > 0 ? c->cfl : MPM_DEFAULT_CFL;
+    if (c->cfl <= 0 && c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC)
+        s->cfl = MPM_APIC_MPM_MAX_CFL; /* its stability limit (mpm.h) */
     next_dt(s);
     mpm_energy e0;
     mpm_sim_energy(s, &e0);

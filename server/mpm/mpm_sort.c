@@ -35,7 +35,8 @@ static void ph_keys(mpm_sim *s, int tid)
 }
 
 /* The particle arrays of doubles, in a fixed order. */
-static int sort_arrays(mpm_sim *s, double **arr[3 * 3 + 2 * 6 + 2 + 9])
+#define NARR (3 * 3 + 2 * 6 + 9 + 9 + 2)
+static int sort_arrays(mpm_sim *s, double **arr[NARR])
 {
     mpm_particles *P = &s->P;
     int na = 0;
@@ -50,6 +51,8 @@ static int sort_arrays(mpm_sim *s, double **arr[3 * 3 + 2 * 6 + 2 + 9])
     }
     for (int c = 0; c < 9; c++)
         if (P->F[c]) arr[na++] = &P->F[c];
+    for (int c = 0; c < 9; c++)
+        if (P->B[c]) arr[na++] = &P->B[c]; /* APIC */
     arr[na++] = &P->m;
     arr[na++] = &P->vol;
     return na;
@@ -85,7 +88,7 @@ static void ph_permute(mpm_sim *s, int tid)
         for (size_t i = i0; i < i1; i++) s->load_p[i] = u32[s->load_p[i]];
         mpm_team_sync(s);
     }
-    double **arr[3 * 3 + 2 * 6 + 2 + 9];
+    double **arr[NARR];
     int na = sort_arrays(s, arr);
     double *dst = s->sscr;
     for (int i = 0; i < na; i++) {
@@ -128,7 +131,7 @@ void mpm_sort_particles(mpm_sim *s)
     for (size_t p = 0; p < n; p++) perm[h[key[p]]++] = (uint32_t)p;
     /* the keys are spent: the scratch carries the permuted copies */
     mpm_team_run(s, ph_permute);
-    double **arr[3 * 3 + 2 * 6 + 2 + 9];
+    double **arr[NARR];
     int na = sort_arrays(s, arr);
     for (int i = 0; i < na; i++) {
         double *old = *arr[i];

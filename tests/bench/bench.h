@@ -95,7 +95,7 @@ typedef enum {
 #define BENCH_HAVE_CPDI 1
 #endif
 #ifndef BENCH_HAVE_APIC
-#define BENCH_HAVE_APIC 0
+#define BENCH_HAVE_APIC 1
 #endif
 
 typedef struct {

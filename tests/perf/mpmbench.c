@@ -34,7 +34,7 @@ static int progress_shown;
 static const char usage[] =
     "usage: mpmbench --scene NAME [--particles N] [--steps S] [--threads T]\n"
     "                [--method mpm|gimp|bspline2|bspline3|cpdi] [--update usf|usl|musl]\n"
-    "                [--pic F] [--csv]\n"
+    "                [--pic F] [--transfer flip|apic|both] [--csv]\n"
     "       mpmbench --all [--particles N] [--steps S] [--csv]\n"
     "       mpmbench --bspline [--particles N] [--steps S] [--csv]\n"
     "       mpmbench --cpdi-vs-gimp [--particles N] [--steps S] [--update U] [--csv]\n"
@@ -60,6 +60,10 @@ static const char usage[] =
     "  --update U     usf | usl | musl (default usf)\n"
     "  --pic F        PIC fraction of the velocity update, 0..1 (default 0: pure FLIP);\n"
     "                 not with the daemon scene or --all\n"
+    "  --transfer T   flip | apic | both (default flip): the velocity transfer; both measures\n"
+    "                 FLIP and APIC interleaved (FLIP, APIC, FLIP, APIC) and prints the APIC /\n"
+    "                 FLIP time per particle-step; APIC rows are scene+apic (disks2d, cube3d,\n"
+    "                 bar1d; not with --pic, the daemon scene or --all)\n"
     "  --csv          print CSV rows instead of the table\n"
     "  --all          every scene, MPM and GIMP, 1 and 2 threads; the lean build; the daemon\n"
     "  --bspline      disks2d and cube3d at 1 and 2 threads, GIMP, BSPLINE2 and BSPLINE3\n"
@@ -231,6 +235,8 @@ typedef struct {
     mpm_update update;
     double pic;
     int have_pic;
+    int transfer; /* 0 flip, 1 apic, 2 both */
+    int have_transfer;
 } opts;
 
 static int parse_long(const char *flag, const char *s, long lo, long hi, long *out)
@@ -275,7 +281,7 @@ static int parse_args(int argc, char **argv, opts *o)
         }
         int known = !strcmp(a, "--scene") || !strcmp(a, "--particles") || !strcmp(a, "--steps") ||
                     !strcmp(a, "--threads") || !strcmp(a, "--method") || !strcmp(a, "--update") ||
-                    !strcmp(a, "--pic");
+                    !strcmp(a, "--pic") || !strcmp(a, "--transfer");
         if (!known) {
             fprintf(stderr, "mpmbench: unknown option '%s' (see --help)\n", a);
             return -1;
@@ -326,6 +332,18 @@ static int parse_args(int argc, char **argv, opts *o)
                 return -1;
             }
             o->have_method = 1;
+        } else if (!strcmp(a, "--transfer")) {
+            if (!strcmp(v, "flip"))
+                o->transfer = 0;
+            else if (!strcmp(v, "apic"))
+                o->transfer = 1;
+            else if (!strcmp(v, "both"))
+                o->transfer = 2;
+            else {
+                fprintf(stderr, "mpmbench: --transfer: expected flip, apic or both, got '%s'\n", v);
+                return -1;
+            }
+            o->have_transfer = 1;
         } else if (!strcmp(a, "--pic")) {
             char *end;
             errno = 0;
@@ -349,8 +367,8 @@ static int parse_args(int argc, char **argv, opts *o)
             o->have_update = 1;
         }
     }
-    if ((o->all || o->bspline) &&
-        (o->have_scene || o->have_threads || o->have_method || o->have_update || o->have_pic)) {
+    if ((o->all || o->bspline) && (o->have_scene || o->have_threads || o->have_method ||
+                                   o->have_update || o->have_pic || o->have_transfer)) {
         fprintf(stderr, "mpmbench: --all runs every scene, method and thread count; it takes "
                         "only --particles, --steps and --csv\n");
         return -1;
@@ -365,9 +383,10 @@ static int parse_args(int argc, char **argv, opts *o)
         fprintf(stderr, "mpmbench: give --scene NAME or --all (see --help)\n");
         return -1;
     }
-    if (o->method == MPM_METHOD_CPDI && o->have_scene && !strcmp(o->scene, "daemon")) {
-        fprintf(stderr, "mpmbench: --method cpdi: not with the daemon scene (the store does "
-                        "not take CPDI runs yet)\n");
+    if (o->transfer && (o->pic > 0 || (o->have_scene && (!strcmp(o->scene, "daemon") ||
+                                                         !strcmp(o->scene, "sparse2d"))))) {
+        fprintf(stderr, "mpmbench: --transfer apic/both: not with --pic, the daemon or the "
+                        "sparse2d scene\n");
         return -1;
     }
     if (o->have_pic && o->have_scene && !strcmp(o->scene, "daemon")) {
@@ -412,9 +431,35 @@ static void sparse_ratio(const pb_row *wide, const pb_row *tight)
               wide->threads > 1 ? "s" : "", q, verdict(q >= 0.8));
 }
 
+/* --transfer both: FLIP, APIC, FLIP, APIC (the same steps in all four, so
+ * that a drift of the machine's speed falls on both alike), then the APIC /
+ * FLIP time per particle-step from the summed medians, and the memory. */
+static int transfer_pair(pb_cfg *c)
+{
+    pb_row r[4];
+    for (int k = 0; k < 4; k++) {
+        c->transfer = k % 2 ? MPM_TRANSFER_APIC : MPM_TRANSFER_FLIP;
+        if (measure(c, &r[k])) return 1;
+        if (k == 0) c->steps = r[0].steps;
+    }
+    double tf = 0, ta = 0;
+    for (int k = 0; k < 4; k++) *(k % 2 ? &ta : &tf) += 1.0 / r[k].mpsteps;
+    double q = ta / tf;
+    pb_result("%s %s %s, %d thread%s: APIC / FLIP time per particle-step = %.3f (%.3f, %.3f; "
+              "target <= 1.3): %s; B/particle FLIP %.0f, APIC %.0f",
+              pb_scene_name(c->scene), pb_method_name(c->method), pb_update_name(c->update),
+              c->threads, c->threads > 1 ? "s" : "", q, r[0].mpsteps / r[1].mpsteps,
+              r[2].mpsteps / r[3].mpsteps, verdict(q <= 1.3), 0.5 * (r[0].bytes_pp + r[2].bytes_pp),
+              0.5 * (r[1].bytes_pp + r[3].bytes_pp));
+    return 0;
+}
+
 static int run_one(const opts *o)
 {
-    pb_cfg c = {PB_DISKS2D, o->method, o->update, o->particles, o->steps, o->threads, o->pic};
+    pb_cfg c = {PB_DISKS2D, o->method,
+                o->update,  o->particles,
+                o->steps,   o->threads,
+                o->pic,     o->transfer == 1 ? MPM_TRANSFER_APIC : MPM_TRANSFER_FLIP};
     pb_row r, r2;
     if (!strcmp(o->scene, "daemon")) {
 #if PB_LEAN
@@ -437,6 +482,7 @@ static int run_one(const opts *o)
     c.scene = !strcmp(o->scene, "cube3d")  ? PB_CUBE3D
               : !strcmp(o->scene, "bar1d") ? PB_BAR1D
                                            : PB_DISKS2D;
+    if (o->transfer == 2) return transfer_pair(&c);
     return measure(&c, &r) ? 1 : 0;
 }
 
@@ -613,7 +659,8 @@ static int run_all(const opts *o)
     for (int s = 0; s < 3; s++)
         for (int m = 0; m < 2; m++)
             for (int t = 0; t < 2; t++) {
-                pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles, o->steps, t + 1, 0.0};
+                pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles,
+                            o->steps,  t + 1,      0.0,     MPM_TRANSFER_FLIP};
                 ok[s][m][t] = measure(&c, &rows[s][m][t]) == 0;
                 failures += !ok[s][m][t];
             }
@@ -651,7 +698,8 @@ static int run_all(const opts *o)
     for (int m = 0; m < 2; m++)
         for (int t = 1; t <= 2; t++) {
             pb_row w, ti;
-            pb_cfg c = {PB_SPARSE_WIDE, methods[m], MPM_USF, 0, o->steps, t, 0.0};
+            pb_cfg c = {PB_SPARSE_WIDE, methods[m], MPM_USF, 0,
+                        o->steps,       t,          0.0,     MPM_TRANSFER_FLIP};
             if (o->particles && o->particles <= 1000000L) c.particles = o->particles;
             if (measure(&c, &w)) {
                 failures++;
@@ -670,7 +718,8 @@ static int run_all(const opts *o)
     /* the lean build on disks2d, next to a fresh normal run of the same steps */
     for (int m = 0; m < 2; m++) {
         pb_row nr, lr;
-        pb_cfg c = {PB_DISKS2D, methods[m], MPM_USF, o->particles, o->steps, 1, 0.0};
+        pb_cfg c = {PB_DISKS2D, methods[m], MPM_USF, o->particles,
+                    o->steps,   1,          0.0,     MPM_TRANSFER_FLIP};
         if (measure(&c, &nr)) {
             failures++;
             continue;

@@ -62,7 +62,8 @@ typedef struct {
     long particles; /* aimed particle count; 0: the scene's default */
     long steps;     /* steps per run; 0: the default for the target speed */
     int threads;
-    double pic; /* mpm_case.pic_fraction (0: pure FLIP) */
+    double pic;            /* mpm_case.pic_fraction (0: pure FLIP) */
+    mpm_transfer transfer; /* mpm_case.transfer; APIC rows carry "+apic" in the scene */
 } pb_cfg;
 
 /* One measured row. */

@@ -283,6 +283,7 @@ static int build(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
         t->c.update = c->update;
         t->c.threads = c->threads;
         t->c.pic_fraction = c->pic;
+        t->c.transfer = c->transfer;
     }
     return rc;
 }
@@ -387,7 +388,8 @@ static int work_scene(void *arg, pb_row *r)
 int pb_measure(const pb_cfg *c, pb_row *row)
 {
     memset(row, 0, sizeof *row);
-    snprintf(row->scene, sizeof row->scene, "%s%s", pb_scene_name(c->scene), PB_SUFFIX);
+    snprintf(row->scene, sizeof row->scene, "%s%s%s", pb_scene_name(c->scene),
+             c->transfer == MPM_TRANSFER_APIC ? "+apic" : "", PB_SUFFIX);
     row->method = c->method;
     row->update = c->update;
     row->threads = c->threads;
