@@ -46,7 +46,7 @@ ASAN := build/asan
 TSAN := build/tsan
 LEAN := build/lean
 
-.PHONY: all deps test test-quick tsan bench bench-accuracy stress demo clean \
+.PHONY: all deps test test-quick tsan bench bench-build bench-accuracy stress demo clean \
         format format-check lint
 .SECONDARY: $(GEN_C) $(GEN_H)
 all: bin/mpmd bin/mpmctl bin/mpmtest bin/mpmrun
@@ -134,6 +134,10 @@ test: deps
 	@$(MAKE) --no-print-directory $(ASAN)/mpmtest $(ASAN)/mpmd $(ASAN)/mpmctl
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  MPMD_BIN=$(ASAN)/mpmd MPMCTL_BIN=$(ASAN)/mpmctl $(ASAN)/mpmtest $(T)
+
+# The benchmarks' binaries, built (not run) in CI so that they never rot.
+bench-build: deps
+	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmbench-accuracy
 
 # Release build, no sanitizers: quick local iteration.
 test-quick: bin/mpmtest bin/mpmd bin/mpmctl

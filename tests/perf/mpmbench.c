@@ -779,7 +779,8 @@ static int run_bspline(const opts *o)
         for (int s = 0; s < 2; s++)
             for (int t = 0; t < 2; t++)
                 for (int m = 0; m < 3; m++) {
-                    pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles, o->steps, t + 1, 0.0};
+                    pb_cfg c = {scenes[s], methods[m], MPM_USF, o->particles,
+                                o->steps,  t + 1,      0.0,     MPM_TRANSFER_FLIP};
                     pb_row r;
                     if (measure(&c, &r)) {
                         failures++;
@@ -828,7 +829,8 @@ static int run_cpdi_vs_gimp(const opts *o)
                             o->particles,
                             steps,
                             T,
-                            0.0};
+                            0.0,
+                            MPM_TRANSFER_FLIP};
                 if (measure(&c, &r[k])) {
                     bad = 1;
                     break;
