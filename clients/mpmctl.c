@@ -71,11 +71,13 @@ static const command commands[] = {
      "Exit status: 0 FINISHED, 3 FAILED, 4 CANCELLED, 5 INTERRUPTED, 1 error,\n"
      "130 stopped by Ctrl-C (the job keeps running).\n"},
     {"runs", C_RUNS, "[--status S] [--limit N] [--json]", "list runs, newest first",
-     "Columns: id, name, status, method, stress update, dim, particles, steps, wall\n"
-     "seconds, submission time.  --status: QUEUED, RUNNING, FINISHED, FAILED, CANCELLED or\n"
-     "INTERRUPTED.  --limit: at most N runs (default: the server's).  --json: one\n"
-     "RunInfo object per line.\n"},
+     "Columns: id, name, status, method, stress update, velocity transfer (FLIP or\n"
+     "APIC), dim, particles, steps, wall seconds, submission time.  --status: QUEUED,\n"
+     "RUNNING, FINISHED, FAILED, CANCELLED or INTERRUPTED.  --limit: at most N runs\n"
+     "(default: the server's).  --json: one RunInfo object per line.\n"},
     {"show", C_SHOW, "ID [--json] [--case]", "one run in detail",
+     "Prints the status, times, counts, method and update, the velocity transfer (FLIP,\n"
+     "with the PIC fraction when the case sets one, or APIC) and the last energies.\n"
      "--json prints the RunInfo object; --case prints the run's case as JSON (alone:\n"
      "pretty, ready to submit again; with --json: inside the RunInfo).\n"},
     {"energy", C_ENERGY, "ID [--csv|--json]", "the complete energy series of a run",
@@ -494,17 +496,18 @@ static int cmd_runs(ctl_conn *c, const cli *a)
         printf("no runs%s%s\n", a->status ? " with status " : "",
                a->status ? mpp_status_name(a->status) : "");
     } else {
-        printf("%6s  %-20s %-11s %-6s %-6s %3s %10s %12s %9s  %s\n", "ID", "NAME", "STATUS",
-               "METHOD", "UPDATE", "DIM", "PARTICLES", "STEPS", "WALL S", "SUBMITTED");
+        printf("%6s  %-20s %-11s %-8s %-6s %-8s %3s %10s %12s %9s  %s\n", "ID", "NAME", "STATUS",
+               "METHOD", "UPDATE", "TRANSFER", "DIM", "PARTICLES", "STEPS", "WALL S", "SUBMITTED");
         for (i = 0; i < n; i++) {
             json_t *r = json_array_get(runs, i);
             char when[32];
             ctl_fmt_time(when, sizeof when, cj_num(r, "submittedAt", 0));
-            printf("%6llu  %-20.20s %-11s %-6s %-6s %3lld %10llu %12lld %9.2f  %s\n",
+            printf("%6llu  %-20.20s %-11s %-8s %-6s %-8s %3lld %10llu %12lld %9.2f  %s\n",
                    (unsigned long long)cj_u64(r, "runId", 0), cj_str(r, "name", ""),
                    cj_str(r, "status", "?"), cj_str(r, "method", "?"), cj_str(r, "update", "?"),
-                   cj_int(r, "dim", 0), (unsigned long long)cj_u64(r, "particles", 0),
-                   cj_int(r, "steps", 0), cj_num(r, "wallS", 0), when);
+                   cj_str(r, "transfer", "?"), cj_int(r, "dim", 0),
+                   (unsigned long long)cj_u64(r, "particles", 0), cj_int(r, "steps", 0),
+                   cj_num(r, "wallS", 0), when);
         }
     }
     json_decref(reply);
@@ -547,12 +550,18 @@ static void show_text(const json_t *r)
         else
             printf(", automatic dt (CFL %g)\n",
                    cj_num(cs, "cfl", 0) > 0 ? cj_num(cs, "cfl", 0) : 0.5);
+    } else {
+        putchar('\n');
+    }
+    printf("  transfer    %s", cj_str(r, "transfer", "?"));
+    if (cs && !strcmp(cj_str(r, "transfer", ""), "FLIP") && cj_num(cs, "picFraction", 0) > 0)
+        printf(" (PIC fraction %g)", cj_num(cs, "picFraction", 0));
+    putchar('\n');
+    if (cs) {
         if (json_object_get(cs, "endTime"))
             printf("  stop        at t = %.10g\n", cj_num(cs, "endTime", 0));
         else
             printf("  stop        after %lld steps\n", cj_int(cs, "steps", 0));
-    } else {
-        putchar('\n');
     }
     printf("  energy      %llu samples\n", (unsigned long long)cj_u64(r, "energySamples", 0));
     if (le)

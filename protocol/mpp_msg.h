@@ -130,10 +130,12 @@ typedef struct {
     const int64_t *snapshot_steps;
     mpm_method method;      /* always sent (RunInfo.method) */
     mpm_update update;      /* always sent (RunInfo.update) */
+    mpm_transfer transfer;  /* always sent (RunInfo.transfer; decoded
+                               absent: FLIP) */
     const void *case_bytes; /* packed Case to include, or NULL; its
-                               method and update are sent as the two
-                               fields above say (encode only: a
-                               decoded run has NULL here) */
+                               method, update and transfer are sent as
+                               the three fields above say (encode only:
+                               a decoded run has NULL here) */
     size_t case_len;
 } mpp_run_info;
 

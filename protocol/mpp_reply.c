@@ -48,17 +48,21 @@ static int fill_run(Mpmd__RunInfo *pi, Mpmd__EnergySample *es, const mpp_run_inf
     pi->has_method = pi->has_update = 1;
     pi->method = (Mpmd__Case__Method)ri->method;
     pi->update = (Mpmd__Case__Update)ri->update;
+    pi->has_transfer = 1;
+    pi->transfer = (Mpmd__Case__Transfer)ri->transfer;
     if (ri->case_bytes) {
         ProtobufCMessage *cm;
         if (mpp_unpack(&mpmd__case__descriptor, ri->case_bytes, ri->case_len, (size_t)-1, &cm,
                        NULL))
             return MPM_ESYNTAX;
         pi->case_ = (Mpmd__Case *)cm;
-        /* what the run used, also for a case stored without the two fields
+        /* what the run used, also for a case stored without the fields
          * under other defaults */
         pi->case_->has_method = pi->case_->has_update = 1;
         pi->case_->method = pi->method;
         pi->case_->update = pi->update;
+        pi->case_->has_transfer = 1;
+        pi->case_->transfer = pi->transfer;
     }
     return 0;
 }
@@ -303,6 +307,7 @@ static void take_run(mpp_run_info *ri, mpm_energy_sample *e, const Mpmd__RunInfo
     ri->snapshot_steps = pi->snapshot_steps;
     ri->method = (mpm_method)pi->method;
     ri->update = (mpm_update)pi->update;
+    ri->transfer = (mpm_transfer)pi->transfer;
 }
 
 int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mpm_error *err)

@@ -157,6 +157,7 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->dim = r->dim;
     ri->method = r->method;
     ri->update = r->update;
+    ri->transfer = r->transfer;
     if (!isnan(r->energy.total)) {
         memset(e, 0, sizeof *e);
         e->step = r->steps;
@@ -299,6 +300,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     r.case_len = pblen;
     r.method = sc->c.method;
     r.update = sc->c.update;
+    r.transfer = sc->c.transfer;
     r.dim = sc->c.grid.dim;
     r.particles = (int64_t)nparticles;
     r.nodes = (int64_t)nodes;
@@ -328,15 +330,16 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         mpp_case_destroy(&sc);
         return;
     }
-    srv_log((uint64_t)run, "queued '%s': %ldD %s %s, %zu particles", namebuf, (long)r.dim,
+    srv_log((uint64_t)run, "queued '%s': %ldD %s %s %s, %zu particles", namebuf, (long)r.dim,
             r.method == MPM_METHOD_GIMP       ? "GMPM"
             : r.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
             : r.method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
+            : r.method == MPM_METHOD_CPDI     ? "CPDI"
                                               : "MPM",
             r.update == MPM_MUSL  ? "musl"
             : r.update == MPM_USL ? "usl"
                                   : "usf",
-            nparticles);
+            r.transfer == MPM_TRANSFER_APIC ? "APIC" : "FLIP", nparticles);
     uint8_t *buf = NULL;
     size_t len = 0;
     mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);

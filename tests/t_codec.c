@@ -924,6 +924,7 @@ TEST(codec_envelopes)
                        .snapshot_steps = ssteps,
                        .method = MPM_METHOD_GIMP,
                        .update = MPM_USL,
+                       .transfer = MPM_TRANSFER_APIC,
                        .case_bytes = cb,
                        .case_len = cn};
     mpp_run_info two[2] = {ri, ri};
@@ -944,7 +945,8 @@ TEST(codec_envelopes)
         "\"particles\":\"0\",\"nodes\":\"0\",\"dim\":2,\"lastEnergy\":{\"step\":\"10\",\"t\":0.01,\"kinetic\":0.5,"
         "\"strain\":0.25,\"potential\":0,\"externalWork\":0,\"total\":0.75,\"momentum\":[1,-1],\"mass\":2,"
         "\"seq\":\"3\",\"angularMomentum\":[-0.125]},\"energySamples\":\"0\",\"snapshotSteps\":[\"0\",\"100\"],\"case\":{\"name\":\"c\","
-        "\"method\":\"GIMP\",\"update\":\"USL\",\"steps\":\"3\"},\"method\":\"GIMP\",\"update\":\"USL\"}}",
+        "\"method\":\"GIMP\",\"update\":\"USL\",\"steps\":\"3\",\"transfer\":\"APIC\"},\"method\":\"GIMP\",\"update\":\"USL\","
+        "\"transfer\":\"APIC\"}}",
         "\"runId\":\"9\",\"jobId\":\"6\",\"name\":\"bar\",\"status\":\"FAILED\",\"error\":\"particle left the grid\"",
         "{\"schemaVersion\":1,\"energy\":{\"runId\":\"5\",\"samples\":[{\"step\":\"10\"",
         "{\"schemaVersion\":1,\"snapshot\":{\"step\":\"10\",\"t\":0.01,\"n\":\"2\",\"dim\":2,\"x\":[0.1,0.2,0.3,0.4],"

@@ -424,7 +424,8 @@ TEST(codec_reply_decode)
                         .n_snapshot_steps = 2,
                         .snapshot_steps = ssteps,
                         .method = MPM_METHOD_MPM,
-                        .update = MPM_USL};
+                        .update = MPM_USL,
+                        .transfer = MPM_TRANSFER_APIC};
     CHECK(mpp_reply_run(&run, &buf, &n) == 0);
     rc = reply_decode(buf, n, 0, &ri, err);
     CHECKF(rc == 0, "%s", err);
@@ -438,7 +439,8 @@ TEST(codec_reply_decode)
               r->submitted_at == 1700000000.5 && r->started_at == 0 && r->finished_at == 0 &&
               r->last_energy && same_energy(r->last_energy, &es[1]) && r->n_snapshot_steps == 2 &&
               r->snapshot_steps[0] == 0 && r->snapshot_steps[1] == 100 &&
-              r->method == MPM_METHOD_MPM && r->update == MPM_USL);
+              r->method == MPM_METHOD_MPM && r->update == MPM_USL &&
+              r->transfer == MPM_TRANSFER_APIC);
     }
     mpp_reply_clear(&ri);
     CHECK(decode_abuse(buf, n, 1) > 0);

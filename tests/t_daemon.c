@@ -326,8 +326,8 @@ DTEST(daemon_basic_run)
     }
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "runs", NULL) == 0);
-    CHECKF(e.status == 0 && strstr(e.out, "METHOD UPDATE") && strstr(e.out, "bar1d_mpm") &&
-               strstr(e.out, "FINISHED    MPM    USF"),
+    CHECKF(e.status == 0 && strstr(e.out, "METHOD   UPDATE TRANSFER") &&
+               strstr(e.out, "bar1d_mpm") && strstr(e.out, "FINISHED    MPM      USF    FLIP"),
            "runs: %s", e.out);
     TLOG("runs:\n%s", e.out);
     td_out_free(&e);
@@ -542,8 +542,9 @@ DTEST(daemon_method_defaults)
     }
     /* mpmctl runs (table and --json) and show print them */
     CHECK(td_ctl(&d, 30, &o, "runs", NULL) == 0);
-    CHECKF(o.status == 0 && strstr(o.out, "METHOD UPDATE") &&
-               strstr(o.out, "FINISHED    GIMP   MUSL") && strstr(o.out, "FINISHED    MPM    USL"),
+    CHECKF(o.status == 0 && strstr(o.out, "METHOD   UPDATE TRANSFER") &&
+               strstr(o.out, "FINISHED    GIMP     MUSL   FLIP") &&
+               strstr(o.out, "FINISHED    MPM      USL    FLIP"),
            "runs: %s", o.out);
     TLOG("runs:\n%s", o.out);
     td_out_free(&o);
@@ -578,6 +579,117 @@ DTEST(daemon_method_defaults)
                "show 1 --case: %s", err);
         int ok = sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL &&
                  strstr(o.out, "\"GIMP\"");
+        mpp_case_destroy(&sc);
+        CHECKF(ok, "show 1 --case: %s", o.out);
+    }
+    td_out_free(&o);
+    CHECK(td_stop(&d) == 0);
+}
+
+/* The run record carries the velocity transfer: an APIC case (the spinning
+ * disk, shortened) and the same case under FLIP with a PIC fraction run
+ * through a real mpmd; RunInfo.transfer (decoded reply, runs --json, show
+ * --json), the runs table, show and the stored case say which is which. */
+DTEST(daemon_transfer)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--solver-threads", "1", NULL};
+    char dir[300], path[400], err[ERRLEN];
+    td_daemon d;
+    td_out o;
+    json_t *c, *r;
+
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    /* job 1: APIC */
+    c = example("disk2d_apic");
+    CHECK(c && !strcmp(jstr(c, "transfer"), "APIC"));
+    json_object_del(c, "endTime");
+    json_object_set_new(c, "steps", json_integer(40));
+    set_output(c, "energyEvery", json_integer(10));
+    CHECK(write_case(json_deep_copy(c), dir, "apic.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && job_of(o.out) == 1, "submit --watch: exit %d, %s%s", o.status, o.out,
+           o.err);
+    td_out_free(&o);
+    /* job 2: the same case under FLIP (absent) with a PIC fraction */
+    json_object_del(c, "transfer");
+    json_object_set_new(c, "name", json_string("disk2d_flip"));
+    json_object_set_new(c, "picFraction", json_real(0.25));
+    CHECK(write_case(c, dir, "flip.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && job_of(o.out) == 2, "submit --watch: exit %d, %s%s", o.status, o.out,
+           o.err);
+    td_out_free(&o);
+
+    /* decoded replies: RunInfo.transfer and the case's, from the run record */
+    {
+        static const char *const want[3] = {"", "APIC", "FLIP"};
+        for (unsigned long long id = 1; id <= 2; id++) {
+            mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = id, .with_case = 1};
+            json_t *reply = NULL, *run, *cs;
+            CHECK(td_request(d.ep, &rq, 10, &reply) == 0);
+            run = json_object_get(reply, "run");
+            cs = json_object_get(run, "case");
+            int ok = run && cs && !strcmp(jstr(run, "transfer"), want[id]) &&
+                     !strcmp(jstr(cs, "transfer"), want[id]);
+            TLOG("run %llu: RunInfo transfer %s; its case: %s", id, jstr(run, "transfer"),
+                 jstr(cs, "transfer"));
+            json_decref(reply);
+            CHECKF(ok, "run %llu: want %s", id, want[id]);
+        }
+    }
+    /* runs --json (and a status filter, unaffected) */
+    for (int filtered = 0; filtered < 2; filtered++) {
+        if (filtered)
+            CHECK(td_ctl(&d, 30, &o, "runs", "--status", "FINISHED", "--json", NULL) == 0);
+        else
+            CHECK(td_ctl(&d, 30, &o, "runs", "--json", NULL) == 0);
+        char **lines = NULL;
+        size_t nl = td_lines(o.out, &lines);
+        json_t *r2 = nl == 2 ? parse_line(lines[0]) : NULL,
+               *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
+        free(lines);
+        int ok = o.status == 0 && r1 && r2 && jint(r1, "runId") == 1 &&
+                 !strcmp(jstr(r1, "transfer"), "APIC") && !strcmp(jstr(r1, "status"), "FINISHED") &&
+                 jint(r2, "runId") == 2 && !strcmp(jstr(r2, "transfer"), "FLIP") &&
+                 !strcmp(jstr(r2, "status"), "FINISHED");
+        json_decref(r1);
+        json_decref(r2);
+        CHECKF(ok, "runs%s --json: %s", filtered ? " --status FINISHED" : "", o.out);
+        td_out_free(&o);
+    }
+    CHECK(td_ctl(&d, 30, &o, "runs", "--status", "FAILED", "--json", NULL) == 0);
+    CHECK(o.status == 0 && !o.out[0]);
+    td_out_free(&o);
+    /* the table */
+    CHECK(td_ctl(&d, 30, &o, "runs", NULL) == 0);
+    CHECKF(o.status == 0 && strstr(o.out, "METHOD   UPDATE TRANSFER") &&
+               strstr(o.out, "disk2d_apic          FINISHED    GIMP     MUSL   APIC") &&
+               strstr(o.out, "disk2d_flip          FINISHED    GIMP     MUSL   FLIP"),
+           "runs: %s", o.out);
+    TLOG("runs:\n%s", o.out);
+    td_out_free(&o);
+    /* show, text and JSON */
+    CHECK(td_ctl(&d, 30, &o, "show", "1", NULL) == 0);
+    CHECKF(o.status == 0 && strstr(o.out, "method      GIMP, MUSL, ") &&
+               strstr(o.out, "\n  transfer    APIC\n"),
+           "show 1: %s", o.out);
+    td_out_free(&o);
+    CHECK(td_ctl(&d, 30, &o, "show", "2", NULL) == 0);
+    CHECKF(o.status == 0 && strstr(o.out, "\n  transfer    FLIP (PIC fraction 0.25)\n"),
+           "show 2: %s", o.out);
+    td_out_free(&o);
+    r = show_json(&d, 1);
+    CHECKF(r && !strcmp(jstr(r, "transfer"), "APIC"), "show 1 --json: %s", jstr(r, "transfer"));
+    json_decref(r);
+    /* show --case gives a case that loads as APIC again */
+    CHECK(td_ctl(&d, 30, &o, "show", "1", "--case", NULL) == 0);
+    {
+        mpp_case *sc = NULL;
+        CHECKF(o.status == 0 && td_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
+               "show 1 --case: %s", err);
+        int ok = sc && sc->c.transfer == MPM_TRANSFER_APIC;
         mpp_case_destroy(&sc);
         CHECKF(ok, "show 1 --case: %s", o.out);
     }

@@ -1,8 +1,9 @@
 /*
  * t_store_migrate.c - the store opens databases written by earlier mpmd
  * releases: a schema-1 database (built here from that release's DDL,
- * verbatim) and a schema-2 one are migrated in place, and every run,
- * energy sample and snapshot reads back as it was written.
+ * verbatim), a schema-2 and a schema-4 one are migrated in place, and
+ * every run, energy sample and snapshot reads back as it was written; runs
+ * written before schema 5 read back as FLIP, the transfer they ran.
  */
 #include "store.h"
 #include "t.h"
@@ -114,11 +115,11 @@ TEST(store_migrate_old_schema)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 4"), "%s",
+    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 5"), "%s",
            lc.migrated);
     int v = -1;
     CHECK(store_schema_version(s, &v) == 0);
-    CHECKF(v == 4 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
+    CHECKF(v == 5 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
     store_stats st;
     store_get_stats(s, &st);
     CHECK(st.recovered_running == 1 && st.recovered_queued == 0);
@@ -134,7 +135,8 @@ TEST(store_migrate_old_schema)
              r.wall_s == 2.5 && r.psteps_per_s == 8.0e6 && r.energy.kinetic == 1.5 &&
              r.energy.strain == 2.25 && r.energy.potential == -3.0 &&
              r.energy.external_work == 0.125 && r.energy.total == 0.625 && r.energy.mass == 0 &&
-             r.error == NULL && !strcmp(r.server_version, "0.3.0");
+             r.error == NULL && !strcmp(r.server_version, "0.3.0") &&
+             r.transfer == MPM_TRANSFER_FLIP;
     store_run_clear(&r);
     CHECKF(ok, "the old finished run reads back differently");
 
@@ -172,9 +174,10 @@ TEST(store_migrate_old_schema)
     /* the run left running: interrupted at its last sample (step 17) */
     CHECK(store_run_get(s, 2, &r) == 0);
     ok = r.status == MPP_STATUS_INTERRUPTED && r.method == MPM_METHOD_MPM && r.update == MPM_USL &&
-         r.dim == 1 && r.steps == 17 && r.energy.kinetic == 3.0 && r.energy.strain == 6.0 &&
-         r.energy.total == 8.0 && r.finished_at == 0 && r.started_at == 1700000011.0 &&
-         r.case_len == 0 && r.error && !strcmp(r.error, STORE_INTERRUPTED_RUNNING);
+         r.transfer == MPM_TRANSFER_FLIP && r.dim == 1 && r.steps == 17 &&
+         r.energy.kinetic == 3.0 && r.energy.strain == 6.0 && r.energy.total == 8.0 &&
+         r.finished_at == 0 && r.started_at == 1700000011.0 && r.case_len == 0 && r.error &&
+         !strcmp(r.error, STORE_INTERRUPTED_RUNNING);
     store_run_clear(&r);
     CHECKF(ok, "the old running run after migration and recovery");
     store_run_filter f = {.status_mask = STORE_STATUS_BIT(MPP_STATUS_FINISHED)};
@@ -303,9 +306,9 @@ TEST(store_migrate_v2)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-2 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 4"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 5"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 4);
+    CHECK(store_schema_version(s, &v) == 0 && v == 5);
 
     mpm_energy_sample *es = NULL;
     size_t nes = 0;
@@ -391,4 +394,167 @@ TEST(store_methods_round_trip)
         CHECK(store_run_insert(s, &bad, &id) == MPM_EINVAL);
         store_close(&s);
     }
+}
+
+/* A version-4 database (the version-1 script, then 1 -> 2, 2 -> 3 and
+ * 3 -> 4 as released) with a finished B-spline run, its energy samples and
+ * a snapshot.  Opening it migrates 4 -> 5 alone: the run reads back as FLIP
+ * (the column's default: the only transfer there was) with every other
+ * field intact; runs stored after it keep their transfer, and the column's
+ * CHECK refuses other names. */
+static const char migrate_v2_to_v4[] =
+    "ALTER TABLE energy ADD COLUMN angular_momentum_x REAL;"
+    "ALTER TABLE energy ADD COLUMN angular_momentum_y REAL;"
+    "ALTER TABLE energy ADD COLUMN angular_momentum_z REAL;"
+    "PRAGMA user_version = 3;"
+    "PRAGMA writable_schema = ON;"
+    "UPDATE sqlite_schema SET sql = replace(sql, 'CHECK (method IN (''mpm'',''gimp''))',"
+    " 'CHECK (method IN (''mpm'',''gimp'',''bspline2'',''bspline3'',''cpdi''))')"
+    " WHERE type = 'table' AND name = 'runs';"
+    "PRAGMA writable_schema = RESET;"
+    "PRAGMA user_version = 4;";
+
+static const char old_rows_v4[] =
+    "INSERT INTO runs (id, name, case_pb, method, \"update\", dim, particles, nodes, status,"
+    " submitted_at, started_at, finished_at, steps, wall_s, psteps_per_s, kinetic, strain,"
+    " potential, external_work, total, error, server_version) VALUES"
+    " (7, 'v4 run', X'0a0162', 'bspline2', 'musl', 2, 16, 25, 'finished', 1700000200.0,"
+    "  1700000201.0, 1700000202.0, 30, 1.5, 320.0, 0.5, 0.25, 0.0, 0.0, 0.75, NULL, '0.3.0'),"
+    " (8, 'v4 failed', X'', 'cpdi', 'usl', 3, 8, 64, 'failed', 1700000210.0,"
+    "  1700000211.0, 1700000212.0, 3, 0.5, 48.0, NULL, NULL, NULL, NULL, NULL, 'diverged',"
+    "  '0.3.0');"
+    "INSERT INTO energy VALUES"
+    " (7, 0, 0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.5, 1.0, 2.0, 0.0, 4.0, 0.0, 0.0, 0.5),"
+    " (7, 1, 30, 0.25, 0.5, 0.25, 0.0, 0.0, 0.75, 1.5, 2.5, 0.0, 4.0, 0.0, 0.0, 0.625);"
+    "INSERT INTO snapshots VALUES (7, 30, 0.25, 1, 2, 3, X'0a0b0c');";
+
+TEST(store_migrate_v4)
+{
+    const char *p = db_path("v4.db");
+    char path[600];
+    snprintf(path, sizeof path, "%s", p);
+    CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v1_to_v2, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v2_to_v4, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, old_rows_v4, NULL) == 0, "%s", store_error()->message);
+    int64_t cnt = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_table_info('runs') WHERE name = 'transfer'",
+                         &cnt) == 0 &&
+          cnt == 0);
+
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
+    store *s = NULL;
+    CHECKF(store_open(path, &o, &s) == 0, "opening a version-4 database: %s",
+           store_error()->message);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 5"), "%s", lc.migrated);
+    int v = -1;
+    CHECK(store_schema_version(s, &v) == 0 && v == 5 && v == STORE_SCHEMA_VERSION);
+
+    /* the old runs: FLIP, everything else as written */
+    store_run r;
+    CHECK(store_run_get(s, 7, &r) == 0);
+    int ok = r.transfer == MPM_TRANSFER_FLIP && !strcmp(r.name, "v4 run") &&
+             r.method == MPM_METHOD_BSPLINE2 && r.update == MPM_MUSL && r.dim == 2 &&
+             r.particles == 16 && r.nodes == 25 && r.status == MPP_STATUS_FINISHED &&
+             r.submitted_at == 1700000200.0 && r.finished_at == 1700000202.0 && r.steps == 30 &&
+             r.psteps_per_s == 320.0 && r.energy.total == 0.75 && r.case_len == 3 &&
+             !memcmp(r.case_pb, "\x0a\x01\x62", 3) && r.error == NULL;
+    store_run_clear(&r);
+    CHECKF(ok, "the version-4 finished run reads back differently");
+    CHECK(store_run_get(s, 8, &r) == 0);
+    ok = r.transfer == MPM_TRANSFER_FLIP && r.method == MPM_METHOD_CPDI && r.update == MPM_USL &&
+         r.status == MPP_STATUS_FAILED && r.error && !strcmp(r.error, "diverged") &&
+         isnan(r.energy.total);
+    store_run_clear(&r);
+    CHECKF(ok, "the version-4 failed run reads back differently");
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
+    CHECK(store_energy_read(s, 7, 0, 0, &es, &nes) == 0);
+    ok = nes == 2 && es[1].step == 30 && es[1].e.total == 0.75 &&
+         es[1].e.angular_momentum[2] == 0.625 && es[0].e.angular_momentum[2] == 0.5;
+    free(es);
+    CHECKF(ok, "the version-4 samples read back differently");
+    store_snapshot sn;
+    CHECK(store_snapshot_get(s, 7, -1, &sn) == 0);
+    ok = sn.step == 30 && sn.size == 3 && !memcmp(sn.data, "\x0a\x0b\x0c", 3);
+    store_snapshot_clear(&sn);
+    CHECK(ok);
+
+    /* new runs keep their transfer, in a listing too */
+    store_run in = sample_run("apic", MPP_STATUS_QUEUED);
+    in.transfer = MPM_TRANSFER_APIC;
+    int64_t id = 0;
+    CHECK(store_run_insert(s, &in, &id) == 0 && id == 9);
+    CHECK(store_flush(s) == 0);
+    store_run *list = NULL;
+    size_t n = 0;
+    CHECK(store_run_list(s, NULL, &list, &n) == 0);
+    ok = n == 3 && list[0].id == 9 && list[0].transfer == MPM_TRANSFER_APIC && list[1].id == 8 &&
+         list[1].transfer == MPM_TRANSFER_FLIP && list[2].id == 7 &&
+         list[2].transfer == MPM_TRANSFER_FLIP;
+    store_run_list_free(list, n);
+    CHECKF(ok, "listing after the migration");
+    store_close(&s);
+
+    /* on disk: old rows 'flip', the new one 'apic'; other names refused */
+    CHECK(store_exec_raw(path, "SELECT count(*) FROM runs WHERE transfer = 'flip' AND id IN (7, 8)",
+                         &cnt) == 0 &&
+          cnt == 2);
+    CHECK(store_exec_raw(path, "SELECT count(*) FROM runs WHERE transfer = 'apic' AND id = 9",
+                         &cnt) == 0 &&
+          cnt == 1);
+    int rc = store_exec_raw(path, "UPDATE runs SET transfer = 'pic' WHERE id = 7", NULL);
+    CHECKF(rc == MPM_EIO && strstr(store_error()->message, "CHECK"), "%d %s", rc,
+           store_error()->message);
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
+}
+
+/* Both transfers are stored and read back (get and list) on a new
+ * database; an unknown one is refused at insert. */
+TEST(store_transfer_round_trip)
+{
+    store_options o = {.log = quiet_log};
+    store *s = NULL;
+    CHECKF(store_open(db_path("transfer.db"), &o, &s) == 0, "%s", store_error()->message);
+    static const mpm_transfer ts[] = {MPM_TRANSFER_APIC, MPM_TRANSFER_FLIP, MPM_TRANSFER_APIC};
+    for (int k = 0; k < 3; k++) {
+        store_run in = sample_run("t", MPP_STATUS_QUEUED);
+        in.transfer = ts[k];
+        in.method = k == 2 ? MPM_METHOD_BSPLINE3 : MPM_METHOD_GIMP;
+        int64_t id = -1;
+        CHECKF(store_run_insert(s, &in, &id) == 0, "%s", store_error()->message);
+        CHECK(id == k + 1);
+    }
+    CHECK(store_flush(s) == 0);
+    for (int k = 0; k < 3; k++) {
+        store_run r;
+        CHECKF(store_run_get(s, k + 1, &r) == 0, "%s", store_error()->message);
+        int ok = r.transfer == ts[k] &&
+                 r.method == (k == 2 ? MPM_METHOD_BSPLINE3 : MPM_METHOD_GIMP) &&
+                 r.update == MPM_MUSL;
+        store_run_clear(&r);
+        CHECKF(ok, "run %d: transfer read back differently", k + 1);
+    }
+    store_run_filter f = {.status_mask = STORE_STATUS_BIT(MPP_STATUS_QUEUED), .with_case = 1};
+    store_run *list = NULL;
+    size_t n = 0;
+    CHECK(store_run_list(s, &f, &list, &n) == 0);
+    int ok = n == 3;
+    for (size_t i = 0; ok && i < n; i++)
+        ok = list[i].transfer == ts[2 - i] && list[i].case_len == case_bytes_len &&
+             !memcmp(list[i].case_pb, case_bytes, case_bytes_len);
+    store_run_list_free(list, n);
+    CHECKF(ok, "listing: transfers read back differently");
+    store_run bad = sample_run("t", MPP_STATUS_QUEUED);
+    bad.transfer = (mpm_transfer)2;
+    int64_t id = -1;
+    CHECK(store_run_insert(s, &bad, &id) == MPM_EINVAL &&
+          strstr(store_error()->message, "unknown transfer"));
+    store_close(&s);
 }

@@ -12,8 +12,9 @@
  * and refuses to open a file another mpmd holds.
  *
  * The API speaks mpmd's one vocabulary: run status is mpp_status
- * (protocol/mpp.h), method and update are the solver's mpm_method and
- * mpm_update, energy samples are mpm_energy_sample (server/mpm/mpm.h).
+ * (protocol/mpp.h), method, update and transfer are the solver's
+ * mpm_method, mpm_update and mpm_transfer, energy samples are
+ * mpm_energy_sample (server/mpm/mpm.h).
  * Callers never see SQLite types.  Every function returns 0 or a negative
  * MPM_E* code (mpm_error.h), and store_error() gives the calling thread's
  * last error (SQLite's message included):
@@ -45,7 +46,7 @@
 #include <stdint.h>
 
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 4
+#define STORE_SCHEMA_VERSION 5
 
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))
@@ -65,7 +66,8 @@ typedef struct {
     size_t case_len;
     mpm_method method;
     mpm_update update;
-    int dim; /* 1..3 */
+    mpm_transfer transfer; /* runs stored before schema 5 read as FLIP */
+    int dim;               /* 1..3 */
     int64_t particles, nodes;
     mpp_status status;
     double submitted_at; /* 0 on insert: now */

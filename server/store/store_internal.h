@@ -148,9 +148,12 @@ extern const char *const sti_status_names[STORE_NSTATUS];
 #define STORE_NMETHOD 5
 extern const char *const sti_method_names[STORE_NMETHOD];
 extern const char *const sti_update_names[3];
+#define STORE_NTRANSFER 2
+extern const char *const sti_transfer_names[STORE_NTRANSFER];
 int sti_status_ok(mpp_status st);
 int sti_method_ok(mpm_method m);
 int sti_update_ok(mpm_update u);
+int sti_transfer_ok(mpm_transfer t);
 const char *sti_status_name(mpp_status st); /* "queued", ...; "?" */
 /* Index of name in names[0..n), or -1. */
 int sti_parse_name(const char *name, const char *const *names, int n);

@@ -16,9 +16,10 @@
  * writer thread (store_writer.c).  Reads use connections of their own
  * (store_read.c).
  *
- * On disk.  Status, method and update are stored as text ('queued',
- * 'gimp', 'musl'), so a database reads the same whatever the C enums'
- * values; the API speaks mpp_status, mpm_method and mpm_update.
+ * On disk.  Status, method, update and transfer are stored as text
+ * ('queued', 'gimp', 'musl', 'apic'), so a database reads the same whatever
+ * the C enums' values; the API speaks mpp_status, mpm_method, mpm_update
+ * and mpm_transfer.
  */
 #define _GNU_SOURCE
 #include "store_internal.h"
@@ -122,6 +123,13 @@ static const char *const migrations[] = {
     " 'CHECK (method IN (''mpm'',''gimp'',''bspline2'',''bspline3'',''cpdi''))')"
     " WHERE type = 'table' AND name = 'runs';"
     "PRAGMA writable_schema = RESET;",
+    /* 4 -> 5: the run's particle-grid velocity transfer (mpmd.Case.transfer,
+     * RunInfo.transfer).  Runs stored before take the default, 'flip': the
+     * transfer of every run before APIC.  (An APIC run stored by a schema-4
+     * build that had APIC also reads 'flip'; its stored case still names
+     * APIC.) */
+    "ALTER TABLE runs ADD COLUMN transfer TEXT NOT NULL DEFAULT 'flip'"
+    " CHECK (transfer IN ('flip','apic'));",
 };
 
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,
@@ -208,6 +216,7 @@ const char *const sti_status_names[STORE_NSTATUS] = {"queued", "running",   "fin
                                                      "failed", "cancelled", "interrupted"};
 const char *const sti_method_names[STORE_NMETHOD] = {"mpm", "gimp", "bspline2", "bspline3", "cpdi"};
 const char *const sti_update_names[3] = {"usf", "usl", "musl"};
+const char *const sti_transfer_names[STORE_NTRANSFER] = {"flip", "apic"};
 
 _Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
                    MPP_STATUS_FINISHED == 3 && MPP_STATUS_FAILED == 4 &&
@@ -217,6 +226,7 @@ _Static_assert(MPM_METHOD_MPM == 0 && MPM_METHOD_GIMP == 1 && MPM_METHOD_BSPLINE
                    MPM_METHOD_BSPLINE3 == 3 && MPM_METHOD_CPDI == 4,
                "sti_method_names");
 _Static_assert(MPM_USF == 0 && MPM_USL == 1 && MPM_MUSL == 2, "sti_update_names");
+_Static_assert(MPM_TRANSFER_FLIP == 0 && MPM_TRANSFER_APIC == 1, "sti_transfer_names");
 
 int sti_status_ok(mpp_status st)
 {
@@ -229,6 +239,10 @@ int sti_method_ok(mpm_method m)
 int sti_update_ok(mpm_update u)
 {
     return (unsigned)u < 3;
+}
+int sti_transfer_ok(mpm_transfer t)
+{
+    return (unsigned)t < STORE_NTRANSFER;
 }
 
 const char *sti_status_name(mpp_status st)

@@ -142,8 +142,8 @@ static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out, s
     "id, name, length(case_pb), method, \"update\", dim, particles, nodes,"   \
     " status, submitted_at, started_at, finished_at, steps, wall_s,"          \
     " psteps_per_s, kinetic, strain, potential, external_work, total, error," \
-    " server_version"
-#define RUN_COL_CASE 22
+    " server_version, transfer"
+#define RUN_COL_CASE 23
 
 void store_run_clear(store_run *r)
 {
@@ -166,10 +166,14 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     int u = sti_parse_name((const char *)sqlite3_column_text(st, 4), sti_update_names, 3);
     int stt =
         sti_parse_name((const char *)sqlite3_column_text(st, 8), sti_status_names, STORE_NSTATUS);
-    if (m < 0 || u < 0 || stt < 0)
-        return sti_fail(MPM_EIO, "run %" PRId64 ": bad method, update or status value", r->id);
+    int tr = sti_parse_name((const char *)sqlite3_column_text(st, 22), sti_transfer_names,
+                            STORE_NTRANSFER);
+    if (m < 0 || u < 0 || stt < 0 || tr < 0)
+        return sti_fail(MPM_EIO, "run %" PRId64 ": bad method, update, status or transfer value",
+                        r->id);
     r->method = (mpm_method)m;
     r->update = (mpm_update)u;
+    r->transfer = (mpm_transfer)tr;
     r->status = (mpp_status)(MPP_STATUS_MIN + stt);
     r->dim = sqlite3_column_int(st, 5);
     r->particles = sqlite3_column_int64(st, 6);

@@ -88,9 +88,9 @@ static const char *const writer_sql[WS_COUNT] = {
     [WS_ROLLBACK] = "ROLLBACK",
     [WS_INS_RUN] = "INSERT INTO runs (id, name, case_pb, method, \"update\","
                    " dim, particles, nodes, status, submitted_at, started_at, finished_at,"
-                   " steps, wall_s, psteps_per_s, error, server_version)"
+                   " steps, wall_s, psteps_per_s, error, server_version, transfer)"
                    " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14,"
-                   " ?15, ?16, ?17)",
+                   " ?15, ?16, ?17, ?18)",
     [WS_UPD_STATUS] = "UPDATE runs SET status = ?2,"
                       " started_at = CASE WHEN ?2 = 'running' THEN ?3 ELSE started_at END,"
                       " finished_at = CASE WHEN ?2 IN ('finished','failed','cancelled',"
@@ -288,6 +288,7 @@ static int apply_op(store *s, op *o)
         BIND(bind_real(st, 15, r->psteps_per_s));
         BIND(bind_text_or_null(st, 16, r->error));
         BIND(bind_static(st, 17, r->server_version));
+        BIND(bind_static(st, 18, sti_transfer_names[r->transfer]));
         break;
     }
     case OP_RUN_STATUS:
@@ -658,6 +659,8 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out)
         return sti_fail(MPM_EINVAL, "unknown method %d", (int)run->method);
     if (!sti_update_ok(run->update))
         return sti_fail(MPM_EINVAL, "unknown update scheme %d", (int)run->update);
+    if (!sti_transfer_ok(run->transfer))
+        return sti_fail(MPM_EINVAL, "unknown transfer %d", (int)run->transfer);
     if (!sti_status_ok(run->status))
         return sti_fail(MPM_EINVAL, "unknown run status %d", (int)run->status);
     if (run->case_len && !run->case_pb)
