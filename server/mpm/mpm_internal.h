@@ -143,6 +143,8 @@ struct mpm_sim {
     mpm_bspline_axis bs[3]; /* B-splines: per axis */
     mpm_gridbuf g;          /* the grid */
     double *minv;           /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
+    double *ncoord[3];      /* node coordinates per axis, np[d] each
+                             * (mpm_node_coord()) */
     double mtol;
     double pic; /* PIC fraction of the velocity update (0: pure FLIP) */
     mpm_transfer transfer;
@@ -391,7 +393,7 @@ static inline size_t mpm_node_index(const mpm_sim *s, const int ijk[3])
  * B-splines the Greville abscissa of control point i, x0 + h (t_{i+1} +
  * ... + t_{i+p}) / p, with which the B-splines reproduce linear functions
  * exactly (sum_i N_i(x) xi_i = x). */
-static inline double mpm_node_coord(const mpm_sim *s, int axis, int padded_index)
+static inline double mpm_node_coord_calc(const mpm_sim *s, int axis, int padded_index)
 {
     if (!s->bsp) return s->x0[axis] + padded_index * s->h[axis];
     int p = s->bsp, n = s->bs[axis].n;
@@ -401,6 +403,13 @@ static inline double mpm_node_coord(const mpm_sim *s, int axis, int padded_index
         sum += t < 0 ? 0 : t > n ? n : t;
     }
     return s->x0[axis] + s->h[axis] * sum / p;
+}
+
+/* mpm_node_coord_calc() of padded node i along axis, from the table made at
+ * creation (the one place the kernels take node coordinates from). */
+static inline double mpm_node_coord(const mpm_sim *s, int axis, int padded_index)
+{
+    return s->ncoord[axis][padded_index];
 }
 
 /* ---- the thread team (mpm_team.c) ----

@@ -414,6 +414,11 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         goto nomem;
     if (alloc_gridbuf(&s->g, s->nn, dim, musl)) goto nomem;
     if (!(s->minv = mpm_dalloc(s->nn))) goto nomem;
+    for (int d = 0; d < 3; d++) {
+        if (!(s->ncoord[d] = mpm_dalloc((size_t)s->np[d]))) goto nomem;
+        for (int i = 0; d < dim && i < s->np[d]; i++)
+            s->ncoord[d][i] = mpm_node_coord_calc(s, d, i);
+    }
     if (s->nthreads > 1) {
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
         for (int t = 1; t < s->nthreads; t++) /* thread 0 scatters into the grid */
@@ -488,6 +493,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->sscr);
     free(s->tout);
     free(s->minv);
+    for (int d = 0; d < 3; d++) free(s->ncoord[d]);
     free(s->mats);
     free(s->fixed_node);
     free(s->fixed_mask);
