@@ -57,13 +57,13 @@
 #endif
 
 #include "mpm_internal.h"
+#include "mpm_pass.h"
 
 #include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
 
-#define INLINE static inline __attribute__((always_inline))
 #define NCORN(D) (1 << (D))
 
 /* Weights of one particle: corner c's first node base[c], tent weights
@@ -309,24 +309,6 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const cw *W, int D, in
     }
 }
 
-/* The strain increment of L into block slot i (Eq. 29: its symmetric part
- * times dt). */
-INLINE void strain_of(const mpm_sim *s, const double L[3][3], double *const deps[6], size_t i,
-                      int D)
-{
-    double dt = s->dt;
-    deps[0][i] = L[0][0] * dt;
-    if (D > 1) {
-        deps[1][i] = L[1][1] * dt;
-        deps[2][i] = D > 2 ? L[2][2] * dt : 0.0;
-        deps[3][i] = 0.5 * (L[0][1] + L[1][0]) * dt;
-    }
-    if (D > 2) {
-        deps[4][i] = 0.5 * (L[1][2] + L[2][1]) * dt;
-        deps[5][i] = 0.5 * (L[0][2] + L[2][0]) * dt;
-    }
-}
-
 /* F <- (I + dt L) F for particle p. */
 INLINE void f_update(mpm_sim *s, const double L[3][3], size_t p, int D)
 {
@@ -341,106 +323,7 @@ INLINE void f_update(mpm_sim *s, const double L[3][3], size_t p, int D)
         }
 }
 
-/* Constitutive update of a block, then the volume follows the strain (as
- * in mpm_kernels.c). */
-INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6], int D)
-{
-    s->model->update[D - 1](s->mats, &s->P, b0, nb, deps);
-    double *restrict vol = s->P.vol + b0;
-    for (size_t i = 0; i < nb; i++) {
-        double tr = deps[0][i];
-        if (D > 1) tr += deps[1][i] + deps[2][i];
-        vol[i] *= 1.0 + tr;
-    }
-}
-
-/* ---- energies in the pass: the arithmetic of mpm_energy.c's pass (and of
- * mpm_kernels.c's esum), so that the sums are the same bits ---- */
-typedef struct {
-    double ek, es, ep, mom[3], ms, L[3];
-    double g[3];
-} esum;
-
-INLINE void esum_init(const mpm_sim *s, esum *e)
-{
-    e->ek = e->es = e->ep = e->ms = 0;
-    for (int d = 0; d < 3; d++) {
-        e->mom[d] = e->L[d] = 0;
-        e->g[d] = s->gravity[d];
-    }
-}
-
-INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D)
-{
-    const mpm_particles *P = &s->P;
-    double m = P->m[p], v2 = 0;
-    for (int d = 0; d < D; d++) {
-        double v = P->v[d][p];
-        v2 += v * v;
-        e->mom[d] += m * v;
-        e->ep -= m * e->g[d] * P->x[d][p];
-    }
-    mpm_angmom_add(P, D, p, m, e->L);
-    e->ek += 0.5 * m * v2;
-    e->ms += m;
-}
-
-INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
-{
-    const mpm_particles *P = &s->P;
-    for (size_t p = b0; p < b0 + nb; p++) e->es += 0.5 * mpm_strain_density(P, D, p) * P->vol[p];
-}
-
-INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
-{
-    if (XV) {
-        o->ekin = e->ek;
-        o->epot = e->ep;
-        o->emass = e->ms;
-        for (int d = 0; d < 3; d++) {
-            o->emom[d] = e->mom[d];
-            o->eang[d] = e->L[d];
-        }
-    }
-    if (S) o->estr = e->es;
-}
-
 /* ---- the support boxes and row extents ---- */
-
-/* Runs of particles in the same row of centre cells (cy, cz), whose node
- * box grows in registers; a run's rows get its whole x extent (a superset:
- * the extents only say what to zero, reduce and update). */
-typedef struct {
-    int cy, cz;
-    int lo[3], hi[3];
-} rowrun;
-
-INLINE void run_init(rowrun *a)
-{
-    a->cy = INT_MIN;
-    a->cz = 0;
-    for (int d = 0; d < 3; d++) a->lo[d] = a->hi[d] = 0;
-}
-
-INLINE void run_flush(const mpm_sim *s, mpm_thread_out *o, rowrun *a, int D)
-{
-    if (a->cy == INT_MIN) return;
-    for (int d = 0; d < D; d++) {
-        if (a->lo[d] < o->blo[d]) o->blo[d] = a->lo[d];
-        if (a->hi[d] > o->bhi[d]) o->bhi[d] = a->hi[d];
-    }
-    int *restrict rlo = o->rlo, *restrict rhi = o->rhi;
-    size_t ny = (size_t)s->np[1];
-    int z0 = D > 2 ? a->lo[2] : 0, z1 = D > 2 ? a->hi[2] : 0;
-    int y0 = D > 1 ? a->lo[1] : 0, y1 = D > 1 ? a->hi[1] : 0;
-    for (int z = z0; z <= z1; z++)
-        for (int y = y0; y <= y1; y++) {
-            size_t r = (size_t)y + (size_t)z * ny;
-            if (a->lo[0] < rlo[r]) rlo[r] = a->lo[0];
-            if (a->hi[0] > rhi[r]) rhi[r] = a->hi[0];
-        }
-    a->cy = INT_MIN;
-}
 
 /* Particle p's corners (at its position and F as they are now): the box of
  * their nodes into lo..hi (clamped to the padded grid) and its centre's
@@ -490,47 +373,15 @@ INLINE void box_add(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int lo
     }
 }
 
-INLINE void box_reset(const mpm_sim *s, mpm_thread_out *o, int D)
-{
-    if (o->blo[0] <= o->bhi[0]) {
-        size_t ny = (size_t)s->np[1];
-        for (int z = o->blo[2]; z <= o->bhi[2]; z++)
-            for (int y = o->blo[1]; y <= o->bhi[1]; y++) {
-                size_t r = (size_t)y + (size_t)z * ny;
-                o->rlo[r] = INT_MAX;
-                o->rhi[r] = -1;
-            }
-    }
-    for (int d = 0; d < 3; d++) {
-        o->blo[d] = d < D ? INT_MAX : 0;
-        o->bhi[d] = d < D ? -1 : 0;
-    }
-}
-
 /* The moved particle: centre inside [lo, hi), velocity finite, every
  * corner in the padded grid and det F > 0 (else it is the pass's first bad
  * particle); its corners' nodes join the run. */
 INLINE void moved(const mpm_sim *s, mpm_thread_out *o, rowrun *a, size_t p, int D)
 {
-    int ok = 1, lo[3], hi[3], cc[3];
-    double v2 = 0;
-    for (int d = 0; d < D; d++) {
-        double x = s->P.x[d][p], v = s->P.v[d][p];
-        ok &= (x >= s->lo[d]) & (x < s->hi[d]) & (fabs(v) <= 1.79e308);
-        v2 += v * v;
-    }
-    ok &= corner_box(s, p, D, lo, hi, cc);
-    if (v2 > o->vmax2) o->vmax2 = v2;
-    if (!ok && o->bad == SIZE_MAX) o->bad = p;
+    int lo[3], hi[3], cc[3];
+    check_particle(s, o, p, D);
+    if (!corner_box(s, p, D, lo, hi, cc) && o->bad == SIZE_MAX) o->bad = p;
     box_add(s, o, a, lo, hi, cc, D);
-}
-
-INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, double al, double bl)
-{
-    if (BL)
-        *v = bl * (*v + dt * dv) + al * vpic;
-    else
-        *v += dt * dv;
 }
 
 /* ---- the passes ---- */
@@ -621,7 +472,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
             v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
         }
         moved(s, o, &a, p, D);
-        if (EN) esum_particle(s, &e, p, D);
+        if (EN) esum_particle(s, &e, p, D, 0);
     }
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 0);
@@ -653,7 +504,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                 v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
             }
             moved(s, o, &a, p, D);
-            if (EN) esum_particle(s, &e, p, D);
+            if (EN) esum_particle(s, &e, p, D, 0);
         }
         block_update(s, b0, nb, o->deps, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -697,7 +548,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             f_update(s, L, p, D);
             for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
             moved(s, o, &a, p, D);
-            if (EN) esum_particle(s, &e, p, D);
+            if (EN) esum_particle(s, &e, p, D, 0);
         }
         block_update(s, b0, nb, o->deps, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -718,31 +569,6 @@ INLINE void bbox_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D)
         box_add(s, o, &a, lo, hi, cc, D);
     }
     run_flush(s, o, &a, D);
-}
-
-/* Sort key of particle p: its centre's cell numbered row-major over the
- * rows' extents (the centre lies inside its domain, so the cell's first
- * node is in the extents; clamped all the same). */
-INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, size_t p0, size_t p1, int D)
-{
-    size_t ny = (size_t)s->np[1], nk = s->rowoff[s->nrows];
-    for (size_t p = p0; p < p1; p++) {
-        int c[3] = {0, 0, 0};
-        for (int d = 0; d < D; d++) {
-            double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
-            double rmax = (double)(s->np[d] - 1);
-            r = r >= 0 ? (r < rmax ? r : rmax) : 0.0;
-            c[d] = (int)r;
-        }
-        for (int d = 1; d < 3; d++)
-            c[d] = c[d] < s->blo[d] ? s->blo[d] : c[d] > s->bhi[d] ? s->bhi[d] : c[d];
-        size_t row = (size_t)c[1] + (size_t)c[2] * ny;
-        int lo = s->ulo[row], w = s->uhi[row] - lo;
-        int x = c[0] - lo;
-        x = x < 0 ? 0 : x > w ? (w > 0 ? w : 0) : x;
-        size_t k = s->rowoff[row] + (size_t)x;
-        key[p] = (uint32_t)(k < nk ? k : nk - 1);
-    }
 }
 
 #ifndef MPM_LEAN

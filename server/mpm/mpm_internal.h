@@ -8,6 +8,7 @@
  *   mpm_loads.c    essential boundary conditions, tractions, particle forces
  *   mpm_energy.c   the energy sums and the divergence guard
  *   mpm_kernels.c  the particle loops (MPM, uGIMP);  mpm_cpdi.c  CPDI1's
+ *   mpm_pass.h     the inline pieces those two files' passes share
  *   mpm_model.c    the constitutive models
  *   mpm_case.c     checking a case and generating its particles
  *   mpm_bspline.c  the B-splines' clamped boundary spans, node positions

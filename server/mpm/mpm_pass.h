@@ -1,0 +1,238 @@
+/*
+ * mpm_pass.h - the inline pieces every particle pass shares: the MPM,
+ * uGIMP and B-spline families of mpm_kernels.c and the CPDI family of
+ * mpm_cpdi.c.  A particle's cell, the runs that record the supports a pass
+ * moves (rowrun) and the thread's box and row extents they merge into, the
+ * check of a moved particle, the strain increment and the constitutive
+ * update of a block, the energy sums made in the pass (esum, with the
+ * energy pass's arithmetic; AP: APIC's affine angular momentum), the
+ * velocity update (FLIP or blended with PIC) and the sort keys.
+ * Private: included only by mpm_kernels.c and mpm_cpdi.c, after
+ * mpm_internal.h; everything is static and always inlined, so that each
+ * specialised loop (dimension, nodes per axis, ...) compiles as before.
+ */
+#ifndef MPM_PASS_H
+#define MPM_PASS_H
+
+#include "mpm_internal.h"
+
+#include <limits.h>
+#include <math.h>
+#include <stdint.h>
+
+#define INLINE static inline __attribute__((always_inline))
+
+/* Cell of p along axis d (trunc of r), clamped to the padded grid: a
+ * position outside the grid (the step then fails) or not finite is
+ * clamped, never converted as is. */
+INLINE int cell_of(const mpm_sim *s, size_t p, int d, double *rr)
+{
+    double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+    double rmax = s->rmax[d];
+    r = r >= 0 ? (r < rmax ? r : rmax) : 0.0;
+    *rr = r;
+    return (int)r;
+}
+
+/* The supports of the particles a pass moves, recorded as runs: sorted
+ * particles come row of cells by row of cells, so consecutive particles in
+ * the same row of cells (cy, cz) share a run whose node box (x: extent,
+ * y and z: rows) grows in registers, and only a finished run is merged
+ * into the thread's box and row extents.  A run's rows get the run's whole
+ * x extent: with 3-node uGIMP this can add a node row's worth of extent
+ * to a neighbouring row (a superset is harmless: the extents only say what
+ * to zero, reduce and update). */
+typedef struct {
+    int cy, cz;       /* row of cells of the run (cy = INT_MIN: none) */
+    int lo[3], hi[3]; /* its node box, clamped to the padded grid */
+} rowrun;
+
+INLINE void run_init(rowrun *a)
+{
+    a->cy = INT_MIN;
+    a->cz = 0;
+    for (int d = 0; d < 3; d++) a->lo[d] = a->hi[d] = 0;
+}
+
+INLINE void run_flush(const mpm_sim *s, mpm_thread_out *o, rowrun *a, int D)
+{
+    if (a->cy == INT_MIN) return;
+    /* clamped here, once per run: the cells are, the supports may reach a
+     * node beyond the padded grid only when the step fails (CPDI's corner
+     * boxes come clamped already: then a no-op) */
+    for (int d = 0; d < D; d++) {
+        if (a->lo[d] < 0) a->lo[d] = 0;
+        if (a->hi[d] > s->np[d] - 1) a->hi[d] = s->np[d] - 1;
+        if (a->lo[d] < o->blo[d]) o->blo[d] = a->lo[d];
+        if (a->hi[d] > o->bhi[d]) o->bhi[d] = a->hi[d];
+    }
+    int *restrict rlo = o->rlo, *restrict rhi = o->rhi;
+    size_t ny = (size_t)s->np[1];
+    int z0 = D > 2 ? a->lo[2] : 0, z1 = D > 2 ? a->hi[2] : 0;
+    int y0 = D > 1 ? a->lo[1] : 0, y1 = D > 1 ? a->hi[1] : 0;
+    for (int z = z0; z <= z1; z++)
+        for (int y = y0; y <= y1; y++) {
+            size_t r = (size_t)y + (size_t)z * ny;
+            if (a->lo[0] < rlo[r]) rlo[r] = a->lo[0];
+            if (a->hi[0] > rhi[r]) rhi[r] = a->hi[0];
+        }
+    a->cy = INT_MIN;
+}
+
+/* The strain increment of L into block slot i (Eq. 29: its symmetric part
+ * times dt). */
+INLINE void strain_of(const mpm_sim *s, const double L[3][3], double *const deps[6], size_t i,
+                      int D)
+{
+    double dt = s->dt;
+    deps[0][i] = L[0][0] * dt;
+    if (D > 1) {
+        deps[1][i] = L[1][1] * dt;
+        deps[2][i] = D > 2 ? L[2][2] * dt : 0.0;
+        deps[3][i] = 0.5 * (L[0][1] + L[1][0]) * dt;
+    }
+    if (D > 2) {
+        deps[4][i] = 0.5 * (L[1][2] + L[2][1]) * dt;
+        deps[5][i] = 0.5 * (L[0][2] + L[2][0]) * dt;
+    }
+}
+
+/* Constitutive update of a block, then the volume follows the strain. */
+INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6], int D)
+{
+    s->model->update[D - 1](s->mats, &s->P, b0, nb, deps);
+    double *restrict vol = s->P.vol + b0;
+    for (size_t i = 0; i < nb; i++) {
+        double tr = deps[0][i];
+        if (D > 1) tr += deps[1][i] + deps[2][i];
+        vol[i] *= 1.0 + tr;
+    }
+}
+
+/* Energy sums of a slice (EN: the step wants them), in the order and with
+ * the arithmetic of the energy pass (mpm_energy.c, mpm_ph_energy), so that the
+ * sums are the same: kinetic, potential, momentum, angular momentum
+ * (mpm_angmom_add) and mass of particle p
+ * once its position and velocity are final, strain energy of a block once
+ * its stress, strain and volume are. */
+typedef struct {
+    double ek, es, ep, mom[3], ms, L[3];
+    double g[3];
+} esum;
+
+INLINE void esum_init(const mpm_sim *s, esum *e)
+{
+    e->ek = e->es = e->ep = e->ms = 0;
+    for (int d = 0; d < 3; d++) {
+        e->mom[d] = e->L[d] = 0;
+        e->g[d] = s->gravity[d];
+    }
+}
+
+INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP)
+{
+    const mpm_particles *P = &s->P;
+    double m = P->m[p], v2 = 0;
+    for (int d = 0; d < D; d++) {
+        double v = P->v[d][p];
+        v2 += v * v;
+        e->mom[d] += m * v;
+        e->ep -= m * e->g[d] * P->x[d][p];
+    }
+    mpm_angmom_add(P, D, p, m, e->L);
+    if (AP) mpm_angmom_add_affine(P, D, p, m, e->L);
+    e->ek += 0.5 * m * v2;
+    e->ms += m;
+}
+
+INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
+{
+    const mpm_particles *P = &s->P;
+    for (size_t p = b0; p < b0 + nb; p++) e->es += 0.5 * mpm_strain_density(P, D, p) * P->vol[p];
+}
+
+/* the slice's sums into o: the kinematic ones (XV) and/or the strain (S) */
+INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
+{
+    if (XV) {
+        o->ekin = e->ek;
+        o->epot = e->ep;
+        o->emass = e->ms;
+        for (int d = 0; d < 3; d++) {
+            o->emom[d] = e->mom[d];
+            o->eang[d] = e->L[d];
+        }
+    }
+    if (S) o->estr = e->es;
+}
+
+/* Checks the updated particle: inside [lo, hi) and finite; the first bad
+ * particle of the pass is recorded. */
+INLINE void check_particle(const mpm_sim *s, mpm_thread_out *o, size_t p, int D)
+{
+    int ok = 1;
+    double v2 = 0;
+    for (int d = 0; d < D; d++) {
+        double x = s->P.x[d][p], v = s->P.v[d][p];
+        ok &= (x >= s->lo[d]) & (x < s->hi[d]) & (fabs(v) <= 1.79e308);
+        v2 += v * v;
+    }
+    if (v2 > o->vmax2) o->vmax2 = v2;
+    if (!ok && o->bad == SIZE_MAX) o->bad = p;
+}
+
+/* Empty box (axes the grid lacks: node 0), and empty rows: only those of
+ * the previous box can be non-empty. */
+INLINE void box_reset(const mpm_sim *s, mpm_thread_out *o, int D)
+{
+    if (o->blo[0] <= o->bhi[0]) {
+        size_t ny = (size_t)s->np[1];
+        for (int z = o->blo[2]; z <= o->bhi[2]; z++)
+            for (int y = o->blo[1]; y <= o->bhi[1]; y++) {
+                size_t r = (size_t)y + (size_t)z * ny;
+                o->rlo[r] = INT_MAX;
+                o->rhi[r] = -1;
+            }
+    }
+    for (int d = 0; d < 3; d++) {
+        o->blo[d] = d < D ? INT_MAX : 0;
+        o->bhi[d] = d < D ? -1 : 0;
+    }
+}
+
+/* The particle velocity (Eq. 31), FLIP: v += dt sum S qdot/m; blended
+ * with PIC (BL): v = (1 - al) (v + dt sum S qdot/m) + al sum S q/m, with
+ * the momentum q after the nodal update, so vpic = sum S v_I^{n+1} (the
+ * position increment's sum; phantom nodes: 0).  bl = 1 - al. */
+INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, double al, double bl)
+{
+    if (BL)
+        *v = bl * (*v + dt * dv) + al * vpic;
+    else
+        *v += dt * dv;
+}
+
+/* Sort key of particle p: its cell (x, row) numbered row-major over the
+ * rows' extents, rowoff[row] + x - ulo[row] (a cell's first node lies in
+ * the extents of its row; clamped all the same). */
+INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, size_t p0, size_t p1, int D)
+{
+    size_t ny = (size_t)s->np[1], nk = s->rowoff[s->nrows];
+    for (size_t p = p0; p < p1; p++) {
+        int c[3] = {0, 0, 0};
+        for (int d = 0; d < D; d++) {
+            double r;
+            c[d] = cell_of(s, p, d, &r);
+        }
+        for (int d = 1; d < 3; d++)
+            c[d] = c[d] < s->blo[d] ? s->blo[d] : c[d] > s->bhi[d] ? s->bhi[d] : c[d];
+        size_t row = (size_t)c[1] + (size_t)c[2] * ny;
+        int lo = s->ulo[row], w = s->uhi[row] - lo;
+        int x = c[0] - lo;
+        x = x < 0 ? 0 : x > w ? (w > 0 ? w : 0) : x;
+        size_t k = s->rowoff[row] + (size_t)x;
+        key[p] = (uint32_t)(k < nk ? k : nk - 1);
+    }
+}
+
+#endif
