@@ -7,7 +7,8 @@
  * -> JSON unchanged, bad input is rejected with the JSON path of the
  * offending field, damaged bytes give errors (not crashes), and the
  * Request / Reply / StreamMsg helpers encode what they should (the client
- * decoders are tested in t_codec_decode.c).
+ * decoders are tested in t_codec_decode.c, the Python interoperability in
+ * t_codec_python.c).
  * Example files are read relative to the repository root.
  */
 #include "t.h"
@@ -1100,101 +1101,6 @@ TEST(codec_submit_bytes)
     rb.case_bytes = NULL;
     CHECK(mpp_request_encode(&rb, &b2, &n2) == MPM_EINVAL && !b2);
     free(cb);
-}
-
-/* The case files follow the protobuf JSON mapping, so another protobuf
- * library reads them too: Debian's Python protobuf (json_format.Parse, with
- * classes protoc generates from proto/mpmd.proto) parses every example, and
- * its binary encoding decodes with protobuf-c to the very bytes the C codec
- * packs from the same JSON; Python also parses the C bytes and writes them
- * back unchanged.  Real tools, no mock: /usr/bin/python3 and protoc
- * (installed by make deps). */
-TEST(codec_python_json_format)
-{
-    static const char *names[] = {
-        "point1d", "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse", "disks2d_fine",
-        "cube3d",  "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi", "disk2d_apic"};
-    enum { NN = sizeof names / sizeof names[0] };
-    char dir[] = "/tmp/mpmpy.XXXXXX", cmd[1024], path[512], err[T_ERRLEN];
-    CHECK(mkdtemp(dir) != NULL);
-    snprintf(cmd, sizeof cmd, "protoc --proto_path=proto --python_out=%s proto/mpmd.proto", dir);
-    int rc = system(cmd);
-    CHECKF(rc == 0, "%s: exit %d (protoc comes with make deps: protobuf-compiler)", cmd, rc);
-    /* the C side: JSON -> protobuf bytes, one file per case */
-    uint8_t *cb[NN] = {0};
-    size_t cn[NN] = {0};
-    for (int k = 0; k < NN; k++) {
-        size_t len = 0;
-        Mpmd__Case *pb = NULL;
-        snprintf(path, sizeof path, "proto/examples/%s.json", names[k]);
-        char *text = td_slurp(path, &len);
-        CHECKF(text, "cannot read %s", path);
-        CHECKF(!td_case_from_json(text, len, &pb, err, sizeof err) &&
-                   !mpp_case_pack(pb, &cb[k], &cn[k]),
-               "%s: %s", names[k], err);
-        free(text);
-        mpp_case_pb_free(&pb);
-        snprintf(path, sizeof path, "%s/%s.c.bin", dir, names[k]);
-        FILE *f = fopen(path, "wb");
-        CHECK(f && fwrite(cb[k], 1, cn[k], f) == cn[k]);
-        CHECK(fclose(f) == 0);
-    }
-    snprintf(path, sizeof path, "%s/conv.py", dir);
-    FILE *f = fopen(path, "w");
-    CHECK(f);
-    fprintf(f,
-            "import sys\nsys.path.insert(0, sys.argv[1])\nimport mpmd_pb2\n"
-            "from google.protobuf import json_format\n"
-            "for name in sys.argv[2:]:\n"
-            "    c = mpmd_pb2.Case()\n"
-            "    json_format.Parse(open('proto/examples/%%s.json' %% name).read(), c)\n"
-            "    open('%%s/%%s.py.bin' %% (sys.argv[1], name), 'wb').write(c.SerializeToString())\n"
-            "    cb = open('%%s/%%s.c.bin' %% (sys.argv[1], name), 'rb').read()\n"
-            "    d = mpmd_pb2.Case()\n"
-            "    d.ParseFromString(cb)\n"
-            "    print(name, len(cb), 'same' if d.SerializeToString() == cb else 'DIFFERENT')\n");
-    CHECK(fclose(f) == 0);
-    int n = snprintf(cmd, sizeof cmd, "/usr/bin/python3 %s/conv.py %s", dir, dir);
-    for (int k = 0; k < NN; k++) n += snprintf(cmd + n, sizeof cmd - (size_t)n, " %s", names[k]);
-    snprintf(cmd + n, sizeof cmd - (size_t)n, " > %s/out.txt 2>&1", dir);
-    rc = system(cmd);
-    snprintf(path, sizeof path, "%s/out.txt", dir);
-    size_t olen = 0;
-    char *out = td_slurp(path, &olen);
-    CHECKF(rc == 0, "python3 json_format: exit %d: %s", rc, out ? out : "(no output)");
-    for (int k = 0; k < NN; k++) {
-        char want[128];
-        snprintf(want, sizeof want, "%s %zu same", names[k], cn[k]);
-        CHECKF(out && strstr(out, want), "python re-serialised the C bytes of %s differently: %s",
-               names[k], out ? out : "");
-        /* Python's bytes decode with protobuf-c to the C codec's own bytes */
-        size_t pl = 0;
-        snprintf(path, sizeof path, "%s/%s.py.bin", dir, names[k]);
-        char *pbytes = td_slurp(path, &pl);
-        Mpmd__Case *pb = NULL;
-        uint8_t *rb = NULL;
-        size_t rn = 0;
-        CHECKF(pbytes && !td_case_unpack(pbytes, pl, 0, &pb, err, sizeof err) &&
-                   !mpp_case_pack(pb, &rb, &rn),
-               "%s: python's bytes: %s", names[k], err);
-        CHECKF(rn == cn[k] && !memcmp(rb, cb[k], rn),
-               "%s: python %zu bytes -> C %zu bytes, C from JSON %zu bytes", names[k], pl, rn,
-               cn[k]);
-        TLOG(
-            "%-15s python json_format -> %5zu bytes -> protobuf-c: equal to the C codec's %zu bytes",
-            names[k], pl, cn[k]);
-        free(pbytes);
-        free(rb);
-        mpp_case_pb_free(&pb);
-        snprintf(path, sizeof path, "%s/%s.py.bin", dir, names[k]);
-        remove(path);
-        snprintf(path, sizeof path, "%s/%s.c.bin", dir, names[k]);
-        remove(path);
-        free(cb[k]);
-    }
-    free(out);
-    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
-    CHECK(system(cmd) == 0);
 }
 
 /* The CPDI example (a soft bar hanging under its suddenly applied weight,
