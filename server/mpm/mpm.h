@@ -205,6 +205,16 @@ typedef struct {
      * m_p eps : (C_p D_p)^T = m_p eps : B_p^T).  It is what APIC conserves,
      * and what is reported. */
     double angular_momentum[3];
+    /* Dissipated and supplied energies, cumulative from the start of the
+     * run, each >= 0 except prescribed_work (signed), and 0 in a scene
+     * without the feature (issue 11; filled by the models and conditions
+     * that have them):
+     *   plastic_work    sum over steps of sigma : d eps_p V (plastic models)
+     *   damping_work    energy removed by local or viscous damping
+     *   friction_work   energy dissipated by Coulomb friction on faces
+     *   prescribed_work work done on the body by prescribed velocities
+     *                   (the reaction forces at the driven nodes) */
+    double plastic_work, damping_work, friction_work, prescribed_work;
 } mpm_energy;
 
 /* One energy sample, the one shape it has from the solver to the store to
