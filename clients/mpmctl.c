@@ -52,8 +52,9 @@ static const command commands[] = {
     {"submit", C_SUBMIT, "CASE.json [--watch] [--csv|--json]", "queue a simulation case",
      "Loads CASE.json (\"-\": standard input) and checks it locally with the daemon's codec:\n"
      "a bad case is reported with the JSON path of the field and nothing is sent.\n"
-     "A case without \"method\" / \"update\" runs GIMP (uGIMP) with MUSL, the schema's\n"
-     "defaults (docs/accuracy.md); both are sent explicitly, so any mpmd runs the same.\n"
+     "A case without \"method\" / \"update\" runs BSPLINE2 (quadratic B-splines) with MUSL,\n"
+     "the schema's defaults since 0.4.0 (GIMP with MUSL before; docs/accuracy.md); both are\n"
+     "sent explicitly, so any mpmd runs the same.  boundary.nodes needs MPM, GIMP or CPDI.\n"
      "Methods: MPM, GIMP, BSPLINE2 (quadratic B-splines), BSPLINE3 (cubic), CPDI (CPDI1:\n"
      "the particle domain follows its deformation gradient, for large deformation;\n"
      "docs/solver.md); updates: USF, USL, MUSL.\n"

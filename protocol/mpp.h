@@ -15,7 +15,7 @@
 #include "mpm.h"
 
 /* The release of mpmd (daemon and mpmctl). */
-#define MPP_VERSION "0.3.0"
+#define MPP_VERSION "0.4.0"
 /* SCHEMA_VERSION of proto/mpmd.proto. */
 #define MPP_SCHEMA_VERSION 1
 

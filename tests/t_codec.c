@@ -635,7 +635,7 @@ TEST(codec_bad_case)
 }
 
 /* Damaged protobuf bytes: errors, never crashes (ASan watches). */
-/* The schema's defaults (GIMP with MUSL), made explicit by
+/* The schema's defaults (BSPLINE2 with MUSL since 0.4.0; GIMP with MUSL before), made explicit by
  * mpp_case_pin_defaults(), and the solver's own checks reported with
  * lowerCamelCase paths like the codec's. */
 TEST(codec_defaults)
@@ -646,8 +646,8 @@ TEST(codec_defaults)
     uint8_t *buf = NULL;
     size_t n = 0;
     CHECKF(td_case_load(td_good2d, strlen(td_good2d), &sc, err, sizeof err) == 0, "%s", err);
-    CHECKF(sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL,
-           "a case without method/update: method %d, update %d (want GIMP, MUSL)",
+    CHECKF(sc->c.method == MPM_METHOD_BSPLINE2 && sc->c.update == MPM_MUSL,
+           "a case without method/update: method %d, update %d (want BSPLINE2, MUSL)",
            (int)sc->c.method, (int)sc->c.update);
     mpp_case_destroy(&sc);
 
@@ -665,7 +665,7 @@ TEST(codec_defaults)
     CHECK(case_to_json(back, 0, &json, err) == 0);
     mpp_case_pb_free(&back);
     TLOG("pinned: %.90s...", json);
-    CHECKF(strstr(json, "\"method\":\"GIMP\",\"update\":\"MUSL\""), "pinned: %s", json);
+    CHECKF(strstr(json, "\"method\":\"BSPLINE2\",\"update\":\"MUSL\""), "pinned: %s", json);
     free(json);
     json = NULL;
     {
@@ -683,10 +683,11 @@ TEST(codec_defaults)
                json);
         free(json);
     }
-    /* a solver check (GMPM half-width above h) names the field as JSON does */
+    /* a solver check (GMPM half-width above h; GIMP named: not the default) names the field as
+     * JSON does */
     {
         const char *wide =
-            "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+            "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]}, \"method\": \"GIMP\","
             " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
             " \"bodies\": [{\"points\": {\"x\": [0.45, 0.55], \"volume\": [0.1, 0.1],"
             " \"halfLength\": [0.05, 0.2]}}], \"steps\": 1}";

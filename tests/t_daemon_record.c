@@ -116,7 +116,7 @@ DTEST(daemon_method_defaults)
 
     snprintf(dir, sizeof dir, "%s/d", tmp);
     if (td_start(&d, dir, extra)) return;
-    /* the block without method and update: GIMP with MUSL, the defaults */
+    /* the block without method and update: BSPLINE2 with MUSL, the defaults */
     c = block2d(40, 10, "defaults");
     CHECK(c);
     json_object_del(c, "method");
@@ -138,7 +138,7 @@ DTEST(daemon_method_defaults)
 
     /* decoded replies: RunInfo.method / update, from the run record */
     {
-        static const char *const want[3][2] = {{"", ""}, {"GIMP", "MUSL"}, {"MPM", "USL"}};
+        static const char *const want[3][2] = {{"", ""}, {"BSPLINE2", "MUSL"}, {"MPM", "USL"}};
         for (unsigned long long id = 1; id <= 2; id++) {
             mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = id, .with_case = 1};
             json_t *reply = NULL, *run, *cs;
@@ -159,7 +159,7 @@ DTEST(daemon_method_defaults)
     /* mpmctl runs (table and --json) and show print them */
     CHECK(td_ctl(&d, 30, &o, "runs", NULL) == 0);
     CHECKF(o.status == 0 && strstr(o.out, "METHOD   UPDATE TRANSFER") &&
-               strstr(o.out, "FINISHED    GIMP     MUSL   FLIP") &&
+               strstr(o.out, "FINISHED    BSPLINE2 MUSL   FLIP") &&
                strstr(o.out, "FINISHED    MPM      USL    FLIP"),
            "runs: %s", o.out);
     TLOG("runs:\n%s", o.out);
@@ -171,7 +171,7 @@ DTEST(daemon_method_defaults)
         json_t *r2 = nl == 2 ? parse_line(lines[0]) : NULL,
                *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
         free(lines);
-        int ok = r1 && r2 && !strcmp(jstr(r1, "method"), "GIMP") &&
+        int ok = r1 && r2 && !strcmp(jstr(r1, "method"), "BSPLINE2") &&
                  !strcmp(jstr(r1, "update"), "MUSL") && !strcmp(jstr(r2, "method"), "MPM") &&
                  !strcmp(jstr(r2, "update"), "USL");
         json_decref(r1);
@@ -180,21 +180,22 @@ DTEST(daemon_method_defaults)
     }
     td_out_free(&o);
     CHECK(td_ctl(&d, 30, &o, "show", "1", NULL) == 0);
-    CHECKF(o.status == 0 && strstr(o.out, "method      GIMP, MUSL, dt 0.001"), "show 1: %s", o.out);
+    CHECKF(o.status == 0 && strstr(o.out, "method      BSPLINE2, MUSL, dt 0.001"), "show 1: %s",
+           o.out);
     td_out_free(&o);
     r = show_json(&d, 2);
     CHECK(r);
     CHECKF(!strcmp(jstr(r, "method"), "MPM") && !strcmp(jstr(r, "update"), "USL"),
            "show 2 --json: %s, %s", jstr(r, "method"), jstr(r, "update"));
     json_decref(r);
-    /* show --case gives a case that loads as GIMP + MUSL */
+    /* show --case gives a case that loads as BSPLINE2 + MUSL */
     CHECK(td_ctl(&d, 30, &o, "show", "1", "--case", NULL) == 0);
     {
         mpp_case *sc = NULL;
         CHECKF(o.status == 0 && td_case_load(o.out, strlen(o.out), &sc, err, sizeof err) == 0,
                "show 1 --case: %s", err);
-        int ok = sc->c.method == MPM_METHOD_GIMP && sc->c.update == MPM_MUSL &&
-                 strstr(o.out, "\"GIMP\"");
+        int ok = sc->c.method == MPM_METHOD_BSPLINE2 && sc->c.update == MPM_MUSL &&
+                 strstr(o.out, "\"BSPLINE2\"");
         mpp_case_destroy(&sc);
         CHECKF(ok, "show 1 --case: %s", o.out);
     }

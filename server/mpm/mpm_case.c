@@ -322,7 +322,8 @@ static int check_bc(const mpm_case *c, mpm_error *err)
         return mpm_fail(
             err, MPM_EINVAL, "boundary.nodes",
             "explicit boundary nodes are not supported with BSPLINE2/BSPLINE3 (B-spline "
-            "control points are not grid nodes); fix whole faces instead");
+            "control points are not grid nodes; BSPLINE2 is the default method when a case "
+            "names none): fix whole faces instead, or set method to MPM, GIMP or CPDI");
     if (c->bc.n_nodes && (!c->bc.node_ijk || !c->bc.node_mask))
         return mpm_fail(err, MPM_EINVAL, "boundary.nodes",
                         "%zu nodes given without indices or masks", c->bc.n_nodes);
