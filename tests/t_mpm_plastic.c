@@ -376,3 +376,90 @@ TEST(plastic_dp_substepping_converges)
     }
     CHECK(err[0] < 1e-1 && err[4] < 1e-5);
 }
+
+/* Elastic-plastic unloading (Sloan's Algorithm 3): from a state on the
+ * cone, a shear increment against the deviator first unloads through the
+ * elastic interior and then yields on the opposite side.  One update must
+ * match the same increment cut into 20000 updates (each nearly elastic or
+ * nearly a single substep), to about the substep tolerance. */
+TEST(plastic_dp_unloading_then_yield)
+{
+    for (int k = 0; k < 3; k++) {
+        mpm_plastic_params P;
+        CHECK(tp_params(&P, MPM_PLASTIC_DRUCKER_PRAGER, (mpm_dp_match)k, 30, 10, 1e4, HUGE_VAL) ==
+              0);
+        double p = -1e5, r = P.xi * P.c - P.eta * p, a = r; /* sqrt(J2) of (a, -a, 0) is a */
+        double s0[6] = {p + a, p - a, p, 0, 0, 0}, one[6], many[6], dis1, dism = 0;
+        /* the elastic distance across the cone is 2 r / (2G) per unit of (1,-1,0) */
+        double g = -3 * r / P.G;
+        double de[6] = {g, -g, 0, 0.3 * g, 0, -0.2 * g};
+        mpm_plastic_state st1 = {0}, stm = {0};
+        memcpy(one, s0, sizeof one);
+        memcpy(many, s0, sizeof many);
+        CHECK(mpm_plastic_update(&P, one, de, &st1, &dis1) == 0);
+        int n = 20000, subs = 0;
+        for (int i = 0; i < n; i++) {
+            double d[6], di;
+            for (int c = 0; c < 6; c++) d[c] = de[c] / n;
+            CHECK(mpm_plastic_update(&P, many, d, &stm, &di) == 0);
+            dism += di;
+            subs += stm.substeps;
+        }
+        double num = 0, den = 0;
+        for (int c = 0; c < 6; c++) {
+            num += (one[c] - many[c]) * (one[c] - many[c]) * (c < 3 ? 1 : 2);
+            den += many[c] * many[c] * (c < 3 ? 1 : 2);
+        }
+        double err = sqrt(num / den), derr = fabs(dis1 - dism) / dism;
+        TLOG("match %d: one update (%d substeps) vs 20000: stress rel diff %.2e, dissipation "
+             "%.6g vs %.6g (rel %.1e), eps_p %.6g vs %.6g",
+             k, st1.substeps, err, dis1, dism, derr, st1.eps_p, stm.eps_p);
+        CHECK(st1.yielded && stm.yielded);
+        CHECK(err <= 1e-4);
+        CHECK(derr <= 1e-3);
+        CHECK(fabs(st1.eps_p - stm.eps_p) <= 1e-3 * stm.eps_p);
+        /* it did unload: the first fifth of the path alone is elastic */
+        double half[6], dh[6];
+        memcpy(half, s0, sizeof half);
+        for (int c = 0; c < 6; c++) dh[c] = de[c] / 5;
+        mpm_plastic_state sth = {0};
+        CHECK(mpm_plastic_update(&P, half, dh, &sth, &dis1) == 0);
+        CHECK(sth.substeps == 0 && dis1 == 0);
+    }
+}
+
+/* The energy balance of a drained triaxial test (DP and MC): the stress
+ * work sum (sig_old + sig_new)/2 : deps equals the elastic energy's change
+ * plus the summed dissipation, to a small fraction of the dissipation (the
+ * trapezoidal work rule's error at the elastic-plastic transition). */
+TEST(plastic_triaxial_energy_balance)
+{
+    for (int kind = 0; kind < 2; kind++) {
+        mpm_plastic_params P;
+        CHECK(tp_params(&P, kind, MPM_DP_COMPRESSION, 30, 10, 1e4, HUGE_VAL) == 0);
+        double p0 = 1e5, qf = mc_qc(P.phi, P.c, p0), W = 0;
+        tp_point x;
+        tp_iso(&x, p0);
+        double s0[6], e0[6], U0, U1;
+        memcpy(s0, x.sig, sizeof s0);
+#define TP_U(s)                                                           \
+    (((s)[0] * (s)[0] + (s)[1] * (s)[1] + (s)[2] * (s)[2]) / (2 * P.E) -  \
+     P.nu / P.E * ((s)[0] * (s)[1] + (s)[1] * (s)[2] + (s)[0] * (s)[2]) + \
+     ((s)[3] * (s)[3] + (s)[4] * (s)[4] + (s)[5] * (s)[5]) / (2 * P.G))
+        U0 = TP_U(s0);
+        for (int k = 0; k < 400; k++) {
+            double so[6];
+            memcpy(so, x.sig, sizeof so);
+            memcpy(e0, x.eps, sizeof e0);
+            CHECK(tp_mixed_step(&P, &x, -8 * qf / P.E / 400, p0, 0) == 0);
+            for (int c = 0; c < 6; c++)
+                W += 0.5 * (so[c] + x.sig[c]) * (x.eps[c] - e0[c]) * (c < 3 ? 1 : 2);
+        }
+        U1 = TP_U(x.sig);
+#undef TP_U
+        double gap = W - (U1 - U0) - x.dis;
+        TLOG("%s: work %.9g = dU %.9g + dissipation %.9g + %.2e (%.1e of the dissipation)",
+             kind ? "MC" : "DP", W, U1 - U0, x.dis, gap, gap / x.dis);
+        CHECK(fabs(gap) <= 1e-3 * x.dis);
+    }
+}

@@ -142,7 +142,7 @@ static double dp_f_at(const mpm_plastic_params *P, const double s[6], const doub
     return dp_f(P, x, scale);
 }
 
-/* The Pegasus method (Sloan 2001, Algorithm 2) for f(s + al De) = 0 on
+/* The Pegasus method (Sloan 2001) for f(s + al De) = 0 on
  * [a0, a1] with f0 < 0 < f1. */
 static double dp_pegasus(const mpm_plastic_params *P, const double s[6], const double De[6],
                          double a0, double a1, double f0, double f1)
@@ -167,7 +167,7 @@ static double dp_pegasus(const mpm_plastic_params *P, const double s[6], const d
 }
 
 /* The elastic fraction of an increment that starts on the surface and
- * first unloads (Sloan 2001, Algorithm 3): [a0, a1] cut into NSUB pieces
+ * first unloads (Sloan 2001): [a0, a1] cut into NSUB pieces
  * until f turns positive, then Pegasus on the piece whose start is inside;
  * a piece that starts on the surface is cut again (3 rounds at most, then
  * the increment counts as plastic from the start). */
@@ -196,7 +196,7 @@ static double dp_unload_alpha(const mpm_plastic_params *P, const double s[6], co
     return 0;
 }
 
-/* Sloan's drift correction (Section 3.4): while f > ftol, the consistent
+/* Sloan's drift correction: while f > ftol, the consistent
  * correction s - f/(a:D b) D b, or the normal correction s - f/(a:a) a when
  * that does not reduce |f|; the plastic strain the correction implies, C
  * (s - s_corrected), is added to the dissipation and eps_p. */
@@ -244,8 +244,10 @@ static void dp_tension(const mpm_plastic_params *P, double s[6], double *dis, do
     memcpy(s, y, sizeof y);
 }
 
-/* The modified Euler scheme with local error control (Sloan 2001,
- * Algorithm 4) over the strain de from s (on the surface). */
+/* The modified Euler scheme with local error control (Sloan 2001) over
+ * the strain de from s (on the surface); |sig| in the relative error is
+ * floored at xi c, so that a state near a cohesive apex does not force
+ * tiny substeps. */
 static int dp_substep(const mpm_plastic_params *P, double s[6], const double de[6], int *nacc,
                       double *dis, double *epq)
 {

@@ -37,19 +37,25 @@
  * radius at pt when it lies outside (the corner of the two surfaces; at
  * pt = apex that is the apex).  Otherwise the cone is integrated by the
  * explicit scheme of Sloan, Abbo & Sheng 2001 (Engng Comput 18(1/2)
- * 121-154): the elastic fraction alpha by the Pegasus method (their
- * Section 3.1, Algorithm 2), with the elastic-plastic unloading check on
- * the surface (cos theta = a : D deps / |a| |D deps| < -LTOL, Eq. 26, and
- * the subdivision into NSUB intervals before Pegasus, Algorithm 3); then
- * the modified Euler scheme with local error control on the plastic part
- * (Algorithm 4: Eqs. 27-34): each substep takes two Euler estimates,
- * accepts when the relative error R = |dsig2 - dsig1| / (2 |sig|) <= tol,
- * sizes the next substep by q = 0.9 sqrt(tol/R) clamped to [0.1, 1.1] (to
- * at most 1 right after a rejection, at least dT_min = 1e-6); after each
- * accepted substep the yield-surface drift is corrected (Section 3.4, Eqs.
- * 35-39: the consistent correction along D b, and the normal correction
- * along a when the consistent one does not reduce |f|), until |f| <= ftol
- * (relative to the sum of the magnitudes of f's terms).
+ * 121-154), in the order of its algorithms (its equation numbers were not
+ * at hand; the steps are named instead): the elastic fraction alpha of the
+ * increment by the Pegasus method; when the increment starts on the
+ * surface, the elastic-plastic unloading check cos theta = a : D deps /
+ * (|a| |D deps|) < -LTOL (1e-6) and then the search over NSUB = 10
+ * subintervals before Pegasus; then the modified Euler scheme with local
+ * error control on the plastic part: each substep takes two forward-Euler
+ * estimates (dlam = a : D de / a : D b, 0 when unloading), accepts when the
+ * relative error R = |dsig2 - dsig1| / (2 |sig|) <= tol, sizes the next
+ * substep by q = 0.9 sqrt(tol/R) clamped to [0.1, 1.1] (to at most 1 right
+ * after a rejection, dT >= dT_min = 1e-6); after each accepted substep the
+ * yield-surface drift is corrected: the consistent correction along D b,
+ * or the normal correction along a when the consistent one does not reduce
+ * |f|, repeated until |f| <= ftol
+ * (relative to the sum of the magnitudes of f's terms).  The dissipation
+ * is summed by the trapezoidal rule on the multipliers, dlam sig : b(sig)
+ * at both ends of a substep (>= 0 by construction).  An increment of about
+ * a thousand yield strains or more (where explicit substepping is stiff)
+ * may exhaust max_substeps: MPM_EDIVERGED, the stress untouched.
  *
  * Mohr-Coulomb (perfect plasticity):
  *   f = k s1 - s3 - sigc,  k = (1 + sin phi)/(1 - sin phi),  sigc = 2 c sqrt(k),
