@@ -463,3 +463,42 @@ TEST(plastic_triaxial_energy_balance)
         CHECK(fabs(gap) <= 1e-3 * x.dis);
     }
 }
+
+/* MC's closed form is the exact solution of the rate equations for fixed
+ * principal axes on one plane: one update of a proportional strain
+ * increment (that yields) equals the same increment cut into 1000
+ * updates, to round-off, dissipation included; in a rotated frame. */
+TEST(plastic_mc_one_update_is_exact)
+{
+    mpm_plastic_params P;
+    CHECK(tp_params(&P, MPM_PLASTIC_MOHR_COULOMB, 0, 30, 10, 1e4, HUGE_VAL) == 0);
+    double th = 0.9, c = cos(th), s = sin(th);
+    double Q[3][3] = {{c, 0, s}, {0, 1, 0}, {-s, 0, c}};
+    static const int vi[6] = {0, 1, 2, 0, 1, 0}, vj[6] = {0, 1, 2, 1, 2, 2};
+    double e[3] = {-3e-3, 0, 3e-3}, de[6] = {0}, worst = 0;
+    for (int k = 0; k < 6; k++)
+        for (int i = 0; i < 3; i++) de[k] += e[i] * Q[i][vi[k]] * Q[i][vj[k]];
+    double one[6] = {-1e5, -1e5, -1e5, 0, 0, 0}, many[6], dis1, dism = 0;
+    memcpy(many, one, sizeof many);
+    mpm_plastic_state st1 = {0}, stm = {0};
+    CHECK(mpm_plastic_update(&P, one, de, &st1, &dis1) == 0);
+    for (int n = 0; n < 1000; n++) {
+        double d[6], di;
+        for (int k = 0; k < 6; k++) d[k] = de[k] / 1000;
+        CHECK(mpm_plastic_update(&P, many, d, &stm, &di) == 0);
+        dism += di;
+    }
+    for (int k = 0; k < 6; k++) {
+        double v = fabs(one[k] - many[k]) / 1e5;
+        if (v > worst) worst = v;
+    }
+    double val[3];
+    mpm_plastic_principal(one, val, NULL);
+    TLOG("one update vs 1000: stress differs by %.1e (relative), dissipation %.9g vs %.9g; "
+         "principal %.6g %.6g %.6g (on the plane, off the edges)",
+         worst, dis1, dism, val[0], val[1], val[2]);
+    CHECK(st1.yielded && val[0] - val[1] > 1e3 && val[1] - val[2] > 1e3);
+    CHECK(worst <= 1e-11);
+    CHECK(fabs(st1.eps_p - stm.eps_p) <= 1e-9 * stm.eps_p);
+    CHECK(fabs(dis1 - dism) <= 1e-9 * dism); /* the trapezoidal dissipation is exact here */
+}

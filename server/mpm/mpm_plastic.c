@@ -227,10 +227,49 @@ static void dp_drift(const mpm_plastic_params *P, double s[6], double *dis, doub
     }
 }
 
+/* The first point of the elastic trial path s0 + al De on the model's
+ * surface (the largest of its surfaces), by the Pegasus method; s0 itself
+ * when s0 is on or outside it.  For the closed-form returns' dissipation. */
+static void first_yield(const mpm_plastic_params *P, const double s0[6], const double De[6],
+                        double out[6])
+{
+    double sc, f0 = mpm_plastic_yield(P, s0, &sc), a0 = 0, a1 = 1, al = 1, x[6];
+    memcpy(out, s0, 6 * sizeof s0[0]);
+    if (f0 >= -P->ftol * sc) return;
+    for (int i = 0; i < 6; i++) x[i] = s0[i] + De[i];
+    double f1 = mpm_plastic_yield(P, x, &sc);
+    if (!(f1 > 0)) return;
+    for (int it = 0; it < PEG_MAXIT && f1 != f0; it++) {
+        al = a1 - f1 * (a1 - a0) / (f1 - f0);
+        for (int i = 0; i < 6; i++) x[i] = s0[i] + al * De[i];
+        double fn = mpm_plastic_yield(P, x, &sc);
+        if (fabs(fn) <= P->ftol * sc) break;
+        if (fn * f1 < 0) {
+            a0 = a1;
+            f0 = f1;
+        } else {
+            f0 = f0 * f1 / (f1 + fn);
+        }
+        a1 = al;
+        f1 = fn;
+    }
+    for (int i = 0; i < 6; i++) out[i] = s0[i] + al * De[i];
+}
+
+/* The dissipation of a closed-form return by the trapezoidal rule between
+ * the first yield point sa and the returned stress y, sa : dep and y : dep
+ * each clamped at 0 (exact for one plane with fixed principal axes, where
+ * the stress moves linearly and the multiplier uniformly). */
+static double trap_dis(const double sa[6], const double y[6], const double dep[6])
+{
+    return 0.5 * (fmax(0, ddot(sa, dep)) + fmax(0, ddot(y, dep)));
+}
+
 /* The tension cut-off's closed-form return of s (whose mean stress is
- * above pt): p = pt, the deviator kept, scaled to the cone's radius at pt
- * when outside it. */
-static void dp_tension(const mpm_plastic_params *P, double s[6], double *dis, double *epq)
+ * above pt; sa the first yield point on the way to it): p = pt, the
+ * deviator kept, scaled to the cone's radius at pt when outside it. */
+static void dp_tension(const mpm_plastic_params *P, double s[6], const double sa[6], double *dis,
+                       double *epq)
 {
     double d[6], r = sqrt_j2(s, d), rt = P->xi * P->c - P->eta * P->pt, y[6];
     if (rt < 0) rt = 0;
@@ -239,7 +278,7 @@ static void dp_tension(const mpm_plastic_params *P, double s[6], double *dis, do
     double dd[6], ep[6];
     for (int i = 0; i < 6; i++) dd[i] = s[i] - y[i];
     compliance(P, dd, ep);
-    *dis += ddot(y, ep);
+    *dis += trap_dis(sa, y, ep);
     *epq += eqv_dev(ep);
     memcpy(s, y, sizeof y);
 }
@@ -311,7 +350,9 @@ static int dp_update(const mpm_plastic_params *P, double sig[6], const double de
     int nsub = 0;
     if (ptr > P->pt + P->ftol * (fabs(P->pt) + fabs(ptr))) {
         /* the tension region (the cut-off, its corner with the cone, the apex) */
-        dp_tension(P, tr, &dis, &epq);
+        double sa[6];
+        first_yield(P, sig, De, sa);
+        dp_tension(P, tr, sa, &dis, &epq);
         memcpy(s, tr, sizeof s);
         nsub = 1;
     } else if (ftr <= P->ftol * sctr) {
@@ -338,7 +379,11 @@ static int dp_update(const mpm_plastic_params *P, double sig[6], const double de
         }
         int rc = dp_substep(P, s, rest, &nsub, &dis, &epq);
         if (rc) return rc;
-        if (meanp(s) > P->pt) dp_tension(P, s, &dis, &epq);
+        if (meanp(s) > P->pt) {
+            double sa[6];
+            memcpy(sa, s, sizeof sa);
+            dp_tension(P, s, sa, &dis, &epq);
+        }
     }
     memcpy(sig, s, sizeof s);
     st->eps_p += epq;
@@ -545,19 +590,26 @@ static int mc_update(const mpm_plastic_params *P, double sig[6], const double de
     if (rc) return rc;
     /* the plastic strain C (trial - y) in the principal frame */
     double d[3] = {val[0] - y[0], val[1] - y[1], val[2] - y[2]}, dm = (d[0] + d[1] + d[2]) / 3;
-    double ep[3], em = 0, dis = 0, dev2 = 0;
+    double ep[3], em = 0, dev2 = 0, y6[6], ep6[6], sa[6];
     for (int i = 0; i < 3; i++) {
         ep[i] = (d[i] - dm) / (2 * P->G) + dm / (3 * P->K);
         em += ep[i] / 3;
-        dis += y[i] * ep[i];
     }
     for (int i = 0; i < 3; i++) dev2 += (ep[i] - em) * (ep[i] - em);
     static const int vi[6] = {0, 1, 2, 0, 1, 0}, vj[6] = {0, 1, 2, 1, 2, 2};
     for (int c = 0; c < 6; c++) {
-        double v = 0;
-        for (int i = 0; i < 3; i++) v += y[i] * vec[i][vi[c]] * vec[i][vj[c]];
-        sig[c] = v;
+        double v = 0, w = 0;
+        for (int i = 0; i < 3; i++) {
+            double nn = vec[i][vi[c]] * vec[i][vj[c]];
+            v += y[i] * nn;
+            w += ep[i] * nn;
+        }
+        y6[c] = v;
+        ep6[c] = w;
     }
+    first_yield(P, sig, De, sa);
+    double dis = trap_dis(sa, y6, ep6);
+    memcpy(sig, y6, sizeof y6);
     st->eps_p += sqrt(2.0 / 3.0 * dev2);
     st->substeps = 1;
     st->yielded = 1;

@@ -75,7 +75,10 @@
  * multiplier is linear in the strain), so substepping would change nothing
  * but the cost; corners and apex are exact, not rounded.  The rotation of
  * the principal axes within an increment is, as in any return mapping,
- * taken at the trial's axes.
+ * taken at the trial's axes.  The closed-form returns (MC, the DP cut-off)
+ * sum the dissipation by the trapezoidal rule between the first yield
+ * point on the elastic trial path (Pegasus) and the returned stress, each
+ * end's sig : deps_p clamped at 0 (exact on one plane with fixed axes).
  *
  * Left out: hardening/softening, a smoothed MC, a cap, rate dependence.
  */
