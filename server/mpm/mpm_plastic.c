@@ -22,6 +22,7 @@
 #define RET_TOL 1e-12  /* a multiplier this far below 0 (relative) counts as 0 */
 #define TINY_REL 1e-14 /* sqrt(J2) below this (relative) is the cone's axis */
 #define R_MIN 1e-16    /* Sloan's EPS: the smallest relative error estimate */
+#define FY_TOL 1e-6    /* the first yield point (for the dissipation only), relative */
 
 /* ---- tensors in Voigt storage (tensor shear) ---- */
 
@@ -227,23 +228,26 @@ static void dp_drift(const mpm_plastic_params *P, double s[6], double *dis, doub
     }
 }
 
+static double yield_fast(const mpm_plastic_params *P, const double sig[6], double *scale);
+
 /* The first point of the elastic trial path s0 + al De on the model's
  * surface (the largest of its surfaces), by the Pegasus method; s0 itself
  * when s0 is on or outside it.  For the closed-form returns' dissipation. */
 static void first_yield(const mpm_plastic_params *P, const double s0[6], const double De[6],
                         double out[6])
 {
-    double sc, f0 = mpm_plastic_yield(P, s0, &sc), a0 = 0, a1 = 1, al = 1, x[6];
+    double sc, f0 = yield_fast(P, s0, &sc), a0 = 0, a1 = 1, al = 1, x[6];
+    double tol = P->ftol > FY_TOL ? P->ftol : FY_TOL;
     memcpy(out, s0, 6 * sizeof s0[0]);
-    if (f0 >= -P->ftol * sc) return;
+    if (f0 >= -tol * sc) return;
     for (int i = 0; i < 6; i++) x[i] = s0[i] + De[i];
-    double f1 = mpm_plastic_yield(P, x, &sc);
+    double f1 = yield_fast(P, x, &sc);
     if (!(f1 > 0)) return;
     for (int it = 0; it < PEG_MAXIT && f1 != f0; it++) {
         al = a1 - f1 * (a1 - a0) / (f1 - f0);
         for (int i = 0; i < 6; i++) x[i] = s0[i] + al * De[i];
-        double fn = mpm_plastic_yield(P, x, &sc);
-        if (fabs(fn) <= P->ftol * sc) break;
+        double fn = yield_fast(P, x, &sc);
+        if (fabs(fn) <= tol * sc) break;
         if (fn * f1 < 0) {
             a0 = a1;
             f0 = f1;
@@ -444,6 +448,27 @@ void mpm_plastic_principal(const double sig[6], double val[3], double vec[3][3])
     }
 }
 
+/* The principal values of sig, descending, from the invariants (the
+ * trigonometric solution of the characteristic cubic). */
+static void mc_principal_fast(const double sig[6], double val[3])
+{
+    double d[6], m = meanp(sig), r2 = sqrt_j2(sig, d);
+    double j2 = r2 * r2;
+    if (!(j2 > 0)) {
+        val[0] = val[1] = val[2] = m;
+        return;
+    }
+    double j3 = d[0] * (d[1] * d[2] - d[4] * d[4]) - d[3] * (d[3] * d[2] - d[4] * d[5]) +
+                d[5] * (d[3] * d[4] - d[1] * d[5]);
+    double c3 = 0.5 * j3 * pow(3 / j2, 1.5);
+    if (c3 > 1) c3 = 1;
+    if (c3 < -1) c3 = -1;
+    double th = acos(c3) / 3, r = 2 * sqrt(j2 / 3), tp = 2.0943951023931955; /* 2 pi / 3 */
+    val[0] = m + r * cos(th);
+    val[1] = m + r * cos(th - tp);
+    val[2] = m + r * cos(th + tp);
+}
+
 /* MC's yield function on ordered principal stresses: the larger of the
  * plane k s1 - s3 - sigc and the cut-off s1 - pt */
 static double mc_f(const mpm_plastic_params *P, const double s[3], double *scale)
@@ -576,8 +601,20 @@ static int mc_update(const mpm_plastic_params *P, double sig[6], const double de
     hooke(P, deps, De);
     for (int i = 0; i < 6; i++) tr[i] = sig[i] + De[i];
     if (!finite6(tr)) return MPM_EDIVERGED;
-    mpm_plastic_principal(tr, val, vec);
+    /* a cheap elastic check first: the principal values from the
+     * invariants (accurate to about sqrt(eps) relative near repeated
+     * values, so only a clear margin counts) */
+    mc_principal_fast(tr, val);
     double f = mc_f(P, val, &sc);
+    if (f < -1e-6 * sc) {
+        memcpy(sig, tr, sizeof tr);
+        st->substeps = 0;
+        st->yielded = 0;
+        if (dissip) *dissip = 0;
+        return 0;
+    }
+    mpm_plastic_principal(tr, val, vec);
+    f = mc_f(P, val, &sc);
     if (f <= P->ftol * sc) {
         memcpy(sig, tr, sizeof tr);
         st->substeps = 0;
@@ -626,12 +663,17 @@ int mpm_plastic_update(const mpm_plastic_params *p, double sig[6], const double 
                                                : dp_update(p, sig, deps, st, dissip);
 }
 
-double mpm_plastic_yield(const mpm_plastic_params *p, const double sig[6], double *scale)
+/* the yield function with MC's principal values from the invariants or by
+ * Jacobi rotations */
+static double yield_any(const mpm_plastic_params *p, const double sig[6], double *scale, int fast)
 {
     double sc, f;
     if (p->kind == MPM_PLASTIC_MOHR_COULOMB) {
         double val[3];
-        mpm_plastic_principal(sig, val, NULL);
+        if (fast)
+            mc_principal_fast(sig, val);
+        else
+            mpm_plastic_principal(sig, val, NULL);
         f = mc_f(p, val, &sc);
     } else {
         f = dp_f(p, sig, &sc);
@@ -643,6 +685,16 @@ double mpm_plastic_yield(const mpm_plastic_params *p, const double sig[6], doubl
     }
     if (scale) *scale = sc;
     return f;
+}
+
+static double yield_fast(const mpm_plastic_params *P, const double sig[6], double *scale)
+{
+    return yield_any(P, sig, scale, 1);
+}
+
+double mpm_plastic_yield(const mpm_plastic_params *p, const double sig[6], double *scale)
+{
+    return yield_any(p, sig, scale, 0);
 }
 
 int mpm_plastic_init(mpm_plastic_params *p, mpm_error *err)
