@@ -37,7 +37,7 @@
  * radius at pt when it lies outside (the corner of the two surfaces; at
  * pt = apex that is the apex).  Otherwise the cone is integrated by the
  * explicit scheme of Sloan, Abbo & Sheng 2001 (Engng Comput 18(1/2)
- * 121-154), in the order of its algorithms (its equation numbers were not
+ * 121-194), in the order of its algorithms (its equation numbers were not
  * at hand; the steps are named instead): the elastic fraction alpha of the
  * increment by the Pegasus method; when the increment starts on the
  * surface, the elastic-plastic unloading check cos theta = a : D deps /
