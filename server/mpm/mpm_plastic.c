@@ -92,46 +92,73 @@ static double dp_f(const mpm_plastic_params *P, const double s[6], double *scale
     return r + P->eta * p - P->xi * P->c;
 }
 
-/* the gradients a = df/dsig and b = dg/dsig (on the axis sqrt(J2) = 0 the
- * deviatoric part is taken as 0) */
-static void dp_grads(const mpm_plastic_params *P, const double s[6], double a[6], double b[6])
+/* The invariants of a stress the cone's formulas use.  Off the cone's
+ * axis the gradient is a = inv d + eta/3 I and the flow b = inv d +
+ * etag/3 I with inv = 1/(2 sqrt(J2)); on the axis (sqrt(J2) = 0 relative
+ * to the surface's scale) inv = 0, the deviatoric part taken as 0.  Then
+ * D b = 2G inv d + K etag I, a : D b = G + K eta etag (K eta etag on the
+ * axis), a : D de = 2G inv d : de + K eta tr(de), and the equivalent
+ * plastic strain per unit multiplier is |dev b| sqrt(2/3) = 1/sqrt3. */
+typedef struct {
+    double p, r, inv; /* mean stress, sqrt(J2), 1/(2 sqrt(J2)) or 0 */
+    double d[6];      /* deviator */
+} dp_inv;
+
+static void dp_invariants(const mpm_plastic_params *P, const double s[6], dp_inv *v)
 {
-    double d[6], p = meanp(s), r = sqrt_j2(s, d);
-    double scale = r + fabs(P->eta * p) + P->xi * P->c;
-    double inv = r > TINY_REL * scale && r > 0 ? 1 / (2 * r) : 0;
-    for (int i = 0; i < 6; i++) a[i] = b[i] = d[i] * inv;
-    for (int i = 0; i < 3; i++) {
-        a[i] += P->eta / 3;
-        b[i] += P->etag / 3;
-    }
+    v->p = meanp(s);
+    v->r = sqrt_j2(s, v->d);
+    double scale = v->r + fabs(P->eta * v->p) + P->xi * P->c;
+    v->inv = v->r > TINY_REL * scale && v->r > 0 ? 1 / (2 * v->r) : 0;
 }
 
-/* One forward-Euler estimate of the plastic increment from s for the
- * strain de (Sloan's Eqs. 27-29 without hardening): dlam = a:D de / a:D b
- * (0 when unloading), dsig = D de - dlam D b, deps_p = dlam b. */
-static double dp_euler(const mpm_plastic_params *P, const double s[6], const double de[6],
-                       double ds[6], double dep[6])
+static double dp_f_inv(const mpm_plastic_params *P, const dp_inv *v, double *scale)
 {
-    double a[6], b[6], De[6], Db[6];
-    dp_grads(P, s, a, b);
-    hooke(P, de, De);
-    hooke(P, b, Db);
-    double den = ddot(a, Db), num = ddot(a, De);
+    *scale = v->r + fabs(P->eta * v->p) + P->xi * P->c;
+    return v->r + P->eta * v->p - P->xi * P->c;
+}
+
+static double dp_aDb(const mpm_plastic_params *P, const dp_inv *v)
+{
+    return (v->inv > 0 ? P->G : 0) + P->K * P->eta * P->etag;
+}
+
+static double dp_aDe(const mpm_plastic_params *P, const dp_inv *v, const double de[6])
+{
+    return 2 * P->G * v->inv * ddot(v->d, de) + P->K * P->eta * (de[0] + de[1] + de[2]);
+}
+
+static void dp_Db(const mpm_plastic_params *P, const dp_inv *v, double Db[6])
+{
+    for (int i = 0; i < 6; i++) Db[i] = 2 * P->G * v->inv * v->d[i] + (i < 3 ? P->K * P->etag : 0);
+}
+
+/* the equivalent plastic strain per unit multiplier */
+static double dp_eq(const dp_inv *v)
+{
+    return v->inv > 0 ? 1 / SQRT3 : 0;
+}
+
+/* One forward-Euler estimate of the plastic increment from the stress
+ * with invariants v for the strain de (De = D de): dlam = a:D de / a:D b
+ * (0 when unloading), dsig = D de - dlam D b; returns dlam. */
+static double dp_euler(const mpm_plastic_params *P, const dp_inv *v, const double de[6],
+                       const double De[6], double ds[6])
+{
+    double num = dp_aDe(P, v, de), den = dp_aDb(P, v), Db[6];
     double dl = num > 0 && den > 0 ? num / den : 0;
-    for (int i = 0; i < 6; i++) {
-        ds[i] = De[i] - dl * Db[i];
-        dep[i] = dl * b[i];
-    }
+    dp_Db(P, v, Db);
+    for (int i = 0; i < 6; i++) ds[i] = De[i] - dl * Db[i];
     return dl;
 }
 
 /* sigma : b(sigma) = sqrt(J2) + etag p, the dissipation per unit
  * multiplier; >= 0 on the surface when etag <= eta and p <= pt (clamped at
  * 0 off it, where it is a round-off estimate) */
-static double dp_sb(const mpm_plastic_params *P, const double s[6])
+static double dp_sb(const mpm_plastic_params *P, const dp_inv *v)
 {
-    double d[6], v = sqrt_j2(s, d) + P->etag * meanp(s);
-    return v > 0 ? v : 0;
+    double x = v->r + P->etag * v->p;
+    return x > 0 ? x : 0;
 }
 
 /* f at s + al De, and its scale */
@@ -197,34 +224,43 @@ static double dp_unload_alpha(const mpm_plastic_params *P, const double s[6], co
     return 0;
 }
 
-/* Sloan's drift correction: while f > ftol, the consistent
- * correction s - f/(a:D b) D b, or the normal correction s - f/(a:a) a when
- * that does not reduce |f|; the plastic strain the correction implies, C
- * (s - s_corrected), is added to the dissipation and eps_p. */
-static void dp_drift(const mpm_plastic_params *P, double s[6], double *dis, double *epq)
+/* Sloan's drift correction: while f > ftol, the consistent correction
+ * s - f/(a:D b) D b, or the normal correction s - f/(a:a) a when that does
+ * not reduce |f|; the plastic strain the correction implies is added to
+ * the dissipation and eps_p.  v: the invariants of s on entry, of the
+ * corrected s on return. */
+static void dp_drift(const mpm_plastic_params *P, double s[6], dp_inv *v, double *dis, double *epq)
 {
     for (int it = 0; it < DRIFT_MAXIT; it++) {
-        double sc, f = dp_f(P, s, &sc);
+        double sc, f = dp_f_inv(P, v, &sc);
         if (f <= P->ftol * sc) return;
-        double a[6], b[6], Db[6], y[6], scy, fy = HUGE_VAL;
-        dp_grads(P, s, a, b);
-        hooke(P, b, Db);
-        double den = ddot(a, Db);
+        double y[6], Db[6], den = dp_aDb(P, v), fy = HUGE_VAL, scy;
+        dp_inv vy;
         if (den > 0) {
+            dp_Db(P, v, Db);
             for (int i = 0; i < 6; i++) y[i] = s[i] - f / den * Db[i];
-            fy = dp_f(P, y, &scy);
+            dp_invariants(P, y, &vy);
+            fy = dp_f_inv(P, &vy, &scy);
         }
-        if (!(fabs(fy) <= fabs(f))) {
+        if (fabs(fy) <= fabs(f)) {
+            *dis += f / den * dp_sb(P, &vy);
+            *epq += f / den * dp_eq(v);
+        } else {
+            double a[6], d[6], ep[6];
+            for (int i = 0; i < 6; i++) a[i] = v->inv * v->d[i] + (i < 3 ? P->eta / 3 : 0);
             double aa = ddot(a, a);
             if (!(aa > 0)) return;
-            for (int i = 0; i < 6; i++) y[i] = s[i] - f / aa * a[i];
+            for (int i = 0; i < 6; i++) {
+                y[i] = s[i] - f / aa * a[i];
+                d[i] = s[i] - y[i];
+            }
+            compliance(P, d, ep);
+            *dis += ddot(y, ep);
+            *epq += eqv_dev(ep);
+            dp_invariants(P, y, &vy);
         }
-        double d[6], ep[6];
-        for (int i = 0; i < 6; i++) d[i] = s[i] - y[i];
-        compliance(P, d, ep);
-        *dis += fabs(fy) <= fabs(f) ? f / den * dp_sb(P, y) : ddot(y, ep);
-        *epq += eqv_dev(ep);
         memcpy(s, y, sizeof y);
+        *v = vy;
     }
 }
 
@@ -288,21 +324,24 @@ static void dp_tension(const mpm_plastic_params *P, double s[6], const double sa
 }
 
 /* The modified Euler scheme with local error control (Sloan 2001) over
- * the strain de from s (on the surface); |sig| in the relative error is
- * floored at xi c, so that a state near a cohesive apex does not force
- * tiny substeps. */
-static int dp_substep(const mpm_plastic_params *P, double s[6], const double de[6], int *nacc,
-                      double *dis, double *epq)
+ * the strain de from s (on the surface; v its invariants, updated with
+ * it); |sig| in the relative error is floored at xi c, so that a state
+ * near a cohesive apex does not force tiny substeps. */
+static int dp_substep(const mpm_plastic_params *P, double s[6], dp_inv *v, const double de[6],
+                      int *nacc, double *dis, double *epq)
 {
     double T = 0, dT = 1, stol = P->tol;
     int fail = 0, n = 0, acc = 0;
     while (T < 1) {
         if (n++ >= P->max_substeps) return MPM_EDIVERGED;
-        double e[6], ds1[6], ep1[6], s1[6], ds2[6], ep2[6], sn[6], diff[6];
+        double e[6], De[6], ds1[6], s1[6], ds2[6], sn[6], diff[6];
+        dp_inv v1;
         for (int i = 0; i < 6; i++) e[i] = dT * de[i];
-        double dl1 = dp_euler(P, s, e, ds1, ep1);
+        hooke(P, e, De);
+        double dl1 = dp_euler(P, v, e, De, ds1);
         for (int i = 0; i < 6; i++) s1[i] = s[i] + ds1[i];
-        double dl2 = dp_euler(P, s1, e, ds2, ep2);
+        dp_invariants(P, s1, &v1);
+        double dl2 = dp_euler(P, &v1, e, De, ds2);
         for (int i = 0; i < 6; i++) {
             sn[i] = s[i] + 0.5 * (ds1[i] + ds2[i]);
             diff[i] = ds2[i] - ds1[i];
@@ -319,15 +358,14 @@ static int dp_substep(const mpm_plastic_params *P, double s[6], const double de[
             fail = 1;
             continue;
         }
-        double epm[6];
-        for (int i = 0; i < 6; i++) epm[i] = 0.5 * (ep1[i] + ep2[i]);
-        /* the dissipation by the trapezoidal rule on the multipliers,
-         * dlam sigma : b(sigma) at both ends (on the surface) */
-        double sb0 = dp_sb(P, s);
-        *epq += eqv_dev(epm);
+        /* the dissipation and eps_p by the trapezoidal rule on the
+         * multipliers, dlam sigma : b(sigma) at both ends (on the surface) */
+        double sb0 = dp_sb(P, v);
+        *epq += 0.5 * (dl1 * dp_eq(v) + dl2 * dp_eq(&v1));
         memcpy(s, sn, sizeof sn);
-        dp_drift(P, s, dis, epq);
-        *dis += 0.5 * (dl1 * sb0 + dl2 * dp_sb(P, s));
+        dp_invariants(P, s, v);
+        dp_drift(P, s, v, dis, epq);
+        *dis += 0.5 * (dl1 * sb0 + dl2 * dp_sb(P, v));
         acc++;
         double q = 0.9 * sqrt(stol / R);
         if (q > 1.1) q = 1.1;
@@ -366,24 +404,26 @@ static int dp_update(const mpm_plastic_params *P, double sig[6], const double de
         if (dissip) *dissip = 0;
         return 0;
     } else {
-        double sc0, f0 = dp_f(P, sig, &sc0), al;
+        dp_inv v;
+        dp_invariants(P, sig, &v);
+        double sc0, f0 = dp_f_inv(P, &v, &sc0), al = 0;
         if (f0 < -P->ftol * sc0) {
             al = dp_pegasus(P, sig, De, 0, 1, f0, ftr);
         } else {
-            double a[6], b[6], na, nd = tnorm(De);
-            dp_grads(P, sig, a, b);
-            na = tnorm(a);
-            al = na > 0 && nd > 0 && ddot(a, De) / (na * nd) < -LTOL ? dp_unload_alpha(P, sig, De)
-                                                                     : 0;
+            /* on the surface: does the increment first unload? */
+            double na = sqrt(v.inv * v.inv * ddot(v.d, v.d) + P->eta * P->eta / 3), nd = tnorm(De);
+            if (na > 0 && nd > 0 && dp_aDe(P, &v, deps) / (na * nd) < -LTOL)
+                al = dp_unload_alpha(P, sig, De);
         }
         double rest[6];
         for (int i = 0; i < 6; i++) {
             s[i] = sig[i] + al * De[i];
             rest[i] = (1 - al) * deps[i];
         }
-        int rc = dp_substep(P, s, rest, &nsub, &dis, &epq);
+        if (al != 0) dp_invariants(P, s, &v);
+        int rc = dp_substep(P, s, &v, rest, &nsub, &dis, &epq);
         if (rc) return rc;
-        if (meanp(s) > P->pt) {
+        if (v.p > P->pt) {
             double sa[6];
             memcpy(sa, s, sizeof sa);
             dp_tension(P, s, sa, &dis, &epq);
