@@ -234,15 +234,16 @@ static void dp_drift(const mpm_plastic_params *P, double s[6], dp_inv *v, double
     for (int it = 0; it < DRIFT_MAXIT; it++) {
         double sc, f = dp_f_inv(P, v, &sc);
         if (f <= P->ftol * sc) return;
-        double y[6], Db[6], den = dp_aDb(P, v), fy = HUGE_VAL, scy;
-        dp_inv vy;
+        double y[6] = {0}, Db[6], den = dp_aDb(P, v), scy;
+        dp_inv vy = {0};
+        int consistent = 0;
         if (den > 0) {
             dp_Db(P, v, Db);
             for (int i = 0; i < 6; i++) y[i] = s[i] - f / den * Db[i];
             dp_invariants(P, y, &vy);
-            fy = dp_f_inv(P, &vy, &scy);
+            consistent = fabs(dp_f_inv(P, &vy, &scy)) <= fabs(f);
         }
-        if (fabs(fy) <= fabs(f)) {
+        if (consistent) {
             *dis += f / den * dp_sb(P, &vy);
             *epq += f / den * dp_eq(v);
         } else {
