@@ -452,7 +452,12 @@ void mpm_plastic_principal(const double sig[6], double val[3], double vec[3][3])
         if (off == 0 || off <= 1e-36 * dia) break;
         for (int r = 0; r < 3; r++) {
             int p = pp[r], q = qq[r];
-            if (a[p][q] == 0) continue;
+            /* an off-diagonal term below round-off of its diagonal is 0 (it
+             * would move the eigenvalues by its square) */
+            if (fabs(a[p][q]) <= 1e-18 * (fabs(a[p][p]) + fabs(a[q][q]))) {
+                a[p][q] = a[q][p] = 0;
+                continue;
+            }
             double th = (a[q][q] - a[p][p]) / (2 * a[p][q]);
             double t = (th >= 0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1));
             if (!isfinite(th)) t = 0.5 / th; /* |th| huge: t = 1/(2 th) */
@@ -501,7 +506,7 @@ static void mc_principal_fast(const double sig[6], double val[3])
     }
     double j3 = d[0] * (d[1] * d[2] - d[4] * d[4]) - d[3] * (d[3] * d[2] - d[4] * d[5]) +
                 d[5] * (d[3] * d[4] - d[1] * d[5]);
-    double c3 = 0.5 * j3 * pow(3 / j2, 1.5);
+    double t3 = 3 / j2, c3 = 0.5 * j3 * t3 * sqrt(t3);
     if (c3 > 1) c3 = 1;
     if (c3 < -1) c3 = -1;
     double th = acos(c3) / 3, r = 2 * sqrt(j2 / 3), tp = 2.0943951023931955; /* 2 pi / 3 */
