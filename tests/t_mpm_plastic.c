@@ -502,3 +502,33 @@ TEST(plastic_mc_one_update_is_exact)
     CHECK(fabs(st1.eps_p - stm.eps_p) <= 1e-9 * stm.eps_p);
     CHECK(fabs(dis1 - dism) <= 1e-9 * dism); /* the trapezoidal dissipation is exact here */
 }
+
+/* DP's cut-off corner: a trial beyond the cut-off with a deviator beyond
+ * the cone's radius at pt returns to p = pt, sqrt(J2) = xi c - eta pt,
+ * keeping the deviator's direction. */
+TEST(plastic_dp_cutoff_corner)
+{
+    mpm_plastic_params P;
+    CHECK(tp_params(&P, MPM_PLASTIC_DRUCKER_PRAGER, MPM_DP_COMPRESSION, 30, 10, 1e4, 1e3) == 0);
+    double sig[6] = {0}, de[6] = {3e-3, 1e-3, 2e-3, 4e-4, -2e-4, 1e-4}, dis, d0[6], d1[6];
+    double m = (de[0] + de[1] + de[2]) / 3;
+    for (int i = 0; i < 6; i++) d0[i] = de[i] - (i < 3 ? m : 0);
+    mpm_plastic_state st = {0};
+    CHECK(mpm_plastic_update(&P, sig, de, &st, &dis) == 0);
+    double p = (sig[0] + sig[1] + sig[2]) / 3, r = 0, r0 = 0, cross = 0;
+    for (int i = 0; i < 6; i++) {
+        d1[i] = sig[i] - (i < 3 ? p : 0);
+        r += d1[i] * d1[i] * (i < 3 ? 0.5 : 1);
+        r0 += d0[i] * d0[i] * (i < 3 ? 0.5 : 1);
+        cross += d0[i] * d1[i] * (i < 3 ? 0.5 : 1);
+    }
+    r = sqrt(r);
+    r0 = sqrt(r0);
+    double rt = P.xi * P.c - P.eta * P.pt, align = cross / (r * r0);
+    TLOG("p %.12g (pt %g), sqrt(J2) %.12g (radius at pt %.12g), direction cosine %.15f", p, P.pt, r,
+         rt, align);
+    CHECK(fabs(p - P.pt) <= 1e-12 * P.pt);
+    CHECK(fabs(r - rt) <= 1e-12 * rt);
+    CHECK(fabs(align - 1) <= 1e-12);
+    CHECK(st.yielded && dis > 0);
+}
