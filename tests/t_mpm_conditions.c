@@ -12,6 +12,7 @@
  */
 #include "mpm.h"
 #include "mpm_timefn.h"
+#include "mpp_case.h"
 #include "t.h"
 
 #include <math.h>
@@ -473,8 +474,12 @@ TEST(mpm_cond_errors)
     pr.time_function = &ramp;
     CHECK(expect_err(&c, "prescribed[0].time_function.t1"));
     pr.time_function = &tf;
-    /* x_hi shares its corner nodes with y_lo, a friction face */
+    /* x_hi shares its corner nodes with y_lo, a friction face: x is
+     * tangential there (allowed), y its normal (refused) */
+    CHECK(mpm_case_check(&c, NULL, NULL) == 0);
+    pr.mask = 3;
     CHECK(expect_err(&c, "prescribed[0].face"));
+    pr.mask = 1;
     c.bc.n_friction = 0;
     c.bc.face_mask[2] = 0;
     CHECK(mpm_case_check(&c, NULL, NULL) == 0);
@@ -519,4 +524,53 @@ TEST(mpm_cond_errors)
     c.n_tractions = 1;
     c.tractions = &trc;
     CHECK(expect_err(&c, "tractions[0].time_function.kind"));
+}
+
+/* ---- the wire: the conditions' fields decode into the mpm_case ---- */
+
+TEST(mpm_cond_decode)
+{
+    static const char json[] =
+        "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
+        " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.2, 0.2], \"hi\": [0.6, 0.6]}, \"ppc\": 1}],"
+        " \"tractions\": [{\"lo\": [0.5, 0.2], \"hi\": [0.6, 0.6], \"value\": [1, 0],"
+        "   \"timeFunction\": {\"kind\": \"RAMP\", \"t0\": 0.5, \"t1\": 1.5}}],"
+        " \"boundary\": {\"yLo\": 2, \"friction\": [{\"face\": \"Y_LO\", \"mu\": 0.4}]},"
+        " \"prescribed\": [{\"face\": \"X_HI\", \"mask\": 1, \"velocity\": [-0.1, 0],"
+        "   \"timeFunction\": {\"kind\": \"TABLE\", \"t\": [0, 1, 2], \"v\": [0, 1, 0.5]}},"
+        "  {\"ijk\": [3, 5, 4, 5], \"velocity\": [0, 0.2]}],"
+        " \"endTime\": 1}";
+    mpp_case *mc = NULL;
+    mpm_error err;
+    int rc = mpp_case_load(json, strlen(json), 0, &mc, &err);
+    CHECKF(rc == 0, "%s", TERR(&err));
+    const mpm_case *c = &mc->c;
+    int ok = c->n_tractions == 1 && c->tractions[0].time_function &&
+             c->tractions[0].time_function->kind == MPM_TF_RAMP &&
+             c->tractions[0].time_function->value == 1 &&
+             c->tractions[0].time_function->t0 == 0.5 && c->tractions[0].time_function->t1 == 1.5 &&
+             c->bc.n_friction == 1 && c->bc.friction[0].face == 2 && c->bc.friction[0].mu == 0.4 &&
+             c->n_prescribed == 2 && c->prescribed[0].face == 1 && c->prescribed[0].mask == 1 &&
+             c->prescribed[0].value[0] == -0.1 && c->prescribed[0].time_function &&
+             c->prescribed[0].time_function->n == 3 && c->prescribed[0].time_function->v[1] == 1 &&
+             c->prescribed[1].face == -1 && c->prescribed[1].n_nodes == 2 &&
+             c->prescribed[1].node_ijk[3] == 4 && c->prescribed[1].node_ijk[4] == 5 &&
+             c->prescribed[1].mask == 3 && c->prescribed[1].value[1] == 0.2 &&
+             !c->prescribed[1].time_function;
+    mpp_case_destroy(&mc);
+    CHECK(ok);
+    /* a TABLE with fewer values than times is refused by the decoder */
+    static const char bad[] =
+        "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+        " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.6]}, \"ppc\": 1}],"
+        " \"prescribed\": [{\"face\": \"X_LO\", \"velocity\": [1],"
+        "   \"timeFunction\": {\"kind\": \"TABLE\", \"t\": [0, 1], \"v\": [0]}}],"
+        " \"endTime\": 1}";
+    rc = mpp_case_load(bad, strlen(bad), 0, &mc, &err);
+    char txt[T_ERRLEN];
+    mpm_error_text(&err, MPM_FIELD_JSON, txt, sizeof txt);
+    TLOG("%s", txt);
+    CHECK(rc == MPM_EINVAL && strstr(txt, "prescribed[0].timeFunction.v") == txt);
 }

@@ -20,7 +20,9 @@
  * that does not press is free tangentially.  The friction force df does
  * -df . (q^n + q^{n+1}) / (2 m) dt of work: friction_work, the energy it
  * dissipates.  MUSL's remap zeroes q2's tangential components at the nodes
- * that stuck.
+ * that stuck.  A friction face's nodes may carry prescribed tangential
+ * directions (a driven edge on a frictional base): those nodes have no
+ * friction.
  *
  * Both lists are sorted by node and visited by segment, as the fixed DOFs
  * are (mpm_loads.c); a scene without them runs none of this.
@@ -121,11 +123,11 @@ static int check_conflicts(const mpm_case *c, size_t pi, int face, const int *ij
                             "a prescribed direction (mask %u) is also fixed by boundary.%s (mask "
                             "%u) on the nodes they share",
                             m, face_name[f], c->bc.face_mask[f]);
-        if (friction_on(c, f))
+        if (friction_on(c, f) && (m & (1u << (f / 2))))
             return mpm_fail(err, MPM_EINVAL, path,
-                            "prescribed nodes lie on face %s, which has friction "
-                            "(boundary.friction); prescribe on other nodes",
-                            face_name[f]);
+                            "a prescribed direction (mask %u) is the normal of face %s, which "
+                            "friction makes a roller (boundary.friction)",
+                            m, face_name[f]);
     }
     for (size_t i = 0; i < c->bc.n_nodes; i++) {
         const int *b = c->bc.node_ijk + 3 * i;
@@ -226,6 +228,8 @@ int mpm_cond_check(const mpm_case *c, mpm_error *err)
 
 /* ---- building ---- */
 
+static size_t lower(const size_t *node, size_t cnt, size_t first);
+
 int mpm_node_on_face(const mpm_sim *s, size_t n, int face)
 {
     int d = face / 2;
@@ -315,12 +319,14 @@ int mpm_cond_build(mpm_sim *s, const mpm_case *c)
                     e[w++] = (cond_ent){n, (unsigned)c->bc.friction[i].face, (uint32_t)i,
                                         c->bc.friction[i].mu};
         qsort(e, nf, sizeof *e, ent_cmp);
+        /* a node with a prescribed (tangential) direction has no friction */
         for (size_t i = 0; i < nf; i++) {
-            s->fric_node[i] = e[i].node;
-            s->fric_face[i] = (unsigned char)e[i].mask;
-            s->fric_mu[i] = e[i].mu;
+            size_t k = lower(s->pres_node, s->npres, e[i].node);
+            if (k < s->npres && s->pres_node[k] == e[i].node) continue;
+            s->fric_node[s->nfric] = e[i].node;
+            s->fric_face[s->nfric] = (unsigned char)e[i].mask;
+            s->fric_mu[s->nfric++] = e[i].mu;
         }
-        s->nfric = nf;
     }
     s->has_cond = 1;
     rc = 0;
