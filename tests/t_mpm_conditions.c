@@ -42,7 +42,7 @@ typedef struct {
  * t_end]; USL runs at C = 0.25 (its limit is 0.5, and the friction's
  * stiff shear layer needs the margin). */
 static int slide(mpm_method m, mpm_update up, double theta_deg, double mu, double t_end,
-                 double t_fit, slide_res *r)
+                 double t_fit, int threads, slide_res *r)
 {
     double th = theta_deg * M_PI / 180, g = 10, H = 0.2, nu = block_mat.poisson_ratio;
     enum { NX = 10, NY = 4, NP = NX * NY };
@@ -80,6 +80,7 @@ static int slide(mpm_method m, mpm_update up, double theta_deg, double mu, doubl
     c.bodies = &b;
     c.bc.n_friction = 1;
     c.bc.friction = &fr;
+    c.threads = threads;
     mpm_error err;
     mpm_sim *s = mpm_sim_new(&c, NULL, &err);
     if (!s) {
@@ -165,7 +166,7 @@ TEST(mpm_cond_sliding_block)
              * friction (cell crossing; C = 0.25 too): not run */
             if (ms[i] == MPM_METHOD_MPM && us[u] == MPM_USL) continue;
             slide_res r;
-            CHECK(slide(ms[i], us[u], th, mu, 0.5, 0.1, &r) == 0);
+            CHECK(slide(ms[i], us[u], th, mu, 0.5, 0.1, 1, &r) == 0);
             TLOG("%-8s %s: a = %.6f (exact %.6f, rel err %.2e), friction work %.4g J, "
                  "balance error %.2e of the released %.4g J",
                  mname(ms[i]),
@@ -189,7 +190,7 @@ TEST(mpm_cond_block_sticks)
     mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_BSPLINE3};
     for (int i = 0; i < 4; i++) {
         slide_res r;
-        CHECK(slide(ms[i], MPM_MUSL, 10, 0.3, 0.5, 0.1, &r) == 0);
+        CHECK(slide(ms[i], MPM_MUSL, 10, 0.3, 0.5, 0.1, 1, &r) == 0);
         TLOG("%-8s MUSL: displacement %.3e m, fitted a = %.3e, friction work %.3e J", mname(ms[i]),
              r.dx, r.a, r.wf);
         CHECK_LT(fabs(r.dx), 3e-4);
@@ -210,7 +211,7 @@ typedef struct {
 /* A 1D bar [0, 1] (E = rho = 1, c = 1), 100 cells, ppc 2, pushed at x_lo
  * by the velocity v0 f(t) (tf NULL: constant), to t_end. */
 static int bar_push(mpm_method m, mpm_update up, double v0, const mpm_timefn *tf, double t_end,
-                    bar_res *r)
+                    int threads, bar_res *r)
 {
     mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
     mpm_body_desc b = {0};
@@ -236,6 +237,7 @@ static int bar_push(mpm_method m, mpm_update up, double v0, const mpm_timefn *tf
     c.bodies = &b;
     c.n_prescribed = 1;
     c.prescribed = &pr;
+    c.threads = threads;
     mpm_error err;
     mpm_sim *s = mpm_sim_new(&c, NULL, &err);
     if (!s) {
@@ -305,7 +307,7 @@ TEST(mpm_cond_prescribed_bar)
     for (int i = 0; i < 3; i++)
         for (int u = 0; u < 3; u++) {
             bar_res r;
-            CHECK(bar_push(ms[i], us[u], v0, &ramp, 0.5, &r) == 0);
+            CHECK(bar_push(ms[i], us[u], v0, &ramp, 0.5, 1, &r) == 0);
             double ex = rho_c_v0_work(v0, r.t);
             TLOG("%-8s %s: face v err %.1e, sigma %.6e (exact %.6e), front %.3f (exact %.3f), "
                  "W_p %.6e, K + S %.6e (rel diff %.2e; continuum %.6e)",
@@ -339,11 +341,31 @@ TEST(mpm_cond_prescribed_history)
     for (int k = 0; k < 2; k++)
         for (int u = 0; u < 2; u++) {
             bar_res r;
-            CHECK(bar_push(MPM_METHOD_GIMP, u ? MPM_USF : MPM_MUSL, 1e-3, fs[k], 0.5, &r) == 0);
+            CHECK(bar_push(MPM_METHOD_GIMP, u ? MPM_USF : MPM_MUSL, 1e-3, fs[k], 0.5, 1, &r) == 0);
             TLOG("%s %s: max face velocity error %.2e of v0; W_p %.6e, K + S %.6e",
                  k ? "TABLE" : "RAMP ", u ? "USF " : "MUSL", r.vface_err, r.wp, r.ks);
             CHECK_LT(r.vface_err, 1e-12);
         }
+}
+
+/* Two threads (the node passes split the friction and prescribed nodes
+ * between them, each summing its share of the work): the sliding block's
+ * acceleration, friction work and the bar's prescribed work agree with
+ * one thread's to 1e-6 (the sums' order differs). */
+TEST(mpm_cond_two_threads)
+{
+    slide_res r1, r2;
+    CHECK(slide(MPM_METHOD_GIMP, MPM_MUSL, 30, 0.2, 0.3, 0.1, 1, &r1) == 0);
+    CHECK(slide(MPM_METHOD_GIMP, MPM_MUSL, 30, 0.2, 0.3, 0.1, 2, &r2) == 0);
+    TLOG("sliding block: a %.9f / %.9f, friction work %.9g / %.9g (1 / 2 threads)", r1.a, r2.a,
+         r1.wf, r2.wf);
+    CHECK_NEAR(r2.a, r1.a, 1e-6 * fabs(r1.a));
+    CHECK_NEAR(r2.wf, r1.wf, 1e-6 * r1.wf);
+    bar_res b1, b2;
+    CHECK(bar_push(MPM_METHOD_MPM, MPM_USF, 1e-3, NULL, 0.2, 1, &b1) == 0);
+    CHECK(bar_push(MPM_METHOD_MPM, MPM_USF, 1e-3, NULL, 0.2, 2, &b2) == 0);
+    TLOG("pushed bar: prescribed work %.12g / %.12g", b1.wp, b2.wp);
+    CHECK_NEAR(b2.wp, b1.wp, 1e-6 * b1.wp);
 }
 
 /* ---- a ramped traction ---- */
