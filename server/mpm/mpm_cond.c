@@ -108,7 +108,7 @@ static int check_friction(const mpm_case *c, mpm_error *err)
 }
 
 /* the first conflict of direction mask m at node ijk (real indices; a
- * face's node when face >= 0, then ijk is NULL) with the fixed DOFs, the
+ * face's nodes when face >= 0, then ijk is not read) with the fixed DOFs, the
  * friction faces and prescribed[0..upto); 0 or MPM_EINVAL */
 static int check_conflicts(const mpm_case *c, size_t pi, int face, const int *ijk, unsigned m,
                            const char *path, mpm_error *err)
@@ -205,7 +205,8 @@ int mpm_cond_check(const mpm_case *c, mpm_error *err)
         if ((rc = mpm_timefn_check(p->time_function, path, err))) return rc;
         if (p->face >= 0) {
             snprintf(path, sizeof path, "prescribed[%zu].face", i);
-            if ((rc = check_conflicts(c, i, p->face, NULL, p->mask, path, err))) return rc;
+            static const int no_ijk[3] = {0, 0, 0}; /* unused with a face */
+            if ((rc = check_conflicts(c, i, p->face, no_ijk, p->mask, path, err))) return rc;
             continue;
         }
         for (size_t k = 0; k < p->n_nodes; k++) {
