@@ -149,8 +149,9 @@ static const char *mname(mpm_method m)
  * fitted over t in [0.1, 0.5] s.  Tolerance on a: 1 % for MPM and GIMP
  * (measured <= 0.2 %), 4 % for the B-splines (measured: USL 2e-5,
  * MUSL 0.9 % (BSPLINE2) and 1.7 % (BSPLINE3), USF 1.8 % and 3.2 %: more
- * friction than Coulomb's with the schemes whose grid velocity the
- * friction does not shape the strain of; not explained yet); the energy balance K + S + P +
+ * friction than Coulomb's, because with USF and MUSL some face control
+ * points pull instead of pressing (30-80 N of the 866 N normal weight)
+ * and the pressing ones carry that tension too; docs/solver.md); the energy balance K + S + P +
  * W_friction - E0 within 1 % of the potential energy released (measured <= 0.35 %).  mu = 0.3 on
  * this elastic block is not run: from t ~ 0.2 s a vibration grows there
  * (the same onset time for every method, h and dt; docs/solver.md). */
