@@ -182,6 +182,88 @@ TEST(mpm_cond_sliding_block)
         }
 }
 
+/* 3D: the same block, 0.5 deep in z, on y_lo with mu = 0.2, gravity's
+ * tangential part pointing 30 deg off x towards z: (g sin theta cos 30,
+ * -g cos theta, g sin theta sin 30).  The friction opposes the sliding
+ * direction as a vector: the centre of mass accelerates along the
+ * tangential gravity with g (sin theta - mu cos theta) within 1 %, and
+ * stays on that line (its z/x acceleration ratio tan 30 within 1 %).
+ * GIMP, MUSL; geostatic start as in 2D. */
+TEST(mpm_cond_sliding_block_3d)
+{
+    double th = 30 * M_PI / 180, ph = 30 * M_PI / 180, g = 10, mu = 0.2, H = 0.2, nu = 0.3;
+    enum { NX = 10, NY = 4, NZ = 10, NP = NX * NY * NZ };
+    double *X = malloc(sizeof(double) * (3 * NP + NP + 6 * NP));
+    CHECK(X);
+    double *V = X + 3 * NP, *S6 = V + NP;
+    for (int k = 0; k < NZ; k++)
+        for (int j = 0; j < NY; j++)
+            for (int i = 0; i < NX; i++) {
+                int p = (k * NY + j) * NX + i;
+                X[3 * p] = 0.3 + (i + 0.5) * 0.05;
+                X[3 * p + 1] = (j + 0.5) * 0.05;
+                X[3 * p + 2] = 0.3 + (k + 0.5) * 0.05;
+                V[p] = 0.05 * 0.05 * 0.05;
+                double syy = -block_mat.density * g * cos(th) * (H - X[3 * p + 1]);
+                double sxx = nu / (1 - nu) * syy;
+                double st[6] = {sxx, syy, sxx, 0, 0, 0};
+                memcpy(S6 + 6 * p, st, sizeof st);
+            }
+    mpm_body_desc b = {0};
+    b.n_points = NP;
+    b.x = X;
+    b.volume = V;
+    b.stress = S6;
+    mpm_friction_desc fr = {2, mu};
+    mpm_case c = {0};
+    c.grid.dim = 3;
+    c.grid.h[0] = c.grid.h[1] = c.grid.h[2] = 0.1;
+    c.grid.nodes[0] = 31;
+    c.grid.nodes[1] = 8;
+    c.grid.nodes[2] = 21;
+    c.method = MPM_METHOD_GIMP;
+    c.update = MPM_MUSL;
+    c.gravity[0] = g * sin(th) * cos(ph);
+    c.gravity[1] = -g * cos(th);
+    c.gravity[2] = g * sin(th) * sin(ph);
+    c.n_materials = 1;
+    c.materials = &block_mat;
+    c.n_bodies = 1;
+    c.bodies = &b;
+    c.bc.n_friction = 1;
+    c.bc.friction = &fr;
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+    free(X);
+    CHECKF(s, "%s", TERR(&err));
+    double st = 0, stt = 0, sv[3] = {0, 0, 0}, stv[3] = {0, 0, 0}, cnt = 0;
+    int rc = 0;
+    while (!rc && mpm_sim_time(s) < 0.4) {
+        rc = mpm_sim_step(s);
+        mpm_energy e;
+        mpm_sim_energy(s, &e);
+        double t = mpm_sim_time(s);
+        if (t < 0.1) continue;
+        st += t;
+        stt += t * t;
+        cnt += 1;
+        for (int d = 0; d < 3; d++) {
+            sv[d] += e.momentum[d] / e.mass;
+            stv[d] += t * e.momentum[d] / e.mass;
+        }
+    }
+    mpm_sim_destroy(&s);
+    CHECK(rc == 0);
+    double a[3];
+    for (int d = 0; d < 3; d++) a[d] = (cnt * stv[d] - st * sv[d]) / (cnt * stt - st * st);
+    double at = sqrt(a[0] * a[0] + a[2] * a[2]), a_ex = g * (sin(th) - mu * cos(th));
+    TLOG("3D GIMP MUSL: a = (%.5f, %.2e, %.5f), |a_t| = %.5f (exact %.5f, rel err %.2e), a_z/a_x "
+         "= %.5f (tan 30 = %.5f)",
+         a[0], a[1], a[2], at, a_ex, fabs(at - a_ex) / a_ex, a[2] / a[0], tan(ph));
+    CHECK_NEAR(at, a_ex, 0.01 * a_ex);
+    CHECK_NEAR(a[2] / a[0], tan(ph), 0.01 * tan(ph));
+}
+
 /* Below the friction angle (theta 10 deg, tan 10 = 0.176 < mu = 0.3) the
  * block stays: its centre of mass moves less than 3e-4 m (h / 300; the
  * elastic shear under the suddenly applied tangential load swings the top
