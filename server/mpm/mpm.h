@@ -268,8 +268,12 @@ typedef struct {
      *   plastic_work    sum over steps of sigma : d eps_p V (plastic models)
      *   damping_work    energy removed by local or viscous damping
      *   friction_work   energy dissipated by Coulomb friction on faces
+     *                   (sum of -df . (q^n + q^{n+1}) / (2 m) dt over the
+     *                   friction nodes, df the friction force)
      *   prescribed_work work done on the body by prescribed velocities
-     *                   (the reaction forces at the driven nodes) */
+     *                   (the reaction forces at the driven nodes: sum of
+     *                   (f_BC2 - f_free) (v^n + v^{n+1}) / 2 dt)
+     * (docs/solver.md, "Conditions").  total leaves them out. */
     double plastic_work, damping_work, friction_work, prescribed_work;
 } mpm_energy;
 
@@ -349,7 +353,8 @@ double mpm_sim_dt_limit(const mpm_sim *sim); /* CFL limit (C = 1) now */
  * generator's order).  Scattered like a point load, f_n += S_np f_p (Eq. 14),
  * added to the tractions, counted in the external work, and kept until the
  * next call; NULL sets them to zero.  The array is copied.  Returns 0, or
- * MPM_EINVAL (a non-finite value; mpm_sim_error() names it), MPM_ENOMEM.
+ * MPM_EINVAL (a non-finite value, or a case whose tractions have time
+ * functions; mpm_sim_error() names it), MPM_ENOMEM.
  * Not to be called while mpm_sim_run() runs. */
 int mpm_sim_set_particle_forces(mpm_sim *sim, const double *f);
 size_t mpm_sim_particles(const mpm_sim *sim);
