@@ -343,7 +343,144 @@ static int conv_bodies(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error
     return 0;
 }
 
-static int conv_tractions(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
+/* ---- conditions: time functions, prescribed velocities, friction ---- */
+
+/* the table points of a time function (0 when absent or not a TABLE) */
+static size_t tf_points(const Mpmd__TimeFunction *f)
+{
+    return f && f->has_kind && f->kind == MPMD__TIME_FUNCTION__KIND__TABLE ? f->n_t : 0;
+}
+
+/* Time function f (path names it) into *out, its table copied to *data
+ * (advanced past it).  The solver checks the values. */
+static int conv_timefn(const Mpmd__TimeFunction *f, const char *path, mpm_timefn *out,
+                       double **data, mpm_error *err)
+{
+    char at_[96];
+    memset(out, 0, sizeof *out);
+    out->kind = f->has_kind ? (mpm_timefn_kind)f->kind : MPM_TF_CONSTANT;
+    if (out->kind != MPM_TF_CONSTANT && out->kind != MPM_TF_RAMP && out->kind != MPM_TF_TABLE)
+        return mpm_fail(err, MPM_EINVAL, AT("%s.kind", path), "unknown value %d", (int)f->kind);
+    out->value = f->value; /* default 1 */
+    out->t0 = f->has_t0 ? f->t0 : 0;
+    if (out->kind == MPM_TF_RAMP && !f->has_t1)
+        return mpm_fail(err, MPM_EINVAL, AT("%s.t1", path), "missing (a RAMP needs t1 > t0)");
+    out->t1 = f->t1;
+    if (out->kind == MPM_TF_TABLE) {
+        if (f->n_t != f->n_v)
+            return mpm_fail(err, MPM_EINVAL, AT("%s.v", path),
+                            "expected as many values as times (%zu), got %zu", f->n_t, f->n_v);
+        out->n = f->n_t;
+        memcpy(*data, f->t, f->n_t * sizeof **data);
+        memcpy(*data + f->n_t, f->v, f->n_t * sizeof **data);
+        out->t = *data;
+        out->v = *data + f->n_t;
+        *data += 2 * f->n_t;
+    }
+    return 0;
+}
+
+/* the time functions' storage: one per traction and prescribed velocity */
+static int alloc_timefns(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
+{
+    size_t n = pb->n_tractions + pb->n_prescribed, pts = 0;
+    for (size_t i = 0; i < pb->n_tractions; i++) pts += tf_points(pb->tractions[i]->time_function);
+    for (size_t i = 0; i < pb->n_prescribed; i++)
+        pts += tf_points(pb->prescribed[i]->time_function);
+    if (pts > MPP_CASE_MAX_TABLE)
+        return mpm_fail(err, MPM_ETOOBIG, "prescribed",
+                        "%zu time-function table points, more than the limit of %u", pts,
+                        MPP_CASE_MAX_TABLE);
+    if (!n) return 0;
+    mc->timefns = calloc(n, sizeof *mc->timefns);
+    mc->tf_data = malloc((pts ? 2 * pts : 1) * sizeof *mc->tf_data);
+    if (!mc->timefns || !mc->tf_data) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
+    return 0;
+}
+
+static int conv_prescribed(const Mpmd__Case *pb, mpp_case *mc, double **data, mpm_error *err)
+{
+    size_t n = pb->n_prescribed, nodes = 0;
+    int dim = mc->c.grid.dim, rc;
+    unsigned all = (1u << dim) - 1;
+    char at_[96], path[64];
+    if (n == 0) return 0;
+    if (n > MPP_CASE_MAX_ITEMS)
+        return mpm_fail(err, MPM_ETOOBIG, "prescribed", "%zu, more than the limit of %u", n,
+                        MPP_CASE_MAX_ITEMS);
+    for (size_t i = 0; i < n; i++) {
+        const Mpmd__PrescribedVelocity *p = pb->prescribed[i];
+        if (p->n_ijk % (size_t)dim)
+            return mpm_fail(err, MPM_EINVAL, AT("prescribed[%zu].ijk", i),
+                            "%zu indices are not a whole number of nodes of %d indices", p->n_ijk,
+                            dim);
+        nodes += p->n_ijk / (size_t)dim;
+    }
+    if (nodes > MPP_CASE_MAX_NODE_FIXES)
+        return mpm_fail(err, MPM_ETOOBIG, "prescribed", "%zu nodes, more than the limit of %u",
+                        nodes, MPP_CASE_MAX_NODE_FIXES);
+    mc->prescribed = calloc(n, sizeof *mc->prescribed);
+    mc->presc_ijk = calloc(nodes ? 3 * nodes : 1, sizeof *mc->presc_ijk);
+    if (!mc->prescribed || !mc->presc_ijk) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
+    int *ijk = mc->presc_ijk;
+    for (size_t i = 0; i < n; i++) {
+        const Mpmd__PrescribedVelocity *p = pb->prescribed[i];
+        mpm_prescribed_desc *pd = &mc->prescribed[i];
+        pd->face = p->has_face ? (int)p->face : -1;
+        pd->n_nodes = p->n_ijk / (size_t)dim;
+        pd->node_ijk = ijk;
+        for (size_t k = 0; k < pd->n_nodes; k++, ijk += 3)
+            for (int d = 0; d < dim; d++) {
+                uint32_t v = p->ijk[k * (size_t)dim + (size_t)d];
+                if (v >= (uint32_t)mc->c.grid.nodes[d])
+                    return mpm_fail(err, MPM_EINVAL,
+                                    AT("prescribed[%zu].ijk[%zu]", i, k * (size_t)dim + (size_t)d),
+                                    "%u is outside the grid (nodes[%d] = %d)", v, d,
+                                    mc->c.grid.nodes[d]);
+                ijk[d] = (int)v;
+            }
+        if (p->mask > 7)
+            return mpm_fail(err, MPM_EINVAL, AT("prescribed[%zu].mask", i),
+                            "%u has bits other than 1 (x), 2 (y), 4 (z)", p->mask);
+        pd->mask = p->mask & all; /* bits of axes the grid lacks are ignored */
+        snprintf(path, sizeof path, "prescribed[%zu].velocity", i);
+        if ((rc = get_vec(path, p->velocity, p->n_velocity, dim, 0, pd->value, err))) return rc;
+        if (p->time_function) {
+            mpm_timefn *tf = &mc->timefns[pb->n_tractions + i];
+            snprintf(path, sizeof path, "prescribed[%zu].time_function", i);
+            if ((rc = conv_timefn(p->time_function, path, tf, data, err))) return rc;
+            pd->time_function = tf;
+        }
+    }
+    mc->c.prescribed = mc->prescribed;
+    mc->c.n_prescribed = n;
+    return 0;
+}
+
+static int conv_friction(const Mpmd__Boundary *bd, mpp_case *mc, mpm_error *err)
+{
+    size_t n = bd->n_friction;
+    char at_[96];
+    if (n == 0) return 0;
+    if (n > 6)
+        return mpm_fail(err, MPM_EINVAL, "boundary.friction", "%zu entries for at most 6 faces", n);
+    mc->friction = calloc(n, sizeof *mc->friction);
+    if (!mc->friction) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
+    for (size_t i = 0; i < n; i++) {
+        const Mpmd__FaceFriction *f = bd->friction[i];
+        if (!f->has_face)
+            return mpm_fail(err, MPM_EINVAL, AT("boundary.friction[%zu].face", i), "missing");
+        if (!f->has_mu)
+            return mpm_fail(err, MPM_EINVAL, AT("boundary.friction[%zu].mu", i), "missing");
+        mc->friction[i].face = (int)f->face;
+        mc->friction[i].mu = f->mu;
+    }
+    mc->c.bc.friction = mc->friction;
+    mc->c.bc.n_friction = n;
+    return 0;
+}
+
+static int conv_tractions(const Mpmd__Case *pb, mpp_case *mc, double **data, mpm_error *err)
 {
     size_t n = pb->n_tractions;
     int dim = mc->c.grid.dim, rc;
@@ -374,6 +511,11 @@ static int conv_tractions(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         td->is_force = t->is_force ? 1 : 0;
         snprintf(path, sizeof path, "tractions[%zu].value", i);
         if ((rc = get_vec(path, t->value, t->n_value, dim, 0, td->value, err))) return rc;
+        if (t->time_function) {
+            snprintf(path, sizeof path, "tractions[%zu].time_function", i);
+            if ((rc = conv_timefn(t->time_function, path, &mc->timefns[i], data, err))) return rc;
+            td->time_function = &mc->timefns[i];
+        }
     }
     return 0;
 }
@@ -402,7 +544,7 @@ static int conv_boundary(const Mpmd__Boundary *bd, mpp_case *mc, mpm_error *err)
         mc->c.bc.face_mask[f] = mask[f];
     }
     n = bd->n_nodes;
-    if (n == 0) return 0;
+    if (n == 0) return conv_friction(bd, mc, err);
     if (n > MPP_CASE_MAX_NODE_FIXES)
         return mpm_fail(err, MPM_ETOOBIG, "boundary.nodes", "%zu, more than the limit of %u", n,
                         MPP_CASE_MAX_NODE_FIXES);
@@ -429,7 +571,7 @@ static int conv_boundary(const Mpmd__Boundary *bd, mpp_case *mc, mpm_error *err)
     mc->c.bc.n_nodes = n;
     mc->c.bc.node_ijk = mc->node_ijk;
     mc->c.bc.node_mask = mc->node_mask;
-    return 0;
+    return conv_friction(bd, mc, err);
 }
 
 static int conv_run(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
@@ -503,8 +645,11 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
         return rc;
     if ((rc = conv_materials(pb, mc, err))) return rc;
     if ((rc = conv_bodies(pb, mc, max, err))) return rc;
-    if ((rc = conv_tractions(pb, mc, err))) return rc;
+    if ((rc = alloc_timefns(pb, mc, err))) return rc;
+    double *tf_next = mc->tf_data;
+    if ((rc = conv_tractions(pb, mc, &tf_next, err))) return rc;
     if ((rc = conv_boundary(pb->boundary, mc, err))) return rc;
+    if ((rc = conv_prescribed(pb, mc, &tf_next, err))) return rc;
     return conv_run(pb, mc, err);
 }
 
@@ -557,6 +702,11 @@ void mpp_case_destroy(mpp_case **mcp)
     free(mc->tractions);
     free(mc->node_ijk);
     free(mc->node_mask);
+    free(mc->friction);
+    free(mc->prescribed);
+    free(mc->presc_ijk);
+    free(mc->timefns);
+    free(mc->tf_data);
     free(mc->name);
     free(mc);
     *mcp = NULL;

@@ -31,7 +31,8 @@ typedef struct Mpmd__Case Mpmd__Case;
  * the caller's (mpp_case_from_pb's max_particles). */
 #define MPP_CASE_MAX_NODES 20000000u      /* grid nodes */
 #define MPP_CASE_MAX_ITEMS 100000u        /* materials, bodies, tractions each */
-#define MPP_CASE_MAX_NODE_FIXES 10000000u /* boundary.nodes */
+#define MPP_CASE_MAX_NODE_FIXES 10000000u /* boundary.nodes, prescribed nodes */
+#define MPP_CASE_MAX_TABLE 1000000u       /* points of all TimeFunction tables */
 #define MPP_CASE_MAX_STEPS 1000000000000LL
 /* Default largest message accepted by the unpack functions (max = 0). */
 #define MPP_MSG_MAX ((size_t)512 << 20)
@@ -71,6 +72,11 @@ typedef struct mpp_case {
     mpm_traction_desc *tractions;
     int *node_ijk;
     unsigned *node_mask;
+    mpm_friction_desc *friction;     /* boundary.friction */
+    mpm_prescribed_desc *prescribed; /* prescribed */
+    int *presc_ijk;                  /* their node sets, 3 ints per node */
+    mpm_timefn *timefns;             /* time functions of tractions and prescribed */
+    double *tf_data;                 /* the TABLE points of those */
 } mpp_case;
 
 /* JSON text -> case message (schema checks only: names, types, enums).

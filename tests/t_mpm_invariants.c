@@ -413,7 +413,7 @@ TEST(inv_traction_momentum_and_work)
         mpm_paper t;
         double v[3] = {0, 0, 0};
         block_case(&t, dim, MPM_METHOD_MPM, MPM_USF, v);
-        mpm_traction_desc tr = {{0.62, 0.2}, {0.66, 0.8}, 0, 0, {5.0, 0}};
+        mpm_traction_desc tr = {{0.62, 0.2}, {0.66, 0.8}, 0, 0, {5.0, 0}, NULL};
         t.c.n_tractions = 1;
         t.c.tractions = &tr;
         t.c.dt = 2e-5;

@@ -78,6 +78,50 @@ typedef struct {
     double density;        /* rho > 0 */
 } mpm_material_desc;
 
+/* A time function f(t), scaling a prescribed velocity or a traction
+ * (issue 11; docs/solver.md, "Conditions"):
+ *   CONSTANT  f(t) = value
+ *   RAMP      f(t) = value * clamp((t - t0) / (t1 - t0), 0, 1): 0 up to t0,
+ *             rising linearly to `value` at t1, `value` after (t0 < t1;
+ *             t0 = t1 is refused)
+ *   TABLE     piecewise linear through the n >= 1 points (t[i], v[i]), t
+ *             strictly increasing, constant beyond the ends (v[0] before
+ *             t[0], v[n-1] after t[n-1]); `value` is ignored */
+typedef enum { MPM_TF_CONSTANT = 0, MPM_TF_RAMP = 1, MPM_TF_TABLE = 2 } mpm_timefn_kind;
+typedef struct {
+    mpm_timefn_kind kind;
+    double value;
+    double t0, t1;
+    size_t n;
+    const double *t, *v;
+} mpm_timefn;
+
+/* Coulomb friction on a face of the grid box (face 2 d + s as in
+ * mpm_bc_desc.face_mask).  The face is made a roller in its normal
+ * direction (whatever its face_mask says about it) and its tangential
+ * motion is resisted with coefficient mu >= 0 while the body presses on it
+ * (docs/solver.md, "Friction on grid faces"). */
+typedef struct {
+    int face;  /* 0..5 = x_lo, x_hi, y_lo, y_hi, z_lo, z_hi (< 2 dim) */
+    double mu; /* >= 0 */
+} mpm_friction_desc;
+
+/* A prescribed velocity on a face of the grid box (face >= 0: the same
+ * nodes a face_mask fixes, ghost layers included for GIMP) or on a node
+ * set (face < 0: n_nodes nodes, node_ijk[3 i + d] as mpm_bc_desc's; MPM,
+ * GIMP and CPDI only).  Direction d (bit d of mask) of each node gets the
+ * velocity value[d] * f(t), f the time function (NULL: 1).  BC1 sets the
+ * node's momentum to m v(t^n), BC2 its rate of momentum to
+ * m (v(t^{n+1}) - v(t^n)) / dt (docs/solver.md). */
+typedef struct {
+    int face;
+    size_t n_nodes;
+    const int *node_ijk;
+    unsigned mask;
+    double value[MPM_MAX_DIM];
+    const mpm_timefn *time_function;
+} mpm_prescribed_desc;
+
 /* Essential boundary conditions.  Direction masks: bit d fixes axis d. */
 typedef struct {
     /* face_mask[2*d + s]: fixed directions on the face of the grid box with
@@ -91,6 +135,9 @@ typedef struct {
     size_t n_nodes;
     const int *node_ijk;
     const unsigned *node_mask;
+    /* Coulomb friction on faces (at most one entry per face) */
+    size_t n_friction;
+    const mpm_friction_desc *friction;
 } mpm_bc_desc;
 
 /* A body: a material filled into a shape, or an explicit list of points.
@@ -124,6 +171,11 @@ typedef struct {
     int normal;                /* axis of the surface normal */
     int is_force;              /* 1: `value` is a total force */
     double value[MPM_MAX_DIM]; /* traction (force / area) or force */
+    /* NULL: constant.  Otherwise the force is value * f(t), applied over a
+     * step at the step's midpoint time t^n + dt/2 (its work counted with
+     * that force; docs/solver.md).  Not combinable with
+     * mpm_sim_set_particle_forces(). */
+    const mpm_timefn *time_function;
 } mpm_traction_desc;
 
 /* A whole simulation case.  The library copies what it needs in
@@ -156,6 +208,10 @@ typedef struct {
     size_t n_tractions;
     const mpm_traction_desc *tractions;
     mpm_bc_desc bc;
+    /* prescribed velocities (a prescribed direction must not be fixed by
+     * bc, nor lie on a friction face, nor be prescribed twice) */
+    size_t n_prescribed;
+    const mpm_prescribed_desc *prescribed;
 
     int threads;          /* solver threads (0 or 1: serial) */
     size_t max_particles; /* most particles the case may make (0:
@@ -212,8 +268,12 @@ typedef struct {
      *   plastic_work    sum over steps of sigma : d eps_p V (plastic models)
      *   damping_work    energy removed by local or viscous damping
      *   friction_work   energy dissipated by Coulomb friction on faces
+     *                   (sum of -df . (q^n + q^{n+1}) / (2 m) dt over the
+     *                   friction nodes, df the friction force)
      *   prescribed_work work done on the body by prescribed velocities
-     *                   (the reaction forces at the driven nodes) */
+     *                   (the reaction forces at the driven nodes: sum of
+     *                   (f_BC2 - f_free) (v^n + v^{n+1}) / 2 dt)
+     * (docs/solver.md, "Conditions").  total leaves them out. */
     double plastic_work, damping_work, friction_work, prescribed_work;
 } mpm_energy;
 
@@ -293,7 +353,8 @@ double mpm_sim_dt_limit(const mpm_sim *sim); /* CFL limit (C = 1) now */
  * generator's order).  Scattered like a point load, f_n += S_np f_p (Eq. 14),
  * added to the tractions, counted in the external work, and kept until the
  * next call; NULL sets them to zero.  The array is copied.  Returns 0, or
- * MPM_EINVAL (a non-finite value; mpm_sim_error() names it), MPM_ENOMEM.
+ * MPM_EINVAL (a non-finite value, or a case whose tractions have time
+ * functions; mpm_sim_error() names it), MPM_ENOMEM.
  * Not to be called while mpm_sim_run() runs. */
 int mpm_sim_set_particle_forces(mpm_sim *sim, const double *f);
 size_t mpm_sim_particles(const mpm_sim *sim);

@@ -353,6 +353,8 @@ static int lean_check(const mpm_case *c, mpm_error *err)
     for (int f = 0; f < 2 * c->grid.dim; f++)
         if (c->bc.face_mask[f]) what = face_path[f];
     if (c->bc.n_nodes) what = "boundary.nodes";
+    if (c->bc.n_friction) what = "boundary.friction";
+    if (c->n_prescribed) what = "prescribed";
     if (!what) return 0;
     return mpm_fail(err, MPM_EINVAL, what,
                     "this solver was built with MPM_LEAN (no gravity, loads or fixed boundaries)");
@@ -451,6 +453,7 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     for (size_t i = 0; i < c->n_bodies; i++)
         if ((rc = check_body(c, &c->bodies[i], i, err))) return rc;
     if ((rc = check_bc(c, err))) return rc;
+    if ((rc = mpm_cond_check(c, err))) return rc;
     for (size_t t = 0; t < c->n_tractions; t++) {
         const mpm_traction_desc *tr = &c->tractions[t];
         if (tr->normal < 0 || tr->normal >= dim)
@@ -460,6 +463,9 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
             if (!isfinite(tr->value[d]) || !(tr->lo[d] <= tr->hi[d]))
                 return mpm_fail(err, MPM_EINVAL, PATH("tractions[%zu]", t),
                                 "value[%d] must be finite and lo[%d] <= hi[%d]", d, d, d);
+        if ((rc =
+                 mpm_timefn_check(tr->time_function, PATH("tractions[%zu].time_function", t), err)))
+            return rc;
     }
 #ifdef MPM_LEAN
     if ((rc = lean_check(c, err))) return rc;

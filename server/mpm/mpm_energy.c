@@ -111,7 +111,7 @@ int mpm_guard(mpm_sim *s)
     /* the loads' work counted as its absolute value: a bound that holds
      * however a coarse solution mis-integrates a force that does work
      * back and forth (the manufactured solutions do) */
-    double avail = s->e_total0 - e.potential + s->external_work_abs;
+    double avail = s->e_total0 - e.potential + s->external_work_abs + s->prescribed_work_abs;
     if (isfinite(have) && have <= MPM_GUARD_FACTOR * fmax(avail, 0) + s->e_floor) return 0;
     mpm_fail(&s->err, MPM_EDIVERGED, NULL,
              "diverged at step %ld, time %.9g: kinetic + strain energy %.6g is more than %g "

@@ -29,6 +29,7 @@
 #define MPM_INTERNAL_H
 
 #include "mpm.h"
+#include "mpm_timefn.h"
 
 #include <pthread.h>
 #include <stdatomic.h>
@@ -118,6 +119,9 @@ typedef struct {
     double eang[3];          /* partial angular momentum (mpm_sim_energy) */
     int ksorted;             /* sort keys of the slice non-decreasing */
     uint32_t kfirst, klast;  /* the slice's first and last sort key */
+    /* this step's work of the prescribed velocities' reactions and of the
+     * face friction on the thread's share of the nodes (mpm_cond.c) */
+    double wpres, wfric;
     char pad[64];
 } mpm_thread_out;
 
@@ -168,6 +172,37 @@ struct mpm_sim {
      * particle (load_p[i] = i) and trac_f keeps the tractions' shares */
     int pforces;
     double *trac_f[3];
+    /* time-varying tractions (mpm_loads.c): the constant part of each load
+     * slot's force (NULL when no traction has a time function), and ntv
+     * entries (slot, traction, force at f = 1); the tractions' time
+     * functions (ntrac copies) */
+    double *load_f0[3];
+    size_t ntv, ntrac;
+    size_t *tv_slot;
+    uint32_t *tv_trac;
+    double *tv_f[3];
+    mpm_timefn_copy *trac_tf;
+    /* conditions (mpm_cond.c).  has_cond: some prescribed DOF or friction
+     * node exists (the node passes then run mpm_cond_*).  Prescribed
+     * velocities: npres entries sorted by padded node (node, direction
+     * mask, source), the sources' directions' values, time functions and
+     * the velocities at t^n and t^{n+1} of the running step (3 per
+     * source).  Friction: nfric entries sorted by node (node, face, mu),
+     * and whether the node stuck in this step (MUSL's remap reads it). */
+    int has_cond;
+    size_t npres, npsrc;
+    size_t *pres_node;
+    unsigned char *pres_mask;
+    uint32_t *pres_src;
+    double *pres_val, *pres_v0, *pres_v1;
+    mpm_timefn_copy *pres_tf;
+    size_t nfric;
+    size_t *fric_node;
+    unsigned char *fric_face, *fric_stick;
+    double *fric_mu;
+    /* cumulative: work of the prescribed velocities (signed) and its
+     * absolute sum (the guard's bound), friction dissipation */
+    double prescribed_work, prescribed_work_abs, friction_work;
 
     /* particles and materials */
     mpm_particles P;
@@ -508,6 +543,36 @@ void mpm_loads_end_step(mpm_sim *s);
 /* mpm_sim_set_particle_forces() once f is checked (f NULL: zero).  0 or
  * MPM_ENOMEM. */
 int mpm_loads_set_forces(mpm_sim *s, const double *f);
+
+/* ---- prescribed velocities and face friction (mpm_cond.c) ---- */
+
+/* Checks c->prescribed and c->bc.friction (and that no direction is both
+ * prescribed and fixed, prescribed twice, or on a friction face).  0 or
+ * MPM_EINVAL naming the field. */
+int mpm_cond_check(const mpm_case *c, mpm_error *err);
+/* Builds the prescribed and friction node lists (after mpm_bc_build()).
+ * 0 or MPM_ENOMEM. */
+int mpm_cond_build(mpm_sim *s, const mpm_case *c);
+void mpm_cond_free(mpm_sim *s);
+/* Before a step (serial): the prescribed velocities at t^n and t^{n+1},
+ * the per-thread work sums cleared. */
+void mpm_cond_begin_step(mpm_sim *s);
+/* After a step (serial): the per-thread work sums into the totals. */
+void mpm_cond_end_step(mpm_sim *s);
+/* Node passes over the flat nodes first..last: BC1 (q = m v(t^n)), BC1 on
+ * MUSL's q2 (q2 = m v(t^{n+1}); stuck friction nodes' tangential q2 = 0),
+ * and BC2 (friction on the free rate of momentum, then f = m (v(t^{n+1}) -
+ * v(t^n)) / dt), summing the work into tout[tid]; each before the fixed
+ * DOFs' zeroing of the same field. */
+void mpm_cond_bc1(const mpm_sim *s, size_t first, size_t last);
+void mpm_cond_bc1q2(const mpm_sim *s, size_t first, size_t last);
+void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last);
+/* whether flat node n lies on face f (2 d + side) as a face condition
+ * covers it (ghost layers behind and beside the face included) */
+int mpm_node_on_face(const mpm_sim *s, size_t n, int face);
+/* Time-varying tractions: the loads' forces at the step's midpoint time
+ * (serial, before the step). */
+void mpm_loads_update(mpm_sim *s);
 
 /* ---- energies and the divergence guard (mpm_energy.c) ---- */
 

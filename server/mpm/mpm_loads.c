@@ -10,7 +10,11 @@
  * (scatter_loads); their work is summed after each step from the loaded
  * particles' displacements.  mpm_sim_set_particle_forces() switches to one
  * load slot per particle, keeping the tractions' shares apart.  Built with
- * -DMPM_LEAN, the boundary conditions compile out.
+ * -DMPM_LEAN, the boundary conditions compile out.  A traction with a time
+ * function keeps its shares apart (tv_*) and mpm_loads_update() sets the
+ * loads' forces before each step to the constant part plus f(t^n + dt/2)
+ * times those shares.  Prescribed velocities and face friction:
+ * mpm_cond.c.
  */
 #include "mpm_internal.h"
 
@@ -56,8 +60,15 @@ void mpm_bc_zero(const mpm_sim *s, double *const field[3], size_t first, size_t 
  * the grid).  A node set names real nodes. */
 int mpm_bc_build(mpm_sim *s, const mpm_bc_desc *bc)
 {
-    int any = bc->n_nodes > 0;
-    for (int f = 0; f < 2 * s->dim; f++) any |= bc->face_mask[f] != 0;
+    int any = bc->n_nodes > 0 || bc->n_friction > 0;
+    unsigned fmask[2 * MPM_MAX_DIM];
+    for (int f = 0; f < 2 * s->dim; f++) {
+        any |= bc->face_mask[f] != 0;
+        fmask[f] = bc->face_mask[f];
+    }
+    /* a face with friction is a roller in its normal direction */
+    for (size_t i = 0; i < bc->n_friction; i++)
+        fmask[bc->friction[i].face] |= 1u << (bc->friction[i].face / 2);
     if (!any) return 0;
     unsigned char *mask = calloc(s->nn, 1);
     unsigned all = (1u << s->dim) - 1;
@@ -67,8 +78,8 @@ int mpm_bc_build(mpm_sim *s, const mpm_bc_desc *bc)
         for (int d = 0; d < s->dim; d++) {
             int r = (int)(rest % (size_t)s->np[d]) - s->pad; /* real index along d */
             rest /= (size_t)s->np[d];
-            if (r <= 0) mask[n] |= bc->face_mask[2 * d] & all;
-            if (r >= s->nreal[d] - 1) mask[n] |= bc->face_mask[2 * d + 1] & all;
+            if (r <= 0) mask[n] |= fmask[2 * d] & all;
+            if (r >= s->nreal[d] - 1) mask[n] |= fmask[2 * d + 1] & all;
         }
     }
     for (size_t i = 0; i < bc->n_nodes; i++) {
@@ -111,8 +122,33 @@ int mpm_loads_build(mpm_sim *s, const mpm_case *c)
         }
     s->load_p = malloc(cnt * sizeof *s->load_p);
     if (!s->load_p) return MPM_ENOMEM;
-        /* gcc 12's -fanalyzer forgets s->load_xold[0] when the next pass stores at
-         * a symbolic d, and calls it leaked; on failure mpm_sim_destroy frees all */
+    /* time-varying tractions: one entry per (particle, traction) */
+    size_t ntv = 0;
+    for (size_t t = 0; t < c->n_tractions; t++) {
+        if (!c->tractions[t].time_function) continue;
+        for (size_t p = 0; p < s->P.n; p++) {
+            int in = 1;
+            for (int d = 0; d < dim; d++)
+                in &=
+                    s->P.x[d][p] >= c->tractions[t].lo[d] && s->P.x[d][p] <= c->tractions[t].hi[d];
+            ntv += (size_t)in;
+        }
+    }
+    if (ntv) {
+        s->ntrac = c->n_tractions;
+        if (!(s->tv_slot = malloc(ntv * sizeof *s->tv_slot)) ||
+            !(s->tv_trac = malloc(ntv * sizeof *s->tv_trac)) ||
+            !(s->trac_tf = calloc(c->n_tractions, sizeof *s->trac_tf)))
+            return MPM_ENOMEM;
+        for (int d = 0; d < dim; d++)
+            if (!(s->tv_f[d] = mpm_dalloc(ntv)) || !(s->load_f0[d] = mpm_dalloc(cnt)))
+                return MPM_ENOMEM;
+        for (size_t t = 0; t < c->n_tractions; t++)
+            if (mpm_timefn_copy_make(&s->trac_tf[t], c->tractions[t].time_function))
+                return MPM_ENOMEM;
+    }
+    /* gcc 12's -fanalyzer forgets s->load_xold[0] when the next pass stores at
+     * a symbolic d, and calls it leaked; on failure mpm_sim_destroy frees all */
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wanalyzer-malloc-leak"
@@ -143,11 +179,37 @@ int mpm_loads_build(mpm_sim *s, const mpm_case *c)
                 while (i < s->nload && s->load_p[i] != p) i++;
                 if (i == s->nload) s->load_p[s->nload++] = p;
                 double share = s->P.vol[p] / vsum * (tr->is_force ? 1.0 : area);
+                if (tr->time_function) {
+                    s->tv_slot[s->ntv] = i;
+                    s->tv_trac[s->ntv] = (uint32_t)t;
+                    for (int d = 0; d < dim; d++) s->tv_f[d][s->ntv] = tr->value[d] * share;
+                    s->ntv++;
+                    continue;
+                }
                 for (int d = 0; d < dim; d++) s->load_f[d][i] += tr->value[d] * share;
             }
         }
     }
+    if (s->ntv)
+        for (int d = 0; d < dim; d++)
+            memcpy(s->load_f0[d], s->load_f[d], s->nload * sizeof *s->load_f0[d]);
     return 0;
+}
+
+/* The loads' forces over the coming step: the constant part plus each
+ * time-varying traction's share times f(t^n + dt/2), the force held over
+ * the whole step (its work is that force times the displacement). */
+void mpm_loads_update(mpm_sim *s)
+{
+    double fac[64], tm = s->t + 0.5 * s->dt;
+    if (!s->ntv) return;
+    for (size_t t = 0; t < s->ntrac && t < 64; t++)
+        fac[t] = mpm_timefn_copy_eval(&s->trac_tf[t], tm);
+    for (int d = 0; d < s->dim; d++) {
+        memcpy(s->load_f[d], s->load_f0[d], s->nload * sizeof *s->load_f[d]);
+        for (size_t e = 0; e < s->ntv; e++)
+            s->load_f[d][s->tv_slot[e]] += fac[s->tv_trac[e]] * s->tv_f[d][e];
+    }
 }
 
 void mpm_loads_begin_step(mpm_sim *s)

@@ -292,7 +292,7 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
     ops &= ~(MPM_N_GRAV | MPM_N_BC1 | MPM_N_BC1Q2 | MPM_N_BC2);
 #endif
     if (!s->has_gravity) ops &= ~MPM_N_GRAV;
-    if (!s->nfixed) ops &= ~(MPM_N_BC1 | MPM_N_BC1Q2 | MPM_N_BC2);
+    if (!s->nfixed && !s->has_cond) ops &= ~(MPM_N_BC1 | MPM_N_BC1Q2 | MPM_N_BC2);
     seg_iter it;
     seg_begin(s, tid, &it);
     size_t row;
@@ -313,9 +313,20 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
                 double *restrict f = s->g.f[d] + base;
                 for (size_t i = 0; i < w; i++) f[i] += gd * m[i];
             }
-        if (ops & MPM_N_BC1) mpm_bc_zero(s, s->g.q, base, base + w - 1);
-        if (ops & MPM_N_BC1Q2) mpm_bc_zero(s, s->g.q2, base, base + w - 1);
-        if (ops & MPM_N_BC2) mpm_bc_zero(s, s->g.f, base, base + w - 1);
+        /* prescribed velocities and friction (mpm_cond.c), then the fixed
+         * DOFs' zeros (a friction face's roller: after friction read f_n) */
+        if (ops & MPM_N_BC1) {
+            if (s->has_cond) mpm_cond_bc1(s, base, base + w - 1);
+            mpm_bc_zero(s, s->g.q, base, base + w - 1);
+        }
+        if (ops & MPM_N_BC1Q2) {
+            if (s->has_cond) mpm_cond_bc1q2(s, base, base + w - 1);
+            mpm_bc_zero(s, s->g.q2, base, base + w - 1);
+        }
+        if (ops & MPM_N_BC2) {
+            if (s->has_cond) mpm_cond_bc2(s, tid, base, base + w - 1);
+            mpm_bc_zero(s, s->g.f, base, base + w - 1);
+        }
         if (ops & MPM_N_UPD)
             for (int d = 0; d < s->dim; d++) {
                 double *restrict q = s->g.q[d] + base;

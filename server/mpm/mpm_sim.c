@@ -436,6 +436,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (mpm_rows_init(s)) goto nomem; /* row extents, all empty */
 
     if (mpm_bc_build(s, &c->bc)) goto nomem;
+    if (mpm_cond_build(s, c)) goto nomem;
     if (mpm_loads_build(s, c)) goto nomem;
     for (int d = 0; d < dim; d++) {
         s->gravity[d] = c->gravity[d];
@@ -497,12 +498,19 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->mats);
     free(s->fixed_node);
     free(s->fixed_mask);
+    mpm_cond_free(s);
     free(s->load_p);
     for (int d = 0; d < 3; d++) {
         free(s->load_f[d]);
         free(s->load_xold[d]);
         free(s->trac_f[d]);
+        free(s->load_f0[d]);
+        free(s->tv_f[d]);
     }
+    free(s->tv_slot);
+    free(s->tv_trac);
+    for (size_t t = 0; s->trac_tf && t < s->ntrac; t++) mpm_timefn_copy_free(&s->trac_tf[t]);
+    free(s->trac_tf);
     free(s);
     *sp = NULL;
 }
@@ -549,6 +557,7 @@ static int finish_step(mpm_sim *s)
         return s->failed;
     }
     mpm_loads_end_step(s);
+    if (s->has_cond) mpm_cond_end_step(s);
     s->vmax = sqrt(v2);
     s->t = t;
     s->steps = step;
@@ -564,6 +573,8 @@ int mpm_sim_step(mpm_sim *s)
     if (s->failed) return MPM_ESTATE;
     s->ecache_ok = 0; /* the particles change (and may be reordered) */
     begin_step(s);
+    if (s->ntv) mpm_loads_update(s);
+    if (s->has_cond) mpm_cond_begin_step(s);
     mpm_loads_begin_step(s);
     /* energies wanted: the passes that write each particle field for the
      * last time in the step sum them (s->step_energy, read once per pass:
@@ -614,6 +625,9 @@ int mpm_sim_set_particle_forces(mpm_sim *s, const double *f)
 #endif
     size_t n = s->P.n * (size_t)s->dim;
     char path[64];
+    if (s->ntv)
+        return mpm_fail(&s->err, MPM_EINVAL, "particle_forces",
+                        "not available in a case whose tractions have time functions");
     if (f)
         for (size_t i = 0; i < n; i++)
             if (!isfinite(f[i])) {
@@ -683,6 +697,8 @@ void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
         mpm_energy_sum(s, e);
     }
     e->external_work = s->external_work;
+    e->friction_work = s->friction_work;
+    e->prescribed_work = s->prescribed_work;
     e->total = e->kinetic + e->strain + e->potential - e->external_work;
 }
 
