@@ -636,7 +636,7 @@ TEST(mpm_cond_errors)
 TEST(mpm_cond_decode)
 {
     static const char json[] =
-        "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]},"
+        "{\"grid\": {\"dim\": 2, \"spacing\": [0.1, 0.1], \"nodes\": [11, 11]}, \"method\": \"GIMP\","
         " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
         " \"bodies\": [{\"box\": {\"lo\": [0.2, 0.2], \"hi\": [0.6, 0.6]}, \"ppc\": 1}],"
         " \"tractions\": [{\"lo\": [0.5, 0.2], \"hi\": [0.6, 0.6], \"value\": [1, 0],"

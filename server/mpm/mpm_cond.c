@@ -183,9 +183,11 @@ int mpm_cond_check(const mpm_case *c, mpm_error *err)
         }
         if (p->face < 0 && bsp) {
             snprintf(path, sizeof path, "prescribed[%zu].ijk", i);
-            return mpm_fail(err, MPM_EINVAL, path,
-                            "node sets are not supported with BSPLINE2/BSPLINE3 (B-spline "
-                            "control points are not grid nodes); prescribe whole faces instead");
+            return mpm_fail(
+                err, MPM_EINVAL, path,
+                "node sets are not supported with BSPLINE2/BSPLINE3 (B-spline "
+                "control points are not grid nodes; BSPLINE2 is the default method); prescribe "
+                "whole faces instead, or set method to MPM, GIMP or CPDI");
         }
         if (p->face < 0 && !p->node_ijk) {
             snprintf(path, sizeof path, "prescribed[%zu].ijk", i);
