@@ -39,6 +39,14 @@ _Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
                    SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
                    SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),
                "mpm_method / mpm_update must match mpmd.Case.Method / Update");
+_Static_assert(SAME(MPM_VOLUME_STRAIN_INCREMENT, MPMD__CASE__VOLUME_UPDATE__STRAIN_INCREMENT) &&
+                   SAME(MPM_VOLUME_DET_F, MPMD__CASE__VOLUME_UPDATE__DET_F) &&
+                   SAME(MPM_VOLUME_CONSTANT, MPMD__CASE__VOLUME_UPDATE__CONSTANT) &&
+                   SAME(MPM_MC_COMPRESSION, MPMD__MATERIAL__MC_MATCH__COMPRESSION) &&
+                   SAME(MPM_MC_EXTENSION, MPMD__MATERIAL__MC_MATCH__EXTENSION) &&
+                   SAME(MPM_MC_PLANE_STRAIN, MPMD__MATERIAL__MC_MATCH__PLANE_STRAIN),
+               "mpm_volume_update / mpm_mc_match must match mpmd.Case.VolumeUpdate / "
+               "Material.McMatch");
 _Static_assert(SAME(MPM_TRANSFER_FLIP, MPMD__CASE__TRANSFER__FLIP) &&
                    SAME(MPM_TRANSFER_APIC, MPMD__CASE__TRANSFER__APIC),
                "mpm_transfer must match mpmd.Case.Transfer");

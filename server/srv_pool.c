@@ -335,7 +335,11 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
             return -1;
         }
     }
-    mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
+    mpm_sim_snapshot(sim, &(mpm_snapshot){.x = b->x,
+                                          .v = b->v,
+                                          .stress = b->stress,
+                                          .pressure = b->pressure,
+                                          .volume = b->volume});
     mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,        dim, b->x, b->v,
                       b->stress,          b->pressure,       b->volume};
     if (record && b->packed) {

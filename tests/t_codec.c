@@ -779,9 +779,9 @@ TEST(codec_bad_bytes)
         {{0x18, 0x05}, 2, "method: unknown value 5"}, /* method = 5 */
         {{0x20, 0x03}, 2, "update: unknown value 3"}, /* update = 3 */
         {{0x8a, 0x01, 0x03, 0x1a, 0x01, 0x09}, 6, "output.snapshotFields[3]: unknown value 9"},
-        {{0x52, 0x02, 0x08, 0x04},
+        {{0x52, 0x02, 0x08, 0x09},
          4,
-         "materials[1].model: unknown value 4"}, /* materials += {model: 4} */
+         "materials[1].model: unknown value 9"}, /* materials += {model: 9} */
     };
     for (size_t i = 0; i < sizeof tails / sizeof tails[0]; i++) {
         uint8_t *b2 = malloc(n + tails[i].n);
