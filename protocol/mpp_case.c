@@ -491,6 +491,13 @@ static int conv_run(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         case MPMD__OUTPUT__FIELD__STRESS: mc->snapshot_fields |= MPP_SNAP_STRESS; break;
         case MPMD__OUTPUT__FIELD__PRESSURE: mc->snapshot_fields |= MPP_SNAP_PRESSURE; break;
         case MPMD__OUTPUT__FIELD__VOLUME: mc->snapshot_fields |= MPP_SNAP_VOLUME; break;
+        case MPMD__OUTPUT__FIELD__PLASTIC_STRAIN:
+            mc->snapshot_fields |= MPP_SNAP_PLASTIC_STRAIN;
+            break;
+        case MPMD__OUTPUT__FIELD__DEFORMATION_GRADIENT:
+            mc->snapshot_fields |= MPP_SNAP_DEFORMATION_GRADIENT;
+            break;
+        case MPMD__OUTPUT__FIELD__YIELDED: mc->snapshot_fields |= MPP_SNAP_YIELDED; break;
         default:
             return mpm_fail(err, MPM_EINVAL, AT("output.snapshot_fields[%zu]", i),
                             "unknown value %d", (int)o->snapshot_fields[i]);
