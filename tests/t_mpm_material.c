@@ -625,3 +625,112 @@ TEST(material_validation)
     CHECKF(rc == MPM_EINVAL && !strcmp(f, "volume_update"), "%d %s", rc, f);
     TLOG("%s: %s", f, err.message);
 }
+
+/* J2 through the solver in 2D (plane strain) and 3D, in uniaxial strain:
+ * a bar [-4, 4] x [-1/4, 1/4]^(dim-1) (h = 0.25, 2 particles per cell and
+ * axis) between rollers on the grid's lateral faces, stretched by
+ * v = (a x, 0, 0), a = 0.2, carrying F (volume update DET_F).  It yields
+ * (e_y = sy / 2 mu = 0.0195) and hardens; the release waves from its ends
+ * reach the centre at t = 3.4.  At t = 0.6 the central particle's stress
+ * against uniaxial strain's closed form at its strain (the sum of the
+ * increments L dt: ln F_xx + sum (L dt - ln(1 + L dt)), 1.2e-4, taken
+ * with the homogeneous L, which matters through the bulk modulus), its
+ * plastic strain likewise, F against the homogeneous 1 + a t (the grid's
+ * interpolation error), and F_yy = 1. */
+TEST(material_j2_block_solver_2d_3d)
+{
+    for (int dim = 2; dim <= 3; dim++) {
+        int mx = 64, my = 4;
+        double h = 0.25, dp = h / 2, a = 0.2, sy = 0.015, H = 0.05;
+        size_t n = (size_t)mx * (size_t)my * (dim == 3 ? (size_t)my : 1);
+        double *x = malloc(n * 3 * sizeof(double)), *v = calloc(n * 3, sizeof(double));
+        double *vol = malloc(n * sizeof(double));
+        CHECK(x && v && vol);
+        size_t pc = 0;
+        for (size_t p = 0; p < n; p++) {
+            size_t q = p;
+            for (int d = 0; d < dim; d++) {
+                int md = d ? my : mx;
+                double lo = d ? -0.25 : -4.0;
+                x[p * dim + d] = lo + ((double)(q % (size_t)md) + 0.5) * dp;
+                q /= (size_t)md;
+            }
+            v[p * dim] = a * x[p * dim];
+            vol[p] = pow(dp, dim);
+            int centre = 1;
+            for (int d = 0; d < dim; d++) centre &= fabs(x[p * dim + d] - 0.5 * dp) < 1e-12;
+            if (centre) pc = p;
+        }
+        mpm_material_desc mat = {.model = MPM_MODEL_VON_MISES,
+                                 .youngs_modulus = 1.0,
+                                 .poisson_ratio = 0.3,
+                                 .density = 1.0,
+                                 .yield_stress = sy,
+                                 .hardening_modulus = H};
+        mpm_body_desc b = {0};
+        b.n_points = n;
+        b.x = x;
+        b.v = v;
+        b.volume = vol;
+        mpm_case c = {0};
+        c.grid.dim = dim;
+        c.grid.origin[0] = -6;
+        c.grid.h[0] = h;
+        c.grid.nodes[0] = 49;
+        for (int d = 1; d < dim; d++) {
+            c.grid.origin[d] = -0.25;
+            c.grid.h[d] = h;
+            c.grid.nodes[d] = 3;
+            c.bc.face_mask[2 * d] = c.bc.face_mask[2 * d + 1] = 1u << d; /* rollers */
+        }
+        c.method = MPM_METHOD_GIMP;
+        c.update = MPM_USF;
+        c.volume_update = MPM_VOLUME_DET_F;
+        c.dt = 0.01;
+        c.n_materials = 1;
+        c.materials = &mat;
+        c.n_bodies = 1;
+        c.bodies = &b;
+        mpm_error err;
+        mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+        int rc = s ? mpm_sim_run(s, 60) : -1;
+        double *sig = calloc(n * 6, sizeof(double)), *F = calloc(n * 9, sizeof(double));
+        double *ep = calloc(n, sizeof(double));
+        if (!rc && sig && F && ep)
+            mpm_sim_snapshot(
+                s, &(mpm_snapshot){.stress = sig, .deformation_gradient = F, .plastic_strain = ep});
+        double t = s ? mpm_sim_time(s) : 0;
+        mpm_mat_params mp;
+        mpm_model_params(&mat, dim, 0, &mp, &err);
+        mpm_sim_destroy(&s);
+        free(x);
+        free(v);
+        free(vol);
+        int ok = !rc && sig && F && ep;
+        /* the increments' sum: ln F + sum (L dt - ln(1 + L dt)), with the
+         * homogeneous L_n = a / (1 + a t_n) */
+        double sxx = 0, syy = 0, epc = 0, e = ok ? log(F[pc * dim * dim]) : 0;
+        for (int k = 0; k < 60; k++) {
+            double ld = a * c.dt / (1 + a * k * c.dt);
+            e += ld - log1p(ld);
+        }
+        j2_uniaxial_strain(&mp, e, e, 0, &sxx, &syy, &epc);
+        double *sp = sig + 6 * pc;
+        double es = ok ? fmax(fabs(sp[0] - sxx), fmax(fabs(sp[1] - syy), fabs(sp[2] - syy))) : 1;
+        double eF = ok ? fabs(F[pc * dim * dim] - (1 + a * t)) : 1, dep = ok ? ep[pc] - epc : 1;
+        double eyy = ok ? fabs(F[pc * dim * dim + dim + 1] - 1) : 1;
+        double s0 = ok ? sp[0] : 0, s1 = ok ? sp[1] : 0;
+        free(sig);
+        free(F);
+        free(ep);
+        CHECKF(ok, "dim %d: run %d", dim, rc);
+        TLOG("dim %d, t = %.3g: strain %.6g (F_xx error %.2e, F_yy - 1 %.1e); sxx %.9g "
+             "syy %.9g vs closed form %.9g %.9g: error %.2e of sxx; eps_p %.6g vs %.6g",
+             dim, t, e, eF, eyy, s0, s1, sxx, syy, es / sxx, epc + dep, epc);
+        CHECK(es <= 1e-4 * sxx);
+        CHECK(fabs(dep) <= 1e-3 * epc);
+        CHECK(eF <= 1e-2);
+        CHECK(eyy <= 1e-12);
+        CHECK(epc > 0.01);
+    }
+}
