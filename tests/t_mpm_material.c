@@ -535,7 +535,7 @@ TEST(material_general_path_bits)
             es[run] = e.strain;
             CHECK(!mpm_sim_has_field(sim, MPM_FIELD_PLASTIC_STRAIN));
         } else {
-            double ep[2 * 196];
+            double ep[2 * 196] = {0};
             mpm_sim_snapshot(sim, &(mpm_snapshot){.plastic_strain = ep});
             size_t n0 = 0, n1 = 0;
             for (int p = 0; p < 196; p++) n0 += ep[p] != 0;
@@ -733,4 +733,31 @@ TEST(material_j2_block_solver_2d_3d)
         CHECK(eyy <= 1e-12);
         CHECK(epc > 0.01);
     }
+}
+
+/* The plastic work is summed per thread and added in thread order: two
+ * runs on 2 threads give the same bits, and agree with the serial run to
+ * round-off (the J2 bar of material_j2_energy_balance, to t = 1). */
+TEST(material_plastic_work_threads)
+{
+    double w[3] = {0, 0, 0};
+    for (int run = 0; run < 3; run++) {
+        scene s;
+        CHECK(bar1d(&s, 100, 0.04, MPM_MODEL_VON_MISES, 0.005, 0.1) == 0);
+        s.c.threads = run ? 2 : 1;
+        mpm_error err;
+        mpm_sim *sim = mpm_sim_new(&s.c, NULL, &err);
+        scene_free(&s);
+        CHECKF(sim, "%s", err.message);
+        int rc = mpm_sim_run(sim, 400);
+        mpm_energy e;
+        mpm_sim_energy(sim, &e);
+        w[run] = e.plastic_work;
+        mpm_sim_destroy(&sim);
+        CHECK(rc == 0);
+    }
+    TLOG("plastic work: serial %.17g, 2 threads %.17g and %.17g", w[0], w[1], w[2]);
+    CHECK(memcmp(&w[1], &w[2], sizeof w[1]) == 0);
+    CHECK(fabs(w[1] - w[0]) <= 1e-12 * w[0]);
+    CHECK(w[0] > 0);
 }
