@@ -138,8 +138,8 @@ TEST(material_jaumann_objectivity)
             mpm_j2_point(&mp, dim, sig, d, &ep, &y, &wp);
             CHECK(!y);
         }
-        /* R = [[0, -1], [1, 0]] (W_xy > 0 turns x towards -y... either way
-         * a quarter turn swaps the normal stresses and flips the shear) */
+        /* a quarter turn (either sense) swaps the normal stresses and
+         * reverses the shear: R sigma R^T with R = [[0, -1], [1, 0]] */
         double q0 = 0, q1 = 0, p0 = (s0[0] + s0[1] + s0[2]) / 3,
                p1 = (sig[0] + sig[1] + sig[2]) / 3;
         for (int c = 0; c < 6; c++) {
