@@ -645,7 +645,7 @@ static int snapshot_csv(FILE *f, const mpp_snapshot *s)
     static const char *const voigt[6] = {"sxx", "syy", "szz", "sxy", "syz", "sxz"};
     size_t n = s->n, dim = s->dim > 0 ? (size_t)s->dim : 0;
     char b[40];
-    if ((s->x || s->v) && (dim < 1 || dim > 3)) {
+    if ((s->x || s->v || s->deformation_gradient) && (dim < 1 || dim > 3)) {
         fprintf(stderr, "mpmctl: the snapshot's arrays do not match n = %zu, dim = %zu\n", n, dim);
         return CTL_EPROTO;
     }
@@ -658,6 +658,11 @@ static int snapshot_csv(FILE *f, const mpp_snapshot *s)
         for (int k = 0; k < 6; k++) fprintf(f, ",%s", voigt[k]);
     if (s->pressure) fputs(",pressure", f);
     if (s->volume) fputs(",volume", f);
+    if (s->plastic_strain) fputs(",plastic_strain", f);
+    if (s->deformation_gradient)
+        for (size_t a = 0; a < dim; a++)
+            for (size_t d = 0; d < dim; d++) fprintf(f, ",F%s%s", ax[a], ax[d]);
+    if (s->yielded) fputs(",yielded", f);
     fputc('\n', f);
 #define CELL(v)                                 \
     do {                                        \
@@ -675,6 +680,10 @@ static int snapshot_csv(FILE *f, const mpp_snapshot *s)
             for (size_t k = 0; k < 6; k++) CELL(s->stress[i * 6 + k]);
         if (s->pressure) CELL(s->pressure[i]);
         if (s->volume) CELL(s->volume[i]);
+        if (s->plastic_strain) CELL(s->plastic_strain[i]);
+        if (s->deformation_gradient)
+            for (size_t k = 0; k < dim * dim; k++) CELL(s->deformation_gradient[i * dim * dim + k]);
+        if (s->yielded) fprintf(f, ",%d", s->yielded[i] ? 1 : 0);
         fputc('\n', f);
     }
 #undef CELL

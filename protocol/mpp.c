@@ -39,6 +39,14 @@ _Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
                    SAME(MPM_USL, MPMD__CASE__UPDATE__USL) &&
                    SAME(MPM_MUSL, MPMD__CASE__UPDATE__MUSL),
                "mpm_method / mpm_update must match mpmd.Case.Method / Update");
+_Static_assert(SAME(MPM_VOLUME_STRAIN_INCREMENT, MPMD__CASE__VOLUME_UPDATE__STRAIN_INCREMENT) &&
+                   SAME(MPM_VOLUME_DET_F, MPMD__CASE__VOLUME_UPDATE__DET_F) &&
+                   SAME(MPM_VOLUME_CONSTANT, MPMD__CASE__VOLUME_UPDATE__CONSTANT) &&
+                   SAME(MPM_MC_COMPRESSION, MPMD__MATERIAL__MC_MATCH__COMPRESSION) &&
+                   SAME(MPM_MC_EXTENSION, MPMD__MATERIAL__MC_MATCH__EXTENSION) &&
+                   SAME(MPM_MC_PLANE_STRAIN, MPMD__MATERIAL__MC_MATCH__PLANE_STRAIN),
+               "mpm_volume_update / mpm_mc_match must match mpmd.Case.VolumeUpdate / "
+               "Material.McMatch");
 _Static_assert(SAME(MPM_TRANSFER_FLIP, MPMD__CASE__TRANSFER__FLIP) &&
                    SAME(MPM_TRANSFER_APIC, MPMD__CASE__TRANSFER__APIC),
                "mpm_transfer must match mpmd.Case.Transfer");
@@ -231,6 +239,9 @@ void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e)
     s->seq = e->seq;
 }
 
+/* mpp_snapshot.yielded is protobuf-c's bool array as is */
+_Static_assert(sizeof(protobuf_c_boolean) == sizeof(int), "protobuf_c_boolean must be an int");
+
 void mpp_fill_snapshot(Mpmd__Snapshot *ps, const mpp_snapshot *s)
 {
     size_t nd = s->n * (size_t)(s->dim > 0 ? s->dim : 0);
@@ -250,6 +261,12 @@ void mpp_fill_snapshot(Mpmd__Snapshot *ps, const mpp_snapshot *s)
     ps->pressure = (double *)s->pressure;
     ps->n_volume = s->volume ? s->n : 0;
     ps->volume = (double *)s->volume;
+    ps->n_plastic_strain = s->plastic_strain ? s->n : 0;
+    ps->plastic_strain = (double *)s->plastic_strain;
+    ps->n_deformation_gradient = s->deformation_gradient ? nd * (size_t)ps->dim : 0;
+    ps->deformation_gradient = (double *)s->deformation_gradient;
+    ps->n_yielded = s->yielded ? s->n : 0;
+    ps->yielded = (protobuf_c_boolean *)s->yielded;
 }
 
 int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
@@ -260,9 +277,10 @@ int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
     s->t = ps->t;
     s->n = (size_t)ps->n;
     s->dim = ps->dim <= MPM_MAX_DIM ? (int)ps->dim : 0;
-    if ((ps->n_x || ps->n_v) && (ps->dim < 1 || ps->dim > MPM_MAX_DIM))
+    if ((ps->n_x || ps->n_v || ps->n_deformation_gradient) &&
+        (ps->dim < 1 || ps->dim > MPM_MAX_DIM))
         return mpm_fail(err, MPM_ESYNTAX, "snapshot.dim",
-                        "%u: must be 1, 2 or 3 with positions or velocities", ps->dim);
+                        "%u: must be 1, 2 or 3 with positions, velocities or F", ps->dim);
     const struct {
         const char *name;
         size_t have;
@@ -273,7 +291,10 @@ int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
              {"v", ps->n_v, ps->dim, ps->v, &s->v},
              {"stress", ps->n_stress, 6, ps->stress, &s->stress},
              {"pressure", ps->n_pressure, 1, ps->pressure, &s->pressure},
-             {"volume", ps->n_volume, 1, ps->volume, &s->volume}};
+             {"volume", ps->n_volume, 1, ps->volume, &s->volume},
+             {"plastic_strain", ps->n_plastic_strain, 1, ps->plastic_strain, &s->plastic_strain},
+             {"deformation_gradient", ps->n_deformation_gradient, (uint64_t)ps->dim * ps->dim,
+              ps->deformation_gradient, &s->deformation_gradient}};
     for (size_t i = 0; i < sizeof a / sizeof a[0]; i++) {
         if (!a[i].have) continue;
         /* n * width without overflow: have / width == n exactly */
@@ -282,6 +303,13 @@ int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
                             "snapshot.%s holds %zu values, not n = %llu times %llu", a[i].name,
                             a[i].have, (unsigned long long)ps->n, (unsigned long long)a[i].width);
         *a[i].dst = a[i].v;
+    }
+    if (ps->n_yielded) {
+        if (ps->n_yielded != ps->n)
+            return mpm_fail(err, MPM_ESYNTAX, NULL,
+                            "snapshot.yielded holds %zu values, not n = %llu", ps->n_yielded,
+                            (unsigned long long)ps->n);
+        s->yielded = ps->yielded;
     }
     return 0;
 }

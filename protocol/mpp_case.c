@@ -173,6 +173,10 @@ static int conv_materials(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         mpm_material_desc *md = &mc->materials[i];
         switch (m->model) {
         case MPMD__MATERIAL__MODEL__LINEAR_ELASTIC: md->model = MPM_MODEL_LINEAR_ELASTIC; break;
+        case MPMD__MATERIAL__MODEL__NEO_HOOKEAN: md->model = MPM_MODEL_NEO_HOOKEAN; break;
+        case MPMD__MATERIAL__MODEL__VON_MISES: md->model = MPM_MODEL_VON_MISES; break;
+        case MPMD__MATERIAL__MODEL__DRUCKER_PRAGER: md->model = MPM_MODEL_DRUCKER_PRAGER; break;
+        case MPMD__MATERIAL__MODEL__MOHR_COULOMB: md->model = MPM_MODEL_MOHR_COULOMB; break;
         default:
             return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].model", i), "unknown value %d",
                             (int)m->model);
@@ -193,6 +197,23 @@ static int conv_materials(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         md->youngs_modulus = m->youngs_modulus;
         md->poisson_ratio = m->has_poisson_ratio ? m->poisson_ratio : 0;
         md->density = m->density;
+        if (m->model == MPMD__MATERIAL__MODEL__VON_MISES && !m->has_yield_stress)
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].yield_stress", i),
+                            "missing (required by VON_MISES)");
+        if ((m->model == MPMD__MATERIAL__MODEL__DRUCKER_PRAGER ||
+             m->model == MPMD__MATERIAL__MODEL__MOHR_COULOMB) &&
+            !m->has_friction_angle)
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].friction_angle", i),
+                            "missing (required by DRUCKER_PRAGER and MOHR_COULOMB)");
+        /* the solver validates the values (mpm_model_params) */
+        md->yield_stress = m->has_yield_stress ? m->yield_stress : 0;
+        md->hardening_modulus = m->has_hardening_modulus ? m->hardening_modulus : 0;
+        md->friction_angle = m->has_friction_angle ? m->friction_angle : 0;
+        md->dilatancy_angle = m->has_dilatancy_angle ? m->dilatancy_angle : 0;
+        md->cohesion = m->has_cohesion ? m->cohesion : 0;
+        md->tension_cutoff = m->has_tension_cutoff ? m->tension_cutoff : 0;
+        md->mc_match = m->has_mc_match ? (mpm_mc_match)m->mc_match : MPM_MC_COMPRESSION;
+        md->substep_tolerance = m->has_substep_tolerance ? m->substep_tolerance : 0;
     }
     return 0;
 }
@@ -612,6 +633,13 @@ static int conv_run(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         case MPMD__OUTPUT__FIELD__STRESS: mc->snapshot_fields |= MPP_SNAP_STRESS; break;
         case MPMD__OUTPUT__FIELD__PRESSURE: mc->snapshot_fields |= MPP_SNAP_PRESSURE; break;
         case MPMD__OUTPUT__FIELD__VOLUME: mc->snapshot_fields |= MPP_SNAP_VOLUME; break;
+        case MPMD__OUTPUT__FIELD__PLASTIC_STRAIN:
+            mc->snapshot_fields |= MPP_SNAP_PLASTIC_STRAIN;
+            break;
+        case MPMD__OUTPUT__FIELD__DEFORMATION_GRADIENT:
+            mc->snapshot_fields |= MPP_SNAP_DEFORMATION_GRADIENT;
+            break;
+        case MPMD__OUTPUT__FIELD__YIELDED: mc->snapshot_fields |= MPP_SNAP_YIELDED; break;
         default:
             return mpm_fail(err, MPM_EINVAL, AT("output.snapshot_fields[%zu]", i),
                             "unknown value %d", (int)o->snapshot_fields[i]);
@@ -640,6 +668,8 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
     c->mass_tol = pb->has_mass_tol ? pb->mass_tol : 0;
     c->pic_fraction = pb->has_pic_fraction ? pb->pic_fraction : 0;
     c->transfer = pb->has_transfer ? (mpm_transfer)pb->transfer : MPM_TRANSFER_FLIP;
+    c->volume_update =
+        pb->has_volume_update ? (mpm_volume_update)pb->volume_update : MPM_VOLUME_STRAIN_INCREMENT;
     c->allow_unstable_dt = pb->has_allow_unstable_dt && pb->allow_unstable_dt;
     if ((rc = get_vec("gravity", pb->gravity, pb->n_gravity, c->grid.dim, 1, c->gravity, err)))
         return rc;

@@ -44,7 +44,11 @@ enum {
     MPP_SNAP_STRESS = 4,
     MPP_SNAP_PRESSURE = 8,
     MPP_SNAP_VOLUME = 16,
-    MPP_SNAP_ALL = 31
+    /* only in runs whose particles carry them (mpm_sim_has_field()) */
+    MPP_SNAP_PLASTIC_STRAIN = 32,
+    MPP_SNAP_DEFORMATION_GRADIENT = 64,
+    MPP_SNAP_YIELDED = 128,
+    MPP_SNAP_ALL = 255
 };
 
 /* A converted, checked case.  `c` points only into this struct's own

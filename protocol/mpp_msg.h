@@ -110,6 +110,10 @@ typedef struct {
     size_t n;
     int dim;
     const double *x, *v, *stress, *pressure, *volume; /* n*dim, n*dim, n*6, n, n */
+    /* only from runs whose particles carry them: n, n*dim*dim (F,
+     * row-major), n (0/1; the int of protobuf-c's bool) */
+    const double *plastic_strain, *deformation_gradient;
+    const int *yielded;
 } mpp_snapshot;
 
 /* A run record (RunInfo).  NULL strings/pointers and times <= 0 are left

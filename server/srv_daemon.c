@@ -568,9 +568,11 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     }
     size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
     const double *data = ss.data;
-    const double *arr[5] = {0};
-    size_t cnt[5] = {n * dim, n * dim, n * 6, n, n};
-    for (int i = 0; i < 5; i++)
+    /* the stored layout of srv_pool.c: the arrays back to back in
+     * field-bit order (MPP_SNAP_*), the yield flags as doubles 0/1 */
+    const double *arr[8] = {0};
+    size_t cnt[8] = {n * dim, n * dim, n * 6, n, n, n, n * dim * dim, n};
+    for (int i = 0; i < 8; i++)
         if (ss.fields & (1u << i)) {
             arr[i] = data + off;
             off += cnt[i];
@@ -583,13 +585,22 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         store_snapshot_clear(&ss);
         return;
     }
-    mpp_snapshot s = {ss.step, ss.t, n, (int)dim, arr[0], arr[1], arr[2], arr[3], arr[4]};
+    int *yl = arr[7] ? malloc(n * sizeof(int) + 1) : NULL;
+    if (arr[7] && !yl) {
+        reply_error(d, id, MPM_ENOMEM, "", "out of memory for a snapshot of %zu particles", n);
+        store_snapshot_clear(&ss);
+        return;
+    }
+    for (size_t i = 0; yl && i < n; i++) yl[i] = arr[7][i] != 0.0;
+    mpp_snapshot s = {ss.step, ss.t,   n,      (int)dim, arr[0], arr[1],
+                      arr[2],  arr[3], arr[4], arr[5],   arr[6], yl};
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_snapshot(&s, &buf, &len))
         reply_error(d, id, MPM_EINTERNAL, "", "cannot encode the snapshot");
     else
         send_reply(d, id, buf, len);
+    free(yl);
     store_snapshot_clear(&ss);
 }
 

@@ -251,6 +251,10 @@ static void snapmsg_zmq_free(void *data, void *hint)
 /* Snapshot buffers are allocated on first use, once per job. */
 typedef struct {
     double *x, *v, *stress, *pressure, *volume, *packed;
+    double *plastic, *F; /* the model's fields, when the run has them */
+    uint8_t *yl;         /* the solver's yield flags, and as the message's ints */
+    int *yli;
+    unsigned fields; /* the fields asked for that the run has */
     size_t n;
     snapmsg *msg; /* the last streamed message's buffer, or NULL */
 } snapbuf;
@@ -262,6 +266,10 @@ static void snapbuf_free(snapbuf *b)
     free(b->stress);
     free(b->pressure);
     free(b->volume);
+    free(b->plastic);
+    free(b->F);
+    free(b->yl);
+    free(b->yli);
     free(b->packed);
     snapmsg_unref(b->msg);
     memset(b, 0, sizeof *b);
@@ -317,8 +325,18 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
     size_t n = mpm_sim_particles(sim);
     int dim = mpm_sim_dim(sim);
     size_t per = 0;
+    /* a field the run's particles lack is left out */
+    if (!mpm_sim_has_field(sim, MPM_FIELD_PLASTIC_STRAIN)) f &= ~(unsigned)MPP_SNAP_PLASTIC_STRAIN;
+    if (!mpm_sim_has_field(sim, MPM_FIELD_DEFORMATION_GRADIENT))
+        f &= ~(unsigned)MPP_SNAP_DEFORMATION_GRADIENT;
+    if (!mpm_sim_has_field(sim, MPM_FIELD_YIELDED)) f &= ~(unsigned)MPP_SNAP_YIELDED;
+    size_t nF = n * (size_t)dim * (size_t)dim;
     if (!b->n) {
         b->n = n;
+        b->fields = f;
+        if (f & MPP_SNAP_PLASTIC_STRAIN) per += 1;
+        if (f & MPP_SNAP_DEFORMATION_GRADIENT) per += (size_t)(dim * dim);
+        if (f & MPP_SNAP_YIELDED) per += 1;
         if (f & MPP_SNAP_X) per += (size_t)dim;
         if (f & MPP_SNAP_V) per += (size_t)dim;
         if (f & MPP_SNAP_STRESS) per += 6;
@@ -329,25 +347,42 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
             ((f & MPP_SNAP_STRESS) && !(b->stress = malloc(n * 6 * sizeof(double)))) ||
             ((f & MPP_SNAP_PRESSURE) && !(b->pressure = malloc(n * sizeof(double)))) ||
             ((f & MPP_SNAP_VOLUME) && !(b->volume = malloc(n * sizeof(double)))) ||
+            ((f & MPP_SNAP_PLASTIC_STRAIN) && !(b->plastic = malloc(n * sizeof(double)))) ||
+            ((f & MPP_SNAP_DEFORMATION_GRADIENT) && !(b->F = malloc(nF * sizeof(double)))) ||
+            ((f & MPP_SNAP_YIELDED) &&
+             (!(b->yl = malloc(n ? n : 1)) || !(b->yli = malloc(n * sizeof(int) + 1)))) ||
             (record && !(b->packed = malloc(n * per * sizeof(double) + 1)))) {
             srv_warn(j->id, "out of memory for snapshots of %zu particles; snapshots off", n);
             snapbuf_free(b);
             return -1;
         }
     }
-    mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
-    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,        dim, b->x, b->v,
-                      b->stress,          b->pressure,       b->volume};
+    f = b->fields;
+    mpm_sim_snapshot(sim, &(mpm_snapshot){.x = b->x,
+                                          .v = b->v,
+                                          .stress = b->stress,
+                                          .pressure = b->pressure,
+                                          .volume = b->volume,
+                                          .plastic_strain = b->plastic,
+                                          .deformation_gradient = b->F,
+                                          .yielded = b->yl});
+    if (b->yl)
+        for (size_t i = 0; i < n; i++) b->yli[i] = b->yl[i];
+    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,         dim,        b->x, b->v,
+                      b->stress,          b->pressure,       b->volume, b->plastic, b->F, b->yli};
     if (record && b->packed) {
-        /* stored layout: the requested arrays back to back, in field-bit order */
+        /* stored layout: the requested arrays back to back, in field-bit
+         * order (the yield flags as 0.0 / 1.0) */
         size_t off = 0;
-        const double *arr[5] = {b->x, b->v, b->stress, b->pressure, b->volume};
-        size_t cnt[5] = {n * dim, n * dim, n * 6, n, n};
-        for (int i = 0; i < 5; i++)
+        const double *arr[7] = {b->x, b->v, b->stress, b->pressure, b->volume, b->plastic, b->F};
+        size_t cnt[7] = {n * dim, n * dim, n * 6, n, n, n, nF};
+        for (int i = 0; i < 7; i++)
             if (arr[i]) {
                 memcpy(b->packed + off, arr[i], cnt[i] * sizeof(double));
                 off += cnt[i];
             }
+        if (b->yl)
+            for (size_t i = 0; i < n; i++) b->packed[off++] = b->yl[i] ? 1.0 : 0.0;
         store_snapshot ss = {(int64_t)j->id,      s.step, s.t, (int64_t)n, dim, f, b->packed,
                              off * sizeof(double)};
         int rc = store_snapshot_put(c->p->st, &ss);

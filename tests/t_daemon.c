@@ -185,7 +185,7 @@ DTEST(daemon_basic_run)
             char *st = td_slurp(snap_csv, &sl), **lines = NULL;
             double x[16], v[16], dmax = 0;
             size_t nl = st ? td_lines(st, &lines) : 0;
-            mpm_snapshot ms = {x, v, NULL, NULL, NULL};
+            mpm_snapshot ms = {.x = x, .v = v};
             CHECK(np == 7);
             mpm_sim_snapshot(sim, &ms);
             CHECKF(nl == np + 1 && lines && !strcmp(lines[0], "i,x,vx"),

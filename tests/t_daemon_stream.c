@@ -133,7 +133,7 @@ DTEST(daemon_stream_snapshots)
             /* its values, decoded once, against the solver */
             if (ok) {
                 while (mpm_sim_steps(sim) < s->step) ok = ok && mpm_sim_step(sim) == 0;
-                mpm_sim_snapshot(sim, &(mpm_snapshot){x, v, NULL, NULL, NULL});
+                mpm_sim_snapshot(sim, &(mpm_snapshot){.x = x, .v = v});
                 for (size_t i = 0; ok && i < 2 * np; i++)
                     worst = fmax(worst, fmax(rel_diff(s->x[i], x[i]), rel_diff(s->v[i], v[i])));
             }

@@ -39,7 +39,10 @@ static void spin_build(spin_case *k, int dim, mpm_method m, mpm_update up, mpm_t
 {
     memset(k, 0, sizeof *k);
     const double R = 0.2, h = dim == 2 ? 0.04 : 0.1, sp = h / 2;
-    k->mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1e3, 0.3, 1.0};
+    k->mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = 1e3,
+                                 .poisson_ratio = 0.3,
+                                 .density = 1.0};
     double c = mpm_material_wave_speed(&k->mat, dim);
     double ax[3] = {0, 0, 1};
     if (dim == 3) {
@@ -229,7 +232,10 @@ TEST(apic_affine_field_is_reproduced)
         for (int m = 0; m < 2; m++)
             for (int u = 0; u < 3; u++) {
                 mpm_method meth = m ? MPM_METHOD_GIMP : MPM_METHOD_MPM;
-                mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1e-200, 0.25, 3.0};
+                mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                         .youngs_modulus = 1e-200,
+                                         .poisson_ratio = 0.25,
+                                         .density = 3.0};
                 mpm_body_desc b;
                 memset(&b, 0, sizeof b);
                 b.shape = MPM_SHAPE_BOX;

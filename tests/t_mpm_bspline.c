@@ -186,7 +186,10 @@ typedef struct {
 static int one_particle(mpm_method meth, int dim, const int nodes[3], const double h[3],
                         const double x[3], const double v[3], one_result *r)
 {
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.3, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.3,
+                             .density = 1.0};
     double vol = 0.01, mass = 0.037;
     mpm_body_desc b = {0};
     b.n_points = 1;
@@ -281,7 +284,10 @@ TEST(bspline_fixed_face_velocity_is_zero)
     for (int m = 0; m < 2; m++)
         for (int roller = 0; roller < 2; roller++) {
             int p = m + 2;
-            mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 100.0, 0.3, 1.0};
+            mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                     .youngs_modulus = 100.0,
+                                     .poisson_ratio = 0.3,
+                                     .density = 1.0};
             mpm_body_desc b = {0};
             b.shape = MPM_SHAPE_BOX;
             b.ppc = 2;
@@ -455,7 +461,10 @@ TEST(bspline_conservation_2d_3d)
                     v[np * 3 + 2] = 0.03 * (x[np * 3 + 0] - 0.65);
                     vol[np] = 0.05 * 0.05 * 0.05;
                 }
-        mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.3, 1.0};
+        mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = 1.0,
+                                 .poisson_ratio = 0.3,
+                                 .density = 1.0};
         mpm_body_desc b = {0};
         b.n_points = np;
         b.x = x;
@@ -541,7 +550,10 @@ TEST(bspline_pic_blend_rigid_translation)
         for (int dim = 2; dim <= 3; dim++)
             for (int k = 0; k < 2; k++) {
                 double v[3] = {0.3, -0.2, 0.1};
-                mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 100.0, 0.3, 1.0};
+                mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                         .youngs_modulus = 100.0,
+                                         .poisson_ratio = 0.3,
+                                         .density = 1.0};
                 mpm_body_desc b = {0};
                 b.shape = MPM_SHAPE_BOX;
                 b.ppc = 2;

@@ -19,7 +19,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const mpm_material_desc block_mat = {MPM_MODEL_LINEAR_ELASTIC, 1e6, 0.3, 1000.0};
+static const mpm_material_desc block_mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                            .youngs_modulus = 1e6,
+                                            .poisson_ratio = 0.3,
+                                            .density = 1000.0};
 
 /* ---- the sliding block ---- */
 
@@ -95,7 +98,7 @@ static int slide(mpm_method m, mpm_update up, double theta_deg, double mu, doubl
         size_t n = mpm_sim_particles(s);
         double *x = malloc(n * 2 * sizeof *x);
         if (!x) return -1;
-        mpm_snapshot sn = {x, NULL, NULL, NULL, NULL};
+        mpm_snapshot sn = {.x = x};
         mpm_sim_snapshot(s, &sn);
         for (size_t p = 0; p < n; p++) x0 += x[2 * p];
         x0 /= (double)n;
@@ -127,7 +130,7 @@ static int slide(mpm_method m, mpm_update up, double theta_deg, double mu, doubl
     size_t n = mpm_sim_particles(s);
     double *x = malloc(n * 2 * sizeof *x), xm = 0;
     if (!x) return -1;
-    mpm_snapshot sn = {x, NULL, NULL, NULL, NULL};
+    mpm_snapshot sn = {.x = x};
     mpm_sim_snapshot(s, &sn);
     for (size_t p = 0; p < n; p++) xm += x[2 * p];
     r->dx = xm / (double)n - x0;
@@ -296,7 +299,10 @@ typedef struct {
 static int bar_push(mpm_method m, mpm_update up, double v0, const mpm_timefn *tf, double t_end,
                     int threads, bar_res *r)
 {
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.0,
+                             .density = 1.0};
     mpm_body_desc b = {0};
     b.shape = MPM_SHAPE_BOX;
     b.lo[0] = 0.0;
@@ -352,7 +358,7 @@ static int bar_push(mpm_method m, mpm_update up, double v0, const mpm_timefn *tf
     double *x = malloc(n * 7 * sizeof *x);
     if (!x) return -1;
     double *sg = x + n;
-    mpm_snapshot sn = {x, NULL, sg, NULL, NULL};
+    mpm_snapshot sn = {.x = x, .stress = sg};
     mpm_sim_snapshot(s, &sn);
     double ssum = 0, cnt = 0;
     for (size_t p = 0; p < n; p++)
@@ -461,7 +467,10 @@ TEST(mpm_cond_two_threads)
  * time, equals K + S (within 1 %) and 1/2 T u(L) (within 2 %). */
 TEST(mpm_cond_ramped_traction)
 {
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.0,
+                             .density = 1.0};
     mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP};
     for (int i = 0; i < 2; i++) {
         mpm_body_desc b = {0};
@@ -492,10 +501,10 @@ TEST(mpm_cond_ramped_traction)
         size_t n = mpm_sim_particles(s);
         double *x0 = malloc(n * 2 * sizeof *x0), *x = x0 + n;
         CHECK(x0);
-        mpm_snapshot sn = {x0, NULL, NULL, NULL, NULL};
+        mpm_snapshot sn = {.x = x0};
         mpm_sim_snapshot(s, &sn);
         int rc = mpm_sim_run(s, 4400);
-        mpm_snapshot sn2 = {x, NULL, NULL, NULL, NULL};
+        mpm_snapshot sn2 = {.x = x};
         mpm_sim_snapshot(s, &sn2);
         mpm_energy e;
         mpm_sim_energy(s, &e);
@@ -529,7 +538,10 @@ static int expect_err(const mpm_case *c, const char *field)
 
 TEST(mpm_cond_errors)
 {
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.0,
+                             .density = 1.0};
     mpm_body_desc b = {0};
     b.shape = MPM_SHAPE_BOX;
     b.lo[0] = b.lo[1] = 0.2;

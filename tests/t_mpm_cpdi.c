@@ -172,7 +172,10 @@ static int lattice(lat_case *t, int D, const int n[3], double a, const double x0
                 t->vol[p] = pow(a, D);
                 p++;
             }
-    t->mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 100.0, 0.3, 1.0};
+    t->mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = 100.0,
+                                 .poisson_ratio = 0.3,
+                                 .density = 1.0};
     t->b.n_points = np;
     t->b.x = t->x;
     t->b.v = t->v;
@@ -424,7 +427,10 @@ static double roughness(const double *sig, int nx, int ny, double scale)
 static int hanging_bar(mpm_method m, mpm_update up, double E, double *rough, double *fyy)
 {
     const double h = 0.05, H = 1.0, g = 10.0, a = 0.5 * h;
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, E, 0.0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = E,
+                             .poisson_ratio = 0.0,
+                             .density = 1.0};
     mpm_body_desc b = {0};
     b.shape = MPM_SHAPE_BOX;
     b.ppc = 2;

@@ -20,7 +20,10 @@
 static void block_case(mpm_paper *t, int dim, mpm_method m, mpm_update up, const double *v)
 {
     memset(t, 0, sizeof *t);
-    t->mat[0] = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    t->mat[0] = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                    .youngs_modulus = 1000.0,
+                                    .poisson_ratio = 0.3,
+                                    .density = 2.0};
     mpm_body_desc *b = &t->body[0];
     b->shape = MPM_SHAPE_BOX;
     b->ppc = 2;
@@ -221,7 +224,10 @@ static double phantom_strain(double shift, double mass_tol)
 {
     static double x[1], vol[1] = {1.0}, stress[6] = {1.0, 0, 0, 0, 0, 0}, hl[1] = {0.5};
     x[0] = 2.5 + shift;
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 100.0, 0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 100.0,
+                             .poisson_ratio = 0,
+                             .density = 1.0};
     mpm_body_desc b = {0};
     b.n_points = 1;
     b.x = x;
@@ -366,7 +372,10 @@ TEST(inv_initial_stress_release_is_not_divergence)
         sig[6 * p] = s0;
     }
     for (int m = 0; m < 2; m++) {
-        mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, E, 0.0, 1.0};
+        mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = E,
+                                 .poisson_ratio = 0.0,
+                                 .density = 1.0};
         mpm_body_desc b;
         memset(&b, 0, sizeof b);
         b.n_points = N;
@@ -460,7 +469,10 @@ TEST(inv_particle_leaving_grid_is_an_error)
 TEST(inv_nan_is_divergence)
 {
     static double x[2] = {0.4, 0.6}, vol[2] = {1e10, 1e10}, stress[12] = {1e300};
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0,
+                             .density = 1.0};
     mpm_body_desc b = {0};
     b.n_points = 2;
     b.x = x;
@@ -653,7 +665,10 @@ TEST(inv_case_check_once)
     mpm_paper_free(&t);
 
     /* a box of about 10^12 particles is refused at the limit, at once */
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.2, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.2,
+                             .density = 1.0};
     mpm_body_desc body = {0};
     body.shape = MPM_SHAPE_BOX;
     body.ppc = 8;
@@ -791,7 +806,10 @@ static int rotating_body(int dim, mpm_method meth, mpm_update up, double turns, 
         double rw = r[0] * w[0] + r[1] * w[1] + r[2] * w[2];
         for (int d = 0; d < 3; d++) La[d] += mass[p] * (r2 * w[d] - rw * r[d]);
     }
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1e3, 0.3, rho};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1e3,
+                             .poisson_ratio = 0.3,
+                             .density = rho};
     mpm_body_desc b;
     memset(&b, 0, sizeof b);
     b.n_points = n;

@@ -28,7 +28,10 @@ static double mms1d_error(mpm_method m, mpm_update up, double pic)
 {
     int n = MMS_N * MMS_PPC;
     double h = 1.0 / MMS_N, A = MMS_AMP;
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.0,
+                             .density = 1.0};
     double c = mpm_material_wave_speed(&mat, 1), om = M_PI * c;
     double *X = malloc((size_t)n * 7 * sizeof *X);
     if (!X) return -1;

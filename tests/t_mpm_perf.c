@@ -21,7 +21,10 @@ static void falling_box(mpm_case *c, mpm_material_desc *mat, mpm_body_desc *b, i
 {
     memset(c, 0, sizeof *c);
     memset(b, 0, sizeof *b);
-    *mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    *mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                               .youngs_modulus = 1000.0,
+                               .poisson_ratio = 0.3,
+                               .density = 2.0};
     b->shape = MPM_SHAPE_BOX;
     b->ppc = 2;
     double v[3] = {0.3, -0.8, 0.2};
@@ -113,7 +116,10 @@ TEST(perf_gimp_family_follows_half_width)
     double x[4] = {0.4, 0.4, 0.6, 0.45}, vol[2] = {0.0025, 0.0025};
     double hl[2][4] = {{0.025, 0.025, 0.025, 0.025}, {0.025, 0.025, 0.025, 0.0251}};
     for (int k = 0; k < 2; k++) {
-        mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+        mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = 1000.0,
+                                 .poisson_ratio = 0.3,
+                                 .density = 2.0};
         mpm_body_desc b = {0};
         b.n_points = 2;
         b.x = x;
@@ -161,7 +167,10 @@ static double sorted_run(int rev, int T, double *vout, int *sorted)
         f[2 * i] = 0;
         f[2 * i + 1] = k == PUSHED ? 1e-3 : 0;
     }
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1000.0,
+                             .poisson_ratio = 0.3,
+                             .density = 2.0};
     mpm_body_desc b = {0};
     b.n_points = NPTS;
     b.x = x;
@@ -227,7 +236,10 @@ TEST(perf_active_box_leaves_no_stale_nodes)
 {
     for (int T = 1; T <= 2; T++)
         for (int m = 0; m < 2; m++) {
-            mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+            mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                     .youngs_modulus = 1000.0,
+                                     .poisson_ratio = 0.3,
+                                     .density = 2.0};
             mpm_body_desc b = {0};
             b.shape = MPM_SHAPE_BOX;
             b.ppc = 2;
@@ -331,7 +343,10 @@ static int stale_nodes(const mpm_sim *s, const unsigned char *sup, int dim, int 
 static int rows_case(int dim, int shape, int m, int up, int T, double *worst, double *frac,
                      long *checked)
 {
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1000.0,
+                             .poisson_ratio = 0.3,
+                             .density = 2.0};
     mpm_body_desc b[2];
     memset(b, 0, sizeof b);
     double h = dim == 2 ? 0.025 : 0.05;
@@ -450,7 +465,10 @@ TEST(perf_active_rows_leave_no_stale_nodes)
  * particles' mass. */
 static int split_1d_case(int m, int up, int T, double *worst, long *checked)
 {
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1000.0,
+                             .poisson_ratio = 0.3,
+                             .density = 2.0};
     mpm_body_desc b[2];
     memset(b, 0, sizeof b);
     /* as many particles in each bar (40): with 2 threads each thread holds
@@ -612,7 +630,10 @@ TEST(perf_sort_order_independent_of_threads)
     static uint32_t id[3][NPTS];
     static double px[3][NPTS];
     for (int T = 1; T <= 3; T++) {
-        mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1000.0, 0.3, 2.0};
+        mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = 1000.0,
+                                 .poisson_ratio = 0.3,
+                                 .density = 2.0};
         mpm_body_desc b = {0};
         b.n_points = NPTS;
         b.x = x;

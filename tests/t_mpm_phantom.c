@@ -94,7 +94,10 @@ TEST(phantom_issue_cube_translates_without_stress)
 {
     for (int m = 0; m < 5; m++)
         for (int up = 0; up < 3; up++) {
-            mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, E_MOD, 0.3, 2.0};
+            mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                     .youngs_modulus = E_MOD,
+                                     .poisson_ratio = 0.3,
+                                     .density = 2.0};
             double v[3] = {0.3, 0.2, -0.1};
             mpm_body_desc b = {0};
             b.shape = MPM_SHAPE_BOX;
@@ -137,7 +140,10 @@ static void lines_case(mpm_case *c, mpm_body_desc *b, mpm_material_desc *mat, do
     const double h = 0.125;
     memset(c, 0, sizeof *c);
     memset(b, 0, sizeof *b);
-    *mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, E_MOD, 0.25, 1.0};
+    *mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                               .youngs_modulus = E_MOD,
+                               .poisson_ratio = 0.25,
+                               .density = 1.0};
     size_t np = 0;
     int ext[3] = {n, dim > 1 ? n : 1, dim > 2 ? n : 1};
     for (int k = 0; k < ext[2]; k++)

@@ -278,7 +278,10 @@ static mpm_sim *bar_nd(int dim, mpm_method m, int ncell, int ppc, double v0, dou
             vol[p] = pow(h / ppc, dim);
             v[p * dim] = v0 * sin(beta * xi);
         }
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 10.0, 0.0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 10.0,
+                             .poisson_ratio = 0.0,
+                             .density = 1.0};
     mpm_body_desc b = {0};
     b.n_points = n;
     b.x = x;

@@ -130,8 +130,10 @@ static int wave_case(wave *w, int dim, mpm_method m, mpm_update u, double C, int
             w->v[p * dim + d] = (dim == 1 ? v0 * sin(M_PI / 2 * X) : v0 * sin(M_PI * X)) + noise;
         }
     }
-    w->mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, dim == 1 ? 10.0 : 1.0,
-                                 dim == 1 ? 0 : 0.3, 1.0};
+    w->mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = dim == 1 ? 10.0 : 1.0,
+                                 .poisson_ratio = dim == 1 ? 0 : 0.3,
+                                 .density = 1.0};
     w->b.n_points = n;
     w->b.x = w->x;
     w->b.volume = w->vol;
@@ -560,7 +562,10 @@ static mpm_sim *block_sim(mpm_method m, mpm_update u, double V, double v0, int p
             v[2 * p] = V + v0 * cos(M_PI * X / L);
             v[2 * p + 1] = 0.5 * V;
         }
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.0,
+                             .density = 1.0};
     mpm_body_desc b = {0};
     b.n_points = n;
     b.x = x;

@@ -28,7 +28,10 @@ void mpm_paper_point(mpm_paper *t, mpm_update up, double dt, double v0)
 {
     memset(t, 0, sizeof *t);
     static const double x = 0.5, vol = 1.0;
-    t->mat[0] = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 4 * M_PI * M_PI, 0, 1};
+    t->mat[0] = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                    .youngs_modulus = 4 * M_PI * M_PI,
+                                    .poisson_ratio = 0,
+                                    .density = 1};
     t->body[0].velocity[0] = v0;
     t->body[0].n_points = 1;
     t->body[0].x = &x;
@@ -69,7 +72,10 @@ int mpm_paper_bar(mpm_paper *t, mpm_method m, mpm_update up, int ncell, int ppc,
         t->vol[i] = h / ppc;
         t->v[i] = v0 * sin(beta * t->x[i]);
     }
-    t->mat[0] = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 10.0, 0, 1};
+    t->mat[0] = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                    .youngs_modulus = 10.0,
+                                    .poisson_ratio = 0,
+                                    .density = 1};
     t->body[0].n_points = n;
     t->body[0].x = t->x;
     t->body[0].volume = t->vol;
@@ -99,7 +105,10 @@ void mpm_paper_disks(mpm_paper *t, mpm_method m, mpm_update up, double h)
     memset(t, 0, sizeof *t);
     int n = (int)lround(1.0 / h) + 1;
     double s = 0.1 / sqrt(2.0);
-    t->mat[0] = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.2, 1.0};
+    t->mat[0] = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                    .youngs_modulus = 1.0,
+                                    .poisson_ratio = 0.2,
+                                    .density = 1.0};
     for (int b = 0; b < 2; b++) {
         mpm_body_desc *d = &t->body[b];
         d->shape = MPM_SHAPE_SPHERE;

@@ -46,7 +46,32 @@ typedef enum {
     MPM_METHOD_CPDI = 4
 } mpm_method;
 typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
-typedef enum { MPM_MODEL_LINEAR_ELASTIC = 0 } mpm_model_kind;
+/* Constitutive models (docs/solver.md, "Material models").  LINEAR_ELASTIC:
+ * small-strain incremental elasticity (today's, bit for bit).  NEO_HOOKEAN:
+ * compressible hyperelastic, sigma = mu/J (b - I) + lambda ln J / J I from
+ * the deformation gradient.  VON_MISES: J2 plasticity with linear isotropic
+ * hardening, radial return, Jaumann stress rate.  DRUCKER_PRAGER and
+ * MOHR_COULOMB: their parameters are validated, the models are not yet
+ * implemented (refused). */
+typedef enum {
+    MPM_MODEL_LINEAR_ELASTIC = 0,
+    MPM_MODEL_NEO_HOOKEAN = 1,
+    MPM_MODEL_VON_MISES = 2,
+    MPM_MODEL_DRUCKER_PRAGER = 3,
+    MPM_MODEL_MOHR_COULOMB = 4
+} mpm_model_kind;
+/* Drucker-Prager's matching to Mohr-Coulomb (the cone through the
+ * compression corners, the extension corners, or the plane-strain fit). */
+typedef enum { MPM_MC_COMPRESSION = 0, MPM_MC_EXTENSION = 1, MPM_MC_PLANE_STRAIN = 2 } mpm_mc_match;
+/* Particle volume update.  STRAIN_INCREMENT (the default, every earlier
+ * release): V <- V (1 + tr deps).  DET_F: V = det F V0 (the particles carry
+ * F).  CONSTANT: the volume (and so the density) never changes, as the
+ * paper's analytic comparisons assume. */
+typedef enum {
+    MPM_VOLUME_STRAIN_INCREMENT = 0,
+    MPM_VOLUME_DET_F = 1,
+    MPM_VOLUME_CONSTANT = 2
+} mpm_volume_update;
 typedef enum { MPM_SHAPE_BOX = 0, MPM_SHAPE_SPHERE = 1 } mpm_shape;
 /* Particle-grid velocity transfer.  FLIP: the update of Eq. 31 (blended
  * with PIC by mpm_case.pic_fraction).  APIC: the affine particle-in-cell
@@ -70,12 +95,22 @@ typedef struct {
     int nodes[MPM_MAX_DIM]; /* >= 2 per axis */
 } mpm_grid_desc;
 
-/* Material.  1D: uniaxial (E only); 2D: plane strain; 3D: isotropic. */
+/* Material.  1D: uniaxial (E only); 2D: plane strain; 3D: isotropic.
+ * The plastic parameters are read by the models that use them (the others
+ * ignore them); angles in degrees. */
 typedef struct {
     mpm_model_kind model;
-    double youngs_modulus; /* E > 0 */
-    double poisson_ratio;  /* -1 < nu < 0.5 (ignored in 1D) */
-    double density;        /* rho > 0 */
+    double youngs_modulus;    /* E > 0 */
+    double poisson_ratio;     /* -1 < nu < 0.5 (ignored in 1D) */
+    double density;           /* rho > 0 */
+    double yield_stress;      /* VON_MISES: initial yield stress sigma_y0 > 0 */
+    double hardening_modulus; /* VON_MISES: isotropic H >= 0, sigma_y = sigma_y0 + H eps_p */
+    double friction_angle;    /* DP/MC: phi in (0, 90) degrees */
+    double dilatancy_angle;   /* DP/MC: psi in [0, phi] degrees */
+    double cohesion;          /* DP/MC: c >= 0 */
+    double tension_cutoff;    /* DP/MC: largest mean tension >= 0 (0: none allowed) */
+    mpm_mc_match mc_match;    /* DP: matching to Mohr-Coulomb */
+    double substep_tolerance; /* DP/MC: Sloan's substepping tolerance, 0 (default) or in (0, 1) */
 } mpm_material_desc;
 
 /* A time function f(t), scaling a prescribed velocity or a traction
@@ -198,6 +233,9 @@ typedef struct {
     double pic_fraction;
     /* FLIP (0, the default: every earlier release) or APIC */
     mpm_transfer transfer;
+    /* particle volume update (STRAIN_INCREMENT, the default: every earlier
+     * release) */
+    mpm_volume_update volume_update;
 
     double gravity[MPM_MAX_DIM];
 
@@ -290,11 +328,23 @@ typedef struct {
 } mpm_energy_sample;
 
 /* Snapshot request: the caller passes arrays of n_particles entries
- * (times dim for position and velocity, times 6 for stress); a NULL array
- * is not filled. */
+ * (times dim for position and velocity, times 6 for stress, times dim*dim
+ * for the deformation gradient, row-major); a NULL array is not filled.
+ * The last three exist only when the run's particles carry them
+ * (mpm_sim_has_field()); otherwise they are left untouched. */
 typedef struct {
     double *x, *v, *stress, *pressure, *volume;
+    double *plastic_strain;       /* equivalent plastic strain (plastic models) */
+    double *deformation_gradient; /* F (NEO_HOOKEAN, DET_F volume, CPDI) */
+    uint8_t *yielded;             /* 1: the particle flowed plastically in the last step */
 } mpm_snapshot;
+
+/* Per-particle fields a run may lack (mpm_sim_has_field()). */
+typedef enum {
+    MPM_FIELD_PLASTIC_STRAIN = 0,
+    MPM_FIELD_DEFORMATION_GRADIENT = 1,
+    MPM_FIELD_YIELDED = 2
+} mpm_field;
 
 typedef struct mpm_sim mpm_sim;
 
@@ -384,6 +434,10 @@ void mpm_sim_want_energy(mpm_sim *sim);
 
 /* Copies the requested particle fields into caller arrays. */
 void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);
+/* 1 when the run's particles carry field f (the plastic strain and the
+ * yield flag: a plastic model in the case; F: a model or the volume update
+ * that needs it, or CPDI), else 0. */
+int mpm_sim_has_field(const mpm_sim *sim, mpm_field f);
 
 /* Grid state after the last step, for tests and diagnostics: node mass and
  * momentum of real node (i, j, k) (unused indices 0).  B-splines: the

@@ -433,6 +433,11 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
                         "must be 0 (or absent) with transfer APIC, itself a PIC transfer whose "
                         "affine part keeps what PIC damps (got %g)",
                         c->pic_fraction);
+    if (c->volume_update != MPM_VOLUME_STRAIN_INCREMENT && c->volume_update != MPM_VOLUME_DET_F &&
+        c->volume_update != MPM_VOLUME_CONSTANT)
+        return mpm_fail(err, MPM_EINVAL, "volume_update",
+                        "unknown value %d (STRAIN_INCREMENT, DET_F or CONSTANT)",
+                        (int)c->volume_update);
     if (c->threads < 0 || c->threads > MPM_MAX_THREADS)
         return mpm_fail(err, MPM_EINVAL, "threads", "must be in [0, %d] (got %d)", MPM_MAX_THREADS,
                         c->threads);

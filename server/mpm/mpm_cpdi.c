@@ -444,7 +444,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
             gather(s, s->g.q, &Wb[i], D, 1, 0, 0, 0, NULL, NULL, 0, NULL, L);
             strain_of(s, L, o->deps, i, D);
         }
-        block_update(s, b0, nb, o->deps, D);
+        block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
         for (size_t i = 0; i < nb; i++) scatter_force(s, gb, &Wb[i], b0 + i, D);
     }
@@ -506,7 +506,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             moved(s, o, &a, p, D);
             if (EN) esum_particle(s, &e, p, D, 0);
         }
-        block_update(s, b0, nb, o->deps, D);
+        block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
     }
     run_flush(s, o, &a, D);
@@ -550,7 +550,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             moved(s, o, &a, p, D);
             if (EN) esum_particle(s, &e, p, D, 0);
         }
-        block_update(s, b0, nb, o->deps, D);
+        block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
     }
     run_flush(s, o, &a, D);

@@ -38,7 +38,7 @@
 static inline void energy_slice(mpm_sim *s, int tid, int ang)
 {
     const mpm_particles *P = &s->P;
-    int dim = s->dim, apic = s->transfer == MPM_TRANSFER_APIC;
+    int dim = s->dim, apic = s->transfer == MPM_TRANSFER_APIC, gen = s->general;
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     double ek = 0, es = 0, ep = 0, mom[3] = {0, 0, 0}, ms = 0, L[3] = {0, 0, 0};
@@ -54,7 +54,10 @@ static inline void energy_slice(mpm_sim *s, int tid, int ang)
             if (apic) mpm_angmom_add_affine(P, dim, p, m, L);
         }
         ek += 0.5 * m * v2;
-        es += 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
+        if (gen) /* the model's stored energy (the in-pass sums: the same) */
+            es += mpm_model_energy(s, p);
+        else
+            es += 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
         ms += m;
     }
     mpm_thread_out *o = &s->tout[tid];

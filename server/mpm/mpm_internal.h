@@ -35,6 +35,8 @@
 #include <stdatomic.h>
 #include <stdlib.h>
 
+typedef struct mpm_model_ops mpm_model_ops;
+
 /* Stress and strain components stored per dimension: 1D xx; 2D plane strain
  * xx yy zz xy; 3D xx yy zz xy yz xz.  Component c is the Voigt index c.  In
  * 2D plane strain eps_zz is identically zero and nothing reads it, so
@@ -59,8 +61,14 @@ typedef struct {
      * the velocity before the nodal update).  Sorted with the particles. */
     double *F[9];
     double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL) */
-    uint16_t *mat;           /* material index */
-    uint32_t *id;            /* creation index (particles are kept sorted by cell) */
+    /* Model state, allocated only when a material's model declares it
+     * (mpm_model_ops.needs), else NULL; sorted with the particles:
+     * epsp the equivalent plastic strain, yld 1.0 when the particle flowed
+     * plastically in its last update (0.0 otherwise), vol0 the initial
+     * volume (volume update DET_F). */
+    double *epsp, *yld, *vol0;
+    uint16_t *mat; /* material index */
+    uint32_t *id;  /* creation index (particles are kept sorted by cell) */
     /* APIC only (NULL with FLIP): affine matrix B_ab = sum_i S_ip v_ia
      * (x_i - x_p)_b at B[3a + b] (a, b < dim; the others NULL) */
     double *B[9];
@@ -69,6 +77,9 @@ typedef struct {
 /* Per-material constants for the constitutive models. */
 typedef struct {
     double E, nu, rho, lambda, mu, c; /* c: p-wave speed */
+    double K;                         /* bulk modulus lambda + 2 mu / 3 */
+    double sy0, H;                    /* VON_MISES: yield stress, hardening modulus */
+    const mpm_model_ops *ops;         /* the material's model */
 } mpm_mat_params;
 
 /* One grid's worth of scatter targets (the main grid, or a thread's private
@@ -100,13 +111,19 @@ void mpm_bspline_axis_init(mpm_bspline_axis *ax, int p, int n);
 void mpm_bspline_span(int p, int n, int c, double C[4][4]);
 
 typedef struct mpm_kernels mpm_kernels;
-typedef struct mpm_model_ops mpm_model_ops;
 
 /* Per-thread results of a particle pass, padded to a cache line. */
 typedef struct {
     double vmax2;            /* max |v|^2 seen */
     size_t bad;              /* first particle that left the grid or blew up */
-    double *deps[6];         /* MPM_BLOCK strain increments (scratch) */
+    double *deps[9];         /* MPM_BLOCK strain increments (scratch): the
+                              * Voigt components of dt sym(L); 2D: deps[2]
+                              * holds the spin dt W_xy = dt (L_xy - L_yx)/2
+                              * (eps_zz is 0 in plane strain); 3D with
+                              * mpm_sim.spin3: deps[6..8] the spins dt W_xy,
+                              * dt W_yz, dt W_xz (mpm_pass.h strain_of()) */
+    double wplast;           /* plastic work of the step's updates so far
+                              * (summed into mpm_sim.plastic_work after it) */
     void *wblk;              /* MPM_BLOCK per-axis weights (mpm_kernels_scratch bytes) */
     int blo[3], bhi[3];      /* padded nodes touched by the slice's supports
                               * (inclusive; empty: blo > bhi) */
@@ -210,6 +227,16 @@ struct mpm_sim {
     mpm_mat_params *mats;
     const mpm_model_ops *model;
     double cmax; /* largest p-wave speed */
+    /* general: the block update is mpm_model_block() (a model other than
+     * linear elasticity, or a volume update other than STRAIN_INCREMENT),
+     * chosen once per job; 0 keeps the linear-elastic path of every earlier
+     * release.  spin3: 3D strain_of() also writes the spins (deps[6..8]).
+     * f_block: the block update carries F (F <- (I + dt L) F; CPDI's passes
+     * do it themselves).  mixed: the materials' models differ (dispatch by
+     * runs of particles of one model). */
+    int general, spin3, f_block, mixed;
+    mpm_volume_update volmode;
+    double plastic_work; /* cumulative sigma : d eps_p V (thread order) */
 
     /* time */
     double dt_fixed; /* > 0: given */
@@ -331,21 +358,85 @@ int mpm_needs_F(const mpm_case *c);
  * MPM_EINVAL. */
 int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
 
-/* Constitutive model interface.  update() receives the strain increments of
- * particles [p0, p0 + n) in block-local arrays deps[c][0..n) and updates the
- * particles' stress and strain.  A new model plugs in here without touching
- * the kernels. */
+/* Constitutive model interface.  A model declares the per-particle state it
+ * needs (needs: MPM_NEED_*), allocated at creation only when a material of
+ * the case uses the model, and provides:
+ *   update  (linear elasticity only: the path of every earlier release,
+ *           called directly when every material is linear elastic and the
+ *           volume update is the default) the strain increments of
+ *           particles [p0, p0 + n) in block-local arrays deps[c][0..n)
+ *           update the particles' stress and strain;
+ *   block   the general update of block slots [i0, i1) of the block
+ *           starting at particle b0 (particle b0 + i, increments
+ *           b->deps[c][i], spins as in mpm_thread_out.deps); F is already
+ *           updated (mpm_model_block());
+ *   point   (rate-form models) the stress-point update: stress sig (Voigt,
+ *           6 entries, tensor shears; 1D: sig[0] only, uniaxial stress;
+ *           2D: plane strain, sig[2] = sigma_zz, deps[2] = 0), the strain
+ *           increment deps, and the state epsp (equivalent plastic strain)
+ *           and *yielded (set 1 when it flowed, else 0); adds the plastic
+ *           work density sigma : d eps_p to *dwp.  Returns 0 (or a negative
+ *           MPM_E* code, reserved for integrators that can fail).
+ *           mpm_model_rate_block() applies the Jaumann rotation and calls it
+ *           per particle: a Drucker-Prager or Mohr-Coulomb integrator plugs
+ *           in by writing this one function;
+ *   energy  the stored (elastic) energy of particle p (not a density). */
+enum { MPM_NEED_F = 1, MPM_NEED_SPIN = 2, MPM_NEED_PLASTIC = 4 };
+
+typedef struct {
+    const mpm_mat_params *mats;
+    mpm_particles *P;
+    double *const *deps; /* mpm_thread_out.deps */
+    int dim;
+    double wp; /* plastic work added (sum of sigma : d eps_p V) */
+} mpm_model_blk;
+
 struct mpm_model_ops {
     const char *name;
+    unsigned needs;
     void (*update[3])(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
                       double *const deps[6]);
+    void (*block)(mpm_model_blk *b, size_t b0, size_t i0, size_t i1);
+    int (*point)(const mpm_mat_params *mp, int dim, double sig[6], const double deps[6],
+                 double *epsp, int *yielded, double *dwp);
+    double (*energy)(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p);
 };
+
+/* The general block update (mpm_sim.general): F (f_block), the models
+ * (one call per run of particles of one model), then the volume
+ * (volmode); the plastic work into o->wplast.  deps: o->deps. */
+void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb);
+/* Stored energy of particle p by its material's model (the general path;
+ * linear elasticity: 1/2 sigma : eps V, the bits of the default path). */
+static inline double mpm_model_energy(const mpm_sim *s, size_t p);
+/* Jaumann rotation of a stress (Voigt, tensor shears) by the spin
+ * increment w = dt W (w[0] = W_xy, w[1] = W_yz, w[2] = W_xz):
+ * sig <- sig + w sig - sig w (dim 2: w[0] only, sigma_zz unchanged). */
+void mpm_jaumann(double sig[6], const double w[3], int dim);
+/* det F of particle p (2D: F_zz = 1). */
+double mpm_det_f(const mpm_particles *P, int dim, size_t p);
+/* Neo-Hookean Cauchy stress of F (3x3; Voigt, tensor shears) and, W not
+ * NULL, the stored energy per reference volume W(F). */
+void mpm_neo_hookean_stress(const mpm_mat_params *mp, const double F[3][3], double sig[6],
+                            double *W);
+/* The J2 point update (mpm_model_ops.point of VON_MISES): closed-form
+ * radial return with linear isotropic hardening. */
+int mpm_j2_point(const mpm_mat_params *mp, int dim, double sig[6], const double deps[6],
+                 double *epsp, int *yielded, double *dwp);
+/* Elastic stored energy density 1/2 sigma : C^-1 : sigma (1D: sigma^2/2E). */
+double mpm_elastic_stored(const mpm_mat_params *mp, const double sig[6], int dim);
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
 /* Fills derived constants; returns 0 or MPM_EINVAL with err naming
  * materials[i]'s field and the limit. */
 int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,
                      mpm_error *err);
+
+static inline double mpm_model_energy(const mpm_sim *s, size_t p)
+{
+    const mpm_mat_params *mp = &s->mats[s->P.mat[p]];
+    return mp->ops->energy(mp, &s->P, s->dim, p);
+}
 
 /* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
  * eps_zz array, its term is zero) */

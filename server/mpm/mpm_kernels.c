@@ -461,7 +461,7 @@ phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS)
  * (DV) the velocity increment sum S f/m.  Phantom
  * nodes in the support go through phantom_grad(). */
 INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
-                   double *const deps[6], size_t i, int DS, int DX, double *const qx[3],
+                   double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
                    double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3])
 {
     const double *restrict minv = s->minv;
@@ -610,7 +610,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
             weights(s, b0 + i, D, NS, BS, &Wb[i]);
             gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL);
         }
-        block_update(s, b0, nb, o->deps, D);
+        block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
         for (size_t i = 0; i < nb; i++) scatter_force(s, gb, &Wb[i], b0 + i, D, NS);
     }
@@ -703,7 +703,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             if (EN) esum_particle(s, &e, p, D, AP);
             box_add(s, &bc, o, &a, xn, D, NS, BS);
         }
-        block_update(s, b0, nb, o->deps, D);
+        block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
     }
     run_flush(s, o, &a, D);
@@ -763,7 +763,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             if (EN) esum_particle(s, &e, p, D, AP);
             box_add(s, &bc, o, &a, xn, D, NS, BS);
         }
-        block_update(s, b0, nb, o->deps, D);
+        block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
     }
     run_flush(s, o, &a, D);

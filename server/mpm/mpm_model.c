@@ -1,18 +1,36 @@
 /*
- * mpm_model.c - constitutive models behind the mpm_model_ops interface.
+ * mpm_model.c - constitutive models behind the mpm_model_ops interface, and
+ * the general block update that carries F, dispatches by material and
+ * updates the volume.
  *
  * The kernels compute strain increments for a block of particles (Eq. 29,
- * Fig. 7) and hand them to the model's update for the job's dimension; the
- * model adds them to the particle strain and updates the stress.  Today the
- * one model is small-strain, incremental linear elasticity: uniaxial in 1D,
- * plane strain in 2D (sigma_zz kept for the mean pressure), isotropic in 3D.
- * An elastoplastic model with Sloan-style substepping plugs in as another
- * mpm_model_ops without touching the kernels.
+ * Fig. 7) and hand them to the model's update for the job's dimension.
+ * Linear elasticity (small-strain, incremental: uniaxial in 1D, plane
+ * strain in 2D with sigma_zz kept for the mean pressure, isotropic in 3D)
+ * keeps its own direct path, the one of every earlier release, when it is
+ * the case's only model and the volume update is the default.  Every other
+ * job goes through mpm_model_block(): F <- (I + dt L) F when a model or the
+ * volume update reads F, then each run of particles of one model through
+ * that model's block function, then the volume (strain increment, det F,
+ * or constant).  The models:
+ *   NEO_HOOKEAN  compressible hyperelastic from F (not rate form),
+ *                sigma = mu/J (b - I) + lambda ln J / J I,
+ *                W = mu/2 (tr b - 3) - mu ln J + lambda/2 (ln J)^2;
+ *                2D plane strain (F_zz = 1), 1D F = diag(F_xx, 1, 1)
+ *                (lateral stretches fixed; 1D has nu = 0, so lambda = 0,
+ *                mu = E/2 and the small-strain limit is sigma = E eps).
+ *   VON_MISES    J2 plasticity, linear isotropic hardening, closed-form
+ *                radial return, after the Jaumann rotation of the stress;
+ *                1D uniaxial stress with the same yield rule.
+ * The rate-form models share mpm_model_rate_block(): Jaumann rotation,
+ * then the model's point() (a Drucker-Prager or Mohr-Coulomb integrator
+ * plugs in as a point function).
  */
 #include "mpm_internal.h"
 
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 static void elastic_1d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
                        double *const deps[6])
@@ -77,42 +95,386 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
     }
 }
 
-static const mpm_model_ops linear_elastic = {"linear_elastic",
-                                             {elastic_1d, elastic_2d, elastic_3d}};
+static double elastic_energy(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p)
+{
+    (void)mp;
+    return 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
+}
+
+/* Block slots [i0, i1) of deps as arrays from slot i0. */
+static void shift(double *const *deps, size_t i0, double *d[6])
+{
+    for (int c = 0; c < 6; c++) d[c] = deps[c] ? deps[c] + i0 : NULL;
+}
+
+static void elastic_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    double *d[6];
+    shift(b->deps, i0, d);
+    if (b->dim == 1)
+        elastic_1d(b->mats, b->P, b0 + i0, i1 - i0, d);
+    else if (b->dim == 2)
+        elastic_2d(b->mats, b->P, b0 + i0, i1 - i0, d);
+    else
+        elastic_3d(b->mats, b->P, b0 + i0, i1 - i0, d);
+}
+
+/* ---- kinematics ---- */
+
+void mpm_jaumann(double sig[6], const double w[3], int dim)
+{
+    if (dim == 1) return;
+    if (dim == 2) {
+        double wxy = w[0], xx = sig[0], yy = sig[1], xy = sig[3];
+        /* (W s - s W) with W = [[0, w], [-w, 0]] */
+        sig[0] = xx + 2.0 * wxy * xy;
+        sig[1] = yy - 2.0 * wxy * xy;
+        sig[3] = xy + wxy * (yy - xx);
+        return;
+    }
+    double S[3][3] = {{sig[0], sig[3], sig[5]}, {sig[3], sig[1], sig[4]}, {sig[5], sig[4], sig[2]}};
+    double W[3][3] = {{0, w[0], w[2]}, {-w[0], 0, w[1]}, {-w[2], -w[1], 0}};
+    double R[3][3];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double a = 0;
+            for (int k = 0; k < 3; k++) a += W[i][k] * S[k][j] - S[i][k] * W[k][j];
+            R[i][j] = S[i][j] + a;
+        }
+    sig[0] = R[0][0];
+    sig[1] = R[1][1];
+    sig[2] = R[2][2];
+    sig[3] = R[0][1];
+    sig[4] = R[1][2];
+    sig[5] = R[0][2];
+}
+
+/* dt L of block slot i from the increments and spins (mpm_pass.h). */
+static void dtl_of(double *const *deps, size_t i, int D, double A[3][3])
+{
+    memset(A, 0, 9 * sizeof(double));
+    A[0][0] = deps[0][i];
+    if (D == 2) {
+        double w = deps[2][i], e = deps[3][i];
+        A[1][1] = deps[1][i];
+        A[0][1] = e + w;
+        A[1][0] = e - w;
+    } else if (D == 3) {
+        A[1][1] = deps[1][i];
+        A[2][2] = deps[2][i];
+        A[0][1] = deps[3][i] + deps[6][i];
+        A[1][0] = deps[3][i] - deps[6][i];
+        A[1][2] = deps[4][i] + deps[7][i];
+        A[2][1] = deps[4][i] - deps[7][i];
+        A[0][2] = deps[5][i] + deps[8][i];
+        A[2][0] = deps[5][i] - deps[8][i];
+    }
+}
+
+/* F <- (I + dt L) F for the block's particles. */
+static void f_block(mpm_sim *s, double *const *deps, size_t b0, size_t nb, int D)
+{
+    double *const *F = s->P.F;
+    for (size_t i = 0; i < nb; i++) {
+        size_t p = b0 + i;
+        double A[3][3], Fo[3][3];
+        dtl_of(deps, i, D, A);
+        for (int a = 0; a < D; a++)
+            for (int b = 0; b < D; b++) Fo[a][b] = F[a * D + b][p];
+        for (int a = 0; a < D; a++)
+            for (int b = 0; b < D; b++) {
+                double v = 0;
+                for (int k = 0; k < D; k++) v += A[a][k] * Fo[k][b];
+                F[a * D + b][p] = Fo[a][b] + v;
+            }
+    }
+}
+
+/* F of particle p as a 3x3 (2D: F_zz = 1; 1D: F_yy = F_zz = 1); returns
+ * det F. */
+static double f_of(const mpm_particles *P, int D, size_t p, double F[3][3])
+{
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) F[a][b] = a < D && b < D ? P->F[a * D + b][p] : (a == b);
+    return F[0][0] * (F[1][1] * F[2][2] - F[2][1] * F[1][2]) -
+           F[0][1] * (F[1][0] * F[2][2] - F[2][0] * F[1][2]) +
+           F[0][2] * (F[1][0] * F[2][1] - F[2][0] * F[1][1]);
+}
+
+double mpm_det_f(const mpm_particles *P, int D, size_t p)
+{
+    double F[3][3];
+    return f_of(P, D, p, F);
+}
+
+/* ---- Neo-Hookean ---- */
+
+void mpm_neo_hookean_stress(const mpm_mat_params *mp, const double Fm[3][3], double sig[6],
+                            double *W)
+{
+    double b[3][3];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double a = 0;
+            for (int k = 0; k < 3; k++) a += Fm[i][k] * Fm[j][k];
+            b[i][j] = a;
+        }
+    double J = Fm[0][0] * (Fm[1][1] * Fm[2][2] - Fm[2][1] * Fm[1][2]) -
+               Fm[0][1] * (Fm[1][0] * Fm[2][2] - Fm[2][0] * Fm[1][2]) +
+               Fm[0][2] * (Fm[1][0] * Fm[2][1] - Fm[2][0] * Fm[1][1]);
+    double lnJ = log(J), mj = mp->mu / J, vol = mp->lambda * lnJ / J;
+    sig[0] = mj * (b[0][0] - 1.0) + vol;
+    sig[1] = mj * (b[1][1] - 1.0) + vol;
+    sig[2] = mj * (b[2][2] - 1.0) + vol;
+    sig[3] = mj * b[0][1];
+    sig[4] = mj * b[1][2];
+    sig[5] = mj * b[0][2];
+    if (W)
+        *W = 0.5 * mp->mu * (b[0][0] + b[1][1] + b[2][2] - 3.0) - mp->mu * lnJ +
+             0.5 * mp->lambda * lnJ * lnJ;
+}
+
+static void nh_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    mpm_particles *P = b->P;
+    int D = b->dim, nc = MPM_NCOMP(D);
+    for (size_t i = i0; i < i1; i++) {
+        size_t p = b0 + i;
+        const mpm_mat_params *mp = &b->mats[P->mat[p]];
+        double F[3][3], sig[6];
+        f_of(P, D, p, F);
+        mpm_neo_hookean_stress(mp, F, sig, NULL);
+        for (int c = 0; c < nc; c++) {
+            P->sig[c][p] = sig[c];
+            /* the small-strain record, as linear elasticity keeps it (2D:
+             * deps[2] is the spin, eps_zz has no array) */
+            if (P->eps[c]) P->eps[c][p] += b->deps[c][i];
+        }
+    }
+}
+
+/* W(F) V0, with V0 = V / det F (the volume update need not be det F) */
+static double nh_energy(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p)
+{
+    double F[3][3], sig[6], W;
+    double J = f_of(P, dim, p, F);
+    mpm_neo_hookean_stress(mp, F, sig, &W);
+    return W * P->vol[p] / J;
+}
+
+/* ---- rate-form models: Jaumann rotation, then the point update ---- */
+
+static void rate_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    mpm_particles *P = b->P;
+    int D = b->dim, nc = MPM_NCOMP(D);
+    double *const *deps = b->deps;
+    for (size_t i = i0; i < i1; i++) {
+        size_t p = b0 + i;
+        const mpm_mat_params *mp = &b->mats[P->mat[p]];
+        double sig[6] = {0, 0, 0, 0, 0, 0}, de[6] = {0, 0, 0, 0, 0, 0}, w[3] = {0, 0, 0};
+        for (int c = 0; c < nc; c++) sig[c] = P->sig[c][p];
+        if (D == 2) {
+            w[0] = deps[2][i];
+            de[0] = deps[0][i];
+            de[1] = deps[1][i];
+            de[3] = deps[3][i];
+        } else {
+            for (int c = 0; c < nc; c++) de[c] = deps[c][i];
+            if (D == 3)
+                for (int k = 0; k < 3; k++) w[k] = deps[6 + k][i];
+        }
+        mpm_jaumann(sig, w, D);
+        double ep = P->epsp ? P->epsp[p] : 0.0, dwp = 0;
+        int y = 0;
+        mp->ops->point(mp, D, sig, de, &ep, &y, &dwp);
+        for (int c = 0; c < nc; c++) {
+            P->sig[c][p] = sig[c];
+            if (P->eps[c]) P->eps[c][p] += de[c];
+        }
+        if (P->epsp) {
+            P->epsp[p] = ep;
+            P->yld[p] = y ? 1.0 : 0.0;
+        }
+        b->wp += dwp * P->vol[p];
+    }
+}
+
+/* ---- von Mises (J2) ---- */
+
+int mpm_j2_point(const mpm_mat_params *mp, int dim, double sig[6], const double de[6], double *epsp,
+                 int *yielded, double *dwp)
+{
+    double sy = mp->sy0 + mp->H * *epsp;
+    *yielded = 0;
+    if (dim == 1) { /* uniaxial stress */
+        double st = sig[0] + mp->E * de[0], f = fabs(st) - sy;
+        if (f > 0) {
+            double dg = f / (mp->E + mp->H), sg = st > 0 ? 1.0 : -1.0;
+            st -= sg * mp->E * dg;
+            *epsp += dg;
+            *dwp += fabs(st) * dg;
+            *yielded = 1;
+        }
+        sig[0] = st;
+        return 0;
+    }
+    /* elastic trial (plane strain: de_zz = 0, sigma_zz follows) */
+    double lt = mp->lambda * (de[0] + de[1] + de[2]), m2 = 2.0 * mp->mu;
+    for (int c = 0; c < 3; c++) sig[c] += lt + m2 * de[c];
+    for (int c = 3; c < 6; c++) sig[c] += m2 * de[c];
+    double pm = (sig[0] + sig[1] + sig[2]) / 3.0, s[6];
+    for (int c = 0; c < 6; c++) s[c] = c < 3 ? sig[c] - pm : sig[c];
+    double ss =
+        s[0] * s[0] + s[1] * s[1] + s[2] * s[2] + 2.0 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]);
+    double q = sqrt(1.5 * ss), f = q - sy;
+    if (f > 0) {
+        double dg = f / (3.0 * mp->mu + mp->H), k = 1.0 - 3.0 * mp->mu * dg / q;
+        for (int c = 0; c < 6; c++) sig[c] = c < 3 ? pm + k * s[c] : k * s[c];
+        *epsp += dg;
+        *dwp += (q - 3.0 * mp->mu * dg) * dg; /* sigma : d eps_p = q_new dg */
+        *yielded = 1;
+    }
+    return 0;
+}
+
+/* 1/2 sigma : C^-1 : sigma V: s:s/(4 mu) + (tr sigma)^2/(18 K) per volume
+ * (1D: sigma^2/(2E)); plane strain with sigma_zz tracked uses the 3D form */
+double mpm_elastic_stored(const mpm_mat_params *mp, const double sig[6], int dim)
+{
+    if (dim == 1) return 0.5 * sig[0] * sig[0] / mp->E;
+    double tr = sig[0] + sig[1] + sig[2], pm = tr / 3.0;
+    double ss = (sig[0] - pm) * (sig[0] - pm) + (sig[1] - pm) * (sig[1] - pm) +
+                (sig[2] - pm) * (sig[2] - pm) +
+                2.0 * (sig[3] * sig[3] + sig[4] * sig[4] + sig[5] * sig[5]);
+    return ss / (4.0 * mp->mu) + tr * tr / (18.0 * mp->K);
+}
+
+static double j2_energy(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p)
+{
+    double sig[6] = {0, 0, 0, 0, 0, 0};
+    for (int c = 0; c < MPM_NCOMP(dim); c++) sig[c] = P->sig[c][p];
+    return mpm_elastic_stored(mp, sig, dim) * P->vol[p];
+}
+
+static const mpm_model_ops linear_elastic = {
+    "linear_elastic", 0, {elastic_1d, elastic_2d, elastic_3d}, elastic_block, NULL, elastic_energy};
+static const mpm_model_ops neo_hookean = {"neo_hookean", MPM_NEED_F, {NULL, NULL, NULL},
+                                          nh_block,      NULL,       nh_energy};
+static const mpm_model_ops von_mises = {"von_mises",        MPM_NEED_SPIN | MPM_NEED_PLASTIC,
+                                        {NULL, NULL, NULL}, rate_block,
+                                        mpm_j2_point,       j2_energy};
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
 {
-    return kind == MPM_MODEL_LINEAR_ELASTIC ? &linear_elastic : NULL;
+    switch (kind) {
+    case MPM_MODEL_LINEAR_ELASTIC: return &linear_elastic;
+    case MPM_MODEL_NEO_HOOKEAN: return &neo_hookean;
+    case MPM_MODEL_VON_MISES: return &von_mises;
+    default: return NULL; /* DRUCKER_PRAGER, MOHR_COULOMB: not yet */
+    }
+}
+
+/* ---- the general block update ---- */
+
+void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
+{
+    int D = s->dim;
+    double *const *deps = o->deps;
+    mpm_particles *P = &s->P;
+    if (s->f_block) f_block(s, deps, b0, nb, D);
+    mpm_model_blk b = {s->mats, P, deps, D, 0.0};
+    if (!s->mixed) {
+        s->model->block(&b, b0, 0, nb);
+    } else { /* runs of particles of one model */
+        size_t i = 0;
+        while (i < nb) {
+            const mpm_model_ops *m = s->mats[P->mat[b0 + i]].ops;
+            size_t j = i + 1;
+            while (j < nb && s->mats[P->mat[b0 + j]].ops == m) j++;
+            m->block(&b, b0, i, j);
+            i = j;
+        }
+    }
+    o->wplast += b.wp;
+    double *restrict vol = P->vol + b0;
+    if (s->volmode == MPM_VOLUME_STRAIN_INCREMENT) {
+        for (size_t i = 0; i < nb; i++) {
+            double tr = deps[0][i];
+            if (D == 2) tr += deps[1][i];
+            if (D > 2) tr += deps[1][i] + deps[2][i];
+            vol[i] *= 1.0 + tr;
+        }
+    } else if (s->volmode == MPM_VOLUME_DET_F) {
+        for (size_t i = 0; i < nb; i++) vol[i] = P->vol0[b0 + i] * mpm_det_f(P, D, b0 + i);
+    } /* CONSTANT: never changes */
+}
+
+#define BAD(field, ...)                                       \
+    (snprintf(path, sizeof path, "materials[%zu]." field, i), \
+     mpm_fail(err, MPM_EINVAL, path, __VA_ARGS__))
+
+/* The Drucker-Prager / Mohr-Coulomb parameters (validated for those models
+ * although they are refused for now). */
+static int check_frictional(const mpm_material_desc *d, size_t i, mpm_error *err)
+{
+    char path[64];
+    double phi = d->friction_angle, psi = d->dilatancy_angle;
+    if (!(phi > 0 && phi < 90))
+        return BAD("friction_angle", "must be in (0, 90) degrees (got %g)", phi);
+    if (!(psi >= 0 && psi <= phi))
+        return BAD("dilatancy_angle", "must be in [0, friction_angle = %g] degrees (got %g)", phi,
+                   psi);
+    if (!(d->cohesion >= 0) || !isfinite(d->cohesion))
+        return BAD("cohesion", "must be finite and >= 0 (got %g)", d->cohesion);
+    if (!(d->tension_cutoff >= 0) || !isfinite(d->tension_cutoff))
+        return BAD("tension_cutoff", "must be finite and >= 0 (got %g)", d->tension_cutoff);
+    if (d->mc_match != MPM_MC_COMPRESSION && d->mc_match != MPM_MC_EXTENSION &&
+        d->mc_match != MPM_MC_PLANE_STRAIN)
+        return BAD("mc_match", "unknown value %d (COMPRESSION, EXTENSION or PLANE_STRAIN)",
+                   (int)d->mc_match);
+    if (!(d->substep_tolerance >= 0 && d->substep_tolerance < 1))
+        return BAD("substep_tolerance", "must be 0 (the default) or in (0, 1) (got %g)",
+                   d->substep_tolerance);
+    return 0;
 }
 
 int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,
                      mpm_error *err)
 {
     char path[64];
-    if (!mpm_model_get(d->model)) {
-        snprintf(path, sizeof path, "materials[%zu].model", i);
-        return mpm_fail(err, MPM_EINVAL, path, "unknown model %d", (int)d->model);
+    int rc;
+    if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
+        if ((rc = check_frictional(d, i, err))) return rc;
+        return BAD("model", "%s is not yet implemented (LINEAR_ELASTIC, NEO_HOOKEAN or VON_MISES)",
+                   d->model == MPM_MODEL_DRUCKER_PRAGER ? "DRUCKER_PRAGER" : "MOHR_COULOMB");
     }
-    if (!(d->youngs_modulus > 0) || !isfinite(d->youngs_modulus)) {
-        snprintf(path, sizeof path, "materials[%zu].youngs_modulus", i);
-        return mpm_fail(err, MPM_EINVAL, path, "must be finite and > 0 (got %g)",
-                        d->youngs_modulus);
-    }
-    if (!(d->density > 0) || !isfinite(d->density)) {
-        snprintf(path, sizeof path, "materials[%zu].density", i);
-        return mpm_fail(err, MPM_EINVAL, path, "must be finite and > 0 (got %g)", d->density);
-    }
+    if (!mpm_model_get(d->model)) return BAD("model", "unknown model %d", (int)d->model);
+    if (!(d->youngs_modulus > 0) || !isfinite(d->youngs_modulus))
+        return BAD("youngs_modulus", "must be finite and > 0 (got %g)", d->youngs_modulus);
+    if (!(d->density > 0) || !isfinite(d->density))
+        return BAD("density", "must be finite and > 0 (got %g)", d->density);
     double nu = dim == 1 ? 0.0 : d->poisson_ratio;
-    if (dim > 1 && !(nu > -1.0 && nu < 0.5)) {
-        snprintf(path, sizeof path, "materials[%zu].poisson_ratio", i);
-        return mpm_fail(err, MPM_EINVAL, path, "must be in (-1, 0.5) (got %g)", d->poisson_ratio);
+    if (dim > 1 && !(nu > -1.0 && nu < 0.5))
+        return BAD("poisson_ratio", "must be in (-1, 0.5) (got %g)", d->poisson_ratio);
+    if (d->model == MPM_MODEL_VON_MISES) {
+        if (!(d->yield_stress > 0) || !isfinite(d->yield_stress))
+            return BAD("yield_stress", "must be finite and > 0 (got %g)", d->yield_stress);
+        if (!(d->hardening_modulus >= 0) || !isfinite(d->hardening_modulus))
+            return BAD("hardening_modulus", "must be finite and >= 0 (got %g)",
+                       d->hardening_modulus);
     }
+    memset(out, 0, sizeof *out);
     out->E = d->youngs_modulus;
     out->nu = nu;
     out->rho = d->density;
     out->lambda = out->E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
     out->mu = out->E / (2.0 * (1.0 + nu));
+    out->K = out->lambda + 2.0 * out->mu / 3.0;
     out->c = mpm_material_wave_speed(d, dim);
+    out->sy0 = d->yield_stress;
+    out->H = d->hardening_modulus;
+    out->ops = mpm_model_get(d->model);
     return 0;
 }
 

@@ -90,31 +90,48 @@ INLINE void run_flush(const mpm_sim *s, mpm_thread_out *o, rowrun *a, int D)
 }
 
 /* The strain increment of L into block slot i (Eq. 29: its symmetric part
- * times dt). */
-INLINE void strain_of(const mpm_sim *s, const double L[3][3], double *const deps[6], size_t i,
+ * times dt), with the spin dt (L_ab - L_ba)/2 for the models that rotate
+ * the stress or carry F: 2D in deps[2] (always: the slot plane strain's
+ * eps_zz = 0 used to take), 3D in deps[6..8] when s->spin3 (a branch
+ * taken the same way for a whole job); 1D has none. */
+INLINE void strain_of(const mpm_sim *s, const double L[3][3], double *const deps[9], size_t i,
                       int D)
 {
     double dt = s->dt;
     deps[0][i] = L[0][0] * dt;
     if (D > 1) {
         deps[1][i] = L[1][1] * dt;
-        deps[2][i] = D > 2 ? L[2][2] * dt : 0.0;
+        deps[2][i] = D > 2 ? L[2][2] * dt : 0.5 * (L[0][1] - L[1][0]) * dt;
         deps[3][i] = 0.5 * (L[0][1] + L[1][0]) * dt;
     }
     if (D > 2) {
         deps[4][i] = 0.5 * (L[1][2] + L[2][1]) * dt;
         deps[5][i] = 0.5 * (L[0][2] + L[2][0]) * dt;
+        if (__builtin_expect(s->spin3, 0)) {
+            deps[6][i] = 0.5 * (L[0][1] - L[1][0]) * dt;
+            deps[7][i] = 0.5 * (L[1][2] - L[2][1]) * dt;
+            deps[8][i] = 0.5 * (L[0][2] - L[2][0]) * dt;
+        }
     }
 }
 
-/* Constitutive update of a block, then the volume follows the strain. */
-INLINE void block_update(mpm_sim *s, size_t b0, size_t nb, double *const deps[6], int D)
+/* Constitutive update of a block, then the volume follows the strain
+ * (2D: eps_zz = 0, deps[2] is the spin).  Any other model or volume update
+ * goes through mpm_model_block(), chosen once per job (s->general, one
+ * test per block). */
+INLINE void block_update(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb, int D)
 {
+    double *const *deps = o->deps;
+    if (__builtin_expect(s->general, 0)) {
+        mpm_model_block(s, o, b0, nb);
+        return;
+    }
     s->model->update[D - 1](s->mats, &s->P, b0, nb, deps);
     double *restrict vol = s->P.vol + b0;
     for (size_t i = 0; i < nb; i++) {
         double tr = deps[0][i];
-        if (D > 1) tr += deps[1][i] + deps[2][i];
+        if (D == 2) tr += deps[1][i];
+        if (D > 2) tr += deps[1][i] + deps[2][i];
         vol[i] *= 1.0 + tr;
     }
 }
@@ -158,6 +175,10 @@ INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP)
 INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
 {
     const mpm_particles *P = &s->P;
+    if (__builtin_expect(s->general, 0)) {
+        for (size_t p = b0; p < b0 + nb; p++) e->es += mpm_model_energy(s, p);
+        return;
+    }
     for (size_t p = b0; p < b0 + nb; p++) e->es += 0.5 * mpm_strain_density(P, D, p) * P->vol[p];
 }
 

@@ -104,14 +104,29 @@ static void free_particles(mpm_particles *P)
     for (int c = 0; c < 9; c++) free(P->B[c]);
     free(P->m);
     free(P->vol);
+    free(P->epsp);
+    free(P->yld);
+    free(P->vol0);
     free(P->mat);
     free(P->id);
     memset(P, 0, sizeof *P);
 }
 
+/* What the case's models declare (mpm_model_ops.needs, OR-ed). */
+static unsigned model_needs(const mpm_case *c)
+{
+    unsigned n = 0;
+    for (size_t i = 0; i < c->n_materials; i++) {
+        const mpm_model_ops *m = mpm_model_get(c->materials[i].model);
+        if (m) n |= m->needs;
+    }
+    return n;
+}
+
 int mpm_needs_F(const mpm_case *c)
 {
-    return c->method == MPM_METHOD_CPDI;
+    return c->method == MPM_METHOD_CPDI || c->volume_update == MPM_VOLUME_DET_F ||
+           (model_needs(c) & MPM_NEED_F);
 }
 
 /* lp: the half-widths (GMPM, CPDI); F: the deformation gradient, set to I;
@@ -397,7 +412,14 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     for (size_t i = 0; i < s->nmat; i++) {
         if (mpm_model_params(&c->materials[i], dim, i, &s->mats[i], err)) goto fail;
         if (s->mats[i].c > s->cmax) s->cmax = s->mats[i].c;
+        if (s->mats[i].ops != s->model) s->mixed = 1;
     }
+    /* the block update's path, once per job (mpm_pass.h block_update()) */
+    unsigned needs = model_needs(c);
+    s->volmode = c->volume_update;
+    s->general = s->mixed || !s->model->update[0] || s->volmode != MPM_VOLUME_STRAIN_INCREMENT;
+    s->f_block = mpm_needs_F(c) && c->method != MPM_METHOD_CPDI;
+    s->spin3 = dim == 3 && ((needs & MPM_NEED_SPIN) || s->f_block);
 
     int musl = c->update == MPM_MUSL;
     s->transfer = c->transfer;
@@ -405,7 +427,12 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
                         c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
                         mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC))
         goto nomem;
+    if ((needs & MPM_NEED_PLASTIC) &&
+        (!(s->P.epsp = mpm_dalloc(np)) || !(s->P.yld = mpm_dalloc(np))))
+        goto nomem;
+    if (s->volmode == MPM_VOLUME_DET_F && !(s->P.vol0 = mpm_dalloc(np))) goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
+    if (s->P.vol0) memcpy(s->P.vol0, s->P.vol, np * sizeof *s->P.vol0);
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
     s->k = select_kernels(s);
@@ -426,7 +453,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
     for (int t = 0; t < s->nthreads; t++)
-        for (int cc = 0; cc < 6; cc++)
+        for (int cc = 0; cc < 9; cc++)
             if (!(s->tout[t].deps[cc] = line_alloc(MPM_BLOCK * sizeof(double)))) goto nomem;
     for (int t = 0; t < s->nthreads; t++)
         if (!(s->tout[t].wblk =
@@ -478,7 +505,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->tbuf);
     if (s->tout)
         for (int t = 0; t < s->nthreads; t++)
-            for (int c = 0; c < 6; c++) free(s->tout[t].deps[c]);
+            for (int c = 0; c < 9; c++) free(s->tout[t].deps[c]);
     if (s->tout)
         for (int t = 0; t < s->nthreads; t++) {
             free(s->tout[t].wblk);
@@ -582,6 +609,11 @@ int mpm_sim_step(mpm_sim *s)
     s->step_energy = s->want_energy;
     s->want_energy = 0;
     mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
+    if (s->general) /* the plastic work of the step, in thread order */
+        for (int t = 0; t < s->nthreads; t++) {
+            s->plastic_work += s->tout[t].wplast;
+            s->tout[t].wplast = 0;
+        }
     if (s->step_energy) {
         s->step_energy = 0;
         mpm_energy_sum(s, &s->ecache);
@@ -699,6 +731,7 @@ void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
     e->external_work = s->external_work;
     e->friction_work = s->friction_work;
     e->prescribed_work = s->prescribed_work;
+    e->plastic_work = s->plastic_work;
     e->total = e->kinetic + e->strain + e->potential - e->external_work;
 }
 
@@ -730,7 +763,22 @@ void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
             o->pressure[q] = tr / 3.0;
         }
         if (o->volume) o->volume[q] = P->vol[p];
+        if (o->plastic_strain && P->epsp) o->plastic_strain[q] = P->epsp[p];
+        if (o->yielded && P->yld) o->yielded[q] = P->yld[p] != 0.0;
+        if (o->deformation_gradient && P->F[0])
+            for (int c = 0; c < dim * dim; c++)
+                o->deformation_gradient[q * (size_t)(dim * dim) + (size_t)c] = P->F[c][p];
     }
+}
+
+int mpm_sim_has_field(const mpm_sim *s, mpm_field f)
+{
+    switch (f) {
+    case MPM_FIELD_PLASTIC_STRAIN: return s->P.epsp != NULL;
+    case MPM_FIELD_DEFORMATION_GRADIENT: return s->P.F[0] != NULL;
+    case MPM_FIELD_YIELDED: return s->P.yld != NULL;
+    }
+    return 0;
 }
 
 void mpm_sim_node(const mpm_sim *s, const int ijk[3], double *mass, double q[MPM_MAX_DIM])

@@ -35,7 +35,7 @@ static void ph_keys(mpm_sim *s, int tid)
 }
 
 /* The particle arrays of doubles, in a fixed order. */
-#define NARR (3 * 3 + 2 * 6 + 9 + 9 + 2)
+#define NARR (3 * 3 + 2 * 6 + 9 + 9 + 2 + 3)
 static int sort_arrays(mpm_sim *s, double **arr[NARR])
 {
     mpm_particles *P = &s->P;
@@ -55,6 +55,9 @@ static int sort_arrays(mpm_sim *s, double **arr[NARR])
         if (P->B[c]) arr[na++] = &P->B[c]; /* APIC */
     arr[na++] = &P->m;
     arr[na++] = &P->vol;
+    if (P->epsp) arr[na++] = &P->epsp; /* model state (mpm_model_ops.needs) */
+    if (P->yld) arr[na++] = &P->yld;
+    if (P->vol0) arr[na++] = &P->vol0; /* volume update DET_F */
     return na;
 }
 

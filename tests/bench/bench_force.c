@@ -35,7 +35,10 @@ static void st_case(mpm_case *c, mpm_material_desc *mat, mpm_body_desc *b, mpm_m
                     mpm_update up)
 {
     memset(c, 0, sizeof *c);
-    *mat = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.0, 1.0};
+    *mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                               .youngs_modulus = 1.0,
+                               .poisson_ratio = 0.0,
+                               .density = 1.0};
     c->grid = (mpm_grid_desc){1, {0}, {1.0 / ST_CELLS}, {ST_CELLS + 1}};
     c->method = m;
     c->update = up;

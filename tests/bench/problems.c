@@ -349,7 +349,10 @@ static int run_mms(const bench_cfg *cf, int keep, bench_res *r)
 {
     int D = bench_problem_dim(cf->pb), N = cf->cells, P = cf->ppc, per = N * P;
     double h = 1.0 / N;
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, MMS_E, D == 1 ? 0.0 : MMS_NU, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = MMS_E,
+                             .poisson_ratio = D == 1 ? 0.0 : MMS_NU,
+                             .density = 1.0};
     double c = mpm_material_wave_speed(&mat, D);
     mms p = {0};
     p.dim = D;
@@ -495,7 +498,10 @@ static int run_spin(const bench_cfg *cf, int keep, bench_res *r)
 {
     int N = cf->cells, per = N * cf->ppc;
     double h = 1.0 / N, d = h / cf->ppc;
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.3, 1.0};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = 1.0,
+                             .poisson_ratio = 0.3,
+                             .density = 1.0};
     double c = mpm_material_wave_speed(&mat, 2), w = SPIN_MACH * c / SPIN_R;
     size_t cap = (size_t)per * (size_t)per, n = 0;
     double *x = malloc(2 * cap * sizeof *x), *v = malloc(2 * cap * sizeof *v),
@@ -580,7 +586,10 @@ static int run_column(const bench_cfg *cf, int keep, bench_res *r)
     int N = cf->cells, P = cf->ppc;
     size_t n = (size_t)N * (size_t)P;
     double h = COL_L / N, d = h / P;
-    mpm_material_desc mat = {MPM_MODEL_LINEAR_ELASTIC, COL_E, 0.0, COL_RHO};
+    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                             .youngs_modulus = COL_E,
+                             .poisson_ratio = 0.0,
+                             .density = COL_RHO};
     double c = mpm_material_wave_speed(&mat, 1), T = 4 * COL_L / c;
     double *X = malloc(n * sizeof *X), *vol = malloc(n * sizeof *vol), *m = malloc(n * sizeof *m),
            *f = malloc(n * sizeof *f), *x = malloc(n * sizeof *x),

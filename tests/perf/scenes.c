@@ -175,7 +175,10 @@ static int build_cube(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
     double h = 1.0 / n; /* a 1 m cube */
     (void)err;
     (void)errlen;
-    t->mat[0] = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1e6, 0.3, 1000.0};
+    t->mat[0] = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                    .youngs_modulus = 1e6,
+                                    .poisson_ratio = 0.3,
+                                    .density = 1000.0};
     mpm_body_desc *b = &t->body[0];
     b->shape = MPM_SHAPE_BOX;
     b->ppc = 2;
@@ -243,7 +246,10 @@ static int build_sparse(const pb_cfg *c, int wide, mpm_paper *t, char *err, size
             }
         n = k;
     }
-    t->mat[0] = (mpm_material_desc){MPM_MODEL_LINEAR_ELASTIC, 1.0, 0.2, 1.0};
+    t->mat[0] = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                                    .youngs_modulus = 1.0,
+                                    .poisson_ratio = 0.2,
+                                    .density = 1.0};
     mpm_body_desc *b = &t->body[0];
     b->n_points = n;
     b->x = t->x;
