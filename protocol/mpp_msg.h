@@ -132,6 +132,9 @@ typedef struct {
     mpm_update update;      /* always sent (RunInfo.update) */
     mpm_transfer transfer;  /* always sent (RunInfo.transfer; decoded
                                absent: FLIP) */
+    const char *warning;    /* RunInfo.warning: NULL (decoded: "") when none */
+    int has_balance;        /* balance_error recorded (RunInfo.balance_error) */
+    double balance_error;   /* the largest balance error of the run's samples */
     const void *case_bytes; /* packed Case to include, or NULL; its
                                method, update and transfer are sent as
                                the three fields above say (encode only:
@@ -152,6 +155,9 @@ typedef struct {
     int64_t steps;
     double t, wall_s;
     const mpm_energy_sample *energy; /* NULL: none */
+    int has_balance;                 /* balance_error sent (Finished.balance_error) */
+    double balance_error;            /* the largest balance error of the run's samples */
+    const char *warning;             /* Finished.warning: NULL (decoded: "") when none */
 } mpp_finished;
 
 /* ---- replies (mpp_reply.c) ---------------------------------------------- */

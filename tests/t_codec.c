@@ -426,7 +426,7 @@ TEST(codec_bad_json)
         return;
     if (expect_bad(
             "\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"colour\": 1", S,
-            "bodies[1].colour: unknown field (Body has: material, velocity, box, sphere, points, ppc)"))
+            "bodies[1].colour: unknown field (Body has: material, velocity, box, sphere, points, ppc, geostatic)"))
         return;
     if (expect_bad(
             "\"endTime\": 1", "\"endTime\": 1, \"method\": \"FEM\"", S,
