@@ -157,8 +157,8 @@ int mpm_sim_budget(const mpm_sim *s, double *worst, char *msg, size_t n)
     if (msg && n)
         snprintf(msg, n,
                  "energy balance error %.3g%% exceeds the budget %.3g%% (energy_budget): the "
-                 "total energy moved from %.6g by more than the budget allows; refine the grid "
-                 "or the time step, or change the method",
+                 "total energy (%.6g at the start) is not conserved to that tolerance; the "
+                 "results are doubtful: refine the grid or the time step, or change the method",
                  100 * s->bal_worst, 100 * s->budget, s->bal_total0);
     return 1;
 }
