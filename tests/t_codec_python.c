@@ -27,9 +27,10 @@
  * (installed by make deps). */
 TEST(codec_python_json_format)
 {
-    static const char *names[] = {
-        "point1d", "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse", "disks2d_fine",
-        "cube3d",  "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi", "disk2d_apic"};
+    static const char *names[] = {"point1d",        "bar1d_mpm",         "bar1d_gimp",
+                                  "disks2d_coarse", "disks2d_fine",      "cube3d",
+                                  "bar1d_bspline2", "disks2d_bspline2",  "hangbar2d_cpdi",
+                                  "disk2d_apic",    "column2d_geostatic"};
     enum { NN = sizeof names / sizeof names[0] };
     char dir[] = "/tmp/mpmpy.XXXXXX", cmd[1024], path[512], err[T_ERRLEN];
     CHECK(mkdtemp(dir) != NULL);

@@ -21,6 +21,7 @@
 #include <string.h>
 
 #include "mpm.h"
+#include "mpp_case.h"
 #include "t.h"
 
 #define COL_W 1.0
@@ -241,4 +242,45 @@ TEST(geostatic_case_checked)
     free(sg);
     mpm_sim_destroy(&s);
     CHECK_LT(worst, 1e-9);
+}
+
+/* The example proto/examples/column2d_geostatic.json through the codec:
+ * geostatic stress, damping for 0.1 s, then free to 0.3 s; the state
+ * stays (GIMP holds it to round-off) and the balance is within budget. */
+TEST(geostatic_example_case)
+{
+    FILE *f = fopen("proto/examples/column2d_geostatic.json", "rb");
+    CHECK(f);
+    static char text[1 << 16];
+    size_t len = fread(text, 1, sizeof text, f);
+    fclose(f);
+    mpp_case *sc = NULL;
+    mpm_error err;
+    CHECKF(mpp_case_load(text, len, 0, &sc, &err) == 0, "%s", TERR(&err));
+    CHECK(sc->c.damping == MPM_DAMPING_LOCAL && sc->c.damping_until == 0.1 &&
+          sc->c.bodies[0].geostatic && sc->c.bodies[0].free_surface == 10 &&
+          !sc->c.bodies[0].has_k0 && sc->c.energy_budget == 0.05 && !sc->c.fail_on_budget);
+    mpm_sim *s = mpm_sim_new(&sc->c, &sc->info, &err);
+    CHECKF(s, "%s", TERR(&err));
+    while (mpm_sim_time(s) < sc->end_time - 0.5 * mpm_sim_dt(s)) CHECK(mpm_sim_step(s) == 0);
+    mpm_energy e;
+    mpm_sim_energy(s, &e);
+    double worst;
+    int over = mpm_sim_budget(s, &worst, NULL, 0);
+    size_t n = mpm_sim_particles(s);
+    double *sg = malloc(n * 6 * sizeof *sg), *x = malloc(n * 2 * sizeof *x), err_max = 0;
+    CHECK(sg && x);
+    mpm_sim_snapshot(s, &(mpm_snapshot){x, NULL, sg, NULL, NULL});
+    for (size_t p = 0; p < n; p++)
+        err_max = fmax(err_max, fabs(sg[6 * p + 1] + COL_RHO * COL_G * (COL_H - x[2 * p + 1])) /
+                                    (COL_RHO * COL_G * COL_H));
+    TLOG("column2d_geostatic.json: %zu points, %ld steps: |sigma_v - rho g depth| <= %.1e rho g H, "
+         "balance error %.1e",
+         n, mpm_sim_steps(s), err_max, worst);
+    free(sg);
+    free(x);
+    mpm_sim_destroy(&s);
+    mpp_case_destroy(&sc);
+    CHECK(!over);
+    CHECK_LT(err_max, 1e-9);
 }
