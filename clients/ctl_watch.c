@@ -78,7 +78,7 @@ typedef struct {
     int finished;        /* Finished seen */
     char error[512];     /* Finished.error */
     char warning[512];   /* Finished.warning */
-    int has_fin_balance; /* Finished.balance_error, the run's largest */
+    int has_fin_balance; /* Finished.balance_error, at the run's end */
     double fin_balance;
     int has_fin;           /* Finished carried a final sample: */
     mpm_energy_sample fin; /* that sample */
@@ -452,10 +452,10 @@ static void summary(watch_t *w, const mpp_run_info *run)
                     (unsigned long long)w->samples);
     }
     if (run && run->has_balance)
-        fprintf(f, "  energy balance error: %.3g %% (largest over the run)\n",
+        fprintf(f, "  energy balance error: %.3g %% (at the end of the run)\n",
                 100 * cj_norm(run->balance_error));
     else if (w->has_fin_balance)
-        fprintf(f, "  energy balance error: %.3g %% (largest over the run)\n",
+        fprintf(f, "  energy balance error: %.3g %% (at the end of the run)\n",
                 100 * w->fin_balance);
     const char *warning = run && *run->warning ? run->warning : w->warning;
     if (*warning) fprintf(f, "  warning: %s\n", warning);

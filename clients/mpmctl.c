@@ -72,8 +72,8 @@ static const command commands[] = {
      "130 stopped by Ctrl-C (the job keeps running).\n"},
     {"runs", C_RUNS, "[--status S] [--limit N] [--json]", "list runs, newest first",
      "Columns: id, name, status, method, stress update, velocity transfer (FLIP or\n"
-     "APIC), dim, particles, steps, wall seconds, the energy balance error (largest\n"
-     "over the run, in %; '!' when it exceeded the case's budget, '-' while running or\n"
+     "APIC), dim, particles, steps, wall seconds, the energy balance error (at the\n"
+     "run's end, in %; '!' when it exceeded the case's budget, '-' while running or\n"
      "for runs stored before it was recorded), submission time.  --status: QUEUED,\n"
      "RUNNING, FINISHED, FAILED, CANCELLED or INTERRUPTED.  --limit: at most N runs\n"
      "(default: the server's).  --json: one RunInfo object per line.\n"},
@@ -590,7 +590,8 @@ static void show_text(const json_t *r)
         char bal[32];
         ctl_fmt_balance(bal, sizeof bal, r);
         if (json_object_get(r, "balanceError"))
-            printf("  balance     error %s (largest over the run's energy samples)\n", bal);
+            printf("  balance     error %s (at the end of the run; each sample carries its own)\n",
+                   bal);
         else if (le && json_object_get(le, "balanceError"))
             printf("  balance     error %.3g %% (last sample)\n",
                    100 * cj_num(le, "balanceError", 0));

@@ -523,12 +523,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
         /* a diverged state has no meaningful energies; keep the last good one */
     }
-    /* the energy budget, over every sample the run took (the final one
-     * included): a warning recorded with the run, or FAILED if the case
+    /* the energy budget, on the balance error of the run's last sample (the
+     * final one): a warning recorded with the run, or FAILED if the case
      * asks (Case.fail_on_budget) */
     double balance;
     char warn[512] = "";
-    int over = mpm_sim_budget(sim, &balance, warn, sizeof warn);
+    int over = mpm_sim_budget(sim, &balance, NULL, warn, sizeof warn);
     if (over && status == MPP_STATUS_FINISHED && sc->c.fail_on_budget) {
         status = MPP_STATUS_FAILED;
         snprintf(why, sizeof why, "%s", warn);

@@ -64,7 +64,7 @@ TEST(energy_bar_budget_catches_gimp_musl_gain)
     CHECK(s != NULL);
     double worst;
     char msg[256];
-    int over = mpm_sim_budget(s, &worst, msg, sizeof msg);
+    int over = mpm_sim_budget(s, NULL, &worst, msg, sizeof msg);
     TLOG("GIMP MUSL bar, 13 cells x 1 point, C 0.5, 8000 steps: total %.4f E0, balance error "
          "%.4f at the end, %.4f at worst; %s",
          e.total / e0.total, e.balance_error, worst, over ? msg : "within budget");
@@ -79,7 +79,7 @@ TEST(energy_bar_budget_catches_gimp_musl_gain)
 
     s = bar_run(MPM_METHOD_MPM, MPM_USF, 7, 0.1, 2000, 100, 0.05, MPM_DAMPING_NONE, 0, &e0, &e);
     CHECK(s != NULL);
-    over = mpm_sim_budget(s, &worst, msg, sizeof msg);
+    over = mpm_sim_budget(s, NULL, &worst, msg, sizeof msg);
     TLOG("MPM USF bar, 7 cells, C 0.1, 2000 steps: balance error %.2e at worst", worst);
     CHECK(over == 0);
     CHECK_LT(worst, 0.05);
@@ -113,7 +113,7 @@ TEST(energy_damping_dissipates_and_balance_closes)
                              1.0, &e0, &e);
         CHECK(s != NULL);
         double worst, t = mpm_sim_time(s);
-        mpm_sim_budget(s, &worst, NULL, 0);
+        mpm_sim_budget(s, NULL, &worst, NULL, 0);
         double kept = (e.kinetic + e.strain) / e0.total;
         TLOG("%s viscous c = 1/s, t = %.3f s: (K + S) / E0 = %.4f (exp(-c t) = %.4f), damping "
              "work %.4f E0, balance error %.2e at the end, %.2e at worst",
@@ -128,7 +128,7 @@ TEST(energy_damping_dissipates_and_balance_closes)
         s = bar_run(ms[i].m, ms[i].up, ms[i].ncell, 0.2, n, 10, 0.05, MPM_DAMPING_LOCAL, 0.2, &e0,
                     &e);
         CHECK(s != NULL);
-        mpm_sim_budget(s, &worst, NULL, 0);
+        mpm_sim_budget(s, NULL, &worst, NULL, 0);
         kept = (e.kinetic + e.strain) / e0.total;
         TLOG("%s local alpha 0.2, two periods: (K + S) / E0 = %.4f, damping work %.4f E0, "
              "balance error %.2e at the end, %.2e at worst",
@@ -169,4 +169,52 @@ TEST(energy_case_fields_checked)
         mpm_error_field(&err, MPM_FIELD_PROTO, f, sizeof f);
         CHECKF(rc == MPM_EINVAL && strcmp(f, bad[i].field) == 0, "case %zu: %d %s", i, rc, f);
     }
+}
+
+/* Damping on the thread team: the node passes split the nodes among the
+ * threads and each sums its damping work, added in thread order, so two
+ * runs with 2 threads give the same bits, and 1 thread the same values to
+ * round-off (the scatter sums change order). */
+TEST(energy_damping_threads)
+{
+    double res[3][3];
+    for (int k = 0; k < 3; k++) {
+        mpm_paper t;
+        mpm_error err;
+        mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.05);
+        t.c.threads = k == 0 ? 1 : 2;
+        t.c.damping = k == 2 ? MPM_DAMPING_VISCOUS : MPM_DAMPING_LOCAL;
+        t.c.damping_coef = 0.5;
+        mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
+        mpm_paper_free(&t);
+        CHECKF(s, "%s", TERR(&err));
+        CHECK(mpm_sim_run(s, 100) == 0);
+        mpm_energy e;
+        mpm_sim_energy(s, &e);
+        res[k][0] = e.damping_work;
+        res[k][1] = e.kinetic;
+        res[k][2] = e.balance_error;
+        mpm_sim_destroy(&s);
+        TLOG("disks, GIMP USF, %s damping, %d thread(s), 100 steps: damping work %.10e, K "
+             "%.10e, balance error %.2e",
+             k == 2 ? "viscous" : "local", k == 0 ? 1 : 2, res[k][0], res[k][1], res[k][2]);
+        CHECK(e.damping_work > 0 && e.balance_error < 0.05);
+    }
+    CHECK_NEAR(res[1][0], res[0][0], 1e-12 * res[0][0]);
+    CHECK_NEAR(res[1][1], res[0][1], 1e-12 * res[0][1]);
+    /* a second 2-thread run: the same bits */
+    mpm_paper t;
+    mpm_error err;
+    mpm_paper_disks(&t, MPM_METHOD_GIMP, MPM_USF, 0.05);
+    t.c.threads = 2;
+    t.c.damping = MPM_DAMPING_LOCAL;
+    t.c.damping_coef = 0.5;
+    mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
+    mpm_paper_free(&t);
+    CHECKF(s, "%s", TERR(&err));
+    CHECK(mpm_sim_run(s, 100) == 0);
+    mpm_energy e;
+    mpm_sim_energy(s, &e);
+    mpm_sim_destroy(&s);
+    CHECK(e.damping_work == res[1][0] && e.kinetic == res[1][1]);
 }

@@ -104,7 +104,7 @@ static col_result col_run(mpm_method m, int geostatic, mpm_damping_kind damp, do
         if (k % 50 == 49) mpm_sim_energy(s, &e);
     }
     mpm_sim_energy(s, &e);
-    mpm_sim_budget(s, &r.balance, NULL, 0);
+    mpm_sim_budget(s, NULL, &r.balance, NULL, 0);
     r.balance_end = e.balance_error;
     mpm_sim_snapshot(s, &(mpm_snapshot){NULL, NULL, sg, NULL, NULL});
     double ref = COL_RHO * COL_G * COL_H, k0 = COL_NU / (1 - COL_NU);
@@ -266,7 +266,7 @@ TEST(geostatic_example_case)
     mpm_energy e;
     mpm_sim_energy(s, &e);
     double worst;
-    int over = mpm_sim_budget(s, &worst, NULL, 0);
+    int over = mpm_sim_budget(s, NULL, &worst, NULL, 0);
     size_t n = mpm_sim_particles(s);
     double *sg = malloc(n * 6 * sizeof *sg), *x = malloc(n * 2 * sizeof *x), err_max = 0;
     CHECK(sg && x);

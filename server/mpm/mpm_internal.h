@@ -192,9 +192,9 @@ struct mpm_sim {
 
     /* energy balance (mpm_energy_finish()): the total at creation, the
      * scale's constant part K_0 + |S_0| + U_0, gravity's potential at
-     * creation, the largest balance error an mpm_sim_energy() found, the
-     * budget (0: none) */
-    double bal_total0, bal_ref0, bal_pot0, bal_worst, budget;
+     * creation, the balance error the last mpm_sim_energy() found and the
+     * largest, the budget (0: none) */
+    double bal_total0, bal_ref0, bal_pot0, bal_last, bal_worst, budget;
     int fail_on_budget;
 
     /* damping (mpm_case.damping): kind, coefficient, the time it stops (0:

@@ -463,7 +463,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->bal_total0 = e0.total;
     s->bal_pot0 = e0.potential;
     s->bal_ref0 = e0.kinetic + fabs(e0.strain) + u0;
-    s->bal_worst = 0;
+    s->bal_last = s->bal_worst = 0;
     s->guard_v2 = s->vmax * s->vmax;
     if (mpm_team_start(s)) goto nomem;
     init_order(s);
@@ -700,6 +700,7 @@ void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
         mpm_energy_sum(s, e);
     }
     mpm_energy_finish(s, e);
+    s->bal_last = e->balance_error;
     if (e->balance_error > s->bal_worst) s->bal_worst = e->balance_error;
 }
 

@@ -83,7 +83,7 @@ typedef struct {
     const char *error;          /* NULL = none */
     const char *server_version; /* NULL on insert: "" */
     /* the energy balance (schema 6; store_run_finish sets them): the run's
-     * largest balance error (has_balance 0: none recorded, as for runs
+     * balance error at its end (has_balance 0: none recorded, as for runs
      * stored before) and the budget's warning (NULL = none) */
     int has_balance;
     double balance_error;
@@ -100,7 +100,7 @@ typedef struct {
     mpm_energy energy;    /* kinetic .. total are stored */
     const char *error;    /* NULL = none */
     int has_balance;      /* 0: leave balance_error unset */
-    double balance_error; /* the run's largest energy balance error */
+    double balance_error; /* the run's energy balance error at its end */
     const char *warning;  /* the energy budget's warning; NULL = none */
 } store_run_end;
 

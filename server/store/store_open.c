@@ -132,7 +132,7 @@ static const char *const migrations[] = {
     " CHECK (transfer IN ('flip','apic'));",
     /* 5 -> 6: the extended energy balance of issue 11 (mpmd.EnergySample
      * fields 12-16): the four cumulative works and the balance error of
-     * each sample, and the run's largest balance error and budget warning
+     * each sample, and the run's balance error at its end and budget warning
      * (RunInfo.balance_error, .warning).  Samples written before read the
      * works and the error as 0 (no such feature ran then; the error was
      * not measured; a NaN written later is NULL and reads NaN), runs
