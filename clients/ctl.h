@@ -148,6 +148,9 @@ int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s);
 
 /* Local time of a Unix time as "YYYY-MM-DD HH:MM:SS" ("-" when <= 0). */
 void ctl_fmt_time(char *buf, size_t n, double unix_s);
+/* A RunInfo's balance error (JSON object run) as "0.123%", with "!" when
+ * the run carries a budget warning; "-" when none is recorded. */
+void ctl_fmt_balance(char *buf, size_t n, const json_t *run);
 /* A duration as "12.3 s", "4m05s", "2h03m". */
 void ctl_fmt_duration(char *buf, size_t n, double s);
 

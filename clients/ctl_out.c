@@ -5,7 +5,9 @@
  * the daemon computed; the angular momentum columns come last, after the
  * momentum: angular_momentum_x, _y, _z in 3D, angular_momentum_z in 2D,
  * none in 1D) or as JSON lines (one EnergySample object per line,
- * in the protobuf JSON mapping).  The same writer serves `energy` and
+ * in the protobuf JSON mapping).  The CSV's last columns are the energy
+ * balance's: plastic_work, damping_work, friction_work, prescribed_work,
+ * balance_error (0 from a daemon older than them).  The same writer serves `energy` and
  * `watch`, so both print identical rows for identical samples.
  */
 #include "ctl.h"
@@ -69,7 +71,7 @@ int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
             fputs("seq,step,t,kinetic,strain,potential,external_work,total,mass", f);
             for (int d = 0; d < o->dim; d++) fprintf(f, ",momentum_%c", axis[d]);
             for (int d = ang_first(o->dim); d < 3; d++) fprintf(f, ",angular_momentum_%c", axis[d]);
-            fputc('\n', f);
+            fputs(",plastic_work,damping_work,friction_work,prescribed_work,balance_error\n", f);
         }
         fprintf(f, "%llu,%lld", (unsigned long long)s->seq, (long long)s->step);
         csv_num(f, cj_norm(s->t));
@@ -81,15 +83,22 @@ int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
         csv_num(f, cj_norm(s->e.mass));
         for (int d = 0; d < o->dim; d++) csv_num(f, d < s->dim ? cj_norm(s->e.momentum[d]) : 0);
         for (int d = ang_first(o->dim); d < 3; d++) csv_num(f, cj_norm(s->e.angular_momentum[d]));
+        csv_num(f, cj_norm(s->e.plastic_work));
+        csv_num(f, cj_norm(s->e.damping_work));
+        csv_num(f, cj_norm(s->e.friction_work));
+        csv_num(f, cj_norm(s->e.prescribed_work));
+        csv_num(f, cj_norm(s->e.balance_error));
         fputc('\n', f);
         break;
     case CTL_OUT_TEXT:
         if (!o->header_done)
-            fprintf(f, "%8s %10s %14s %15s %15s %15s %15s\n", "seq", "step", "t", "kinetic",
-                    "strain", "potential-work", "total");
-        fprintf(f, "%8llu %10lld %14.6g %15.8e %15.8e %15.8e %15.8e\n", (unsigned long long)s->seq,
-                (long long)s->step, cj_norm(s->t), cj_norm(s->e.kinetic), cj_norm(s->e.strain),
-                cj_norm(s->e.potential) - cj_norm(s->e.external_work), cj_norm(s->e.total));
+            fprintf(f, "%8s %10s %14s %15s %15s %15s %15s %9s\n", "seq", "step", "t", "kinetic",
+                    "strain", "potential-work", "total", "balance");
+        fprintf(f, "%8llu %10lld %14.6g %15.8e %15.8e %15.8e %15.8e %8.3g%%\n",
+                (unsigned long long)s->seq, (long long)s->step, cj_norm(s->t),
+                cj_norm(s->e.kinetic), cj_norm(s->e.strain),
+                cj_norm(s->e.potential) - cj_norm(s->e.external_work), cj_norm(s->e.total),
+                100 * cj_norm(s->e.balance_error));
         break;
     }
     o->header_done = 1;
@@ -102,6 +111,16 @@ void ctl_fmt_time(char *buf, size_t n, double unix_s)
     time_t t = (time_t)unix_s;
     if (unix_s <= 0 || !localtime_r(&t, &tm) || !strftime(buf, n, "%Y-%m-%d %H:%M:%S", &tm))
         snprintf(buf, n, "-");
+}
+
+void ctl_fmt_balance(char *buf, size_t n, const json_t *run)
+{
+    const json_t *b = json_object_get(run, "balanceError");
+    if (!b)
+        snprintf(buf, n, "-");
+    else
+        snprintf(buf, n, "%.3g%%%s", 100 * cj_num(run, "balanceError", 0),
+                 *cj_str(run, "warning", "") ? "!" : "");
 }
 
 void ctl_fmt_duration(char *buf, size_t n, double s)

@@ -58,7 +58,8 @@ typedef struct {
     uint64_t gaps_filled; /* times the stream skipped samples */
     double first_total, last_total;
     double kinetic, strain;
-    double angmom; /* |angular momentum| of the last sample (2D, 3D) */
+    double angmom;  /* |angular momentum| of the last sample (2D, 3D) */
+    double balance; /* the last sample's energy balance error */
     int have_angmom;
     int have_first;
 
@@ -74,8 +75,11 @@ typedef struct {
     uint64_t stream_seq;  /* last StreamMsg.seq seen */
     uint64_t stream_lost; /* messages the stream dropped */
 
-    int finished;          /* Finished seen */
-    char error[512];       /* Finished.error */
+    int finished;        /* Finished seen */
+    char error[512];     /* Finished.error */
+    char warning[512];   /* Finished.warning */
+    int has_fin_balance; /* Finished.balance_error, at the run's end */
+    double fin_balance;
     int has_fin;           /* Finished carried a final sample: */
     mpm_energy_sample fin; /* that sample */
 
@@ -139,6 +143,8 @@ static size_t status_line(const watch_t *w, int compact, char *line, size_t cap)
                w->kinetic, w->strain, w->last_total);
     if (w->have_first && w->have_angmom)
         append(line, cap, &n, compact ? " |L| %.3e" : "  |L| %.6e", w->angmom);
+    if (w->have_first)
+        append(line, cap, &n, compact ? " bal %.2g%%" : "  bal %.3g%%", 100 * w->balance);
     if (w->steps_total > 0) {
         double frac = (double)w->step / (double)w->steps_total;
         if (frac < 0) frac = 0;
@@ -188,6 +194,7 @@ static int emit(watch_t *w, const mpm_energy_sample *s)
     w->last_total = total;
     w->kinetic = cj_norm(s->e.kinetic);
     w->strain = cj_norm(s->e.strain);
+    w->balance = cj_norm(s->e.balance_error);
     w->have_angmom = s->dim >= 2;
     if (w->have_angmom) {
         const double *L = s->e.angular_momentum;
@@ -363,6 +370,9 @@ static int on_message(watch_t *w, const void *data, size_t len)
         w->wall_s = cj_norm(m.finished.wall_s);
         w->has_fin = m.has_energy;
         w->fin = m.energy;
+        snprintf(w->warning, sizeof w->warning, "%s", m.finished.warning);
+        w->has_fin_balance = m.finished.has_balance;
+        w->fin_balance = cj_norm(m.finished.balance_error);
         break;
     default: break;
     }
@@ -441,6 +451,14 @@ static void summary(watch_t *w, const mpp_run_info *run)
             fprintf(f, "  energy drift: %+.3e absolute over %llu samples\n", d,
                     (unsigned long long)w->samples);
     }
+    if (run && run->has_balance)
+        fprintf(f, "  energy balance error: %.3g %% (at the end of the run)\n",
+                100 * cj_norm(run->balance_error));
+    else if (w->has_fin_balance)
+        fprintf(f, "  energy balance error: %.3g %% (at the end of the run)\n",
+                100 * w->fin_balance);
+    const char *warning = run && *run->warning ? run->warning : w->warning;
+    if (*warning) fprintf(f, "  warning: %s\n", warning);
     if (w->gaps_filled || w->stream_lost)
         fprintf(f, "  stream: %llu messages dropped, %llu gaps filled from the history\n",
                 (unsigned long long)w->stream_lost, (unsigned long long)w->gaps_filled);

@@ -73,12 +73,15 @@ static const command commands[] = {
      "130 stopped by Ctrl-C (the job keeps running).\n"},
     {"runs", C_RUNS, "[--status S] [--limit N] [--json]", "list runs, newest first",
      "Columns: id, name, status, method, stress update, velocity transfer (FLIP or\n"
-     "APIC), dim, particles, steps, wall seconds, submission time.  --status: QUEUED,\n"
+     "APIC), dim, particles, steps, wall seconds, the energy balance error (at the\n"
+     "run's end, in %; '!' when it exceeded the case's budget, '-' while running or\n"
+     "for runs stored before it was recorded), submission time.  --status: QUEUED,\n"
      "RUNNING, FINISHED, FAILED, CANCELLED or INTERRUPTED.  --limit: at most N runs\n"
      "(default: the server's).  --json: one RunInfo object per line.\n"},
     {"show", C_SHOW, "ID [--json] [--case]", "one run in detail",
      "Prints the status, times, counts, method and update, the velocity transfer (FLIP,\n"
-     "with the PIC fraction when the case sets one, or APIC) and the last energies.\n"
+     "with the PIC fraction when the case sets one, or APIC), the last energies, the\n"
+     "energy balance error and the budget's warning, if any.\n"
      "--json prints the RunInfo object; --case prints the run's case as JSON (alone:\n"
      "pretty, ready to submit again; with --json: inside the RunInfo).\n"},
     {"energy", C_ENERGY, "ID [--csv|--json]", "the complete energy series of a run",
@@ -497,18 +500,20 @@ static int cmd_runs(ctl_conn *c, const cli *a)
         printf("no runs%s%s\n", a->status ? " with status " : "",
                a->status ? mpp_status_name(a->status) : "");
     } else {
-        printf("%6s  %-20s %-11s %-8s %-6s %-8s %3s %10s %12s %9s  %s\n", "ID", "NAME", "STATUS",
-               "METHOD", "UPDATE", "TRANSFER", "DIM", "PARTICLES", "STEPS", "WALL S", "SUBMITTED");
+        printf("%6s  %-20s %-11s %-8s %-6s %-8s %3s %10s %12s %9s %9s  %s\n", "ID", "NAME",
+               "STATUS", "METHOD", "UPDATE", "TRANSFER", "DIM", "PARTICLES", "STEPS", "WALL S",
+               "BALANCE", "SUBMITTED");
         for (i = 0; i < n; i++) {
             json_t *r = json_array_get(runs, i);
-            char when[32];
+            char when[32], bal[32];
             ctl_fmt_time(when, sizeof when, cj_num(r, "submittedAt", 0));
-            printf("%6llu  %-20.20s %-11s %-8s %-6s %-8s %3lld %10llu %12lld %9.2f  %s\n",
+            ctl_fmt_balance(bal, sizeof bal, r);
+            printf("%6llu  %-20.20s %-11s %-8s %-6s %-8s %3lld %10llu %12lld %9.2f %9s  %s\n",
                    (unsigned long long)cj_u64(r, "runId", 0), cj_str(r, "name", ""),
                    cj_str(r, "status", "?"), cj_str(r, "method", "?"), cj_str(r, "update", "?"),
                    cj_str(r, "transfer", "?"), cj_int(r, "dim", 0),
                    (unsigned long long)cj_u64(r, "particles", 0), cj_int(r, "steps", 0),
-                   cj_num(r, "wallS", 0), when);
+                   cj_num(r, "wallS", 0), bal, when);
         }
     }
     json_decref(reply);
@@ -565,12 +570,34 @@ static void show_text(const json_t *r)
             printf("  stop        after %lld steps\n", cj_int(cs, "steps", 0));
     }
     printf("  energy      %llu samples\n", (unsigned long long)cj_u64(r, "energySamples", 0));
-    if (le)
+    if (le) {
         printf("  last energy step %lld, t %.10g: kinetic %.10e, strain %.10e, potential %.10e, "
                "external work %.10e, total %.10e\n",
                cj_int(le, "step", 0), cj_num(le, "t", 0), cj_num(le, "kinetic", NAN),
                cj_num(le, "strain", NAN), cj_num(le, "potential", NAN),
                cj_num(le, "externalWork", NAN), cj_num(le, "total", NAN));
+        static const char *const works[][2] = {{"plasticWork", "plastic work"},
+                                               {"dampingWork", "damping work"},
+                                               {"frictionWork", "friction work"},
+                                               {"prescribedWork", "prescribed work"}};
+        int any = 0;
+        for (size_t k = 0; k < sizeof works / sizeof works[0]; k++)
+            if (cj_num(le, works[k][0], 0) != 0)
+                printf("%s%s %.10e", any++ ? ", " : "              ", works[k][1],
+                       cj_num(le, works[k][0], 0));
+        if (any) putchar('\n');
+    }
+    {
+        char bal[32];
+        ctl_fmt_balance(bal, sizeof bal, r);
+        if (json_object_get(r, "balanceError"))
+            printf("  balance     error %s (at the end of the run; each sample carries its own)\n",
+                   bal);
+        else if (le && json_object_get(le, "balanceError"))
+            printf("  balance     error %.3g %% (last sample)\n",
+                   100 * cj_num(le, "balanceError", 0));
+        if (*cj_str(r, "warning", "")) printf("  warning     %s\n", cj_str(r, "warning", ""));
+    }
     if (json_is_array(snaps) && json_array_size(snaps)) {
         size_t n = json_array_size(snaps);
         printf("  snapshots   %zu stored, steps", n);

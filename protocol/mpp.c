@@ -213,6 +213,18 @@ void mpp_fill_energy(Mpmd__EnergySample *es, const mpm_energy_sample *s)
     es->n_angular_momentum = s->dim == 3 ? 3 : s->dim == 2 ? 1 : 0;
     es->angular_momentum =
         (double *)(s->dim == 2 ? &s->e.angular_momentum[2] : s->e.angular_momentum);
+    /* sent when non-zero: absent reads 0, so a run without the features
+     * sends the bytes an older daemon sent */
+    es->has_plastic_work = s->e.plastic_work != 0;
+    es->has_damping_work = s->e.damping_work != 0;
+    es->has_friction_work = s->e.friction_work != 0;
+    es->has_prescribed_work = s->e.prescribed_work != 0;
+    es->has_balance_error = s->e.balance_error != 0;
+    es->plastic_work = s->e.plastic_work;
+    es->damping_work = s->e.damping_work;
+    es->friction_work = s->e.friction_work;
+    es->prescribed_work = s->e.prescribed_work;
+    es->balance_error = s->e.balance_error;
 }
 
 void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e)
@@ -237,6 +249,12 @@ void mpp_take_energy(mpm_energy_sample *s, const Mpmd__EnergySample *e)
         for (size_t d = 0; d < e->n_angular_momentum && d < 3; d++)
             s->e.angular_momentum[d] = e->angular_momentum[d];
     s->seq = e->seq;
+    /* absent (an older daemon): 0 */
+    s->e.plastic_work = e->plastic_work;
+    s->e.damping_work = e->damping_work;
+    s->e.friction_work = e->friction_work;
+    s->e.prescribed_work = e->prescribed_work;
+    s->e.balance_error = e->balance_error;
 }
 
 /* mpp_snapshot.yielded is protobuf-c's bool array as is */

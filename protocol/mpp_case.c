@@ -323,6 +323,12 @@ static int conv_bodies(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error
                                 pbb->ppc);
             b->ppc = (int)pbb->ppc;
         }
+        if (pbb->geostatic) { /* the solver checks gravity, k0 and the surface */
+            b->geostatic = 1;
+            b->free_surface = pbb->geostatic->free_surface;
+            b->has_k0 = pbb->geostatic->has_k0;
+            b->k0 = pbb->geostatic->k0;
+        }
         switch (pbb->geometry_case) {
         case MPMD__BODY__GEOMETRY_BOX:
             b->shape = MPM_SHAPE_BOX;
@@ -671,6 +677,13 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
     c->volume_update =
         pb->has_volume_update ? (mpm_volume_update)pb->volume_update : MPM_VOLUME_STRAIN_INCREMENT;
     c->allow_unstable_dt = pb->has_allow_unstable_dt && pb->allow_unstable_dt;
+    if (pb->damping) {
+        c->damping = (mpm_damping_kind)pb->damping->kind;
+        c->damping_coef = pb->damping->coefficient;
+        c->damping_until = pb->damping->until;
+    }
+    c->energy_budget = pb->has_energy_budget ? pb->energy_budget : 0.05; /* the .proto's default */
+    c->fail_on_budget = pb->has_fail_on_budget && pb->fail_on_budget;
     if ((rc = get_vec("gravity", pb->gravity, pb->n_gravity, c->grid.dim, 1, c->gravity, err)))
         return rc;
     if ((rc = conv_materials(pb, mc, err))) return rc;

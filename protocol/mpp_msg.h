@@ -136,6 +136,9 @@ typedef struct {
     mpm_update update;      /* always sent (RunInfo.update) */
     mpm_transfer transfer;  /* always sent (RunInfo.transfer; decoded
                                absent: FLIP) */
+    const char *warning;    /* RunInfo.warning: NULL (decoded: "") when none */
+    int has_balance;        /* balance_error recorded (RunInfo.balance_error) */
+    double balance_error;   /* the balance error at the run's end */
     const void *case_bytes; /* packed Case to include, or NULL; its
                                method, update and transfer are sent as
                                the three fields above say (encode only:
@@ -156,6 +159,9 @@ typedef struct {
     int64_t steps;
     double t, wall_s;
     const mpm_energy_sample *energy; /* NULL: none */
+    int has_balance;                 /* balance_error sent (Finished.balance_error) */
+    double balance_error;            /* the balance error at the run's end */
+    const char *warning;             /* Finished.warning: NULL (decoded: "") when none */
 } mpp_finished;
 
 /* ---- replies (mpp_reply.c) ---------------------------------------------- */

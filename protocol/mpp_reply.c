@@ -50,6 +50,9 @@ static int fill_run(Mpmd__RunInfo *pi, Mpmd__EnergySample *es, const mpp_run_inf
     pi->update = (Mpmd__Case__Update)ri->update;
     pi->has_transfer = 1;
     pi->transfer = (Mpmd__Case__Transfer)ri->transfer;
+    pi->warning = (char *)ri->warning;
+    pi->has_balance_error = ri->has_balance != 0;
+    pi->balance_error = ri->balance_error;
     if (ri->case_bytes) {
         ProtobufCMessage *cm;
         if (mpp_unpack(&mpmd__case__descriptor, ri->case_bytes, ri->case_len, (size_t)-1, &cm,
@@ -308,6 +311,9 @@ static void take_run(mpp_run_info *ri, mpm_energy_sample *e, const Mpmd__RunInfo
     ri->method = (mpm_method)pi->method;
     ri->update = (mpm_update)pi->update;
     ri->transfer = (mpm_transfer)pi->transfer;
+    ri->warning = str(pi->warning);
+    ri->has_balance = pi->has_balance_error;
+    ri->balance_error = pi->balance_error;
 }
 
 int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mpm_error *err)

@@ -75,6 +75,9 @@ int mpp_stream_finished(uint64_t job_id, uint64_t seq, const mpp_finished *f, ui
         mpp_fill_energy(&es, f->energy);
         pf.energy = &es;
     }
+    pf.has_balance_error = f->has_balance != 0;
+    pf.balance_error = f->balance_error;
+    pf.warning = (char *)f->warning;
     m.body_case = MPMD__STREAM_MSG__BODY_FINISHED;
     m.finished = &pf;
     return pack_stream(&m, job_id, seq, buf, len);
@@ -134,6 +137,9 @@ int mpp_stream_decode(const void *buf, size_t len, size_t max, mpp_stream *out, 
         out->finished.steps = f->steps;
         out->finished.t = f->t;
         out->finished.wall_s = f->wall_s;
+        out->finished.has_balance = f->has_balance_error;
+        out->finished.balance_error = f->balance_error;
+        out->finished.warning = f->warning ? f->warning : "";
         out->has_energy = f->energy != NULL;
         mpp_take_energy(&out->energy, f->energy);
         break;

@@ -158,6 +158,9 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->method = r->method;
     ri->update = r->update;
     ri->transfer = r->transfer;
+    ri->warning = r->warning;
+    ri->has_balance = r->has_balance;
+    ri->balance_error = r->balance_error;
     if (!isnan(r->energy.total)) {
         memset(e, 0, sizeof *e);
         e->step = r->steps;

@@ -424,7 +424,8 @@ static void progress(ctx *c, mpm_sim *sim, double wall)
 
 /* Records the end and publishes Finished. */
 static void finish(ctx *c, int status, const char *error, int64_t steps, double t, double wall,
-                   size_t particles, const mpm_energy_sample *last)
+                   size_t particles, const mpm_energy_sample *last, const double *balance,
+                   const char *warning)
 {
     srv_job *j = c->j;
     flush_samples(c);
@@ -438,16 +439,21 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
         end.has_energy = 1;
         end.energy = last->e;
     }
+    end.has_balance = balance != NULL;
+    end.balance_error = balance ? *balance : 0;
+    end.warning = warning;
     int rc = store_run_finish(c->p->st, (int64_t)j->id, &end);
     if (rc) srv_warn(j->id, "end of run not recorded: %s", store_error()->message);
-    mpp_finished f = {status, error, steps, t, wall, last};
+    mpp_finished f = {status, error, steps, t, wall, last, balance != NULL, end.balance_error,
+                      warning};
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_stream_finished(j->id, j->msg_seq++, &f, &buf, &len))
         srv_warn(j->id, "out of memory encoding the end of the stream");
     publish(c, buf, len);
-    srv_log(j->id, "%s after %lld steps, t = %g, %.3f s%s%s", mpp_status_name(status),
-            (long long)steps, t, wall, error ? ": " : "", error ? error : "");
+    srv_log(j->id, "%s after %lld steps, t = %g, %.3f s%s%s%s%s", mpp_status_name(status),
+            (long long)steps, t, wall, error ? ": " : "", error ? error : "",
+            warning ? "; warning: " : "", warning ? warning : "");
 }
 
 static void run_job(srv_pool *p, void *push, srv_job *j)
@@ -467,7 +473,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me);
     if (!sim) {
         finish(&c, MPP_STATUS_FAILED, mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err), 0, 0,
-               0, 0, NULL);
+               0, 0, NULL, NULL, NULL);
         return;
     }
     size_t n = mpm_sim_particles(sim);
@@ -552,8 +558,20 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
         /* a diverged state has no meaningful energies; keep the last good one */
     }
+    /* the energy budget, on the balance error of the run's last sample (the
+     * final one): a warning recorded with the run, or FAILED if the case
+     * asks (Case.fail_on_budget) */
+    double balance;
+    char warn[512] = "";
+    int over = mpm_sim_budget(sim, &balance, NULL, warn, sizeof warn);
+    if (over && status == MPP_STATUS_FINISHED && sc->c.fail_on_budget) {
+        status = MPP_STATUS_FAILED;
+        snprintf(why, sizeof why, "%s", warn);
+        warn[0] = 0;
+    }
     progress(&c, sim, wall);
-    finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last);
+    finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last,
+           &balance, over && warn[0] ? warn : NULL);
     snapbuf_free(&sb);
     free(c.pe); /* empty: finish() handed everything on */
     mpm_sim_destroy(&sim);
@@ -754,7 +772,7 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         end.error = "cancelled by a client before it started";
         int src = store_run_finish(p->st, (int64_t)id, &end);
         if (src) srv_warn(id, "cancellation not recorded: %s", store_error()->message);
-        mpp_finished f = {MPP_STATUS_CANCELLED, end.error, 0, 0, 0, NULL};
+        mpp_finished f = {MPP_STATUS_CANCELLED, end.error, 0, 0, 0, NULL, 0, 0, NULL};
         if (mpp_stream_finished(id, j->msg_seq++, &f, msg, len))
             srv_warn(id, "out of memory encoding the end of the stream");
         srv_log(id, "cancelled while queued");
@@ -795,7 +813,7 @@ void srv_pool_stop(srv_pool *p, srv_pool_publish_fn pub, void *arg)
         if (rc) srv_warn(q->id, "interruption not recorded: %s", store_error()->message);
         srv_log(q->id, "interrupted while queued");
         if (pub) {
-            mpp_finished f = {MPP_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL};
+            mpp_finished f = {MPP_STATUS_INTERRUPTED, end.error, 0, 0, 0, NULL, 0, 0, NULL};
             uint8_t *msg = NULL;
             size_t len = 0;
             if (mpp_stream_finished(q->id, q->msg_seq++, &f, &msg, &len))

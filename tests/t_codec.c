@@ -304,9 +304,9 @@ TEST(codec_example_cube3d)
 TEST(codec_roundtrip)
 {
     static const char *const names[] = {
-        "point1d",       "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse", "disks2d_fine",
-        "cube3d",        "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi", "disk2d_apic",
-        "sliding_block", "pushed_bar1d",   "impact2d_j2"};
+        "point1d",       "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse",    "disks2d_fine",
+        "cube3d",        "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi",    "disk2d_apic",
+        "sliding_block", "pushed_bar1d",   "impact2d_j2",      "column2d_geostatic"};
     for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
         char path[256], err[T_ERRLEN];
         size_t len = 0, n1 = 0, n2 = 0;
@@ -427,7 +427,7 @@ TEST(codec_bad_json)
         return;
     if (expect_bad(
             "\"velocity\": [-0.1, 0]", "\"velocity\": [-0.1, 0], \"colour\": 1", S,
-            "bodies[1].colour: unknown field (Body has: material, velocity, box, sphere, points, ppc)"))
+            "bodies[1].colour: unknown field (Body has: material, velocity, box, sphere, points, ppc, geostatic)"))
         return;
     if (expect_bad(
             "\"endTime\": 1", "\"endTime\": 1, \"method\": \"FEM\"", S,

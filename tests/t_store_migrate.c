@@ -115,11 +115,11 @@ TEST(store_migrate_old_schema)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 5"), "%s",
+    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 6"), "%s",
            lc.migrated);
     int v = -1;
     CHECK(store_schema_version(s, &v) == 0);
-    CHECKF(v == 5 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
+    CHECKF(v == 6 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
     store_stats st;
     store_get_stats(s, &st);
     CHECK(st.recovered_running == 1 && st.recovered_queued == 0);
@@ -306,9 +306,9 @@ TEST(store_migrate_v2)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-2 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 5"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 6"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 5);
+    CHECK(store_schema_version(s, &v) == 0 && v == 6);
 
     mpm_energy_sample *es = NULL;
     size_t nes = 0;
@@ -448,9 +448,9 @@ TEST(store_migrate_v4)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-4 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 5"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 6"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 5 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 6 && v == STORE_SCHEMA_VERSION);
 
     /* the old runs: FLIP, everything else as written */
     store_run r;
@@ -557,4 +557,91 @@ TEST(store_transfer_round_trip)
     CHECK(store_run_insert(s, &bad, &id) == MPM_EINVAL &&
           strstr(store_error()->message, "unknown transfer"));
     store_close(&s);
+}
+
+/* A version-5 database (version 4 as above, then 4 -> 5 as released) with
+ * the version-4 rows.  Opening it migrates 5 -> 6 alone: the old samples
+ * read the four works and the balance error as 0, the old runs no balance
+ * recorded and no warning; a run finished after it keeps its balance error
+ * and warning, and its samples their works. */
+TEST(store_migrate_v5)
+{
+    const char *p = db_path("v5.db");
+    char path[600];
+    snprintf(path, sizeof path, "%s", p);
+    CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v1_to_v2, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v2_to_v4, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path,
+                          "ALTER TABLE runs ADD COLUMN transfer TEXT NOT NULL DEFAULT 'flip'"
+                          " CHECK (transfer IN ('flip','apic'));"
+                          "PRAGMA user_version = 5;",
+                          NULL) == 0,
+           "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, old_rows_v4, NULL) == 0, "%s", store_error()->message);
+
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
+    store *s = NULL;
+    CHECKF(store_open(path, &o, &s) == 0, "opening a version-5 database: %s",
+           store_error()->message);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 5 to 6"), "%s", lc.migrated);
+    int v = -1;
+    CHECK(store_schema_version(s, &v) == 0 && v == 6 && v == STORE_SCHEMA_VERSION);
+
+    store_run r;
+    CHECK(store_run_get(s, 7, &r) == 0);
+    int ok = !r.has_balance && r.warning == NULL && r.energy.total == 0.75 &&
+             !strcmp(r.name, "v4 run") && r.transfer == MPM_TRANSFER_FLIP;
+    store_run_clear(&r);
+    CHECKF(ok, "the version-5 run reads back differently");
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
+    CHECK(store_energy_read(s, 7, 0, 0, &es, &nes) == 0);
+    ok = nes == 2 && es[1].e.total == 0.75 && es[1].e.angular_momentum[2] == 0.625;
+    for (size_t i = 0; ok && i < nes; i++)
+        ok = es[i].e.plastic_work == 0 && es[i].e.damping_work == 0 && es[i].e.friction_work == 0 &&
+             es[i].e.prescribed_work == 0 && es[i].e.balance_error == 0;
+    free(es);
+    CHECKF(ok, "the version-5 samples read back differently");
+
+    /* a new run: its samples' works and its end's balance and warning */
+    store_run in = sample_run("balance", MPP_STATUS_QUEUED);
+    int64_t id = 0;
+    CHECK(store_run_insert(s, &in, &id) == 0 && id == 9);
+    mpm_energy_sample smp = {.seq = 0, .step = 4, .t = 0.5, .dim = 2};
+    smp.e.total = 1.5;
+    smp.e.plastic_work = 0.125;
+    smp.e.damping_work = 0.25;
+    smp.e.friction_work = 0.375;
+    smp.e.prescribed_work = -0.5;
+    smp.e.balance_error = 0.0625;
+    CHECK(store_energy_append(s, id, &smp, 1) == 0);
+    store_run_end end = {.status = MPP_STATUS_FINISHED,
+                         .steps = 4,
+                         .has_energy = 1,
+                         .energy = smp.e,
+                         .has_balance = 1,
+                         .balance_error = 0.0625,
+                         .warning = "energy balance error 6.25% exceeds the budget 5%"};
+    CHECK(store_run_finish(s, id, &end) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_run_get(s, id, &r) == 0);
+    ok = r.has_balance && r.balance_error == 0.0625 && r.warning &&
+         !strcmp(r.warning, end.warning) && r.status == MPP_STATUS_FINISHED;
+    store_run_clear(&r);
+    CHECKF(ok, "the balance and warning of a new run read back differently");
+    CHECK(store_energy_read(s, id, 0, 0, &es, &nes) == 0);
+    ok = nes == 1 && es[0].e.plastic_work == 0.125 && es[0].e.damping_work == 0.25 &&
+         es[0].e.friction_work == 0.375 && es[0].e.prescribed_work == -0.5 &&
+         es[0].e.balance_error == 0.0625;
+    free(es);
+    CHECKF(ok, "the new sample's works read back differently");
+    store_close(&s);
+    int64_t cnt = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
 }

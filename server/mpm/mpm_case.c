@@ -67,6 +67,27 @@ static int in_region(const mpm_traction_desc *t, int dim, const double *x)
     return 1;
 }
 
+/* The geostatic stress of particle p of body b added to its stress
+ * (mpm.h, mpm_body_desc.geostatic); the case passed check_body(), so
+ * gravity has exactly one non-zero component. */
+static void geostatic(gen_ctx *g, const mpm_body_desc *b, size_t p)
+{
+    const mpm_case *c = g->c;
+    mpm_particles *P = g->P;
+    int dim = c->grid.dim, a = 0;
+    for (int d = 0; d < dim; d++)
+        if (c->gravity[d] != 0) a = d;
+    double gv = c->gravity[a];
+    /* depth below the surface: gravity points from the surface into the body */
+    double depth = gv < 0 ? b->free_surface - P->x[a][p] : P->x[a][p] - b->free_surface;
+    if (!(depth > 0)) return;
+    const mpm_mat_params *mp = &g->mats[b->material];
+    double sv = -mp->rho * fabs(gv) * depth;
+    double k0 = b->has_k0 ? b->k0 : mp->nu / (1 - mp->nu);
+    int nn = dim == 1 ? 1 : 3; /* normal components stored (2D: xx yy zz) */
+    for (int d = 0; d < nn; d++) P->sig[d][p] += d == a ? sv : k0 * sv;
+}
+
 static void emit(gen_ctx *g, const mpm_body_desc *b, const double *x, double vol, double mass,
                  const double *v, const double *stress, const double *lp)
 {
@@ -92,6 +113,7 @@ static void emit(gen_ctx *g, const mpm_body_desc *b, const double *x, double vol
             /* stored components are the Voigt indices < MPM_NCOMP(dim) */
             for (int c = 0; c < MPM_NCOMP(dim); c++) P->sig[c][p] = stress[c];
         }
+        if (b->geostatic) geostatic(g, b, p);
     }
     g->n++;
 }
@@ -226,6 +248,20 @@ static int check_body(const mpm_case *c, const mpm_body_desc *b, size_t bi, mpm_
         if (!isfinite(b->velocity[d]))
             return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].velocity[%d]", bi, d),
                             "must be finite");
+    if (b->geostatic) {
+        int axes = 0;
+        for (int d = 0; d < dim; d++) axes += c->gravity[d] != 0;
+        if (axes != 1)
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].geostatic", bi),
+                            "needs gravity along exactly one axis (got %d non-zero components)",
+                            axes);
+        if (!isfinite(b->free_surface))
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].geostatic.free_surface", bi),
+                            "must be finite");
+        if (b->has_k0 && !(b->k0 >= 0 && isfinite(b->k0)))
+            return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu].geostatic.k0", bi),
+                            "must be finite and >= 0 (absent: nu / (1 - nu)) (got %g)", b->k0);
+    }
     if (b->n_points > 0) return 0;
     if (b->shape != MPM_SHAPE_BOX && b->shape != MPM_SHAPE_SPHERE)
         return mpm_fail(err, MPM_EINVAL, PATH("bodies[%zu]", bi), "unknown shape %d",
@@ -444,6 +480,25 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     for (int d = 0; d < dim; d++)
         if (!isfinite(c->gravity[d]))
             return mpm_fail(err, MPM_EINVAL, PATH("gravity[%d]", d), "must be finite");
+    if (c->damping != MPM_DAMPING_NONE && c->damping != MPM_DAMPING_LOCAL &&
+        c->damping != MPM_DAMPING_VISCOUS)
+        return mpm_fail(err, MPM_EINVAL, "damping.kind",
+                        "unknown value %d (NONE, LOCAL or VISCOUS)", (int)c->damping);
+    if (c->damping == MPM_DAMPING_LOCAL && !(c->damping_coef >= 0 && c->damping_coef < 1))
+        return mpm_fail(err, MPM_EINVAL, "damping.coefficient",
+                        "local damping's alpha must be in [0, 1) (got %g)", c->damping_coef);
+    if (c->damping == MPM_DAMPING_VISCOUS && !(c->damping_coef >= 0 && isfinite(c->damping_coef)))
+        return mpm_fail(err, MPM_EINVAL, "damping.coefficient",
+                        "viscous damping's rate c (1/s) must be finite and >= 0 (got %g)",
+                        c->damping_coef);
+    if (!(c->damping_until >= 0 && isfinite(c->damping_until)))
+        return mpm_fail(err, MPM_EINVAL, "damping.until",
+                        "must be finite and >= 0 (0: damping throughout) (got %g)",
+                        c->damping_until);
+    if (!(c->energy_budget >= 0 && isfinite(c->energy_budget)))
+        return mpm_fail(err, MPM_EINVAL, "energy_budget",
+                        "must be finite and >= 0 (a fraction; 0: no check) (got %g)",
+                        c->energy_budget);
     if (c->n_materials < 1 || c->n_materials > 65535 || !c->materials)
         return mpm_fail(err, MPM_EINVAL, "materials", "need 1 to 65535 materials (got %zu)",
                         c->n_materials);

@@ -134,6 +134,7 @@ typedef struct {
                               * the step's passes when energies are wanted) */
     double emom[3], emass;   /* partial momentum and mass (mpm_sim_energy) */
     double eang[3];          /* partial angular momentum (mpm_sim_energy) */
+    double edamp;            /* damping work of the thread's nodes this step */
     int ksorted;             /* sort keys of the slice non-decreasing */
     uint32_t kfirst, klast;  /* the slice's first and last sort key */
     /* this step's work of the prescribed velocities' reactions and of the
@@ -250,6 +251,19 @@ struct mpm_sim {
      * floor below which an energy is noise */
     double e_total0, e_floor;
     double guard_v2; /* max |v|^2 at the last check */
+
+    /* energy balance (mpm_energy_finish()): the total at creation, the
+     * scale's constant part K_0 + |S_0| + U_0, gravity's potential at
+     * creation, the balance error the last mpm_sim_energy() found and the
+     * largest, the budget (0: none) */
+    double bal_total0, bal_ref0, bal_pot0, bal_last, bal_worst, budget;
+    int fail_on_budget;
+
+    /* damping (mpm_case.damping): kind, coefficient, the time it stops (0:
+     * never), and the energy it removed so far */
+    mpm_damping_kind damp;
+    int damp_on; /* the running step damps */
+    double damp_coef, damp_until, damping_work;
 
     /* energies summed inside the step (mpm_sim_want_energy()): want asks
      * for them in the next step, step_energy says the running step sums
@@ -587,14 +601,16 @@ static inline size_t mpm_row_node(const mpm_sim *s, size_t row, int x)
 enum { MPM_F_M = 1, MPM_F_Q = 2, MPM_F_F = 4, MPM_F_Q2 = 8 };
 /* Node operations of mpm_node_pass(), in the order applied to each node
  * (after the reduction of the fields named): inverse mass with phantom
- * nodes at 0, gravity f += m g, BC1 on q or on q2, BC2 on f, q += f dt. */
+ * nodes at 0, gravity f += m g, BC1 on q or on q2, BC2 on f, damping of
+ * f, q += f dt. */
 enum {
     MPM_N_MINV = 16,
     MPM_N_GRAV = 32,
     MPM_N_BC1 = 64,
     MPM_N_BC1Q2 = 128,
     MPM_N_BC2 = 256,
-    MPM_N_UPD = 512
+    MPM_N_UPD = 512,
+    MPM_N_DAMP = 1024 /* damping (after BC2, before the update; mpm.h) */
 };
 
 /* Allocates the row extents (all empty) of the simulation and of each
@@ -676,6 +692,10 @@ void mpm_ph_energy(mpm_sim *s, int tid);
 void mpm_energy_sum(const mpm_sim *s, mpm_energy *e);
 /* The guard: 0, or MPM_EDIVERGED with s->err set and s->failed. */
 int mpm_guard(mpm_sim *s);
+/* The cumulative works of the run into e (external, damping, and the
+ * other helpers' dissipations), then the total and the balance error:
+ * the one place they are computed (mpm_sim_energy() and the guard). */
+void mpm_energy_finish(const mpm_sim *s, mpm_energy *e);
 /* The elastic energy stored by the initial stress (U0, see mpm_guard()). */
 double mpm_initial_stress_energy(const mpm_sim *s);
 

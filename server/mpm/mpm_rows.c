@@ -13,6 +13,7 @@
 #include "mpm_internal.h"
 
 #include <limits.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -279,11 +280,41 @@ void mpm_ph_bbox(mpm_sim *s, int tid)
     s->k->bbox(s, &s->tout[tid], a, b);
 }
 
+/* Damping of the rate of momentum over nodes base .. base + w - 1 (mpm.h,
+ * mpm_damping_kind), after BC2 (a fixed component has f = 0 and q = 0, so
+ * it is not damped) and before q += f dt; the energy removed, -f_d . v_mid
+ * dt with v_mid = (q + (q + f dt)) / 2m the mean nodal velocity of the
+ * update (exactly the work f_d does on the grid's kinetic energy in the
+ * update), is added to the thread's edamp.  Phantom nodes (1/m stored as
+ * 0) have v = 0 and are not damped. */
+static void damp_seg(mpm_sim *s, int tid, size_t base, size_t w)
+{
+    double dt = s->dt, a = s->damp_coef, work = 0;
+    int local = s->damp == MPM_DAMPING_LOCAL;
+    const double *restrict mi = s->minv + base;
+    for (int d = 0; d < s->dim; d++) {
+        const double *restrict q = s->g.q[d] + base;
+        double *restrict f = s->g.f[d] + base;
+        for (size_t i = 0; i < w; i++) {
+            if (mi[i] == 0) continue;
+            double v = q[i] * mi[i], fd;
+            if (local)
+                fd = v > 0 ? -a * fabs(f[i]) : v < 0 ? a * fabs(f[i]) : 0.0;
+            else
+                fd = -a * q[i];
+            f[i] += fd;
+            work -= fd * (q[i] + 0.5 * f[i] * dt) * mi[i] * dt;
+        }
+    }
+    s->tout[tid].edamp += work;
+}
+
 /* A node pass over the thread's share of the extents' nodes, each node in
  * the step's order: reduce the fields named (MPM_F_*), then inverse mass with
  * phantom nodes (m <= M_TOL) at 0 (MPM_N_MINV), gravity f += m g (MPM_N_GRAV,
  * sum_p m_p b S_np), BC1 on q (MPM_N_BC1) or on q2 (MPM_N_BC1Q2), BC2 on f
- * (MPM_N_BC2), and q += f dt (MPM_N_UPD: Eq. 13 integrated, Fig. 6 step 6). */
+ * (MPM_N_BC2), damping (MPM_N_DAMP), and q += f dt (MPM_N_UPD: Eq. 13 integrated, Fig. 6 step 6).
+ */
 void mpm_node_pass(mpm_sim *s, int tid, int ops)
 {
     int fields = ops & (MPM_F_M | MPM_F_Q | MPM_F_F | MPM_F_Q2);
@@ -314,7 +345,11 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
                 for (size_t i = 0; i < w; i++) f[i] += gd * m[i];
             }
         /* prescribed velocities and friction (mpm_cond.c), then the fixed
-         * DOFs' zeros (a friction face's roller: after friction read f_n) */
+         * DOFs' zeros (a friction face's roller: after friction read f_n).
+         * Damping acts before BC2, so that the fixed and prescribed
+         * directions end exactly at their values (what damping adds there
+         * is taken back by BC2 and counted in the prescribed work: the
+         * balance still closes) */
         if (ops & MPM_N_BC1) {
             if (s->has_cond) mpm_cond_bc1(s, base, base + w - 1);
             mpm_bc_zero(s, s->g.q, base, base + w - 1);
@@ -323,6 +358,7 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
             if (s->has_cond) mpm_cond_bc1q2(s, base, base + w - 1);
             mpm_bc_zero(s, s->g.q2, base, base + w - 1);
         }
+        if (ops & MPM_N_DAMP) damp_seg(s, tid, base, w);
         if (ops & MPM_N_BC2) {
             if (s->has_cond) mpm_cond_bc2(s, tid, base, base + w - 1);
             mpm_bc_zero(s, s->g.f, base, base + w - 1);

@@ -235,15 +235,16 @@ static void ph_g2p_x_stress(mpm_sim *s, int tid)
  * BC2, then q += f dt */
 static void forces_update(mpm_sim *s, int tid, int reduce_ops)
 {
+    int damp = s->damp_on ? MPM_N_DAMP : 0;
     if (!s->nload) {
-        mpm_node_pass(s, tid, reduce_ops | MPM_N_BC2 | MPM_N_UPD);
+        mpm_node_pass(s, tid, reduce_ops | MPM_N_BC2 | damp | MPM_N_UPD);
         return;
     }
     mpm_node_pass(s, tid, reduce_ops);
     mpm_team_sync(s);
     if (tid == 0) s->k->scatter_loads(s);
     mpm_team_sync(s);
-    mpm_node_pass(s, tid, MPM_N_BC2 | MPM_N_UPD);
+    mpm_node_pass(s, tid, MPM_N_BC2 | damp | MPM_N_UPD);
 }
 
 static void ph_step_usf(mpm_sim *s, int tid)
@@ -477,10 +478,20 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (c->cfl <= 0 && c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC)
         s->cfl = MPM_APIC_MPM_MAX_CFL; /* its stability limit (mpm.h) */
     next_dt(s);
+    s->damp = c->damping;
+    s->damp_coef = c->damping_coef;
+    s->damp_until = c->damping_until;
+    s->budget = c->energy_budget;
+    s->fail_on_budget = c->fail_on_budget;
     mpm_energy e0;
     mpm_sim_energy(s, &e0);
-    s->e_total0 = e0.total + 2 * mpm_initial_stress_energy(s);
+    double u0 = mpm_initial_stress_energy(s);
+    s->e_total0 = e0.total + 2 * u0;
     s->e_floor = 1e-9 * 0.5 * e0.mass * s->cmax * s->cmax;
+    s->bal_total0 = e0.total;
+    s->bal_pot0 = e0.potential;
+    s->bal_ref0 = e0.kinetic + fabs(e0.strain) + u0;
+    s->bal_last = s->bal_worst = 0;
     s->guard_v2 = s->vmax * s->vmax;
     if (mpm_team_start(s)) goto nomem;
     init_order(s);
@@ -585,6 +596,11 @@ static int finish_step(mpm_sim *s)
     }
     mpm_loads_end_step(s);
     if (s->has_cond) mpm_cond_end_step(s);
+    if (s->damp_on)
+        for (int th = 0; th < s->nthreads; th++) { /* in thread order */
+            s->damping_work += s->tout[th].edamp;
+            s->tout[th].edamp = 0;
+        }
     s->vmax = sqrt(v2);
     s->t = t;
     s->steps = step;
@@ -608,6 +624,7 @@ int mpm_sim_step(mpm_sim *s)
      * USF stress_force and g2p_xv, USL g2p_xv_stress, MUSL g2p_x_stress) */
     s->step_energy = s->want_energy;
     s->want_energy = 0;
+    s->damp_on = s->damp != MPM_DAMPING_NONE && (!(s->damp_until > 0) || s->t < s->damp_until);
     mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
     if (s->general) /* the plastic work of the step, in thread order */
         for (int t = 0; t < s->nthreads; t++) {
@@ -728,11 +745,9 @@ void mpm_sim_energy(const mpm_sim *cs, mpm_energy *e)
         }
         mpm_energy_sum(s, e);
     }
-    e->external_work = s->external_work;
-    e->friction_work = s->friction_work;
-    e->prescribed_work = s->prescribed_work;
-    e->plastic_work = s->plastic_work;
-    e->total = e->kinetic + e->strain + e->potential - e->external_work;
+    mpm_energy_finish(s, e);
+    s->bal_last = e->balance_error;
+    if (e->balance_error > s->bal_worst) s->bal_worst = e->balance_error;
 }
 
 void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out)

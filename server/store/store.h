@@ -46,7 +46,7 @@
 #include <stdint.h>
 
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 5
+#define STORE_SCHEMA_VERSION 6
 
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))
@@ -82,6 +82,12 @@ typedef struct {
                                    not stored and read back as 0. */
     const char *error;          /* NULL = none */
     const char *server_version; /* NULL on insert: "" */
+    /* the energy balance (schema 6; store_run_finish sets them): the run's
+     * balance error at its end (has_balance 0: none recorded, as for runs
+     * stored before) and the budget's warning (NULL = none) */
+    int has_balance;
+    double balance_error;
+    const char *warning;
 } store_run;
 
 /* How a run ended (store_run_finish). */
@@ -90,9 +96,12 @@ typedef struct {
     double finished_at; /* 0: now */
     int64_t steps;
     double wall_s, psteps_per_s;
-    int has_energy;    /* 0: leave the final energies unset */
-    mpm_energy energy; /* kinetic .. total are stored */
-    const char *error; /* NULL = none */
+    int has_energy;       /* 0: leave the final energies unset */
+    mpm_energy energy;    /* kinetic .. total are stored */
+    const char *error;    /* NULL = none */
+    int has_balance;      /* 0: leave balance_error unset */
+    double balance_error; /* the run's energy balance error at its end */
+    const char *warning;  /* the energy budget's warning; NULL = none */
 } store_run_end;
 
 /* A particle snapshot: data is opaque to the store (the caller's encoding of

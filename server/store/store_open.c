@@ -130,6 +130,20 @@ static const char *const migrations[] = {
      * APIC.) */
     "ALTER TABLE runs ADD COLUMN transfer TEXT NOT NULL DEFAULT 'flip'"
     " CHECK (transfer IN ('flip','apic'));",
+    /* 5 -> 6: the extended energy balance of issue 11 (mpmd.EnergySample
+     * fields 12-16): the four cumulative works and the balance error of
+     * each sample, and the run's balance error at its end and budget warning
+     * (RunInfo.balance_error, .warning).  Samples written before read the
+     * works and the error as 0 (no such feature ran then; the error was
+     * not measured; a NaN written later is NULL and reads NaN), runs
+     * before as no balance recorded (NULL) and no warning. */
+    "ALTER TABLE energy ADD COLUMN plastic_work REAL DEFAULT 0;"
+    "ALTER TABLE energy ADD COLUMN damping_work REAL DEFAULT 0;"
+    "ALTER TABLE energy ADD COLUMN friction_work REAL DEFAULT 0;"
+    "ALTER TABLE energy ADD COLUMN prescribed_work REAL DEFAULT 0;"
+    "ALTER TABLE energy ADD COLUMN balance_error REAL DEFAULT 0;"
+    "ALTER TABLE runs ADD COLUMN balance_error REAL;"
+    "ALTER TABLE runs ADD COLUMN warning TEXT;",
 };
 
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,

@@ -142,8 +142,8 @@ static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out, s
     "id, name, length(case_pb), method, \"update\", dim, particles, nodes,"   \
     " status, submitted_at, started_at, finished_at, steps, wall_s,"          \
     " psteps_per_s, kinetic, strain, potential, external_work, total, error," \
-    " server_version, transfer"
-#define RUN_COL_CASE 23
+    " server_version, transfer, balance_error, warning"
+#define RUN_COL_CASE 25
 
 void store_run_clear(store_run *r)
 {
@@ -152,6 +152,7 @@ void store_run_clear(store_run *r)
     free((void *)r->case_pb);
     free((void *)r->error);
     free((void *)r->server_version);
+    free((void *)r->warning);
     memset(r, 0, sizeof *r);
 }
 
@@ -189,9 +190,12 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     r->energy.potential = col_real_nan(st, 17);
     r->energy.external_work = col_real_nan(st, 18);
     r->energy.total = col_real_nan(st, 19);
+    r->has_balance = sqlite3_column_type(st, 23) != SQLITE_NULL;
+    r->balance_error = r->has_balance ? sqlite3_column_double(st, 23) : 0;
     int rc;
     if ((rc = col_strdup(db, st, 1, &r->name)) || (rc = col_strdup(db, st, 20, &r->error)) ||
-        (rc = col_strdup(db, st, 21, &r->server_version))) {
+        (rc = col_strdup(db, st, 21, &r->server_version)) ||
+        (rc = col_strdup(db, st, 24, &r->warning))) {
         store_run_clear(r);
         return rc;
     }
@@ -381,7 +385,8 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
         "SELECT e.seq, e.step, e.t, e.kinetic, e.strain, e.potential, e.external_work,"
         " e.total, e.momentum_x, e.momentum_y, e.momentum_z, e.mass,"
         " (SELECT dim FROM runs WHERE id = ?1),"
-        " e.angular_momentum_x, e.angular_momentum_y, e.angular_momentum_z"
+        " e.angular_momentum_x, e.angular_momentum_y, e.angular_momentum_z,"
+        " e.plastic_work, e.damping_work, e.friction_work, e.prescribed_work, e.balance_error"
         " FROM energy e WHERE e.run_id = ?1 AND e.seq >= ?2 ORDER BY e.seq LIMIT ?3",
         -1, &st, NULL);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, run_id);
@@ -407,6 +412,11 @@ int store_energy_read(store *s, int64_t run_id, int64_t from_seq, size_t max,
         e->e.mass = col_real_nan(st, 11);
         e->dim = sqlite3_column_int(st, 12);
         for (int k = 0; k < 3; k++) e->e.angular_momentum[k] = col_real_nan(st, 13 + k);
+        e->e.plastic_work = col_real_nan(st, 16);
+        e->e.damping_work = col_real_nan(st, 17);
+        e->e.friction_work = col_real_nan(st, 18);
+        e->e.prescribed_work = col_real_nan(st, 19);
+        e->e.balance_error = col_real_nan(st, 20);
     }
     if (i < cnt && rc != SQLITE_DONE) {
         r = sti_sql_fail(db, rc, "reading energy samples");

@@ -101,13 +101,16 @@ static const char *const writer_sql[WS_COUNT] = {
                         " WHERE id = ?1" NOT_ENDED,
     [WS_FINISH] = "UPDATE runs SET status = ?2, finished_at = ?3, steps = ?4,"
                   " wall_s = ?5, psteps_per_s = ?6, kinetic = ?7, strain = ?8,"
-                  " potential = ?9, external_work = ?10, total = ?11, error = ?12"
+                  " potential = ?9, external_work = ?10, total = ?11, error = ?12,"
+                  " balance_error = ?13, warning = ?14"
                   " WHERE id = ?1" NOT_ENDED,
     [WS_INS_ENERGY] = "INSERT INTO energy (run_id, seq, step, t, kinetic, strain, potential,"
                       " external_work, total, momentum_x, momentum_y, momentum_z, mass,"
-                      " angular_momentum_x, angular_momentum_y, angular_momentum_z)"
+                      " angular_momentum_x, angular_momentum_y, angular_momentum_z,"
+                      " plastic_work, damping_work, friction_work, prescribed_work,"
+                      " balance_error)"
                       " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15,"
-                      " ?16)",
+                      " ?16, ?17, ?18, ?19, ?20, ?21)",
     [WS_PUT_SNAP] = "INSERT OR REPLACE INTO snapshots (run_id, step, t, n, dim, fields, data)"
                     " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
     [WS_GET_STATUS] = "SELECT status FROM runs WHERE id = ?1",
@@ -240,6 +243,11 @@ static int apply_energy(store *s, const op *o)
         BIND(bind_real(st, 14, e->e.angular_momentum[0]));
         BIND(bind_real(st, 15, e->e.angular_momentum[1]));
         BIND(bind_real(st, 16, e->e.angular_momentum[2]));
+        BIND(bind_real(st, 17, e->e.plastic_work));
+        BIND(bind_real(st, 18, e->e.damping_work));
+        BIND(bind_real(st, 19, e->e.friction_work));
+        BIND(bind_real(st, 20, e->e.prescribed_work));
+        BIND(bind_real(st, 21, e->e.balance_error));
         rc = ws_run(st, rc);
         if (rc != SQLITE_DONE) {
             if (!bad++)
@@ -326,6 +334,8 @@ static int apply_op(store *s, op *o)
         BIND(bind_real(st, 10, e->has_energy ? e->energy.external_work : NAN));
         BIND(bind_real(st, 11, e->has_energy ? e->energy.total : NAN));
         BIND(bind_text_or_null(st, 12, e->error));
+        BIND(bind_real(st, 13, e->has_balance ? e->balance_error : NAN));
+        BIND(bind_text_or_null(st, 14, e->warning));
         break;
     }
     case OP_ENERGY: return apply_energy(s, o);
@@ -734,10 +744,11 @@ int store_run_finish(store *s, int64_t id, const store_run_end *end)
     if (isnan(end->finished_at) || end->finished_at < 0)
         return sti_fail(MPM_EINVAL, "bad finished_at");
     char *cur;
-    op *o = op_new(OP_RUN_FINISH, id, str_room(end->error), &cur);
+    op *o = op_new(OP_RUN_FINISH, id, str_room(end->error) + str_room(end->warning), &cur);
     if (!o) return MPM_ENOMEM;
     o->u.fin = *end;
     o->u.fin.error = tail_str(&cur, end->error);
+    o->u.fin.warning = tail_str(&cur, end->warning);
     if (o->u.fin.finished_at == 0) o->u.fin.finished_at = store_time_now();
     return submit(s, o, 0);
 }
