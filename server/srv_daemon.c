@@ -40,7 +40,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <time.h>
+#include <unistd.h>
 #include <zmq.h>
 
 #define EVENTS_EP "inproc://mpmd-events"
@@ -51,6 +54,10 @@
 /* How long the last stream messages and replies may take to leave at
  * shutdown (a vanished peer holds the exit up this long, no longer). */
 #define SHUTDOWN_LINGER_MS 1000
+/* Bytes above --max-request-bytes that a request frame may still have and
+ * get a TOO_LARGE reply; a larger frame costs its sender the connection
+ * (ZMQ_MAXMSGSIZE). */
+#define REQUEST_MARGIN 65536
 
 static volatile sig_atomic_t stop_signal;
 
@@ -817,12 +824,54 @@ static void stop_jobs(daemon_t *d)
     drain_pending(d);
 }
 
-static int open_socket(void *zctx, int type, const char *ep, int allow_remote, void **out,
+/* 1 if a process accepts connections on the unix socket at path (a live
+ * daemon owns this ipc:// endpoint), 0 if none does (no file, or a stale
+ * one that a dead daemon left: zmq_bind replaces it). */
+static int ipc_in_use(const char *path)
+{
+    struct sockaddr_un a;
+    if (path[0] == '@' || strlen(path) >= sizeof a.sun_path) return 0; /* abstract: bind says */
+    int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) return 0;
+    memset(&a, 0, sizeof a);
+    a.sun_family = AF_UNIX;
+    memcpy(a.sun_path, path, strlen(path) + 1);
+    int live = connect(fd, (struct sockaddr *)&a, sizeof a) == 0;
+    close(fd);
+    return live;
+}
+
+/* The endpoint libzmq binds for ep: tcp://localhost:P becomes
+ * tcp://127.0.0.1:P and tcp://ip6-localhost:P tcp://[::1]:P (libzmq takes
+ * a bind host for an interface name, not a host name); *ipv6 says the host
+ * is an IPv6 address (ZMQ_IPV6 needed). */
+static int bind_endpoint(const char *ep, char *out, size_t n, int *ipv6)
+{
+    static const struct {
+        const char *from, *to;
+    } alias[] = {{"tcp://localhost:", "tcp://127.0.0.1:"},
+                 {"tcp://ip6-localhost:", "tcp://[::1]:"}};
+    *ipv6 = 0;
+    for (size_t i = 0; i < sizeof alias / sizeof alias[0]; i++) {
+        size_t k = strlen(alias[i].from);
+        if (!strncmp(ep, alias[i].from, k)) {
+            int w = snprintf(out, n, "%s%s", alias[i].to, ep + k);
+            *ipv6 = alias[i].to[6] == '[';
+            return w > 0 && (size_t)w < n ? 0 : -1;
+        }
+    }
+    *ipv6 = !strncmp(ep, "tcp://[", 7) || (!strncmp(ep, "tcp://", 6) && strchr(ep + 6, ':') &&
+                                           strchr(ep + 6, ':') != strrchr(ep + 6, ':'));
+    int w = snprintf(out, n, "%s", ep);
+    return w > 0 && (size_t)w < n ? 0 : -1;
+}
+
+static int open_socket(void *zctx, int type, const char *ep, const srv_config *cfg, void **out,
                        char *err, size_t errlen)
 {
     *out = NULL;
     if (!mpp_endpoint_is_local(ep)) {
-        if (!allow_remote) {
+        if (!cfg->allow_remote) {
             snprintf(err, errlen,
                      "refusing to bind %s: not loopback, ipc:// or inproc:// "
                      "(mpmd has no authentication yet; pass --allow-remote to bind anyway)",
@@ -834,6 +883,19 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
                  "SUBMIT JOBS AND READ RUNS (no authentication yet) !!!",
                  ep);
     }
+    char bep[300];
+    int ipv6 = 0;
+    if (bind_endpoint(ep, bep, sizeof bep, &ipv6)) {
+        snprintf(err, errlen, "endpoint %s is too long", ep);
+        return -1;
+    }
+    if (!strncmp(bep, "ipc://", 6) && ipc_in_use(bep + 6)) {
+        snprintf(err, errlen,
+                 "cannot bind %s: another process (a running mpmd?) accepts connections on "
+                 "it; stop it or choose another endpoint",
+                 ep);
+        return -1;
+    }
     void *s = zmq_socket(zctx, type);
     int zero = 0, one = 1, hwm = 10000;
     if (!s) {
@@ -841,6 +903,7 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
         return -1;
     }
     if (zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) ||
+        (ipv6 && zmq_setsockopt(s, ZMQ_IPV6, &one, sizeof one)) ||
         (type == ZMQ_ROUTER && zmq_setsockopt(s, ZMQ_ROUTER_MANDATORY, &one, sizeof one)) ||
         (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_SNDHWM, &hwm, sizeof hwm)) ||
         (type == ZMQ_PULL && zmq_setsockopt(s, ZMQ_RCVHWM, &hwm, sizeof hwm))) {
@@ -849,17 +912,19 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
         return -1;
     }
     if (type == ZMQ_ROUTER) {
-        /* a hard cap well above the soft limit: larger frames cost the
-         * sender its connection; smaller ones over the soft limit get an
-         * error reply */
-        int64_t cap = 2 * (int64_t)(1u << 30);
+        /* libzmq drops the connection of a peer whose message is above
+         * this as soon as its size is read, before any of it is allocated:
+         * a request over --max-request-bytes is never held whole.  The
+         * margin lets a request slightly over the limit get a TOO_LARGE
+         * reply instead (the frame sizes a client can be told about). */
+        int64_t cap = (int64_t)cfg->max_request_bytes + REQUEST_MARGIN;
         if (zmq_setsockopt(s, ZMQ_MAXMSGSIZE, &cap, sizeof cap)) {
             snprintf(err, errlen, "ZMQ_MAXMSGSIZE: %s", zmq_strerror(errno));
             zmq_close(s);
             return -1;
         }
     }
-    if (zmq_bind(s, ep)) {
+    if (zmq_bind(s, bep)) {
         snprintf(err, errlen, "cannot bind %s: %s", ep, zmq_strerror(errno));
         zmq_close(s);
         return -1;
@@ -886,7 +951,7 @@ int srv_daemon_run(const srv_config *cfg)
     store_options so = {0};
     so.log = srv_log_store;
     if (store_open(cfg->db, &so, &d.st)) {
-        srv_warn(0, "%s", store_error()->message);
+        srv_error(0, "%s", store_error()->message);
         return 1;
     }
     store_stats ss;
@@ -898,20 +963,20 @@ int srv_daemon_run(const srv_config *cfg)
                 (long long)ss.recovered_running, (long long)ss.recovered_queued);
     d.zctx = zmq_ctx_new();
     if (!d.zctx) {
-        srv_warn(0, "zmq_ctx_new: %s", zmq_strerror(errno));
+        srv_error(0, "zmq_ctx_new: %s", zmq_strerror(errno));
         goto out;
     }
-    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg->allow_remote, &d.router, err,
-                    sizeof err) ||
-        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg->allow_remote, &d.xpub, err,
-                    sizeof err) ||
-        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, 0, &d.pull, err, sizeof err)) {
-        srv_warn(0, "%s", err);
+    srv_config inproc = *cfg;
+    inproc.allow_remote = 0;
+    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, &d.router, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg, &d.xpub, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, &inproc, &d.pull, err, sizeof err)) {
+        srv_error(0, "%s", err);
         goto out;
     }
     d.pool = srv_pool_new(d.zctx, cfg, d.st, EVENTS_EP, err, sizeof err);
     if (!d.pool) {
-        srv_warn(0, "%s", err);
+        srv_error(0, "%s", err);
         goto out;
     }
     srv_log(0,

@@ -92,9 +92,9 @@ typedef struct {
 
 struct store {
     char *path;
-    char *lock_path;
-    int lock_fd;
-    int notify_fd; /* eventfd, written after each commit */
+    char *lock_path; /* realpath(path).lock: the holder's pid, for messages */
+    int lock_fd;     /* the database file itself, flock()ed */
+    int notify_fd;   /* eventfd, written after each commit */
 
     /* options */
     double batch_s;
