@@ -260,7 +260,7 @@ static void apply_run(watch_t *w, const mpp_run_info *run)
         w->step = run->steps;
         w->t = cj_norm(run->t);
     }
-    if (!w->name[0]) snprintf(w->name, sizeof w->name, "%s", run->name);
+    if (!w->name[0]) ctl_esc(run->name, w->name, sizeof w->name);
 }
 
 /* Status(job) into *reply (release it with mpp_reply_clear()); its run is

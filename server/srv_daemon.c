@@ -59,6 +59,12 @@
  * (ZMQ_MAXMSGSIZE). */
 #define REQUEST_MARGIN 65536
 
+/* Job topics remembered as subscribed (so that a job submitted after its
+ * watcher subscribed is streamed in full); more are not remembered (the
+ * XPUB passes on only the first subscription of a topic and its last
+ * unsubscription, so one entry per topic). */
+#define WATCHED_MAX 4096
+
 static volatile sig_atomic_t stop_signal;
 
 static void on_signal(int sig)
@@ -75,6 +81,8 @@ typedef struct {
     uint64_t requests, bad_requests;
     struct pending *pending, **pending_tail; /* reads waiting for a commit */
     size_t npending;
+    uint64_t watched[WATCHED_MAX]; /* job topics somebody subscribes to */
+    size_t nwatched;
 } daemon_t;
 
 /* A request that waits, off the event loop: a read until the store has
@@ -157,7 +165,10 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->started_at = r->started_at;
     ri->finished_at = r->finished_at;
     ri->steps = r->steps;
-    if (MPP_STATUS_ENDED(r->status)) ri->steps_total = r->steps;
+    /* a finished run took the steps it planned; one that failed, or was
+     * cancelled or interrupted, planned more (absent: the client works them
+     * out from the case when it can) */
+    if (r->status == MPP_STATUS_FINISHED) ri->steps_total = r->steps;
     ri->wall_s = r->wall_s;
     ri->particles = (uint64_t)r->particles;
     ri->nodes = (uint64_t)r->nodes;
@@ -271,15 +282,30 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         return;
     }
     size_t nparticles = sc->info.particles;
-    /* in floating point: endTime / dt can be far beyond any integer type */
-    double steps = !sc->has_end_time ? (double)sc->steps
-                   : sc->c.dt > 0    ? ceil(sc->end_time / sc->c.dt - 0.5)
-                                     : 0;
+    /* in floating point: endTime / dt can be far beyond any integer type.
+     * With automatic dt, the largest dt the CFL condition can give (the
+     * materials' wave speed alone, particles at rest) makes the fewest
+     * steps: a case over the limit even so is refused now, any other is
+     * stopped at the limit while it runs (FAILED). */
+    double steps = 0, hmin = sc->c.grid.h[0];
+    for (int k = 1; k < sc->c.grid.dim; k++) hmin = fmin(hmin, sc->c.grid.h[k]);
+    double cfl = sc->c.cfl > 0 ? sc->c.cfl : MPM_DEFAULT_CFL; /* no default is larger */
+    int automatic = sc->has_end_time && !(sc->c.dt > 0);
+    if (!sc->has_end_time)
+        steps = (double)sc->steps;
+    else if (!automatic)
+        steps = ceil(sc->end_time / sc->c.dt - 0.5);
+    else if (sc->info.cmax > 0 && hmin > 0)
+        steps = ceil(sc->end_time * sc->info.cmax / (cfl * hmin) - 0.5);
     if (!(steps <= (double)d->cfg->max_steps)) {
         reply_error(d, id, MPM_ETOOBIG, sc->has_end_time ? "end_time" : "steps",
-                    "the case asks for %.15g steps%s, above this server's limit %lld "
+                    "the case asks for %s%.15g steps%s, above this server's limit %lld "
                     "(--max-steps)",
-                    steps, sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
+                    automatic ? "at least " : "", steps,
+                    automatic          ? " (endTime / the largest CFL dt, C h / c)"
+                    : sc->has_end_time ? " (endTime / dt)"
+                                       : "",
+                    d->cfg->max_steps);
         mpp_case_destroy(&sc);
         return;
     }
@@ -337,6 +363,8 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         mpp_case_destroy(&sc);
         return;
     }
+    for (size_t i = 0; i < d->nwatched; i++)
+        if (d->watched[i] == (uint64_t)run) srv_pool_watch(d->pool, (uint64_t)run, 1);
     srv_log((uint64_t)run, "queued '%s': %ldD %s %s %s, %zu particles", namebuf, (long)r.dim,
             r.method == MPM_METHOD_GIMP       ? "GMPM"
             : r.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
@@ -620,7 +648,14 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
                     rq->limit, LIST_MAX);
         return;
     }
-    f.limit = rq->limit ? rq->limit : LIST_DEFAULT;
+    if (rq->before_id > (uint64_t)INT64_MAX) {
+        reply_error(d, id, MPM_EREQUEST, "list_runs.before_run_id", "%llu: not a run id",
+                    (unsigned long long)rq->before_id);
+        return;
+    }
+    /* one more than asked for: whether a next page exists */
+    f.limit = (rq->limit ? rq->limit : LIST_DEFAULT) + 1;
+    f.before_id = (int64_t)rq->before_id;
     store_run *runs = NULL;
     size_t n = 0;
     if (store_run_list(d->st, &f, &runs, &n)) {
@@ -633,15 +668,21 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     if (!ri || !es || !xs) {
         reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
     } else {
-        for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
+        uint64_t next = 0;
+        size_t ns = n;
+        if (n == f.limit) { /* the extra one is not sent: it says there is more */
+            ns = n - 1;
+            next = (uint64_t)runs[ns - 1].id;
+        }
+        for (size_t i = 0; i < ns; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
         uint8_t *buf = NULL;
         size_t len = 0;
-        if (mpp_reply_runs(ri, n, &buf, &len))
-            reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", n);
+        if (mpp_reply_runs_page(ri, ns, next, &buf, &len))
+            reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", ns);
         else
             send_reply(d, id, buf, len);
     }
-    if (xs)
+    if (xs) /* calloc'd: an entry run_info() did not fill clears as nothing */
         for (size_t i = 0; i < n; i++) store_run_extra_clear(&xs[i]);
     free(xs);
     free(ri);
@@ -760,6 +801,12 @@ static void on_xpub(daemon_t *d)
             srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0) {
             srv_debug(job, "stream %s", b[0] ? "watched" : "no longer watched");
             srv_pool_watch(d->pool, job, b[0]);
+            size_t i = 0;
+            while (i < d->nwatched && d->watched[i] != job) i++;
+            if (b[0] && i == d->nwatched && d->nwatched < WATCHED_MAX)
+                d->watched[d->nwatched++] = job;
+            else if (!b[0] && i < d->nwatched)
+                d->watched[i] = d->watched[--d->nwatched];
         }
         zmq_msg_close(&m);
     }

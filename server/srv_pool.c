@@ -248,11 +248,16 @@ static void snapmsg_zmq_free(void *data, void *hint)
     snapmsg_unref(hint);
 }
 
+/* Snapshot message buffers a job may have at once (each held by zmq
+ * until every watcher's connection has taken it, or kept for reuse). */
+#define SNAP_SLOTS 256
+
 /* Snapshot buffers are allocated on first use, once per job. */
 typedef struct {
     double *x, *v, *stress, *pressure, *volume, *packed;
     size_t n;
-    snapmsg *msg; /* the last streamed message's buffer, or NULL */
+    snapmsg *msg[SNAP_SLOTS]; /* message buffers: the worker's reference */
+    uint64_t dropped;         /* snapshots not streamed: over the budget */
 } snapbuf;
 
 static void snapbuf_free(snapbuf *b)
@@ -263,30 +268,73 @@ static void snapbuf_free(snapbuf *b)
     free(b->pressure);
     free(b->volume);
     free(b->packed);
-    snapmsg_unref(b->msg);
+    for (int i = 0; i < SNAP_SLOTS; i++) snapmsg_unref(b->msg[i]);
     memset(b, 0, sizeof *b);
 }
 
-/* Packs a snapshot into the job's message buffer (a fresh one only when
- * zmq still holds the last, or it is too small) and sends it without a
- * copy. */
+/* The stream's memory bound.  A message buffer that zmq still holds is
+ * queued for some watcher (the XPUB keeps a message until the last
+ * subscriber's connection has written it to the kernel); a watcher that
+ * stalls keeps every later one.  The bytes so held are counted here, per
+ * job, and a snapshot that would take them above --stream-buffer-mb is not
+ * streamed (its seq is used: watchers see the gap; the record, if asked
+ * for, is stored as always).  One message may always be in flight, so a
+ * snapshot larger than the budget still reaches a watcher that keeps up.
+ * Buffers zmq has let go of are reused (the solver faults in no fresh
+ * pages), and those beyond the one kept are freed.  Returns the slot to
+ * pack into (its buffer at least need bytes), or -1 to drop. */
+static int snap_slot(ctx *c, snapbuf *b, size_t need)
+{
+    size_t held = 0, budget = (size_t)c->p->cfg->stream_buffer_mb << 20;
+    int reuse = -1, empty = -1;
+    for (int i = 0; i < SNAP_SLOTS; i++) {
+        snapmsg *m = b->msg[i];
+        if (!m) {
+            if (empty < 0) empty = i;
+        } else if (atomic_load(&m->refs) != 1) {
+            held += m->cap;
+        } else if (reuse < 0 && m->cap >= need) {
+            reuse = i;
+        } else {
+            /* free, but another one will do: let it go */
+            snapmsg_unref(m);
+            b->msg[i] = NULL;
+            if (empty < 0) empty = i;
+        }
+    }
+    if (budget && held && held + need > budget) return -1;
+    if (reuse >= 0) return reuse;
+    if (empty < 0) return -1;
+    snapmsg *m = malloc(sizeof *m + need);
+    if (!m) {
+        srv_warn(c->j->id, "out of memory for a snapshot message of %zu bytes", need);
+        return -1;
+    }
+    atomic_init(&m->refs, 1);
+    m->cap = need;
+    b->msg[empty] = m;
+    return empty;
+}
+
+/* Packs a snapshot into a message buffer of the job (see snap_slot()) and
+ * sends it without a copy. */
 static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
 {
     srv_job *j = c->j;
     uint64_t seq = j->msg_seq++;
     size_t need = 0, len = 0;
     mpp_stream_snapshot_into(j->id, seq, s, NULL, 0, &need); /* the size only */
-    snapmsg *m = b->msg;
-    if (!m || m->cap < need || atomic_load(&m->refs) != 1) {
-        snapmsg_unref(m);
-        b->msg = m = malloc(sizeof *m + need);
-        if (!m) {
-            srv_warn(j->id, "out of memory for a snapshot message of %zu bytes", need);
-            return;
-        }
-        atomic_init(&m->refs, 1);
-        m->cap = need;
+    int slot = snap_slot(c, b, need);
+    if (slot < 0) {
+        if (!b->dropped++)
+            srv_log(j->id,
+                    "snapshot at step %lld not streamed: %zu bytes of snapshots are still "
+                    "queued for a slow watcher (--stream-buffer-mb %d); later ones are dropped "
+                    "likewise while it lags",
+                    (long long)s->step, need, c->p->cfg->stream_buffer_mb);
+        return;
     }
+    snapmsg *m = b->msg[slot];
     if (mpp_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
         srv_warn(j->id, "cannot encode a snapshot");
         return;
@@ -519,6 +567,9 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     }
     progress(&c, sim, wall);
     finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last);
+    if (sb.dropped)
+        srv_log(j->id, "%llu snapshot(s) not streamed: a watcher lagged (--stream-buffer-mb %d)",
+                (unsigned long long)sb.dropped, cfg->stream_buffer_mb);
     snapbuf_free(&sb);
     free(c.pe); /* empty: finish() handed everything on */
     mpm_sim_destroy(&sim);
