@@ -28,7 +28,7 @@ static double now_s(void)
 
 int ctl_conn_open(ctl_conn *c)
 {
-    int linger = 0, ms;
+    int linger = 0, one = 1, ms;
     c->zctx = zmq_ctx_new();
     if (!c->zctx) {
         fprintf(stderr, "mpmctl: zmq_ctx_new: %s\n", zmq_strerror(errno));
@@ -41,7 +41,9 @@ int ctl_conn_open(ctl_conn *c)
         return CTL_ESYS;
     }
     ms = (int)(c->timeout_s * 1000.0);
+    /* ZMQ_IPV6: tcp://[::1]:PORT connects too (IPv4 addresses still do) */
     if (zmq_setsockopt(c->dealer, ZMQ_LINGER, &linger, sizeof linger) ||
+        zmq_setsockopt(c->dealer, ZMQ_IPV6, &one, sizeof one) ||
         zmq_setsockopt(c->dealer, ZMQ_SNDTIMEO, &ms, sizeof ms)) {
         fprintf(stderr, "mpmctl: zmq_setsockopt: %s\n", zmq_strerror(errno));
         ctl_conn_close(c);

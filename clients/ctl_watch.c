@@ -523,6 +523,7 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
     snprintf(topic, sizeof topic, "job:%016llx:", (unsigned long long)job);
     if (!sub || zmq_setsockopt(sub, ZMQ_LINGER, &linger, sizeof linger) ||
         zmq_setsockopt(sub, ZMQ_RCVHWM, &hwm, sizeof hwm) ||
+        zmq_setsockopt(sub, ZMQ_IPV6, &(int){1}, sizeof(int)) ||
         zmq_setsockopt(sub, ZMQ_SUBSCRIBE, topic, strlen(topic))) {
         fprintf(stderr, "mpmctl: stream socket: %s\n", zmq_strerror(errno));
         if (sub) zmq_close(sub);

@@ -20,13 +20,22 @@ void srv_log_set_verbose(int v)
 }
 
 /* Copies src into dst (n bytes) with control bytes (< 0x20, 0x7f)
- * escaped: \n, \r, \t, \\ and \xHH; returns the length written. */
+ * escaped: \n, \r, \t, \\ and \xHH, and the UTF-8 C1 controls as \u00HH;
+ * returns the length written. */
 static size_t escape(char *dst, size_t n, const char *src)
 {
     static const char hex[] = "0123456789abcdef";
     size_t k = 0;
-    for (const unsigned char *p = (const unsigned char *)src; *p && k + 5 < n; p++) {
+    for (const unsigned char *p = (const unsigned char *)src; *p && k + 7 < n; p++) {
         unsigned char c = *p;
+        if (c == 0xc2 && p[1] >= 0x80 && p[1] <= 0x9f) { /* a UTF-8 C1 control (8-bit CSI) */
+            c = *++p;
+            memcpy(dst + k, "\\u00", 4);
+            k += 4;
+            dst[k++] = hex[c >> 4];
+            dst[k++] = hex[c & 15];
+            continue;
+        }
         if (c >= 0x20 && c != 0x7f && c != '\\') {
             dst[k++] = (char)c;
             continue;
