@@ -237,8 +237,8 @@ DTEST(daemon_runs_paging)
            "runs --limit 2: %s%s", o.out, o.err);
     td_out_free(&o);
     CHECK(td_ctl(&d, 30, &o, "runs", "--limit", "2", "--before", "4", "--json", NULL) == 0);
-    CHECKF(o.status == 0 && count_lines(o.out) == 2 && strstr(o.out, "\"runId\": 3") &&
-               strstr(o.out, "\"runId\": 2") && strstr(o.err, "--before 2"),
+    CHECKF(o.status == 0 && count_lines(o.out) == 2 && strstr(o.out, "\"runId\":\"3\"") &&
+               strstr(o.out, "\"runId\":\"2\"") && strstr(o.err, "--before 2"),
            "runs --before 4: %s%s", o.out, o.err);
     td_out_free(&o);
     CHECK(td_ctl(&d, 30, &o, "runs", "--limit", "2", "--before", "2", NULL) == 0);
