@@ -201,7 +201,14 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
         }
     }
     srv_job_info ji;
-    if (srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
+    if (srv_pool_lost(d->pool, (uint64_t)r->id, &ji) == 0) {
+        /* ended on a full disk: the store may still say running */
+        ri->status = ji.status;
+        ri->error = SRV_STORE_LOST;
+        ri->steps = ji.steps;
+        ri->t = ji.t;
+        ri->wall_s = ji.wall_s;
+    } else if (srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
         ri->status = ji.status;
         ri->steps = ji.steps;
         ri->steps_total = ji.steps_total;
@@ -994,6 +1001,9 @@ int srv_daemon_run(const srv_config *cfg)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
+    /* over a file-size limit (RLIMIT_FSIZE) a write fails with EFBIG, as on
+     * a full disk, instead of killing the daemon */
+    signal(SIGXFSZ, SIG_IGN);
 
     store_options so = {0};
     so.log = srv_log_store;

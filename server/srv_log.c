@@ -109,5 +109,9 @@ void srv_debug(uint64_t job, const char *fmt, ...)
 void srv_log_store(void *ud, const char *msg)
 {
     (void)ud;
-    srv_log(0, "store: %s", msg);
+    /* a lost write is a warning (the store's other lines are information) */
+    if (!strncmp(msg, "write failed", 12) || !strncmp(msg, "ROLLBACK", 8))
+        srv_warn(0, "store: %s", msg);
+    else
+        srv_log(0, "store: %s", msg);
 }

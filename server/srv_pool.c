@@ -68,6 +68,14 @@ struct srv_pool {
     srv_job *head, *tail; /* queued */
     size_t nqueued;
     srv_job **running; /* one slot per worker */
+    /* jobs ended by the store's losses, whose end the store may not have
+     * (a ring, guarded by mu) */
+    struct {
+        uint64_t id;
+        int64_t steps;
+        double t, wall_s;
+    } lost[64];
+    unsigned nlost;
     worker *workers;
     int nworkers;
     int stopping;
@@ -498,7 +506,10 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     c.pe = sc->energy_every ? calloc(1, sizeof *c.pe) : NULL;
     if (c.pe) c.pe->last_flush = c.pe->last_sample = mono_now();
     int snaps_ok = 1, status = MPP_STATUS_FINISHED;
-    char why[512] = "";
+    char why[512] = "", loss[400];
+    /* writes the store loses whole (a full disk) end the run: its record
+     * would be missing its samples, and nobody would know */
+    uint64_t lost0 = store_losses(p->st, NULL, 0);
     energy_sample(&c, sim, &last);
     progress(&c, sim, 0);
     double next_progress = 0.2;
@@ -542,6 +553,11 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             if (w >= next_progress) {
                 progress(&c, sim, w);
                 next_progress = w + 0.2;
+                if (store_losses(p->st, loss, sizeof loss) > lost0) {
+                    status = MPP_STATUS_FAILED;
+                    snprintf(why, sizeof why, "%s: %s", SRV_STORE_LOST, loss);
+                    break;
+                }
             }
             if (cfg->max_wall_s > 0 && w > cfg->max_wall_s) {
                 status = MPP_STATUS_FAILED;
@@ -560,12 +576,27 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         status = MPP_STATUS_FAILED;
         mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
     }
+    /* (without waiting for the last commit: a loss in the run's last batch
+     * shows in the log and at the next start, not here) */
+    if (status == MPP_STATUS_FINISHED && store_losses(p->st, loss, sizeof loss) > lost0) {
+        status = MPP_STATUS_FAILED;
+        snprintf(why, sizeof why, "%s: %s", SRV_STORE_LOST, loss);
+    }
     if (last.step != mpm_sim_steps(sim) && status != MPP_STATUS_FAILED)
         energy_sample(&c, sim, &last);
     else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
         /* a diverged state has no meaningful energies; keep the last good one */
     }
     progress(&c, sim, wall);
+    if (!strncmp(why, SRV_STORE_LOST, strlen(SRV_STORE_LOST))) {
+        pthread_mutex_lock(&p->mu);
+        unsigned i = p->nlost++ % (sizeof p->lost / sizeof p->lost[0]);
+        p->lost[i].id = j->id;
+        p->lost[i].steps = mpm_sim_steps(sim);
+        p->lost[i].t = mpm_sim_time(sim);
+        p->lost[i].wall_s = wall;
+        pthread_mutex_unlock(&p->mu);
+    }
     finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last);
     if (sb.dropped)
         srv_log(j->id, "%llu snapshot(s) not streamed: a watcher lagged (--stream-buffer-mb %d)",
@@ -776,6 +807,23 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         srv_log(id, "cancelled while queued");
         job_free(j);
     }
+    return rc;
+}
+
+int srv_pool_lost(srv_pool *p, uint64_t id, srv_job_info *out)
+{
+    int rc = -1;
+    pthread_mutex_lock(&p->mu);
+    for (size_t i = 0; i < sizeof p->lost / sizeof p->lost[0]; i++)
+        if (p->lost[i].id == id && id) {
+            memset(out, 0, sizeof *out);
+            out->status = MPP_STATUS_FAILED;
+            out->steps = p->lost[i].steps;
+            out->t = p->lost[i].t;
+            out->wall_s = p->lost[i].wall_s;
+            rc = 0;
+        }
+    pthread_mutex_unlock(&p->mu);
     return rc;
 }
 

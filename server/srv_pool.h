@@ -64,6 +64,15 @@ int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out);
  * SRV_CANCEL_NONE, SRV_CANCEL_QUEUED or SRV_CANCEL_RUNNING. */
 int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len);
 
+/* The error of a run that ended because the store lost writes (disk full,
+ * I/O error); the reason follows it in the log and the Finished message. */
+#define SRV_STORE_LOST "the run store lost writes (disk full or I/O error)"
+
+/* A job that ended FAILED with SRV_STORE_LOST lately (its end may not be
+ * in the store: the disk was full): its status, steps, t and wall time in
+ * *out (name unset), 0; -1 if it is not one of the last 64 such jobs. */
+int srv_pool_lost(srv_pool *p, uint64_t id, srv_job_info *out);
+
 /* Somebody subscribed to (on = 1) or left (on = 0) the job's stream. */
 void srv_pool_watch(srv_pool *p, uint64_t id, int on);
 

@@ -4,9 +4,12 @@
  * within --stream-buffer-mb (RSS and the job's wall time measured against
  * no watcher), a watcher subscribed before its job starts gets the
  * snapshots, tcp://localhost and tcp://[::1] endpoints bind, runs
- * listings page with a cursor, and `show` of a run that stopped early
- * prints the steps done and the steps planned.
+ * listings page with a cursor, `show` of a run that stopped early prints
+ * the steps done and the steps planned, and a full disk (RLIMIT_FSIZE on
+ * the daemon) ends the running job FAILED with its watchers told while the
+ * finished runs stay readable.
  */
+#define _GNU_SOURCE
 #include "t_daemon.h"
 #include "t_daemon_util.h"
 
@@ -14,6 +17,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <zmq.h>
 
@@ -285,4 +290,124 @@ DTEST(daemon_show_failed_run_steps)
     CHECKF(o.status == 0 && strstr(o.out, want), "show 1 (want '%s'):\n%s", want, o.out);
     TLOG("show of a FAILED run: %s", want);
     td_out_free(&o);
+}
+
+/* Size of a file, 0 if absent. */
+static long long file_size(const char *path)
+{
+    struct stat sb;
+    return stat(path, &sb) == 0 ? (long long)sb.st_size : 0;
+}
+
+/* A full disk, simulated by a file-size limit on the daemon (its writes
+ * then fail with EFBIG, as with ENOSPC): the running job that records
+ * snapshots ends FAILED with the reason, its watcher gets the Finished
+ * with it, Status says so, the finished run stays intact, and the daemon
+ * keeps answering and starts again. */
+DTEST(daemon_disk_full)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--workers", "1", "--verbose", NULL};
+    char dir[300], path[400], wal[420], st[32];
+    td_daemon d;
+    td_out o;
+    void *zctx = NULL, *sub = NULL;
+    snprintf(dir, sizeof dir, "%s/full", tmp);
+    if (td_start(&d, dir, extra)) return;
+    CHECK(write_case(bar_steps(10, 1), dir, "bar.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0 && o.status == 0);
+    td_out_free(&o);
+    CHECK(td_wait_status(&d, 1, "FINISHED|FAILED", 30, st, sizeof st) == 0);
+    CHECKF(!strcmp(st, "FINISHED"), "run 1: %s", st);
+    td_msleep(200); /* its last writes committed */
+
+    /* the disk is full: no file may grow more than 64 kB beyond today */
+    snprintf(wal, sizeof wal, "%s-wal", d.db);
+    long long lim = file_size(d.db);
+    if (file_size(wal) > lim) lim = file_size(wal);
+    lim += 64 * 1024;
+    struct rlimit rl = {(rlim_t)lim, (rlim_t)lim};
+    CHECKF(prlimit(d.pid, RLIMIT_FSIZE, &rl, NULL) == 0, "prlimit: %s", strerror(errno));
+
+    /* job 2 records a 820 kB snapshot every 10 steps until it is stopped */
+    json_t *c = block2d(LONG_STEPS, 100, "full");
+    CHECK(c);
+    json_object_set_new(json_object_get(c, "grid"), "spacing", json_pack("[f,f]", 0.005, 0.005));
+    json_object_set_new(json_object_get(c, "grid"), "nodes", json_pack("[i,i]", 201, 201));
+    json_object_del(json_array_get(json_object_get(c, "bodies"), 0), "velocity");
+    set_output(c, "snapshotEvery", json_integer(10));
+    set_output(c, "snapshotFields", json_pack("[s,s]", "X", "V"));
+    set_output(c, "recordSnapshots", json_true());
+    CHECK(write_case(c, dir, "full.json", path, sizeof path) == 0);
+    zctx = zmq_ctx_new();
+    sub = zctx ? subscribe(zctx, &d, 2, 100000) : NULL;
+    if (!sub || wait_watched(&d, 2, 20)) {
+        t_fail(__FILE__, __LINE__, "job 2's stream never watched");
+        goto out;
+    }
+    if (td_ctl(&d, 30, &o, "submit", path, NULL) || o.status || job_of(o.out) != 2) {
+        t_fail(__FILE__, __LINE__, "submit 2: %s%s", o.out, o.err);
+        td_out_free(&o);
+        goto out;
+    }
+    td_out_free(&o);
+    char error[600] = "";
+    int ended = 0;
+    for (double end = td_now() + 60; !ended && td_now() < end;) {
+        zmq_pollitem_t it = {sub, 0, ZMQ_POLLIN, 0};
+        if (zmq_poll(&it, 1, 1000) != 1) continue;
+        zmq_msg_t part[2];
+        int n = td_recv_parts(sub, part, 2);
+        mpp_stream m;
+        mpm_error e;
+        if (n == 2 &&
+            mpp_stream_decode(zmq_msg_data(&part[1]), zmq_msg_size(&part[1]), 0, &m, &e) == 0) {
+            if (m.kind == MPP_STREAM_FINISHED) {
+                ended = m.finished.status;
+                snprintf(error, sizeof error, "%s", m.finished.error);
+            }
+            mpp_stream_clear(&m);
+        }
+        for (int i = 0; i < n && i < 2; i++) zmq_msg_close(&part[i]);
+    }
+    TLOG("job 2 on a full disk: %s: %s", ended ? mpp_status_name(ended) : "no end", error);
+    if (ended != MPP_STATUS_FAILED || !strstr(error, "disk full or I/O error")) {
+        t_fail(__FILE__, __LINE__, "the watcher got %s '%s'", ended ? mpp_status_name(ended) : "-",
+               error);
+        goto out;
+    }
+    /* Status says it too (its end may not be in the store), run 1 is
+     * intact, and the daemon answers */
+    if (td_job_status(&d, 2, st, sizeof st, NULL) || strcmp(st, "FAILED")) {
+        t_fail(__FILE__, __LINE__, "Status(2): %s", st);
+        goto out;
+    }
+    json_t *r = show_json(&d, 1);
+    int intact = r && !strcmp(jstr(r, "status"), "FINISHED") && jint(r, "steps") == 10 &&
+                 jint(r, "energySamples") == 11;
+    json_decref(r);
+    if (!intact) {
+        t_fail(__FILE__, __LINE__, "run 1 is not intact");
+        goto out;
+    }
+    if (td_ctl(&d, 30, &o, "runs", NULL) || o.status || !strstr(o.out, "FINISHED"))
+        t_fail(__FILE__, __LINE__, "runs on a full disk: %s%s", o.out, o.err);
+    td_out_free(&o);
+
+    /* a restart (the disk freed): run 1 as it was, run 2 not left running */
+    td_stop(&d);
+    if (td_start(&d, dir, extra)) goto out;
+    r = show_json(&d, 1);
+    intact = r && !strcmp(jstr(r, "status"), "FINISHED") && jint(r, "energySamples") == 11;
+    json_decref(r);
+    r = show_json(&d, 2);
+    int stopped =
+        r && (!strcmp(jstr(r, "status"), "FAILED") || !strcmp(jstr(r, "status"), "INTERRUPTED"));
+    TLOG("after a restart: run 1 %s, run 2 %s (%s)", intact ? "intact" : "DAMAGED",
+         r ? jstr(r, "status") : "?", r ? jstr(r, "error") : "");
+    json_decref(r);
+    if (!intact || !stopped) t_fail(__FILE__, __LINE__, "after the restart");
+out:
+    if (sub) zmq_close(sub);
+    if (zctx) zmq_ctx_term(zctx);
 }

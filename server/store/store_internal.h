@@ -124,6 +124,8 @@ struct store {
     int over_cap; /* logged that the queue passed the cap */
     int64_t next_id;
     uint64_t ops_committed, transactions, write_errors, unreported;
+    uint64_t batches_lost; /* transactions lost whole (disk full, I/O error) */
+    char last_loss[512];   /* why the last one was */
     uint64_t snapshots_dropped;
     char last_werr[512];
     int64_t rec_running, rec_queued;
