@@ -232,6 +232,16 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     store_run r;
     int rc = store_run_get(d->st, (int64_t)run, &r);
     const char *what = strcmp(field, "job_id") ? "run" : "job";
+    srv_job_info lost;
+    if (rc == MPM_ENOTFOUND && srv_pool_lost(d->pool, run, &lost) == 0) {
+        /* a job whose record the full disk lost, insert and all: what the
+         * daemon knows of it (run_info() overlays its end) */
+        memset(&r, 0, sizeof r);
+        r.id = (int64_t)run;
+        r.status = MPP_STATUS_FAILED;
+        r.energy.total = NAN;
+        rc = 0;
+    }
     if (rc == MPM_ENOTFOUND) {
         reply_error(d, id, MPM_ENOTFOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
