@@ -124,10 +124,17 @@ DTEST(daemon_stalled_watcher_bounded)
         if (!dropped) t_fail(__FILE__, __LINE__, "no snapshot dropped for the stalled watcher");
     }
     /* the bound: the job's own memory + --stream-buffer-mb (64) + one
-     * message; unbounded it took 1.1 GB (200 x 5.5 MB) */
-    if (!(hwm[1] > 0 && hwm[1] < 200 * 1024))
-        t_fail(__FILE__, __LINE__, "mpmd VmHWM %ld kB with a stalled watcher (bound 200 MB)",
-               hwm[1]);
+     * message; unbounded it took 1.1 GB (200 x 5.5 MB).  Under ASan the
+     * daemon carries shadow memory and a quarantine of freed blocks (job
+     * 1's solver among them): 110 MB with no watcher, 284 MB measured */
+#if defined(__SANITIZE_ADDRESS__)
+    const long bound_mb = 400;
+#else
+    const long bound_mb = 200;
+#endif
+    if (!(hwm[1] > 0 && hwm[1] < bound_mb * 1024))
+        t_fail(__FILE__, __LINE__, "mpmd VmHWM %ld kB with a stalled watcher (bound %ld MB)",
+               hwm[1], bound_mb);
     /* the stalled watcher still gets what it reads: the first snapshot */
     {
         zmq_msg_t part[2];
