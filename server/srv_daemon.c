@@ -368,7 +368,11 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
     char namebuf[128];
     snprintf(namebuf, sizeof namebuf, "%s", name);
-    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes);
+    /* a watcher may have subscribed before the job existed: it is watched
+     * from its first step */
+    int watched = 0;
+    for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == (uint64_t)run;
+    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes, watched);
     if (rc) {
         store_run_end end = {0};
         end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
@@ -380,8 +384,6 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         mpp_case_destroy(&sc);
         return;
     }
-    for (size_t i = 0; i < d->nwatched; i++)
-        if (d->watched[i] == (uint64_t)run) srv_pool_watch(d->pool, (uint64_t)run, 1);
     srv_log((uint64_t)run, "queued '%s': %ldD %s %s %s, %zu particles", namebuf, (long)r.dim,
             r.method == MPM_METHOD_GIMP       ? "GMPM"
             : r.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"

@@ -704,13 +704,13 @@ int srv_pool_has_room(srv_pool *p)
 }
 
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
-                    size_t nodes)
+                    size_t nodes, int watched)
 {
     srv_job *j = calloc(1, sizeof *j);
     if (!j) return MPM_ENOMEM;
     j->id = id;
     atomic_init(&j->cancel, 0);
-    atomic_init(&j->watched, 0);
+    atomic_init(&j->watched, watched != 0);
     j->status = MPP_STATUS_QUEUED;
     j->submitted_at = submitted_at;
     j->particles = particles;

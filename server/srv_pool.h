@@ -46,11 +46,11 @@ typedef struct srv_pool srv_pool;
 srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char *events_ep,
                        char *err, size_t errlen);
 
-/* Queues job `id` (its run record already inserted).  Takes ownership of
- * *sc (set to NULL) on success.  Returns 0, MPM_EFULL or
- * MPM_EUNAVAIL. */
+/* Queues job `id` (its run record already inserted); watched: somebody
+ * subscribed to its stream already.  Takes ownership of *sc (set to NULL)
+ * on success.  Returns 0, MPM_EFULL or MPM_EUNAVAIL. */
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
-                    size_t nodes);
+                    size_t nodes, int watched);
 
 /* 1 if the queue has room for another job. */
 int srv_pool_has_room(srv_pool *p);
