@@ -324,24 +324,29 @@ static int snap_slot(ctx *c, snapbuf *b, size_t need)
     return empty;
 }
 
-/* Packs a snapshot into a message buffer of the job (see snap_slot()) and
- * sends it without a copy. */
-static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
+/* The message buffer (slot) a snapshot with this seq (its arrays' sizes
+ * as in s; their values are not read) will be packed into, or -1 when it
+ * is not streamed: the stream's budget is full (logged once per job). */
+static int snapshot_slot(ctx *c, snapbuf *b, const mpp_snapshot *s, uint64_t seq)
+{
+    size_t need = 0;
+    mpp_stream_snapshot_into(c->j->id, seq, s, NULL, 0, &need); /* the size only */
+    int slot = snap_slot(c, b, need);
+    if (slot < 0 && !b->dropped++)
+        srv_log(c->j->id,
+                "snapshot at step %lld not streamed: %zu bytes of snapshots are still "
+                "queued for a slow watcher (--stream-buffer-mb %d); later ones are dropped "
+                "likewise while it lags",
+                (long long)s->step, need, c->p->cfg->stream_buffer_mb);
+    return slot;
+}
+
+/* Packs a snapshot into the job's message buffer `slot` (snapshot_slot()
+ * with the same seq) and sends it without a copy. */
+static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s, uint64_t seq, int slot)
 {
     srv_job *j = c->j;
-    uint64_t seq = j->msg_seq++;
-    size_t need = 0, len = 0;
-    mpp_stream_snapshot_into(j->id, seq, s, NULL, 0, &need); /* the size only */
-    int slot = snap_slot(c, b, need);
-    if (slot < 0) {
-        if (!b->dropped++)
-            srv_log(j->id,
-                    "snapshot at step %lld not streamed: %zu bytes of snapshots are still "
-                    "queued for a slow watcher (--stream-buffer-mb %d); later ones are dropped "
-                    "likewise while it lags",
-                    (long long)s->step, need, c->p->cfg->stream_buffer_mb);
-        return;
-    }
+    size_t len = 0;
     snapmsg *m = b->msg[slot];
     if (mpp_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
         srv_warn(j->id, "cannot encode a snapshot");
@@ -391,9 +396,18 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
             return -1;
         }
     }
-    mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
     mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,        dim, b->x, b->v,
                       b->stress,          b->pressure,       b->volume};
+    /* a snapshot the stream's budget refuses is not even gathered unless
+     * it is recorded: a stalled watcher costs the job nothing */
+    uint64_t seq = 0;
+    int slot = -1;
+    if (stream) {
+        seq = j->msg_seq++;
+        slot = snapshot_slot(c, b, &s, seq);
+        if (slot < 0 && !record) return 0;
+    }
+    mpm_sim_snapshot(sim, &(mpm_snapshot){b->x, b->v, b->stress, b->pressure, b->volume});
     if (record && b->packed) {
         /* stored layout: the requested arrays back to back, in field-bit order */
         size_t off = 0;
@@ -411,7 +425,7 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
             srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
                      store_error()->message);
     }
-    if (stream) publish_snapshot(c, b, &s);
+    if (slot >= 0) publish_snapshot(c, b, &s, seq, slot);
     return 0;
 }
 
