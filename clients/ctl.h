@@ -67,6 +67,7 @@ typedef struct {
     double timeout_s;     /* per request */
     void *zctx;           /* zmq context, NULL until ctl_conn_open */
     void *dealer;         /* control socket */
+    void *mon;            /* PAIR on the DEALER's monitor: disconnections */
 } ctl_conn;
 
 /* Creates the context and connects the DEALER (linger 0). */
@@ -145,6 +146,16 @@ typedef struct {
 } ctl_energy_out;
 void ctl_energy_out_init(ctl_energy_out *o, ctl_out fmt, int dim, FILE *f);
 int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s);
+
+/* s with the bytes a terminal would act on shown escaped: C0 controls and
+ * DEL as \n, \r, \t or \xHH, the UTF-8 C1 controls (U+0080..U+009F, an
+ * 8-bit CSI among them) as \u00HH; into buf (n bytes, cut short when
+ * full); returns buf.  For every server-supplied text printed as text. */
+const char *ctl_esc(const char *s, char *buf, size_t n);
+/* Room ctl_esc needs for a text of n bytes, for a buffer of the caller. */
+#define CTL_ESC_LEN(n) (6 * (n) + 1)
+/* The server's cap on runs per listing (ListRuns.limit). */
+#define CTL_LIST_MAX 10000u
 
 /* Local time of a Unix time as "YYYY-MM-DD HH:MM:SS" ("-" when <= 0). */
 void ctl_fmt_time(char *buf, size_t n, double unix_s);

@@ -28,7 +28,7 @@ static double now_s(void)
 
 int ctl_conn_open(ctl_conn *c)
 {
-    int linger = 0, ms;
+    int linger = 0, one = 1, ms;
     c->zctx = zmq_ctx_new();
     if (!c->zctx) {
         fprintf(stderr, "mpmctl: zmq_ctx_new: %s\n", zmq_strerror(errno));
@@ -41,11 +41,26 @@ int ctl_conn_open(ctl_conn *c)
         return CTL_ESYS;
     }
     ms = (int)(c->timeout_s * 1000.0);
+    /* ZMQ_IPV6: tcp://[::1]:PORT connects too (IPv4 addresses still do) */
     if (zmq_setsockopt(c->dealer, ZMQ_LINGER, &linger, sizeof linger) ||
+        zmq_setsockopt(c->dealer, ZMQ_IPV6, &one, sizeof one) ||
         zmq_setsockopt(c->dealer, ZMQ_SNDTIMEO, &ms, sizeof ms)) {
         fprintf(stderr, "mpmctl: zmq_setsockopt: %s\n", zmq_strerror(errno));
         ctl_conn_close(c);
         return CTL_ESYS;
+    }
+    /* the monitor tells when the server drops the connection: a request
+     * above its --max-request-bytes is refused so, unread, and no reply
+     * would ever come */
+    char mep[64];
+    snprintf(mep, sizeof mep, "inproc://mpmctl-monitor-%p", (void *)c);
+    if (zmq_socket_monitor(c->dealer, mep, ZMQ_EVENT_DISCONNECTED) == 0) {
+        c->mon = zmq_socket(c->zctx, ZMQ_PAIR);
+        if (c->mon && (zmq_setsockopt(c->mon, ZMQ_LINGER, &linger, sizeof linger) ||
+                       zmq_connect(c->mon, mep))) {
+            zmq_close(c->mon);
+            c->mon = NULL;
+        }
     }
     if (zmq_connect(c->dealer, c->endpoint)) {
         fprintf(stderr, "mpmctl: cannot connect to %s: %s\n", c->endpoint, zmq_strerror(errno));
@@ -55,8 +70,28 @@ int ctl_conn_open(ctl_conn *c)
     return 0;
 }
 
+/* Reads the monitor's pending events: 1 if the connection was dropped. */
+static int drain_monitor(ctl_conn *c)
+{
+    int dropped = 0;
+    for (;;) {
+        zmq_msg_t m;
+        zmq_msg_init(&m);
+        if (!c->mon || zmq_msg_recv(&m, c->mon, ZMQ_DONTWAIT) < 0) {
+            zmq_msg_close(&m);
+            return dropped;
+        }
+        uint16_t ev = 0;
+        if (zmq_msg_size(&m) >= 2 && zmq_msg_more(&m)) memcpy(&ev, zmq_msg_data(&m), 2);
+        if (ev == ZMQ_EVENT_DISCONNECTED) dropped = 1;
+        zmq_msg_close(&m);
+    }
+}
+
 void ctl_conn_close(ctl_conn *c)
 {
+    if (c->mon) zmq_close(c->mon);
+    c->mon = NULL;
     if (c->dealer) zmq_close(c->dealer);
     c->dealer = NULL;
     if (c->zctx) {
@@ -109,6 +144,7 @@ static int exchange_raw(ctl_conn *c, const mpp_request *rq, zmq_msg_t *body)
         fprintf(stderr, "mpmctl: cannot encode the request (%d)\n", rc);
         return CTL_ESYS;
     }
+    drain_monitor(c); /* what happened before this request */
     if (zmq_send(c->dealer, "", 0, ZMQ_SNDMORE) < 0 || zmq_send(c->dealer, buf, len, 0) < 0) {
         int e = errno;
         free(buf);
@@ -122,14 +158,14 @@ static int exchange_raw(ctl_conn *c, const mpp_request *rq, zmq_msg_t *body)
     }
     free(buf);
     for (;;) {
-        zmq_pollitem_t it = {c->dealer, 0, ZMQ_POLLIN, 0};
+        zmq_pollitem_t it[2] = {{c->dealer, 0, ZMQ_POLLIN, 0}, {c->mon, 0, ZMQ_POLLIN, 0}};
         double left = deadline - now_s();
         if (left <= 0) {
             fprintf(stderr, "mpmctl: no reply from %s within %g s (is mpmd running?)\n",
                     c->endpoint, c->timeout_s);
             return CTL_ETIMEOUT;
         }
-        rc = zmq_poll(&it, 1, (long)(left * 1000.0) + 1);
+        rc = zmq_poll(it, c->mon ? 2 : 1, (long)(left * 1000.0) + 1);
         if (rc < 0 && errno == EINTR) {
             if (ctl_interrupted) return CTL_EINTR;
             continue;
@@ -138,7 +174,15 @@ static int exchange_raw(ctl_conn *c, const mpp_request *rq, zmq_msg_t *body)
             fprintf(stderr, "mpmctl: zmq_poll: %s\n", zmq_strerror(errno));
             return CTL_ESYS;
         }
-        if (rc > 0) break;
+        if (rc > 0 && (it[0].revents & ZMQ_POLLIN)) break;
+        if (rc > 0 && drain_monitor(c)) {
+            fprintf(stderr,
+                    "mpmctl: %s closed the connection without a reply: the request (%zu bytes) "
+                    "may exceed the server's limit (mpmd --max-request-bytes), or the server "
+                    "stopped\n",
+                    c->endpoint, len);
+            return CTL_ESYS;
+        }
     }
     if ((rc = recv_multi(c->dealer, parts, 2, &n))) return rc;
     if (n != 2 || zmq_msg_size(&parts[0]) != 0) {
@@ -237,7 +281,8 @@ int ctl_call_quiet(ctl_conn *c, const mpp_request *rq, const char *want, json_t 
 static void print_error(const char *code, const char *message, const char *field)
 {
     size_t n = field ? strlen(field) : 0;
-    fprintf(stderr, "mpmctl: %s: %s", code, message);
+    char text[4096];
+    fprintf(stderr, "mpmctl: %s: %s", code, ctl_esc(message, text, sizeof text));
     if (n && !(strncmp(message, field, n) == 0 && message[n] == ':'))
         fprintf(stderr, " (field %s)", field);
     fputc('\n', stderr);

@@ -267,7 +267,7 @@ static void apply_run(watch_t *w, const mpp_run_info *run)
         w->step = run->steps;
         w->t = cj_norm(run->t);
     }
-    if (!w->name[0]) snprintf(w->name, sizeof w->name, "%s", run->name);
+    if (!w->name[0]) ctl_esc(run->name, w->name, sizeof w->name);
 }
 
 /* Status(job) into *reply (release it with mpp_reply_clear()); its run is
@@ -541,6 +541,7 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
     snprintf(topic, sizeof topic, "job:%016llx:", (unsigned long long)job);
     if (!sub || zmq_setsockopt(sub, ZMQ_LINGER, &linger, sizeof linger) ||
         zmq_setsockopt(sub, ZMQ_RCVHWM, &hwm, sizeof hwm) ||
+        zmq_setsockopt(sub, ZMQ_IPV6, &(int){1}, sizeof(int)) ||
         zmq_setsockopt(sub, ZMQ_SUBSCRIBE, topic, strlen(topic))) {
         fprintf(stderr, "mpmctl: stream socket: %s\n", zmq_strerror(errno));
         if (sub) zmq_close(sub);

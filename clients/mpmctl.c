@@ -71,13 +71,17 @@ static const command commands[] = {
      "--csv/--json, which print only the series: CSV rows / JSON lines).\n"
      "Exit status: 0 FINISHED, 3 FAILED, 4 CANCELLED, 5 INTERRUPTED, 1 error,\n"
      "130 stopped by Ctrl-C (the job keeps running).\n"},
-    {"runs", C_RUNS, "[--status S] [--limit N] [--json]", "list runs, newest first",
+    {"runs", C_RUNS, "[--status S] [--limit N] [--before ID | --all] [--json]",
+     "list runs, newest first",
      "Columns: id, name, status, method, stress update, velocity transfer (FLIP or\n"
      "APIC), dim, particles, steps, wall seconds, the energy balance error (at the\n"
      "run's end, in %; '!' when it exceeded the case's budget, '-' while running or\n"
      "for runs stored before it was recorded), submission time.  --status: QUEUED,\n"
-     "RUNNING, FINISHED, FAILED, CANCELLED or INTERRUPTED.  --limit: at most N runs\n"
-     "(default: the server's).  --json: one RunInfo object per line.\n"},
+     "RUNNING, FINISHED, FAILED, CANCELLED or INTERRUPTED.  --limit: at most N runs,\n"
+     "up to 10000 (the server's cap; default: the server's, 100) per page.  A cut\n"
+     "listing ends with the command for the next page (--before ID: runs older than\n"
+     "run ID); --all pages through every run.  --json: one RunInfo object per line.\n"
+     "Control characters in names and errors are shown escaped (\\n, \\x1b).\n"},
     {"show", C_SHOW, "ID [--json] [--case]", "one run in detail",
      "Prints the status, times, counts, method and update, the velocity transfer (FLIP,\n"
      "with the PIC fraction when the case sets one, or APIC), the last energies, the\n"
@@ -109,6 +113,8 @@ typedef enum {
     O_JSON,
     O_STATUS,
     O_LIMIT,
+    O_BEFORE,
+    O_ALL,
     O_CASE,
     O_STEP,
     O_OUT,
@@ -132,6 +138,8 @@ static const option options[O_COUNT] = {
     [O_JSON] = {"json", 0, 0, C_GLOBAL & ~C_SNAPSHOT},
     [O_STATUS] = {"status", 0, 1, C_RUNS},
     [O_LIMIT] = {"limit", 0, 1, C_RUNS},
+    [O_BEFORE] = {"before", 0, 1, C_RUNS},
+    [O_ALL] = {"all", 0, 0, C_RUNS},
     [O_CASE] = {"case", 0, 0, C_SHOW},
     [O_STEP] = {"step", 0, 1, C_SNAPSHOT},
     [O_OUT] = {"out", 'o', 1, C_SNAPSHOT},
@@ -148,6 +156,7 @@ typedef struct {
     ctl_out fmt;
     int status;
     unsigned limit;
+    uint64_t before;
     long long step;
 } cli;
 
@@ -310,12 +319,17 @@ static int parse_args(int argc, char **argv, cli *a)
         unsigned long v;
         errno = 0;
         v = strtoul(a->val[O_LIMIT], &end, 10);
-        if (errno || end == a->val[O_LIMIT] || *end || v == 0 || v > 1000000 ||
+        if (errno || end == a->val[O_LIMIT] || *end || v == 0 || v > CTL_LIST_MAX ||
             a->val[O_LIMIT][0] == '-')
-            return bad_usage("--limit: expected a positive integer up to 1000000, got '%s'",
-                             a->val[O_LIMIT]);
+            return bad_usage("--limit: expected a positive integer up to %u (the server's cap), "
+                             "got '%s'",
+                             CTL_LIST_MAX, a->val[O_LIMIT]);
         a->limit = (unsigned)v;
     }
+    if (a->given[O_BEFORE] && a->given[O_ALL])
+        return bad_usage("runs: --before and --all exclude each other");
+    if (a->given[O_BEFORE] && parse_id(a->val[O_BEFORE], "--before", &a->before))
+        return CTL_EXIT_USAGE;
     if (a->given[O_STEP]) {
         char *end;
         errno = 0;
@@ -482,42 +496,80 @@ static int cmd_watch(ctl_conn *c, const cli *a)
     return do_watch(c, job, a->fmt);
 }
 
-static int cmd_runs(ctl_conn *c, const cli *a)
+/* One page of `runs`: prints it (the header once, on the first page that
+ * has runs) and stores the cursor of the next page in *next (0: none). */
+static int runs_page(ctl_conn *c, const cli *a, uint64_t before, int *header, size_t *shown,
+                     uint64_t *next)
 {
-    mpp_request rq = {.kind = MPP_REQ_LIST_RUNS, .status = a->status, .limit = a->limit};
+    mpp_request rq = {
+        .kind = MPP_REQ_LIST_RUNS, .status = a->status, .limit = a->limit, .before_id = before};
     json_t *reply = NULL, *list = NULL, *runs;
     int rc = ctl_call(c, &rq, "runs", &reply, &list);
     size_t i, n;
+    *next = 0;
     if (rc) {
         json_decref(reply);
         return exit_for_rc(rc);
     }
     runs = json_object_get(list, "runs");
     n = json_is_array(runs) ? json_array_size(runs) : 0;
+    *next = cj_u64(list, "nextBeforeRunId", 0);
     if (a->fmt == CTL_OUT_JSON) {
         for (i = 0; i < n && !rc; i++) rc = out_json_line(json_array_get(runs, i));
-    } else if (!n) {
-        printf("no runs%s%s\n", a->status ? " with status " : "",
-               a->status ? mpp_status_name(a->status) : "");
-    } else {
-        printf("%6s  %-20s %-11s %-8s %-6s %-8s %3s %10s %12s %9s %9s  %s\n", "ID", "NAME",
-               "STATUS", "METHOD", "UPDATE", "TRANSFER", "DIM", "PARTICLES", "STEPS", "WALL S",
-               "BALANCE", "SUBMITTED");
+    } else if (n) {
+        if (!*header)
+            printf("%6s  %-20s %-11s %-8s %-6s %-8s %3s %10s %12s %9s %9s  %s\n", "ID", "NAME",
+                   "STATUS", "METHOD", "UPDATE", "TRANSFER", "DIM", "PARTICLES", "STEPS", "WALL S",
+                   "BALANCE", "SUBMITTED");
+        *header = 1;
         for (i = 0; i < n; i++) {
             json_t *r = json_array_get(runs, i);
-            char when[32], bal[32];
+            char when[32], name[128], bal[32];
             ctl_fmt_time(when, sizeof when, cj_num(r, "submittedAt", 0));
             ctl_fmt_balance(bal, sizeof bal, r);
             printf("%6llu  %-20.20s %-11s %-8s %-6s %-8s %3lld %10llu %12lld %9.2f %9s  %s\n",
-                   (unsigned long long)cj_u64(r, "runId", 0), cj_str(r, "name", ""),
-                   cj_str(r, "status", "?"), cj_str(r, "method", "?"), cj_str(r, "update", "?"),
-                   cj_str(r, "transfer", "?"), cj_int(r, "dim", 0),
-                   (unsigned long long)cj_u64(r, "particles", 0), cj_int(r, "steps", 0),
-                   cj_num(r, "wallS", 0), bal, when);
+                   (unsigned long long)cj_u64(r, "runId", 0),
+                   ctl_esc(cj_str(r, "name", ""), name, sizeof name), cj_str(r, "status", "?"),
+                   cj_str(r, "method", "?"), cj_str(r, "update", "?"), cj_str(r, "transfer", "?"),
+                   cj_int(r, "dim", 0), (unsigned long long)cj_u64(r, "particles", 0),
+                   cj_int(r, "steps", 0), cj_num(r, "wallS", 0), bal, when);
         }
     }
+    *shown += n;
     json_decref(reply);
     return rc ? CTL_EXIT_ERROR : CTL_EXIT_OK;
+}
+
+static int cmd_runs(ctl_conn *c, const cli *a)
+{
+    int header = 0, rc;
+    size_t shown = 0;
+    uint64_t before = a->before, next = 0;
+    for (;;) {
+        rc = runs_page(c, a, before, &header, &shown, &next);
+        if (rc || !next || !a->given[O_ALL]) break;
+        before = next;
+    }
+    if (rc) return rc;
+    if (a->fmt != CTL_OUT_JSON && !shown)
+        printf("no runs%s%s\n", a->status ? " with status " : "",
+               a->status ? mpp_status_name(a->status) : "");
+    /* a cut listing says how to go on (stderr: stdout keeps the table) */
+    if (next && !a->given[O_ALL])
+        fprintf(stderr, "mpmctl: more runs: mpmctl runs --before %llu (or --all)\n",
+                (unsigned long long)next);
+    return CTL_EXIT_OK;
+}
+
+/* The steps a run planned, from its case: the step count, or endTime / dt
+ * with a fixed dt; 0 when unknown (automatic dt). */
+static long long planned_steps(const json_t *cs)
+{
+    if (!cs) return 0;
+    if (cj_int(cs, "steps", 0) > 0) return cj_int(cs, "steps", 0);
+    double dt = cj_num(cs, "dt", 0), end = cj_num(cs, "endTime", 0);
+    if (dt > 0 && end > 0 && end / dt < 9e18) return (long long)ceil(end / dt - 0.5);
+    return 0;
 }
 
 static void show_text(const json_t *r)
@@ -527,19 +579,24 @@ static void show_text(const json_t *r)
     const json_t *le = json_object_get(r, "lastEnergy");
     const json_t *snaps = json_object_get(r, "snapshotSteps");
     const char *err = cj_str(r, "error", "");
+    char name[2048], etext[4096];
     printf("run %llu (job %llu)%s%s\n", (unsigned long long)cj_u64(r, "runId", 0),
            (unsigned long long)cj_u64(r, "jobId", 0), *cj_str(r, "name", "") ? ": " : "",
-           cj_str(r, "name", ""));
+           ctl_esc(cj_str(r, "name", ""), name, sizeof name));
     printf("  status      %s\n", cj_str(r, "status", "?"));
-    if (*err) printf("  error       %s\n", err);
+    if (*err) printf("  error       %s\n", ctl_esc(err, etext, sizeof etext));
     ctl_fmt_time(b, sizeof b, cj_num(r, "submittedAt", 0));
     printf("  submitted   %s\n", b);
     ctl_fmt_time(b, sizeof b, cj_num(r, "startedAt", 0));
     printf("  started     %s\n", b);
     ctl_fmt_time(b, sizeof b, cj_num(r, "finishedAt", 0));
     printf("  finished    %s\n", b);
+    /* steps done, then planned: the server's figure (a live or finished
+     * run), else the case's (a run that stopped early) */
+    long long plan = cj_int(r, "stepsTotal", 0);
+    if (plan <= 0) plan = planned_steps(cs);
     printf("  steps       %lld", cj_int(r, "steps", 0));
-    if (cj_int(r, "stepsTotal", 0) > 0) printf(" of %lld", cj_int(r, "stepsTotal", 0));
+    if (plan > 0) printf(" of %lld", plan);
     printf("\n  t           %.10g\n", cj_num(r, "t", 0));
     ctl_fmt_duration(b, sizeof b, cj_num(r, "wallS", 0));
     printf("  wall        %s\n", b);

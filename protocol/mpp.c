@@ -133,6 +133,40 @@ int mpp_pack(const ProtobufCMessage *m, uint8_t **buf, size_t *len)
     return 0;
 }
 
+/* The unpack's allocator: malloc, refused once the message has taken more
+ * than its budget (so that crafted input - thousands of empty repeated
+ * sub-messages, two bytes each on the wire, a hundred in memory - cannot
+ * inflate memory); free is plain free(), so protobuf_c_message_free_unpacked
+ * with the default allocator frees what it made. */
+typedef struct {
+    size_t used, budget;
+    int exceeded;
+} unpack_budget;
+
+static void *budget_alloc(void *ud, size_t size)
+{
+    unpack_budget *b = ud;
+    if (size > b->budget - b->used) {
+        b->exceeded = 1;
+        return NULL;
+    }
+    b->used += size;
+    return malloc(size ? size : 1);
+}
+
+static void budget_free(void *ud, void *p)
+{
+    (void)ud;
+    free(p);
+}
+
+size_t mpp_unpack_budget(size_t len)
+{
+    return len > (SIZE_MAX - MPP_UNPACK_FLOOR) / MPP_UNPACK_INFLATE
+               ? SIZE_MAX
+               : MPP_UNPACK_INFLATE * len + MPP_UNPACK_FLOOR;
+}
+
 int mpp_unpack(const ProtobufCMessageDescriptor *d, const void *buf, size_t len, size_t max,
                ProtobufCMessage **out, mpm_error *err)
 {
@@ -142,7 +176,14 @@ int mpp_unpack(const ProtobufCMessageDescriptor *d, const void *buf, size_t len,
     if (len > max)
         return mpm_fail(err, MPM_ETOOBIG, NULL,
                         "%s message of %zu bytes: more than the limit of %zu", d->name, len, max);
-    *out = protobuf_c_message_unpack(d, NULL, len, buf ? buf : empty);
+    unpack_budget b = {0, mpp_unpack_budget(len), 0};
+    ProtobufCAllocator a = {budget_alloc, budget_free, &b};
+    *out = protobuf_c_message_unpack(d, &a, len, buf ? buf : empty);
+    if (!*out && b.exceeded)
+        return mpm_fail(err, MPM_ETOOBIG, NULL,
+                        "%s message of %zu bytes: decoding it would take more than %zu bytes of "
+                        "memory (%d times its size + %d)",
+                        d->name, len, b.budget, MPP_UNPACK_INFLATE, MPP_UNPACK_FLOOR);
     if (!*out)
         return mpm_fail(err, MPM_ESYNTAX, NULL, "not a valid %s message (%zu bytes)", d->name, len);
     return 0;

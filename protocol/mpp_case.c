@@ -660,6 +660,8 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
     const char *name = pb->name ? pb->name : "";
     size_t nl = strlen(name);
     int rc;
+    if (nl > MPP_NAME_MAX)
+        return mpm_fail(err, MPM_EINVAL, "name", "%zu bytes: at most %d", nl, MPP_NAME_MAX);
     if (!mpp_json_utf8_valid(name)) return mpm_fail(err, MPM_EINVAL, "name", "not valid UTF-8");
     mc->name = malloc(nl + 1);
     if (!mc->name) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");

@@ -36,6 +36,17 @@ typedef struct Mpmd__Case Mpmd__Case;
 #define MPP_CASE_MAX_STEPS 1000000000000LL
 /* Default largest message accepted by the unpack functions (max = 0). */
 #define MPP_MSG_MAX ((size_t)512 << 20)
+/* Memory an unpack may take for a message of n bytes: MPP_UNPACK_INFLATE * n
+ * + MPP_UNPACK_FLOOR (every unpack of the library; more fails with
+ * MPM_ETOOBIG).  Honest messages take at most a few times their size
+ * (packed arrays 1x, a boundary node fix about 7x); crafted ones (empty
+ * repeated sub-messages) would take about 45x. */
+#define MPP_UNPACK_INFLATE 8
+#define MPP_UNPACK_FLOOR (1 << 20)
+/* The budget of a message of len bytes (saturating). */
+size_t mpp_unpack_budget(size_t len);
+/* Longest case name accepted (bytes); longer is INVALID_CASE on `name`. */
+#define MPP_NAME_MAX 256
 
 /* Snapshot field bits (mpp_case.snapshot_fields). */
 enum {

@@ -67,12 +67,13 @@ typedef enum {
 typedef struct {
     mpp_req_kind kind;
     uint32_t schema_version;
-    uint64_t id;       /* Cancel, Status: job_id; GetRun, GetEnergy, GetSnapshot: run_id */
-    int status;        /* ListRuns: mpp_status filter, 0 = all */
-    uint32_t limit;    /* ListRuns, GetEnergy: 0 = server default */
-    int with_case;     /* GetRun */
-    uint64_t from_seq; /* GetEnergy */
-    int has_step;      /* GetSnapshot: 0 = the latest */
+    uint64_t id;        /* Cancel, Status: job_id; GetRun, GetEnergy, GetSnapshot: run_id */
+    int status;         /* ListRuns: mpp_status filter, 0 = all */
+    uint32_t limit;     /* ListRuns, GetEnergy: 0 = server default */
+    uint64_t before_id; /* ListRuns: only runs with a smaller id; 0 = from the newest */
+    int with_case;      /* GetRun */
+    uint64_t from_seq;  /* GetEnergy */
+    int has_step;       /* GetSnapshot: 0 = the latest */
     int64_t step;
     Mpmd__Case *case_pb;    /* Submit: the case (owned by a decoded request;
                                convert with mpp_case_from_pb) */
@@ -181,6 +182,10 @@ int mpp_reply_error_from(const mpm_error *e, uint8_t **buf, size_t *len);
 int mpp_reply_submit_ok(uint64_t job_id, uint64_t run_id, uint8_t **buf, size_t *len);
 int mpp_reply_run(const mpp_run_info *ri, uint8_t **buf, size_t *len);
 int mpp_reply_runs(const mpp_run_info *ri, size_t n, uint8_t **buf, size_t *len);
+/* The same with the paging cursor RunList.next_before_run_id (0: absent,
+ * the listing is complete). */
+int mpp_reply_runs_page(const mpp_run_info *ri, size_t n, uint64_t next_before, uint8_t **buf,
+                        size_t *len);
 int mpp_reply_energy(uint64_t run_id, const mpm_energy_sample *s, size_t n, int more, uint8_t **buf,
                      size_t *len);
 int mpp_reply_snapshot(const mpp_snapshot *s, uint8_t **buf, size_t *len);

@@ -129,6 +129,12 @@ int mpp_reply_run(const mpp_run_info *ri, uint8_t **buf, size_t *len)
 
 int mpp_reply_runs(const mpp_run_info *ri, size_t n, uint8_t **buf, size_t *len)
 {
+    return mpp_reply_runs_page(ri, n, 0, buf, len);
+}
+
+int mpp_reply_runs_page(const mpp_run_info *ri, size_t n, uint64_t next_before, uint8_t **buf,
+                        size_t *len)
+{
     Mpmd__Reply r = MPMD__REPLY__INIT;
     Mpmd__RunList rl = MPMD__RUN_LIST__INIT;
     Mpmd__RunInfo *pis = calloc(n ? n : 1, sizeof *pis);
@@ -146,6 +152,8 @@ int mpp_reply_runs(const mpp_run_info *ri, size_t n, uint8_t **buf, size_t *len)
     if (!rc) {
         rl.n_runs = n;
         rl.runs = ptrs;
+        rl.has_next_before_run_id = next_before != 0;
+        rl.next_before_run_id = next_before;
         r.body_case = MPMD__REPLY__BODY_RUNS;
         r.runs = &rl;
         rc = pack_reply(&r, buf, len);

@@ -64,6 +64,7 @@ int mpp_request_decode(const void *buf, size_t len, size_t max, mpp_request *rq,
             rq->status = r->list_runs->status;
         }
         rq->limit = r->list_runs->has_limit ? r->list_runs->limit : 0;
+        rq->before_id = r->list_runs->has_before_run_id ? r->list_runs->before_run_id : 0;
         break;
     case MPMD__REQUEST__BODY_GET_RUN:
         rq->kind = MPP_REQ_GET_RUN;
@@ -193,6 +194,10 @@ int mpp_request_encode(const mpp_request *rq, uint8_t **buf, size_t *len)
         if (rq->limit) {
             lr.has_limit = 1;
             lr.limit = rq->limit;
+        }
+        if (rq->before_id) {
+            lr.has_before_run_id = 1;
+            lr.before_run_id = rq->before_id;
         }
         r.body_case = MPMD__REQUEST__BODY_LIST_RUNS;
         r.list_runs = &lr;

@@ -41,6 +41,9 @@ static const setting settings[] = {
      "wall seconds per job, 0 = no limit (default 0)"},
     {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30,
      "largest request accepted (default 67108864)"},
+    {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20,
+     "MB of snapshots a job's stream may hold for slow watchers; more are dropped, "
+     "0 = no bound (default 64)"},
     {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1,
      "allow binding on non-loopback addresses"},
     {"verbose", NULL, T_FLAG, F(verbose), 0, 1, "debug log lines"},
@@ -59,6 +62,7 @@ static void defaults(srv_config *c)
     c->max_steps = 100000000;
     c->max_wall_s = 0;
     c->max_request_bytes = 64LL << 20;
+    c->stream_buffer_mb = 64;
 }
 
 static const setting *find(const char *key)

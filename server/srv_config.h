@@ -23,6 +23,7 @@ typedef struct {
     long long max_steps;         /* per job */
     double max_wall_s;           /* per job, 0 = none */
     long long max_request_bytes; /* largest request accepted */
+    int stream_buffer_mb;        /* snapshot bytes queued for watchers, per job (0: no bound) */
     int allow_remote;            /* allow non-loopback binds */
     int verbose;
 } srv_config;

@@ -40,7 +40,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <time.h>
+#include <unistd.h>
 #include <zmq.h>
 
 #define EVENTS_EP "inproc://mpmd-events"
@@ -51,6 +54,16 @@
 /* How long the last stream messages and replies may take to leave at
  * shutdown (a vanished peer holds the exit up this long, no longer). */
 #define SHUTDOWN_LINGER_MS 1000
+/* Bytes above --max-request-bytes that a request frame may still have and
+ * get a TOO_LARGE reply; a larger frame costs its sender the connection
+ * (ZMQ_MAXMSGSIZE). */
+#define REQUEST_MARGIN 65536
+
+/* Job topics remembered as subscribed (so that a job submitted after its
+ * watcher subscribed is streamed in full); more are not remembered (the
+ * XPUB passes on only the first subscription of a topic and its last
+ * unsubscription, so one entry per topic). */
+#define WATCHED_MAX 4096
 
 static volatile sig_atomic_t stop_signal;
 
@@ -68,6 +81,8 @@ typedef struct {
     uint64_t requests, bad_requests;
     struct pending *pending, **pending_tail; /* reads waiting for a commit */
     size_t npending;
+    uint64_t watched[WATCHED_MAX]; /* job topics somebody subscribes to */
+    size_t nwatched;
 } daemon_t;
 
 /* A request that waits, off the event loop: a read until the store has
@@ -150,7 +165,10 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->started_at = r->started_at;
     ri->finished_at = r->finished_at;
     ri->steps = r->steps;
-    if (MPP_STATUS_ENDED(r->status)) ri->steps_total = r->steps;
+    /* a finished run took the steps it planned; one that failed, or was
+     * cancelled or interrupted, planned more (absent: the client works them
+     * out from the case when it can) */
+    if (r->status == MPP_STATUS_FINISHED) ri->steps_total = r->steps;
     ri->wall_s = r->wall_s;
     ri->particles = (uint64_t)r->particles;
     ri->nodes = (uint64_t)r->nodes;
@@ -186,7 +204,14 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
         }
     }
     srv_job_info ji;
-    if (srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
+    if (srv_pool_lost(d->pool, (uint64_t)r->id, &ji) == 0) {
+        /* ended on a full disk: the store may still say running */
+        ri->status = ji.status;
+        ri->error = SRV_STORE_LOST;
+        ri->steps = ji.steps;
+        ri->t = ji.t;
+        ri->wall_s = ji.wall_s;
+    } else if (srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
         ri->status = ji.status;
         ri->steps = ji.steps;
         ri->steps_total = ji.steps_total;
@@ -210,6 +235,16 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     store_run r;
     int rc = store_run_get(d->st, (int64_t)run, &r);
     const char *what = strcmp(field, "job_id") ? "run" : "job";
+    srv_job_info lost;
+    if (rc == MPM_ENOTFOUND && srv_pool_lost(d->pool, run, &lost) == 0) {
+        /* a job whose record the full disk lost, insert and all: what the
+         * daemon knows of it (run_info() overlays its end) */
+        memset(&r, 0, sizeof r);
+        r.id = (int64_t)run;
+        r.status = MPP_STATUS_FAILED;
+        r.energy.total = NAN;
+        rc = 0;
+    }
     if (rc == MPM_ENOTFOUND) {
         reply_error(d, id, MPM_ENOTFOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
@@ -267,15 +302,30 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         return;
     }
     size_t nparticles = sc->info.particles;
-    /* in floating point: endTime / dt can be far beyond any integer type */
-    double steps = !sc->has_end_time ? (double)sc->steps
-                   : sc->c.dt > 0    ? ceil(sc->end_time / sc->c.dt - 0.5)
-                                     : 0;
+    /* in floating point: endTime / dt can be far beyond any integer type.
+     * With automatic dt, the largest dt the CFL condition can give (the
+     * materials' wave speed alone, particles at rest) makes the fewest
+     * steps: a case over the limit even so is refused now, any other is
+     * stopped at the limit while it runs (FAILED). */
+    double steps = 0, hmin = sc->c.grid.h[0];
+    for (int k = 1; k < sc->c.grid.dim; k++) hmin = fmin(hmin, sc->c.grid.h[k]);
+    double cfl = sc->c.cfl > 0 ? sc->c.cfl : MPM_DEFAULT_CFL; /* no default is larger */
+    int automatic = sc->has_end_time && !(sc->c.dt > 0);
+    if (!sc->has_end_time)
+        steps = (double)sc->steps;
+    else if (!automatic)
+        steps = ceil(sc->end_time / sc->c.dt - 0.5);
+    else if (sc->info.cmax > 0 && hmin > 0)
+        steps = ceil(sc->end_time * sc->info.cmax / (cfl * hmin) - 0.5);
     if (!(steps <= (double)d->cfg->max_steps)) {
         reply_error(d, id, MPM_ETOOBIG, sc->has_end_time ? "end_time" : "steps",
-                    "the case asks for %.15g steps%s, above this server's limit %lld "
+                    "the case asks for %s%.15g steps%s, above this server's limit %lld "
                     "(--max-steps)",
-                    steps, sc->has_end_time ? " (endTime / dt)" : "", d->cfg->max_steps);
+                    automatic ? "at least " : "", steps,
+                    automatic          ? " (endTime / the largest CFL dt, C h / c)"
+                    : sc->has_end_time ? " (endTime / dt)"
+                                       : "",
+                    d->cfg->max_steps);
         mpp_case_destroy(&sc);
         return;
     }
@@ -321,7 +371,11 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
     char namebuf[128];
     snprintf(namebuf, sizeof namebuf, "%s", name);
-    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes);
+    /* a watcher may have subscribed before the job existed: it is watched
+     * from its first step */
+    int watched = 0;
+    for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == (uint64_t)run;
+    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes, watched);
     if (rc) {
         store_run_end end = {0};
         end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
@@ -627,7 +681,14 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
                     rq->limit, LIST_MAX);
         return;
     }
-    f.limit = rq->limit ? rq->limit : LIST_DEFAULT;
+    if (rq->before_id > (uint64_t)INT64_MAX) {
+        reply_error(d, id, MPM_EREQUEST, "list_runs.before_run_id", "%llu: not a run id",
+                    (unsigned long long)rq->before_id);
+        return;
+    }
+    /* one more than asked for: whether a next page exists */
+    f.limit = (rq->limit ? rq->limit : LIST_DEFAULT) + 1;
+    f.before_id = (int64_t)rq->before_id;
     store_run *runs = NULL;
     size_t n = 0;
     if (store_run_list(d->st, &f, &runs, &n)) {
@@ -640,15 +701,21 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     if (!ri || !es || !xs) {
         reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
     } else {
-        for (size_t i = 0; i < n; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
+        uint64_t next = 0;
+        size_t ns = n;
+        if (n == f.limit) { /* the extra one is not sent: it says there is more */
+            ns = n - 1;
+            next = (uint64_t)runs[ns - 1].id;
+        }
+        for (size_t i = 0; i < ns; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
         uint8_t *buf = NULL;
         size_t len = 0;
-        if (mpp_reply_runs(ri, n, &buf, &len))
-            reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", n);
+        if (mpp_reply_runs_page(ri, ns, next, &buf, &len))
+            reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", ns);
         else
             send_reply(d, id, buf, len);
     }
-    if (xs)
+    if (xs) /* calloc'd: an entry run_info() did not fill clears as nothing */
         for (size_t i = 0; i < n; i++) store_run_extra_clear(&xs[i]);
     free(xs);
     free(ri);
@@ -767,6 +834,12 @@ static void on_xpub(daemon_t *d)
             srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0) {
             srv_debug(job, "stream %s", b[0] ? "watched" : "no longer watched");
             srv_pool_watch(d->pool, job, b[0]);
+            size_t i = 0;
+            while (i < d->nwatched && d->watched[i] != job) i++;
+            if (b[0] && i == d->nwatched && d->nwatched < WATCHED_MAX)
+                d->watched[d->nwatched++] = job;
+            else if (!b[0] && i < d->nwatched)
+                d->watched[i] = d->watched[--d->nwatched];
         }
         zmq_msg_close(&m);
     }
@@ -831,12 +904,54 @@ static void stop_jobs(daemon_t *d)
     drain_pending(d);
 }
 
-static int open_socket(void *zctx, int type, const char *ep, int allow_remote, void **out,
+/* 1 if a process accepts connections on the unix socket at path (a live
+ * daemon owns this ipc:// endpoint), 0 if none does (no file, or a stale
+ * one that a dead daemon left: zmq_bind replaces it). */
+static int ipc_in_use(const char *path)
+{
+    struct sockaddr_un a;
+    if (path[0] == '@' || strlen(path) >= sizeof a.sun_path) return 0; /* abstract: bind says */
+    int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) return 0;
+    memset(&a, 0, sizeof a);
+    a.sun_family = AF_UNIX;
+    memcpy(a.sun_path, path, strlen(path) + 1);
+    int live = connect(fd, (struct sockaddr *)&a, sizeof a) == 0;
+    close(fd);
+    return live;
+}
+
+/* The endpoint libzmq binds for ep: tcp://localhost:P becomes
+ * tcp://127.0.0.1:P and tcp://ip6-localhost:P tcp://[::1]:P (libzmq takes
+ * a bind host for an interface name, not a host name); *ipv6 says the host
+ * is an IPv6 address (ZMQ_IPV6 needed). */
+static int bind_endpoint(const char *ep, char *out, size_t n, int *ipv6)
+{
+    static const struct {
+        const char *from, *to;
+    } alias[] = {{"tcp://localhost:", "tcp://127.0.0.1:"},
+                 {"tcp://ip6-localhost:", "tcp://[::1]:"}};
+    *ipv6 = 0;
+    for (size_t i = 0; i < sizeof alias / sizeof alias[0]; i++) {
+        size_t k = strlen(alias[i].from);
+        if (!strncmp(ep, alias[i].from, k)) {
+            int w = snprintf(out, n, "%s%s", alias[i].to, ep + k);
+            *ipv6 = alias[i].to[6] == '[';
+            return w > 0 && (size_t)w < n ? 0 : -1;
+        }
+    }
+    *ipv6 = !strncmp(ep, "tcp://[", 7) || (!strncmp(ep, "tcp://", 6) && strchr(ep + 6, ':') &&
+                                           strchr(ep + 6, ':') != strrchr(ep + 6, ':'));
+    int w = snprintf(out, n, "%s", ep);
+    return w > 0 && (size_t)w < n ? 0 : -1;
+}
+
+static int open_socket(void *zctx, int type, const char *ep, const srv_config *cfg, void **out,
                        char *err, size_t errlen)
 {
     *out = NULL;
     if (!mpp_endpoint_is_local(ep)) {
-        if (!allow_remote) {
+        if (!cfg->allow_remote) {
             snprintf(err, errlen,
                      "refusing to bind %s: not loopback, ipc:// or inproc:// "
                      "(mpmd has no authentication yet; pass --allow-remote to bind anyway)",
@@ -848,6 +963,19 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
                  "SUBMIT JOBS AND READ RUNS (no authentication yet) !!!",
                  ep);
     }
+    char bep[300];
+    int ipv6 = 0;
+    if (bind_endpoint(ep, bep, sizeof bep, &ipv6)) {
+        snprintf(err, errlen, "endpoint %s is too long", ep);
+        return -1;
+    }
+    if (!strncmp(bep, "ipc://", 6) && ipc_in_use(bep + 6)) {
+        snprintf(err, errlen,
+                 "cannot bind %s: another process (a running mpmd?) accepts connections on "
+                 "it; stop it or choose another endpoint",
+                 ep);
+        return -1;
+    }
     void *s = zmq_socket(zctx, type);
     int zero = 0, one = 1, hwm = 10000;
     if (!s) {
@@ -855,6 +983,7 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
         return -1;
     }
     if (zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) ||
+        (ipv6 && zmq_setsockopt(s, ZMQ_IPV6, &one, sizeof one)) ||
         (type == ZMQ_ROUTER && zmq_setsockopt(s, ZMQ_ROUTER_MANDATORY, &one, sizeof one)) ||
         (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_SNDHWM, &hwm, sizeof hwm)) ||
         (type == ZMQ_PULL && zmq_setsockopt(s, ZMQ_RCVHWM, &hwm, sizeof hwm))) {
@@ -863,17 +992,19 @@ static int open_socket(void *zctx, int type, const char *ep, int allow_remote, v
         return -1;
     }
     if (type == ZMQ_ROUTER) {
-        /* a hard cap well above the soft limit: larger frames cost the
-         * sender its connection; smaller ones over the soft limit get an
-         * error reply */
-        int64_t cap = 2 * (int64_t)(1u << 30);
+        /* libzmq drops the connection of a peer whose message is above
+         * this as soon as its size is read, before any of it is allocated:
+         * a request over --max-request-bytes is never held whole.  The
+         * margin lets a request slightly over the limit get a TOO_LARGE
+         * reply instead (the frame sizes a client can be told about). */
+        int64_t cap = (int64_t)cfg->max_request_bytes + REQUEST_MARGIN;
         if (zmq_setsockopt(s, ZMQ_MAXMSGSIZE, &cap, sizeof cap)) {
             snprintf(err, errlen, "ZMQ_MAXMSGSIZE: %s", zmq_strerror(errno));
             zmq_close(s);
             return -1;
         }
     }
-    if (zmq_bind(s, ep)) {
+    if (zmq_bind(s, bep)) {
         snprintf(err, errlen, "cannot bind %s: %s", ep, zmq_strerror(errno));
         zmq_close(s);
         return -1;
@@ -896,11 +1027,14 @@ int srv_daemon_run(const srv_config *cfg)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
+    /* over a file-size limit (RLIMIT_FSIZE) a write fails with EFBIG, as on
+     * a full disk, instead of killing the daemon */
+    signal(SIGXFSZ, SIG_IGN);
 
     store_options so = {0};
     so.log = srv_log_store;
     if (store_open(cfg->db, &so, &d.st)) {
-        srv_warn(0, "%s", store_error()->message);
+        srv_error(0, "%s", store_error()->message);
         return 1;
     }
     store_stats ss;
@@ -912,20 +1046,20 @@ int srv_daemon_run(const srv_config *cfg)
                 (long long)ss.recovered_running, (long long)ss.recovered_queued);
     d.zctx = zmq_ctx_new();
     if (!d.zctx) {
-        srv_warn(0, "zmq_ctx_new: %s", zmq_strerror(errno));
+        srv_error(0, "zmq_ctx_new: %s", zmq_strerror(errno));
         goto out;
     }
-    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg->allow_remote, &d.router, err,
-                    sizeof err) ||
-        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg->allow_remote, &d.xpub, err,
-                    sizeof err) ||
-        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, 0, &d.pull, err, sizeof err)) {
-        srv_warn(0, "%s", err);
+    srv_config inproc = *cfg;
+    inproc.allow_remote = 0;
+    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, &d.router, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg, &d.xpub, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, &inproc, &d.pull, err, sizeof err)) {
+        srv_error(0, "%s", err);
         goto out;
     }
     d.pool = srv_pool_new(d.zctx, cfg, d.st, EVENTS_EP, err, sizeof err);
     if (!d.pool) {
-        srv_warn(0, "%s", err);
+        srv_error(0, "%s", err);
         goto out;
     }
     srv_log(0,

@@ -68,6 +68,14 @@ struct srv_pool {
     srv_job *head, *tail; /* queued */
     size_t nqueued;
     srv_job **running; /* one slot per worker */
+    /* jobs ended by the store's losses, whose end the store may not have
+     * (a ring, guarded by mu) */
+    struct {
+        uint64_t id;
+        int64_t steps;
+        double t, wall_s;
+    } lost[64];
+    unsigned nlost;
     worker *workers;
     int nworkers;
     int stopping;
@@ -248,6 +256,10 @@ static void snapmsg_zmq_free(void *data, void *hint)
     snapmsg_unref(hint);
 }
 
+/* Snapshot message buffers a job may have at once (each held by zmq
+ * until every watcher's connection has taken it, or kept for reuse). */
+#define SNAP_SLOTS 256
+
 /* Snapshot buffers are allocated on first use, once per job. */
 typedef struct {
     double *x, *v, *stress, *pressure, *volume, *packed;
@@ -256,7 +268,8 @@ typedef struct {
     int *yli;
     unsigned fields; /* the fields asked for that the run has */
     size_t n;
-    snapmsg *msg; /* the last streamed message's buffer, or NULL */
+    snapmsg *msg[SNAP_SLOTS]; /* message buffers: the worker's reference */
+    uint64_t dropped;         /* snapshots not streamed: over the budget */
 } snapbuf;
 
 static void snapbuf_free(snapbuf *b)
@@ -271,30 +284,78 @@ static void snapbuf_free(snapbuf *b)
     free(b->yl);
     free(b->yli);
     free(b->packed);
-    snapmsg_unref(b->msg);
+    for (int i = 0; i < SNAP_SLOTS; i++) snapmsg_unref(b->msg[i]);
     memset(b, 0, sizeof *b);
 }
 
-/* Packs a snapshot into the job's message buffer (a fresh one only when
- * zmq still holds the last, or it is too small) and sends it without a
- * copy. */
-static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s)
+/* The stream's memory bound.  A message buffer that zmq still holds is
+ * queued for some watcher (the XPUB keeps a message until the last
+ * subscriber's connection has written it to the kernel); a watcher that
+ * stalls keeps every later one.  The bytes so held are counted here, per
+ * job, and a snapshot that would take them above --stream-buffer-mb is not
+ * streamed (its seq is used: watchers see the gap; the record, if asked
+ * for, is stored as always).  One message may always be in flight, so a
+ * snapshot larger than the budget still reaches a watcher that keeps up.
+ * Buffers zmq has let go of are reused (the solver faults in no fresh
+ * pages), and those beyond the one kept are freed.  Returns the slot to
+ * pack into (its buffer at least need bytes), or -1 to drop. */
+static int snap_slot(ctx *c, snapbuf *b, size_t need)
+{
+    size_t held = 0, budget = (size_t)c->p->cfg->stream_buffer_mb << 20;
+    int reuse = -1, empty = -1;
+    for (int i = 0; i < SNAP_SLOTS; i++) {
+        snapmsg *m = b->msg[i];
+        if (!m) {
+            if (empty < 0) empty = i;
+        } else if (atomic_load(&m->refs) != 1) {
+            held += m->cap;
+        } else if (reuse < 0 && m->cap >= need) {
+            reuse = i;
+        } else {
+            /* free, but another one will do: let it go */
+            snapmsg_unref(m);
+            b->msg[i] = NULL;
+            if (empty < 0) empty = i;
+        }
+    }
+    if (budget && held && held + need > budget) return -1;
+    if (reuse >= 0) return reuse;
+    if (empty < 0) return -1;
+    snapmsg *m = malloc(sizeof *m + need);
+    if (!m) {
+        srv_warn(c->j->id, "out of memory for a snapshot message of %zu bytes", need);
+        return -1;
+    }
+    atomic_init(&m->refs, 1);
+    m->cap = need;
+    b->msg[empty] = m;
+    return empty;
+}
+
+/* The message buffer (slot) a snapshot with this seq (its arrays' sizes
+ * as in s; their values are not read) will be packed into, or -1 when it
+ * is not streamed: the stream's budget is full (logged once per job). */
+static int snapshot_slot(ctx *c, snapbuf *b, const mpp_snapshot *s, uint64_t seq)
+{
+    size_t need = 0;
+    mpp_stream_snapshot_into(c->j->id, seq, s, NULL, 0, &need); /* the size only */
+    int slot = snap_slot(c, b, need);
+    if (slot < 0 && !b->dropped++)
+        srv_log(c->j->id,
+                "snapshot at step %lld not streamed: %zu bytes of snapshots are still "
+                "queued for a slow watcher (--stream-buffer-mb %d); later ones are dropped "
+                "likewise while it lags",
+                (long long)s->step, need, c->p->cfg->stream_buffer_mb);
+    return slot;
+}
+
+/* Packs a snapshot into the job's message buffer `slot` (snapshot_slot()
+ * with the same seq) and sends it without a copy. */
+static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s, uint64_t seq, int slot)
 {
     srv_job *j = c->j;
-    uint64_t seq = j->msg_seq++;
-    size_t need = 0, len = 0;
-    mpp_stream_snapshot_into(j->id, seq, s, NULL, 0, &need); /* the size only */
-    snapmsg *m = b->msg;
-    if (!m || m->cap < need || atomic_load(&m->refs) != 1) {
-        snapmsg_unref(m);
-        b->msg = m = malloc(sizeof *m + need);
-        if (!m) {
-            srv_warn(j->id, "out of memory for a snapshot message of %zu bytes", need);
-            return;
-        }
-        atomic_init(&m->refs, 1);
-        m->cap = need;
-    }
+    size_t len = 0;
+    snapmsg *m = b->msg[slot];
     if (mpp_stream_snapshot_into(j->id, seq, s, m->data, m->cap, &len)) {
         srv_warn(j->id, "cannot encode a snapshot");
         return;
@@ -358,6 +419,18 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
         }
     }
     f = b->fields;
+    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,         dim,        b->x, b->v,
+                      b->stress,          b->pressure,       b->volume, b->plastic, b->F, b->yli};
+    /* a snapshot the stream's budget refuses is not even gathered unless
+     * it is recorded: a stalled watcher costs the job nothing (the size of
+     * its message depends on n and the fields only, not on the values) */
+    uint64_t seq = 0;
+    int slot = -1;
+    if (stream) {
+        seq = j->msg_seq++;
+        slot = snapshot_slot(c, b, &s, seq);
+        if (slot < 0 && !record) return 0;
+    }
     mpm_sim_snapshot(sim, &(mpm_snapshot){.x = b->x,
                                           .v = b->v,
                                           .stress = b->stress,
@@ -368,8 +441,6 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
                                           .yielded = b->yl});
     if (b->yl)
         for (size_t i = 0; i < n; i++) b->yli[i] = b->yl[i];
-    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,         dim,        b->x, b->v,
-                      b->stress,          b->pressure,       b->volume, b->plastic, b->F, b->yli};
     if (record && b->packed) {
         /* stored layout: the requested arrays back to back, in field-bit
          * order (the yield flags as 0.0 / 1.0) */
@@ -390,7 +461,7 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
             srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
                      store_error()->message);
     }
-    if (stream) publish_snapshot(c, b, &s);
+    if (slot >= 0) publish_snapshot(c, b, &s, seq, slot);
     return 0;
 }
 
@@ -491,7 +562,10 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     c.pe = sc->energy_every ? calloc(1, sizeof *c.pe) : NULL;
     if (c.pe) c.pe->last_flush = c.pe->last_sample = mono_now();
     int snaps_ok = 1, status = MPP_STATUS_FINISHED;
-    char why[512] = "";
+    char why[512] = "", loss[400];
+    /* writes the store loses whole (a full disk) end the run: its record
+     * would be missing its samples, and nobody would know */
+    uint64_t lost0 = store_losses(p->st, NULL, 0);
     energy_sample(&c, sim, &last);
     progress(&c, sim, 0);
     double next_progress = 0.2;
@@ -535,6 +609,11 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             if (w >= next_progress) {
                 progress(&c, sim, w);
                 next_progress = w + 0.2;
+                if (store_losses(p->st, loss, sizeof loss) > lost0) {
+                    status = MPP_STATUS_FAILED;
+                    snprintf(why, sizeof why, "%s: %s", SRV_STORE_LOST, loss);
+                    break;
+                }
             }
             if (cfg->max_wall_s > 0 && w > cfg->max_wall_s) {
                 status = MPP_STATUS_FAILED;
@@ -553,6 +632,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         status = MPP_STATUS_FAILED;
         mpm_error_text(mpm_sim_error(sim), MPM_FIELD_PROTO, why, sizeof why);
     }
+    /* (without waiting for the last commit: a loss in the run's last batch
+     * shows in the log and at the next start, not here) */
+    if (status == MPP_STATUS_FINISHED && store_losses(p->st, loss, sizeof loss) > lost0) {
+        status = MPP_STATUS_FAILED;
+        snprintf(why, sizeof why, "%s: %s", SRV_STORE_LOST, loss);
+    }
     if (last.step != mpm_sim_steps(sim) && status != MPP_STATUS_FAILED)
         energy_sample(&c, sim, &last);
     else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
@@ -570,8 +655,20 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         warn[0] = 0;
     }
     progress(&c, sim, wall);
+    if (!strncmp(why, SRV_STORE_LOST, strlen(SRV_STORE_LOST))) {
+        pthread_mutex_lock(&p->mu);
+        unsigned i = p->nlost++ % (sizeof p->lost / sizeof p->lost[0]);
+        p->lost[i].id = j->id;
+        p->lost[i].steps = mpm_sim_steps(sim);
+        p->lost[i].t = mpm_sim_time(sim);
+        p->lost[i].wall_s = wall;
+        pthread_mutex_unlock(&p->mu);
+    }
     finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last,
            &balance, over && warn[0] ? warn : NULL);
+    if (sb.dropped)
+        srv_log(j->id, "%llu snapshot(s) not streamed: a watcher lagged (--stream-buffer-mb %d)",
+                (unsigned long long)sb.dropped, cfg->stream_buffer_mb);
     snapbuf_free(&sb);
     free(c.pe); /* empty: finish() handed everything on */
     mpm_sim_destroy(&sim);
@@ -675,13 +772,13 @@ int srv_pool_has_room(srv_pool *p)
 }
 
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
-                    size_t nodes)
+                    size_t nodes, int watched)
 {
     srv_job *j = calloc(1, sizeof *j);
     if (!j) return MPM_ENOMEM;
     j->id = id;
     atomic_init(&j->cancel, 0);
-    atomic_init(&j->watched, 0);
+    atomic_init(&j->watched, watched != 0);
     j->status = MPP_STATUS_QUEUED;
     j->submitted_at = submitted_at;
     j->particles = particles;
@@ -778,6 +875,23 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         srv_log(id, "cancelled while queued");
         job_free(j);
     }
+    return rc;
+}
+
+int srv_pool_lost(srv_pool *p, uint64_t id, srv_job_info *out)
+{
+    int rc = -1;
+    pthread_mutex_lock(&p->mu);
+    for (size_t i = 0; i < sizeof p->lost / sizeof p->lost[0]; i++)
+        if (p->lost[i].id == id && id) {
+            memset(out, 0, sizeof *out);
+            out->status = MPP_STATUS_FAILED;
+            out->steps = p->lost[i].steps;
+            out->t = p->lost[i].t;
+            out->wall_s = p->lost[i].wall_s;
+            rc = 0;
+        }
+    pthread_mutex_unlock(&p->mu);
     return rc;
 }
 

@@ -46,11 +46,11 @@ typedef struct srv_pool srv_pool;
 srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char *events_ep,
                        char *err, size_t errlen);
 
-/* Queues job `id` (its run record already inserted).  Takes ownership of
- * *sc (set to NULL) on success.  Returns 0, MPM_EFULL or
- * MPM_EUNAVAIL. */
+/* Queues job `id` (its run record already inserted); watched: somebody
+ * subscribed to its stream already.  Takes ownership of *sc (set to NULL)
+ * on success.  Returns 0, MPM_EFULL or MPM_EUNAVAIL. */
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
-                    size_t nodes);
+                    size_t nodes, int watched);
 
 /* 1 if the queue has room for another job. */
 int srv_pool_has_room(srv_pool *p);
@@ -63,6 +63,15 @@ int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out);
  * publish (free() it); a running one stops before its next step.  Returns
  * SRV_CANCEL_NONE, SRV_CANCEL_QUEUED or SRV_CANCEL_RUNNING. */
 int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len);
+
+/* The error of a run that ended because the store lost writes (disk full,
+ * I/O error); the reason follows it in the log and the Finished message. */
+#define SRV_STORE_LOST "the run store lost writes (disk full or I/O error)"
+
+/* A job that ended FAILED with SRV_STORE_LOST lately (its end may not be
+ * in the store: the disk was full): its status, steps, t and wall time in
+ * *out (name unset), 0; -1 if it is not one of the last 64 such jobs. */
+int srv_pool_lost(srv_pool *p, uint64_t id, srv_job_info *out);
 
 /* Somebody subscribed to (on = 1) or left (on = 0) the job's stream. */
 void srv_pool_watch(srv_pool *p, uint64_t id, int on);

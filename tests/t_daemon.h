@@ -67,6 +67,8 @@ const char *td_bin(const char *env);
  * waits until it answers Ping (up to 20 s).  Returns 0, or -1 after
  * failing the test (with the log). */
 int td_start(td_daemon *d, const char *dir, const char *const *extra);
+/* The same on endpoint ep (NULL: ipc://dir/ctl). */
+int td_start_ep(td_daemon *d, const char *dir, const char *ep, const char *const *extra);
 /* SIGTERM, then waits up to 20 s: returns the exit status (128 + signal if
  * killed by one), or -1 after SIGKILL on timeout. */
 int td_stop(td_daemon *d);

@@ -296,7 +296,9 @@ int td_frames(const char *ep, const void *const *frames, const size_t *lens, int
     *reply = NULL;
     if (!ctx) return -1;
     s = zmq_socket(ctx, ZMQ_DEALER);
-    if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, ep)) goto out;
+    if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) ||
+        zmq_setsockopt(s, ZMQ_IPV6, &(int){1}, sizeof(int)) || zmq_connect(s, ep))
+        goto out;
     for (int i = 0; i < n; i++)
         if (zmq_send(s, frames[i], lens[i], i + 1 < n ? ZMQ_SNDMORE : 0) < 0) goto out;
     {
@@ -334,6 +336,11 @@ out:
 
 int td_start(td_daemon *d, const char *dir, const char *const *extra)
 {
+    return td_start_ep(d, dir, NULL, extra);
+}
+
+int td_start_ep(td_daemon *d, const char *dir, const char *ep, const char *const *extra)
+{
     const char *bin = td_bin("MPMD_BIN");
     const char *argv[TD_MAX_ARGS];
     int n = 0, fd;
@@ -342,7 +349,10 @@ int td_start(td_daemon *d, const char *dir, const char *const *extra)
     mkdir(dir, 0700);
     memset(d, 0, sizeof *d);
     snprintf(d->dir, sizeof d->dir, "%s", dir);
-    snprintf(d->ep, sizeof d->ep, "ipc://%s/ctl", dir);
+    if (ep)
+        snprintf(d->ep, sizeof d->ep, "%s", ep);
+    else
+        snprintf(d->ep, sizeof d->ep, "ipc://%s/ctl", dir);
     snprintf(d->db, sizeof d->db, "%s/mpmd.db", dir);
     snprintf(d->log, sizeof d->log, "%s/mpmd.log", dir);
     argv[n++] = bin;

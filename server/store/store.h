@@ -162,8 +162,9 @@ const mpm_error *store_error(void);
 
 /* ---- open / close ---- */
 
-/* Opens (creating if needed) the database at path: takes the lock on
- * "<path>.lock" (writing our pid into it), sets WAL mode, busy_timeout and
+/* Opens (creating if needed) the database at path: takes an OS lock
+ * (flock) on the database file itself, whatever path reaches it (writing
+ * our pid, best effort, into "<real path>.lock"), sets WAL mode, busy_timeout and
  * foreign keys, applies the pending schema migrations in one transaction,
  * marks runs left 'running' or 'queued' by a previous daemon 'interrupted'
  * (error STORE_INTERRUPTED_RUNNING / STORE_INTERRUPTED_QUEUED, finished_at
@@ -283,6 +284,10 @@ int store_schema_version(store *s, int *version);
 /* ---- diagnostics and helpers ---- */
 
 void store_get_stats(store *s, store_stats *st);
+/* Transactions the writer lost whole since the store opened (disk full,
+ * I/O error: every write in them is lost), with the reason of the last
+ * one in why (len bytes; "" if none; why may be NULL). */
+uint64_t store_losses(store *s, char *why, size_t len);
 /* Copies the text of the last failed asynchronous write ("" if none). */
 void store_last_write_error(store *s, char *buf, size_t len);
 

@@ -92,9 +92,9 @@ typedef struct {
 
 struct store {
     char *path;
-    char *lock_path;
-    int lock_fd;
-    int notify_fd; /* eventfd, written after each commit */
+    char *lock_path; /* realpath(path).lock: the holder's pid, for messages */
+    int lock_fd;     /* the database file itself, flock()ed */
+    int notify_fd;   /* eventfd, written after each commit */
 
     /* options */
     double batch_s;
@@ -124,6 +124,8 @@ struct store {
     int over_cap; /* logged that the queue passed the cap */
     int64_t next_id;
     uint64_t ops_committed, transactions, write_errors, unreported;
+    uint64_t batches_lost; /* transactions lost whole (disk full, I/O error) */
+    char last_loss[512];   /* why the last one was */
     uint64_t snapshots_dropped;
     char last_werr[512];
     int64_t rec_running, rec_queued;

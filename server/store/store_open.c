@@ -5,8 +5,11 @@
  * share: the calling thread's error, logging, the on-disk names of the
  * enums and the SQLite helpers (store_internal.h).
  *
- * Open.  store_open: flock(<path>.lock) (non-blocking; one daemon per
- * database), then WAL, busy_timeout, foreign keys, schema migrations (the
+ * Open.  store_open: flock() on the database file itself (non-blocking;
+ * one daemon per database: the lock goes with the file's inode, so a
+ * symlink or a hard link to it, or another spelling of its path, finds it
+ * held), the holder's pid written, best effort, into <realpath>.lock for
+ * the message a second daemon prints; then WAL, busy_timeout, foreign keys, schema migrations (the
  * table of steps `migrations[]`, the pending ones applied in order in one
  * transaction, the version recorded in PRAGMA user_version), crash
  * recovery (runs left 'running' or 'queued' become 'interrupted'; queued
@@ -358,37 +361,63 @@ int store_exec_raw(const char *path, const char *sql, int64_t *result)
 /* ---------------------------------------------------------------------- */
 /* Lock file: one daemon per database */
 
+/* The pid in a lock file, or 0. */
+static long lock_pid(const char *lock_path)
+{
+    char buf[32] = {0};
+    int fd = open(lock_path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return 0;
+    ssize_t n = pread(fd, buf, sizeof buf - 1, 0);
+    close(fd);
+    char *end = NULL;
+    long pid = n > 0 ? strtol(buf, &end, 10) : 0;
+    return end != buf && pid > 0 ? pid : 0;
+}
+
+/* Locks the database file (created empty if absent: SQLite takes an empty
+ * file for a new database).  flock() and SQLite's fcntl() locks do not
+ * interact on Linux; the descriptor stays open until every connection is
+ * closed (closing a descriptor of the file drops the process's fcntl
+ * locks on it, so it must not close while SQLite holds any). */
 static int lock_acquire(store *s)
 {
-    int fd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-    if (fd < 0)
-        return sti_fail(MPM_EIO, "cannot open lock file %s: %s", s->lock_path, strerror(errno));
+    int fd = open(s->path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd < 0) return sti_fail(MPM_EIO, "cannot open database %s: %s", s->path, strerror(errno));
+    char *real = realpath(s->path, NULL);
+    if (real) {
+        size_t n = strlen(real);
+        char *lp = malloc(n + sizeof ".lock");
+        if (lp) {
+            memcpy(lp, real, n);
+            memcpy(lp + n, ".lock", sizeof ".lock");
+            free(s->lock_path);
+            s->lock_path = lp;
+        }
+        free(real);
+    }
     if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
         int e = errno;
+        close(fd);
         if (e == EWOULDBLOCK) {
-            char buf[32] = {0};
-            ssize_t n = pread(fd, buf, sizeof buf - 1, 0);
-            long pid = 0;
-            char *end = NULL;
-            if (n > 0) pid = strtol(buf, &end, 10);
-            close(fd);
-            if (n > 0 && end != buf && pid > 0)
+            long pid = lock_pid(s->lock_path);
+            if (pid > 0)
                 return sti_fail(MPM_ELOCKED, "database %s is in use by another mpmd (pid %ld)",
                                 s->path, pid);
             return sti_fail(MPM_ELOCKED, "database %s is in use by another mpmd (pid unknown)",
                             s->path);
         }
-        close(fd);
-        return sti_fail(MPM_EIO, "cannot lock %s: %s", s->lock_path, strerror(e));
-    }
-    char pid[32];
-    int n = snprintf(pid, sizeof pid, "%ld\n", (long)getpid());
-    if (ftruncate(fd, 0) != 0 || pwrite(fd, pid, (size_t)n, 0) != n) {
-        int e = errno;
-        close(fd);
-        return sti_fail(MPM_EIO, "cannot write pid into %s: %s", s->lock_path, strerror(e));
+        return sti_fail(MPM_EIO, "cannot lock %s: %s", s->path, strerror(e));
     }
     s->lock_fd = fd;
+    /* the pid, for the message of a second daemon: nothing depends on it,
+     * so a full disk or a read-only directory does not stop the start */
+    char pid[32];
+    int n = snprintf(pid, sizeof pid, "%ld\n", (long)getpid());
+    int pfd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (pfd < 0 || ftruncate(pfd, 0) != 0 || pwrite(pfd, pid, (size_t)n, 0) != n)
+        sti_log(s, "cannot write the pid into %s: %s (the lock holds regardless)", s->lock_path,
+                strerror(errno));
+    if (pfd >= 0) close(pfd);
     return 0;
 }
 
@@ -397,7 +426,7 @@ static void lock_release(store *s)
     if (s->lock_fd < 0) return;
     /* empty the pid before the lock goes; the file stays (unlinking a lock
      * file races with a process that has just opened it) */
-    if (ftruncate(s->lock_fd, 0) != 0)
+    if (truncate(s->lock_path, 0) != 0 && errno != ENOENT)
         sti_log(s, "cannot truncate %s: %s", s->lock_path, strerror(errno));
     close(s->lock_fd); /* releases the flock */
     s->lock_fd = -1;

@@ -165,9 +165,11 @@ static int bind_static(sqlite3_stmt *st, int i, const char *v)
 /* ---------------------------------------------------------------------- */
 /* The writer thread */
 
-/* Records a failed asynchronous write: logged, counted, reported by flush. */
-__attribute__((format(printf, 3, 4))) static void write_error(store *s, uint64_t nops,
-                                                              const char *fmt, ...)
+/* Records a failed asynchronous write: logged, counted, reported by flush;
+ * lost = 1 when a whole transaction was lost (disk full, I/O error), not
+ * one refused statement. */
+__attribute__((format(printf, 4, 5))) static void write_error_(store *s, int lost, uint64_t nops,
+                                                               const char *fmt, ...)
 {
     char buf[512];
     va_list ap;
@@ -178,9 +180,15 @@ __attribute__((format(printf, 3, 4))) static void write_error(store *s, uint64_t
     s->write_errors += nops;
     s->unreported += nops;
     snprintf(s->last_werr, sizeof s->last_werr, "%s", buf);
+    if (lost) {
+        s->batches_lost++;
+        snprintf(s->last_loss, sizeof s->last_loss, "%s", buf);
+    }
     pthread_mutex_unlock(&s->mu);
     sti_log(s, "write failed: %s", buf);
 }
+#define write_error(s, nops, ...) write_error_(s, 0, nops, __VA_ARGS__)
+#define write_loss(s, nops, ...) write_error_(s, 1, nops, __VA_ARGS__)
 
 /* Why an update of run id matched no row: "no run N" or "run N already
  * ended (status)". */
@@ -388,7 +396,7 @@ static void apply_batch(store *s, op *batch, size_t n)
             nanosleep(&ts, NULL);
             continue;
         }
-        write_error(s, n, "BEGIN: %s; %zu writes lost", sqlite3_errmsg(s->wdb), n);
+        write_loss(s, n, "BEGIN: %s; %zu writes lost", sqlite3_errmsg(s->wdb), n);
         return;
     }
     for (op *o = batch; o; o = o->next) {
@@ -396,15 +404,15 @@ static void apply_batch(store *s, op *batch, size_t n)
         failed++;
         if (sqlite3_get_autocommit(s->wdb)) {
             /* SQLite rolled the whole transaction back (disk full, I/O) */
-            write_error(s, n - failed, "transaction rolled back (%s); %zu more writes lost",
-                        sqlite3_errmsg(s->wdb), (size_t)(n - failed));
+            write_loss(s, n - failed, "transaction rolled back (%s); %zu more writes lost",
+                       sqlite3_errmsg(s->wdb), (size_t)(n - failed));
             return;
         }
     }
     rc = ws_simple(s, WS_COMMIT);
     if (rc != SQLITE_OK) {
-        write_error(s, n - failed, "COMMIT: %s; %zu writes lost", sqlite3_errmsg(s->wdb),
-                    (size_t)(n - failed));
+        write_loss(s, n - failed, "COMMIT: %s; %zu writes lost", sqlite3_errmsg(s->wdb),
+                   (size_t)(n - failed));
         if (!sqlite3_get_autocommit(s->wdb) && ws_simple(s, WS_ROLLBACK) != SQLITE_OK)
             sti_log(s, "ROLLBACK: %s", sqlite3_errmsg(s->wdb));
         return;
@@ -873,6 +881,17 @@ void store_get_stats(store *s, store_stats *st)
     st->recovered_running = s->rec_running;
     st->recovered_queued = s->rec_queued;
     pthread_mutex_unlock(&s->mu);
+}
+
+uint64_t store_losses(store *s, char *why, size_t len)
+{
+    if (why && len) why[0] = 0;
+    if (!s) return 0;
+    pthread_mutex_lock(&s->mu);
+    uint64_t n = s->batches_lost;
+    if (why && len) snprintf(why, len, "%s", s->last_loss);
+    pthread_mutex_unlock(&s->mu);
+    return n;
 }
 
 void store_last_write_error(store *s, char *buf, size_t len)
