@@ -35,7 +35,8 @@ enum {
     CTL_EPROTO = -4,   /* a reply that is not what was asked for */
     CTL_ESYS = -5,     /* zmq, file or allocation failure */
     CTL_ECASE = -6,    /* the case file is unreadable or invalid */
-    CTL_EINTR = -7     /* interrupted by a signal */
+    CTL_EINTR = -7,    /* interrupted by a signal */
+    CTL_EAUTH = -8     /* the server refused the handshake (key) */
 };
 
 /* Exit statuses of mpmctl. */
@@ -67,8 +68,27 @@ typedef struct {
     double timeout_s;     /* per request */
     void *zctx;           /* zmq context, NULL until ctl_conn_open */
     void *dealer;         /* control socket */
-    void *mon;            /* PAIR on the DEALER's monitor: disconnections */
+    void *mon;            /* PAIR on the DEALER's monitor: disconnections,
+                             failed handshakes */
+    int curve;            /* CURVE keys loaded (ctl_keys_load) */
+    char server_key[41], public_key[41], secret_key[41]; /* Z85 */
 } ctl_conn;
+
+/* ---- CURVE keys (ctl_keys.c) ------------------------------------------ */
+
+/* Loads the CURVE keys: the server's public key from MPMD_SERVER_KEY (a Z85
+ * key or a file) or KEYDIR/server.pub, the client's secret key from the
+ * file MPMD_CLIENT_KEY or KEYDIR/mpmd.key (mode 0600 or stricter), where
+ * KEYDIR is keys_dir (--keys), else $MPMD_KEYS, else ~/.config/mpmd if it
+ * exists.  No server key: c->curve stays 0 (no CURVE).  A server key
+ * without a client key is an error. */
+int ctl_keys_load(ctl_conn *c, const char *keys_dir);
+/* Sets the CURVE client options on sock when keys are loaded. */
+int ctl_conn_secure(ctl_conn *c, void *sock);
+/* `mpmctl keygen`: writes DIR/NAME.key (the secret key, mode 0600) and
+ * DIR/NAME.pub (the public key), refusing to overwrite either; prints the
+ * public key.  DIR "" or NULL: "."; NAME "" or NULL: "mpmd". */
+int ctl_keygen(const char *dir, const char *name);
 
 /* Creates the context and connects the DEALER (linger 0). */
 int ctl_conn_open(ctl_conn *c);

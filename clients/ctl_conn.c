@@ -54,7 +54,16 @@ int ctl_conn_open(ctl_conn *c)
      * would ever come */
     char mep[64];
     snprintf(mep, sizeof mep, "inproc://mpmctl-monitor-%p", (void *)c);
-    if (zmq_socket_monitor(c->dealer, mep, ZMQ_EVENT_DISCONNECTED) == 0) {
+    if (ctl_conn_secure(c, c->dealer)) {
+        ctl_conn_close(c);
+        return CTL_ESYS;
+    }
+    /* ... and when a handshake fails (a CURVE key refused, or CURVE on one
+     * side only): libzmq would retry silently until the timeout */
+    if (zmq_socket_monitor(c->dealer, mep,
+                           ZMQ_EVENT_DISCONNECTED | ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL |
+                               ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL |
+                               ZMQ_EVENT_HANDSHAKE_FAILED_AUTH) == 0) {
         c->mon = zmq_socket(c->zctx, ZMQ_PAIR);
         if (c->mon && (zmq_setsockopt(c->mon, ZMQ_LINGER, &linger, sizeof linger) ||
                        zmq_connect(c->mon, mep))) {
@@ -70,22 +79,53 @@ int ctl_conn_open(ctl_conn *c)
     return 0;
 }
 
-/* Reads the monitor's pending events: 1 if the connection was dropped. */
+/* What the monitor saw. */
+enum { MON_NONE = 0, MON_DROPPED = 1, MON_HANDSHAKE = 2, MON_REFUSED = 3 };
+
+/* Reads the monitor's pending events: the worst of MON_*. */
 static int drain_monitor(ctl_conn *c)
 {
-    int dropped = 0;
+    int seen = MON_NONE;
     for (;;) {
         zmq_msg_t m;
         zmq_msg_init(&m);
         if (!c->mon || zmq_msg_recv(&m, c->mon, ZMQ_DONTWAIT) < 0) {
             zmq_msg_close(&m);
-            return dropped;
+            return seen;
         }
         uint16_t ev = 0;
         if (zmq_msg_size(&m) >= 2 && zmq_msg_more(&m)) memcpy(&ev, zmq_msg_data(&m), 2);
-        if (ev == ZMQ_EVENT_DISCONNECTED) dropped = 1;
+        int k = ev == ZMQ_EVENT_DISCONNECTED            ? MON_DROPPED
+                : ev == ZMQ_EVENT_HANDSHAKE_FAILED_AUTH ? MON_REFUSED
+                : ev == ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL ||
+                        ev == ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL
+                    ? MON_HANDSHAKE
+                    : MON_NONE;
+        if (k > seen) seen = k;
         zmq_msg_close(&m);
     }
+}
+
+/* Says why the handshake failed; returns CTL_EAUTH. */
+static int report_handshake(ctl_conn *c, int what)
+{
+    if (what == MON_REFUSED)
+        fprintf(stderr,
+                "mpmctl: %s refused this client's key (public key %s): it is not in the "
+                "server's --authorized-keys, or was removed from it\n",
+                c->endpoint, c->public_key);
+    else if (c->curve)
+        fprintf(stderr,
+                "mpmctl: the CURVE handshake with %s failed (client public key %s): is %s the "
+                "server's public key (MPMD_SERVER_KEY), and does the server use CURVE?\n",
+                c->endpoint, c->public_key, c->server_key);
+    else
+        fprintf(stderr,
+                "mpmctl: the handshake with %s failed: the server requires CURVE and this "
+                "client has no key (set MPMD_SERVER_KEY and MPMD_CLIENT_KEY, or --keys DIR; "
+                "README: Security)\n",
+                c->endpoint);
+    return CTL_EAUTH;
 }
 
 void ctl_conn_close(ctl_conn *c)
@@ -144,7 +184,11 @@ static int exchange_raw(ctl_conn *c, const mpp_request *rq, zmq_msg_t *body)
         fprintf(stderr, "mpmctl: cannot encode the request (%d)\n", rc);
         return CTL_ESYS;
     }
-    drain_monitor(c); /* what happened before this request */
+    int before = drain_monitor(c); /* what happened before this request */
+    if (before >= MON_HANDSHAKE) {
+        free(buf);
+        return report_handshake(c, before);
+    }
     if (zmq_send(c->dealer, "", 0, ZMQ_SNDMORE) < 0 || zmq_send(c->dealer, buf, len, 0) < 0) {
         int e = errno;
         free(buf);
@@ -175,7 +219,9 @@ static int exchange_raw(ctl_conn *c, const mpp_request *rq, zmq_msg_t *body)
             return CTL_ESYS;
         }
         if (rc > 0 && (it[0].revents & ZMQ_POLLIN)) break;
-        if (rc > 0 && drain_monitor(c)) {
+        int ev = rc > 0 ? drain_monitor(c) : MON_NONE;
+        if (ev >= MON_HANDSHAKE) return report_handshake(c, ev);
+        if (ev == MON_DROPPED) {
             fprintf(stderr,
                     "mpmctl: %s closed the connection without a reply: the request (%zu bytes) "
                     "may exceed the server's limit (mpmd --max-request-bytes), or the server "

@@ -547,6 +547,10 @@ int ctl_watch(ctl_conn *c, uint64_t job, ctl_out fmt, int *final_status)
         if (sub) zmq_close(sub);
         return CTL_ESYS;
     }
+    if (ctl_conn_secure(c, sub)) {
+        zmq_close(sub);
+        return CTL_ESYS;
+    }
     if (zmq_connect(sub, ep)) {
         fprintf(stderr, "mpmctl: cannot connect to the stream at %s: %s\n", ep,
                 zmq_strerror(errno));

@@ -37,7 +37,8 @@ enum {
     C_CANCEL = 1u << 6,
     C_PING = 1u << 7,
     C_VERSION = 1u << 8,
-    C_GLOBAL = 0x1ffu
+    C_KEYGEN = 1u << 9,
+    C_GLOBAL = 0x3ffu
 };
 
 typedef struct {
@@ -100,6 +101,14 @@ static const command commands[] = {
     {"ping", C_PING, "[--json]", "check the server",
      "Prints the server version, schema version, stream endpoint and round-trip time.\n"},
     {"version", C_VERSION, "[--json]", "versions of mpmctl and of the server", ""},
+    {"keygen", C_KEYGEN, "[--out DIR] [--name NAME]", "make a CURVE keypair",
+     "Writes DIR/NAME.key (the secret key, mode 0600) and DIR/NAME.pub (the public\n"
+     "key) as Z85 text; DIR defaults to the current directory (created mode 0700 if\n"
+     "missing), NAME to \"mpmd\".  Never overwrites a key.  Prints the public key.\n"
+     "A client: keygen --out ~/.config/mpmd, then put the server's public key in\n"
+     "~/.config/mpmd/server.pub and give your mpmd.pub to the server's admin (README:\n"
+     "Security).  A server: keygen --out /etc/mpmd --name server, then mpmd\n"
+     "--curve-secret /etc/mpmd/server.key --authorized-keys FILE|DIR.\n"},
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 
@@ -118,6 +127,8 @@ typedef enum {
     O_CASE,
     O_STEP,
     O_OUT,
+    O_KEYS,
+    O_NAME,
     O_COUNT
 } opt_id;
 
@@ -142,7 +153,9 @@ static const option options[O_COUNT] = {
     [O_ALL] = {"all", 0, 0, C_RUNS},
     [O_CASE] = {"case", 0, 0, C_SHOW},
     [O_STEP] = {"step", 0, 1, C_SNAPSHOT},
-    [O_OUT] = {"out", 'o', 1, C_SNAPSHOT},
+    [O_OUT] = {"out", 'o', 1, C_SNAPSHOT | C_KEYGEN},
+    [O_KEYS] = {"keys", 0, 1, C_GLOBAL & ~C_KEYGEN},
+    [O_NAME] = {"name", 0, 1, C_KEYGEN},
 };
 
 typedef struct {
@@ -174,6 +187,10 @@ static void usage(FILE *f)
             "  --stream EP     stream socket (env MPMD_STREAM; default: as the server reports,\n"
             "                  or derived from the endpoint: tcp port + 1, ipc path + .stream)\n"
             "  --timeout S     seconds to wait for each reply (default %g)\n"
+            "  --keys DIR      CURVE keys: DIR/server.pub (the server's public key) and\n"
+            "                  DIR/mpmd.key (yours; env MPMD_KEYS; default ~/.config/mpmd\n"
+            "                  if it exists); env MPMD_SERVER_KEY (a key or a file) and\n"
+            "                  MPMD_CLIENT_KEY (your secret key file) override them\n"
             "  -h, --help      this help; `mpmctl COMMAND --help` for one command\n"
             "\nExit status: 0 success, 1 error, 2 bad command line; watch and submit --watch:\n"
             "3 FAILED, 4 CANCELLED, 5 INTERRUPTED.\n",
@@ -183,7 +200,8 @@ static void usage(FILE *f)
 static void command_usage(const command *c)
 {
     printf("usage: mpmctl %s %s\n  %s\n\n%s", c->name, c->args, c->help, c->more);
-    printf("\nGlobal options: --endpoint EP, --stream EP, --timeout S (see mpmctl --help).\n");
+    printf("\nGlobal options: --endpoint EP, --stream EP, --timeout S, --keys DIR (see mpmctl "
+           "--help).\n");
 }
 
 __attribute__((format(printf, 1, 2))) static int bad_usage(const char *fmt, ...)
@@ -342,7 +360,7 @@ static int parse_args(int argc, char **argv, cli *a)
 
     /* positional arguments */
     {
-        int want = (a->cmd->bit & (C_RUNS | C_PING | C_VERSION)) ? 0 : 1;
+        int want = (a->cmd->bit & (C_RUNS | C_PING | C_VERSION | C_KEYGEN)) ? 0 : 1;
         if (a->npos < want)
             return bad_usage("%s needs %s (see mpmctl %s --help)", a->cmd->name,
                              a->cmd->bit == C_SUBMIT ? "a case file" : "a job id", a->cmd->name);
@@ -587,6 +605,10 @@ static void show_text(const json_t *r)
     if (*err) printf("  error       %s\n", ctl_esc(err, etext, sizeof etext));
     ctl_fmt_time(b, sizeof b, cj_num(r, "submittedAt", 0));
     printf("  submitted   %s\n", b);
+    if (*cj_str(r, "owner", "")) {
+        char ob[256];
+        printf("  owner       %s\n", ctl_esc(cj_str(r, "owner", ""), ob, sizeof ob));
+    }
     ctl_fmt_time(b, sizeof b, cj_num(r, "startedAt", 0));
     printf("  started     %s\n", b);
     ctl_fmt_time(b, sizeof b, cj_num(r, "finishedAt", 0));
@@ -928,6 +950,9 @@ int main(int argc, char **argv)
     if (!c.endpoint || !*c.endpoint) c.endpoint = CTL_DEFAULT_ENDPOINT;
     c.stream = a.given[O_STREAM] ? a.val[O_STREAM] : getenv("MPMD_STREAM");
     c.timeout_s = a.timeout;
+    if (a.cmd->bit == C_KEYGEN) return exit_for_rc(ctl_keygen(a.val[O_OUT], a.val[O_NAME]));
+    if ((rc = ctl_keys_load(&c, a.given[O_KEYS] ? a.val[O_KEYS] : NULL)))
+        return exit_for_rc(rc);
     switch (a.cmd->bit) {
     case C_SUBMIT: rc = cmd_submit(&c, &a); break;
     case C_WATCH: rc = cmd_watch(&c, &a); break;

@@ -28,7 +28,8 @@ _Static_assert(SAME(MPP_ERR_INTERNAL, MPMD__ERROR__CODE__INTERNAL) &&
                    SAME(MPP_ERR_QUEUE_FULL, MPMD__ERROR__CODE__QUEUE_FULL) &&
                    SAME(MPP_ERR_TOO_LARGE, MPMD__ERROR__CODE__TOO_LARGE) &&
                    SAME(MPP_ERR_CONFLICT, MPMD__ERROR__CODE__CONFLICT) &&
-                   SAME(MPP_ERR_UNAVAILABLE, MPMD__ERROR__CODE__UNAVAILABLE),
+                   SAME(MPP_ERR_UNAVAILABLE, MPMD__ERROR__CODE__UNAVAILABLE) &&
+                   SAME(MPP_ERR_FORBIDDEN, MPMD__ERROR__CODE__FORBIDDEN),
                "mpp_err_code must match mpmd.Error.Code");
 _Static_assert(SAME(MPM_METHOD_MPM, MPMD__CASE__METHOD__MPM) &&
                    SAME(MPM_METHOD_GIMP, MPMD__CASE__METHOD__GIMP) &&
@@ -106,6 +107,7 @@ mpp_err_code mpp_error_wire_code(int mpm_code)
     case MPM_ETOOBIG: return MPP_ERR_TOO_LARGE;
     case MPM_ECONFLICT: return MPP_ERR_CONFLICT;
     case MPM_EUNAVAIL: return MPP_ERR_UNAVAILABLE;
+    case MPM_EFORBIDDEN: return MPP_ERR_FORBIDDEN;
     default: return MPP_ERR_INTERNAL;
     }
 }

@@ -49,7 +49,8 @@ typedef enum {
     MPP_ERR_QUEUE_FULL = 6,
     MPP_ERR_TOO_LARGE = 7,
     MPP_ERR_CONFLICT = 8,
-    MPP_ERR_UNAVAILABLE = 9
+    MPP_ERR_UNAVAILABLE = 9,
+    MPP_ERR_FORBIDDEN = 10
 } mpp_err_code;
 
 /* "QUEUED", ... as in the schema; NULL for a value that is not a status. */

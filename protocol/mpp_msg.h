@@ -138,6 +138,7 @@ typedef struct {
     mpm_transfer transfer;  /* always sent (RunInfo.transfer; decoded
                                absent: FLIP) */
     const char *warning;    /* RunInfo.warning: NULL (decoded: "") when none */
+    const char *owner;      /* RunInfo.owner: NULL (decoded: "") when not recorded */
     int has_balance;        /* balance_error recorded (RunInfo.balance_error) */
     double balance_error;   /* the balance error at the run's end */
     const void *case_bytes; /* packed Case to include, or NULL; its

@@ -51,6 +51,7 @@ static int fill_run(Mpmd__RunInfo *pi, Mpmd__EnergySample *es, const mpp_run_inf
     pi->has_transfer = 1;
     pi->transfer = (Mpmd__Case__Transfer)ri->transfer;
     pi->warning = (char *)ri->warning;
+    pi->owner = (char *)ri->owner;
     pi->has_balance_error = ri->has_balance != 0;
     pi->balance_error = ri->balance_error;
     if (ri->case_bytes) {
@@ -320,6 +321,7 @@ static void take_run(mpp_run_info *ri, mpm_energy_sample *e, const Mpmd__RunInfo
     ri->update = (mpm_update)pi->update;
     ri->transfer = (mpm_transfer)pi->transfer;
     ri->warning = str(pi->warning);
+    ri->owner = str(pi->owner);
     ri->has_balance = pi->has_balance_error;
     ri->balance_error = pi->balance_error;
 }

@@ -44,8 +44,22 @@ static const setting settings[] = {
     {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20,
      "MB of snapshots a job's stream may hold for slow watchers; more are dropped, "
      "0 = no bound (default 64)"},
+    {"curve-secret", "MPMD_CURVE_SECRET", T_STR, F(curve_secret), 0, 0,
+     "the server's CURVE secret key file (mode 0600; mpmctl keygen): CURVE on both sockets"},
+    {"authorized-keys", NULL, T_STR, F(authorized_keys), 0, 0,
+     "client public keys allowed in (a file of 'KEY [comment]' lines or a directory of "
+     ".pub files; re-read on SIGHUP)"},
+    {"admin-keys", NULL, T_STR, F(admin_keys), 0, 0,
+     "keys that may also cancel anyone's jobs (same format; re-read on SIGHUP)"},
+    {"client-max-jobs", NULL, T_INT, F(client_max_jobs), 0, 1000000,
+     "queued and running jobs per client key (or local user), 0 = no limit (default 0)"},
+    {"client-max-particles", NULL, T_LL, F(client_max_particles), 0, (double)MPM_MAX_PARTICLES,
+     "particles per job of one client, 0 = only --max-particles (default 0)"},
+    {"insecure-allow-remote-without-auth", NULL, T_FLAG, F(insecure_remote), 0, 1,
+     "bind non-loopback addresses WITHOUT CURVE: anyone who reaches them may submit, "
+     "cancel and read (trusted networks only)"},
     {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1,
-     "allow binding on non-loopback addresses"},
+     "obsolete: a non-loopback bind needs --curve-secret (or the insecure flag above)"},
     {"verbose", NULL, T_FLAG, F(verbose), 0, 1, "debug log lines"},
 };
 #define NSET (sizeof settings / sizeof settings[0])
@@ -181,8 +195,9 @@ static void usage(void)
            "read settings from FILE (key = value lines)", "--version", "print the version",
            "-h, --help", "this text");
     printf("Order: defaults < --config file < environment < flags.  Binding anywhere but\n"
-           "loopback, ipc:// or inproc:// is refused without --allow-remote (there is no\n"
-           "authentication yet).\n");
+           "loopback, ipc:// or inproc:// needs --curve-secret and --authorized-keys (or,\n"
+           "on a trusted network, --insecure-allow-remote-without-auth).  SIGHUP re-reads\n"
+           "the key lists.\n");
 }
 
 int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errlen)
@@ -242,12 +257,16 @@ int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errl
     }
     const char *eps[2] = {c->endpoint, c->stream_endpoint};
     for (int i = 0; i < 2; i++)
-        if (!mpp_endpoint_is_local(eps[i]) && !c->allow_remote) {
+        if (!mpp_endpoint_is_local(eps[i]) && !c->curve_secret[0] && !c->insecure_remote) {
             snprintf(err, errlen,
-                     "%s %s: refusing to bind a non-loopback address (there is no "
-                     "authentication yet); use tcp://127.0.0.1:PORT or ipc://, or pass "
-                     "--allow-remote",
-                     i ? "--stream-endpoint" : "--endpoint", eps[i]);
+                     "%s %s: refusing to bind a non-loopback address without authentication; "
+                     "give --curve-secret FILE and --authorized-keys PATH (README: Security), "
+                     "use tcp://127.0.0.1:PORT or ipc://, or, on a trusted network only, "
+                     "--insecure-allow-remote-without-auth%s",
+                     i ? "--stream-endpoint" : "--endpoint", eps[i],
+                     c->allow_remote ? " (--allow-remote no longer binds without "
+                                       "authentication)"
+                                     : "");
             return -1;
         }
     if (!strcmp(c->endpoint, c->stream_endpoint)) {

@@ -24,7 +24,13 @@ typedef struct {
     double max_wall_s;           /* per job, 0 = none */
     long long max_request_bytes; /* largest request accepted */
     int stream_buffer_mb;        /* snapshot bytes queued for watchers, per job (0: no bound) */
-    int allow_remote;            /* allow non-loopback binds */
+    int allow_remote;            /* deprecated: non-loopback binds need CURVE now */
+    int insecure_remote;         /* --insecure-allow-remote-without-auth */
+    char curve_secret[1024];     /* server secret key file ("": no CURVE) */
+    char authorized_keys[1024];  /* client public keys: file or directory */
+    char admin_keys[1024];       /* admin public keys: file or directory */
+    int client_max_jobs;         /* live (queued + running) jobs per client, 0 = no limit */
+    long long client_max_particles; /* particles per job of one client, 0 = no limit */
     int verbose;
 } srv_config;
 

@@ -29,6 +29,7 @@
 #include "srv_daemon.h"
 
 #include "mpp_msg.h"
+#include "srv_auth.h"
 #include "srv_log.h"
 #include "srv_pool.h"
 #include "store.h"
@@ -65,18 +66,28 @@
  * unsubscription, so one entry per topic). */
 #define WATCHED_MAX 4096
 
-static volatile sig_atomic_t stop_signal;
+static volatile sig_atomic_t stop_signal, hup_signal;
 
 static void on_signal(int sig)
 {
     stop_signal = sig;
 }
 
+static void on_hup(int sig)
+{
+    (void)sig;
+    hup_signal = 1;
+}
+
+/* Size of an owner string: a Z85 key or SRV_OWNER_LOCAL, with its NUL. */
+#define OWNER_SIZE 48
+
 typedef struct {
     const srv_config *cfg;
     void *zctx, *router, *xpub, *pull;
     store *st;
     srv_pool *pool;
+    srv_auth *auth;
     int stopping; /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
     struct pending *pending, **pending_tail; /* reads waiting for a commit */
@@ -92,6 +103,7 @@ typedef struct {
  * of the same client, so that a client's replies keep its order. */
 typedef struct pending {
     zmq_msg_t id;    /* the client's identity frame */
+    char owner[OWNER_SIZE]; /* who sent it (the CURVE key, or "local") */
     mpp_request rq;  /* the decoded request (a read: owns nothing big) */
     int begun;       /* its action is done and its ticket taken */
     uint64_t ticket; /* store_ticket() when it began */
@@ -177,6 +189,7 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->update = r->update;
     ri->transfer = r->transfer;
     ri->warning = r->warning;
+    ri->owner = r->owner && r->owner[0] ? r->owner : NULL;
     ri->has_balance = r->has_balance;
     ri->balance_error = r->balance_error;
     if (!isnan(r->energy.total)) {
@@ -287,7 +300,7 @@ static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
 
 /* ---- requests ---- */
 
-static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     if (stop_signal || d->stopping) {
         reply_error(d, id, MPM_EUNAVAIL, "", "mpmd is shutting down");
@@ -302,6 +315,26 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         return;
     }
     size_t nparticles = sc->info.particles;
+    if (d->cfg->client_max_particles > 0 &&
+        nparticles > (unsigned long long)d->cfg->client_max_particles) {
+        reply_error(d, id, MPM_ETOOBIG, "bodies",
+                    "the case has %zu particles, above this server's per-client quota of %lld "
+                    "(--client-max-particles) for %s",
+                    nparticles, d->cfg->client_max_particles, owner);
+        mpp_case_destroy(&sc);
+        return;
+    }
+    if (d->cfg->client_max_jobs > 0) {
+        int live = srv_pool_owner_jobs(d->pool, owner);
+        if (live >= d->cfg->client_max_jobs) {
+            reply_error(d, id, MPM_EFULL, "",
+                        "%s has %d queued or running jobs, this server's per-client quota "
+                        "(--client-max-jobs %d); retry when one has ended",
+                        owner, live, d->cfg->client_max_jobs);
+            mpp_case_destroy(&sc);
+            return;
+        }
+    }
     /* in floating point: endTime / dt can be far beyond any integer type.
      * With automatic dt, the largest dt the CFL condition can give (the
      * materials' wave speed alone, particles at rest) makes the fewest
@@ -360,6 +393,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     r.status = MPP_STATUS_QUEUED;
     r.submitted_at = wall_now();
     r.server_version = MPP_VERSION;
+    r.owner = owner;
     int64_t run = 0;
     rc = store_run_insert(d->st, &r, &run);
     free(pb);
@@ -375,7 +409,8 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
      * from its first step */
     int watched = 0;
     for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == (uint64_t)run;
-    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes, watched);
+    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes, watched,
+                         owner);
     if (rc) {
         store_run_end end = {0};
         end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
@@ -387,7 +422,8 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         mpp_case_destroy(&sc);
         return;
     }
-    srv_log((uint64_t)run, "queued '%s': %ldD %s %s %s, %zu particles", namebuf, (long)r.dim,
+    srv_log((uint64_t)run, "queued '%s' of %s: %ldD %s %s %s, %zu particles", namebuf, owner,
+            (long)r.dim,
             r.method == MPM_METHOD_GIMP       ? "GMPM"
             : r.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
             : r.method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
@@ -408,8 +444,8 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
 static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
 static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
-static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job);
-static void do_other(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
+static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t job);
+static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
 
 static int is_read(mpp_req_kind k)
 {
@@ -436,14 +472,15 @@ static void answer_read(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
  * listing, had enqueued when it began, so that it sees everything the
  * workers published before it).  *begun says the request's action (a
  * cancel's) is done and its ticket taken. */
-static int run_request(daemon_t *d, zmq_msg_t *id, mpp_request *rq, int *begun, uint64_t *ticket)
+static int run_request(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq, int *begun,
+                       uint64_t *ticket)
 {
     if (!is_read(rq->kind)) {
-        do_other(d, id, rq);
+        do_other(d, id, owner, rq);
         return 1;
     }
     if (!*begun) {
-        if (rq->kind == MPP_REQ_CANCEL && cancel_job(d, id, rq->id)) return 1;
+        if (rq->kind == MPP_REQ_CANCEL && cancel_job(d, id, owner, rq->id)) return 1;
         *ticket = store_ticket(d->st, rq->kind == MPP_REQ_LIST_RUNS ? 0 : (int64_t)rq->id);
         *begun = 1;
     }
@@ -468,10 +505,12 @@ static int peer_waits(daemon_t *d, zmq_msg_t *id, const pending *before)
 
 /* Queues a request (taken over: *rq is emptied); on failure answers
  * UNAVAILABLE. */
-static void enqueue(daemon_t *d, zmq_msg_t *id, mpp_request *rq, int begun, uint64_t ticket)
+static void enqueue(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq, int begun,
+                    uint64_t ticket)
 {
     pending *p = d->npending < PENDING_MAX ? calloc(1, sizeof *p) : NULL;
     if (p && zmq_msg_init(&p->id) == 0 && zmq_msg_copy(&p->id, id) == 0) {
+        snprintf(p->owner, sizeof p->owner, "%s", owner);
         p->rq = *rq;
         memset(rq, 0, sizeof *rq);
         p->begun = begun;
@@ -493,12 +532,12 @@ static void enqueue(daemon_t *d, zmq_msg_t *id, mpp_request *rq, int begun, uint
 /* Runs a decoded request, in arrival order per client: behind a waiting
  * request of the same client it queues; a read whose writes are not yet
  * committed queues; everything else is answered now. */
-static void dispatch(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+static void dispatch(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     int begun = 0;
     uint64_t ticket = 0;
-    if (peer_waits(d, id, NULL) || !run_request(d, id, rq, &begun, &ticket))
-        enqueue(d, id, rq, begun, ticket);
+    if (peer_waits(d, id, NULL) || !run_request(d, id, owner, rq, &begun, &ticket))
+        enqueue(d, id, owner, rq, begun, ticket);
 }
 
 /* Carries on the waiting requests whose writes are committed, in arrival
@@ -509,7 +548,8 @@ static void serve_pending(daemon_t *d)
     d->pending_tail = &d->pending;
     while (*pp) {
         pending *p = *pp;
-        if (!peer_waits(d, &p->id, p) && run_request(d, &p->id, &p->rq, &p->begun, &p->ticket)) {
+        if (!peer_waits(d, &p->id, p) &&
+            run_request(d, &p->id, p->owner, &p->rq, &p->begun, &p->ticket)) {
             *pp = p->next;
             zmq_msg_close(&p->id);
             mpp_request_clear(&p->rq);
@@ -532,10 +572,31 @@ static void drain_pending(daemon_t *d)
 
 /* A cancel's action: 0 when the job was live (its reply, the run, follows
  * once the store has it), 1 when it was answered with an error. */
-static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job)
+static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t job)
 {
     uint8_t *msg = NULL;
     size_t len = 0;
+    /* only its owner or an admin key may cancel a job: the owner of a live
+     * job is the pool's, of any other the store's */
+    char who[OWNER_SIZE] = "";
+    srv_job_info ji;
+    if (srv_pool_info(d->pool, job, &ji) == 0) {
+        snprintf(who, sizeof who, "%s", ji.owner);
+    } else {
+        store_run r;
+        if (store_run_get(d->st, (int64_t)job, &r) == 0) {
+            snprintf(who, sizeof who, "%s", r.owner ? r.owner : "");
+            store_run_clear(&r);
+        }
+    }
+    if (who[0] && strcmp(who, owner) && !srv_auth_is_admin(d->auth, owner)) {
+        srv_warn(job, "cancel by %s refused: the job is %s's", owner, who);
+        reply_error(d, id, MPM_EFORBIDDEN, "job_id",
+                    "job %llu was submitted by %s: only its owner or an admin key "
+                    "(--admin-keys) may cancel it",
+                    (unsigned long long)job, who);
+        return 1;
+    }
     int rc = srv_pool_cancel(d->pool, job, &msg, &len);
     publish(d, job, msg, len);
     if (rc == SRV_CANCEL_NONE) {
@@ -555,7 +616,7 @@ static int cancel_job(daemon_t *d, zmq_msg_t *id, uint64_t job)
                     store_error()->message);
         return 1;
     }
-    if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested");
+    if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested by %s", owner);
     return 0;
 }
 
@@ -724,12 +785,12 @@ static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 }
 
 /* Requests that read nothing a worker writes: Submit, Ping, Version. */
-static void do_other(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     uint8_t *buf = NULL;
     size_t len = 0;
     switch (rq->kind) {
-    case MPP_REQ_SUBMIT: do_submit(d, id, rq); break;
+    case MPP_REQ_SUBMIT: do_submit(d, id, owner, rq); break;
     case MPP_REQ_PING:
         mpp_reply_pong(MPP_VERSION, d->cfg->stream_endpoint, &buf, &len);
         send_reply(d, id, buf, len);
@@ -751,7 +812,8 @@ static void do_other(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     }
 }
 
-static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t size)
+static void handle_request(daemon_t *d, zmq_msg_t *id, const char *owner, const void *data,
+                           size_t size)
 {
     mpp_request rq;
     d->requests++;
@@ -774,7 +836,7 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const void *data, size_t 
         mpp_request_clear(&rq);
         return;
     }
-    dispatch(d, id, &rq);
+    dispatch(d, id, owner, &rq);
     mpp_request_clear(&rq);
 }
 
@@ -801,7 +863,12 @@ static void on_router(daemon_t *d)
         }
     }
     if (nparts == 3 && !extra && zmq_msg_size(&part[1]) == 0) {
-        handle_request(d, &part[0], zmq_msg_data(&part[2]), zmq_msg_size(&part[2]));
+        /* the ZAP handler's user id: the client's CURVE key (Z85); none
+         * without CURVE (loopback, ipc://) */
+        const char *uid = zmq_msg_gets(&part[2], "User-Id");
+        char owner[OWNER_SIZE];
+        snprintf(owner, sizeof owner, "%s", uid && *uid ? uid : SRV_OWNER_LOCAL);
+        handle_request(d, &part[0], owner, zmq_msg_data(&part[2]), zmq_msg_size(&part[2]));
     } else if (nparts >= 1) {
         d->bad_requests++;
         size_t total = (size_t)nparts + extra;
@@ -946,21 +1013,23 @@ static int bind_endpoint(const char *ep, char *out, size_t n, int *ipv6)
     return w > 0 && (size_t)w < n ? 0 : -1;
 }
 
-static int open_socket(void *zctx, int type, const char *ep, const srv_config *cfg, void **out,
-                       char *err, size_t errlen)
+static int open_socket(void *zctx, int type, const char *ep, const srv_config *cfg,
+                       srv_auth *auth, void **out, char *err, size_t errlen)
 {
     *out = NULL;
-    if (!mpp_endpoint_is_local(ep)) {
-        if (!cfg->allow_remote) {
+    if (!mpp_endpoint_is_local(ep) && !srv_auth_curve(auth)) {
+        if (!cfg->insecure_remote) {
             snprintf(err, errlen,
-                     "refusing to bind %s: not loopback, ipc:// or inproc:// "
-                     "(mpmd has no authentication yet; pass --allow-remote to bind anyway)",
+                     "refusing to bind %s: not loopback, ipc:// or inproc://, and no CURVE "
+                     "(give --curve-secret and --authorized-keys, or "
+                     "--insecure-allow-remote-without-auth on a trusted network)",
                      ep);
             return -1;
         }
         srv_warn(0,
-                 "!!! binding %s on a non-loopback address: ANYONE WHO CAN REACH IT CAN "
-                 "SUBMIT JOBS AND READ RUNS (no authentication yet) !!!",
+                 "!!! binding %s on a non-loopback address WITHOUT AUTHENTICATION "
+                 "(--insecure-allow-remote-without-auth): ANYONE WHO CAN REACH IT CAN "
+                 "SUBMIT, CANCEL AND READ JOBS !!!",
                  ep);
     }
     char bep[300];
@@ -988,6 +1057,10 @@ static int open_socket(void *zctx, int type, const char *ep, const srv_config *c
         (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_SNDHWM, &hwm, sizeof hwm)) ||
         (type == ZMQ_PULL && zmq_setsockopt(s, ZMQ_RCVHWM, &hwm, sizeof hwm))) {
         snprintf(err, errlen, "setting options on %s: %s", ep, zmq_strerror(errno));
+        zmq_close(s);
+        return -1;
+    }
+    if ((type == ZMQ_ROUTER || type == ZMQ_XPUB) && srv_auth_secure(auth, s, err, errlen)) {
         zmq_close(s);
         return -1;
     }
@@ -1026,15 +1099,23 @@ int srv_daemon_run(const srv_config *cfg)
     sigemptyset(&sa.sa_mask);
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
+    sa.sa_handler = on_hup;
+    sigaction(SIGHUP, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
     /* over a file-size limit (RLIMIT_FSIZE) a write fails with EFBIG, as on
      * a full disk, instead of killing the daemon */
     signal(SIGXFSZ, SIG_IGN);
 
+    if (srv_auth_new(cfg, &d.auth, err, sizeof err)) {
+        srv_error(0, "%s", err);
+        srv_auth_destroy(&d.auth);
+        return 1;
+    }
     store_options so = {0};
     so.log = srv_log_store;
     if (store_open(cfg->db, &so, &d.st)) {
         srv_error(0, "%s", store_error()->message);
+        srv_auth_destroy(&d.auth);
         return 1;
     }
     store_stats ss;
@@ -1050,10 +1131,12 @@ int srv_daemon_run(const srv_config *cfg)
         goto out;
     }
     srv_config inproc = *cfg;
-    inproc.allow_remote = 0;
-    if (open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, &d.router, err, sizeof err) ||
-        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg, &d.xpub, err, sizeof err) ||
-        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, &inproc, &d.pull, err, sizeof err)) {
+    inproc.insecure_remote = 0;
+    if (srv_auth_start(d.auth, d.zctx, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, d.auth, &d.router, err, sizeof err) ||
+        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg, d.auth, &d.xpub, err,
+                    sizeof err) ||
+        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, &inproc, NULL, &d.pull, err, sizeof err)) {
         srv_error(0, "%s", err);
         goto out;
     }
@@ -1064,15 +1147,19 @@ int srv_daemon_run(const srv_config *cfg)
     }
     srv_log(0,
             "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
-            "queue %d",
+            "queue %d, %s",
             MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
-            cfg->queue_max);
+            cfg->queue_max, srv_auth_curve(d.auth) ? "CURVE" : "no authentication");
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},
                                   {d.xpub, 0, ZMQ_POLLIN, 0},
                                   {d.pull, 0, ZMQ_POLLIN, 0},
                                   {NULL, store_notify_fd(d.st), ZMQ_POLLIN, 0}};
         int n = zmq_poll(items, 4, 250);
+        if (hup_signal) {
+            hup_signal = 0;
+            srv_auth_reload(d.auth);
+        }
         if (n < 0) {
             if (errno == EINTR) continue;
             srv_warn(0, "zmq_poll: %s", zmq_strerror(errno));
@@ -1098,6 +1185,7 @@ out:
         while (zmq_ctx_term(d.zctx) && errno == EINTR) {
         }
     }
+    srv_auth_destroy(&d.auth); /* its thread ended with the context */
     store_close(&d.st);
     srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,
             (unsigned long long)d.bad_requests);

@@ -46,6 +46,7 @@ typedef struct srv_job {
     int64_t steps, steps_total;
     double t, wall_s, submitted_at, started_at;
     size_t particles, nodes;
+    char owner[48];       /* who submitted it */
     struct srv_job *next; /* FIFO link */
     /* worker-private */
     uint64_t msg_seq, energy_seq;
@@ -772,11 +773,12 @@ int srv_pool_has_room(srv_pool *p)
 }
 
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
-                    size_t nodes, int watched)
+                    size_t nodes, int watched, const char *owner)
 {
     srv_job *j = calloc(1, sizeof *j);
     if (!j) return MPM_ENOMEM;
     j->id = id;
+    snprintf(j->owner, sizeof j->owner, "%s", owner ? owner : "");
     atomic_init(&j->cancel, 0);
     atomic_init(&j->watched, watched != 0);
     j->status = MPP_STATUS_QUEUED;
@@ -820,6 +822,17 @@ static srv_job *find_locked(srv_pool *p, uint64_t id, srv_job **prev)
     return NULL;
 }
 
+int srv_pool_owner_jobs(srv_pool *p, const char *owner)
+{
+    int n = 0;
+    pthread_mutex_lock(&p->mu);
+    for (srv_job *j = p->head; j; j = j->next) n += !strcmp(j->owner, owner);
+    for (int i = 0; i < p->nworkers; i++)
+        n += p->running[i] && !strcmp(p->running[i]->owner, owner);
+    pthread_mutex_unlock(&p->mu);
+    return n;
+}
+
 int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out)
 {
     pthread_mutex_lock(&p->mu);
@@ -836,6 +849,7 @@ int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out)
         out->nodes = j->nodes;
         out->dim = j->sc ? j->sc->c.grid.dim : 0;
         out->name = j->sc ? j->sc->name : "";
+        memcpy(out->owner, j->owner, sizeof out->owner);
     }
     pthread_mutex_unlock(&p->mu);
     return j ? 0 : -1;

@@ -37,6 +37,7 @@ typedef struct {
     size_t particles, nodes;
     int dim;
     const char *name; /* valid until the next pool call */
+    char owner[48];   /* who submitted it (srv_pool_submit) */
 } srv_job_info;
 
 typedef struct srv_pool srv_pool;
@@ -47,10 +48,14 @@ srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char 
                        char *err, size_t errlen);
 
 /* Queues job `id` (its run record already inserted); watched: somebody
- * subscribed to its stream already.  Takes ownership of *sc (set to NULL)
- * on success.  Returns 0, MPM_EFULL or MPM_EUNAVAIL. */
+ * subscribed to its stream already; owner: who submitted it (a CURVE key
+ * in Z85, or "local"; at most 47 bytes kept).  Takes ownership of *sc (set
+ * to NULL) on success.  Returns 0, MPM_EFULL or MPM_EUNAVAIL. */
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
-                    size_t nodes, int watched);
+                    size_t nodes, int watched, const char *owner);
+
+/* Number of queued and running jobs whose owner is `owner`. */
+int srv_pool_owner_jobs(srv_pool *p, const char *owner);
 
 /* 1 if the queue has room for another job. */
 int srv_pool_has_room(srv_pool *p);

@@ -150,6 +150,7 @@ const char *mpm_strerror(int code)
     case MPM_ESCHEMA: return "not an mpmd database, or a newer schema";
     case MPM_EREQUEST: return "bad request";
     case MPM_EINTERNAL: return "internal error";
+    case MPM_EFORBIDDEN: return "forbidden";
     default: return "unknown error";
     }
 }

@@ -43,9 +43,10 @@ enum {
     MPM_ELOCKED = -16,   /* the database is in use by another mpmd */
     MPM_ESCHEMA = -17,   /* not an mpmd database, or a newer schema */
     MPM_EREQUEST = -18,  /* a request that lacks a body or a required id */
-    MPM_EINTERNAL = -19  /* a bug or an impossible state */
+    MPM_EINTERNAL = -19, /* a bug or an impossible state */
+    MPM_EFORBIDDEN = -20 /* the requester may not do this (not the owner) */
 };
-#define MPM_E_LAST MPM_EINTERNAL
+#define MPM_E_LAST MPM_EFORBIDDEN
 
 #define MPM_PATH_MAX 8        /* path elements */
 #define MPM_PATH_NAME_MAX 32  /* bytes of one element's name, with NUL */

@@ -46,7 +46,7 @@
 #include <stdint.h>
 
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 6
+#define STORE_SCHEMA_VERSION 7
 
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))
@@ -88,6 +88,9 @@ typedef struct {
     int has_balance;
     double balance_error;
     const char *warning;
+    /* who submitted it (schema 7): a client's CURVE public key in Z85, or
+     * "local"; NULL on insert: ""; runs stored before read "" */
+    const char *owner;
 } store_run;
 
 /* How a run ended (store_run_finish). */

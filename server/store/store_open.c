@@ -147,6 +147,10 @@ static const char *const migrations[] = {
     "ALTER TABLE energy ADD COLUMN balance_error REAL DEFAULT 0;"
     "ALTER TABLE runs ADD COLUMN balance_error REAL;"
     "ALTER TABLE runs ADD COLUMN warning TEXT;",
+    /* 6 -> 7: the run's owner (issue 12, RunInfo.owner): the submitter's
+     * CURVE public key (Z85) or "local".  Runs stored before read '' (not
+     * recorded): only an admin key may cancel them, and none is live. */
+    "ALTER TABLE runs ADD COLUMN owner TEXT NOT NULL DEFAULT '';",
 };
 
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,

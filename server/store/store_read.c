@@ -142,8 +142,8 @@ static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out, s
     "id, name, length(case_pb), method, \"update\", dim, particles, nodes,"   \
     " status, submitted_at, started_at, finished_at, steps, wall_s,"          \
     " psteps_per_s, kinetic, strain, potential, external_work, total, error," \
-    " server_version, transfer, balance_error, warning"
-#define RUN_COL_CASE 25
+    " server_version, transfer, balance_error, warning, owner"
+#define RUN_COL_CASE 26
 
 void store_run_clear(store_run *r)
 {
@@ -153,6 +153,7 @@ void store_run_clear(store_run *r)
     free((void *)r->error);
     free((void *)r->server_version);
     free((void *)r->warning);
+    free((void *)r->owner);
     memset(r, 0, sizeof *r);
 }
 
@@ -195,7 +196,8 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     int rc;
     if ((rc = col_strdup(db, st, 1, &r->name)) || (rc = col_strdup(db, st, 20, &r->error)) ||
         (rc = col_strdup(db, st, 21, &r->server_version)) ||
-        (rc = col_strdup(db, st, 24, &r->warning))) {
+        (rc = col_strdup(db, st, 24, &r->warning)) ||
+        (rc = col_strdup(db, st, 25, &r->owner))) {
         store_run_clear(r);
         return rc;
     }

@@ -88,9 +88,9 @@ static const char *const writer_sql[WS_COUNT] = {
     [WS_ROLLBACK] = "ROLLBACK",
     [WS_INS_RUN] = "INSERT INTO runs (id, name, case_pb, method, \"update\","
                    " dim, particles, nodes, status, submitted_at, started_at, finished_at,"
-                   " steps, wall_s, psteps_per_s, error, server_version, transfer)"
+                   " steps, wall_s, psteps_per_s, error, server_version, transfer, owner)"
                    " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14,"
-                   " ?15, ?16, ?17, ?18)",
+                   " ?15, ?16, ?17, ?18, ?19)",
     [WS_UPD_STATUS] = "UPDATE runs SET status = ?2,"
                       " started_at = CASE WHEN ?2 = 'running' THEN ?3 ELSE started_at END,"
                       " finished_at = CASE WHEN ?2 IN ('finished','failed','cancelled',"
@@ -305,6 +305,7 @@ static int apply_op(store *s, op *o)
         BIND(bind_text_or_null(st, 16, r->error));
         BIND(bind_static(st, 17, r->server_version));
         BIND(bind_static(st, 18, sti_transfer_names[r->transfer]));
+        BIND(bind_static(st, 19, r->owner));
         break;
     }
     case OP_RUN_STATUS:
@@ -690,14 +691,18 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out)
 
     const char *name = run->name ? run->name : "";
     const char *ver = run->server_version ? run->server_version : "";
+    const char *owner = run->owner ? run->owner : "";
     char *cur;
     op *o = op_new(OP_RUN_INSERT, 0,
-                   str_room(name) + str_room(ver) + str_room(run->error) + run->case_len, &cur);
+                   str_room(name) + str_room(ver) + str_room(owner) + str_room(run->error) +
+                       run->case_len,
+                   &cur);
     if (!o) return MPM_ENOMEM;
     store_run *r = &o->u.run;
     *r = *run;
     r->name = tail_str(&cur, name);
     r->server_version = tail_str(&cur, ver);
+    r->owner = tail_str(&cur, owner);
     r->error = tail_str(&cur, run->error);
     r->case_pb = run->case_len ? tail_put(&cur, run->case_pb, run->case_len) : NULL;
     if (r->submitted_at == 0) r->submitted_at = store_time_now();

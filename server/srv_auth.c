@@ -1,0 +1,424 @@
+/*
+ * srv_auth.c - CURVE keys, the client allow-list and the ZAP handler (see
+ * srv_auth.h).  The key lists live behind a mutex: the ZAP thread reads
+ * them for every handshake, the main thread replaces them on SIGHUP and
+ * reads the admin list for a Cancel.  A list is a file of lines
+ * "KEY [comment]" ('#' lines and blank lines skipped) or a directory whose
+ * *.pub files are such files.
+ */
+#include "srv_auth.h"
+
+#include "srv_log.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <zmq.h>
+
+#define ZAP_EP "inproc://zeromq.zap.01"
+#define ZAP_DOMAIN "mpmd"
+#define KEYS_MAX 100000 /* keys per list */
+
+typedef struct {
+    char (*z)[SRV_KEY_Z85_SIZE]; /* Z85 texts, sorted */
+    size_t n;
+} keylist;
+
+struct srv_auth {
+    int curve;
+    char secret[SRV_KEY_Z85_SIZE], public_[SRV_KEY_Z85_SIZE];
+    char authorized_path[1024], admin_path[1024];
+    pthread_mutex_t mu;
+    keylist allowed, admins; /* under mu */
+    void *zap;               /* the handler's REP (its thread's after start) */
+    pthread_t thread;
+    int started;
+};
+
+static int is_z85_key(const char *s, size_t n)
+{
+    uint8_t bin[32];
+    char tmp[SRV_KEY_Z85_SIZE];
+    if (n != SRV_KEY_Z85_LEN) return 0;
+    memcpy(tmp, s, n);
+    tmp[n] = 0;
+    return zmq_z85_decode(bin, tmp) != NULL;
+}
+
+/* The key of one line (first token) into z: 1, 0 for no key (blank or
+ * comment), -1 for a line that is not a key. */
+static int line_key(const char *line, char *z)
+{
+    while (*line == ' ' || *line == '\t') line++;
+    if (!*line || *line == '#' || *line == '\n' || *line == '\r') return 0;
+    size_t n = strcspn(line, " \t\r\n");
+    if (!is_z85_key(line, n)) return -1;
+    memcpy(z, line, n);
+    z[n] = 0;
+    return 1;
+}
+
+int srv_key_file_read(const char *path, int secret, char *z85, char *err, size_t errlen)
+{
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        snprintf(err, errlen, "cannot open the key file %s: %s", path, strerror(errno));
+        return -1;
+    }
+    struct stat sb;
+    if (secret && fstat(fileno(f), &sb) == 0 && (sb.st_mode & 077)) {
+        snprintf(err, errlen,
+                 "the secret key file %s has mode %04o: it must be 0600 or stricter "
+                 "(chmod 600 %s)",
+                 path, (unsigned)(sb.st_mode & 07777), path);
+        fclose(f);
+        return -1;
+    }
+    char line[512];
+    int ln = 0;
+    while (fgets(line, sizeof line, f)) {
+        ln++;
+        int k = line_key(line, z85);
+        if (k == 0) continue;
+        fclose(f);
+        if (k < 0) {
+            snprintf(err, errlen, "%s:%d: not a 40-character Z85 key", path, ln);
+            return -1;
+        }
+        return 0;
+    }
+    fclose(f);
+    snprintf(err, errlen, "%s holds no key", path);
+    return -1;
+}
+
+static int cmp_key(const void *a, const void *b)
+{
+    return memcmp(a, b, SRV_KEY_Z85_SIZE);
+}
+
+static int list_add(keylist *l, const char *z, size_t *cap)
+{
+    if (l->n == *cap) {
+        size_t nc = *cap ? 2 * *cap : 16;
+        void *p = nc > KEYS_MAX ? NULL : realloc(l->z, nc * sizeof *l->z);
+        if (!p) return -1;
+        l->z = p;
+        *cap = nc;
+    }
+    memset(l->z[l->n], 0, SRV_KEY_Z85_SIZE);
+    memcpy(l->z[l->n++], z, SRV_KEY_Z85_LEN);
+    return 0;
+}
+
+/* Adds the keys of one list file to l. */
+static int load_file(const char *path, keylist *l, size_t *cap, char *err, size_t errlen)
+{
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        snprintf(err, errlen, "cannot open %s: %s", path, strerror(errno));
+        return -1;
+    }
+    char line[4096], z[SRV_KEY_Z85_SIZE];
+    int ln = 0, rc = 0;
+    while (!rc && fgets(line, sizeof line, f)) {
+        ln++;
+        int k = line_key(line, z);
+        if (k < 0) {
+            snprintf(err, errlen, "%s:%d: not a 40-character Z85 key", path, ln);
+            rc = -1;
+        } else if (k > 0 && list_add(l, z, cap)) {
+            snprintf(err, errlen, "%s: more than %d keys", path, KEYS_MAX);
+            rc = -1;
+        }
+    }
+    fclose(f);
+    return rc;
+}
+
+/* Loads a list from a file or a directory of *.pub files. */
+static int load_list(const char *path, keylist *out, char *err, size_t errlen)
+{
+    keylist l = {0};
+    size_t cap = 0;
+    int rc = 0;
+    memset(out, 0, sizeof *out);
+    if (!*path) return 0;
+    struct stat sb;
+    if (stat(path, &sb)) {
+        snprintf(err, errlen, "cannot read %s: %s", path, strerror(errno));
+        return -1;
+    }
+    if (S_ISDIR(sb.st_mode)) {
+        DIR *d = opendir(path);
+        if (!d) {
+            snprintf(err, errlen, "cannot read the directory %s: %s", path, strerror(errno));
+            return -1;
+        }
+        struct dirent *e;
+        while (!rc && (e = readdir(d))) {
+            size_t n = strlen(e->d_name);
+            if (n < 5 || strcmp(e->d_name + n - 4, ".pub") || e->d_name[0] == '.') continue;
+            char fp[2048];
+            snprintf(fp, sizeof fp, "%s/%s", path, e->d_name);
+            rc = load_file(fp, &l, &cap, err, errlen);
+        }
+        closedir(d);
+    } else {
+        rc = load_file(path, &l, &cap, err, errlen);
+    }
+    if (rc) {
+        free(l.z);
+        return -1;
+    }
+    if (l.n) qsort(l.z, l.n, sizeof *l.z, cmp_key);
+    *out = l;
+    return 0;
+}
+
+static int list_has(const keylist *l, const char *z)
+{
+    char k[SRV_KEY_Z85_SIZE] = {0};
+    if (strlen(z) != SRV_KEY_Z85_LEN) return 0;
+    memcpy(k, z, SRV_KEY_Z85_LEN);
+    return l->n && bsearch(k, l->z, l->n, sizeof *l->z, cmp_key) != NULL;
+}
+
+/* Logs the keys of b not in a with the verb. */
+static size_t log_diff(const keylist *a, const keylist *b, const char *what, const char *verb)
+{
+    size_t n = 0;
+    for (size_t i = 0; i < b->n; i++)
+        if (!list_has(a, b->z[i])) {
+            srv_log(0, "%s: key %s %s", what, b->z[i], verb);
+            n++;
+        }
+    return n;
+}
+
+int srv_auth_new(const srv_config *cfg, srv_auth **out, char *err, size_t errlen)
+{
+    srv_auth *a = calloc(1, sizeof *a);
+    *out = NULL;
+    if (!a) {
+        snprintf(err, errlen, "out of memory");
+        return -1;
+    }
+    pthread_mutex_init(&a->mu, NULL);
+    *out = a;
+    if (!cfg->curve_secret[0]) {
+        if (cfg->authorized_keys[0] || cfg->admin_keys[0]) {
+            snprintf(err, errlen,
+                     "--authorized-keys and --admin-keys need --curve-secret (the server's "
+                     "CURVE secret key: mpmctl keygen makes one)");
+            return -1;
+        }
+        return 0;
+    }
+    if (!zmq_has("curve")) {
+        snprintf(err, errlen, "--curve-secret: this libzmq has no CURVE support (libsodium)");
+        return -1;
+    }
+    char e[1200];
+    if (srv_key_file_read(cfg->curve_secret, 1, a->secret, e, sizeof e)) {
+        snprintf(err, errlen, "--curve-secret: %s", e);
+        return -1;
+    }
+    if (zmq_curve_public(a->public_, a->secret)) {
+        snprintf(err, errlen, "--curve-secret %s: cannot derive the public key: %s",
+                 cfg->curve_secret, zmq_strerror(errno));
+        return -1;
+    }
+    if (!cfg->authorized_keys[0] && !cfg->admin_keys[0]) {
+        snprintf(err, errlen,
+                 "--curve-secret needs --authorized-keys (or --admin-keys): without a list "
+                 "any client that knows the server's public key would be accepted");
+        return -1;
+    }
+    snprintf(a->authorized_path, sizeof a->authorized_path, "%s", cfg->authorized_keys);
+    snprintf(a->admin_path, sizeof a->admin_path, "%s", cfg->admin_keys);
+    if (load_list(a->authorized_path, &a->allowed, e, sizeof e)) {
+        snprintf(err, errlen, "--authorized-keys: %s", e);
+        return -1;
+    }
+    if (load_list(a->admin_path, &a->admins, e, sizeof e)) {
+        snprintf(err, errlen, "--admin-keys: %s", e);
+        return -1;
+    }
+    a->curve = 1;
+    srv_log(0, "CURVE on: server public key %s; %zu authorized key(s), %zu admin key(s)",
+            a->public_, a->allowed.n, a->admins.n);
+    return 0;
+}
+
+int srv_auth_curve(const srv_auth *a)
+{
+    return a && a->curve;
+}
+
+const char *srv_auth_server_public(const srv_auth *a)
+{
+    return a && a->curve ? a->public_ : "";
+}
+
+void srv_auth_reload(srv_auth *a)
+{
+    if (!a || !a->curve) return;
+    keylist al, ad;
+    char e[1200];
+    if (load_list(a->authorized_path, &al, e, sizeof e)) {
+        srv_error(0, "SIGHUP: --authorized-keys: %s; the previous keys stay in force", e);
+        return;
+    }
+    if (load_list(a->admin_path, &ad, e, sizeof e)) {
+        srv_error(0, "SIGHUP: --admin-keys: %s; the previous keys stay in force", e);
+        free(al.z);
+        return;
+    }
+    pthread_mutex_lock(&a->mu);
+    size_t add = log_diff(&a->allowed, &al, "--authorized-keys", "added");
+    size_t del = log_diff(&al, &a->allowed, "--authorized-keys", "removed");
+    add += log_diff(&a->admins, &ad, "--admin-keys", "added");
+    del += log_diff(&ad, &a->admins, "--admin-keys", "removed");
+    free(a->allowed.z);
+    free(a->admins.z);
+    a->allowed = al;
+    a->admins = ad;
+    pthread_mutex_unlock(&a->mu);
+    srv_log(0, "SIGHUP: keys re-read: %zu added, %zu removed; %zu authorized, %zu admin", add,
+            del, al.n, ad.n);
+}
+
+int srv_auth_is_admin(srv_auth *a, const char *owner)
+{
+    if (!a || !a->curve || !owner) return 0;
+    pthread_mutex_lock(&a->mu);
+    int r = list_has(&a->admins, owner);
+    pthread_mutex_unlock(&a->mu);
+    return r;
+}
+
+/* ---- the ZAP handler ---- */
+
+static int send_str(void *s, const char *str, int more)
+{
+    return zmq_send(s, str, strlen(str), more ? ZMQ_SNDMORE : 0) < 0 ? -1 : 0;
+}
+
+/* Answers one ZAP request (RFC 27): frames version, request id, domain,
+ * address, identity, mechanism, credentials. */
+static void zap_answer(srv_auth *a, zmq_msg_t *f, int n)
+{
+    char z[SRV_KEY_Z85_SIZE] = "";
+    const char *status = "400", *text = "unknown key";
+    int ok = 0;
+    if (n >= 7 && zmq_msg_size(&f[5]) == 5 && !memcmp(zmq_msg_data(&f[5]), "CURVE", 5) &&
+        zmq_msg_size(&f[6]) == 32 && zmq_z85_encode(z, zmq_msg_data(&f[6]), 32)) {
+        pthread_mutex_lock(&a->mu);
+        ok = list_has(&a->allowed, z) || list_has(&a->admins, z);
+        pthread_mutex_unlock(&a->mu);
+        if (ok) status = "200", text = "OK";
+    } else {
+        text = "CURVE only";
+    }
+    char addr[64] = "?";
+    if (n >= 4) {
+        size_t k = zmq_msg_size(&f[3]) < sizeof addr - 1 ? zmq_msg_size(&f[3]) : sizeof addr - 1;
+        memcpy(addr, zmq_msg_data(&f[3]), k);
+        addr[k] = 0;
+    }
+    if (ok)
+        srv_debug(0, "ZAP: key %s from %s accepted", z, addr);
+    else
+        srv_warn(0, "ZAP: refused %s from %s: %s", z[0] ? z : "a client", addr,
+                 z[0] ? "key not in --authorized-keys or --admin-keys" : text);
+    if (n < 2) return;
+    if (send_str(a->zap, "1.0", 1) ||
+        zmq_send(a->zap, zmq_msg_data(&f[1]), zmq_msg_size(&f[1]), ZMQ_SNDMORE) < 0 ||
+        send_str(a->zap, status, 1) || send_str(a->zap, text, 1) ||
+        send_str(a->zap, ok ? z : "", 1) || send_str(a->zap, "", 0))
+        srv_warn(0, "ZAP reply: %s", zmq_strerror(errno));
+}
+
+static void *zap_thread(void *arg)
+{
+    srv_auth *a = arg;
+    for (;;) {
+        zmq_msg_t f[8];
+        int n = 0, more = 1, term = 0;
+        while (more) {
+            zmq_msg_t m;
+            zmq_msg_init(&m);
+            if (zmq_msg_recv(&m, a->zap, 0) < 0) {
+                zmq_msg_close(&m);
+                if (errno == EINTR) continue;
+                term = 1;
+                break;
+            }
+            more = zmq_msg_more(&m);
+            if (n < 8)
+                f[n++] = m;
+            else
+                zmq_msg_close(&m);
+        }
+        if (!term) zap_answer(a, f, n);
+        for (int i = 0; i < n; i++) zmq_msg_close(&f[i]);
+        if (term) break;
+    }
+    int zero = 0;
+    zmq_setsockopt(a->zap, ZMQ_LINGER, &zero, sizeof zero);
+    zmq_close(a->zap);
+    return NULL;
+}
+
+int srv_auth_start(srv_auth *a, void *zctx, char *err, size_t errlen)
+{
+    if (!a->curve) return 0;
+    a->zap = zmq_socket(zctx, ZMQ_REP);
+    if (!a->zap || zmq_bind(a->zap, ZAP_EP)) {
+        snprintf(err, errlen, "ZAP handler: %s", zmq_strerror(errno));
+        if (a->zap) zmq_close(a->zap);
+        a->zap = NULL;
+        return -1;
+    }
+    if (pthread_create(&a->thread, NULL, zap_thread, a)) {
+        snprintf(err, errlen, "ZAP handler: cannot start its thread");
+        zmq_close(a->zap);
+        a->zap = NULL;
+        return -1;
+    }
+    a->started = 1;
+    return 0;
+}
+
+int srv_auth_secure(srv_auth *a, void *sock, char *err, size_t errlen)
+{
+    if (!a || !a->curve) return 0;
+    int one = 1;
+    uint8_t key[32];
+    if (!zmq_z85_decode(key, a->secret) ||
+        zmq_setsockopt(sock, ZMQ_ZAP_DOMAIN, ZAP_DOMAIN, strlen(ZAP_DOMAIN)) ||
+        zmq_setsockopt(sock, ZMQ_CURVE_SERVER, &one, sizeof one) ||
+        zmq_setsockopt(sock, ZMQ_CURVE_SECRETKEY, key, sizeof key)) {
+        snprintf(err, errlen, "CURVE options: %s", zmq_strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
+void srv_auth_destroy(srv_auth **pa)
+{
+    srv_auth *a = *pa;
+    if (!a) return;
+    if (a->started) pthread_join(a->thread, NULL);
+    free(a->allowed.z);
+    free(a->admins.z);
+    pthread_mutex_destroy(&a->mu);
+    memset(a->secret, 0, sizeof a->secret);
+    free(a);
+    *pa = NULL;
+}

@@ -1,0 +1,68 @@
+/*
+ * srv_auth.h - the daemon's authentication: CURVE on its sockets, the
+ * allow-list of client public keys (and the admin keys) and the ZAP
+ * handler thread that checks every CURVE handshake against them.
+ *
+ * With --curve-secret the request and stream sockets are CURVE servers in
+ * the ZAP domain "mpmd"; libzmq asks the handler (a REP socket on
+ * inproc://zeromq.zap.01, its own thread) about every client key, and the
+ * handler accepts only the keys listed in --authorized-keys or
+ * --admin-keys, with the key's Z85 text as the user id that every message
+ * of the connection carries ("User-Id"): the run's owner.  The lists are
+ * re-read by srv_auth_reload() (SIGHUP); a list that no longer reads keeps
+ * the previous one and the error is logged.
+ */
+#ifndef SRV_AUTH_H
+#define SRV_AUTH_H
+
+#include <stddef.h>
+
+#include "srv_config.h"
+
+/* Z85 text of a 32-byte key, and its buffer size. */
+#define SRV_KEY_Z85_LEN 40
+#define SRV_KEY_Z85_SIZE 41
+
+/* The owner of a request that came without CURVE (loopback, ipc://). */
+#define SRV_OWNER_LOCAL "local"
+
+typedef struct srv_auth srv_auth;
+
+/* Reads a key file: the first line that is neither blank nor a '#'
+ * comment holds the 40-character Z85 key (a comment may follow it).  With
+ * secret != 0 the file must be mode 0600 or stricter (no group or other
+ * bits).  Returns 0 with the key in z85 (SRV_KEY_Z85_SIZE bytes), or -1
+ * with a message naming the file. */
+int srv_key_file_read(const char *path, int secret, char *z85, char *err, size_t errlen);
+
+/* Loads what cfg asks for: the server secret (--curve-secret) and the key
+ * lists.  *out is NULL-free: with no --curve-secret the result says
+ * CURVE is off (srv_auth_curve() 0) and nothing else is loaded.  Returns
+ * 0, or -1 with a message. */
+int srv_auth_new(const srv_config *cfg, srv_auth **out, char *err, size_t errlen);
+
+/* 1 if the sockets use CURVE. */
+int srv_auth_curve(const srv_auth *a);
+
+/* The server's public key (Z85), "" when CURVE is off. */
+const char *srv_auth_server_public(const srv_auth *a);
+
+/* Binds the ZAP handler in zctx and starts its thread (CURVE only; a
+ * no-op otherwise).  Call before binding the sockets it guards. */
+int srv_auth_start(srv_auth *a, void *zctx, char *err, size_t errlen);
+
+/* Makes sock a CURVE server in the "mpmd" ZAP domain (a no-op when CURVE
+ * is off). */
+int srv_auth_secure(srv_auth *a, void *sock, char *err, size_t errlen);
+
+/* Re-reads the key lists and logs the keys added and removed. */
+void srv_auth_reload(srv_auth *a);
+
+/* 1 if owner (a Z85 key) is listed in --admin-keys. */
+int srv_auth_is_admin(srv_auth *a, const char *owner);
+
+/* Joins the handler thread (after zmq_ctx_term of its context, which ends
+ * it) and frees a; nulls the pointer. */
+void srv_auth_destroy(srv_auth **a);
+
+#endif
