@@ -127,8 +127,7 @@ int ctl_keys_load(ctl_conn *c, const char *keys_dir)
         return CTL_EUSAGE;
     }
     if (zmq_curve_public(c->public_key, c->secret_key)) {
-        fprintf(stderr, "mpmctl: cannot derive the client's public key: %s\n",
-                zmq_strerror(errno));
+        fprintf(stderr, "mpmctl: cannot derive the client's public key: %s\n", zmq_strerror(errno));
         return CTL_ESYS;
     }
     c->curve = 1;

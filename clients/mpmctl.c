@@ -951,8 +951,7 @@ int main(int argc, char **argv)
     c.stream = a.given[O_STREAM] ? a.val[O_STREAM] : getenv("MPMD_STREAM");
     c.timeout_s = a.timeout;
     if (a.cmd->bit == C_KEYGEN) return exit_for_rc(ctl_keygen(a.val[O_OUT], a.val[O_NAME]));
-    if ((rc = ctl_keys_load(&c, a.given[O_KEYS] ? a.val[O_KEYS] : NULL)))
-        return exit_for_rc(rc);
+    if ((rc = ctl_keys_load(&c, a.given[O_KEYS] ? a.val[O_KEYS] : NULL))) return exit_for_rc(rc);
     switch (a.cmd->bit) {
     case C_SUBMIT: rc = cmd_submit(&c, &a); break;
     case C_WATCH: rc = cmd_watch(&c, &a); break;

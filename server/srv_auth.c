@@ -289,8 +289,8 @@ void srv_auth_reload(srv_auth *a)
     a->allowed = al;
     a->admins = ad;
     pthread_mutex_unlock(&a->mu);
-    srv_log(0, "SIGHUP: keys re-read: %zu added, %zu removed; %zu authorized, %zu admin", add,
-            del, al.n, ad.n);
+    srv_log(0, "SIGHUP: keys re-read: %zu added, %zu removed; %zu authorized, %zu admin", add, del,
+            al.n, ad.n);
 }
 
 int srv_auth_is_admin(srv_auth *a, const char *owner)

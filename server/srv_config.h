@@ -13,23 +13,23 @@
 #include "mpp_endpoint.h"
 
 typedef struct {
-    char endpoint[256];          /* control socket (ROUTER) */
-    char stream_endpoint[256];   /* job streams (XPUB); "" = derived */
-    char db[1024];               /* SQLite file */
-    int workers;                 /* jobs run at once */
-    int solver_threads;          /* threads per job (a case may ask for fewer) */
-    int queue_max;               /* queued jobs beyond the running ones */
-    long long max_particles;     /* per job */
-    long long max_steps;         /* per job */
-    double max_wall_s;           /* per job, 0 = none */
-    long long max_request_bytes; /* largest request accepted */
-    int stream_buffer_mb;        /* snapshot bytes queued for watchers, per job (0: no bound) */
-    int allow_remote;            /* deprecated: non-loopback binds need CURVE now */
-    int insecure_remote;         /* --insecure-allow-remote-without-auth */
-    char curve_secret[1024];     /* server secret key file ("": no CURVE) */
-    char authorized_keys[1024];  /* client public keys: file or directory */
-    char admin_keys[1024];       /* admin public keys: file or directory */
-    int client_max_jobs;         /* live (queued + running) jobs per client, 0 = no limit */
+    char endpoint[256];             /* control socket (ROUTER) */
+    char stream_endpoint[256];      /* job streams (XPUB); "" = derived */
+    char db[1024];                  /* SQLite file */
+    int workers;                    /* jobs run at once */
+    int solver_threads;             /* threads per job (a case may ask for fewer) */
+    int queue_max;                  /* queued jobs beyond the running ones */
+    long long max_particles;        /* per job */
+    long long max_steps;            /* per job */
+    double max_wall_s;              /* per job, 0 = none */
+    long long max_request_bytes;    /* largest request accepted */
+    int stream_buffer_mb;           /* snapshot bytes queued for watchers, per job (0: no bound) */
+    int allow_remote;               /* deprecated: non-loopback binds need CURVE now */
+    int insecure_remote;            /* --insecure-allow-remote-without-auth */
+    char curve_secret[1024];        /* server secret key file ("": no CURVE) */
+    char authorized_keys[1024];     /* client public keys: file or directory */
+    char admin_keys[1024];          /* admin public keys: file or directory */
+    int client_max_jobs;            /* live (queued + running) jobs per client, 0 = no limit */
     long long client_max_particles; /* particles per job of one client, 0 = no limit */
     int verbose;
 } srv_config;

@@ -102,11 +102,11 @@ typedef struct {
  * read ever blocks the loop on a commit; any request behind a waiting one
  * of the same client, so that a client's replies keep its order. */
 typedef struct pending {
-    zmq_msg_t id;    /* the client's identity frame */
+    zmq_msg_t id;           /* the client's identity frame */
     char owner[OWNER_SIZE]; /* who sent it (the CURVE key, or "local") */
-    mpp_request rq;  /* the decoded request (a read: owns nothing big) */
-    int begun;       /* its action is done and its ticket taken */
-    uint64_t ticket; /* store_ticket() when it began */
+    mpp_request rq;         /* the decoded request (a read: owns nothing big) */
+    int begun;              /* its action is done and its ticket taken */
+    uint64_t ticket;        /* store_ticket() when it began */
     struct pending *next;
 } pending;
 /* Reads waiting at once, at most; more get UNAVAILABLE (a store that cannot
@@ -1013,8 +1013,8 @@ static int bind_endpoint(const char *ep, char *out, size_t n, int *ipv6)
     return w > 0 && (size_t)w < n ? 0 : -1;
 }
 
-static int open_socket(void *zctx, int type, const char *ep, const srv_config *cfg,
-                       srv_auth *auth, void **out, char *err, size_t errlen)
+static int open_socket(void *zctx, int type, const char *ep, const srv_config *cfg, srv_auth *auth,
+                       void **out, char *err, size_t errlen)
 {
     *out = NULL;
     if (!mpp_endpoint_is_local(ep) && !srv_auth_curve(auth)) {
@@ -1148,8 +1148,8 @@ int srv_daemon_run(const srv_config *cfg)
     srv_log(0,
             "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
             "queue %d, %s",
-            MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers,
-            cfg->queue_max, srv_auth_curve(d.auth) ? "CURVE" : "no authentication");
+            MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers, cfg->queue_max,
+            srv_auth_curve(d.auth) ? "CURVE" : "no authentication");
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},
                                   {d.xpub, 0, ZMQ_POLLIN, 0},

@@ -366,6 +366,7 @@ TEST(codec_reply_decode)
                    {MPM_ETOOBIG, MPP_ERR_TOO_LARGE},
                    {MPM_ECONFLICT, MPP_ERR_CONFLICT},
                    {MPM_EUNAVAIL, MPP_ERR_UNAVAILABLE},
+                   {MPM_EFORBIDDEN, MPP_ERR_FORBIDDEN},
                    {MPM_ENOMEM, MPP_ERR_INTERNAL},
                    {MPM_EIO, MPP_ERR_INTERNAL},
                    {0, MPP_ERR_INTERNAL},

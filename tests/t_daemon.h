@@ -55,8 +55,13 @@ typedef struct {
 } td_bg;
 
 /* Kills and reaps everything this test started; prints daemon logs if the
- * test failed.  Called by DTEST. */
+ * test failed; forgets the CURVE keys.  Called by DTEST. */
 void td_cleanup(void);
+
+/* CURVE for the raw requests (td_request, td_frames, and so td_start's
+ * Ping): the server's public key and the client's keypair in Z85; NULL
+ * server_pub: none (the default). */
+void td_set_curve(const char *server_pub, const char *client_pub, const char *client_sec);
 
 /* The binary named by an environment variable; fails the test (NULL) if it
  * is unset or not executable. */

@@ -147,8 +147,21 @@ static void print_tail(const char *path, int lines)
     free(t);
 }
 
+/* CURVE keys of the raw requests (td_set_curve); "" = none. */
+static char curve_srv[41], curve_pub[41], curve_sec[41];
+
+void td_set_curve(const char *server_pub, const char *client_pub, const char *client_sec)
+{
+    curve_srv[0] = curve_pub[0] = curve_sec[0] = 0;
+    if (!server_pub) return;
+    snprintf(curve_srv, sizeof curve_srv, "%s", server_pub);
+    snprintf(curve_pub, sizeof curve_pub, "%s", client_pub);
+    snprintf(curve_sec, sizeof curve_sec, "%s", client_sec);
+}
+
 void td_cleanup(void)
 {
+    td_set_curve(NULL, NULL, NULL);
     for (int i = 0; i < nprocs; i++) {
         if (procs[i].pid > 0) {
             if (procs[i].daemon) {
@@ -297,7 +310,11 @@ int td_frames(const char *ep, const void *const *frames, const size_t *lens, int
     if (!ctx) return -1;
     s = zmq_socket(ctx, ZMQ_DEALER);
     if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) ||
-        zmq_setsockopt(s, ZMQ_IPV6, &(int){1}, sizeof(int)) || zmq_connect(s, ep))
+        zmq_setsockopt(s, ZMQ_IPV6, &(int){1}, sizeof(int)) ||
+        (curve_srv[0] && (zmq_setsockopt(s, ZMQ_CURVE_SERVERKEY, curve_srv, 41) ||
+                          zmq_setsockopt(s, ZMQ_CURVE_PUBLICKEY, curve_pub, 41) ||
+                          zmq_setsockopt(s, ZMQ_CURVE_SECRETKEY, curve_sec, 41))) ||
+        zmq_connect(s, ep))
         goto out;
     for (int i = 0; i < n; i++)
         if (zmq_send(s, frames[i], lens[i], i + 1 < n ? ZMQ_SNDMORE : 0) < 0) goto out;

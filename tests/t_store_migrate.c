@@ -3,7 +3,8 @@
  * releases: a schema-1 database (built here from that release's DDL,
  * verbatim), a schema-2 and a schema-4 one are migrated in place, and
  * every run, energy sample and snapshot reads back as it was written; runs
- * written before schema 5 read back as FLIP, the transfer they ran.
+ * written before schema 5 read back as FLIP, the transfer they ran; runs
+ * written before schema 7 read back with no owner ("").
  */
 #include "store.h"
 #include "t.h"
@@ -115,11 +116,11 @@ TEST(store_migrate_old_schema)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 6"), "%s",
+    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 7"), "%s",
            lc.migrated);
     int v = -1;
     CHECK(store_schema_version(s, &v) == 0);
-    CHECKF(v == 6 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
+    CHECKF(v == 7 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
     store_stats st;
     store_get_stats(s, &st);
     CHECK(st.recovered_running == 1 && st.recovered_queued == 0);
@@ -306,9 +307,9 @@ TEST(store_migrate_v2)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-2 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 6"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 7"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 6);
+    CHECK(store_schema_version(s, &v) == 0 && v == 7);
 
     mpm_energy_sample *es = NULL;
     size_t nes = 0;
@@ -448,9 +449,9 @@ TEST(store_migrate_v4)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-4 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 6"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 7"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 6 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 7 && v == STORE_SCHEMA_VERSION);
 
     /* the old runs: FLIP, everything else as written */
     store_run r;
@@ -585,9 +586,9 @@ TEST(store_migrate_v5)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-5 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 5 to 6"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 5 to 7"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 6 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 7 && v == STORE_SCHEMA_VERSION);
 
     store_run r;
     CHECK(store_run_get(s, 7, &r) == 0);
@@ -637,6 +638,84 @@ TEST(store_migrate_v5)
          es[0].e.balance_error == 0.0625;
     free(es);
     CHECKF(ok, "the new sample's works read back differently");
+    store_close(&s);
+    int64_t cnt = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
+}
+
+/* A version-6 database (version 5 as above, then 5 -> 6 as released) with
+ * the version-4 rows.  Opening it migrates 6 -> 7 alone: the old run reads
+ * back with no owner (""), a new run keeps the owner it was inserted with,
+ * and one inserted without an owner reads "". */
+TEST(store_migrate_v6)
+{
+    const char *p = db_path("v6.db");
+    char path[600];
+    snprintf(path, sizeof path, "%s", p);
+    CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v1_to_v2, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v2_to_v4, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, old_rows_v4, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path,
+                          "ALTER TABLE runs ADD COLUMN transfer TEXT NOT NULL DEFAULT 'flip'"
+                          " CHECK (transfer IN ('flip','apic'));"
+                          "ALTER TABLE energy ADD COLUMN plastic_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN damping_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN friction_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN prescribed_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN balance_error REAL DEFAULT 0;"
+                          "ALTER TABLE runs ADD COLUMN balance_error REAL;"
+                          "ALTER TABLE runs ADD COLUMN warning TEXT;"
+                          "PRAGMA user_version = 6;",
+                          NULL) == 0,
+           "%s", store_error()->message);
+
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
+    store *s = NULL;
+    CHECKF(store_open(path, &o, &s) == 0, "opening a version-6 database: %s",
+           store_error()->message);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 6 to 7"), "%s", lc.migrated);
+    int v = -1;
+    CHECK(store_schema_version(s, &v) == 0 && v == 7 && v == STORE_SCHEMA_VERSION);
+
+    store_run r;
+    CHECK(store_run_get(s, 7, &r) == 0);
+    int ok = r.owner && !strcmp(r.owner, "") && !strcmp(r.name, "v4 run") &&
+             r.energy.total == 0.75 && r.transfer == MPM_TRANSFER_FLIP;
+    store_run_clear(&r);
+    CHECKF(ok, "the version-6 run reads back differently");
+
+    /* new runs: with an owner (a Z85 key) and without */
+    const char *key = "rq:rM>}U?@Lns47E1%kR.o@n%FcmmsL/@{H8]yf7";
+    store_run in = sample_run("owned", MPP_STATUS_QUEUED);
+    in.owner = key;
+    int64_t id = 0, id2 = 0;
+    CHECK(store_run_insert(s, &in, &id) == 0 && id == 9);
+    in = sample_run("unowned", MPP_STATUS_QUEUED);
+    CHECK(store_run_insert(s, &in, &id2) == 0 && id2 == 10);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_run_get(s, id, &r) == 0);
+    ok = r.owner && !strcmp(r.owner, key);
+    store_run_clear(&r);
+    CHECKF(ok, "the owner of a new run reads back differently");
+    CHECK(store_run_get(s, id2, &r) == 0);
+    ok = r.owner && !strcmp(r.owner, "");
+    store_run_clear(&r);
+    CHECKF(ok, "a run inserted without an owner reads back with one");
+    /* listings carry it too */
+    store_run_filter f = {0};
+    store_run *list = NULL;
+    size_t n = 0;
+    CHECK(store_run_list(s, &f, &list, &n) == 0);
+    ok = n == 4 && list[1].id == 9 && list[1].owner && !strcmp(list[1].owner, key) &&
+         list[3].id == 7 && list[3].owner && !strcmp(list[3].owner, "");
+    store_run_list_free(list, n);
+    CHECKF(ok, "the listing's owners differ");
     store_close(&s);
     int64_t cnt = -1;
     CHECK(store_exec_raw(path,

@@ -196,8 +196,7 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     int rc;
     if ((rc = col_strdup(db, st, 1, &r->name)) || (rc = col_strdup(db, st, 20, &r->error)) ||
         (rc = col_strdup(db, st, 21, &r->server_version)) ||
-        (rc = col_strdup(db, st, 24, &r->warning)) ||
-        (rc = col_strdup(db, st, 25, &r->owner))) {
+        (rc = col_strdup(db, st, 24, &r->warning)) || (rc = col_strdup(db, st, 25, &r->owner))) {
         store_run_clear(r);
         return rc;
     }
