@@ -8,7 +8,7 @@ set -euo pipefail
 
 pkgs=(
   gcc make pkg-config
-  libzmq3-dev          # ZeroMQ
+  libzmq3-dev          # ZeroMQ (Debian's libzmq5 has CURVE, through libsodium)
   libsqlite3-dev       # run records
   libprotobuf-c-dev    # protobuf-c runtime
   protobuf-c-compiler  # protoc-c, generates proto/*.pb-c.[ch]
