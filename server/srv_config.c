@@ -55,6 +55,9 @@ static const setting settings[] = {
      "queued and running jobs per client key (or local user), 0 = no limit (default 0)"},
     {"client-max-particles", NULL, T_LL, F(client_max_particles), 0, (double)MPM_MAX_PARTICLES,
      "particles per job of one client, 0 = only --max-particles (default 0)"},
+    {"client-max-disk-mb", NULL, T_LL, F(client_max_disk_mb), 0, 1e12,
+     "MiB of recorded snapshots and energy samples per client; at or above it, its "
+     "submissions are refused, 0 = no limit (default 0)"},
     {"insecure-allow-remote-without-auth", NULL, T_FLAG, F(insecure_remote), 0, 1,
      "bind non-loopback addresses WITHOUT CURVE: anyone who reaches them may submit, "
      "cancel and read (trusted networks only)"},

@@ -31,6 +31,7 @@ typedef struct {
     char admin_keys[1024];          /* admin public keys: file or directory */
     int client_max_jobs;            /* live (queued + running) jobs per client, 0 = no limit */
     long long client_max_particles; /* particles per job of one client, 0 = no limit */
+    long long client_max_disk_mb;   /* MiB of stored records per client, 0 = no limit */
     int verbose;
 } srv_config;
 

@@ -324,6 +324,23 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
         mpp_case_destroy(&sc);
         return;
     }
+    if (d->cfg->client_max_disk_mb > 0) {
+        int64_t used = 0;
+        if (store_owner_bytes(d->st, owner, &used)) {
+            reply_error(d, id, MPM_EINTERNAL, "", "cannot check the disk quota: %s",
+                        store_error()->message);
+            mpp_case_destroy(&sc);
+            return;
+        }
+        if (used >= d->cfg->client_max_disk_mb * 1048576LL) {
+            reply_error(d, id, MPM_ETOOBIG, "",
+                        "%s's recorded runs take %.1f MiB, this server's per-client quota is "
+                        "%lld MiB (--client-max-disk-mb); ask its admin to free space",
+                        owner, (double)used / 1048576.0, d->cfg->client_max_disk_mb);
+            mpp_case_destroy(&sc);
+            return;
+        }
+    }
     if (d->cfg->client_max_jobs > 0) {
         int live = srv_pool_owner_jobs(d->pool, owner);
         if (live >= d->cfg->client_max_jobs) {

@@ -9,8 +9,8 @@
  * owner can; a key removed from the list is refused after SIGHUP; a
  * non-loopback bind without CURVE, a secret key file readable by others and
  * CURVE without a key list are refused at start; the per-client quotas
- * (queued jobs, particles per job) refuse with QUEUE_FULL and TOO_LARGE
- * naming the quota.
+ * (queued jobs, particles per job, recorded bytes) refuse with QUEUE_FULL
+ * and TOO_LARGE naming the quota.
  */
 #define _GNU_SOURCE
 #include "t_daemon.h"
@@ -357,14 +357,21 @@ DTEST(daemon_auth_refused_starts)
 }
 
 /* Per-client quotas, without CURVE (every request is "local"'s): the
- * second live job and a case above the particle quota are refused, naming
- * the quota. */
+ * second live job, a case above the particle quota and a submission once
+ * the client's recorded runs exceed its disk quota are refused, naming the
+ * quota. */
 DTEST(daemon_auth_quotas)
 {
     const char *tmp = t_tmpdir();
     char dir[300], cpath[500], bpath[500];
     snprintf(dir, sizeof dir, "%s/quota", tmp);
-    const char *extra[] = {"--client-max-jobs", "1", "--client-max-particles", "100", NULL};
+    const char *extra[] = {"--client-max-jobs",
+                           "1",
+                           "--client-max-particles",
+                           "300",
+                           "--client-max-disk-mb",
+                           "1",
+                           NULL};
     td_daemon d;
     if (td_start(&d, dir, extra)) return;
     CHECK(write_case(long_case(100), dir, "long.json", cpath, sizeof cpath) == 0);
@@ -379,14 +386,24 @@ DTEST(daemon_auth_quotas)
     CHECKF(ok, "a run submitted without CURVE is not owned by \"local\"");
     EXPECT_CTL(&d, 1, "QUEUE_FULL", "submit", cpath);
     EXPECT_CTL(&d, 1, "--client-max-jobs 1", "submit", cpath);
-    /* 2D block: 256 particles, above 100 */
-    CHECK(write_case(block2d(10, 0, "big"), dir, "big.json", bpath, sizeof bpath) == 0);
+    /* the disks: 784 particles, above 300 */
+    CHECK(write_case(example("disks2d_fine"), dir, "big.json", bpath, sizeof bpath) == 0);
     EXPECT_CTL(&d, 1, "TOO_LARGE", "submit", bpath);
-    EXPECT_CTL(&d, 1, "per-client quota of 100 (--client-max-particles)", "submit", bpath);
+    EXPECT_CTL(&d, 1, "per-client quota of 300 (--client-max-particles)", "submit", bpath);
     /* once the job has ended there is room again */
     EXPECT_CTL(&d, 0, "cancel requested", "cancel", "1");
     char st[32];
     CHECK(td_wait_status(&d, job, "CANCELLED", 20, st, sizeof st) == 0);
-    EXPECT_CTL(&d, 0, "job", "submit", cpath);
+    /* 401 recorded snapshots of 256 particles: above 1 MiB */
+    json_t *rec = block2d(400, 10, "recorded");
+    set_output(rec, "snapshotEvery", json_integer(1));
+    set_output(rec, "recordSnapshots", json_true());
+    CHECK(write_case(rec, dir, "rec.json", bpath, sizeof bpath) == 0);
+    CHECK(td_ctl(&d, 30, &o, "submit", bpath, NULL) == 0);
+    unsigned long long job2 = job_of(o.out);
+    td_out_free(&o);
+    CHECK(job2 == 2);
+    CHECK(td_wait_status(&d, job2, "FINISHED", 30, st, sizeof st) == 0);
+    EXPECT_CTL(&d, 1, "per-client quota is 1 MiB (--client-max-disk-mb)", "submit", cpath);
     CHECK(td_stop(&d) == 0);
 }

@@ -276,6 +276,12 @@ typedef struct {
 int store_run_extras(store *s, int64_t run_id, store_run_extra *out);
 void store_run_extra_clear(store_run_extra *x);
 
+/* Bytes the committed records of one owner's runs take (schema 7): their
+ * snapshots' data, plus STORE_ENERGY_ROW_BYTES per energy sample; into
+ * *bytes.  0 or a negative code. */
+#define STORE_ENERGY_ROW_BYTES 168 /* 21 columns of 8 bytes */
+int store_owner_bytes(store *s, const char *owner, int64_t *bytes);
+
 /* Reads the snapshot of a run at step (step < 0: the one with the highest
  * step).  MPM_ENOTFOUND if none. */
 int store_snapshot_get(store *s, int64_t run_id, int64_t step, store_snapshot *out);

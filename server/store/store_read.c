@@ -498,6 +498,34 @@ out:
     return r;
 }
 
+int store_owner_bytes(store *s, const char *owner, int64_t *bytes)
+{
+    if (!s || !owner || !bytes) return sti_fail(MPM_EINVAL, "store_owner_bytes: NULL argument");
+    *bytes = 0;
+    sqlite3 *db;
+    int r = reader_get(s, &db);
+    if (r) return r;
+    sqlite3_stmt *st = NULL;
+    /* length() of a blob reads its size from the record header, not its
+     * pages; runs_by_owner finds the runs */
+    int rc = sqlite3_prepare_v2(
+        db,
+        "SELECT (SELECT coalesce(sum(length(data)), 0) FROM snapshots WHERE run_id IN"
+        " (SELECT id FROM runs WHERE owner = ?1)) + ?2 * (SELECT count(*) FROM energy"
+        " WHERE run_id IN (SELECT id FROM runs WHERE owner = ?1))",
+        -1, &st, NULL);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_text(st, 1, owner, -1, SQLITE_STATIC);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 2, STORE_ENERGY_ROW_BYTES);
+    if (rc == SQLITE_OK) rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW)
+        *bytes = sqlite3_column_int64(st, 0);
+    else
+        r = sti_sql_fail(db, rc, "summing an owner's stored bytes");
+    sqlite3_finalize(st);
+    reader_put(s, db);
+    return r;
+}
+
 void store_run_extra_clear(store_run_extra *x)
 {
     if (!x) return;
