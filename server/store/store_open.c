@@ -149,7 +149,7 @@ static const char *const migrations[] = {
     "ALTER TABLE runs ADD COLUMN warning TEXT;",
     /* 6 -> 7: the run's owner (issue 12, RunInfo.owner): the submitter's
      * CURVE public key (Z85) or "local".  Runs stored before read '' (not
-     * recorded): only an admin key may cancel them, and none is live.  The
+     * recorded); they have all ended (a cancel gets CONFLICT).  The
      * index serves the per-client disk quota (store_owner_bytes). */
     "ALTER TABLE runs ADD COLUMN owner TEXT NOT NULL DEFAULT '';"
     "CREATE INDEX runs_by_owner ON runs(owner, id);",
