@@ -426,7 +426,8 @@ TEST(codec_reply_decode)
                         .snapshot_steps = ssteps,
                         .method = MPM_METHOD_MPM,
                         .update = MPM_USL,
-                        .transfer = MPM_TRANSFER_APIC};
+                        .transfer = MPM_TRANSFER_APIC,
+                        .owner = "rq:rM>}U?@Lns47E1%kR.o@n%FcmmsL/@{H8]yf7"};
     CHECK(mpp_reply_run(&run, &buf, &n) == 0);
     rc = reply_decode(buf, n, 0, &ri, err);
     CHECKF(rc == 0, "%s", err);
@@ -441,7 +442,7 @@ TEST(codec_reply_decode)
               r->last_energy && same_energy(r->last_energy, &es[1]) && r->n_snapshot_steps == 2 &&
               r->snapshot_steps[0] == 0 && r->snapshot_steps[1] == 100 &&
               r->method == MPM_METHOD_MPM && r->update == MPM_USL &&
-              r->transfer == MPM_TRANSFER_APIC);
+              r->transfer == MPM_TRANSFER_APIC && r->owner && !strcmp(r->owner, run.owner));
     }
     mpp_reply_clear(&ri);
     CHECK(decode_abuse(buf, n, 1) > 0);
