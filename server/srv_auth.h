@@ -36,9 +36,9 @@ typedef struct srv_auth srv_auth;
 int srv_key_file_read(const char *path, int secret, char *z85, char *err, size_t errlen);
 
 /* Loads what cfg asks for: the server secret (--curve-secret) and the key
- * lists.  *out is NULL-free: with no --curve-secret the result says
- * CURVE is off (srv_auth_curve() 0) and nothing else is loaded.  Returns
- * 0, or -1 with a message. */
+ * lists.  *out is set even on failure (srv_auth_destroy() it); with no
+ * --curve-secret it says CURVE is off (srv_auth_curve() 0) and nothing
+ * else is loaded.  Returns 0, or -1 with a message. */
 int srv_auth_new(const srv_config *cfg, srv_auth **out, char *err, size_t errlen);
 
 /* 1 if the sockets use CURVE. */

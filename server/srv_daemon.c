@@ -19,6 +19,13 @@
  * client does so by itself).  Anything else is logged and dropped, or
  * answered BAD_REQUEST when the identity and delimiter are right.
  *
+ * Authentication (srv_auth.h): with CURVE, the ZAP handler has accepted
+ * every connection's key before any of its messages arrives, and each
+ * request carries that key as its "User-Id": the requester, who owns the
+ * runs it submits (a request without CURVE is "local"'s), is counted
+ * against the per-client quotas, and may cancel only its own jobs unless
+ * its key is an admin's.  SIGHUP re-reads the key lists.
+ *
  * Shutdown (SIGINT, SIGTERM): running jobs are told to stop before their
  * next step and queued ones end INTERRUPTED at once; until the workers are
  * done the main thread keeps relaying their stream messages and answering
