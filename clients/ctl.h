@@ -80,8 +80,8 @@ typedef struct {
  * key or a file) or KEYDIR/server.pub, the client's secret key from the
  * file MPMD_CLIENT_KEY or KEYDIR/mpmd.key (mode 0600 or stricter), where
  * KEYDIR is keys_dir (--keys), else $MPMD_KEYS, else ~/.config/mpmd if it
- * exists.  No server key: c->curve stays 0 (no CURVE).  A server key
- * without a client key is an error. */
+ * exists and c->endpoint is not local (loopback, ipc://).  No server key: c->curve stays 0 (no
+ * CURVE).  A server key without a client key is an error. */
 int ctl_keys_load(ctl_conn *c, const char *keys_dir);
 /* Sets the CURVE client options on sock when keys are loaded. */
 int ctl_conn_secure(ctl_conn *c, void *sock);

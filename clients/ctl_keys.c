@@ -5,7 +5,8 @@
  * (its public key derived from it), from the environment (MPMD_SERVER_KEY:
  * a Z85 key or a file holding one; MPMD_CLIENT_KEY: the client's secret
  * key file) or from a key directory (--keys DIR, else $MPMD_KEYS, else
- * ~/.config/mpmd when it exists) holding server.pub and mpmd.key.  With no
+ * ~/.config/mpmd when it exists and the endpoint is not loopback or ipc://)
+ * holding server.pub and mpmd.key.  With no
  * server key the connection goes without CURVE (loopback, ipc://).
  */
 #include "ctl.h"
@@ -90,7 +91,10 @@ int ctl_keys_load(ctl_conn *c, const char *keys_dir)
         snprintf(dir, sizeof dir, "%s", keys_dir);
     else if (getenv("MPMD_KEYS") && *getenv("MPMD_KEYS"))
         snprintf(dir, sizeof dir, "%s", getenv("MPMD_KEYS"));
-    else if (home && *home) {
+    else if (home && *home && !mpp_endpoint_is_local(c->endpoint)) {
+        /* the default directory serves remote daemons only: a local one
+         * (make demo) is reached without keys however the user's remote
+         * servers are set up */
         snprintf(dir, sizeof dir, "%s/.config/mpmd", home);
         if (!exists(dir)) dir[0] = 0;
     }
