@@ -46,8 +46,8 @@ typedef struct {
 
 /* The run: material m, dimension dim, confinement p0, axial strain rate
  * v (the top's speed; cell size 1) for time t_end, ramped over t_ramp. */
-static int triax(const mpm_material_desc *m, int dim, double p0, double v, double t_ramp,
-                 double t_end, triax_res *r)
+static int triax_run(const mpm_material_desc *m, int dim, double p0, double v, double t_ramp,
+                     double t_end, int threads, int poison, mpm_error *fail, triax_res *r)
 {
     int np = 1 << dim, ax = dim - 1;
     double x[8 * 3], vol[8], sig[8 * 6];
@@ -92,6 +92,7 @@ static int triax(const mpm_material_desc *m, int dim, double p0, double v, doubl
     c.tractions = tr;
     c.n_prescribed = 1;
     c.prescribed = &pr;
+    c.threads = threads;
     mpm_error err;
     mpm_sim *s = mpm_sim_new(&c, NULL, &err);
     if (!s) {
@@ -105,9 +106,12 @@ static int triax(const mpm_material_desc *m, int dim, double p0, double v, doubl
     const mpm_mat_params *mp = &s->mats[0];
     int mark = 0;
     const mpm_particles *P = &s->P;
+    if (poison) s->P.sig[0][3] = NAN; /* a non-finite stress, for the failure path */
     while (mpm_sim_time(s) < t_end) {
         if (mpm_sim_step(s)) {
             TLOG("%s", TERR(mpm_sim_error(s)));
+            if (fail) *fail = *mpm_sim_error(s);
+            mpm_sim_plastic_stats(s, &r->st);
             mpm_sim_destroy(&s);
             return -1;
         }
@@ -159,6 +163,12 @@ static int triax(const mpm_material_desc *m, int dim, double p0, double v, doubl
     mpm_sim_plastic_stats(s, &r->st);
     mpm_sim_destroy(&s);
     return 0;
+}
+
+static int triax(const mpm_material_desc *m, int dim, double p0, double v, double t_ramp,
+                 double t_end, triax_res *r)
+{
+    return triax_run(m, dim, p0, v, t_ramp, t_end, 1, 0, NULL, r);
 }
 
 /* Mohr-Coulomb's failure deviator at the lateral stress s3 (compression
@@ -244,4 +254,61 @@ TEST(mpm_biaxial_2d)
     run_set(2, "2D MC", MPM_MODEL_MOHR_COULOMB, MPM_MC_COMPRESSION, 10);
     run_set(2, "2D DP", MPM_MODEL_DRUCKER_PRAGER, MPM_MC_PLANE_STRAIN, 0);
     run_set(2, "2D DP", MPM_MODEL_DRUCKER_PRAGER, MPM_MC_PLANE_STRAIN, 10);
+}
+
+/* Two threads (4 particles each in 3D): the substep counters are summed in
+ * thread order and equal the serial run's; the stress and energies agree
+ * to 1e-12 (the grid's scatter sums in another order). */
+TEST(mpm_triaxial_threads)
+{
+    mpm_material_desc m = {.model = MPM_MODEL_DRUCKER_PRAGER,
+                           .youngs_modulus = 1e4,
+                           .poisson_ratio = 0.3,
+                           .density = 1.0,
+                           .friction_angle = 30,
+                           .dilatancy_angle = 10,
+                           .cohesion = 2,
+                           .tension_cutoff = HUGE_VAL,
+                           .substep_tolerance = 1e-6};
+    triax_res r1, r2;
+    CHECK(triax_run(&m, 3, 10, 1e-2, 0.2, 3.0, 1, 0, NULL, &r1) == 0);
+    CHECK(triax_run(&m, 3, 10, 1e-2, 0.2, 3.0, 2, 0, NULL, &r2) == 0);
+    TLOG("1 thread: %lld updates, %lld substeps, max %d, q %.17g, plastic+stored %.17g; 2 "
+         "threads: %lld, %lld, %d, %.17g, %.17g",
+         r1.st.updates, r1.st.substeps, r1.st.max_substeps, r1.q_end, r1.edu, r2.st.updates,
+         r2.st.substeps, r2.st.max_substeps, r2.q_end, r2.edu);
+    CHECK(r1.st.updates == r2.st.updates && r1.st.substeps == r2.st.substeps &&
+          r1.st.max_substeps == r2.st.max_substeps);
+    CHECK_NEAR(r1.q_end, r2.q_end, 1e-12 * r1.q_end);
+    CHECK_NEAR(r1.edu, r2.edu, 1e-12 * r1.edu);
+}
+
+/* A stress-point update that fails (here a non-finite stress put into
+ * particle 3, whose forces reach every particle's strain) fails the run
+ * with MPM_EDIVERGED naming the particle and the material, for both
+ * models.  (Exhausting DP's substeps needs an increment
+ * of about a thousand yield strains, which the CFL step does not give.) */
+TEST(mpm_triaxial_update_fails)
+{
+    mpm_material_desc m = {.model = MPM_MODEL_DRUCKER_PRAGER,
+                           .youngs_modulus = 1e4,
+                           .poisson_ratio = 0.3,
+                           .density = 1.0,
+                           .friction_angle = 30,
+                           .dilatancy_angle = 10,
+                           .cohesion = 2,
+                           .tension_cutoff = HUGE_VAL,
+                           .substep_tolerance = 1e-9};
+    for (int k = 0; k < 2; k++) {
+        triax_res r;
+        mpm_error e = {0};
+        m.model = k ? MPM_MODEL_MOHR_COULOMB : MPM_MODEL_DRUCKER_PRAGER;
+        int rc = triax_run(&m, 3, 10, 1e-1, 0.02, 1.0, 1, 1, &e, &r);
+        TLOG("%s", e.message);
+        CHECKF(rc == -1 && e.code == MPM_EDIVERGED &&
+                   strstr(e.message, k ? "mohr_coulomb update of particle "
+                                       : "drucker_prager update of particle ") &&
+                   strstr(e.message, " (materials[0]) failed"),
+               "%d %s", rc, e.message);
+    }
 }
