@@ -392,11 +392,13 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
  *           2D: plane strain, sig[2] = sigma_zz, deps[2] = 0), the strain
  *           increment deps, and the state epsp (equivalent plastic strain)
  *           and *yielded (set 1 when it flowed, else 0); adds the plastic
- *           work density sigma : d eps_p to *dwp.  Returns 0 (or a negative
- *           MPM_E* code, reserved for integrators that can fail).
- *           mpm_model_rate_block() applies the Jaumann rotation and calls it
- *           per particle: a Drucker-Prager or Mohr-Coulomb integrator plugs
- *           in by writing this one function;
+ *           work density sigma : d eps_p to *dwp.  Returns 0 or a negative
+ *           MPM_E* code (DP, MC: MPM_EDIVERGED, state unchanged).  J2's
+ *           block (rate_block()) applies the Jaumann rotation and calls
+ *           it per particle; DP and MC have their own block
+ *           (frictional_block(), which also counts the substeps and
+ *           reports a failed update) and the same point function for
+ *           callers of one point;
  *   energy  the stored (elastic) energy of particle p (not a density). */
 enum { MPM_NEED_F = 1, MPM_NEED_SPIN = 2, MPM_NEED_PLASTIC = 4 };
 
