@@ -173,7 +173,7 @@ TEST(codec_material_triaxial_example)
     while (!rc && mpm_sim_time(s) < tend) rc = mpm_sim_step(s);
     mpm_sim_energy(s, &e1);
     long steps = mpm_sim_steps(s);
-    double sig[8 * 6];
+    double sig[8 * 6] = {0};
     mpm_sim_snapshot(s, &(mpm_snapshot){.stress = sig});
     mpm_plastic_stats ps;
     mpm_sim_plastic_stats(s, &ps);
