@@ -303,10 +303,11 @@ TEST(codec_example_cube3d)
 /* JSON -> pb -> bytes -> pb -> JSON -> pb -> bytes: same bytes. */
 TEST(codec_roundtrip)
 {
-    static const char *const names[] = {
-        "point1d",       "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse",    "disks2d_fine",
-        "cube3d",        "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi",    "disk2d_apic",
-        "sliding_block", "pushed_bar1d",   "impact2d_j2",      "column2d_geostatic"};
+    static const char *const names[] = {"point1d",        "bar1d_mpm",          "bar1d_gimp",
+                                        "disks2d_coarse", "disks2d_fine",       "cube3d",
+                                        "bar1d_bspline2", "disks2d_bspline2",   "hangbar2d_cpdi",
+                                        "disk2d_apic",    "sliding_block",      "pushed_bar1d",
+                                        "impact2d_j2",    "column2d_geostatic", "triaxial3d_mc"};
     for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
         char path[256], err[T_ERRLEN];
         size_t len = 0, n1 = 0, n2 = 0;

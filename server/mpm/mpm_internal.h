@@ -29,6 +29,7 @@
 #define MPM_INTERNAL_H
 
 #include "mpm.h"
+#include "mpm_plastic.h"
 #include "mpm_timefn.h"
 
 #include <pthread.h>
@@ -80,6 +81,10 @@ typedef struct {
     double K;                         /* bulk modulus lambda + 2 mu / 3 */
     double sy0, H;                    /* VON_MISES: yield stress, hardening modulus */
     const mpm_model_ops *ops;         /* the material's model */
+    /* DRUCKER_PRAGER, MOHR_COULOMB: mpm_plastic_init()'s parameters (in
+     * mpm_sim.plp, so that this struct, which the elastic kernels index,
+     * keeps its size); else NULL */
+    const mpm_plastic_params *pl;
 } mpm_mat_params;
 
 /* One grid's worth of scatter targets (the main grid, or a thread's private
@@ -140,6 +145,13 @@ typedef struct {
     /* this step's work of the prescribed velocities' reactions and of the
      * face friction on the thread's share of the nodes (mpm_cond.c) */
     double wpres, wfric;
+    /* DRUCKER_PRAGER / MOHR_COULOMB updates of the step (mpm_model_block()):
+     * plastic point-updates, their substeps (a closed-form return counts
+     * 1), the most in one update, and the first particle whose integrator
+     * failed (SIZE_MAX: none); summed and reset by mpm_sim_step() */
+    long long plupd, plsub;
+    int plmax;
+    size_t plbad;
     char pad[64];
 } mpm_thread_out;
 
@@ -238,6 +250,11 @@ struct mpm_sim {
     int general, spin3, f_block, mixed;
     mpm_volume_update volmode;
     double plastic_work; /* cumulative sigma : d eps_p V (thread order) */
+    /* frictional: a material is DRUCKER_PRAGER or MOHR_COULOMB (the step
+     * sums the substep counters, mpm_sim_plastic_stats()) */
+    int frictional;
+    mpm_plastic_stats plstats;
+    mpm_plastic_params *plp; /* per material (frictional only, else NULL) */
 
     /* time */
     double dt_fixed; /* > 0: given */
@@ -389,11 +406,13 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
  *           2D: plane strain, sig[2] = sigma_zz, deps[2] = 0), the strain
  *           increment deps, and the state epsp (equivalent plastic strain)
  *           and *yielded (set 1 when it flowed, else 0); adds the plastic
- *           work density sigma : d eps_p to *dwp.  Returns 0 (or a negative
- *           MPM_E* code, reserved for integrators that can fail).
- *           mpm_model_rate_block() applies the Jaumann rotation and calls it
- *           per particle: a Drucker-Prager or Mohr-Coulomb integrator plugs
- *           in by writing this one function;
+ *           work density sigma : d eps_p to *dwp.  Returns 0 or a negative
+ *           MPM_E* code (DP, MC: MPM_EDIVERGED, state unchanged).  J2's
+ *           block (rate_block()) applies the Jaumann rotation and calls
+ *           it per particle; DP and MC have their own block
+ *           (frictional_block(), which also counts the substeps and
+ *           reports a failed update) and the same point function for
+ *           callers of one point;
  *   energy  the stored (elastic) energy of particle p (not a density). */
 enum { MPM_NEED_F = 1, MPM_NEED_SPIN = 2, MPM_NEED_PLASTIC = 4 };
 
@@ -403,6 +422,11 @@ typedef struct {
     double *const *deps; /* mpm_thread_out.deps */
     int dim;
     double wp; /* plastic work added (sum of sigma : d eps_p V) */
+    /* frictional models (DP, MC): plastic updates, substeps, the most in
+     * one update, the first particle whose update failed (SIZE_MAX) */
+    long long nupd, nsub;
+    int maxsub;
+    size_t bad;
 } mpm_model_blk;
 
 struct mpm_model_ops {
@@ -441,6 +465,11 @@ int mpm_j2_point(const mpm_mat_params *mp, int dim, double sig[6], const double 
 double mpm_elastic_stored(const mpm_mat_params *mp, const double sig[6], int dim);
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
+/* The integrator's parameters of a DRUCKER_PRAGER or MOHR_COULOMB material
+ * (angles to radians, mpm_plastic_init()); 0 or MPM_EINVAL naming
+ * materials[i]'s field.  The caller has checked d with mpm_model_params(). */
+int mpm_model_plastic(const mpm_material_desc *d, int dim, size_t i, mpm_plastic_params *pl,
+                      mpm_error *err);
 /* Fills derived constants; returns 0 or MPM_EINVAL with err naming
  * materials[i]'s field and the limit. */
 int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,
