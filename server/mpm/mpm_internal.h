@@ -29,7 +29,6 @@
 #define MPM_INTERNAL_H
 
 #include "mpm.h"
-#include "mpm_plastic.h"
 #include "mpm_timefn.h"
 
 #include <pthread.h>
@@ -80,7 +79,6 @@ typedef struct {
     double E, nu, rho, lambda, mu, c; /* c: p-wave speed */
     double K;                         /* bulk modulus lambda + 2 mu / 3 */
     double sy0, H;                    /* VON_MISES: yield stress, hardening modulus */
-    mpm_plastic_params pl;            /* DRUCKER_PRAGER, MOHR_COULOMB */
     const mpm_model_ops *ops;         /* the material's model */
 } mpm_mat_params;
 

@@ -357,21 +357,6 @@ static double j2_energy(const mpm_mat_params *mp, const mpm_particles *P, int di
     return mpm_elastic_stored(mp, sig, dim) * P->vol[p];
 }
 
-/* ---- Drucker-Prager and Mohr-Coulomb (mpm_plastic.c's integrators) ---- */
-
-static int frictional_point(const mpm_mat_params *mp, int dim, double sig[6], const double de[6],
-                            double *epsp, int *yielded, double *dwp)
-{
-    (void)dim; /* 2D: plane strain (de_zz = 0, sigma_zz kept); 3D */
-    mpm_plastic_state st = {*epsp, 0, 0};
-    double dis = 0;
-    int rc = mpm_plastic_update(&mp->pl, sig, de, &st, &dis);
-    *epsp = st.eps_p;
-    *yielded = st.yielded;
-    *dwp += dis;
-    return rc;
-}
-
 static const mpm_model_ops linear_elastic = {
     "linear_elastic", 0, {elastic_1d, elastic_2d, elastic_3d}, elastic_block, NULL, elastic_energy};
 static const mpm_model_ops neo_hookean = {"neo_hookean", MPM_NEED_F, {NULL, NULL, NULL},
@@ -379,9 +364,6 @@ static const mpm_model_ops neo_hookean = {"neo_hookean", MPM_NEED_F, {NULL, NULL
 static const mpm_model_ops von_mises = {"von_mises",        MPM_NEED_SPIN | MPM_NEED_PLASTIC,
                                         {NULL, NULL, NULL}, rate_block,
                                         mpm_j2_point,       j2_energy};
-static const mpm_model_ops frictional = {"frictional",       MPM_NEED_SPIN | MPM_NEED_PLASTIC,
-                                         {NULL, NULL, NULL}, rate_block,
-                                         frictional_point,   j2_energy};
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
 {
@@ -389,9 +371,7 @@ const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
     case MPM_MODEL_LINEAR_ELASTIC: return &linear_elastic;
     case MPM_MODEL_NEO_HOOKEAN: return &neo_hookean;
     case MPM_MODEL_VON_MISES: return &von_mises;
-    case MPM_MODEL_DRUCKER_PRAGER:
-    case MPM_MODEL_MOHR_COULOMB: return &frictional;
-    default: return NULL;
+    default: return NULL; /* DRUCKER_PRAGER, MOHR_COULOMB: not yet */
     }
 }
 
@@ -466,7 +446,8 @@ int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_para
     int rc;
     if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
         if ((rc = check_frictional(d, i, err))) return rc;
-        if (dim == 1) return BAD("model", "DRUCKER_PRAGER and MOHR_COULOMB need 2D or 3D");
+        return BAD("model", "%s is not yet implemented (LINEAR_ELASTIC, NEO_HOOKEAN or VON_MISES)",
+                   d->model == MPM_MODEL_DRUCKER_PRAGER ? "DRUCKER_PRAGER" : "MOHR_COULOMB");
     }
     if (!mpm_model_get(d->model)) return BAD("model", "unknown model %d", (int)d->model);
     if (!(d->youngs_modulus > 0) || !isfinite(d->youngs_modulus))
@@ -494,23 +475,6 @@ int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_para
     out->sy0 = d->yield_stress;
     out->H = d->hardening_modulus;
     out->ops = mpm_model_get(d->model);
-    if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
-        const double deg = 3.14159265358979323846 / 180.0;
-        mpm_plastic_params *pl = &out->pl;
-        pl->kind = d->model == MPM_MODEL_DRUCKER_PRAGER ? MPM_PLASTIC_DRUCKER_PRAGER
-                                                        : MPM_PLASTIC_MOHR_COULOMB;
-        pl->E = out->E;
-        pl->nu = nu;
-        pl->phi = d->friction_angle * deg;
-        pl->psi = d->dilatancy_angle * deg;
-        pl->c = d->cohesion;
-        pl->tension = d->tension_cutoff;
-        pl->match = (mpm_dp_match)d->mc_match;
-        pl->tol = d->substep_tolerance;
-        mpm_error e2;
-        if ((rc = mpm_plastic_init(pl, &e2)))
-            return BAD("model", "plastic parameters: %s", e2.message);
-    }
     return 0;
 }
 
