@@ -211,7 +211,8 @@ static int conv_materials(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         md->friction_angle = m->has_friction_angle ? m->friction_angle : 0;
         md->dilatancy_angle = m->has_dilatancy_angle ? m->dilatancy_angle : 0;
         md->cohesion = m->has_cohesion ? m->cohesion : 0;
-        md->tension_cutoff = m->has_tension_cutoff ? m->tension_cutoff : 0;
+        md->tension_cutoff =
+            m->has_tension_cutoff ? m->tension_cutoff : HUGE_VAL; /* the apex only */
         md->mc_match = m->has_mc_match ? (mpm_mc_match)m->mc_match : MPM_MC_COMPRESSION;
         md->substep_tolerance = m->has_substep_tolerance ? m->substep_tolerance : 0;
     }

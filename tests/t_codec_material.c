@@ -52,8 +52,9 @@ TEST(codec_material_case)
     } bad[] = {
         {"\"yieldStress\":0.5,", "", "materials[0].yieldStress: missing"},
         {"\"yieldStress\":0.5,", "\"yieldStress\":-0.5,", "materials[0].yieldStress: must be"},
-        {"\"VON_MISES\"", "\"DRUCKER_PRAGER\",\"frictionAngle\":30",
-         "materials[0].model: DRUCKER_PRAGER is not yet implemented"},
+        {"\"VON_MISES\"", "\"DRUCKER_PRAGER\"", "materials[0].frictionAngle: missing"},
+        {"\"VON_MISES\"", "\"MOHR_COULOMB\",\"frictionAngle\":30,\"tensionCutoff\":-1",
+         "materials[0].tensionCutoff: must be >= 0"},
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         const char *p = strstr(j2_case, bad[i].from);

@@ -557,8 +557,8 @@ TEST(material_general_path_bits)
 }
 
 /* Validation names the field and the limit; Drucker-Prager and
- * Mohr-Coulomb are refused as not yet implemented, after their own
- * parameters are checked. */
+ * Mohr-Coulomb are refused in 1D and accepted in 2D (k = 3 at 30 degrees,
+ * the angle converted to radians). */
 TEST(material_validation)
 {
     static const struct {
@@ -598,12 +598,24 @@ TEST(material_validation)
         {{.model = MPM_MODEL_DRUCKER_PRAGER,
           .youngs_modulus = 1,
           .density = 1,
-          .friction_angle = 30},
-         "materials[0].model",
-         "DRUCKER_PRAGER is not yet implemented"},
-        {{.model = MPM_MODEL_MOHR_COULOMB, .youngs_modulus = 1, .density = 1, .friction_angle = 30},
-         "materials[0].model",
-         "MOHR_COULOMB is not yet implemented"},
+          .friction_angle = 30,
+          .tension_cutoff = -1},
+         "materials[0].tension_cutoff",
+         ">= 0"},
+        {{.model = MPM_MODEL_DRUCKER_PRAGER,
+          .youngs_modulus = 1,
+          .density = 1,
+          .friction_angle = 30,
+          .mc_match = (mpm_mc_match)5},
+         "materials[0].mc_match",
+         "unknown value 5"},
+        {{.model = MPM_MODEL_MOHR_COULOMB,
+          .youngs_modulus = 1,
+          .density = 1,
+          .friction_angle = 30,
+          .poisson_ratio = 0.5},
+         "materials[0].poisson_ratio",
+         "(-1, 0.5)"},
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         mpm_mat_params mp;
@@ -614,6 +626,27 @@ TEST(material_validation)
         CHECKF(rc == MPM_EINVAL && !strcmp(f, bad[i].field) && strstr(err.message, bad[i].what),
                "case %zu: %d %s: %s", i, rc, f, err.message);
         TLOG("%s: %s", f, err.message);
+    }
+    /* the frictional models need 2D or 3D; in 2D they are accepted */
+    mpm_material_desc mc = {.model = MPM_MODEL_MOHR_COULOMB,
+                            .youngs_modulus = 1,
+                            .density = 1,
+                            .friction_angle = 30,
+                            .tension_cutoff = HUGE_VAL};
+    for (int dim = 1; dim <= 2; dim++) {
+        mpm_mat_params mp;
+        mpm_error err;
+        char f[128];
+        int rc = mpm_model_params(&mc, dim, 0, &mp, &err);
+        mpm_error_field(&err, MPM_FIELD_PROTO, f, sizeof f);
+        if (dim == 1)
+            CHECKF(rc == MPM_EINVAL && !strcmp(f, "materials[0].model") &&
+                       strstr(err.message, "2D (plane strain) or 3D"),
+                   "%d %s: %s", rc, f, err.message);
+        else
+            CHECKF(rc == 0 && mp.pl.kind == MPM_PLASTIC_MOHR_COULOMB &&
+                       fabs(mp.pl.kphi - 3.0) < 1e-12,
+                   "%d %s: %s", rc, f, err.message);
     }
     scene s;
     CHECK(block2d(&s, 0, MPM_MODEL_LINEAR_ELASTIC, (mpm_volume_update)7) == 0);

@@ -51,8 +51,9 @@ typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
  * compressible hyperelastic, sigma = mu/J (b - I) + lambda ln J / J I from
  * the deformation gradient.  VON_MISES: J2 plasticity with linear isotropic
  * hardening, radial return, Jaumann stress rate.  DRUCKER_PRAGER and
- * MOHR_COULOMB: their parameters are validated, the models are not yet
- * implemented (refused). */
+ * MOHR_COULOMB: perfectly plastic, non-associated, with a tension cut-off
+ * (server/mpm/mpm_plastic.h; Sloan's substepping for DP, a closed-form
+ * principal-space return for MC), Jaumann stress rate; 2D and 3D only. */
 typedef enum {
     MPM_MODEL_LINEAR_ELASTIC = 0,
     MPM_MODEL_NEO_HOOKEAN = 1,
@@ -108,7 +109,9 @@ typedef struct {
     double friction_angle;    /* DP/MC: phi in (0, 90) degrees */
     double dilatancy_angle;   /* DP/MC: psi in [0, phi] degrees */
     double cohesion;          /* DP/MC: c >= 0 */
-    double tension_cutoff;    /* DP/MC: largest mean tension >= 0 (0: none allowed) */
+    double tension_cutoff;    /* DP/MC: tension cut-off >= 0 (DP: the largest mean stress, MC:
+                                 the largest principal stress), capped at the apex; HUGE_VAL
+                                 (the codec's value when the field is absent): the apex only */
     mpm_mc_match mc_match;    /* DP: matching to Mohr-Coulomb */
     double substep_tolerance; /* DP/MC: Sloan's substepping tolerance, 0 (default) or in (0, 1) */
 } mpm_material_desc;
@@ -431,6 +434,21 @@ void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out);
  * then costs nothing.  The request holds for one step; the physics is
  * unchanged.  Not to be called while a step runs. */
 void mpm_sim_want_energy(mpm_sim *sim);
+
+/* The work of the frictional models' stress-point integrators
+ * (DRUCKER_PRAGER: Sloan's substepping; MOHR_COULOMB: a closed-form
+ * return, which counts one substep), cumulative from the start of the run
+ * and summed per thread in thread order (the same for any thread count):
+ * updates is the number of plastic particle-updates (a particle that
+ * yielded in a step counts once), substeps the substeps they took, and
+ * max_substeps the most that one update took.  All 0 when no material is
+ * DRUCKER_PRAGER or MOHR_COULOMB (no counting is done then). */
+typedef struct {
+    long long updates;
+    long long substeps;
+    int max_substeps;
+} mpm_plastic_stats;
+void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
 
 /* Copies the requested particle fields into caller arrays. */
 void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);

@@ -29,6 +29,7 @@
 #define MPM_INTERNAL_H
 
 #include "mpm.h"
+#include "mpm_plastic.h"
 #include "mpm_timefn.h"
 
 #include <pthread.h>
@@ -80,6 +81,7 @@ typedef struct {
     double K;                         /* bulk modulus lambda + 2 mu / 3 */
     double sy0, H;                    /* VON_MISES: yield stress, hardening modulus */
     const mpm_model_ops *ops;         /* the material's model */
+    mpm_plastic_params pl;            /* DRUCKER_PRAGER, MOHR_COULOMB: mpm_plastic_init()'s */
 } mpm_mat_params;
 
 /* One grid's worth of scatter targets (the main grid, or a thread's private
@@ -139,6 +141,13 @@ typedef struct {
     /* this step's work of the prescribed velocities' reactions and of the
      * face friction on the thread's share of the nodes (mpm_cond.c) */
     double wpres, wfric;
+    /* DRUCKER_PRAGER / MOHR_COULOMB updates of the step (mpm_model_block()):
+     * plastic point-updates, their substeps (a closed-form return counts
+     * 1), the most in one update, and the first particle whose integrator
+     * failed (SIZE_MAX: none); summed and reset by mpm_sim_step() */
+    long long plupd, plsub;
+    int plmax;
+    size_t plbad;
     char pad[64];
 } mpm_thread_out;
 
@@ -237,6 +246,10 @@ struct mpm_sim {
     int general, spin3, f_block, mixed;
     mpm_volume_update volmode;
     double plastic_work; /* cumulative sigma : d eps_p V (thread order) */
+    /* frictional: a material is DRUCKER_PRAGER or MOHR_COULOMB (the step
+     * sums the substep counters, mpm_sim_plastic_stats()) */
+    int frictional;
+    mpm_plastic_stats plstats;
 
     /* time */
     double dt_fixed; /* > 0: given */
@@ -389,6 +402,11 @@ typedef struct {
     double *const *deps; /* mpm_thread_out.deps */
     int dim;
     double wp; /* plastic work added (sum of sigma : d eps_p V) */
+    /* frictional models (DP, MC): plastic updates, substeps, the most in
+     * one update, the first particle whose update failed (SIZE_MAX) */
+    long long nupd, nsub;
+    int maxsub;
+    size_t bad;
 } mpm_model_blk;
 
 struct mpm_model_ops {

@@ -22,9 +22,14 @@
  *   VON_MISES    J2 plasticity, linear isotropic hardening, closed-form
  *                radial return, after the Jaumann rotation of the stress;
  *                1D uniaxial stress with the same yield rule.
- * The rate-form models share mpm_model_rate_block(): Jaumann rotation,
- * then the model's point() (a Drucker-Prager or Mohr-Coulomb integrator
- * plugs in as a point function).
+ *   DRUCKER_PRAGER, MOHR_COULOMB  perfectly plastic, non-associated, with
+ *                a tension cut-off: mpm_plastic_update() (mpm_plastic.h)
+ *                after the Jaumann rotation, with the parameters that
+ *                mpm_plastic_init() derived once per material; 2D plane
+ *                strain (deps_zz = 0, sigma_zz kept), 3D; refused in 1D.
+ *                Their block also counts the integrator's substeps.
+ * The rate-form models share the Jaumann rotation, then the model's point
+ * update (J2: rate_block() calling point(); DP, MC: frictional_block()).
  */
 #include "mpm_internal.h"
 
@@ -357,6 +362,69 @@ static double j2_energy(const mpm_mat_params *mp, const mpm_particles *P, int di
     return mpm_elastic_stored(mp, sig, dim) * P->vol[p];
 }
 
+/* ---- Drucker-Prager and Mohr-Coulomb (mpm_plastic.h) ---- */
+
+/* The point hook: the integrator with the material's parameters (1D is
+ * refused at creation).  Returns its code (MPM_EDIVERGED: the stress and
+ * state unchanged). */
+static int frictional_point(const mpm_mat_params *mp, int dim, double sig[6], const double de[6],
+                            double *epsp, int *yielded, double *dwp)
+{
+    (void)dim;
+    mpm_plastic_state st = {*epsp, 0, 0};
+    double d = 0;
+    int rc = mpm_plastic_update(&mp->pl, sig, de, &st, &d);
+    if (rc) return rc;
+    *epsp = st.eps_p;
+    *yielded = st.yielded;
+    *dwp += d;
+    return 0;
+}
+
+/* rate_block() for the frictional models, counting the integrator's
+ * substeps (mpm_sim_plastic_stats()) and keeping the first particle whose
+ * update failed (its stress and state are left as they were). */
+static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    mpm_particles *P = b->P;
+    int D = b->dim, nc = MPM_NCOMP(D);
+    double *const *deps = b->deps;
+    for (size_t i = i0; i < i1; i++) {
+        size_t p = b0 + i;
+        const mpm_mat_params *mp = &b->mats[P->mat[p]];
+        double sig[6] = {0, 0, 0, 0, 0, 0}, de[6] = {0, 0, 0, 0, 0, 0}, w[3] = {0, 0, 0};
+        for (int c = 0; c < nc; c++) sig[c] = P->sig[c][p];
+        if (D == 2) { /* plane strain: de_zz = 0, sigma_zz kept */
+            w[0] = deps[2][i];
+            de[0] = deps[0][i];
+            de[1] = deps[1][i];
+            de[3] = deps[3][i];
+        } else {
+            for (int c = 0; c < 6; c++) de[c] = deps[c][i];
+            for (int k = 0; k < 3; k++) w[k] = deps[6 + k][i];
+        }
+        mpm_jaumann(sig, w, D);
+        mpm_plastic_state st = {P->epsp[p], 0, 0};
+        double dwp = 0;
+        if (mpm_plastic_update(&mp->pl, sig, de, &st, &dwp)) {
+            if (b->bad == SIZE_MAX) b->bad = p;
+            continue;
+        }
+        for (int c = 0; c < nc; c++) {
+            P->sig[c][p] = sig[c];
+            if (P->eps[c]) P->eps[c][p] += de[c];
+        }
+        P->epsp[p] = st.eps_p;
+        P->yld[p] = st.yielded ? 1.0 : 0.0;
+        if (st.substeps) {
+            b->nupd++;
+            b->nsub += st.substeps;
+            if (st.substeps > b->maxsub) b->maxsub = st.substeps;
+        }
+        b->wp += dwp * P->vol[p];
+    }
+}
+
 static const mpm_model_ops linear_elastic = {
     "linear_elastic", 0, {elastic_1d, elastic_2d, elastic_3d}, elastic_block, NULL, elastic_energy};
 static const mpm_model_ops neo_hookean = {"neo_hookean", MPM_NEED_F, {NULL, NULL, NULL},
@@ -364,6 +432,12 @@ static const mpm_model_ops neo_hookean = {"neo_hookean", MPM_NEED_F, {NULL, NULL
 static const mpm_model_ops von_mises = {"von_mises",        MPM_NEED_SPIN | MPM_NEED_PLASTIC,
                                         {NULL, NULL, NULL}, rate_block,
                                         mpm_j2_point,       j2_energy};
+static const mpm_model_ops drucker_prager = {"drucker_prager",   MPM_NEED_SPIN | MPM_NEED_PLASTIC,
+                                             {NULL, NULL, NULL}, frictional_block,
+                                             frictional_point,   j2_energy};
+static const mpm_model_ops mohr_coulomb = {"mohr_coulomb",     MPM_NEED_SPIN | MPM_NEED_PLASTIC,
+                                           {NULL, NULL, NULL}, frictional_block,
+                                           frictional_point,   j2_energy};
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
 {
@@ -371,7 +445,9 @@ const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
     case MPM_MODEL_LINEAR_ELASTIC: return &linear_elastic;
     case MPM_MODEL_NEO_HOOKEAN: return &neo_hookean;
     case MPM_MODEL_VON_MISES: return &von_mises;
-    default: return NULL; /* DRUCKER_PRAGER, MOHR_COULOMB: not yet */
+    case MPM_MODEL_DRUCKER_PRAGER: return &drucker_prager;
+    case MPM_MODEL_MOHR_COULOMB: return &mohr_coulomb;
+    default: return NULL;
     }
 }
 
@@ -383,7 +459,7 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
     double *const *deps = o->deps;
     mpm_particles *P = &s->P;
     if (s->f_block) f_block(s, deps, b0, nb, D);
-    mpm_model_blk b = {s->mats, P, deps, D, 0.0};
+    mpm_model_blk b = {s->mats, P, deps, D, 0.0, 0, 0, 0, SIZE_MAX};
     if (!s->mixed) {
         s->model->block(&b, b0, 0, nb);
     } else { /* runs of particles of one model */
@@ -397,6 +473,12 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
         }
     }
     o->wplast += b.wp;
+    if (s->frictional) {
+        o->plupd += b.nupd;
+        o->plsub += b.nsub;
+        if (b.maxsub > o->plmax) o->plmax = b.maxsub;
+        if (b.bad < o->plbad) o->plbad = b.bad;
+    }
     double *restrict vol = P->vol + b0;
     if (s->volmode == MPM_VOLUME_STRAIN_INCREMENT) {
         for (size_t i = 0; i < nb; i++) {
@@ -414,8 +496,7 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
     (snprintf(path, sizeof path, "materials[%zu]." field, i), \
      mpm_fail(err, MPM_EINVAL, path, __VA_ARGS__))
 
-/* The Drucker-Prager / Mohr-Coulomb parameters (validated for those models
- * although they are refused for now). */
+/* The Drucker-Prager / Mohr-Coulomb parameters. */
 static int check_frictional(const mpm_material_desc *d, size_t i, mpm_error *err)
 {
     char path[64];
@@ -427,8 +508,8 @@ static int check_frictional(const mpm_material_desc *d, size_t i, mpm_error *err
                    psi);
     if (!(d->cohesion >= 0) || !isfinite(d->cohesion))
         return BAD("cohesion", "must be finite and >= 0 (got %g)", d->cohesion);
-    if (!(d->tension_cutoff >= 0) || !isfinite(d->tension_cutoff))
-        return BAD("tension_cutoff", "must be finite and >= 0 (got %g)", d->tension_cutoff);
+    if (!(d->tension_cutoff >= 0))
+        return BAD("tension_cutoff", "must be >= 0 (got %g)", d->tension_cutoff);
     if (d->mc_match != MPM_MC_COMPRESSION && d->mc_match != MPM_MC_EXTENSION &&
         d->mc_match != MPM_MC_PLANE_STRAIN)
         return BAD("mc_match", "unknown value %d (COMPRESSION, EXTENSION or PLANE_STRAIN)",
@@ -446,8 +527,11 @@ int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_para
     int rc;
     if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
         if ((rc = check_frictional(d, i, err))) return rc;
-        return BAD("model", "%s is not yet implemented (LINEAR_ELASTIC, NEO_HOOKEAN or VON_MISES)",
-                   d->model == MPM_MODEL_DRUCKER_PRAGER ? "DRUCKER_PRAGER" : "MOHR_COULOMB");
+        if (dim == 1)
+            return BAD("model",
+                       "%s needs a 2D (plane strain) or 3D grid (1D keeps one stress "
+                       "component, the lateral stresses of uniaxial strain would be lost)",
+                       d->model == MPM_MODEL_DRUCKER_PRAGER ? "DRUCKER_PRAGER" : "MOHR_COULOMB");
     }
     if (!mpm_model_get(d->model)) return BAD("model", "unknown model %d", (int)d->model);
     if (!(d->youngs_modulus > 0) || !isfinite(d->youngs_modulus))
@@ -475,6 +559,29 @@ int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_para
     out->sy0 = d->yield_stress;
     out->H = d->hardening_modulus;
     out->ops = mpm_model_get(d->model);
+    if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
+        static const mpm_dp_match match[] = {MPM_DP_COMPRESSION, MPM_DP_EXTENSION,
+                                             MPM_DP_PLANE_STRAIN};
+        const double rad = acos(-1.0) / 180.0;
+        mpm_plastic_params *pl = &out->pl;
+        pl->kind = d->model == MPM_MODEL_DRUCKER_PRAGER ? MPM_PLASTIC_DRUCKER_PRAGER
+                                                        : MPM_PLASTIC_MOHR_COULOMB;
+        pl->E = out->E;
+        pl->nu = nu;
+        pl->phi = d->friction_angle * rad;
+        pl->psi = d->dilatancy_angle * rad;
+        pl->c = d->cohesion;
+        pl->tension = d->tension_cutoff;
+        pl->match = match[d->mc_match];
+        pl->tol = d->substep_tolerance;
+        if ((rc = mpm_plastic_init(pl, err))) {
+            /* its field names are the schema's but for the matching */
+            if (err && err->depth == 1 && !strcmp(err->path[0].name, "dp_match"))
+                snprintf(err->path[0].name, sizeof err->path[0].name, "mc_match");
+            mpm_error_prefix(err, "materials", (long)i);
+            return rc;
+        }
+    }
     return 0;
 }
 

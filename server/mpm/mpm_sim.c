@@ -413,6 +413,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         if (mpm_model_params(&c->materials[i], dim, i, &s->mats[i], err)) goto fail;
         if (s->mats[i].c > s->cmax) s->cmax = s->mats[i].c;
         if (s->mats[i].ops != s->model) s->mixed = 1;
+        if (c->materials[i].model == MPM_MODEL_DRUCKER_PRAGER ||
+            c->materials[i].model == MPM_MODEL_MOHR_COULOMB)
+            s->frictional = 1;
     }
     /* the block update's path, once per job (mpm_pass.h block_update()) */
     unsigned needs = model_needs(c);
@@ -452,9 +455,11 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
             if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, musl)) goto nomem;
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
-    for (int t = 0; t < s->nthreads; t++)
+    for (int t = 0; t < s->nthreads; t++) {
+        s->tout[t].plbad = SIZE_MAX;
         for (int cc = 0; cc < 9; cc++)
             if (!(s->tout[t].deps[cc] = line_alloc(MPM_BLOCK * sizeof(double)))) goto nomem;
+    }
     for (int t = 0; t < s->nthreads; t++)
         if (!(s->tout[t].wblk =
                   line_alloc(mpm_kernels_scratch() > mpm_cpdi_scratch() ? mpm_kernels_scratch()
@@ -595,6 +600,44 @@ static int finish_step(mpm_sim *s)
     return 0;
 }
 
+/* The frictional models' counters of the step, in thread order; a failed
+ * stress-point update fails the run (MPM_EDIVERGED, naming the particle
+ * and its material).  Returns s->failed. */
+static int frictional_end_step(mpm_sim *s)
+{
+    size_t bad = SIZE_MAX;
+    for (int t = 0; t < s->nthreads; t++) {
+        mpm_thread_out *o = &s->tout[t];
+        s->plstats.updates += o->plupd;
+        s->plstats.substeps += o->plsub;
+        if (o->plmax > s->plstats.max_substeps) s->plstats.max_substeps = o->plmax;
+        if (o->plbad < bad) bad = o->plbad;
+        o->plupd = o->plsub = 0;
+        o->plmax = 0;
+        o->plbad = SIZE_MAX;
+    }
+    if (bad != SIZE_MAX) {
+        unsigned m = s->P.mat[bad];
+        const mpm_plastic_params *pl = &s->mats[m].pl;
+        s->failed = mpm_fail(
+            &s->err, MPM_EDIVERGED, NULL,
+            "diverged at step %ld, time %.9g: the %s update of particle %zu (materials[%u]) "
+            "failed: %s",
+            s->steps + 1, s->t + s->dt, s->mats[m].ops->name, (size_t)s->P.id[bad], m,
+            pl->kind == MPM_PLASTIC_DRUCKER_PRAGER
+                ? "Sloan's substepping exhausted its substeps or met a non-finite stress (a "
+                  "strain increment of about a thousand yield strains; reduce dt or raise "
+                  "substep_tolerance)"
+                : "a non-finite trial stress");
+    }
+    return s->failed;
+}
+
+void mpm_sim_plastic_stats(const mpm_sim *s, mpm_plastic_stats *out)
+{
+    *out = s->plstats;
+}
+
 int mpm_sim_step(mpm_sim *s)
 {
     if (s->failed) return MPM_ESTATE;
@@ -619,6 +662,7 @@ int mpm_sim_step(mpm_sim *s)
         mpm_energy_sum(s, &s->ecache);
         s->ecache_ok = 1; /* the particles as they are now, even if the step failed */
     }
+    if (s->frictional && frictional_end_step(s)) return s->failed;
     return finish_step(s);
 }
 
