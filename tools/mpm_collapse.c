@@ -7,7 +7,6 @@
 #include "mpm_collapse.h"
 
 #include <math.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -16,8 +15,16 @@
 #define COLLAPSE_RHO 1500.0 /* bulk density of a dry quartz sand (kg/m^3) */
 #define COLLAPSE_E 1e6      /* Young's modulus (Pa): elastic strain at the base <= 0.5 % */
 #define COLLAPSE_NU 0.3
-/* at rest: kinetic energy below this fraction of the released potential */
+/* cohesion (Pa): c = 0 stops Drucker-Prager's substepping at the cone's
+ * apex (the stress-free particles of the free surface); 10 Pa is 0.7 % of
+ * rho g d0 at d0 = 0.1 m, a cohesive length c / (rho g) = 0.7 mm, far
+ * below a cell */
+#define COLLAPSE_C 10.0
+/* at rest: kinetic energy below this fraction of the released potential
+ * (the elastic vibrations of the deposit keep about 3e-3 without damping)
+ * for COLLAPSE_REST_T seconds */
 #define COLLAPSE_REST 5e-3
+#define COLLAPSE_REST_T 0.1
 
 double mpm_collapse_ref_runout(double a, double *band)
 {
@@ -84,7 +91,7 @@ int mpm_collapse_setup(const mpm_collapse_cfg *cfg, mpm_collapse_case *cc)
     cc->mat.density = COLLAPSE_RHO;
     cc->mat.friction_angle = phi;
     cc->mat.dilatancy_angle = 0;
-    cc->mat.cohesion = 0;
+    cc->mat.cohesion = COLLAPSE_C;
     cc->mat.tension_cutoff = 0;
     cc->mat.mc_match = MPM_MC_PLANE_STRAIN;
     cc->body.material = 0;
@@ -167,7 +174,7 @@ int mpm_collapse_run(const mpm_collapse_cfg *cfg, mpm_collapse_res *r, mpm_error
     double t_max = cfg->t_max > 0 ? cfg->t_max : 8.0 * sqrt(cc.h0 / COLLAPSE_G) + 0.5;
     mpm_energy e;
     mpm_sim_energy(s, &e);
-    double e0 = e.kinetic + e.strain + e.potential, p0 = e.potential, emax = 0;
+    double e0 = e.kinetic + e.strain + e.potential, p0 = e.potential, emax = 0, t_rest = -1;
     int rc = 0, every = 20;
     while (mpm_sim_time(s) < t_max) {
         if (mpm_sim_steps(s) % every == every - 1) mpm_sim_want_energy(s);
@@ -177,13 +184,15 @@ int mpm_collapse_run(const mpm_collapse_cfg *cfg, mpm_collapse_res *r, mpm_error
         double bal = e.kinetic + e.strain + e.potential + e.plastic_work + e.friction_work - e0;
         if (fabs(bal) > emax) emax = fabs(bal);
         double drop = p0 - e.potential;
-        if (getenv("COLLAPSE_TRACE") && mpm_sim_steps(s) % (every * 25) == 0)
-            fprintf(stderr, "t %.3f K/drop %.3e drop %.4g wp %.4g wf %.4g bal %.2e\n",
-                    mpm_sim_time(s), e.kinetic / drop, drop, e.plastic_work, e.friction_work,
-                    bal / drop);
-        if (mpm_sim_time(s) > t_min && drop > 0 && e.kinetic < COLLAPSE_REST * drop) {
-            r->at_rest = 1;
-            break;
+        double t = mpm_sim_time(s);
+        if (t > t_min && drop > 0 && e.kinetic < COLLAPSE_REST * drop) {
+            if (t_rest < 0) t_rest = t;
+            if (t - t_rest >= COLLAPSE_REST_T) {
+                r->at_rest = 1;
+                break;
+            }
+        } else {
+            t_rest = -1;
         }
     }
     if (rc) {

@@ -36,7 +36,7 @@ typedef struct {
     double height; /* h_inf / d0 */
     double t_end;  /* when the run stopped (s) */
     long steps;
-    int at_rest;   /* 1: K fell below 5e-3 of the released potential energy */
+    int at_rest;   /* 1: K stayed below 5e-3 of the released potential for 0.1 s */
     double e_err;  /* max over the run of |K + S + P + W_p + W_f - E0| / (P0 - P_end) */
     double wp, wf; /* plastic and friction work at the end (J/m) */
     double e_drop; /* P0 - P_end (J/m) */
