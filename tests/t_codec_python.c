@@ -30,7 +30,7 @@ TEST(codec_python_json_format)
     static const char *names[] = {
         "point1d",       "bar1d_mpm",      "bar1d_gimp",       "disks2d_coarse", "disks2d_fine",
         "cube3d",        "bar1d_bspline2", "disks2d_bspline2", "hangbar2d_cpdi", "disk2d_apic",
-        "sliding_block", "pushed_bar1d",   "impact2d_j2",      "collapse2d"};
+        "sliding_block", "pushed_bar1d",   "impact2d_j2",      "triaxial3d_mc",  "collapse2d"};
     enum { NN = sizeof names / sizeof names[0] };
     char dir[] = "/tmp/mpmpy.XXXXXX", cmd[1024], path[512], err[T_ERRLEN];
     CHECK(mkdtemp(dir) != NULL);

@@ -637,15 +637,16 @@ TEST(material_validation)
         mpm_mat_params mp;
         mpm_error err;
         char f[128];
+        mpm_plastic_params pl;
         int rc = mpm_model_params(&mc, dim, 0, &mp, &err);
+        if (!rc) rc = mpm_model_plastic(&mc, dim, 0, &pl, &err);
         mpm_error_field(&err, MPM_FIELD_PROTO, f, sizeof f);
         if (dim == 1)
             CHECKF(rc == MPM_EINVAL && !strcmp(f, "materials[0].model") &&
                        strstr(err.message, "2D (plane strain) or 3D"),
                    "%d %s: %s", rc, f, err.message);
         else
-            CHECKF(rc == 0 && mp.pl.kind == MPM_PLASTIC_MOHR_COULOMB &&
-                       fabs(mp.pl.kphi - 3.0) < 1e-12,
+            CHECKF(rc == 0 && pl.kind == MPM_PLASTIC_MOHR_COULOMB && fabs(pl.kphi - 3.0) < 1e-12,
                    "%d %s: %s", rc, f, err.message);
     }
     scene s;

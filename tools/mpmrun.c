@@ -232,6 +232,13 @@ int main(int argc, char **argv)
     printf("# total energy %.6e -> %.6e (%+.3f%%), momentum (%.2e, %.2e)\n", e0.total, e.total,
            100 * (e.total - e0.total) / e0.total, e.momentum[0], e.momentum[1]);
     if (kind != 2) printf("# max Eq. 38 error of the centre-of-mass velocity: %.3e\n", err_max);
+    mpm_plastic_stats ps; /* the paper's cases are elastic: printed only if a case yields */
+    mpm_sim_plastic_stats(s, &ps);
+    if (ps.updates)
+        printf(
+            "# plastic updates %lld, substeps %lld (%.3g per update, max %d), plastic work %.6e\n",
+            ps.updates, ps.substeps, (double)ps.substeps / (double)ps.updates, ps.max_substeps,
+            e.plastic_work);
     if (rc)
         fprintf(stderr, "mpmrun: %s\n",
                 mpm_error_text(mpm_sim_error(s), MPM_FIELD_PROTO, err, sizeof err));

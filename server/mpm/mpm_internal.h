@@ -81,7 +81,10 @@ typedef struct {
     double K;                         /* bulk modulus lambda + 2 mu / 3 */
     double sy0, H;                    /* VON_MISES: yield stress, hardening modulus */
     const mpm_model_ops *ops;         /* the material's model */
-    mpm_plastic_params pl;            /* DRUCKER_PRAGER, MOHR_COULOMB: mpm_plastic_init()'s */
+    /* DRUCKER_PRAGER, MOHR_COULOMB: mpm_plastic_init()'s parameters (in
+     * mpm_sim.plp, so that this struct, which the elastic kernels index,
+     * keeps its size); else NULL */
+    const mpm_plastic_params *pl;
 } mpm_mat_params;
 
 /* One grid's worth of scatter targets (the main grid, or a thread's private
@@ -250,6 +253,7 @@ struct mpm_sim {
      * sums the substep counters, mpm_sim_plastic_stats()) */
     int frictional;
     mpm_plastic_stats plstats;
+    mpm_plastic_params *plp; /* per material (frictional only, else NULL) */
 
     /* time */
     double dt_fixed; /* > 0: given */
@@ -388,11 +392,13 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
  *           2D: plane strain, sig[2] = sigma_zz, deps[2] = 0), the strain
  *           increment deps, and the state epsp (equivalent plastic strain)
  *           and *yielded (set 1 when it flowed, else 0); adds the plastic
- *           work density sigma : d eps_p to *dwp.  Returns 0 (or a negative
- *           MPM_E* code, reserved for integrators that can fail).
- *           mpm_model_rate_block() applies the Jaumann rotation and calls it
- *           per particle: a Drucker-Prager or Mohr-Coulomb integrator plugs
- *           in by writing this one function;
+ *           work density sigma : d eps_p to *dwp.  Returns 0 or a negative
+ *           MPM_E* code (DP, MC: MPM_EDIVERGED, state unchanged).  J2's
+ *           block (rate_block()) applies the Jaumann rotation and calls
+ *           it per particle; DP and MC have their own block
+ *           (frictional_block(), which also counts the substeps and
+ *           reports a failed update) and the same point function for
+ *           callers of one point;
  *   energy  the stored (elastic) energy of particle p (not a density). */
 enum { MPM_NEED_F = 1, MPM_NEED_SPIN = 2, MPM_NEED_PLASTIC = 4 };
 
@@ -445,6 +451,11 @@ int mpm_j2_point(const mpm_mat_params *mp, int dim, double sig[6], const double 
 double mpm_elastic_stored(const mpm_mat_params *mp, const double sig[6], int dim);
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
+/* The integrator's parameters of a DRUCKER_PRAGER or MOHR_COULOMB material
+ * (angles to radians, mpm_plastic_init()); 0 or MPM_EINVAL naming
+ * materials[i]'s field.  The caller has checked d with mpm_model_params(). */
+int mpm_model_plastic(const mpm_material_desc *d, int dim, size_t i, mpm_plastic_params *pl,
+                      mpm_error *err);
 /* Fills derived constants; returns 0 or MPM_EINVAL with err naming
  * materials[i]'s field and the limit. */
 int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,

@@ -373,7 +373,7 @@ static int frictional_point(const mpm_mat_params *mp, int dim, double sig[6], co
     (void)dim;
     mpm_plastic_state st = {*epsp, 0, 0};
     double d = 0;
-    int rc = mpm_plastic_update(&mp->pl, sig, de, &st, &d);
+    int rc = mpm_plastic_update(mp->pl, sig, de, &st, &d);
     if (rc) return rc;
     *epsp = st.eps_p;
     *yielded = st.yielded;
@@ -406,7 +406,7 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
         mpm_jaumann(sig, w, D);
         mpm_plastic_state st = {P->epsp[p], 0, 0};
         double dwp = 0;
-        if (mpm_plastic_update(&mp->pl, sig, de, &st, &dwp)) {
+        if (mpm_plastic_update(mp->pl, sig, de, &st, &dwp)) {
             if (b->bad == SIZE_MAX) b->bad = p;
             continue;
         }
@@ -560,29 +560,36 @@ int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_para
     out->H = d->hardening_modulus;
     out->ops = mpm_model_get(d->model);
     if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
-        static const mpm_dp_match match[] = {MPM_DP_COMPRESSION, MPM_DP_EXTENSION,
-                                             MPM_DP_PLANE_STRAIN};
-        const double rad = acos(-1.0) / 180.0;
-        mpm_plastic_params *pl = &out->pl;
-        pl->kind = d->model == MPM_MODEL_DRUCKER_PRAGER ? MPM_PLASTIC_DRUCKER_PRAGER
-                                                        : MPM_PLASTIC_MOHR_COULOMB;
-        pl->E = out->E;
-        pl->nu = nu;
-        pl->phi = d->friction_angle * rad;
-        pl->psi = d->dilatancy_angle * rad;
-        pl->c = d->cohesion;
-        pl->tension = d->tension_cutoff;
-        pl->match = match[d->mc_match];
-        pl->tol = d->substep_tolerance;
-        if ((rc = mpm_plastic_init(pl, err))) {
-            /* its field names are the schema's but for the matching */
-            if (err && err->depth == 1 && !strcmp(err->path[0].name, "dp_match"))
-                snprintf(err->path[0].name, sizeof err->path[0].name, "mc_match");
-            mpm_error_prefix(err, "materials", (long)i);
-            return rc;
-        }
+        mpm_plastic_params pl; /* checked here; the simulation keeps its own */
+        if ((rc = mpm_model_plastic(d, dim, i, &pl, err))) return rc;
     }
     return 0;
+}
+
+int mpm_model_plastic(const mpm_material_desc *d, int dim, size_t i, mpm_plastic_params *pl,
+                      mpm_error *err)
+{
+    static const mpm_dp_match match[] = {MPM_DP_COMPRESSION, MPM_DP_EXTENSION, MPM_DP_PLANE_STRAIN};
+    const double rad = acos(-1.0) / 180.0;
+    memset(pl, 0, sizeof *pl);
+    pl->kind = d->model == MPM_MODEL_DRUCKER_PRAGER ? MPM_PLASTIC_DRUCKER_PRAGER
+                                                    : MPM_PLASTIC_MOHR_COULOMB;
+    pl->E = d->youngs_modulus;
+    pl->nu = dim == 1 ? 0.0 : d->poisson_ratio;
+    pl->phi = d->friction_angle * rad;
+    pl->psi = d->dilatancy_angle * rad;
+    pl->c = d->cohesion;
+    pl->tension = d->tension_cutoff;
+    pl->match = (unsigned)d->mc_match < 3 ? match[d->mc_match] : (mpm_dp_match)d->mc_match;
+    pl->tol = d->substep_tolerance;
+    int rc = mpm_plastic_init(pl, err);
+    if (rc) {
+        /* its field names are the schema's but for the matching */
+        if (err && err->depth == 1 && !strcmp(err->path[0].name, "dp_match"))
+            snprintf(err->path[0].name, sizeof err->path[0].name, "mc_match");
+        mpm_error_prefix(err, "materials", (long)i);
+    }
+    return rc;
 }
 
 double mpm_material_wave_speed(const mpm_material_desc *m, int dim)

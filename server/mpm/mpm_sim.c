@@ -417,6 +417,15 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
             c->materials[i].model == MPM_MODEL_MOHR_COULOMB)
             s->frictional = 1;
     }
+    if (s->frictional) {
+        if (!(s->plp = calloc(s->nmat, sizeof *s->plp))) goto nomem;
+        for (size_t i = 0; i < s->nmat; i++) {
+            mpm_model_kind k = c->materials[i].model;
+            if (k != MPM_MODEL_DRUCKER_PRAGER && k != MPM_MODEL_MOHR_COULOMB) continue;
+            if (mpm_model_plastic(&c->materials[i], dim, i, &s->plp[i], err)) goto fail;
+            s->mats[i].pl = &s->plp[i];
+        }
+    }
     /* the block update's path, once per job (mpm_pass.h block_update()) */
     unsigned needs = model_needs(c);
     s->volmode = c->volume_update;
@@ -543,6 +552,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->tv_trac);
     for (size_t t = 0; s->trac_tf && t < s->ntrac; t++) mpm_timefn_copy_free(&s->trac_tf[t]);
     free(s->trac_tf);
+    free(s->plp);
     free(s);
     *sp = NULL;
 }
@@ -618,7 +628,7 @@ static int frictional_end_step(mpm_sim *s)
     }
     if (bad != SIZE_MAX) {
         unsigned m = s->P.mat[bad];
-        const mpm_plastic_params *pl = &s->mats[m].pl;
+        const mpm_plastic_params *pl = s->mats[m].pl;
         s->failed = mpm_fail(
             &s->err, MPM_EDIVERGED, NULL,
             "diverged at step %ld, time %.9g: the %s update of particle %zu (materials[%u]) "
