@@ -276,6 +276,8 @@ bench: deps
 # ---- the demo ----------------------------------------------------------------------
 # make demo: mpmd on loopback with its default database, the paper's fine
 # bouncing disks submitted and watched live with mpmctl, then stopped.
+# make demo CASE=collapse: the granular column collapse instead.
+CASE ?= disks
 demo: deps
 	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl
-	bash deploy/demo.sh
+	bash deploy/demo.sh $(CASE)

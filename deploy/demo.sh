@@ -1,9 +1,20 @@
 #!/usr/bin/env bash
 # make demo: starts mpmd on loopback with its default database (mpmd.db in
-# this directory), submits the paper's fine bouncing disks, watches the run
-# live, lists the runs, and stops the daemon.  If an mpmd already answers
-# on the endpoint, the demo uses it and leaves it running.
+# this directory), submits a case, watches the run live, lists the runs,
+# and stops the daemon.  If an mpmd already answers on the endpoint, the
+# demo uses it and leaves it running.  The case (argument 1, or
+# `make demo CASE=...`): disks (the default: the paper's fine bouncing
+# disks) or collapse (the granular column collapse, a = 2, Drucker-Prager;
+# proto/examples/collapse2d.json).
 set -euo pipefail
+choice=${1:-disks}
+case "$choice" in
+disks) file=proto/examples/disks2d_fine.json
+       title="the paper's two bouncing disks, GMPM, 392 points per disk (Section 5.6)" ;;
+collapse) file=proto/examples/collapse2d.json
+          title="a granular column collapse, a = 2, Drucker-Prager phi 30 on a rough base (Lube et al. 2005)" ;;
+*) echo "demo: unknown case '$choice' (disks or collapse)" >&2; exit 2 ;;
+esac
 cd "$(dirname "$0")/.."
 export MPMD_ENDPOINT=${MPMD_ENDPOINT:-tcp://127.0.0.1:5555}
 mkdir -p build
@@ -37,7 +48,7 @@ else
     bin/mpmctl ping
 fi
 echo
-echo "demo: the paper's two bouncing disks, GMPM, 392 points per disk (Section 5.6)"
-bin/mpmctl submit proto/examples/disks2d_fine.json --watch
+echo "demo: $title"
+bin/mpmctl submit "$file" --watch
 echo
 bin/mpmctl runs --limit 5

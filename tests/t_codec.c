@@ -307,7 +307,8 @@ TEST(codec_roundtrip)
                                         "disks2d_coarse", "disks2d_fine",       "cube3d",
                                         "bar1d_bspline2", "disks2d_bspline2",   "hangbar2d_cpdi",
                                         "disk2d_apic",    "sliding_block",      "pushed_bar1d",
-                                        "impact2d_j2",    "column2d_geostatic", "triaxial3d_mc"};
+                                        "impact2d_j2",    "column2d_geostatic", "triaxial3d_mc",
+                                        "collapse2d"};
     for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
         char path[256], err[T_ERRLEN];
         size_t len = 0, n1 = 0, n2 = 0;

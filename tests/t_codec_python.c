@@ -31,7 +31,8 @@ TEST(codec_python_json_format)
                                   "disks2d_coarse", "disks2d_fine",       "cube3d",
                                   "bar1d_bspline2", "disks2d_bspline2",   "hangbar2d_cpdi",
                                   "disk2d_apic",    "sliding_block",      "pushed_bar1d",
-                                  "impact2d_j2",    "column2d_geostatic", "triaxial3d_mc"};
+                                  "impact2d_j2",    "column2d_geostatic", "triaxial3d_mc",
+                                  "collapse2d"};
     enum { NN = sizeof names / sizeof names[0] };
     char dir[] = "/tmp/mpmpy.XXXXXX", cmd[1024], path[512], err[T_ERRLEN];
     CHECK(mkdtemp(dir) != NULL);

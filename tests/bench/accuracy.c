@@ -955,7 +955,10 @@ static void list_problems(FILE *f)
 {
     for (int pb = 0; pb < BP_COUNT; pb++)
         fprintf(f, "%s%s", pb ? ", " : "", bench_problem_name((bench_problem)pb));
+    fprintf(f, ", collapse");
 }
+
+static int only_collapse; /* --only names collapse (collapse.c) */
 
 static int parse_only(const char *s, int *only)
 {
@@ -963,6 +966,10 @@ static int parse_only(const char *s, int *only)
     snprintf(buf, sizeof buf, "%s", s);
     for (char *tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
         int found = 0;
+        if (!strcmp(tok, "collapse")) {
+            only_collapse = 1;
+            continue;
+        }
         for (int pb = 0; pb < BP_COUNT; pb++)
             if (!strcmp(tok, bench_problem_name((bench_problem)pb))) only[pb] = found = 1;
         if (!found) {
@@ -1101,6 +1108,12 @@ int main(int argc, char **argv)
         return 1;
     }
     const int *sel = use_only ? only : NULL;
+    int sweeps = !use_only;
+    for (int pb = 0; pb < BP_COUNT; pb++) sweeps |= only[pb];
+    if (!sweeps) { /* --only collapse */
+        free(E);
+        return bench_collapse(quick, out) ? 1 : 0;
+    }
     plan(sel);
     printf("%d configurations, %d repeats each for timing (median), one solver thread\n\n", nE,
            repeats);
@@ -1124,6 +1137,7 @@ int main(int argc, char **argv)
     if (!rc) printf("\nwrote %s", path);
     if (!rc && !(rc = write_gnuplot(out, sel))) printf(" and %s/accuracy.gp", out);
     printf(" (%.0f s in all)\n", bench_now() - t0);
+    if ((!use_only || only_collapse) && bench_collapse(quick, out)) rc = 1;
     for (int i = 0; i < nE; i++) bench_res_free(&E[i].r);
     free(E);
     return rc ? 1 : 0;

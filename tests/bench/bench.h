@@ -188,4 +188,9 @@ int bench_force_set(mpm_sim *s, const double *f);
  * writes a one-line summary into msg. */
 int bench_force_selftest(char *msg, size_t n);
 
+/* The granular column collapse (collapse.c): its own table, run after the
+ * sweeps (or alone with --only collapse), and DIR/collapse.csv.  quick: one
+ * cell size and scheme.  Returns 0, or -1 when a run failed. */
+int bench_collapse(int quick, const char *out);
+
 #endif

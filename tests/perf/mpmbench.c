@@ -46,6 +46,9 @@ static const char usage[] =
     "  bar1d     the paper's bar with N particles (2 per cell)\n"
     "  sparse2d  a spinning disk of N particles (default 10^4) in a 4096x4096 grid and in a\n"
     "            grid just large enough for it: both rows and the ratio\n"
+    "  collapse2d  a granular column (a = 2, ~N particles, BSPLINE2 unless --method) falling\n"
+    "            on a friction base: linear elastic and Drucker-Prager rows, twice each with\n"
+    "            the same steps, and the DP / elastic time per particle-step (aim <= 2)\n"
     "  daemon    disks2d through a real bin/mpmd (ipc://, temporary database): no watcher,\n"
     "            and a watcher taking energies every step and snapshots every 100 steps,\n"
     "            against the same case in-process (default 100 steps, 2 threads)\n"
@@ -293,13 +296,14 @@ static int parse_args(int argc, char **argv, opts *o)
         const char *v = argv[++i];
         long x;
         if (!strcmp(a, "--scene")) {
-            static const char *const names[] = {"disks2d", "cube3d", "bar1d", "sparse2d", "daemon"};
+            static const char *const names[] = {"disks2d",  "cube3d", "bar1d",
+                                                "sparse2d", "daemon", "collapse2d"};
             int ok = 0;
             for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) ok |= !strcmp(v, names[k]);
             if (!ok) {
                 fprintf(stderr,
-                        "mpmbench: --scene: expected disks2d, cube3d, bar1d, sparse2d or "
-                        "daemon, got '%s'\n",
+                        "mpmbench: --scene: expected disks2d, cube3d, bar1d, sparse2d, "
+                        "collapse2d or daemon, got '%s'\n",
                         v);
                 return -1;
             }
@@ -454,6 +458,29 @@ static int transfer_pair(pb_cfg *c)
     return 0;
 }
 
+/* The collapse scenes: elastic, Drucker-Prager, elastic, Drucker-Prager
+ * with the same steps (a drift of the machine's speed falls on both
+ * alike), then the DP / elastic time per particle-step from the summed
+ * medians (the issue's aim: <= 2). */
+static int collapse_pair(pb_cfg *c)
+{
+    pb_row r[4];
+    for (int k = 0; k < 4; k++) {
+        c->scene = k % 2 ? PB_COLLAPSE_DP : PB_COLLAPSE_EL;
+        if (measure(c, &r[k])) return 1;
+        if (k == 0) c->steps = r[0].steps;
+    }
+    double te = 0, td = 0;
+    for (int k = 0; k < 4; k++) *(k % 2 ? &td : &te) += 1.0 / r[k].mpsteps;
+    double q = td / te;
+    pb_result("collapse2d %s %s, %d thread%s: Drucker-Prager / linear elastic time per "
+              "particle-step = %.3f (%.3f, %.3f; aim <= 2): %s",
+              pb_method_name(c->method), pb_update_name(c->update), c->threads,
+              c->threads > 1 ? "s" : "", q, r[0].mpsteps / r[1].mpsteps,
+              r[2].mpsteps / r[3].mpsteps, verdict(q <= 2.0));
+    return 0;
+}
+
 static int run_one(const opts *o)
 {
     pb_cfg c = {PB_DISKS2D, o->method,
@@ -469,6 +496,10 @@ static int run_one(const opts *o)
 #else
         return pb_daemon_scene(o->method, o->update, o->particles, o->steps, o->threads) ? 1 : 0;
 #endif
+    }
+    if (!strcmp(o->scene, "collapse2d")) {
+        c.method = o->have_method ? o->method : MPM_METHOD_BSPLINE2;
+        return collapse_pair(&c) ? 1 : 0;
     }
     if (!strcmp(o->scene, "sparse2d")) {
         c.scene = PB_SPARSE_WIDE;
@@ -713,6 +744,14 @@ static int run_all(const opts *o)
             }
             sparse_ratio(&w, &ti);
         }
+    pb_note("%s", "");
+
+    /* the granular collapse: Drucker-Prager against linear elasticity */
+    for (int t = 1; t <= 2; t++) {
+        pb_cfg c = {PB_COLLAPSE_EL,   MPM_METHOD_BSPLINE2, MPM_USF, o->particles, o->steps, t, 0.0,
+                    MPM_TRANSFER_FLIP};
+        failures += collapse_pair(&c) != 0;
+    }
     pb_note("%s", "");
 
     /* the lean build on disks2d, next to a fresh normal run of the same steps */

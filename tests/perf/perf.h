@@ -51,6 +51,8 @@ typedef enum {
     PB_BAR1D,
     PB_SPARSE_WIDE,  /* the sparse2d body in a 4096 x 4096 node grid */
     PB_SPARSE_TIGHT, /* the same body in a grid just large enough for it */
+    PB_COLLAPSE_DP,  /* the granular column collapse (a = 2, Drucker-Prager, friction base) */
+    PB_COLLAPSE_EL,  /* the same column, linear elastic (the reference of the DP cost) */
     PB_NSCENES
 } pb_scene;
 

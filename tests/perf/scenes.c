@@ -40,6 +40,7 @@
  */
 #include "perf.h"
 
+#include "mpm_collapse.h"
 #include "mpm_paper.h"
 
 #include <errno.h>
@@ -61,8 +62,9 @@
 #define CUBE_MARGIN 3     /* cells beside the cube */
 #define CUBE_TOP 14       /* cells above it: room for the rebound (v0^2 / 2g ~ 10 cells) */
 
-static const char *const scene_names[PB_NSCENES] = {"disks2d", "cube3d", "bar1d", "sparse2d-4096",
-                                                    "sparse2d-tight"};
+static const char *const scene_names[PB_NSCENES] = {
+    "disks2d",        "cube3d",        "bar1d",        "sparse2d-4096",
+    "sparse2d-tight", "collapse2d-dp", "collapse2d-el"};
 
 const char *pb_scene_name(pb_scene s)
 {
@@ -116,6 +118,8 @@ static double scene_tmax(pb_scene s)
     case PB_DISKS2D: return 4.0;
     case PB_CUBE3D: return 0.5;
     case PB_BAR1D: return 10.0;
+    case PB_COLLAPSE_DP:
+    case PB_COLLAPSE_EL: return 0.3; /* the column is still falling */
     default: return 12.0;
     }
 }
@@ -362,10 +366,54 @@ static int timed_runs(mpm_sim *sim, const pb_cfg *c, pb_row *r)
     return 0;
 }
 
+/* The collapse scenes (tools/mpm_collapse.h): a = 2, 2 x 2 particles per
+ * cell, cells across the column for about the aimed particle count
+ * (4 a cells^2 particles), Drucker-Prager (plane-strain match, phi 30) or
+ * linear elasticity with the same geostatic start, base friction mu =
+ * tan 30 and the x_lo roller in both. */
+static int work_collapse(const pb_cfg *c, pb_row *r)
+{
+    long np = c->particles ? c->particles : pb_scene_default_particles(c->scene);
+    mpm_collapse_cfg cfg = {.a = 2,
+                            .cells = (int)lround(sqrt((double)np / 8.0)),
+                            .method = c->method,
+                            .model = c->scene == PB_COLLAPSE_DP ? MPM_MODEL_DRUCKER_PRAGER
+                                                                : MPM_MODEL_LINEAR_ELASTIC,
+                            .threads = c->threads};
+    if (cfg.cells < 4) cfg.cells = 4;
+    mpm_collapse_case cc;
+    double t0 = pb_now();
+    if (mpm_collapse_setup(&cfg, &cc)) {
+        snprintf(r->msg, sizeof r->msg, "out of memory for %ld particles", np);
+        return -1;
+    }
+    cc.c.update = c->update;
+    cc.c.pic_fraction = c->pic;
+    cc.c.transfer = c->transfer;
+    mpm_error me;
+    mpm_sim *sim = mpm_sim_new(&cc.c, NULL, &me);
+    if (!sim) {
+        char err[256];
+        snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s",
+                 mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
+        mpm_collapse_free(&cc);
+        return -1;
+    }
+    r->setup_s = pb_now() - t0;
+    r->dim = mpm_sim_dim(sim);
+    r->particles = mpm_sim_particles(sim);
+    r->nodes = mpm_sim_nodes(sim);
+    int rc = timed_runs(sim, c, r);
+    mpm_sim_destroy(&sim);
+    mpm_collapse_free(&cc);
+    return rc;
+}
+
 /* The child's work for one in-process configuration. */
 static int work_scene(void *arg, pb_row *r)
 {
     const pb_cfg *c = arg;
+    if (c->scene == PB_COLLAPSE_DP || c->scene == PB_COLLAPSE_EL) return work_collapse(c, r);
     mpm_paper t;
     char err[256] = "";
     double t0 = pb_now();
