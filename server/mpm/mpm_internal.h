@@ -9,7 +9,10 @@
  *   mpm_energy.c   the energy sums and the divergence guard
  *   mpm_kernels.c  the particle loops (MPM, uGIMP);  mpm_cpdi.c  CPDI1's
  *   mpm_pass.h     the inline pieces those two files' passes share
- *   mpm_model.c    the constitutive models
+ *   mpm_model.c    the constitutive models;  mpm_plastic.c  the
+ *                  Drucker-Prager and Mohr-Coulomb stress-point integrators
+ *   mpm_timefn.c   time functions;  mpm_cond.c  prescribed velocities and
+ *                  Coulomb friction on grid faces
  *   mpm_case.c     checking a case and generating its particles
  *   mpm_bspline.c  the B-splines' clamped boundary spans, node positions
  *
