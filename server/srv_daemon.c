@@ -39,6 +39,7 @@
 #include "srv_auth.h"
 #include "srv_log.h"
 #include "srv_pool.h"
+#include "srv_socket.h"
 #include "store.h"
 
 #include <errno.h>
@@ -48,8 +49,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/socket.h>
-#include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
 #include <zmq.h>
@@ -62,10 +61,6 @@
 /* How long the last stream messages and replies may take to leave at
  * shutdown (a vanished peer holds the exit up this long, no longer). */
 #define SHUTDOWN_LINGER_MS 1000
-/* Bytes above --max-request-bytes that a request frame may still have and
- * get a TOO_LARGE reply; a larger frame costs its sender the connection
- * (ZMQ_MAXMSGSIZE). */
-#define REQUEST_MARGIN 65536
 
 /* Job topics remembered as subscribed (so that a job submitted after its
  * watcher subscribed is streamed in full); more are not remembered (the
@@ -995,121 +990,6 @@ static void stop_jobs(daemon_t *d)
     drain_pending(d);
 }
 
-/* 1 if a process accepts connections on the unix socket at path (a live
- * daemon owns this ipc:// endpoint), 0 if none does (no file, or a stale
- * one that a dead daemon left: zmq_bind replaces it). */
-static int ipc_in_use(const char *path)
-{
-    struct sockaddr_un a;
-    if (path[0] == '@' || strlen(path) >= sizeof a.sun_path) return 0; /* abstract: bind says */
-    int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    if (fd < 0) return 0;
-    memset(&a, 0, sizeof a);
-    a.sun_family = AF_UNIX;
-    memcpy(a.sun_path, path, strlen(path) + 1);
-    int live = connect(fd, (struct sockaddr *)&a, sizeof a) == 0;
-    close(fd);
-    return live;
-}
-
-/* The endpoint libzmq binds for ep: tcp://localhost:P becomes
- * tcp://127.0.0.1:P and tcp://ip6-localhost:P tcp://[::1]:P (libzmq takes
- * a bind host for an interface name, not a host name); *ipv6 says the host
- * is an IPv6 address (ZMQ_IPV6 needed). */
-static int bind_endpoint(const char *ep, char *out, size_t n, int *ipv6)
-{
-    static const struct {
-        const char *from, *to;
-    } alias[] = {{"tcp://localhost:", "tcp://127.0.0.1:"},
-                 {"tcp://ip6-localhost:", "tcp://[::1]:"}};
-    *ipv6 = 0;
-    for (size_t i = 0; i < sizeof alias / sizeof alias[0]; i++) {
-        size_t k = strlen(alias[i].from);
-        if (!strncmp(ep, alias[i].from, k)) {
-            int w = snprintf(out, n, "%s%s", alias[i].to, ep + k);
-            *ipv6 = alias[i].to[6] == '[';
-            return w > 0 && (size_t)w < n ? 0 : -1;
-        }
-    }
-    *ipv6 = !strncmp(ep, "tcp://[", 7) || (!strncmp(ep, "tcp://", 6) && strchr(ep + 6, ':') &&
-                                           strchr(ep + 6, ':') != strrchr(ep + 6, ':'));
-    int w = snprintf(out, n, "%s", ep);
-    return w > 0 && (size_t)w < n ? 0 : -1;
-}
-
-static int open_socket(void *zctx, int type, const char *ep, const srv_config *cfg, srv_auth *auth,
-                       void **out, char *err, size_t errlen)
-{
-    *out = NULL;
-    if (!mpp_endpoint_is_local(ep) && !srv_auth_curve(auth)) {
-        if (!cfg->insecure_remote) {
-            snprintf(err, errlen,
-                     "refusing to bind %s: not loopback, ipc:// or inproc://, and no CURVE "
-                     "(give --curve-secret and --authorized-keys, or "
-                     "--insecure-allow-remote-without-auth on a trusted network)",
-                     ep);
-            return -1;
-        }
-        srv_warn(0,
-                 "!!! binding %s on a non-loopback address WITHOUT AUTHENTICATION "
-                 "(--insecure-allow-remote-without-auth): ANYONE WHO CAN REACH IT CAN "
-                 "SUBMIT, CANCEL AND READ JOBS !!!",
-                 ep);
-    }
-    char bep[300];
-    int ipv6 = 0;
-    if (bind_endpoint(ep, bep, sizeof bep, &ipv6)) {
-        snprintf(err, errlen, "endpoint %s is too long", ep);
-        return -1;
-    }
-    if (!strncmp(bep, "ipc://", 6) && ipc_in_use(bep + 6)) {
-        snprintf(err, errlen,
-                 "cannot bind %s: another process (a running mpmd?) accepts connections on "
-                 "it; stop it or choose another endpoint",
-                 ep);
-        return -1;
-    }
-    void *s = zmq_socket(zctx, type);
-    int zero = 0, one = 1, hwm = 10000;
-    if (!s) {
-        snprintf(err, errlen, "zmq_socket: %s", zmq_strerror(errno));
-        return -1;
-    }
-    if (zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) ||
-        (ipv6 && zmq_setsockopt(s, ZMQ_IPV6, &one, sizeof one)) ||
-        (type == ZMQ_ROUTER && zmq_setsockopt(s, ZMQ_ROUTER_MANDATORY, &one, sizeof one)) ||
-        (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_SNDHWM, &hwm, sizeof hwm)) ||
-        (type == ZMQ_PULL && zmq_setsockopt(s, ZMQ_RCVHWM, &hwm, sizeof hwm))) {
-        snprintf(err, errlen, "setting options on %s: %s", ep, zmq_strerror(errno));
-        zmq_close(s);
-        return -1;
-    }
-    if ((type == ZMQ_ROUTER || type == ZMQ_XPUB) && srv_auth_secure(auth, s, err, errlen)) {
-        zmq_close(s);
-        return -1;
-    }
-    if (type == ZMQ_ROUTER) {
-        /* libzmq drops the connection of a peer whose message is above
-         * this as soon as its size is read, before any of it is allocated:
-         * a request over --max-request-bytes is never held whole.  The
-         * margin lets a request slightly over the limit get a TOO_LARGE
-         * reply instead (the frame sizes a client can be told about). */
-        int64_t cap = (int64_t)cfg->max_request_bytes + REQUEST_MARGIN;
-        if (zmq_setsockopt(s, ZMQ_MAXMSGSIZE, &cap, sizeof cap)) {
-            snprintf(err, errlen, "ZMQ_MAXMSGSIZE: %s", zmq_strerror(errno));
-            zmq_close(s);
-            return -1;
-        }
-    }
-    if (zmq_bind(s, bep)) {
-        snprintf(err, errlen, "cannot bind %s: %s", ep, zmq_strerror(errno));
-        zmq_close(s);
-        return -1;
-    }
-    *out = s;
-    return 0;
-}
-
 int srv_daemon_run(const srv_config *cfg)
 {
     daemon_t d = {0};
@@ -1157,10 +1037,11 @@ int srv_daemon_run(const srv_config *cfg)
     srv_config inproc = *cfg;
     inproc.insecure_remote = 0;
     if (srv_auth_start(d.auth, d.zctx, err, sizeof err) ||
-        open_socket(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, d.auth, &d.router, err, sizeof err) ||
-        open_socket(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg, d.auth, &d.xpub, err,
-                    sizeof err) ||
-        open_socket(d.zctx, ZMQ_PULL, EVENTS_EP, &inproc, NULL, &d.pull, err, sizeof err)) {
+        srv_socket_open(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, d.auth, &d.router, err,
+                        sizeof err) ||
+        srv_socket_open(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg, d.auth, &d.xpub, err,
+                        sizeof err) ||
+        srv_socket_open(d.zctx, ZMQ_PULL, EVENTS_EP, &inproc, NULL, &d.pull, err, sizeof err)) {
         srv_error(0, "%s", err);
         goto out;
     }
