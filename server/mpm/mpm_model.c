@@ -269,34 +269,54 @@ static double nh_energy(const mpm_mat_params *mp, const mpm_particles *P, int di
 
 /* ---- rate-form models: Jaumann rotation, then the point update ---- */
 
+/* Block slot i (particle p) for a rate-form update: its stress rotated by
+ * the Jaumann term, and its strain increment de (Voigt, 6 entries; plane
+ * strain: de_zz = 0, sigma_zz kept; the spin from deps[2] in 2D,
+ * deps[6..8] in 3D). */
+static void rate_gather(const mpm_model_blk *b, size_t i, size_t p, double sig[6], double de[6])
+{
+    const mpm_particles *P = b->P;
+    int D = b->dim, nc = MPM_NCOMP(D);
+    double *const *deps = b->deps;
+    double w[3] = {0, 0, 0};
+    for (int c = 0; c < 6; c++) sig[c] = de[c] = 0;
+    for (int c = 0; c < nc; c++) sig[c] = P->sig[c][p];
+    if (D == 2) {
+        w[0] = deps[2][i];
+        de[0] = deps[0][i];
+        de[1] = deps[1][i];
+        de[3] = deps[3][i];
+    } else {
+        for (int c = 0; c < nc; c++) de[c] = deps[c][i];
+        if (D == 3)
+            for (int k = 0; k < 3; k++) w[k] = deps[6 + k][i];
+    }
+    mpm_jaumann(sig, w, D);
+}
+
+/* The updated stress of particle p, and its strain plus de. */
+static void rate_put(const mpm_model_blk *b, size_t p, const double sig[6], const double de[6])
+{
+    mpm_particles *P = b->P;
+    for (int c = 0; c < MPM_NCOMP(b->dim); c++) {
+        P->sig[c][p] = sig[c];
+        if (P->eps[c]) P->eps[c][p] += de[c];
+    }
+}
+
 static void rate_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
     mpm_particles *P = b->P;
-    int D = b->dim, nc = MPM_NCOMP(D);
-    double *const *deps = b->deps;
+    int D = b->dim;
     for (size_t i = i0; i < i1; i++) {
         size_t p = b0 + i;
         const mpm_mat_params *mp = &b->mats[P->mat[p]];
-        double sig[6] = {0, 0, 0, 0, 0, 0}, de[6] = {0, 0, 0, 0, 0, 0}, w[3] = {0, 0, 0};
-        for (int c = 0; c < nc; c++) sig[c] = P->sig[c][p];
-        if (D == 2) {
-            w[0] = deps[2][i];
-            de[0] = deps[0][i];
-            de[1] = deps[1][i];
-            de[3] = deps[3][i];
-        } else {
-            for (int c = 0; c < nc; c++) de[c] = deps[c][i];
-            if (D == 3)
-                for (int k = 0; k < 3; k++) w[k] = deps[6 + k][i];
-        }
-        mpm_jaumann(sig, w, D);
+        double sig[6], de[6];
+        rate_gather(b, i, p, sig, de);
         double ep = P->epsp ? P->epsp[p] : 0.0, dwp = 0;
         int y = 0;
         mp->ops->point(mp, D, sig, de, &ep, &y, &dwp);
-        for (int c = 0; c < nc; c++) {
-            P->sig[c][p] = sig[c];
-            if (P->eps[c]) P->eps[c][p] += de[c];
-        }
+        rate_put(b, p, sig, de);
         if (P->epsp) {
             P->epsp[p] = ep;
             P->yld[p] = y ? 1.0 : 0.0;
@@ -387,33 +407,19 @@ static int frictional_point(const mpm_mat_params *mp, int dim, double sig[6], co
 static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
     mpm_particles *P = b->P;
-    int D = b->dim, nc = MPM_NCOMP(D);
-    double *const *deps = b->deps;
+
     for (size_t i = i0; i < i1; i++) {
         size_t p = b0 + i;
         const mpm_mat_params *mp = &b->mats[P->mat[p]];
-        double sig[6] = {0, 0, 0, 0, 0, 0}, de[6] = {0, 0, 0, 0, 0, 0}, w[3] = {0, 0, 0};
-        for (int c = 0; c < nc; c++) sig[c] = P->sig[c][p];
-        if (D == 2) { /* plane strain: de_zz = 0, sigma_zz kept */
-            w[0] = deps[2][i];
-            de[0] = deps[0][i];
-            de[1] = deps[1][i];
-            de[3] = deps[3][i];
-        } else {
-            for (int c = 0; c < 6; c++) de[c] = deps[c][i];
-            for (int k = 0; k < 3; k++) w[k] = deps[6 + k][i];
-        }
-        mpm_jaumann(sig, w, D);
+        double sig[6], de[6];
+        rate_gather(b, i, p, sig, de);
         mpm_plastic_state st = {P->epsp[p], 0, 0};
         double dwp = 0;
         if (mpm_plastic_update(mp->pl, sig, de, &st, &dwp)) {
             if (b->bad == SIZE_MAX) b->bad = p;
             continue;
         }
-        for (int c = 0; c < nc; c++) {
-            P->sig[c][p] = sig[c];
-            if (P->eps[c]) P->eps[c][p] += de[c];
-        }
+        rate_put(b, p, sig, de);
         P->epsp[p] = st.eps_p;
         P->yld[p] = st.yielded ? 1.0 : 0.0;
         if (st.substeps) {
