@@ -511,6 +511,25 @@ typedef struct {
 } mpm_plastic_stats;
 void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
 
+/* Checkpoints (mpm_checkpoint.c): the solver state a case does not
+ * determine -- the particles (in their current, sorted order), time, step,
+ * dt, the cumulative works and counters, the balance and guard references
+ * -- as one self-checking blob (a header with a format version, a
+ * fingerprint of the case's layout and a checksum of the payload).
+ *
+ * mpm_sim_checkpoint_size() is the blob's exact size in bytes.
+ * mpm_sim_checkpoint_save() writes it into buf (n >= that size); returns
+ * 0, or MPM_ETOOBIG when n is too small.  Only between steps.
+ * mpm_sim_checkpoint_load() restores a blob into sim, a fresh simulation
+ * from mpm_sim_new() on the same case; returns 0, or MPM_ESYNTAX (not a
+ * checkpoint, truncated, checksum mismatch), MPM_EVERSION (another format
+ * version) or MPM_EINVAL (a blob of another case's layout), with err
+ * filled.  After a load, the run goes on exactly as the saved one would
+ * have: with the same thread count it gives the same bits. */
+size_t mpm_sim_checkpoint_size(const mpm_sim *sim);
+int mpm_sim_checkpoint_save(const mpm_sim *sim, void *buf, size_t n);
+int mpm_sim_checkpoint_load(mpm_sim *sim, const void *buf, size_t n, mpm_error *err);
+
 /* Copies the requested particle fields into caller arrays. */
 void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);
 /* 1 when the run's particles carry field f (the plastic strain and the
