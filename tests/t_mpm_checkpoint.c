@@ -1,0 +1,484 @@
+/*
+ * t_mpm_checkpoint.c - the solver's checkpoints (mpm_checkpoint.c, issue
+ * 12): a run stopped after K steps, saved, its simulation destroyed, a
+ * fresh one made from the same case and loaded, then run to step N, ends
+ * with the same bits as the run taken straight through (every snapshot
+ * field, t, dt, steps, the energy sample with its balance error, the
+ * budget's final and worst errors, the plastic counters), over a matrix
+ * that covers each feature at least once (1D/2D/3D; MPM, GIMP, BSPLINE2,
+ * BSPLINE3, CPDI; USF, USL, MUSL; FLIP, PIC blend, APIC; the five models;
+ * gravity, tractions with time functions, point loads, prescribed
+ * velocities, friction, damping, geostatic stress, the volume updates,
+ * fixed and automatic dt, particle forces; 1 and 2 threads; K a multiple
+ * of the sort interval and not).  Also: the refusals (a flipped byte, a
+ * truncated or padded blob, another version, another case), a failed load
+ * leaving the simulation as it was, and a 2-thread blob continued on 1
+ * thread within round-off.
+ */
+#include "t.h"
+#include "mpm.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* features of a case */
+enum {
+    F_GRAV = 1,
+    F_TRAC_TF = 2,   /* a traction on the top with a RAMP time function */
+    F_POINT = 4,     /* a point force */
+    F_PRES = 8,      /* a prescribed velocity on the bottom face (x, TABLE) */
+    F_FRIC = 16,     /* friction on the bottom face */
+    F_DAMP_L = 32,   /* local damping until half the run */
+    F_DAMP_V = 64,   /* viscous damping */
+    F_GEO = 128,     /* geostatic initial stress */
+    F_PFORCES = 256, /* mpm_sim_set_particle_forces() (changed at step 10) */
+    F_FIXED_DT = 512
+};
+
+typedef struct {
+    const char *name;
+    int dim;
+    mpm_method method;
+    mpm_update update;
+    mpm_transfer transfer;
+    double pic;
+    mpm_model_kind model;
+    mpm_volume_update volume;
+    unsigned feat;
+    int threads;
+    int K; /* save after K of N steps */
+} ck_spec;
+
+#define CK_N 40
+
+/* A case and the storage behind it. */
+typedef struct {
+    mpm_case c;
+    mpm_material_desc mat;
+    mpm_body_desc body;
+    mpm_traction_desc trac[2];
+    mpm_timefn ramp, table;
+    double tt[3], tv[3];
+    mpm_prescribed_desc pres;
+    mpm_friction_desc fric;
+} ck_case;
+
+/* A block x in [0.25, 0.75] (1D: [0, 0.5]), y in [0, 0.5], z in [0.25,
+ * 0.75] on a grid of 8 cells of 0.125 per axis, 2 points per cell per
+ * axis, moving at (0.2, -0.1, 0.05), the bottom face (1D: x_lo) fixed in
+ * the vertical direction (all directions without friction or a
+ * prescribed velocity). */
+static void ck_build(ck_case *k, const ck_spec *sp)
+{
+    memset(k, 0, sizeof *k);
+    int dim = sp->dim, up = dim == 1 ? 0 : 1; /* the vertical axis */
+    mpm_case *c = &k->c;
+    c->grid.dim = dim;
+    for (int d = 0; d < dim; d++) {
+        c->grid.h[d] = 0.125;
+        c->grid.nodes[d] = 9;
+    }
+    c->method = sp->method;
+    c->update = sp->update;
+    c->transfer = sp->transfer;
+    c->pic_fraction = sp->pic;
+    c->volume_update = sp->volume;
+    c->threads = sp->threads;
+    if (sp->feat & F_FIXED_DT) c->dt = 1e-3;
+    k->mat.model = sp->model;
+    k->mat.youngs_modulus = 1e5;
+    k->mat.poisson_ratio = 0.3;
+    k->mat.density = 1000;
+    k->mat.yield_stress = 1500;
+    k->mat.hardening_modulus = 1e4;
+    k->mat.friction_angle = 30;
+    k->mat.dilatancy_angle = 5;
+    k->mat.cohesion = 200;
+    k->mat.tension_cutoff = HUGE_VAL;
+    k->mat.mc_match = MPM_MC_COMPRESSION;
+    c->n_materials = 1;
+    c->materials = &k->mat;
+    mpm_body_desc *b = &k->body;
+    b->ppc = 2;
+    b->shape = MPM_SHAPE_BOX;
+    for (int d = 0; d < dim; d++) {
+        b->lo[d] = d == up ? 0.0 : 0.25;
+        b->hi[d] = d == up ? 0.5 : 0.75;
+        b->velocity[d] = d == 0 ? 0.2 : d == 1 ? -0.1 : 0.05;
+    }
+    if (dim == 1) b->lo[0] = 0, b->hi[0] = 0.5;
+    c->n_bodies = 1;
+    c->bodies = b;
+    if (sp->feat & (F_GRAV | F_GEO)) c->gravity[up] = -9.81;
+    if (sp->feat & F_GEO) {
+        b->geostatic = 1;
+        b->free_surface = 0.5;
+    }
+    c->bc.face_mask[2 * up] = (sp->feat & (F_FRIC | F_PRES)) ? 1u << up : 7u;
+    if (sp->feat & F_FRIC) {
+        k->fric.face = 2 * up;
+        k->fric.mu = 0.3;
+        c->bc.n_friction = 1;
+        c->bc.friction = &k->fric;
+    }
+    if (sp->feat & F_PRES) {
+        k->tt[0] = 0, k->tt[1] = 0.02, k->tt[2] = 0.05;
+        k->tv[0] = 0, k->tv[1] = 1, k->tv[2] = 0.5;
+        k->table.kind = MPM_TF_TABLE;
+        k->table.n = 3;
+        k->table.t = k->tt;
+        k->table.v = k->tv;
+        k->pres.face = 2 * up;
+        k->pres.mask = 1u; /* x, tangential to the bottom */
+        k->pres.value[0] = 0.1;
+        k->pres.time_function = &k->table;
+        c->n_prescribed = 1;
+        c->prescribed = &k->pres;
+    }
+    size_t nt = 0;
+    if (sp->feat & F_TRAC_TF) {
+        mpm_traction_desc *t = &k->trac[nt++];
+        k->ramp.kind = MPM_TF_RAMP;
+        k->ramp.value = 1;
+        k->ramp.t0 = 0;
+        k->ramp.t1 = 0.05;
+        for (int d = 0; d < dim; d++) {
+            t->lo[d] = b->lo[d];
+            t->hi[d] = b->hi[d];
+        }
+        t->lo[up] = 0.44;
+        t->hi[up] = 0.5;
+        t->normal = up;
+        t->value[up] = -2000;
+        if (dim > 1) t->value[0] = 300;
+        t->time_function = &k->ramp;
+    }
+    if (sp->feat & F_POINT) {
+        mpm_traction_desc *t = &k->trac[nt++];
+        for (int d = 0; d < dim; d++) {
+            t->lo[d] = b->lo[d];
+            t->hi[d] = b->lo[d] + 0.07;
+        }
+        t->normal = 0;
+        t->is_force = 1;
+        t->value[0] = 5;
+        if (dim > 1) t->value[1] = -3;
+    }
+    c->n_tractions = nt;
+    c->tractions = nt ? k->trac : NULL;
+    if (sp->feat & (F_DAMP_L | F_DAMP_V)) {
+        c->damping = sp->feat & F_DAMP_L ? MPM_DAMPING_LOCAL : MPM_DAMPING_VISCOUS;
+        c->damping_coef = sp->feat & F_DAMP_L ? 0.2 : 5.0;
+        c->damping_until = sp->feat & F_DAMP_L ? 0.04 : 0;
+    }
+    c->energy_budget = 0.5;
+}
+
+/* Particle forces (creation order): f_p = (a + 0.001 p, -a, a/2). */
+static int ck_forces(mpm_sim *s, double a)
+{
+    size_t n = mpm_sim_particles(s);
+    int dim = mpm_sim_dim(s);
+    double *f = malloc(n * (size_t)dim * sizeof *f);
+    if (!f) return MPM_ENOMEM;
+    for (size_t p = 0; p < n; p++)
+        for (int d = 0; d < dim; d++)
+            f[p * (size_t)dim + (size_t)d] = d == 0 ? a + 0.001 * (double)p : d == 1 ? -a : a / 2;
+    int rc = mpm_sim_set_particle_forces(s, f);
+    free(f);
+    return rc;
+}
+
+/* Runs s from its step to step `to`, with the case's particle forces
+ * changed at step 10 and the energies asked of step 20 (mpm_sim_energy()
+ * right after it: the in-pass sums and the balance's worst error). */
+static int ck_run(mpm_sim *s, const ck_spec *sp, long to)
+{
+    while (mpm_sim_steps(s) < to) {
+        long st = mpm_sim_steps(s);
+        if ((sp->feat & F_PFORCES) && st == 10) {
+            int rc = ck_forces(s, 0.5);
+            if (rc) return rc;
+        }
+        if (st == 19) mpm_sim_want_energy(s);
+        int rc = mpm_sim_step(s);
+        if (rc) return rc;
+        if (st == 19) {
+            mpm_energy e;
+            mpm_sim_energy(s, &e);
+        }
+    }
+    return 0;
+}
+
+/* Everything a run's results are read from. */
+typedef struct {
+    size_t n;
+    int dim;
+    double *x, *v, *stress, *pressure, *volume, *epsp, *F;
+    uint8_t *yld;
+    double t, dt;
+    long steps;
+    mpm_energy_sample es;
+    double bal_final, bal_worst;
+    mpm_plastic_stats pl;
+} ck_state;
+
+static void ck_state_free(ck_state *r)
+{
+    free(r->x);
+    free(r->v);
+    free(r->stress);
+    free(r->pressure);
+    free(r->volume);
+    free(r->epsp);
+    free(r->F);
+    free(r->yld);
+    memset(r, 0, sizeof *r);
+}
+
+static int ck_state_get(const mpm_sim *s, ck_state *r)
+{
+    memset(r, 0, sizeof *r);
+    size_t n = r->n = mpm_sim_particles(s);
+    int dim = r->dim = mpm_sim_dim(s);
+    r->x = calloc(n * (size_t)dim, sizeof(double));
+    r->v = calloc(n * (size_t)dim, sizeof(double));
+    r->stress = calloc(n * 6, sizeof(double));
+    r->pressure = calloc(n, sizeof(double));
+    r->volume = calloc(n, sizeof(double));
+    r->epsp = calloc(n, sizeof(double));
+    r->F = calloc(n * 9, sizeof(double));
+    r->yld = calloc(n, 1);
+    if (!r->x || !r->v || !r->stress || !r->pressure || !r->volume || !r->epsp || !r->F || !r->yld)
+        return MPM_ENOMEM;
+    mpm_snapshot o = {r->x, r->v, r->stress, r->pressure, r->volume, r->epsp, r->F, r->yld};
+    mpm_sim_snapshot(s, &o);
+    r->t = mpm_sim_time(s);
+    r->dt = mpm_sim_dt(s);
+    r->steps = mpm_sim_steps(s);
+    mpm_sim_energy_sample(s, &r->es);
+    (void)mpm_sim_budget(s, &r->bal_final, &r->bal_worst, NULL, 0);
+    mpm_sim_plastic_stats(s, &r->pl);
+    return 0;
+}
+
+/* The first field that differs between a and b ("" when none). */
+static const char *ck_state_diff(const ck_state *a, const ck_state *b)
+{
+    size_t n = a->n, nd = n * (size_t)a->dim;
+    if (a->n != b->n || a->dim != b->dim) return "count";
+    if (memcmp(a->x, b->x, nd * sizeof(double))) return "x";
+    if (memcmp(a->v, b->v, nd * sizeof(double))) return "v";
+    if (memcmp(a->stress, b->stress, n * 6 * sizeof(double))) return "stress";
+    if (memcmp(a->pressure, b->pressure, n * sizeof(double))) return "pressure";
+    if (memcmp(a->volume, b->volume, n * sizeof(double))) return "volume";
+    if (memcmp(a->epsp, b->epsp, n * sizeof(double))) return "plastic_strain";
+    if (memcmp(a->F, b->F, n * 9 * sizeof(double))) return "deformation_gradient";
+    if (memcmp(a->yld, b->yld, n)) return "yielded";
+    if (memcmp(&a->t, &b->t, sizeof a->t)) return "t";
+    if (memcmp(&a->dt, &b->dt, sizeof a->dt)) return "dt";
+    if (a->steps != b->steps) return "steps";
+    if (memcmp(&a->es, &b->es, sizeof a->es)) return "energy sample";
+    if (memcmp(&a->bal_final, &b->bal_final, sizeof(double)) ||
+        memcmp(&a->bal_worst, &b->bal_worst, sizeof(double)))
+        return "budget";
+    if (memcmp(&a->pl, &b->pl, sizeof a->pl)) return "plastic stats";
+    return "";
+}
+
+/* Saves s into a new blob (*len its size); NULL when out of memory. */
+static void *ck_save(const mpm_sim *s, size_t *len)
+{
+    *len = mpm_sim_checkpoint_size(s);
+    void *blob = malloc(*len);
+    if (blob && mpm_sim_checkpoint_save(s, blob, *len)) {
+        free(blob);
+        return NULL;
+    }
+    return blob;
+}
+
+/* The spec's run straight through and with a checkpoint at K into a fresh
+ * simulation: 0 when both end with the same bits, else a message in msg. */
+static int ck_roundtrip(const ck_spec *sp, char *msg, size_t nmsg, size_t *blob_bytes,
+                        long *yielded)
+{
+    ck_case k;
+    ck_build(&k, sp);
+    mpm_error err;
+    ck_state ref = {0}, got = {0};
+    void *blob = NULL;
+    int ok = 0;
+    mpm_sim *a = mpm_sim_new(&k.c, NULL, &err), *b = NULL;
+    if (!a) {
+        char t[512];
+        snprintf(msg, nmsg, "%s: mpm_sim_new: %s", sp->name,
+                 mpm_error_text(&err, MPM_FIELD_PROTO, t, sizeof t));
+        return -1;
+    }
+    /* the energies read at step K, as the checkpointed run reads them */
+    int rc = (sp->feat & F_PFORCES) ? ck_forces(a, 0.2) : 0;
+    if (!rc) rc = ck_run(a, sp, sp->K);
+    if (!rc) {
+        mpm_energy_sample es;
+        mpm_sim_energy_sample(a, &es);
+        rc = ck_run(a, sp, CK_N);
+    }
+    if (rc) {
+        char t[512];
+        snprintf(msg, nmsg, "%s: the straight run failed (%d): %s", sp->name, rc,
+                 mpm_error_text(mpm_sim_error(a), MPM_FIELD_PROTO, t, sizeof t));
+        goto out;
+    }
+    if (ck_state_get(a, &ref)) goto nomem;
+    *yielded = 0;
+    for (size_t p = 0; p < ref.n; p++) *yielded += ref.epsp[p] > 0;
+    mpm_sim_destroy(&a);
+
+    /* K steps, save, a fresh simulation, load, the rest */
+    if (!(a = mpm_sim_new(&k.c, NULL, &err))) goto nomem;
+    rc = (sp->feat & F_PFORCES) ? ck_forces(a, 0.2) : 0;
+    if (!rc) rc = ck_run(a, sp, sp->K);
+    size_t len = 0;
+    ck_state before = {0}, after = {0};
+    if (!rc && ck_state_get(a, &before)) {
+        ck_state_free(&before);
+        goto nomem;
+    }
+    if (rc || !(blob = ck_save(a, &len))) {
+        snprintf(msg, nmsg, "%s: the first part or the save failed (%d)", sp->name, rc);
+        ck_state_free(&before);
+        goto out;
+    }
+    *blob_bytes = len;
+    mpm_sim_destroy(&a);
+    if (!(b = mpm_sim_new(&k.c, NULL, &err))) {
+        ck_state_free(&before);
+        goto nomem;
+    }
+    if ((rc = mpm_sim_checkpoint_load(b, blob, len, &err))) {
+        char t[512];
+        snprintf(msg, nmsg, "%s: load: %s", sp->name,
+                 mpm_error_text(&err, MPM_FIELD_PROTO, t, sizeof t));
+        ck_state_free(&before);
+        goto out;
+    }
+    /* the loaded state reads back as the saved one */
+    rc = ck_state_get(b, &after);
+    const char *d0 = rc ? "memory" : ck_state_diff(&before, &after);
+    ck_state_free(&before);
+    ck_state_free(&after);
+    if (*d0) {
+        snprintf(msg, nmsg, "%s: right after the load, %s differs", sp->name, d0);
+        goto out;
+    }
+    if ((rc = ck_run(b, sp, CK_N))) {
+        snprintf(msg, nmsg, "%s: the resumed run failed (%d)", sp->name, rc);
+        goto out;
+    }
+    if (ck_state_get(b, &got)) goto nomem;
+    const char *d = ck_state_diff(&ref, &got);
+    if (*d) {
+        snprintf(msg, nmsg, "%s: after %d + %d steps, %s differs from the straight run", sp->name,
+                 sp->K, CK_N - sp->K, d);
+        goto out;
+    }
+    ok = 1;
+    goto out;
+nomem:
+    snprintf(msg, nmsg, "%s: out of memory", sp->name);
+out:
+    mpm_sim_destroy(&a);
+    mpm_sim_destroy(&b);
+    ck_state_free(&ref);
+    ck_state_free(&got);
+    free(blob);
+    return ok ? 0 : -1;
+}
+
+#define LE MPM_MODEL_LINEAR_ELASTIC
+#define NH MPM_MODEL_NEO_HOOKEAN
+#define J2 MPM_MODEL_VON_MISES
+#define DP MPM_MODEL_DRUCKER_PRAGER
+#define MC MPM_MODEL_MOHR_COULOMB
+#define SI MPM_VOLUME_STRAIN_INCREMENT
+#define DF MPM_VOLUME_DET_F
+#define CV MPM_VOLUME_CONSTANT
+#define FL MPM_TRANSFER_FLIP
+#define AP MPM_TRANSFER_APIC
+
+static int ck_matrix(const ck_spec *specs, size_t n)
+{
+    int fails = 0;
+    for (size_t i = 0; i < n; i++) {
+        char msg[768] = "";
+        size_t bytes = 0;
+        long yielded = 0;
+        if (ck_roundtrip(&specs[i], msg, sizeof msg, &bytes, &yielded)) {
+            t_fail(__FILE__, __LINE__, "%s", msg);
+            fails++;
+        } else {
+            TLOG("%-38s same bits after %d + %d steps (blob %zu bytes, %ld particles "
+                 "yielded)",
+                 specs[i].name, specs[i].K, CK_N - specs[i].K, bytes, yielded);
+        }
+    }
+    return fails;
+}
+
+TEST(ckpt_same_bits_1d)
+{
+    static const ck_spec specs[] = {
+        {"1D MPM USF elastic gravity", 1, MPM_METHOD_MPM, MPM_USF, FL, 0, LE, SI, F_GRAV, 1, 21},
+        {"1D GIMP MUSL neo-Hookean traction(t)", 1, MPM_METHOD_GIMP, MPM_MUSL, FL, 0, NH, SI,
+         F_TRAC_TF | F_FIXED_DT, 2, 21},
+        {"1D BSPLINE2 USL J2 PIC-blend", 1, MPM_METHOD_BSPLINE2, MPM_USL, FL, 0.3, J2, SI, F_GRAV,
+         1, 32},
+        {"1D BSPLINE3 USF elastic point load", 1, MPM_METHOD_BSPLINE3, MPM_USF, FL, 0, LE, CV,
+         F_POINT | F_GRAV, 2, 17},
+        {"1D CPDI USF elastic viscous damping", 1, MPM_METHOD_CPDI, MPM_USF, FL, 0, LE, DF,
+         F_DAMP_V | F_GRAV, 2, 21},
+    };
+    CHECK(ck_matrix(specs, sizeof specs / sizeof *specs) == 0);
+}
+
+TEST(ckpt_same_bits_2d)
+{
+    static const ck_spec specs[] = {
+        {"2D GIMP USF elastic gravity K=32", 2, MPM_METHOD_GIMP, MPM_USF, FL, 0, LE, SI, F_GRAV, 1,
+         32},
+        {"2D MPM MUSL APIC forces+point", 2, MPM_METHOD_MPM, MPM_MUSL, AP, 0, LE, SI,
+         F_POINT | F_PFORCES, 2, 21},
+        {"2D BSPLINE2 USL DP geostatic", 2, MPM_METHOD_BSPLINE2, MPM_USL, FL, 0, DP, SI, F_GEO, 2,
+         21},
+        {"2D BSPLINE3 MUSL MC friction", 2, MPM_METHOD_BSPLINE3, MPM_MUSL, FL, 0, MC, SI,
+         F_GRAV | F_FRIC, 1, 21},
+        {"2D CPDI USF neo-Hookean DET_F", 2, MPM_METHOD_CPDI, MPM_USF, FL, 0, NH, DF,
+         F_POINT | F_FIXED_DT, 2, 21},
+        {"2D GIMP USL J2 prescribed(t) CONSTANT", 2, MPM_METHOD_GIMP, MPM_USL, FL, 0, J2, CV,
+         F_GRAV | F_PRES, 1, 21},
+        {"2D GIMP USF APIC DP local damping", 2, MPM_METHOD_GIMP, MPM_USF, AP, 0, DP, SI,
+         F_GEO | F_DAMP_L, 2, 21},
+        {"2D MPM MUSL MC prescribed traction(t)", 2, MPM_METHOD_MPM, MPM_MUSL, FL, 0.2, MC, DF,
+         F_GRAV | F_PRES | F_TRAC_TF | F_FIXED_DT, 2, 32},
+    };
+    CHECK(ck_matrix(specs, sizeof specs / sizeof *specs) == 0);
+}
+
+TEST(ckpt_same_bits_3d)
+{
+    static const ck_spec specs[] = {
+        {"3D GIMP MUSL elastic traction(t)", 3, MPM_METHOD_GIMP, MPM_MUSL, FL, 0, LE, SI,
+         F_GRAV | F_TRAC_TF, 2, 21},
+        {"3D CPDI USL MC friction", 3, MPM_METHOD_CPDI, MPM_USL, FL, 0, MC, SI, F_GRAV | F_FRIC, 2,
+         21},
+        {"3D MPM USF J2 PIC-blend forces", 3, MPM_METHOD_MPM, MPM_USF, FL, 0.5, J2, SI,
+         F_GRAV | F_PFORCES, 1, 21},
+        {"3D BSPLINE2 MUSL DP viscous damping", 3, MPM_METHOD_BSPLINE2, MPM_MUSL, FL, 0, DP, SI,
+         F_GEO | F_DAMP_V, 2, 32},
+    };
+    CHECK(ck_matrix(specs, sizeof specs / sizeof *specs) == 0);
+}
