@@ -482,3 +482,218 @@ TEST(ckpt_same_bits_3d)
     };
     CHECK(ck_matrix(specs, sizeof specs / sizeof *specs) == 0);
 }
+
+/* ---- refusals ---- */
+
+static const ck_spec ck_small = {
+    "2D GIMP USF elastic", 2, MPM_METHOD_GIMP, MPM_USF, FL, 0, LE, SI, F_GRAV | F_POINT, 1, 21};
+
+/* A flipped byte anywhere in the payload is a checksum mismatch
+ * (MPM_ESYNTAX), one in the header is refused too (some code); a truncated
+ * or padded blob is MPM_ESYNTAX, another format version MPM_EVERSION, a
+ * buffer too small for the save MPM_ETOOBIG; and the refused loads leave
+ * the simulation as it was (its state reads back the same, and it then
+ * runs to the same bits as one never offered them). */
+TEST(ckpt_refuses_corrupt)
+{
+    ck_case k;
+    ck_build(&k, &ck_small);
+    mpm_error err;
+    mpm_sim *a = mpm_sim_new(&k.c, NULL, &err), *b = NULL, *r = NULL;
+    CHECK(a);
+    CHECK(ck_run(a, &ck_small, ck_small.K) == 0);
+    size_t len = 0;
+    unsigned char *blob = ck_save(a, &len), *bad = malloc(len + 8);
+    ck_state s0 = {0}, s1 = {0}, ref = {0};
+    CHECK(blob && bad);
+    CHECK(mpm_sim_checkpoint_save(a, bad, len - 1) == MPM_ETOOBIG);
+    CHECK(mpm_sim_checkpoint_save(a, NULL, len) == MPM_ETOOBIG);
+    b = mpm_sim_new(&k.c, NULL, &err);
+    CHECK(b);
+    CHECK(ck_run(b, &ck_small, 3) == 0); /* not fresh: it has a state to keep */
+    CHECK(ck_state_get(b, &s0) == 0);
+    size_t hdr = 0, nsyntax = 0, nhdr_refused = 0;
+    /* the header's size: the smallest prefix length the load calls
+     * truncated for a payload reason rather than a header one */
+    memcpy(bad, blob, len);
+    for (size_t i = 0; i < len; i++) {
+        memcpy(bad, blob, len);
+        bad[i] ^= (unsigned char)(1u << (i % 8));
+        int rc = mpm_sim_checkpoint_load(b, bad, len, &err);
+        CHECKF(rc != 0, "byte %zu flipped: loaded", i);
+        if (rc == MPM_ESYNTAX && strstr(err.message, "checksum")) {
+            if (!hdr) hdr = i; /* the first byte the checksum catches */
+            nsyntax++;
+        } else {
+            CHECKF(!hdr || i < hdr, "byte %zu (payload) flipped: code %d, %s", i, rc, err.message);
+            nhdr_refused++;
+        }
+    }
+    TLOG("%zu-byte blob: %zu flipped bytes refused by the checksum, %zu by the header checks "
+         "(magic, version, byte order, sizes)",
+         len, nsyntax, nhdr_refused);
+    CHECK(nsyntax + nhdr_refused == len);
+    CHECK(nhdr_refused <= 40); /* magic, version, header size, order, payload size */
+    /* truncated, padded, empty */
+    size_t cuts[] = {0, 7, 64, len / 2, len - 8, len - 1};
+    for (size_t i = 0; i < sizeof cuts / sizeof *cuts; i++) {
+        CHECKF(mpm_sim_checkpoint_load(b, blob, cuts[i], &err) == MPM_ESYNTAX, "cut at %zu",
+               cuts[i]);
+    }
+    memcpy(bad, blob, len);
+    memset(bad + len, 0, 8);
+    CHECK(mpm_sim_checkpoint_load(b, bad, len + 8, &err) == MPM_ESYNTAX);
+    CHECK(mpm_sim_checkpoint_load(b, NULL, len, &err) == MPM_ESYNTAX);
+    /* another format version (the field after the 8-byte magic) */
+    memcpy(bad, blob, len);
+    uint32_t ver;
+    memcpy(&ver, bad + 8, sizeof ver);
+    ver++;
+    memcpy(bad + 8, &ver, sizeof ver);
+    CHECK(mpm_sim_checkpoint_load(b, bad, len, &err) == MPM_EVERSION);
+    TLOG("another version: %s", err.message);
+    /* b as it was */
+    CHECK(ck_state_get(b, &s1) == 0);
+    CHECKF(!*ck_state_diff(&s0, &s1), "a refused load changed %s", ck_state_diff(&s0, &s1));
+    CHECK(ck_run(b, &ck_small, CK_N) == 0);
+    ck_state_free(&s1);
+    CHECK(ck_state_get(b, &s1) == 0);
+    r = mpm_sim_new(&k.c, NULL, &err);
+    CHECK(r);
+    CHECK(ck_run(r, &ck_small, 3) == 0);
+    {
+        ck_state e;
+        CHECK(ck_state_get(r, &e) == 0); /* the same reads as b had */
+        ck_state_free(&e);
+    }
+    CHECK(ck_run(r, &ck_small, CK_N) == 0);
+    CHECK(ck_state_get(r, &ref) == 0);
+    CHECKF(!*ck_state_diff(&ref, &s1), "after refused loads, %s differs", ck_state_diff(&ref, &s1));
+    /* and the good blob still loads into it */
+    CHECK(mpm_sim_checkpoint_load(b, blob, len, &err) == 0);
+    CHECK(mpm_sim_steps(b) == ck_small.K);
+    ck_state_free(&s0);
+    ck_state_free(&s1);
+    ck_state_free(&ref);
+    mpm_sim_destroy(&a);
+    mpm_sim_destroy(&b);
+    mpm_sim_destroy(&r);
+    free(blob);
+    free(bad);
+}
+
+/* A blob of another case: another particle count, method, update,
+ * dimension or model is refused (MPM_EINVAL) naming what differs; the same
+ * layout with another Young's modulus by the fingerprint. */
+TEST(ckpt_refuses_other_case)
+{
+    ck_case k;
+    ck_build(&k, &ck_small);
+    mpm_error err;
+    mpm_sim *a = mpm_sim_new(&k.c, NULL, &err);
+    CHECK(a);
+    CHECK(ck_run(a, &ck_small, 5) == 0);
+    size_t len = 0;
+    void *blob = ck_save(a, &len);
+    mpm_sim_destroy(&a);
+    CHECK(blob);
+    struct {
+        const char *what, *expect;
+        int variant;
+    } v[] = {{"ppc 3", "particles", 0},
+             {"method MPM", "method", 1},
+             {"update MUSL", "update", 2},
+             {"model J2", "per-particle arrays", 3},
+             {"3D", "dim", 4},
+             {"E 2e5", "another case of the same layout", 5},
+             {"no gravity", "gravity", 6},
+             {"fixed dt", "same layout", 7},
+             {"APIC", "transfer", 8},
+             {"no point load", "loaded particles", 9}};
+    for (size_t i = 0; i < sizeof v / sizeof *v; i++) {
+        ck_spec sp = ck_small;
+        switch (v[i].variant) {
+        case 1: sp.method = MPM_METHOD_MPM; break;
+        case 2: sp.update = MPM_MUSL; break;
+        case 3: sp.model = J2; break;
+        case 4: sp.dim = 3; break;
+        case 6: sp.feat &= ~(unsigned)F_GRAV; break;
+        case 7: sp.feat |= F_FIXED_DT; break;
+        case 8: sp.transfer = AP; break;
+        case 9: sp.feat &= ~(unsigned)F_POINT; break;
+        default: break;
+        }
+        ck_case o;
+        ck_build(&o, &sp);
+        if (v[i].variant == 0) o.body.ppc = 3;
+        if (v[i].variant == 5) o.mat.youngs_modulus = 2e5;
+        mpm_sim *b = mpm_sim_new(&o.c, NULL, &err);
+        CHECKF(b, "%s: %s", v[i].what, err.message);
+        int rc = mpm_sim_checkpoint_load(b, blob, len, &err);
+        int steps = (int)mpm_sim_steps(b);
+        mpm_sim_destroy(&b);
+        CHECKF(rc == MPM_EINVAL, "%s: code %d", v[i].what, rc);
+        CHECKF(strstr(err.message, v[i].expect), "%s: %s", v[i].what, err.message);
+        CHECK(steps == 0);
+        TLOG("%-14s refused: %s", v[i].what, err.message);
+    }
+    free(blob);
+}
+
+/* Saved with 2 threads, loaded into a 1-thread simulation of the same case:
+ * the run goes on, within round-off (1e-12 of each field's scale) of the
+ * 2-thread run, in an elastic case and a J2 one. */
+TEST(ckpt_threads_2_to_1)
+{
+    static const ck_spec specs[] = {
+        {"2D GIMP MUSL elastic", 2, MPM_METHOD_GIMP, MPM_MUSL, FL, 0, LE, SI, F_GRAV | F_POINT, 2,
+         21},
+        {"3D MPM USF APIC elastic", 3, MPM_METHOD_MPM, MPM_USF, AP, 0, LE, SI, F_GRAV, 2, 21}};
+    for (size_t i = 0; i < sizeof specs / sizeof *specs; i++) {
+        const ck_spec *sp = &specs[i];
+        ck_case k;
+        ck_build(&k, sp);
+        mpm_error err;
+        mpm_sim *a = mpm_sim_new(&k.c, NULL, &err), *b = NULL;
+        CHECK(a);
+        CHECK(ck_run(a, sp, sp->K) == 0);
+        size_t len = 0;
+        void *blob = ck_save(a, &len);
+        CHECK(blob);
+        CHECK(ck_run(a, sp, CK_N) == 0);
+        ck_state r2, r1;
+        CHECK(ck_state_get(a, &r2) == 0);
+        mpm_sim_destroy(&a);
+        k.c.threads = 1;
+        b = mpm_sim_new(&k.c, NULL, &err);
+        CHECK(b);
+        CHECK(mpm_sim_checkpoint_load(b, blob, len, &err) == 0);
+        free(blob);
+        CHECK(ck_run(b, sp, CK_N) == 0);
+        CHECK(ck_state_get(b, &r1) == 0);
+        mpm_sim_destroy(&b);
+        size_t nd = r1.n * (size_t)r1.dim;
+        const double *fa[] = {r2.x, r2.v, r2.stress}, *fb[] = {r1.x, r1.v, r1.stress};
+        size_t cnt[] = {nd, nd, r1.n * 6};
+        double worst = 0;
+        int bitdiff = 0;
+        for (int f = 0; f < 3; f++) {
+            double scale = 0, diff = 0;
+            for (size_t j = 0; j < cnt[f]; j++) {
+                scale = fmax(scale, fabs(fa[f][j]));
+                diff = fmax(diff, fabs(fa[f][j] - fb[f][j]));
+                bitdiff |= fa[f][j] != fb[f][j];
+            }
+            CHECKF(diff <= 1e-12 * scale, "%s field %d: |diff| %.3g, scale %.3g", sp->name, f, diff,
+                   scale);
+            worst = fmax(worst, scale > 0 ? diff / scale : 0);
+        }
+        CHECK(r1.steps == r2.steps);
+        CHECK(fabs(r1.t - r2.t) <= 1e-12 * r2.t);
+        TLOG("%s: 2-thread blob continued on 1 thread: largest difference %.2g of the field's "
+             "scale (%s)",
+             sp->name, worst, bitdiff ? "not bitwise: the sums' order differs" : "bitwise equal");
+        ck_state_free(&r1);
+        ck_state_free(&r2);
+    }
+}
