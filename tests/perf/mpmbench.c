@@ -38,6 +38,7 @@ static const char usage[] =
     "       mpmbench --all [--particles N] [--steps S] [--csv]\n"
     "       mpmbench --bspline [--particles N] [--steps S] [--csv]\n"
     "       mpmbench --cpdi-vs-gimp [--particles N] [--steps S] [--update U] [--csv]\n"
+    "       mpmbench --checkpoint [--particles N] [--threads T]\n"
     "Throughput of the mpmd solver (issue #5): millions of particle-steps per second,\n"
     "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
     "Scenes:\n"
@@ -71,6 +72,9 @@ static const char usage[] =
     "  --all          every scene, MPM and GIMP, 1 and 2 threads; the lean build; the daemon\n"
     "  --bspline      disks2d and cube3d at 1 and 2 threads, GIMP, BSPLINE2 and BSPLINE3\n"
     "                 interleaved (two rounds): the B-splines' speed as ratios to GIMP\n"
+    "  --checkpoint   the solver's checkpoints: bytes per particle, save and load times\n"
+    "                 (median of 3, in memory) of a 2D GIMP elastic, a 2D Drucker-Prager and\n"
+    "                 a 3D CPDI block of ~N particles, against one step\n"
     "  --cpdi-vs-gimp disks2d and cube3d at 1 and 2 threads, GIMP and CPDI interleaved\n"
     "                 (GIMP, CPDI, GIMP, CPDI, the same steps), then CPDI / GIMP throughput\n"
     "                 (issue #10: >= 0.4) and CPDI's bytes per particle (<= 300 2D, 450 3D)\n"
@@ -230,7 +234,7 @@ const char *pb_exe_dir(void)
 /* ---- the command line ---- */
 
 typedef struct {
-    int all, bspline, csv, have_scene, cpdi_vs_gimp;
+    int all, bspline, csv, have_scene, cpdi_vs_gimp, checkpoint;
     const char *scene;
     long particles, steps;
     int threads, have_threads, have_method, have_update;
@@ -280,6 +284,10 @@ static int parse_args(int argc, char **argv, opts *o)
         }
         if (!strcmp(a, "--cpdi-vs-gimp")) {
             o->cpdi_vs_gimp = 1;
+            continue;
+        }
+        if (!strcmp(a, "--checkpoint")) {
+            o->checkpoint = 1;
             continue;
         }
         int known = !strcmp(a, "--scene") || !strcmp(a, "--particles") || !strcmp(a, "--steps") ||
@@ -382,7 +390,13 @@ static int parse_args(int argc, char **argv, opts *o)
                         "takes only --particles, --steps, --update and --csv\n");
         return -1;
     }
-    if (o->cpdi_vs_gimp) return 0;
+    if (o->checkpoint && (o->all || o->bspline || o->cpdi_vs_gimp || o->have_scene ||
+                          o->have_method || o->have_update || o->have_pic || o->have_transfer)) {
+        fprintf(stderr, "mpmbench: --checkpoint runs its own scenes; it takes only --particles "
+                        "and --threads\n");
+        return -1;
+    }
+    if (o->cpdi_vs_gimp || o->checkpoint) return 0;
     if (!o->all && !o->bspline && !o->have_scene) {
         fprintf(stderr, "mpmbench: give --scene NAME or --all (see --help)\n");
         return -1;
@@ -907,6 +921,8 @@ int main(int argc, char **argv)
         rc = run_all(&o);
     } else if (o.bspline) {
         rc = run_bspline(&o);
+    } else if (o.checkpoint) {
+        rc = pb_checkpoint_bench(o.particles ? o.particles : 1000000L, o.threads);
     } else if (o.cpdi_vs_gimp) {
         rc = run_cpdi_vs_gimp(&o);
     } else {

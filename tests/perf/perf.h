@@ -160,4 +160,10 @@ void pb_progress(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* The directory of this executable (for bin/mpmd, bin/mpmbench-lean). */
 const char *pb_exe_dir(void);
 
+/* mpmbench --checkpoint (checkpoint.c): the checkpoints' bytes per
+ * particle and save and load times for ~particles particles on threads
+ * threads; 0, or 1 when a scene failed or a loaded simulation did not save
+ * the same blob. */
+int pb_checkpoint_bench(long particles, int threads);
+
 #endif
