@@ -109,6 +109,7 @@ typedef struct {
     uint64_t fingerprint;
     uint64_t layout[L_COUNT];
 } ck_header;
+_Static_assert(sizeof(ck_header) == 48 + 8 * L_COUNT, "the header has no padding");
 
 /* The scalars: doubles, then integers (int64). */
 enum {
