@@ -87,7 +87,7 @@ static const char *const ck_name[L_COUNT] = {"dim",
                                              "padded nodes along z",
                                              "particles",
                                              "materials",
-                                             "per-particle arrays (bit mask)",
+                                             "per-particle arrays",
                                              "fixed nodes",
                                              "prescribed-velocity nodes",
                                              "prescribed velocities",
@@ -387,6 +387,41 @@ int mpm_sim_checkpoint_save(const mpm_sim *s, void *buf, size_t n)
 
 #define CK_FIELD "checkpoint"
 
+/* Layout word i's value v as a refusal names it: the schema's enum names,
+ * the arrays by name, counts as numbers. */
+static const char *layout_value(int i, uint64_t v, char *buf, size_t n)
+{
+    static const char *const method[] = {"MPM", "GIMP", "BSPLINE2", "BSPLINE3", "CPDI"};
+    static const char *const update[] = {"USF", "USL", "MUSL"};
+    static const char *const transfer[] = {"FLIP", "APIC"};
+    static const char *const volume[] = {"STRAIN_INCREMENT", "DET_F", "CONSTANT"};
+    static const char *const damping[] = {"NONE", "LOCAL", "VISCOUS"};
+    static const char *const arrays[] = {"half-widths",    "F",       "APIC B",
+                                         "plastic strain", "yielded", "initial volume"};
+    const char *const *names = NULL;
+    size_t nn = 0;
+    switch (i) {
+    case L_METHOD: names = method, nn = 5; break;
+    case L_UPDATE: names = update, nn = 3; break;
+    case L_TRANSFER: names = transfer, nn = 2; break;
+    case L_VOLUME: names = volume, nn = 3; break;
+    case L_DAMPING: names = damping, nn = 3; break;
+    default: break;
+    }
+    if (names && v < nn) {
+        snprintf(buf, n, "%s", names[v]);
+    } else if (i == L_ARRAYS) {
+        size_t w = (size_t)snprintf(buf, n, "(");
+        for (int b = 0; b < 6; b++)
+            if ((v & (1u << b)) && w < n)
+                w += (size_t)snprintf(buf + w, n - w, "%s%s", w > 1 ? ", " : "", arrays[b]);
+        if (w < n) snprintf(buf + w, n - w, ")");
+    } else {
+        snprintf(buf, n, "%llu", (unsigned long long)v);
+    }
+    return buf;
+}
+
 /* Everything checked before anything is written. */
 static int check_blob(const mpm_sim *s, const unsigned char *b, size_t n, ck_header *h,
                       mpm_error *err)
@@ -424,11 +459,14 @@ static int check_blob(const mpm_sim *s, const unsigned char *b, size_t n, ck_hea
     uint64_t L[L_COUNT];
     layout_of(s, L);
     for (int i = 0; i < L_COUNT; i++)
-        if (L[i] != h->layout[i])
+        if (L[i] != h->layout[i]) {
+            char a[96], c[96];
             return mpm_fail(err, MPM_EINVAL, CK_FIELD,
-                            "saved from a case of another layout: %s %llu in the checkpoint, "
-                            "%llu in this case",
-                            ck_name[i], (unsigned long long)h->layout[i], (unsigned long long)L[i]);
+                            "saved from a case of another layout: %s %s in the checkpoint, %s in "
+                            "this case",
+                            ck_name[i], layout_value(i, h->layout[i], a, sizeof a),
+                            layout_value(i, L[i], c, sizeof c));
+        }
     if (fingerprint_of(s, L) != h->fingerprint)
         return mpm_fail(err, MPM_EINVAL, CK_FIELD,
                         "saved from another case of the same layout: the grid's spacing or "
