@@ -607,7 +607,7 @@ TEST(ckpt_refuses_other_case)
              {"no gravity", "gravity", 6},
              {"fixed dt", "same layout", 7},
              {"APIC", "transfer", 8},
-             {"no point load", "loaded particles", 9}};
+             {"no point load", "point forces", 9}};
     for (size_t i = 0; i < sizeof v / sizeof *v; i++) {
         ck_spec sp = ck_small;
         switch (v[i].variant) {

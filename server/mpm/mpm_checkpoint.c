@@ -448,6 +448,9 @@ static int check_blob(const mpm_sim *s, const unsigned char *b, size_t n, ck_hea
                         "truncated or padded: the header announces %llu payload bytes, the "
                         "blob has %zu",
                         (unsigned long long)h->payload_size, n - sizeof *h);
+    if (h->payload_size < 8 * (S_COUNT + I_COUNT))
+        return mpm_fail(err, MPM_ESYNTAX, CK_FIELD, "a payload of %llu bytes has no state",
+                        (unsigned long long)h->payload_size);
     ck_header z = *h;
     z.checksum = 0;
     uint64_t ck = hash_bytes(b + sizeof z, n - sizeof z, hash_bytes(&z, sizeof z, 0));
@@ -501,8 +504,8 @@ int mpm_sim_checkpoint_load(mpm_sim *s, const void *buf, size_t n, mpm_error *er
                         "load into a fresh simulation");
     if (!pf && nload != s->nload)
         return mpm_fail(err, MPM_EINVAL, CK_FIELD,
-                        "saved from a case of another layout: %zu loaded particles in the "
-                        "checkpoint, %zu in this case",
+                        "saved from a case of another layout: %zu particles under tractions or "
+                        "point forces in the checkpoint, %zu in this case",
                         nload, s->nload);
     /* the particles' sections: the materials and creation indices checked
      * (the creation indices a permutation: the scratch marks them) */
