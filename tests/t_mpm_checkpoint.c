@@ -567,9 +567,18 @@ TEST(ckpt_refuses_corrupt)
     CHECK(ck_run(r, &ck_small, CK_N) == 0);
     CHECK(ck_state_get(r, &ref) == 0);
     CHECKF(!*ck_state_diff(&ref, &s1), "after refused loads, %s differs", ck_state_diff(&ref, &s1));
-    /* and the good blob still loads into it */
+    /* and the good blob still loads into it, although it has run on to
+     * step N: it then goes on as the saved run does */
     CHECK(mpm_sim_checkpoint_load(b, blob, len, &err) == 0);
     CHECK(mpm_sim_steps(b) == ck_small.K);
+    CHECK(ck_run(b, &ck_small, CK_N) == 0);
+    CHECK(ck_run(a, &ck_small, CK_N) == 0);
+    ck_state_free(&s0);
+    ck_state_free(&s1);
+    CHECK(ck_state_get(a, &s0) == 0);
+    CHECK(ck_state_get(b, &s1) == 0);
+    CHECKF(!*ck_state_diff(&s0, &s1), "loaded into a used simulation: %s differs",
+           ck_state_diff(&s0, &s1));
     ck_state_free(&s0);
     ck_state_free(&s1);
     ck_state_free(&ref);
