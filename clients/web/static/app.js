@@ -1,7 +1,7 @@
 // mpmweb's page: the runs table and one run's view, plain JS, no build step.
 //
 // Everything the daemon says (names, errors, warnings) is set with
-// textContent, never innerHTML.  A live job follows /api/events/JOB
+// textContent, never parsed as markup.  A live job follows /api/events/JOB
 // (Server-Sent Events): its record, its energy history, then progress,
 // energy, snapshot notices and finished; samples are merged by their seq
 // (a gap is filled from /api/energy) and the record is polled while the job
