@@ -32,7 +32,7 @@
 #define WEB_MAX_URL 2048         /* a request's URL, bytes */
 #define WEB_SSE_QUEUE 512        /* events queued per browser */
 #define WEB_RUNS_MAX 500u        /* runs per /api/runs page */
-#define WEB_HISTORY_MAX 200000u  /* energy samples in an event stream's history */
+#define WEB_HISTORY_MAX 50000u   /* energy samples in an event stream's history */
 #define WEB_REQUEST_TIMEOUT 10.0 /* s, per mpmd request */
 
 /* An HTTP answer made by the API: status, body (malloc'd) and its type. */
