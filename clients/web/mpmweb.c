@@ -473,6 +473,7 @@ int main(int argc, char **argv)
             fprintf(stderr, "mpmweb: %s needs a value (mpmweb --help)\n", a);
             return CTL_EXIT_USAGE;
         }
+        if (!v) v = ""; /* not used by the flags without a value */
         if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
             usage(stdout);
             return 0;

@@ -33,6 +33,10 @@ static void put(buf_t *b, const char *s, size_t k)
         b->p = p;
         b->cap = cap;
     }
+    if (!b->p) { /* cannot happen: the first call allocates */
+        b->oom = 1;
+        return;
+    }
     memcpy(b->p + b->n, s, k);
     b->n += k;
     b->p[b->n] = 0;
