@@ -361,15 +361,18 @@ static void web_cleanup(void)
     }
 }
 
-static void browser_live(void);
+/* A test whose mpmweb and browser are stopped however it returns (and its
+ * daemons, by DTEST). */
+#define WTEST(name)             \
+    static void w_##name(void); \
+    DTEST(name)                 \
+    {                           \
+        w_##name();             \
+        web_cleanup();          \
+    }                           \
+    static void w_##name(void)
 
-DTEST(web_browser_live)
-{
-    browser_live();
-    web_cleanup();
-}
-
-static void browser_live(void)
+WTEST(web_browser_live)
 {
     td_daemon d;
     char dir[300], path[400], url[256], ids[32];
@@ -539,7 +542,7 @@ static void browser_live(void)
 
 /* Control from the page, when enabled: only with the header, and then the
  * daemon cancels the job. */
-DTEST(web_control_enabled)
+WTEST(web_control_enabled)
 {
     td_daemon d;
     web_t w;
@@ -586,7 +589,7 @@ DTEST(web_control_enabled)
 }
 
 /* --listen beyond loopback needs --allow-remote; bad addresses are named. */
-TEST(web_listen_rules)
+WTEST(web_listen_rules)
 {
     web_t w;
     const char *a1[] = {"--listen", "0.0.0.0:0", NULL};
@@ -613,4 +616,71 @@ TEST(web_listen_rules)
     int st = web_stop(&live_web);
     CHECK(warned);
     CHECK(st == 0);
+}
+
+/* A browser that opens a job's event stream and never reads: the job runs
+ * to its end all the same, its record is whole, the gateway keeps
+ * answering others meanwhile, and it stops cleanly with the stalled
+ * connection still open. */
+WTEST(web_slow_browser)
+{
+    td_daemon d;
+    char dir[300], path[400], rq[256];
+    snprintf(dir, sizeof dir, "%s/d", t_tmpdir());
+    CHECK(td_start(&d, dir, NULL) == 0);
+    const char *wargs[] = {"--endpoint", d.ep, "--listen", "127.0.0.1:0", NULL};
+    CHECK(web_start(&live_web, "webs", wargs) == 0);
+    json_t *c = example("disks2d_fine");
+    CHECK(c != NULL);
+    set_output(c, "energyEvery", json_integer(1));
+    set_output(c, "snapshotEvery", json_integer(10));
+    CHECK(write_case(c, t_tmpdir(), "disks.json", path, sizeof path) == 0);
+    td_out o;
+    CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0 && o.status == 0);
+    unsigned long long job = job_of(o.out);
+    td_out_free(&o);
+    CHECK(job > 0);
+
+    /* the stalled browser: a tiny receive buffer, never read */
+    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)live_web.port)};
+    inet_pton(AF_INET, "127.0.0.1", &a.sin_addr);
+    int fd = socket(AF_INET, SOCK_STREAM, 0), small = 2048;
+    CHECK(fd >= 0);
+    setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+    if (connect(fd, (struct sockaddr *)&a, sizeof a)) {
+        close(fd);
+        CHECK(0);
+    }
+    int k =
+        snprintf(rq, sizeof rq, "GET /api/events/%llu HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n", job);
+    int sent = write(fd, rq, (size_t)k) == k;
+    if (!sent) close(fd);
+    CHECK(sent);
+
+    /* the job ends; others are served meanwhile */
+    char st[32];
+    http_t h;
+    int listed = http(live_web.port, "GET", "/api/runs", "", NULL, &h) == 0 && h.status == 200;
+    http_free(&h);
+    int ended = td_wait_status(&d, job, "FINISHED", 120, st, sizeof st) == 0;
+    json_t *run = ended ? show_json(&d, job) : NULL;
+    long long samples = run ? jint(run, "energySamples") : -1,
+              steps = run ? jint(run, "steps") : -1;
+    json_decref(run);
+    int listed2 = http(live_web.port, "GET", "/api/runs", "", NULL, &h) == 0 && h.status == 200;
+    http_free(&h);
+    int stopped = web_stop(&live_web);
+    close(fd);
+    CHECK(listed && listed2);
+    CHECKF(ended, "the job is %s", st);
+    TLOG("job %llu: %lld steps, %lld energy samples recorded with a stalled browser", job, steps,
+         samples);
+    CHECK(steps > 0 && samples == steps + 1);
+    CHECKF(stopped == 0, "mpmweb stopped with status %d", stopped);
+    char *e = slurp(live_web.err);
+    const char *dropped = e ? strstr(e, "events dropped") : NULL;
+    while (dropped && dropped > e && dropped[-1] != ';') dropped--;
+    TLOG("mpmweb at its stop:%.40s", dropped ? dropped : " (no count)");
+    free(e);
+    CHECK(td_stop(&d) == 0);
 }
