@@ -307,4 +307,5 @@ test: $(ASAN)/mpmweb
 test: export MPMWEB_BIN = $(ASAN)/mpmweb
 tsan: $(TSAN)/mpmweb
 tsan: export MPMWEB_BIN = $(TSAN)/mpmweb
+TSAN_T += web_
 demo: bin/mpmweb
