@@ -173,6 +173,7 @@ function drawEnergy(v) {
   for (const [k, colour] of SERIES) {
     g.strokeStyle = colour;
     g.lineWidth = 1.6;
+    g.setLineDash(k === "total" ? [6, 4] : []); // total dashed: kinetic shows beneath it
     g.beginPath();
     let first = true;
     for (let i = 0; i < s.length; i += stride) {
@@ -184,6 +185,7 @@ function drawEnergy(v) {
     if (!first && isFinite(p[k])) g.lineTo(X(p.t), Y(p[k]));
     g.stroke();
   }
+  g.setLineDash([]);
   const last = s[s.length - 1];
   $("r-balance").textContent = isFinite(last.balance) ? "balance error " + fmtNum(100 * last.balance, 3) + " %" : "";
   cv.dataset.energyPoints = String(s.length);
