@@ -4,10 +4,14 @@
  * loopback port, plain HTTP over a socket for the API and its safety rules
  * (JSON-escaped names, control refused without --allow-control and without
  * its header, foreign Host refused, non-loopback --listen refused without
- * --allow-remote), and Debian's headless Chromium loading the page twice
- * while the job runs: the DOM it dumps must show the energy plot's points
- * and all the job's particles drawn, both advancing between the loads, and
- * its screenshots must be PNGs with more than one colour.  The screenshots
+ * --allow-remote), and Debian's headless Chromium (driven over the
+ * DevTools pipe, t_web_cdp.c: --dump-dom with --virtual-time-budget never
+ * returns while an event stream is open, virtual time waiting for it) on
+ * the page of the running job: what the page records on its canvases must
+ * show the energy plot's points and all the job's particles drawn, both
+ * advancing while the same page stays open, its screenshots must be PNGs
+ * with more than one colour, and after the job ends the record must come
+ * with its time slider.  The screenshots
  * are kept in build/test-web/.  Without chromium the browser part is
  * skipped, saying so (deploy/install-deps.sh installs it).
  *
