@@ -281,3 +281,31 @@ CASE ?= disks
 demo: deps
 	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl
 	bash deploy/demo.sh $(CASE)
+
+# ---- mpmweb, the live web monitor (clients/web/) -----------------------------------
+# bin/mpmweb: the gateway (clients/web/*.c) with mpmctl's connection, keys and
+# JSON helpers, the protocol library and libmicrohttpd; its page is
+# clients/web/static/ (read at run time, found beside the binary).  The tests
+# find it through MPMWEB_BIN (else beside MPMD_BIN); the web_ tests drive it
+# with headless Chromium.
+WEB_SRCS := $(wildcard clients/web/*.c)
+WEB_CTL  := clients/ctl_conn.c clients/ctl_keys.c clients/ctl_json.c clients/ctl_out.c
+WEBLIBS  := -lmicrohttpd $(ZMQLIBS) $(LDLIBS)
+mpmweb_deps = $(patsubst %.c,$(1)/%.o,$(WEB_SRCS) $(WEB_CTL)) $(1)/libmpp.a $(1)/libmpm.a
+LINT_SRCS += $(WEB_SRCS)
+all: bin/mpmweb
+bin/mpmweb: $(call mpmweb_deps,$(REL))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ $(WEBLIBS)
+$(ASAN)/mpmweb: $(call mpmweb_deps,$(ASAN))
+	$(CC) $(SAN) -o $@ $^ $(WEBLIBS)
+$(TSAN)/mpmweb: $(call mpmweb_deps,$(TSAN))
+	$(CC) $(TSANF) -o $@ $^ $(WEBLIBS)
+test-quick: bin/mpmweb
+test-quick: export MPMWEB_BIN = bin/mpmweb
+test: $(ASAN)/mpmweb
+test: export MPMWEB_BIN = $(ASAN)/mpmweb
+tsan: $(TSAN)/mpmweb
+tsan: export MPMWEB_BIN = $(TSAN)/mpmweb
+TSAN_T += web_
+demo: bin/mpmweb

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # make demo: starts mpmd on loopback with its default database (mpmd.db in
-# this directory), submits a case, watches the run live, lists the runs,
-# and stops the daemon.  If an mpmd already answers on the endpoint, the
+# this directory) and the web monitor mpmweb (http://127.0.0.1:8080/, or
+# MPMWEB_LISTEN), submits a case, watches the run live, lists the runs, and
+# stops the monitor and the daemon.  If an mpmd already answers on the endpoint, the
 # demo uses it and leaves it running.  The case (argument 1, or
 # `make demo CASE=...`): disks (the default: the paper's fine bouncing
 # disks) or collapse (the granular column collapse, a = 2, Drucker-Prager;
@@ -19,8 +20,15 @@ cd "$(dirname "$0")/.."
 export MPMD_ENDPOINT=${MPMD_ENDPOINT:-tcp://127.0.0.1:5555}
 mkdir -p build
 log=build/demo-mpmd.log
+weblog=build/demo-mpmweb.log
 pid=
+webpid=
 stop() {
+    if [ -n "$webpid" ]; then
+        kill -TERM "$webpid" 2>/dev/null || true
+        wait "$webpid" 2>/dev/null || true
+        echo "demo: mpmweb stopped (its log: $weblog)"
+    fi
     if [ -n "$pid" ]; then
         kill -TERM "$pid" 2>/dev/null || true
         wait "$pid" 2>/dev/null || true
@@ -47,8 +55,29 @@ else
     done
     bin/mpmctl ping
 fi
+listen=${MPMWEB_LISTEN:-127.0.0.1:8080}
+bin/mpmweb --listen "$listen" > "$weblog" 2>&1 &
+webpid=$!
+for _ in $(seq 25); do
+    grep -q "serving" "$weblog" 2>/dev/null && break
+    if ! kill -0 "$webpid" 2>/dev/null; then
+        webpid=
+        echo "demo: mpmweb did not start (port taken? MPMWEB_LISTEN=127.0.0.1:PORT make demo):" >&2
+        cat "$weblog" >&2
+        break
+    fi
+    sleep 0.2
+done
+if [ -n "$webpid" ]; then
+    echo "demo: the web monitor is at http://$listen/ (open it now to watch the run live)"
+    sleep "${DEMO_PAUSE:-3}"
+fi
 echo
 echo "demo: $title"
 bin/mpmctl submit "$file" --watch
 echo
 bin/mpmctl runs --limit 5
+if [ -n "$webpid" ] && [ -t 0 ]; then
+    echo
+    read -r -p "demo: the run stays on http://$listen/ (slider, energy); press Enter to stop. " _ || true
+fi

@@ -15,6 +15,8 @@ pkgs=(
   libjansson-dev       # JSON case files
   protobuf-compiler python3-protobuf  # tests: Python's protobuf JSON parser reads the cases too
   clang-format cppcheck  # make format-check, make lint (gcc's -fanalyzer comes with gcc)
+  libmicrohttpd-dev    # mpmweb, the web monitor's HTTP server
+  chromium             # tests: the web monitor's page in a real (headless) browser
 )
 # Optional group: `install-deps.sh bench` adds what `make bench-accuracy` uses
 # for its plots (gnuplot-nox), unless some gnuplot is already there.
