@@ -37,6 +37,7 @@
 
 #include "mpp_msg.h"
 #include "srv_auth.h"
+#include "srv_budget.h"
 #include "srv_log.h"
 #include "srv_pool.h"
 #include "srv_socket.h"
@@ -90,7 +91,8 @@ typedef struct {
     store *st;
     srv_pool *pool;
     srv_auth *auth;
-    int stopping; /* shutting down: no new jobs */
+    srv_budget *budget; /* the disk budgets */
+    int stopping;       /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
     struct pending *pending, **pending_tail; /* reads waiting for a commit */
     size_t npending;
@@ -326,23 +328,6 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
         mpp_case_destroy(&sc);
         return;
     }
-    if (d->cfg->client_max_disk_mb > 0) {
-        int64_t used = 0;
-        if (store_owner_bytes(d->st, owner, &used)) {
-            reply_error(d, id, MPM_EINTERNAL, "", "cannot check the disk quota: %s",
-                        store_error()->message);
-            mpp_case_destroy(&sc);
-            return;
-        }
-        if (used >= d->cfg->client_max_disk_mb * 1048576LL) {
-            reply_error(d, id, MPM_ETOOBIG, "",
-                        "%s's recorded runs take %.1f MiB, this server's per-client quota is "
-                        "%lld MiB (--client-max-disk-mb); ask its admin to free space",
-                        owner, (double)used / 1048576.0, d->cfg->client_max_disk_mb);
-            mpp_case_destroy(&sc);
-            return;
-        }
-    }
     if (d->cfg->client_max_jobs > 0) {
         int live = srv_pool_owner_jobs(d->pool, owner);
         if (live >= d->cfg->client_max_jobs) {
@@ -378,6 +363,14 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
                     : sc->has_end_time ? " (endTime / dt)"
                                        : "",
                     d->cfg->max_steps);
+        mpp_case_destroy(&sc);
+        return;
+    }
+    /* the disk budgets, on the bytes the run would record in those steps */
+    srv_disk_estimate de;
+    srv_budget_estimate(sc, steps, &de);
+    if (srv_budget_admit(d->budget, owner, &de, automatic, &cerr)) {
+        reply_mpm_error(d, id, &cerr);
         mpp_case_destroy(&sc);
         return;
     }
@@ -1029,6 +1022,11 @@ int srv_daemon_run(const srv_config *cfg)
                 "%lld run(s) left running and %lld left queued by an earlier mpmd are now "
                 "interrupted",
                 (long long)ss.recovered_running, (long long)ss.recovered_queued);
+    d.budget = srv_budget_new(cfg, d.st, err, sizeof err);
+    if (!d.budget) {
+        srv_error(0, "%s", err);
+        goto out;
+    }
     d.zctx = zmq_ctx_new();
     if (!d.zctx) {
         srv_error(0, "zmq_ctx_new: %s", zmq_strerror(errno));
@@ -1050,6 +1048,7 @@ int srv_daemon_run(const srv_config *cfg)
         srv_error(0, "%s", err);
         goto out;
     }
+    srv_pool_set_budget(d.pool, d.budget);
     srv_log(0,
             "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
             "queue %d, %s",
@@ -1092,6 +1091,7 @@ out:
     }
     srv_auth_destroy(&d.auth); /* its thread ended with the context */
     store_close(&d.st);
+    srv_budget_destroy(&d.budget); /* after the workers: they charge it */
     srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,
             (unsigned long long)d.bad_requests);
     return rc;

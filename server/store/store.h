@@ -282,6 +282,17 @@ void store_run_extra_clear(store_run_extra *x);
 #define STORE_ENERGY_ROW_BYTES 168 /* 21 columns of 8 bytes */
 int store_owner_bytes(store *s, const char *owner, int64_t *bytes);
 
+/* The same figure for every owner at once (one query, for a daemon's
+ * start): *rows gets *n entries (NULL when there are no runs), released
+ * with store_owner_totals_free(); their sum is the database's recorded
+ * total.  0 or a negative code. */
+typedef struct {
+    const char *owner; /* "" for runs stored before schema 7 */
+    int64_t bytes;
+} store_owner_total;
+int store_owner_totals(store *s, store_owner_total **rows, size_t *n);
+void store_owner_totals_free(store_owner_total *rows, size_t n);
+
 /* Reads the snapshot of a run at step (step < 0: the one with the highest
  * step).  MPM_ENOTFOUND if none. */
 int store_snapshot_get(store *s, int64_t run_id, int64_t step, store_snapshot *out);

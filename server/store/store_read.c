@@ -526,6 +526,68 @@ int store_owner_bytes(store *s, const char *owner, int64_t *bytes)
     return r;
 }
 
+int store_owner_totals(store *s, store_owner_total **rows, size_t *n)
+{
+    if (!s || !rows || !n) return sti_fail(MPM_EINVAL, "store_owner_totals: NULL argument");
+    *rows = NULL;
+    *n = 0;
+    sqlite3 *db;
+    int r = reader_get(s, &db);
+    if (r) return r;
+    sqlite3_stmt *st = NULL;
+    /* one statement: each run's snapshot bytes (length() reads a blob's
+     * size from its record header) and sample count, summed per owner */
+    int rc = sqlite3_prepare_v2(
+        db,
+        "SELECT r.owner, coalesce(sum(s.b), 0) + ?1 * coalesce(sum(e.c), 0) FROM runs r"
+        " LEFT JOIN (SELECT run_id, sum(length(data)) AS b FROM snapshots GROUP BY run_id) s"
+        " ON s.run_id = r.id"
+        " LEFT JOIN (SELECT run_id, count(*) AS c FROM energy GROUP BY run_id) e"
+        " ON e.run_id = r.id GROUP BY r.owner",
+        -1, &st, NULL);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, STORE_ENERGY_ROW_BYTES);
+    store_owner_total *out = NULL;
+    size_t cnt = 0, cap = 0;
+    while (rc == SQLITE_OK || rc == SQLITE_ROW) {
+        rc = sqlite3_step(st);
+        if (rc != SQLITE_ROW) break;
+        if (cnt == cap) {
+            size_t nc = cap ? 2 * cap : 8;
+            store_owner_total *g = realloc(out, nc * sizeof *g);
+            if (!g) {
+                r = sti_fail(MPM_ENOMEM, "out of memory reading the owners' totals");
+                break;
+            }
+            out = g;
+            cap = nc;
+        }
+        out[cnt].owner = NULL;
+        out[cnt].bytes = sqlite3_column_int64(st, 1);
+        if ((r = col_strdup(db, st, 0, &out[cnt].owner))) break;
+        if (!out[cnt].owner && !(out[cnt].owner = calloc(1, 1))) {
+            r = sti_fail(MPM_ENOMEM, "out of memory reading the owners' totals");
+            break;
+        }
+        cnt++;
+    }
+    if (!r && rc != SQLITE_DONE) r = sti_sql_fail(db, rc, "summing the owners' stored bytes");
+    sqlite3_finalize(st);
+    reader_put(s, db);
+    if (r) {
+        store_owner_totals_free(out, cnt);
+        return r;
+    }
+    *rows = out;
+    *n = cnt;
+    return 0;
+}
+
+void store_owner_totals_free(store_owner_total *rows, size_t n)
+{
+    for (size_t i = 0; rows && i < n; i++) free((void *)rows[i].owner);
+    free(rows);
+}
+
 void store_run_extra_clear(store_run_extra *x)
 {
     if (!x) return;
