@@ -896,9 +896,70 @@ static void on_router(daemon_t *d)
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
 }
 
+/* Who submitted a job (live: the pool's; else the store's): 0 with it in
+ * who, or -1 if there is no such job. */
+static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n)
+{
+    srv_job_info ji;
+    if (srv_pool_info(d->pool, job, &ji) == 0) {
+        snprintf(who, n, "%s", ji.owner);
+        return 0;
+    }
+    store_run r;
+    if (store_run_get(d->st, (int64_t)job, &r)) return -1;
+    snprintf(who, n, "%s", r.owner ? r.owner : "");
+    store_run_clear(&r);
+    return 0;
+}
+
+/* Under CURVE (ZMQ_XPUB_MANUAL) a subscription takes effect only when the
+ * daemon applies it: when it names one job's full topic and its sender
+ * (the "User-Id" the ZAP handler gave the connection) is the job's owner
+ * or an admin key.  A prefix, the empty subscription (everything) or
+ * another key's job is not applied: that subscriber receives nothing.
+ * Returns 1 when applied (b[0] == 1), else 0.  An unsubscription is
+ * applied for the key that sent it; the ones libzmq makes when a
+ * subscriber leaves carry no key and concern its pipe only.  (Those come
+ * for refused subscriptions too, so a job once watched under CURVE stays
+ * watched: its snapshots are packed until it ends.) */
+static int apply_subscription(daemon_t *d, zmq_msg_t *m, const char *b, size_t n, int is_job,
+                              uint64_t job)
+{
+    const char *uid = zmq_msg_gets(m, "User-Id");
+    if (!uid || !*uid) return 0; /* a leaving subscriber's: nothing to apply */
+    if (b[0] == 0) {
+        if (zmq_setsockopt(d->xpub, ZMQ_UNSUBSCRIBE, b + 1, n - 1))
+            srv_warn(0, "stream: ZMQ_UNSUBSCRIBE: %s", zmq_strerror(errno));
+        return 0;
+    }
+    char who[OWNER_SIZE];
+    if (b[0] != 1) return 0;
+    if (!is_job) {
+        srv_log(0,
+                "stream subscription to a %zu-byte prefix by %s not applied: only one job's "
+                "topic can be watched",
+                n - 1, uid);
+        return 0;
+    }
+    if (job_owner(d, job, who, sizeof who)) {
+        srv_log(job, "stream subscription by %s not applied: no such job", uid);
+        return 0;
+    }
+    if (strcmp(who, uid) && !srv_auth_is_admin(d->auth, uid)) {
+        srv_warn(job, "stream subscription by %s refused: the job is %s's", uid, who);
+        return 0;
+    }
+    if (zmq_setsockopt(d->xpub, ZMQ_SUBSCRIBE, b + 1, n - 1)) {
+        srv_warn(job, "stream: ZMQ_SUBSCRIBE: %s", zmq_strerror(errno));
+        return 0;
+    }
+    return 1;
+}
+
 /* Subscription changes on the stream socket: byte 1 = subscribe, 0 = leave. */
 static void on_xpub(daemon_t *d)
 {
+    int manual = srv_auth_curve(d->auth);
     for (;;) {
         zmq_msg_t m;
         zmq_msg_init(&m);
@@ -908,9 +969,14 @@ static void on_xpub(daemon_t *d)
         }
         const char *b = zmq_msg_data(&m);
         size_t n = zmq_msg_size(&m);
-        uint64_t job;
-        if (n == SRV_TOPIC_LEN + 1 && (b[0] == 0 || b[0] == 1) &&
-            srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0) {
+        uint64_t job = 0;
+        int is_job = n == SRV_TOPIC_LEN + 1 && srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0;
+        if (manual) {
+            if (n >= 1 && apply_subscription(d, &m, b, n, is_job, job)) {
+                srv_debug(job, "stream watched");
+                srv_pool_watch(d->pool, job, 1);
+            }
+        } else if (is_job && (b[0] == 0 || b[0] == 1)) {
             srv_debug(job, "stream %s", b[0] ? "watched" : "no longer watched");
             srv_pool_watch(d->pool, job, b[0]);
             size_t i = 0;
