@@ -406,3 +406,152 @@ DTEST(daemon_auth_quotas)
     EXPECT_CTL(&d, 1, "local's recorded runs take 0.00 MiB", "submit", bpath);
     CHECK(td_stop(&d) == 0);
 }
+
+/* A CURVE SUB on sep as the client key (pub, sec), subscribed to the
+ * topics (NULL-terminated; "" is everything); NULL on failure. */
+static void *curve_sub(void *zctx, const char *sep, const char *spub, const char *pub,
+                       const char *sec, const char *const *topics)
+{
+    void *s = zmq_socket(zctx, ZMQ_SUB);
+    int zero = 0;
+    if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) ||
+        zmq_setsockopt(s, ZMQ_CURVE_SERVERKEY, spub, 40) ||
+        zmq_setsockopt(s, ZMQ_CURVE_PUBLICKEY, pub, 40) ||
+        zmq_setsockopt(s, ZMQ_CURVE_SECRETKEY, sec, 40)) {
+        if (s) zmq_close(s);
+        return NULL;
+    }
+    for (int i = 0; topics[i]; i++)
+        if (zmq_setsockopt(s, ZMQ_SUBSCRIBE, topics[i], strlen(topics[i]))) {
+            zmq_close(s);
+            return NULL;
+        }
+    if (zmq_connect(s, sep)) {
+        zmq_close(s);
+        return NULL;
+    }
+    return s;
+}
+
+/* Messages waiting on s (multipart: counted once), read within ms. */
+static int drain(void *s, int ms)
+{
+    int n = 0;
+    double end = td_now() + ms / 1000.0;
+    for (;;) {
+        zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
+        double left = end - td_now();
+        if (zmq_poll(&it, 1, left > 0 ? (long)(left * 1000) : 0) <= 0) return n;
+        zmq_msg_t part[4];
+        int np = td_recv_parts(s, part, 4);
+        for (int i = 0; i < np; i++) zmq_msg_close(&part[i]);
+        n += np > 0;
+    }
+}
+
+/* Waits up to timeout s until the daemon's log has text; 0 or -1. */
+static int wait_log(const td_daemon *d, const char *text, double timeout)
+{
+    double end = td_now() + timeout;
+    while (td_now() < end) {
+        if (log_has(d, text)) return 0;
+        td_msleep(50);
+    }
+    return -1;
+}
+
+/* Stream privacy under CURVE: a's job streams to a and to the admin key,
+ * while another authorized key (b) subscribing to that job's topic and to
+ * everything ("") receives nothing; a's late `watch` of its own job still
+ * gives the whole series. */
+DTEST(daemon_auth_stream_private)
+{
+    const char *tmp = t_tmpdir();
+    char dir[300], srvkey[400], auth[400], admins[400], ep[64], sep[64], text[600];
+    char spub[41], ssec[41], apub[41], asec[41], bpub[41], bsec[41], dpub[41], dsec[41];
+    snprintf(dir, sizeof dir, "%s/private", tmp);
+    mkdir(dir, 0700);
+    if (keygen(dir, "srv", "server", spub, ssec) || keygen(dir, "a", "mpmd", apub, asec) ||
+        keygen(dir, "b", "mpmd", bpub, bsec) || keygen(dir, "adm", "mpmd", dpub, dsec))
+        return;
+    snprintf(srvkey, sizeof srvkey, "%s/srv/server.key", dir);
+    CHECK(give_server_key(dir, "a", spub) == 0 && give_server_key(dir, "b", spub) == 0 &&
+          give_server_key(dir, "adm", spub) == 0);
+    snprintf(auth, sizeof auth, "%s/authorized_keys", dir);
+    snprintf(text, sizeof text, "%s alice\n%s bob\n", apub, bpub);
+    CHECK(write_text(auth, text) == 0);
+    snprintf(admins, sizeof admins, "%s/admins", dir);
+    snprintf(text, sizeof text, "%s root\n", dpub);
+    CHECK(write_text(admins, text) == 0);
+    int port = 21000 + (int)((getpid() + 7919) % 19000);
+    snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
+    snprintf(sep, sizeof sep, "tcp://127.0.0.1:%d", port + 1);
+    const char *extra[] = {"--curve-secret", srvkey, "--authorized-keys", auth,
+                           "--admin-keys",   admins, "--verbose",         NULL};
+    td_daemon d;
+    char ddir[400];
+    snprintf(ddir, sizeof ddir, "%s/d", dir);
+    td_set_curve(spub, apub, asec);
+    if (td_start_ep(&d, ddir, ep, extra)) return;
+
+    /* a's job 1 runs until cancelled: progress several times a second */
+    char cpath[500];
+    CHECK(write_case(long_case(100), dir, "long.json", cpath, sizeof cpath) == 0);
+    td_out o;
+    CTL_AS(&d, dir, "a", &o, "submit", cpath);
+    unsigned long long job = job_of(o.out);
+    td_out_free(&o);
+    CHECKF(job == 1, "a's submit gave no job 1");
+    char st[32];
+    CHECK(td_wait_status(&d, job, "RUNNING", 20, st, sizeof st) == 0);
+
+    void *zctx = zmq_ctx_new();
+    CHECK(zctx);
+    const char *topic = "job:0000000000000001:";
+    const char *b_topics[] = {topic, "", NULL}, *one[] = {topic, NULL};
+    /* b first: its subscriptions are refused before a's are applied */
+    void *sb = curve_sub(zctx, sep, spub, bpub, bsec, b_topics);
+    int ok = sb != NULL;
+    snprintf(text, sizeof text, "job 1: stream subscription by %s refused: the job is %s's", bpub,
+             apub);
+    ok = ok && wait_log(&d, text, 20) == 0;
+    snprintf(text, sizeof text, "stream subscription to a 0-byte prefix by %s not applied", bpub);
+    ok = ok && wait_log(&d, text, 20) == 0;
+    void *sa = ok ? curve_sub(zctx, sep, spub, apub, asec, one) : NULL;
+    void *sd = ok ? curve_sub(zctx, sep, spub, dpub, dsec, one) : NULL;
+    int na = 0, nd = 0, nb = 0;
+    double end = td_now() + 30;
+    while (sa && sd && (na < 3 || nd < 3) && td_now() < end) {
+        na += drain(sa, 100);
+        nd += drain(sd, 100);
+    }
+    /* b had every chance to get the same messages as a and the admin */
+    if (sb) nb = drain(sb, 500);
+    TLOG("stream of a's job: a got %d messages, the admin %d, b %d", na, nd, nb);
+    if (sa) zmq_close(sa);
+    if (sd) zmq_close(sd);
+    if (sb) zmq_close(sb);
+    zmq_ctx_term(zctx);
+    CHECKF(ok, "b's subscriptions were not refused (daemon log)");
+    CHECKF(na >= 3 && nd >= 3, "the owner (%d) or the admin (%d) did not receive the stream", na,
+           nd);
+    CHECKF(nb == 0, "b received %d messages of a's job", nb);
+    CTL_AS(&d, dir, "a", &o, "cancel", "1");
+    td_out_free(&o);
+    CHECK(td_wait_status(&d, job, "CANCELLED", 20, st, sizeof st) == 0);
+
+    /* a's `watch` of its own job, after it started: the whole series */
+    char bpath[500];
+    CHECK(write_case(bar_steps(600, 10), dir, "bar.json", bpath, sizeof bpath) == 0);
+    CTL_AS(&d, dir, "a", &o, "submit", bpath);
+    unsigned long long job2 = job_of(o.out);
+    td_out_free(&o);
+    CHECK(job2 == 2);
+    CTL_AS(&d, dir, "a", &o, "watch", "2", "--csv");
+    series s = {0};
+    ok = o.status == 0 && parse_csv(o.out, &s) == 0 && s.n == 61 && consecutive(&s);
+    series_free(&s);
+    td_out_free(&o);
+    CHECKF(ok, "a's late watch of its job did not give the 61 samples");
+    CHECK(td_stop(&d) == 0);
+}
