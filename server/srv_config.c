@@ -65,6 +65,9 @@ static const setting settings[] = {
     {"max-disk-mb", NULL, T_LL, F(max_disk_mb), 0, 1e12,
      "MiB of recorded snapshots and energy samples in the whole database (estimated at "
      "submit, counted while jobs run), 0 = no limit (default 0)"},
+    {"private-runs", NULL, T_FLAG, F(private_runs), 0, 1,
+     "a client key may read (show, runs, energy, snapshot, watch) only its own runs; admin "
+     "keys read all (default: every authorized key reads every run)"},
     {"insecure-allow-remote-without-auth", NULL, T_FLAG, F(insecure_remote), 0, 1,
      "bind non-loopback addresses WITHOUT CURVE: anyone who reaches them may submit, "
      "cancel and read (trusted networks only)"},

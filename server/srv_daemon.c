@@ -455,7 +455,8 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
 
 static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
 static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
-static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
+static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
+static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n);
 static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t job);
 static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
 
@@ -465,14 +466,34 @@ static int is_read(mpp_req_kind k)
            k == MPP_REQ_LIST_RUNS || k == MPP_REQ_GET_ENERGY || k == MPP_REQ_GET_SNAPSHOT;
 }
 
-/* Answers a read request from committed data. */
-static void answer_read(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+/* With --private-runs, a read of one run by a key that neither owns it nor
+ * is an admin's is answered FORBIDDEN (1); else 0.  (A run that does not
+ * exist gets its NOT_FOUND from the read itself.) */
+static int read_denied(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
+    if (!d->cfg->private_runs || rq->kind == MPP_REQ_LIST_RUNS || rq->kind == MPP_REQ_CANCEL)
+        return 0;
+    char who[OWNER_SIZE];
+    if (job_owner(d, rq->id, who, sizeof who) || !strcmp(who, owner) ||
+        srv_auth_is_admin(d->auth, owner))
+        return 0;
+    srv_log(rq->id, "read by %s refused: the run is %s's (--private-runs)", owner, who);
+    reply_error(d, id, MPM_EFORBIDDEN, rq->kind == MPP_REQ_STATUS ? "job_id" : "run_id",
+                "run %llu is another client's: this server shows each key only its own runs "
+                "(--private-runs)",
+                (unsigned long long)rq->id);
+    return 1;
+}
+
+/* Answers a read request from committed data. */
+static void answer_read(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
+{
+    if (read_denied(d, id, owner, rq)) return;
     switch (rq->kind) {
     case MPP_REQ_CANCEL:
     case MPP_REQ_STATUS: reply_run(d, id, rq->id, 0, "job_id"); break;
     case MPP_REQ_GET_RUN: reply_run(d, id, rq->id, rq->with_case, "run_id"); break;
-    case MPP_REQ_LIST_RUNS: do_list(d, id, rq); break;
+    case MPP_REQ_LIST_RUNS: do_list(d, id, owner, rq); break;
     case MPP_REQ_GET_ENERGY: do_energy(d, id, rq); break;
     case MPP_REQ_GET_SNAPSHOT: do_snapshot(d, id, rq); break;
     default: reply_error(d, id, MPM_EINTERNAL, "", "request kind %d is not a read", (int)rq->kind);
@@ -497,7 +518,7 @@ static int run_request(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_reques
         *begun = 1;
     }
     if (!store_ticket_done(d->st, *ticket)) return 0;
-    answer_read(d, id, rq);
+    answer_read(d, id, owner, rq);
     return 1;
 }
 
@@ -734,9 +755,11 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_snapshot_clear(&ss);
 }
 
-static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     store_run_filter f = {0};
+    /* --private-runs: a key lists its own runs (an admin's: all) */
+    if (d->cfg->private_runs && !srv_auth_is_admin(d->auth, owner)) f.owner = owner;
     if (rq->status) {
         if (rq->status < MPP_STATUS_MIN || rq->status > MPP_STATUS_MAX) {
             reply_error(d, id, MPM_EREQUEST, "list_runs.status",

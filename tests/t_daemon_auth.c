@@ -463,7 +463,9 @@ static int wait_log(const td_daemon *d, const char *text, double timeout)
 /* Stream privacy under CURVE: a's job streams to a and to the admin key,
  * while another authorized key (b) subscribing to that job's topic and to
  * everything ("") receives nothing; a's late `watch` of its own job still
- * gives the whole series. */
+ * gives the whole series.  Read privacy (--private-runs): b's show,
+ * energy, snapshot and watch of a's run are FORBIDDEN and its listing
+ * holds its own run only; the admin reads and lists every run. */
 DTEST(daemon_auth_stream_private)
 {
     const char *tmp = t_tmpdir();
@@ -486,8 +488,8 @@ DTEST(daemon_auth_stream_private)
     int port = 21000 + (int)((getpid() + 7919) % 19000);
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
     snprintf(sep, sizeof sep, "tcp://127.0.0.1:%d", port + 1);
-    const char *extra[] = {"--curve-secret", srvkey, "--authorized-keys", auth,
-                           "--admin-keys",   admins, "--verbose",         NULL};
+    const char *extra[] = {"--curve-secret", srvkey,      "--authorized-keys", auth, "--admin-keys",
+                           admins,           "--verbose", "--private-runs",    NULL};
     td_daemon d;
     char ddir[400];
     snprintf(ddir, sizeof ddir, "%s/d", dir);
@@ -536,18 +538,54 @@ DTEST(daemon_auth_stream_private)
     CHECKF(na >= 3 && nd >= 3, "the owner (%d) or the admin (%d) did not receive the stream", na,
            nd);
     CHECKF(nb == 0, "b received %d messages of a's job", nb);
+
+    /* --private-runs: b reads none of a's run, nor sees it listed; b's own
+     * run it reads; the admin reads and lists both */
+    static const char *const reads[][5] = {{"show", "1", NULL},
+                                           {"energy", "1", "--csv", NULL},
+                                           {"snapshot", "1", "-o", "-", NULL},
+                                           {"watch", "1", NULL}};
+    for (size_t i = 0; i < sizeof reads / sizeof reads[0]; i++) {
+        const char *args[8] = {"--keys", NULL};
+        char kd[400];
+        snprintf(kd, sizeof kd, "%s/b", dir);
+        args[1] = kd;
+        for (int k = 0; reads[i][k]; k++) args[2 + k] = reads[i][k];
+        CHECK(td_ctlv(&d, 30, &o, args) == 0);
+        ok = o.status == 1 && strstr(o.err, "FORBIDDEN") && strstr(o.err, "--private-runs");
+        TLOG("b: %s 1: exit %d: %.200s", reads[i][0], o.status, o.err);
+        td_out_free(&o);
+        CHECKF(ok, "b's %s of a's run was not FORBIDDEN", reads[i][0]);
+    }
+    char bpath[500];
+    CHECK(write_case(bar_steps(600, 10), dir, "bar.json", bpath, sizeof bpath) == 0);
+    CTL_AS(&d, dir, "b", &o, "submit", bpath);
+    unsigned long long jb = job_of(o.out);
+    td_out_free(&o);
+    CHECK(jb == 2);
+    CTL_AS(&d, dir, "b", &o, "runs", "--json");
+    ok = o.status == 0 && count_lines(o.out) == 1 && strstr(o.out, bpub) && !strstr(o.out, apub);
+    td_out_free(&o);
+    CHECKF(ok, "b's listing is not its own run alone");
+    CTL_AS(&d, dir, "adm", &o, "runs", "--json");
+    ok = o.status == 0 && count_lines(o.out) == 2 && strstr(o.out, bpub) && strstr(o.out, apub);
+    td_out_free(&o);
+    CHECKF(ok, "the admin's listing does not show both runs");
+    CTL_AS(&d, dir, "adm", &o, "show", "1");
+    ok = o.status == 0;
+    td_out_free(&o);
+    CHECKF(ok, "the admin cannot read a's run");
+
     CTL_AS(&d, dir, "a", &o, "cancel", "1");
     td_out_free(&o);
     CHECK(td_wait_status(&d, job, "CANCELLED", 20, st, sizeof st) == 0);
 
     /* a's `watch` of its own job, after it started: the whole series */
-    char bpath[500];
-    CHECK(write_case(bar_steps(600, 10), dir, "bar.json", bpath, sizeof bpath) == 0);
     CTL_AS(&d, dir, "a", &o, "submit", bpath);
     unsigned long long job2 = job_of(o.out);
     td_out_free(&o);
-    CHECK(job2 == 2);
-    CTL_AS(&d, dir, "a", &o, "watch", "2", "--csv");
+    CHECK(job2 == 3);
+    CTL_AS(&d, dir, "a", &o, "watch", "3", "--csv");
     series s = {0};
     ok = o.status == 0 && parse_csv(o.out, &s) == 0 && s.n == 61 && consecutive(&s);
     series_free(&s);

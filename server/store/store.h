@@ -127,6 +127,7 @@ typedef struct {
     int64_t before_id;    /* > 0: only runs with id < before_id */
     int with_case;        /* 1: also load case_pb (else NULL; case_len
                              is set either way) */
+    const char *owner;    /* non-NULL: only the runs of this owner */
 } store_run_filter;
 
 typedef void (*store_log_fn)(void *ud, const char *msg);

@@ -282,6 +282,7 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t
         len += (size_t)snprintf(sql + len, sizeof sql - len, ")");
     }
     if (f->before_id > 0) len += (size_t)snprintf(sql + len, sizeof sql - len, " AND id < ?1");
+    if (f->owner) len += (size_t)snprintf(sql + len, sizeof sql - len, " AND owner = ?3");
     len += (size_t)snprintf(sql + len, sizeof sql - len, " ORDER BY id DESC");
     if (f->limit) len += (size_t)snprintf(sql + len, sizeof sql - len, " LIMIT ?2");
     if (len >= sizeof sql) return sti_fail(MPM_EINVAL, "run list query too long");
@@ -299,6 +300,7 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t
     }
     if (f->before_id > 0) rc = sqlite3_bind_int64(st, 1, f->before_id);
     if (rc == SQLITE_OK && f->limit) rc = sqlite3_bind_int64(st, 2, (sqlite3_int64)f->limit);
+    if (rc == SQLITE_OK && f->owner) rc = sqlite3_bind_text(st, 3, f->owner, -1, SQLITE_STATIC);
     if (rc != SQLITE_OK) {
         r = sti_sql_fail(db, rc, "listing runs");
         goto out;
