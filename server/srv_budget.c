@@ -17,6 +17,7 @@
 typedef struct {
     char owner[48];
     int64_t bytes;
+    long long quota_mb; /* the client's disk quota (0: none) */
 } owner_total;
 
 struct srv_budget {
@@ -42,6 +43,7 @@ static owner_total *find_locked(srv_budget *b, const char *owner, int add)
     owner_total *o = &b->tab[b->n++];
     snprintf(o->owner, sizeof o->owner, "%s", owner);
     o->bytes = 0;
+    o->quota_mb = b->cfg->client_max_disk_mb;
     return o;
 }
 
@@ -118,8 +120,8 @@ void srv_budget_estimate(const mpp_case *sc, double steps, srv_disk_estimate *ou
     out->bytes = out->snapshots * out->snapshot_bytes + out->samples * STORE_ENERGY_ROW_BYTES;
 }
 
-int srv_budget_admit(srv_budget *b, const char *owner, const srv_disk_estimate *e, int automatic,
-                     mpm_error *err)
+int srv_budget_admit(srv_budget *b, const char *owner, long long quota_mb,
+                     const srv_disk_estimate *e, int automatic, mpm_error *err)
 {
     const srv_config *cfg = b->cfg;
     double snap = e->snapshots * e->snapshot_bytes;
@@ -139,20 +141,22 @@ int srv_budget_admit(srv_budget *b, const char *owner, const srv_disk_estimate *
                         what, cfg->job_max_disk_mb);
     pthread_mutex_lock(&b->mu);
     int64_t total = b->total;
-    owner_total *o = find_locked(b, owner, 0);
+    owner_total *o = find_locked(b, owner, 1);
     int64_t mine = o ? o->bytes : 0;
+    if (o) o->quota_mb = quota_mb;
     pthread_mutex_unlock(&b->mu);
     if (cfg->max_disk_mb > 0 && (double)total + e->bytes > (double)cfg->max_disk_mb * MIB)
         return mpm_fail(err, MPM_ETOOBIG, field,
                         "%s; the runs recorded take %.2f MiB, and with it they would pass this "
                         "server's disk budget of %lld MiB (--max-disk-mb)",
                         what, (double)total / MIB, cfg->max_disk_mb);
-    if (cfg->client_max_disk_mb > 0 &&
-        (double)mine + e->bytes > (double)cfg->client_max_disk_mb * MIB)
+    if (quota_mb > 0 && (double)mine + e->bytes > (double)quota_mb * MIB)
         return mpm_fail(err, MPM_ETOOBIG, field,
                         "%s; %s's recorded runs take %.2f MiB, and with it they would pass this "
-                        "server's per-client quota of %lld MiB (--client-max-disk-mb)",
-                        what, owner, (double)mine / MIB, cfg->client_max_disk_mb);
+                        "server's per-client quota of %lld MiB (%s)",
+                        what, owner, (double)mine / MIB, quota_mb,
+                        quota_mb == cfg->client_max_disk_mb ? "--client-max-disk-mb"
+                                                            : "max-disk-mb of its key");
     return 0;
 }
 
@@ -177,13 +181,14 @@ int srv_budget_charge(srv_budget *b, const char *owner, int64_t *job_bytes, int6
                  "this run had recorded %.2f MiB",
                  (double)b->total / MIB, (long long)n, cfg->max_disk_mb, (double)*job_bytes / MIB);
         rc = MPM_ETOOBIG;
-    } else if (cfg->client_max_disk_mb > 0 && o &&
-               o->bytes + n > cfg->client_max_disk_mb * 1048576LL) {
+    } else if (o && o->quota_mb > 0 && o->bytes + n > o->quota_mb * 1048576LL) {
         snprintf(why, whylen,
                  "per-client disk quota reached: %s's runs take %.2f MiB and this run's next "
-                 "%lld bytes would pass this server's quota of %lld MiB (--client-max-disk-mb); "
-                 "this run had recorded %.2f MiB",
-                 owner, (double)o->bytes / MIB, (long long)n, cfg->client_max_disk_mb,
+                 "%lld bytes would pass this server's quota of %lld MiB (%s); this run had "
+                 "recorded %.2f MiB",
+                 owner, (double)o->bytes / MIB, (long long)n, o->quota_mb,
+                 o->quota_mb == cfg->client_max_disk_mb ? "--client-max-disk-mb"
+                                                        : "max-disk-mb of its key",
                  (double)*job_bytes / MIB);
         rc = MPM_ETOOBIG;
     } else if (!o) {

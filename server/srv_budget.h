@@ -43,17 +43,20 @@ typedef struct {
 } srv_disk_estimate;
 void srv_budget_estimate(const mpp_case *sc, double steps, srv_disk_estimate *out);
 
-/* Admits a submission by owner whose estimate is e: 0, or MPM_ETOOBIG
+/* Admits a submission by owner whose estimate is e, under the client's
+ * disk quota quota_mb (srv_auth_quota(); 0: none), which its jobs' writes
+ * are then charged against: 0, or MPM_ETOOBIG
  * with err naming the field (output.snapshot_every when the snapshots make
  * most of the bytes, else output.energy_every), the estimate, the budget
  * and its flag.  `automatic`: the step count is the automatic dt's
  * smallest (the message says "at least"). */
-int srv_budget_admit(srv_budget *b, const char *owner, const srv_disk_estimate *e, int automatic,
-                     mpm_error *err);
+int srv_budget_admit(srv_budget *b, const char *owner, long long quota_mb,
+                     const srv_disk_estimate *e, int automatic, mpm_error *err);
 
 /* Charges n bytes that a job of owner (*job_bytes recorded so far) is
  * about to record: 0 when they fit every budget (charged: *job_bytes and
- * the totals grow by n), else MPM_ETOOBIG with the reason in why (the
+ * the totals grow by n; the client's quota is the one its last admitted
+ * submission set), else MPM_ETOOBIG with the reason in why (the
  * budget, its flag and the figures; nothing charged). */
 int srv_budget_charge(srv_budget *b, const char *owner, int64_t *job_bytes, int64_t n, char *why,
                       size_t whylen);

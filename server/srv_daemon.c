@@ -319,22 +319,30 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
         return;
     }
     size_t nparticles = sc->info.particles;
-    if (d->cfg->client_max_particles > 0 &&
-        nparticles > (unsigned long long)d->cfg->client_max_particles) {
+    /* the client's quotas: its key's settings, else the --client-max-* */
+    srv_quota q;
+    srv_auth_quota(d->auth, d->cfg, owner, &q);
+    if (q.max_particles > 0 && nparticles > (unsigned long long)q.max_particles) {
         reply_error(d, id, MPM_ETOOBIG, "bodies",
                     "the case has %zu particles, above this server's per-client quota of %lld "
-                    "(--client-max-particles) for %s",
-                    nparticles, d->cfg->client_max_particles, owner);
+                    "(%s) for %s",
+                    nparticles, q.max_particles,
+                    q.max_particles == d->cfg->client_max_particles ? "--client-max-particles"
+                                                                    : "max-particles of its key",
+                    owner);
         mpp_case_destroy(&sc);
         return;
     }
-    if (d->cfg->client_max_jobs > 0) {
+    if (q.max_jobs > 0) {
         int live = srv_pool_owner_jobs(d->pool, owner);
-        if (live >= d->cfg->client_max_jobs) {
+        if (live >= q.max_jobs) {
             reply_error(d, id, MPM_EFULL, "",
                         "%s has %d queued or running jobs, this server's per-client quota "
-                        "(--client-max-jobs %d); retry when one has ended",
-                        owner, live, d->cfg->client_max_jobs);
+                        "(%s %lld); retry when one has ended",
+                        owner, live,
+                        q.max_jobs == d->cfg->client_max_jobs ? "--client-max-jobs"
+                                                              : "max-jobs of its key",
+                        q.max_jobs);
             mpp_case_destroy(&sc);
             return;
         }
@@ -369,7 +377,7 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
     /* the disk budgets, on the bytes the run would record in those steps */
     srv_disk_estimate de;
     srv_budget_estimate(sc, steps, &de);
-    if (srv_budget_admit(d->budget, owner, &de, automatic, &cerr)) {
+    if (srv_budget_admit(d->budget, owner, q.max_disk_mb, &de, automatic, &cerr)) {
         reply_mpm_error(d, id, &cerr);
         mpp_case_destroy(&sc);
         return;
@@ -1149,13 +1157,14 @@ int srv_daemon_run(const srv_config *cfg)
                                   {d.pull, 0, ZMQ_POLLIN, 0},
                                   {NULL, store_notify_fd(d.st), ZMQ_POLLIN, 0}};
         int n = zmq_poll(items, 4, 250);
+        int perr = errno; /* the reload's file calls may change errno */
         if (hup_signal) {
             hup_signal = 0;
             srv_auth_reload(d.auth);
         }
         if (n < 0) {
-            if (errno == EINTR) continue;
-            srv_warn(0, "zmq_poll: %s", zmq_strerror(errno));
+            if (perr == EINTR) continue;
+            srv_warn(0, "zmq_poll: %s", zmq_strerror(perr));
             break;
         }
         if (items[3].revents & ZMQ_POLLIN) store_notify_drain(d.st);

@@ -593,3 +593,119 @@ DTEST(daemon_auth_stream_private)
     CHECKF(ok, "a's late watch of its job did not give the 61 samples");
     CHECK(td_stop(&d) == 0);
 }
+
+/* Per-key quotas: the allow-list's "KEY max-jobs=N max-particles=N
+ * max-disk-mb=N comment" settings override the --client-max-* flags for
+ * that key only; a bad setting refuses the start naming the file, line and
+ * setting (and on SIGHUP leaves the previous list in force); SIGHUP
+ * applies new settings. */
+DTEST(daemon_auth_key_quotas)
+{
+    const char *tmp = t_tmpdir();
+    char dir[300], srvkey[400], auth[400], ep[64], text[600];
+    char spub[41], ssec[41], apub[41], asec[41], bpub[41];
+    snprintf(dir, sizeof dir, "%s/keyquota", tmp);
+    mkdir(dir, 0700);
+    if (keygen(dir, "srv", "server", spub, ssec) || keygen(dir, "a", "mpmd", apub, asec) ||
+        keygen(dir, "b", "mpmd", bpub, NULL))
+        return;
+    snprintf(srvkey, sizeof srvkey, "%s/srv/server.key", dir);
+    CHECK(give_server_key(dir, "a", spub) == 0 && give_server_key(dir, "b", spub) == 0);
+    snprintf(auth, sizeof auth, "%s/authorized_keys", dir);
+    int port = 21000 + (int)((getpid() + 3571) % 19000);
+    snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
+
+    /* bad settings: the start is refused naming file, line and setting */
+    static const char *const bad[] = {"max-jobz=3", "max-jobs=-1", "max-disk-mb=1.5",
+                                      "max-particles=x"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        snprintf(text, sizeof text, "# clients\n%s max-jobs=1 %s alice\n", apub, bad[i]);
+        CHECK(write_text(auth, text) == 0);
+        char db[400];
+        snprintf(db, sizeof db, "%s/bad.db", dir);
+        const char *argv[] = {"--endpoint",        ep,   "--db", db, "--curve-secret", srvkey,
+                              "--authorized-keys", auth, NULL};
+        td_out o;
+        CHECK(td_run_mpmd(argv, 20, &o) == 0);
+        char want[600];
+        snprintf(want, sizeof want, "%s:2: setting '%s'", auth, bad[i]);
+        int ok = o.status != 0 && (strstr(o.err, want) || strstr(o.out, want));
+        TLOG("%s: exit %d: %.200s", bad[i], o.status, o.err[0] ? o.err : o.out);
+        td_out_free(&o);
+        CHECKF(ok, "the setting %s was not refused naming the file, line and setting", bad[i]);
+    }
+
+    /* a: one job, 300 particles, 1 MiB; b: the flags' quotas (none) */
+    snprintf(text, sizeof text, "%s max-jobs=1 max-particles=300 max-disk-mb=1 alice\n%s bob\n",
+             apub, bpub);
+    CHECK(write_text(auth, text) == 0);
+    const char *extra[] = {"--curve-secret", srvkey, "--authorized-keys", auth, NULL};
+    td_daemon d;
+    char ddir[400];
+    snprintf(ddir, sizeof ddir, "%s/d", dir);
+    td_set_curve(spub, apub, asec);
+    if (td_start_ep(&d, ddir, ep, extra)) return;
+    char cpath[500], bigp[500], recp[500];
+    CHECK(write_case(long_case(100000), dir, "long.json", cpath, sizeof cpath) == 0);
+    CHECK(write_case(example("disks2d_fine"), dir, "big.json", bigp, sizeof bigp) == 0);
+    json_t *rec = block2d(400, 10, "recorded");
+    set_output(rec, "snapshotEvery", json_integer(1));
+    set_output(rec, "recordSnapshots", json_true());
+    CHECK(write_case(rec, dir, "rec.json", recp, sizeof recp) == 0);
+    td_out o;
+    /* (the job quota is checked before the disk's: this one first) */
+    CTL_AS(&d, dir, "a", &o, "submit", recp);
+    int ok = o.status == 1 && strstr(o.err, "per-client quota of 1 MiB (max-disk-mb of its key)");
+    TLOG("a: rec: exit %d: %.200s", o.status, o.err);
+    td_out_free(&o);
+    CHECKF(ok, "a's 9.4 MiB case was not refused by its key's max-disk-mb");
+    CTL_AS(&d, dir, "a", &o, "submit", cpath);
+    ok = o.status == 0 && job_of(o.out) == 1;
+    td_out_free(&o);
+    CHECKF(ok, "a's first job was refused");
+    static const struct {
+        const char *path_of, *want;
+    } refused[] = {{"long", "(max-jobs of its key 1)"},
+                   {"big", "per-client quota of 300 (max-particles of its key)"}};
+    for (size_t i = 0; i < 2; i++) {
+        const char *p = i == 0 ? cpath : bigp;
+        CTL_AS(&d, dir, "a", &o, "submit", p);
+        ok = o.status == 1 && strstr(o.err, refused[i].want);
+        TLOG("a: %s: exit %d: %.200s", refused[i].path_of, o.status, o.err);
+        td_out_free(&o);
+        CHECKF(ok, "a's %s case was not refused with \"%s\"", refused[i].path_of, refused[i].want);
+    }
+    /* b is bound by the flags only */
+    for (int i = 0; i < 3; i++) {
+        CTL_AS(&d, dir, "b", &o, "submit", i == 2 ? recp : i ? bigp : cpath);
+        ok = o.status == 0 && job_of(o.out) > 1;
+        td_out_free(&o);
+        CHECKF(ok, "b's submission %d was refused", i);
+    }
+    /* SIGHUP with a bad setting: the previous list stays (a: one job) */
+    snprintf(text, sizeof text, "%s max-jobs=two alice\n%s bob\n", apub, bpub);
+    CHECK(write_text(auth, text) == 0);
+    CHECK(kill(d.pid, SIGHUP) == 0);
+    snprintf(text, sizeof text, "%s:1: setting 'max-jobs=two'", auth);
+    CHECK(wait_log(&d, text, 20) == 0);
+    CTL_AS(&d, dir, "a", &o, "submit", cpath);
+    ok = o.status == 1 && strstr(o.err, "max-jobs of its key 1");
+    TLOG("a after a bad SIGHUP: exit %d in %.1f s: %.200s", o.status, o.secs, o.err);
+    td_out_free(&o);
+    CHECKF(ok, "after a bad SIGHUP a's quota is not the previous one");
+    /* SIGHUP with two jobs for a */
+    snprintf(text, sizeof text, "%s max-jobs=2 alice\n%s bob\n", apub, bpub);
+    CHECK(write_text(auth, text) == 0);
+    CHECK(kill(d.pid, SIGHUP) == 0);
+    CHECK(wait_log(&d, "SIGHUP: keys re-read", 20) == 0);
+    CTL_AS(&d, dir, "a", &o, "submit", cpath);
+    ok = o.status == 0 && job_of(o.out) > 1;
+    TLOG("a after SIGHUP: exit %d: %.200s%.200s", o.status, o.out, o.err);
+    td_out_free(&o);
+    CHECKF(ok, "after SIGHUP a's second job was refused");
+    CTL_AS(&d, dir, "a", &o, "submit", cpath);
+    ok = o.status == 1 && strstr(o.err, "max-jobs of its key 2");
+    td_out_free(&o);
+    CHECKF(ok, "after SIGHUP a's third job was not refused");
+    CHECK(td_stop(&d) == 0);
+}
