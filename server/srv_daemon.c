@@ -936,11 +936,7 @@ static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n)
         snprintf(who, n, "%s", ji.owner);
         return 0;
     }
-    store_run r;
-    if (store_run_get(d->st, (int64_t)job, &r)) return -1;
-    snprintf(who, n, "%s", r.owner ? r.owner : "");
-    store_run_clear(&r);
-    return 0;
+    return store_run_owner(d->st, (int64_t)job, who, n) ? -1 : 0;
 }
 
 /* Under CURVE (ZMQ_XPUB_MANUAL) a subscription takes effect only when the

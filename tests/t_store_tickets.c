@@ -2,7 +2,8 @@
  * t_store_tickets.c - the store's commit tracking without blocking: a
  * ticket per run is done once that run's writes are committed, the notify
  * descriptor becomes readable after a commit, and many runs fit; the
- * owners' recorded bytes (store_owner_totals) and the listing by owner.
+ * owners' recorded bytes (store_owner_totals), a run's owner and the
+ * listing by owner.
  */
 #include "store.h"
 #include "t.h"
@@ -224,5 +225,8 @@ TEST(store_owner_totals)
     ok = n == 2 && runs[0].id == id[3] && runs[1].id == id[0];
     store_run_list_free(runs, n);
     CHECKF(ok, "the owner filter listed %zu runs", n);
+    char who[48];
+    CHECK(store_run_owner(s, id[1], who, sizeof who) == 0 && !strcmp(who, "bob"));
+    CHECK(store_run_owner(s, 999, who, sizeof who) == MPM_ENOTFOUND);
     store_close(&s);
 }

@@ -292,6 +292,11 @@ typedef struct {
     int64_t bytes;
 } store_owner_total;
 int store_owner_totals(store *s, store_owner_total **rows, size_t *n);
+
+/* The owner of run id into buf (len bytes; "" for runs stored before
+ * schema 7), without reading the rest of the run.  MPM_ENOTFOUND if
+ * none. */
+int store_run_owner(store *s, int64_t id, char *buf, size_t len);
 void store_owner_totals_free(store_owner_total *rows, size_t n);
 
 /* Reads the snapshot of a run at step (step < 0: the one with the highest

@@ -584,6 +584,30 @@ int store_owner_totals(store *s, store_owner_total **rows, size_t *n)
     return 0;
 }
 
+int store_run_owner(store *s, int64_t id, char *buf, size_t len)
+{
+    if (!s || !buf || !len) return sti_fail(MPM_EINVAL, "store_run_owner: NULL argument");
+    buf[0] = 0;
+    sqlite3 *db;
+    int r = reader_get(s, &db);
+    if (r) return r;
+    sqlite3_stmt *st = NULL;
+    int rc = sqlite3_prepare_v2(db, "SELECT owner FROM runs WHERE id = ?1", -1, &st, NULL);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, id);
+    if (rc == SQLITE_OK) rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW) {
+        const unsigned char *t = sqlite3_column_text(st, 0);
+        snprintf(buf, len, "%s", t ? (const char *)t : "");
+    } else if (rc == SQLITE_DONE) {
+        r = sti_fail(MPM_ENOTFOUND, "no run %lld", (long long)id);
+    } else {
+        r = sti_sql_fail(db, rc, "reading a run's owner");
+    }
+    sqlite3_finalize(st);
+    reader_put(s, db);
+    return r;
+}
+
 void store_owner_totals_free(store_owner_total *rows, size_t n)
 {
     for (size_t i = 0; rows && i < n; i++) free((void *)rows[i].owner);
