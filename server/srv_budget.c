@@ -67,15 +67,20 @@ srv_budget *srv_budget_new(const srv_config *cfg, store *st, char *err, size_t e
         srv_budget_destroy(&b);
         return NULL;
     }
+    /* one row per owner (GROUP BY): the table as read */
+    b->tab = calloc(n ? n : 1, sizeof *b->tab);
+    if (!b->tab) {
+        snprintf(err, errlen, "out of memory");
+        store_owner_totals_free(rows, n);
+        srv_budget_destroy(&b);
+        return NULL;
+    }
+    b->cap = n ? n : 1;
     for (size_t i = 0; i < n; i++) {
-        owner_total *o = find_locked(b, rows[i].owner, 1);
-        if (!o) {
-            snprintf(err, errlen, "out of memory");
-            store_owner_totals_free(rows, n);
-            srv_budget_destroy(&b);
-            return NULL;
-        }
-        o->bytes += rows[i].bytes;
+        owner_total *o = &b->tab[b->n++];
+        snprintf(o->owner, sizeof o->owner, "%s", rows[i].owner ? rows[i].owner : "");
+        o->bytes = rows[i].bytes;
+        o->quota_mb = cfg->client_max_disk_mb;
         b->total += rows[i].bytes;
     }
     store_owner_totals_free(rows, n);

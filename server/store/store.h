@@ -288,7 +288,7 @@ int store_owner_bytes(store *s, const char *owner, int64_t *bytes);
  * with store_owner_totals_free(); their sum is the database's recorded
  * total.  0 or a negative code. */
 typedef struct {
-    const char *owner; /* "" for runs stored before schema 7 */
+    const char *owner; /* "" for runs stored before schema 7 (NULL: none) */
     int64_t bytes;
 } store_owner_total;
 int store_owner_totals(store *s, store_owner_total **rows, size_t *n);

@@ -537,6 +537,8 @@ int store_owner_totals(store *s, store_owner_total **rows, size_t *n)
     int r = reader_get(s, &db);
     if (r) return r;
     sqlite3_stmt *st = NULL;
+    store_owner_total *v = NULL;
+    size_t cnt = 0, capn = 0;
     /* one statement: each run's snapshot bytes (length() reads a blob's
      * size from its record header) and sample count, summed per owner */
     int rc = sqlite3_prepare_v2(
@@ -548,38 +550,34 @@ int store_owner_totals(store *s, store_owner_total **rows, size_t *n)
         " ON e.run_id = r.id GROUP BY r.owner",
         -1, &st, NULL);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, STORE_ENERGY_ROW_BYTES);
-    store_owner_total *out = NULL;
-    size_t cnt = 0, cap = 0;
-    while (rc == SQLITE_OK || rc == SQLITE_ROW) {
-        rc = sqlite3_step(st);
-        if (rc != SQLITE_ROW) break;
-        if (cnt == cap) {
-            size_t nc = cap ? 2 * cap : 8;
-            store_owner_total *g = realloc(out, nc * sizeof *g);
-            if (!g) {
+    if (rc != SQLITE_OK) {
+        r = sti_sql_fail(db, rc, "summing the owners' stored bytes");
+        goto out;
+    }
+    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+        if (cnt == capn) {
+            size_t nc = capn ? 2 * capn : 16;
+            store_owner_total *nv = realloc(v, nc * sizeof *nv);
+            if (!nv) {
                 r = sti_fail(MPM_ENOMEM, "out of memory reading the owners' totals");
-                break;
+                goto out;
             }
-            out = g;
-            cap = nc;
+            v = nv;
+            capn = nc;
         }
-        out[cnt].owner = NULL;
-        out[cnt].bytes = sqlite3_column_int64(st, 1);
-        if ((r = col_strdup(db, st, 0, &out[cnt].owner))) break;
-        if (!out[cnt].owner && !(out[cnt].owner = calloc(1, 1))) {
-            r = sti_fail(MPM_ENOMEM, "out of memory reading the owners' totals");
-            break;
-        }
+        v[cnt].bytes = sqlite3_column_int64(st, 1);
+        if ((r = col_strdup(db, st, 0, &v[cnt].owner))) goto out;
         cnt++;
     }
-    if (!r && rc != SQLITE_DONE) r = sti_sql_fail(db, rc, "summing the owners' stored bytes");
+    if (rc != SQLITE_DONE) r = sti_sql_fail(db, rc, "summing the owners' stored bytes");
+out:
     sqlite3_finalize(st);
     reader_put(s, db);
     if (r) {
-        store_owner_totals_free(out, cnt);
+        store_owner_totals_free(v, cnt);
         return r;
     }
-    *rows = out;
+    *rows = v;
     *n = cnt;
     return 0;
 }
