@@ -3,8 +3,11 @@
  * srv_auth.h).  The key lists live behind a mutex: the ZAP thread reads
  * them for every handshake, the main thread replaces them on SIGHUP and
  * reads the admin list for a Cancel.  A list is a file of lines
- * "KEY [comment]" ('#' lines and blank lines skipped) or a directory whose
- * *.pub files are such files.
+ * "KEY [max-jobs=N] [max-particles=N] [max-disk-mb=N] [comment]" ('#'
+ * lines and blank lines skipped) or a directory whose *.pub files are such
+ * files.  The settings are the key's own quotas (srv_auth_quota): the
+ * tokens after the key that start with "max-"; the first other token
+ * begins the comment.
  */
 #include "srv_auth.h"
 
@@ -23,10 +26,22 @@
 #define ZAP_DOMAIN "mpmd"
 #define KEYS_MAX 100000 /* keys per list */
 
+/* A listed key and its quota settings (-1: not set). */
 typedef struct {
-    char (*z)[SRV_KEY_Z85_SIZE]; /* Z85 texts, sorted */
+    char z[SRV_KEY_Z85_SIZE]; /* first: the sort key */
+    long long q[3];           /* max-jobs, max-particles, max-disk-mb */
+} keyent;
+
+typedef struct {
+    keyent *z; /* sorted by key */
     size_t n;
 } keylist;
+
+static const struct {
+    const char *name;
+    double hi;
+} settings[3] = {
+    {"max-jobs", 1e6}, {"max-particles", (double)MPM_MAX_PARTICLES}, {"max-disk-mb", 1e12}};
 
 struct srv_auth {
     int curve;
@@ -50,8 +65,8 @@ static int is_z85_key(const char *s, size_t n)
 }
 
 /* The key of one line (first token) into z: 1, 0 for no key (blank or
- * comment), -1 for a line that is not a key. */
-static int line_key(const char *line, char *z)
+ * comment), -1 for a line that is not a key.  *rest: what follows it. */
+static int line_key(const char *line, char *z, const char **rest)
 {
     while (*line == ' ' || *line == '\t') line++;
     if (!*line || *line == '#' || *line == '\n' || *line == '\r') return 0;
@@ -59,7 +74,44 @@ static int line_key(const char *line, char *z)
     if (!is_z85_key(line, n)) return -1;
     memcpy(z, line, n);
     z[n] = 0;
+    if (rest) *rest = line + n;
     return 1;
+}
+
+/* The settings after a key ("max-NAME=N" tokens, up to the comment) into
+ * q (-1 when absent): 0, or -1 with the bad token and why in err. */
+static int line_settings(const char *s, long long q[3], char *err, size_t errlen)
+{
+    for (int i = 0; i < 3; i++) q[i] = -1;
+    for (;;) {
+        while (*s == ' ' || *s == '\t') s++;
+        size_t n = strcspn(s, " \t\r\n");
+        if (!n || strncmp(s, "max-", 4)) return 0; /* the comment, or nothing */
+        char tok[128];
+        snprintf(tok, sizeof tok, "%.*s", (int)(n < 127 ? n : 127), s);
+        char *eq = strchr(tok, '=');
+        int k = -1;
+        for (int i = 0; eq && i < 3; i++)
+            if ((size_t)(eq - tok) == strlen(settings[i].name) &&
+                !strncmp(tok, settings[i].name, (size_t)(eq - tok)))
+                k = i;
+        if (k < 0) {
+            snprintf(err, errlen,
+                     "setting '%s': unknown (max-jobs=N, max-particles=N or max-disk-mb=N)", tok);
+            return -1;
+        }
+        char *end;
+        errno = 0;
+        double v = strtod(eq + 1, &end);
+        if (errno || end == eq + 1 || *end || !(v >= 0 && v <= settings[k].hi) ||
+            v != (long long)v) {
+            snprintf(err, errlen, "setting '%s': %s expects a whole number in [0, %.0f]", tok,
+                     settings[k].name, settings[k].hi);
+            return -1;
+        }
+        q[k] = (long long)v;
+        s += n;
+    }
 }
 
 int srv_key_file_read(const char *path, int secret, char *z85, char *err, size_t errlen)
@@ -82,7 +134,7 @@ int srv_key_file_read(const char *path, int secret, char *z85, char *err, size_t
     int ln = 0;
     while (fgets(line, sizeof line, f)) {
         ln++;
-        int k = line_key(line, z85);
+        int k = line_key(line, z85, NULL);
         if (k == 0) continue;
         fclose(f);
         if (k < 0) {
@@ -101,7 +153,7 @@ static int cmp_key(const void *a, const void *b)
     return memcmp(a, b, SRV_KEY_Z85_SIZE);
 }
 
-static int list_add(keylist *l, const char *z, size_t *cap)
+static int list_add(keylist *l, const char *z, const long long q[3], size_t *cap)
 {
     if (l->n == *cap) {
         size_t nc = *cap ? 2 * *cap : 16;
@@ -110,8 +162,10 @@ static int list_add(keylist *l, const char *z, size_t *cap)
         l->z = p;
         *cap = nc;
     }
-    memset(l->z[l->n], 0, SRV_KEY_Z85_SIZE);
-    memcpy(l->z[l->n++], z, SRV_KEY_Z85_LEN);
+    keyent *e = &l->z[l->n++];
+    memset(e->z, 0, SRV_KEY_Z85_SIZE);
+    memcpy(e->z, z, SRV_KEY_Z85_LEN);
+    memcpy(e->q, q, sizeof e->q);
     return 0;
 }
 
@@ -123,15 +177,20 @@ static int load_file(const char *path, keylist *l, size_t *cap, char *err, size_
         snprintf(err, errlen, "cannot open %s: %s", path, strerror(errno));
         return -1;
     }
-    char line[4096], z[SRV_KEY_Z85_SIZE];
+    char line[4096], z[SRV_KEY_Z85_SIZE], e[256];
     int ln = 0, rc = 0;
     while (!rc && fgets(line, sizeof line, f)) {
         ln++;
-        int k = line_key(line, z);
+        const char *rest = NULL;
+        long long q[3];
+        int k = line_key(line, z, &rest);
         if (k < 0) {
             snprintf(err, errlen, "%s:%d: not a 40-character Z85 key", path, ln);
             rc = -1;
-        } else if (k > 0 && list_add(l, z, cap)) {
+        } else if (k > 0 && line_settings(rest, q, e, sizeof e)) {
+            snprintf(err, errlen, "%s:%d: %s", path, ln, e);
+            rc = -1;
+        } else if (k > 0 && list_add(l, z, q, cap)) {
             snprintf(err, errlen, "%s: more than %d keys", path, KEYS_MAX);
             rc = -1;
         }
@@ -180,12 +239,17 @@ static int load_list(const char *path, keylist *out, char *err, size_t errlen)
     return 0;
 }
 
-static int list_has(const keylist *l, const char *z)
+static const keyent *list_find(const keylist *l, const char *z)
 {
     char k[SRV_KEY_Z85_SIZE] = {0};
-    if (strlen(z) != SRV_KEY_Z85_LEN) return 0;
+    if (strlen(z) != SRV_KEY_Z85_LEN) return NULL;
     memcpy(k, z, SRV_KEY_Z85_LEN);
-    return l->n && bsearch(k, l->z, l->n, sizeof *l->z, cmp_key) != NULL;
+    return l->n ? bsearch(k, l->z, l->n, sizeof *l->z, cmp_key) : NULL;
+}
+
+static int list_has(const keylist *l, const char *z)
+{
+    return list_find(l, z) != NULL;
 }
 
 /* Logs the keys of b not in a with the verb. */
@@ -193,8 +257,8 @@ static size_t log_diff(const keylist *a, const keylist *b, const char *what, con
 {
     size_t n = 0;
     for (size_t i = 0; i < b->n; i++)
-        if (!list_has(a, b->z[i])) {
-            srv_log(0, "%s: key %s %s", what, b->z[i], verb);
+        if (!list_has(a, b->z[i].z)) {
+            srv_log(0, "%s: key %s %s", what, b->z[i].z, verb);
             n++;
         }
     return n;
@@ -291,6 +355,23 @@ void srv_auth_reload(srv_auth *a)
     pthread_mutex_unlock(&a->mu);
     srv_log(0, "SIGHUP: keys re-read: %zu added, %zu removed; %zu authorized, %zu admin", add, del,
             al.n, ad.n);
+}
+
+void srv_auth_quota(srv_auth *a, const srv_config *cfg, const char *owner, srv_quota *q)
+{
+    long long v[3] = {cfg->client_max_jobs, cfg->client_max_particles, cfg->client_max_disk_mb};
+    if (a && a->curve && owner) {
+        pthread_mutex_lock(&a->mu);
+        /* the authorized list's settings first, then the admin list's */
+        const keyent *e[2] = {list_find(&a->allowed, owner), list_find(&a->admins, owner)};
+        for (int k = 0; k < 3; k++)
+            for (int i = 1; i >= 0; i--)
+                if (e[i] && e[i]->q[k] >= 0) v[k] = e[i]->q[k];
+        pthread_mutex_unlock(&a->mu);
+    }
+    q->max_jobs = v[0];
+    q->max_particles = v[1];
+    q->max_disk_mb = v[2];
 }
 
 int srv_auth_is_admin(srv_auth *a, const char *owner)

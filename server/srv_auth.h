@@ -58,6 +58,17 @@ int srv_auth_secure(srv_auth *a, void *sock, char *err, size_t errlen);
 /* Re-reads the key lists and logs the keys added and removed. */
 void srv_auth_reload(srv_auth *a);
 
+/* A client's quotas (0: no limit). */
+typedef struct {
+    long long max_jobs, max_particles, max_disk_mb;
+} srv_quota;
+
+/* The quotas of owner: the settings on its key's line (in
+ * --authorized-keys, else --admin-keys: "KEY max-jobs=N max-particles=N
+ * max-disk-mb=N comment", each optional), else cfg's --client-max-jobs,
+ * --client-max-particles and --client-max-disk-mb. */
+void srv_auth_quota(srv_auth *a, const srv_config *cfg, const char *owner, srv_quota *q);
+
 /* 1 if owner (a Z85 key) is listed in --admin-keys. */
 int srv_auth_is_admin(srv_auth *a, const char *owner);
 

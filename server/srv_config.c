@@ -56,8 +56,18 @@ static const setting settings[] = {
     {"client-max-particles", NULL, T_LL, F(client_max_particles), 0, (double)MPM_MAX_PARTICLES,
      "particles per job of one client, 0 = only --max-particles (default 0)"},
     {"client-max-disk-mb", NULL, T_LL, F(client_max_disk_mb), 0, 1e12,
-     "MiB of recorded snapshots and energy samples per client; at or above it, its "
-     "submissions are refused, 0 = no limit (default 0)"},
+     "MiB of recorded snapshots and energy samples per client: a submission whose estimate "
+     "would pass it is refused, a job that would pass it ends FAILED, 0 = no limit "
+     "(default 0)"},
+    {"job-max-disk-mb", NULL, T_LL, F(job_max_disk_mb), 0, 1e12,
+     "MiB of recorded snapshots and energy samples per job (estimated at submit, counted "
+     "while it runs), 0 = no limit (default 4096)"},
+    {"max-disk-mb", NULL, T_LL, F(max_disk_mb), 0, 1e12,
+     "MiB of recorded snapshots and energy samples in the whole database (estimated at "
+     "submit, counted while jobs run), 0 = no limit (default 0)"},
+    {"private-runs", NULL, T_FLAG, F(private_runs), 0, 1,
+     "a client key may read (show, runs, energy, snapshot, watch) only its own runs; admin "
+     "keys read all (default: every authorized key reads every run)"},
     {"insecure-allow-remote-without-auth", NULL, T_FLAG, F(insecure_remote), 0, 1,
      "bind non-loopback addresses WITHOUT CURVE: anyone who reaches them may submit, "
      "cancel and read (trusted networks only)"},
@@ -80,6 +90,7 @@ static void defaults(srv_config *c)
     c->max_wall_s = 0;
     c->max_request_bytes = 64LL << 20;
     c->stream_buffer_mb = 64;
+    c->job_max_disk_mb = 4096;
 }
 
 static const setting *find(const char *key)

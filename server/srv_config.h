@@ -32,6 +32,9 @@ typedef struct {
     int client_max_jobs;            /* live (queued + running) jobs per client, 0 = no limit */
     long long client_max_particles; /* particles per job of one client, 0 = no limit */
     long long client_max_disk_mb;   /* MiB of stored records per client, 0 = no limit */
+    long long job_max_disk_mb;      /* MiB of stored records per job, 0 = no limit */
+    long long max_disk_mb;          /* MiB of stored records in the database, 0 = no limit */
+    int private_runs;               /* a client reads only its own runs (admins: all) */
     int verbose;
 } srv_config;
 

@@ -37,6 +37,7 @@
 
 #include "mpp_msg.h"
 #include "srv_auth.h"
+#include "srv_budget.h"
 #include "srv_log.h"
 #include "srv_pool.h"
 #include "srv_socket.h"
@@ -90,7 +91,8 @@ typedef struct {
     store *st;
     srv_pool *pool;
     srv_auth *auth;
-    int stopping; /* shutting down: no new jobs */
+    srv_budget *budget; /* the disk budgets */
+    int stopping;       /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
     struct pending *pending, **pending_tail; /* reads waiting for a commit */
     size_t npending;
@@ -317,39 +319,30 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
         return;
     }
     size_t nparticles = sc->info.particles;
-    if (d->cfg->client_max_particles > 0 &&
-        nparticles > (unsigned long long)d->cfg->client_max_particles) {
+    /* the client's quotas: its key's settings, else the --client-max-* */
+    srv_quota q;
+    srv_auth_quota(d->auth, d->cfg, owner, &q);
+    if (q.max_particles > 0 && nparticles > (unsigned long long)q.max_particles) {
         reply_error(d, id, MPM_ETOOBIG, "bodies",
                     "the case has %zu particles, above this server's per-client quota of %lld "
-                    "(--client-max-particles) for %s",
-                    nparticles, d->cfg->client_max_particles, owner);
+                    "(%s) for %s",
+                    nparticles, q.max_particles,
+                    q.max_particles == d->cfg->client_max_particles ? "--client-max-particles"
+                                                                    : "max-particles of its key",
+                    owner);
         mpp_case_destroy(&sc);
         return;
     }
-    if (d->cfg->client_max_disk_mb > 0) {
-        int64_t used = 0;
-        if (store_owner_bytes(d->st, owner, &used)) {
-            reply_error(d, id, MPM_EINTERNAL, "", "cannot check the disk quota: %s",
-                        store_error()->message);
-            mpp_case_destroy(&sc);
-            return;
-        }
-        if (used >= d->cfg->client_max_disk_mb * 1048576LL) {
-            reply_error(d, id, MPM_ETOOBIG, "",
-                        "%s's recorded runs take %.1f MiB, this server's per-client quota is "
-                        "%lld MiB (--client-max-disk-mb); ask its admin to free space",
-                        owner, (double)used / 1048576.0, d->cfg->client_max_disk_mb);
-            mpp_case_destroy(&sc);
-            return;
-        }
-    }
-    if (d->cfg->client_max_jobs > 0) {
+    if (q.max_jobs > 0) {
         int live = srv_pool_owner_jobs(d->pool, owner);
-        if (live >= d->cfg->client_max_jobs) {
+        if (live >= q.max_jobs) {
             reply_error(d, id, MPM_EFULL, "",
                         "%s has %d queued or running jobs, this server's per-client quota "
-                        "(--client-max-jobs %d); retry when one has ended",
-                        owner, live, d->cfg->client_max_jobs);
+                        "(%s %lld); retry when one has ended",
+                        owner, live,
+                        q.max_jobs == d->cfg->client_max_jobs ? "--client-max-jobs"
+                                                              : "max-jobs of its key",
+                        q.max_jobs);
             mpp_case_destroy(&sc);
             return;
         }
@@ -378,6 +371,14 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
                     : sc->has_end_time ? " (endTime / dt)"
                                        : "",
                     d->cfg->max_steps);
+        mpp_case_destroy(&sc);
+        return;
+    }
+    /* the disk budgets, on the bytes the run would record in those steps */
+    srv_disk_estimate de;
+    srv_budget_estimate(sc, steps, &de);
+    if (srv_budget_admit(d->budget, owner, q.max_disk_mb, &de, automatic, &cerr)) {
+        reply_mpm_error(d, id, &cerr);
         mpp_case_destroy(&sc);
         return;
     }
@@ -462,7 +463,8 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
 
 static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
 static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
-static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
+static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
+static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n);
 static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t job);
 static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
 
@@ -472,14 +474,34 @@ static int is_read(mpp_req_kind k)
            k == MPP_REQ_LIST_RUNS || k == MPP_REQ_GET_ENERGY || k == MPP_REQ_GET_SNAPSHOT;
 }
 
-/* Answers a read request from committed data. */
-static void answer_read(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+/* With --private-runs, a read of one run by a key that neither owns it nor
+ * is an admin's is answered FORBIDDEN (1); else 0.  (A run that does not
+ * exist gets its NOT_FOUND from the read itself.) */
+static int read_denied(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
+    if (!d->cfg->private_runs || rq->kind == MPP_REQ_LIST_RUNS || rq->kind == MPP_REQ_CANCEL)
+        return 0;
+    char who[OWNER_SIZE];
+    if (job_owner(d, rq->id, who, sizeof who) || !strcmp(who, owner) ||
+        srv_auth_is_admin(d->auth, owner))
+        return 0;
+    srv_log(rq->id, "read by %s refused: the run is %s's (--private-runs)", owner, who);
+    reply_error(d, id, MPM_EFORBIDDEN, rq->kind == MPP_REQ_STATUS ? "job_id" : "run_id",
+                "run %llu is another client's: this server shows each key only its own runs "
+                "(--private-runs)",
+                (unsigned long long)rq->id);
+    return 1;
+}
+
+/* Answers a read request from committed data. */
+static void answer_read(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
+{
+    if (read_denied(d, id, owner, rq)) return;
     switch (rq->kind) {
     case MPP_REQ_CANCEL:
     case MPP_REQ_STATUS: reply_run(d, id, rq->id, 0, "job_id"); break;
     case MPP_REQ_GET_RUN: reply_run(d, id, rq->id, rq->with_case, "run_id"); break;
-    case MPP_REQ_LIST_RUNS: do_list(d, id, rq); break;
+    case MPP_REQ_LIST_RUNS: do_list(d, id, owner, rq); break;
     case MPP_REQ_GET_ENERGY: do_energy(d, id, rq); break;
     case MPP_REQ_GET_SNAPSHOT: do_snapshot(d, id, rq); break;
     default: reply_error(d, id, MPM_EINTERNAL, "", "request kind %d is not a read", (int)rq->kind);
@@ -504,7 +526,7 @@ static int run_request(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_reques
         *begun = 1;
     }
     if (!store_ticket_done(d->st, *ticket)) return 0;
-    answer_read(d, id, rq);
+    answer_read(d, id, owner, rq);
     return 1;
 }
 
@@ -741,9 +763,11 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_snapshot_clear(&ss);
 }
 
-static void do_list(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
+static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     store_run_filter f = {0};
+    /* --private-runs: a key lists its own runs (an admin's: all) */
+    if (d->cfg->private_runs && !srv_auth_is_admin(d->auth, owner)) f.owner = owner;
     if (rq->status) {
         if (rq->status < MPP_STATUS_MIN || rq->status > MPP_STATUS_MAX) {
             reply_error(d, id, MPM_EREQUEST, "list_runs.status",
@@ -903,9 +927,66 @@ static void on_router(daemon_t *d)
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
 }
 
+/* Who submitted a job (live: the pool's; else the store's): 0 with it in
+ * who, or -1 if there is no such job. */
+static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n)
+{
+    srv_job_info ji;
+    if (srv_pool_info(d->pool, job, &ji) == 0) {
+        snprintf(who, n, "%s", ji.owner);
+        return 0;
+    }
+    return store_run_owner(d->st, (int64_t)job, who, n) ? -1 : 0;
+}
+
+/* Under CURVE (ZMQ_XPUB_MANUAL) a subscription takes effect only when the
+ * daemon applies it: when it names one job's full topic and its sender
+ * (the "User-Id" the ZAP handler gave the connection) is the job's owner
+ * or an admin key.  A prefix, the empty subscription (everything) or
+ * another key's job is not applied: that subscriber receives nothing.
+ * Returns 1 when applied (b[0] == 1), else 0.  An unsubscription is
+ * applied for the key that sent it; the ones libzmq makes when a
+ * subscriber leaves carry no key and concern its pipe only.  (Those come
+ * for refused subscriptions too, so a job once watched under CURVE stays
+ * watched: its snapshots are packed until it ends.) */
+static int apply_subscription(daemon_t *d, zmq_msg_t *m, const char *b, size_t n, int is_job,
+                              uint64_t job)
+{
+    const char *uid = zmq_msg_gets(m, "User-Id");
+    if (!uid || !*uid) return 0; /* a leaving subscriber's: nothing to apply */
+    if (b[0] == 0) {
+        if (zmq_setsockopt(d->xpub, ZMQ_UNSUBSCRIBE, b + 1, n - 1))
+            srv_warn(0, "stream: ZMQ_UNSUBSCRIBE: %s", zmq_strerror(errno));
+        return 0;
+    }
+    char who[OWNER_SIZE];
+    if (b[0] != 1) return 0;
+    if (!is_job) {
+        srv_log(0,
+                "stream subscription to a %zu-byte prefix by %s not applied: only one job's "
+                "topic can be watched",
+                n - 1, uid);
+        return 0;
+    }
+    if (job_owner(d, job, who, sizeof who)) {
+        srv_log(job, "stream subscription by %s not applied: no such job", uid);
+        return 0;
+    }
+    if (strcmp(who, uid) && !srv_auth_is_admin(d->auth, uid)) {
+        srv_warn(job, "stream subscription by %s refused: the job is %s's", uid, who);
+        return 0;
+    }
+    if (zmq_setsockopt(d->xpub, ZMQ_SUBSCRIBE, b + 1, n - 1)) {
+        srv_warn(job, "stream: ZMQ_SUBSCRIBE: %s", zmq_strerror(errno));
+        return 0;
+    }
+    return 1;
+}
+
 /* Subscription changes on the stream socket: byte 1 = subscribe, 0 = leave. */
 static void on_xpub(daemon_t *d)
 {
+    int manual = srv_auth_curve(d->auth);
     for (;;) {
         zmq_msg_t m;
         zmq_msg_init(&m);
@@ -915,9 +996,14 @@ static void on_xpub(daemon_t *d)
         }
         const char *b = zmq_msg_data(&m);
         size_t n = zmq_msg_size(&m);
-        uint64_t job;
-        if (n == SRV_TOPIC_LEN + 1 && (b[0] == 0 || b[0] == 1) &&
-            srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0) {
+        uint64_t job = 0;
+        int is_job = n == SRV_TOPIC_LEN + 1 && srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0;
+        if (manual) {
+            if (n >= 1 && apply_subscription(d, &m, b, n, is_job, job)) {
+                srv_debug(job, "stream watched");
+                srv_pool_watch(d->pool, job, 1);
+            }
+        } else if (is_job && (b[0] == 0 || b[0] == 1)) {
             srv_debug(job, "stream %s", b[0] ? "watched" : "no longer watched");
             srv_pool_watch(d->pool, job, b[0]);
             size_t i = 0;
@@ -1029,6 +1115,11 @@ int srv_daemon_run(const srv_config *cfg)
                 "%lld run(s) left running and %lld left queued by an earlier mpmd are now "
                 "interrupted",
                 (long long)ss.recovered_running, (long long)ss.recovered_queued);
+    d.budget = srv_budget_new(cfg, d.st, err, sizeof err);
+    if (!d.budget) {
+        srv_error(0, "%s", err);
+        goto out;
+    }
     d.zctx = zmq_ctx_new();
     if (!d.zctx) {
         srv_error(0, "zmq_ctx_new: %s", zmq_strerror(errno));
@@ -1050,6 +1141,7 @@ int srv_daemon_run(const srv_config *cfg)
         srv_error(0, "%s", err);
         goto out;
     }
+    srv_pool_set_budget(d.pool, d.budget);
     srv_log(0,
             "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
             "queue %d, %s",
@@ -1061,13 +1153,14 @@ int srv_daemon_run(const srv_config *cfg)
                                   {d.pull, 0, ZMQ_POLLIN, 0},
                                   {NULL, store_notify_fd(d.st), ZMQ_POLLIN, 0}};
         int n = zmq_poll(items, 4, 250);
+        int perr = errno; /* the reload's file calls may change errno */
         if (hup_signal) {
             hup_signal = 0;
             srv_auth_reload(d.auth);
         }
         if (n < 0) {
-            if (errno == EINTR) continue;
-            srv_warn(0, "zmq_poll: %s", zmq_strerror(errno));
+            if (perr == EINTR) continue;
+            srv_warn(0, "zmq_poll: %s", zmq_strerror(perr));
             break;
         }
         if (items[3].revents & ZMQ_POLLIN) store_notify_drain(d.st);
@@ -1092,6 +1185,7 @@ out:
     }
     srv_auth_destroy(&d.auth); /* its thread ended with the context */
     store_close(&d.st);
+    srv_budget_destroy(&d.budget); /* after the workers: they charge it */
     srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,
             (unsigned long long)d.bad_requests);
     return rc;

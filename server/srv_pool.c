@@ -22,6 +22,7 @@
 #include "srv_pool.h"
 
 #include "mpm.h"
+#include "srv_budget.h"
 #include "srv_log.h"
 
 #include <errno.h>
@@ -79,6 +80,7 @@ struct srv_pool {
     unsigned nlost;
     worker *workers;
     int nworkers;
+    srv_budget *budget; /* the disk budgets (NULL: none) */
     int stopping;
     int joined;
 };
@@ -151,8 +153,30 @@ typedef struct {
     void *push;
     srv_job *j;
     char topic[SRV_TOPIC_LEN + 1];
-    pending *pe; /* NULL: every sample handed on at once */
+    pending *pe;       /* NULL: every sample handed on at once */
+    int64_t recorded;  /* bytes this job has recorded (charged) */
+    int over;          /* a disk budget refused a write: the job ends */
+    char overwhy[512]; /* why */
 } ctx;
+
+/* Charges n bytes the job is about to record (srv_budget.h): 0, or -1
+ * when a budget refuses them: they are not to be recorded, and the job
+ * ends FAILED with the reason (c->overwhy) before its next step. */
+static int charge(ctx *c, int64_t n)
+{
+    if (!c->p->budget) return 0;
+    if (c->over) return -1;
+    if (!srv_budget_charge(c->p->budget, c->j->owner, &c->recorded, n, c->overwhy,
+                           sizeof c->overwhy))
+        return 0;
+    c->over = 1;
+    return -1;
+}
+
+static void refund(ctx *c, int64_t n)
+{
+    if (c->p->budget) srv_budget_refund(c->p->budget, c->j->owner, &c->recorded, n);
+}
 
 static void publish(ctx *c, uint8_t *buf, size_t len)
 {
@@ -174,11 +198,20 @@ static void flush_samples(ctx *c)
     if (!pe) return;
     pe->last_flush = mono_now();
     if (!pe->n) return;
+    int64_t bytes = (int64_t)pe->n * STORE_ENERGY_ROW_BYTES;
+    if (charge(c, bytes)) {
+        /* over a disk budget: neither recorded nor streamed */
+        for (size_t i = 0; i < pe->n; i++) free(pe->msg[i]);
+        pe->n = 0;
+        return;
+    }
     int rc = store_energy_append(c->p->st, (int64_t)c->j->id, pe->rec, pe->n);
-    if (rc)
+    if (rc) {
+        refund(c, bytes);
         srv_warn(c->j->id, "energy samples %llu..%llu not recorded: %s",
                  (unsigned long long)pe->rec[0].seq, (unsigned long long)pe->rec[pe->n - 1].seq,
                  store_error()->message);
+    }
     for (size_t i = 0; i < pe->n; i++) publish(c, pe->msg[i], pe->len[i]);
     pe->n = 0;
 }
@@ -200,10 +233,16 @@ static void energy_sample(ctx *c, mpm_sim *sim, mpm_energy_sample *out)
     if (out) *out = s;
     pending *pe = c->pe;
     if (!pe) {
+        if (charge(c, STORE_ENERGY_ROW_BYTES)) {
+            free(buf);
+            return;
+        }
         int rc = store_energy_append(c->p->st, (int64_t)j->id, &r, 1);
-        if (rc)
+        if (rc) {
+            refund(c, STORE_ENERGY_ROW_BYTES);
             srv_warn(j->id, "energy sample %llu not recorded: %s", (unsigned long long)s.seq,
                      store_error()->message);
+        }
         publish(c, buf, len);
         return;
     }
@@ -457,10 +496,13 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
             for (size_t i = 0; i < n; i++) b->packed[off++] = b->yl[i] ? 1.0 : 0.0;
         store_snapshot ss = {(int64_t)j->id,      s.step, s.t, (int64_t)n, dim, f, b->packed,
                              off * sizeof(double)};
-        int rc = store_snapshot_put(c->p->st, &ss);
-        if (rc)
+        /* over a disk budget: not recorded, and the job ends */
+        int rc = charge(c, (int64_t)ss.size) ? 0 : store_snapshot_put(c->p->st, &ss);
+        if (rc) {
+            refund(c, (int64_t)ss.size);
             srv_warn(j->id, "snapshot at step %lld not recorded: %s", (long long)s.step,
                      store_error()->message);
+        }
     }
     if (slot >= 0) publish_snapshot(c, b, &s, seq, slot);
     return 0;
@@ -530,7 +572,7 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
 
 static void run_job(srv_pool *p, void *push, srv_job *j)
 {
-    ctx c = {p, push, j, "", NULL};
+    ctx c = {p, push, j, "", NULL, 0, 0, ""};
     srv_topic(j->id, c.topic);
     mpp_case *sc = j->sc;
     const srv_config *cfg = p->cfg;
@@ -578,6 +620,11 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             snprintf(why, sizeof why, "%s at step %ld",
                      cancel == CANCEL_USER ? "cancelled by a client" : "daemon shutting down",
                      mpm_sim_steps(sim));
+            break;
+        }
+        if (c.over) {
+            status = MPP_STATUS_FAILED;
+            snprintf(why, sizeof why, "%s", c.overwhy);
             break;
         }
         int64_t k = mpm_sim_steps(sim);
@@ -643,6 +690,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         energy_sample(&c, sim, &last);
     else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
         /* a diverged state has no meaningful energies; keep the last good one */
+    }
+    /* the last samples may pass a disk budget: then the run is not whole */
+    flush_samples(&c);
+    if (c.over && status == MPP_STATUS_FINISHED) {
+        status = MPP_STATUS_FAILED;
+        snprintf(why, sizeof why, "%s", c.overwhy);
     }
     /* the energy budget, on the balance error of the run's last sample (the
      * final one): a warning recorded with the run, or FAILED if the case
@@ -758,6 +811,13 @@ srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char 
         p->workers[i].started = 1;
     }
     return p;
+}
+
+void srv_pool_set_budget(srv_pool *p, srv_budget *b)
+{
+    pthread_mutex_lock(&p->mu);
+    p->budget = b;
+    pthread_mutex_unlock(&p->mu);
 }
 
 int srv_pool_has_room(srv_pool *p)

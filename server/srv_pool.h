@@ -47,6 +47,11 @@ typedef struct srv_pool srv_pool;
 srv_pool *srv_pool_new(void *zctx, const srv_config *cfg, store *st, const char *events_ep,
                        char *err, size_t errlen);
 
+/* The disk budgets the workers charge each recorded write to (see
+ * srv_budget.h); call before the first submit.  NULL: none. */
+struct srv_budget;
+void srv_pool_set_budget(srv_pool *p, struct srv_budget *b);
+
 /* Queues job `id` (its run record already inserted); watched: somebody
  * subscribed to its stream already; owner: who submitted it (a CURVE key
  * in Z85, or "local"; at most 47 bytes kept).  Takes ownership of *sc (set

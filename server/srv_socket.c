@@ -104,6 +104,10 @@ int srv_socket_open(void *zctx, int type, const char *ep, const srv_config *cfg,
         (ipv6 && zmq_setsockopt(s, ZMQ_IPV6, &one, sizeof one)) ||
         (type == ZMQ_ROUTER && zmq_setsockopt(s, ZMQ_ROUTER_MANDATORY, &one, sizeof one)) ||
         (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_SNDHWM, &hwm, sizeof hwm)) ||
+        /* under CURVE the daemon applies each subscription itself, only
+         * for the job's owner or an admin (srv_daemon.c on_xpub()) */
+        (type == ZMQ_XPUB && srv_auth_curve(auth) &&
+         zmq_setsockopt(s, ZMQ_XPUB_MANUAL, &one, sizeof one)) ||
         (type == ZMQ_PULL && zmq_setsockopt(s, ZMQ_RCVHWM, &hwm, sizeof hwm))) {
         snprintf(err, errlen, "setting options on %s: %s", ep, zmq_strerror(errno));
         zmq_close(s);

@@ -1,7 +1,9 @@
 /*
  * t_store_tickets.c - the store's commit tracking without blocking: a
  * ticket per run is done once that run's writes are committed, the notify
- * descriptor becomes readable after a commit, and many runs fit.
+ * descriptor becomes readable after a commit, and many runs fit; the
+ * owners' recorded bytes (store_owner_totals), a run's owner and the
+ * listing by owner.
  */
 #include "store.h"
 #include "t.h"
@@ -169,5 +171,62 @@ TEST(store_tickets_many_runs)
     CHECK(last == st1.ops_enqueued + NRUNS);
     CHECK(store_flush(s) == 0);
     CHECK(store_ticket_done(s, last));
+    store_close(&s);
+}
+
+/* ---- the owners' recorded bytes (the daemon's disk budgets) ---- */
+
+/* store_owner_totals: one row per owner, each the same figure as
+ * store_owner_bytes (snapshot bytes + STORE_ENERGY_ROW_BYTES per sample),
+ * runs without records counted 0; the listing's owner filter. */
+TEST(store_owner_totals)
+{
+    store *s = NULL;
+    store_options o = {.log = quiet_log};
+    CHECKF(store_open(db_path("owners.db"), &o, &s) == 0, "%s", store_error()->message);
+    static const char *const owners[3] = {"alice", "bob", "carol"};
+    int64_t id[4];
+    for (int k = 0; k < 4; k++) {
+        store_run in = sample_run("owned", MPP_STATUS_RUNNING);
+        in.owner = owners[k == 3 ? 0 : k]; /* alice has two runs */
+        CHECK(store_run_insert(s, &in, &id[k]) == 0);
+    }
+    /* alice: 1000 + 24 bytes and 3 samples; bob: 5 samples; carol: none */
+    static unsigned char blob[1000];
+    store_snapshot a = {
+        .run_id = id[0], .step = 1, .n = 1, .dim = 1, .fields = 1, .data = blob, .size = 1000};
+    store_snapshot b = {
+        .run_id = id[3], .step = 1, .n = 1, .dim = 1, .fields = 1, .data = blob, .size = 24};
+    CHECK(store_snapshot_put(s, &a) == 0 && store_snapshot_put(s, &b) == 0);
+    mpm_energy_sample e[5];
+    memset(e, 0, sizeof e);
+    for (int i = 0; i < 5; i++) e[i].seq = (uint64_t)i, e[i].dim = 1;
+    CHECK(store_energy_append(s, id[0], e, 2) == 0 && store_energy_append(s, id[3], e, 1) == 0);
+    CHECK(store_energy_append(s, id[1], e, 5) == 0);
+    CHECK(store_flush(s) == 0);
+    store_owner_total *rows = NULL;
+    size_t n = 0;
+    CHECK(store_owner_totals(s, &rows, &n) == 0);
+    int64_t want[3] = {1024 + 3 * STORE_ENERGY_ROW_BYTES, 5 * STORE_ENERGY_ROW_BYTES, 0};
+    int ok = n == 3;
+    for (size_t i = 0; ok && i < n; i++) {
+        int k = !strcmp(rows[i].owner, "alice") ? 0 : !strcmp(rows[i].owner, "bob") ? 1 : 2;
+        int64_t one = -1;
+        ok = rows[i].bytes == want[k] && store_owner_bytes(s, rows[i].owner, &one) == 0 &&
+             one == want[k];
+        TLOG("%s: %lld bytes (store_owner_bytes %lld)", rows[i].owner, (long long)rows[i].bytes,
+             (long long)one);
+    }
+    store_owner_totals_free(rows, n);
+    CHECKF(ok, "the owners' totals differ from what was recorded");
+    store_run_filter f = {.owner = "alice"};
+    store_run *runs = NULL;
+    CHECK(store_run_list(s, &f, &runs, &n) == 0);
+    ok = n == 2 && runs[0].id == id[3] && runs[1].id == id[0];
+    store_run_list_free(runs, n);
+    CHECKF(ok, "the owner filter listed %zu runs", n);
+    char who[48];
+    CHECK(store_run_owner(s, id[1], who, sizeof who) == 0 && !strcmp(who, "bob"));
+    CHECK(store_run_owner(s, 999, who, sizeof who) == MPM_ENOTFOUND);
     store_close(&s);
 }

@@ -550,6 +550,9 @@ void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);
  * yield flag: a plastic model in the case; F: a model or the volume update
  * that needs it, or CPDI), else 0. */
 int mpm_sim_has_field(const mpm_sim *sim, mpm_field f);
+/* The same answer for the run a checked case c would make, without
+ * building it (the daemon's estimate of a job's recorded bytes). */
+int mpm_case_has_field(const mpm_case *c, mpm_field f);
 
 /* Grid state after the last step, for tests and diagnostics: node mass and
  * momentum of real node (i, j, k) (unused indices 0).  B-splines: the

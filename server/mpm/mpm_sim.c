@@ -840,6 +840,16 @@ void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
     }
 }
 
+int mpm_case_has_field(const mpm_case *c, mpm_field f)
+{
+    switch (f) {
+    case MPM_FIELD_PLASTIC_STRAIN:
+    case MPM_FIELD_YIELDED: return (model_needs(c) & MPM_NEED_PLASTIC) != 0;
+    case MPM_FIELD_DEFORMATION_GRADIENT: return mpm_needs_F(c);
+    }
+    return 0;
+}
+
 int mpm_sim_has_field(const mpm_sim *s, mpm_field f)
 {
     switch (f) {

@@ -127,6 +127,7 @@ typedef struct {
     int64_t before_id;    /* > 0: only runs with id < before_id */
     int with_case;        /* 1: also load case_pb (else NULL; case_len
                              is set either way) */
+    const char *owner;    /* non-NULL: only the runs of this owner */
 } store_run_filter;
 
 typedef void (*store_log_fn)(void *ud, const char *msg);
@@ -281,6 +282,22 @@ void store_run_extra_clear(store_run_extra *x);
  * *bytes.  0 or a negative code. */
 #define STORE_ENERGY_ROW_BYTES 168 /* 21 columns of 8 bytes */
 int store_owner_bytes(store *s, const char *owner, int64_t *bytes);
+
+/* The same figure for every owner at once (one query, for a daemon's
+ * start): *rows gets *n entries (NULL when there are no runs), released
+ * with store_owner_totals_free(); their sum is the database's recorded
+ * total.  0 or a negative code. */
+typedef struct {
+    const char *owner; /* "" for runs stored before schema 7 (NULL: none) */
+    int64_t bytes;
+} store_owner_total;
+int store_owner_totals(store *s, store_owner_total **rows, size_t *n);
+
+/* The owner of run id into buf (len bytes; "" for runs stored before
+ * schema 7), without reading the rest of the run.  MPM_ENOTFOUND if
+ * none. */
+int store_run_owner(store *s, int64_t id, char *buf, size_t len);
+void store_owner_totals_free(store_owner_total *rows, size_t n);
 
 /* Reads the snapshot of a run at step (step < 0: the one with the highest
  * step).  MPM_ENOTFOUND if none. */

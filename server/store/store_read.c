@@ -282,6 +282,7 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t
         len += (size_t)snprintf(sql + len, sizeof sql - len, ")");
     }
     if (f->before_id > 0) len += (size_t)snprintf(sql + len, sizeof sql - len, " AND id < ?1");
+    if (f->owner) len += (size_t)snprintf(sql + len, sizeof sql - len, " AND owner = ?3");
     len += (size_t)snprintf(sql + len, sizeof sql - len, " ORDER BY id DESC");
     if (f->limit) len += (size_t)snprintf(sql + len, sizeof sql - len, " LIMIT ?2");
     if (len >= sizeof sql) return sti_fail(MPM_EINVAL, "run list query too long");
@@ -299,6 +300,7 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t
     }
     if (f->before_id > 0) rc = sqlite3_bind_int64(st, 1, f->before_id);
     if (rc == SQLITE_OK && f->limit) rc = sqlite3_bind_int64(st, 2, (sqlite3_int64)f->limit);
+    if (rc == SQLITE_OK && f->owner) rc = sqlite3_bind_text(st, 3, f->owner, -1, SQLITE_STATIC);
     if (rc != SQLITE_OK) {
         r = sti_sql_fail(db, rc, "listing runs");
         goto out;
@@ -524,6 +526,90 @@ int store_owner_bytes(store *s, const char *owner, int64_t *bytes)
     sqlite3_finalize(st);
     reader_put(s, db);
     return r;
+}
+
+int store_owner_totals(store *s, store_owner_total **rows, size_t *n)
+{
+    if (!s || !rows || !n) return sti_fail(MPM_EINVAL, "store_owner_totals: NULL argument");
+    *rows = NULL;
+    *n = 0;
+    sqlite3 *db;
+    int r = reader_get(s, &db);
+    if (r) return r;
+    sqlite3_stmt *st = NULL;
+    store_owner_total *v = NULL;
+    size_t cnt = 0, capn = 0;
+    /* one statement: each run's snapshot bytes (length() reads a blob's
+     * size from its record header) and sample count, summed per owner */
+    int rc = sqlite3_prepare_v2(
+        db,
+        "SELECT r.owner, coalesce(sum(s.b), 0) + ?1 * coalesce(sum(e.c), 0) FROM runs r"
+        " LEFT JOIN (SELECT run_id, sum(length(data)) AS b FROM snapshots GROUP BY run_id) s"
+        " ON s.run_id = r.id"
+        " LEFT JOIN (SELECT run_id, count(*) AS c FROM energy GROUP BY run_id) e"
+        " ON e.run_id = r.id GROUP BY r.owner",
+        -1, &st, NULL);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, STORE_ENERGY_ROW_BYTES);
+    if (rc != SQLITE_OK) {
+        r = sti_sql_fail(db, rc, "summing the owners' stored bytes");
+        goto out;
+    }
+    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+        if (cnt == capn) {
+            size_t nc = capn ? 2 * capn : 16;
+            store_owner_total *nv = realloc(v, nc * sizeof *nv);
+            if (!nv) {
+                r = sti_fail(MPM_ENOMEM, "out of memory reading the owners' totals");
+                goto out;
+            }
+            v = nv;
+            capn = nc;
+        }
+        v[cnt].bytes = sqlite3_column_int64(st, 1);
+        if ((r = col_strdup(db, st, 0, &v[cnt].owner))) goto out;
+        cnt++;
+    }
+    if (rc != SQLITE_DONE) r = sti_sql_fail(db, rc, "summing the owners' stored bytes");
+out:
+    sqlite3_finalize(st);
+    reader_put(s, db);
+    if (r) {
+        store_owner_totals_free(v, cnt);
+        return r;
+    }
+    *rows = v;
+    *n = cnt;
+    return 0;
+}
+
+int store_run_owner(store *s, int64_t id, char *buf, size_t len)
+{
+    if (!s || !buf || !len) return sti_fail(MPM_EINVAL, "store_run_owner: NULL argument");
+    buf[0] = 0;
+    sqlite3 *db;
+    int r = reader_get(s, &db);
+    if (r) return r;
+    sqlite3_stmt *st = NULL;
+    int rc = sqlite3_prepare_v2(db, "SELECT owner FROM runs WHERE id = ?1", -1, &st, NULL);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 1, id);
+    if (rc == SQLITE_OK) rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW) {
+        const unsigned char *t = sqlite3_column_text(st, 0);
+        snprintf(buf, len, "%s", t ? (const char *)t : "");
+    } else if (rc == SQLITE_DONE) {
+        r = sti_fail(MPM_ENOTFOUND, "no run %lld", (long long)id);
+    } else {
+        r = sti_sql_fail(db, rc, "reading a run's owner");
+    }
+    sqlite3_finalize(st);
+    reader_put(s, db);
+    return r;
+}
+
+void store_owner_totals_free(store_owner_total *rows, size_t n)
+{
+    for (size_t i = 0; rows && i < n; i++) free((void *)rows[i].owner);
+    free(rows);
 }
 
 void store_run_extra_clear(store_run_extra *x)
