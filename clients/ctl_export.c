@@ -131,7 +131,7 @@ int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int g
                 "mpmctl: export: run %llu has no recorded snapshots (submit the case with "
                 "output.snapshotEvery > 0 and output.recordSnapshots: true to record them)\n",
                 (unsigned long long)id);
-        rc = CTL_EUSAGE;
+        rc = CTL_ECASE;
         goto out;
     }
     if ((rc = prepare_dir(dir))) goto out;
@@ -294,7 +294,7 @@ int ctl_plot(ctl_conn *c, uint64_t id, const char *out, const char *terminal)
     if (rc) goto out;
     if (!pd.n) {
         fprintf(stderr, "mpmctl: plot: run %llu has no energy samples\n", (unsigned long long)id);
-        rc = CTL_EUSAGE;
+        rc = CTL_ECASE;
         goto out;
     }
     if (!(f = fopen(script, "w"))) {

@@ -8,8 +8,9 @@
  * the snapshot's own array when it already has the layout) and write them
  * appended raw (a UInt64 byte count, then the bytes), appended base64 (the
  * count and the bytes as one base64 stream), zlib-compressed (the VTK
- * block header, then blocks of 1 MiB compressed at level 1; every array is
- * compressed before the XML is written, since the offsets come first), or
+ * block header, then blocks of 1 MiB deflated at level 1 by up to four
+ * threads; every array is compressed before the XML is written, since the
+ * offsets come first), or
  * as ASCII text.  The XML header carries the appended offsets, computed
  * from the sizes, so the file is written in one pass.
  */
@@ -17,9 +18,11 @@
 
 #include <errno.h>
 #include <inttypes.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <zlib.h>
 
@@ -154,30 +157,99 @@ static void release(varr *a, size_t n)
     }
 }
 
-/* zlib: the VTK header (UInt64: blocks, block size, last block's size,
- * compressed size of each) and the blocks, into a->z. */
+/* zlib: blocks compressed by a few threads, each block into its own slot
+ * of a scratch buffer; deflate level 1 with the run-length strategy (on
+ * doubles as fast as Huffman alone and three times faster than the default
+ * matching, for a ratio within a few per cent of it). */
+typedef struct {
+    const varr *a;
+    size_t nb, slot, first, stride;
+    uint8_t *scratch;
+    uint64_t *sizes;
+    int failed;
+} zjob;
+
+static void *zwork(void *arg)
+{
+    zjob *j = arg;
+    z_stream zs;
+    memset(&zs, 0, sizeof zs);
+    /* running indices compress far better with matching */
+    int strategy = j->a->type == VT_I64 ? Z_DEFAULT_STRATEGY : Z_RLE;
+    if (deflateInit2(&zs, Z_BEST_SPEED, Z_DEFLATED, 15, 8, strategy) != Z_OK) {
+        j->failed = 1;
+        return NULL;
+    }
+    for (size_t b = j->first; b < j->nb; b += j->stride) {
+        size_t in = b + 1 < j->nb ? ZBLOCK : j->a->nbytes - b * ZBLOCK;
+        zs.next_in = j->a->bytes + b * ZBLOCK;
+        zs.avail_in = (uInt)in;
+        zs.next_out = j->scratch + b * j->slot;
+        zs.avail_out = (uInt)j->slot;
+        if (deflate(&zs, Z_FINISH) != Z_STREAM_END) {
+            j->failed = 1;
+            break;
+        }
+        j->sizes[b] = zs.total_out;
+        deflateReset(&zs);
+    }
+    deflateEnd(&zs);
+    return NULL;
+}
+
+#define ZTHREADS 4
+
+/* The VTK header (UInt64: blocks, block size, the last block's size when
+ * partial, else 0, the compressed size of each) and the blocks, into a->z. */
 static int compress_array(varr *a)
 {
     size_t nb = (a->nbytes + ZBLOCK - 1) / ZBLOCK, hdr = (3 + nb) * 8;
-    size_t cap = hdr + nb * compressBound((uLong)ZBLOCK) + 1;
+    size_t slot = deflateBound(NULL, (uLong)ZBLOCK) + 64, pos = hdr;
+    long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+    size_t nt = ncpu < 1 ? 1 : ncpu > ZTHREADS ? ZTHREADS : (size_t)ncpu, started = 0;
+    pthread_t th[ZTHREADS];
+    zjob jobs[ZTHREADS];
+    uint8_t *scratch = malloc(nb * slot + 1);
     uint64_t *h;
-    size_t pos = hdr;
-    a->z = malloc(cap);
-    if (!a->z) return CTL_ESYS;
+    int failed = 0;
+    a->z = malloc(hdr + nb * slot + 1);
+    if (!a->z || !scratch) {
+        free(scratch);
+        return CTL_ESYS;
+    }
     h = (uint64_t *)(void *)a->z;
     h[0] = nb;
     h[1] = ZBLOCK;
     h[2] = a->nbytes % ZBLOCK;
-    for (size_t b = 0; b < nb; b++) {
-        size_t in = b + 1 < nb || !h[2] ? ZBLOCK : (size_t)h[2];
-        uLongf out = (uLongf)(cap - pos);
-        if (compress2(a->z + pos, &out, a->bytes + b * ZBLOCK, (uLong)in, Z_BEST_SPEED) != Z_OK)
-            return CTL_ESYS;
-        h[3 + b] = out;
-        pos += out;
+    if (nt > nb) nt = nb ? nb : 1;
+    for (size_t t = 0; t < nt; t++) {
+        jobs[t] = (zjob){.a = a,
+                         .nb = nb,
+                         .slot = slot,
+                         .first = t,
+                         .stride = nt,
+                         .scratch = scratch,
+                         .sizes = h + 3};
+        /* the first share is this thread's; a thread that cannot start
+         * leaves its share to this one */
+        if (t && !pthread_create(&th[started], NULL, zwork, &jobs[t])) {
+            started++;
+        } else if (t) {
+            jobs[0].stride = 1;
+            nt = t;
+            break;
+        }
     }
+    zwork(&jobs[0]);
+    for (size_t t = 0; t < started; t++) pthread_join(th[t], NULL);
+    for (size_t t = 0; t < nt; t++) failed |= jobs[t].failed;
+    for (size_t b = 0; !failed && b < nb; b++) {
+        memcpy(a->z + pos, scratch + b * slot, (size_t)h[3 + b]);
+        pos += (size_t)h[3 + b];
+    }
+    free(scratch);
     a->zbytes = pos;
-    return 0;
+    return failed ? CTL_ESYS : 0;
 }
 
 /* Bytes the array takes in the appended section. */
@@ -194,7 +266,7 @@ typedef struct {
     FILE *f;
     uint8_t carry[3];
     int nc;
-    char out[4096];
+    char out[1 << 16];
     size_t no;
 } b64;
 
@@ -223,7 +295,25 @@ static void b64_put(b64 *e, const uint8_t *p, size_t n)
             e->nc = 0;
         }
     }
-    for (; n >= 3; p += 3, n -= 3) b64_quad(e, p, 3);
+    while (n >= 3) {
+        /* whole triplets straight into the output buffer */
+        size_t room = (sizeof e->out - e->no) / 4, k = n / 3 < room ? n / 3 : room;
+        char *o = e->out + e->no;
+        if (!k) {
+            fwrite(e->out, 1, e->no, e->f);
+            e->no = 0;
+            continue;
+        }
+        for (size_t q = 0; q < k; q++, p += 3, o += 4) {
+            uint32_t v = (uint32_t)p[0] << 16 | (uint32_t)p[1] << 8 | p[2];
+            o[0] = b64chars[v >> 18];
+            o[1] = b64chars[v >> 12 & 63];
+            o[2] = b64chars[v >> 6 & 63];
+            o[3] = b64chars[v & 63];
+        }
+        e->no += 4 * k;
+        n -= 3 * k;
+    }
     while (n--) e->carry[e->nc++] = *p++;
 }
 
@@ -350,7 +440,7 @@ int ctl_vtk_write_vtp(const char *path, const mpp_snapshot *s, ctl_vtk_enc enc)
                 "mpmctl: %s: the snapshot at step %lld has no particle positions (dim %d): "
                 "record X (output.snapshotFields empty or listing X) to write VTK\n",
                 path, (long long)s->step, dim);
-        return CTL_EUSAGE;
+        return CTL_ECASE;
     }
     memset(a, 0, sizeof a);
     /* the order of the arrays in the appended section */

@@ -42,7 +42,7 @@ const char *ctl_vtk_enc_name(ctl_vtk_enc enc);
  * volume, plastic_strain, deformation_gradient (3x3 row-major; a 1D or 2D
  * F padded with the identity: F_zz = 1 in plane strain), yielded (UInt8),
  * each only when the snapshot has it; FieldData TIME (Float64) and STEP
- * (Int64).  A snapshot without positions is refused (CTL_EUSAGE, naming
+ * (Int64).  A snapshot without positions is refused (CTL_ECASE, naming
  * output.snapshotFields). */
 int ctl_vtk_write_vtp(const char *path, const mpp_snapshot *s, ctl_vtk_enc enc);
 
@@ -71,7 +71,7 @@ int ctl_vtk_write_pvd(const char *path, const char *const *files, const double *
  * DIR/<name>_<step>.vtp (enc), DIR/<name>.pvd with their times,
  * DIR/energy.csv (as `energy --csv`), and with grid DIR/grid.vti; DIR is
  * created if missing.  Progress on stderr when it is a terminal, a summary
- * line at the end.  A run without recorded snapshots is CTL_EUSAGE with
+ * line at the end.  A run without recorded snapshots is CTL_ECASE with
  * the case fields that record them. */
 int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int grid);
 

@@ -115,7 +115,9 @@ def check_polydata(pd, snap, label):
         count += same(label + " " + name, arr(a).ravel(), vals)
     if "stress" in snap and ptd.GetTensors() is None:
         raise Mismatch("%s: stress is not the active tensor" % label)
-    return "%d particles, %dD, %d values, fields %s" % (n, dim, count, " ".join(sorted(want)))
+    plastic = sum(1 for v in snap.get("plasticStrain", []) if v != 0)
+    return "%d particles, %dD, %d values, plastic %d, fields %s" % (
+        n, dim, count, plastic, " ".join(sorted(want)))
 
 
 def read_with(reader_cls, path):
@@ -195,7 +197,8 @@ def main():
                 what = check_vti(w[3], w[2]) if w[2].endswith(".json") else check_vti(w[2], w[3])
             else:
                 raise Mismatch("unknown check %r" % w[0])
-            print("ok %s %s %s: %s" % (w[0], w[1], os.path.basename(w[-1] if w[0] != "vti" else w[2]), what))
+            f = w[2] if w[0] == "pvd" else w[3]
+            print("ok %s %s %s: %s" % (w[0], w[1], os.path.basename(f), what))
         except Mismatch as e:
             print("MISMATCH %s: %s" % (" ".join(w), e))
             ok = False

@@ -16,7 +16,7 @@
 #include <sys/stat.h>
 #include <time.h>
 
-#include "ctl_vtk.h"
+#include "../../clients/ctl_vtk.h" /* mpmctl's writer, not a library */
 
 static double now_s(void)
 {
