@@ -206,17 +206,17 @@ static int compress_array(varr *a)
     size_t nb = (a->nbytes + ZBLOCK - 1) / ZBLOCK, hdr = (3 + nb) * 8;
     size_t slot = deflateBound(NULL, (uLong)ZBLOCK) + 64, pos = hdr;
     long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
-    size_t nt = ncpu < 1 ? 1 : ncpu > ZTHREADS ? ZTHREADS : (size_t)ncpu, started = 0;
+    size_t nt = ncpu < 1 ? 1 : ncpu > ZTHREADS ? ZTHREADS : (size_t)ncpu;
     pthread_t th[ZTHREADS];
     zjob jobs[ZTHREADS];
-    uint8_t *scratch = malloc(nb * slot + 1);
+    int running[ZTHREADS] = {0};
+    uint8_t *scratch;
     uint64_t *h;
     int failed = 0;
+    /* each block into its slot after the header, then moved down */
     a->z = malloc(hdr + nb * slot + 1);
-    if (!a->z || !scratch) {
-        free(scratch);
-        return CTL_ESYS;
-    }
+    if (!a->z) return CTL_ESYS;
+    scratch = a->z + hdr;
     h = (uint64_t *)(void *)a->z;
     h[0] = nb;
     h[1] = ZBLOCK;
@@ -230,24 +230,19 @@ static int compress_array(varr *a)
                          .stride = nt,
                          .scratch = scratch,
                          .sizes = h + 3};
-        /* the first share is this thread's; a thread that cannot start
-         * leaves its share to this one */
-        if (t && !pthread_create(&th[started], NULL, zwork, &jobs[t])) {
-            started++;
-        } else if (t) {
-            jobs[0].stride = 1;
-            nt = t;
-            break;
-        }
+        /* share 0 is this thread's, and so is the share of a thread that
+         * cannot start */
+        if (t && !pthread_create(&th[t], NULL, zwork, &jobs[t])) running[t] = 1;
     }
-    zwork(&jobs[0]);
-    for (size_t t = 0; t < started; t++) pthread_join(th[t], NULL);
+    for (size_t t = 0; t < nt; t++)
+        if (!running[t]) zwork(&jobs[t]);
+    for (size_t t = 1; t < nt; t++)
+        if (running[t]) pthread_join(th[t], NULL);
     for (size_t t = 0; t < nt; t++) failed |= jobs[t].failed;
     for (size_t b = 0; !failed && b < nb; b++) {
-        memcpy(a->z + pos, scratch + b * slot, (size_t)h[3 + b]);
+        memmove(a->z + pos, scratch + b * slot, (size_t)h[3 + b]);
         pos += (size_t)h[3 + b];
     }
-    free(scratch);
     a->zbytes = pos;
     return failed ? CTL_ESYS : 0;
 }
@@ -350,9 +345,12 @@ static void xml_array(FILE *f, const varr *a, ctl_vtk_enc enc, size_t offset, co
     fprintf(f, "%s</DataArray>\n", indent);
 }
 
-static void appended_write(FILE *f, const varr *a, ctl_vtk_enc enc)
+/* Writes the array's appended bytes; raw and base64 lay the array out here,
+ * one at a time, and release it after. */
+static int appended_write(FILE *f, varr *a, ctl_vtk_enc enc)
 {
     uint64_t n = a->nbytes;
+    if (enc != CTL_VTK_ZLIB && layout(a)) return CTL_ESYS;
     if (enc == CTL_VTK_ZLIB) {
         fwrite(a->z, 1, a->zbytes, f);
     } else if (enc == CTL_VTK_BASE64) {
@@ -364,17 +362,27 @@ static void appended_write(FILE *f, const varr *a, ctl_vtk_enc enc)
         fwrite(&n, 8, 1, f);
         if (a->nbytes) fwrite(a->bytes, 1, a->nbytes, f);
     }
+    if (enc != CTL_VTK_ZLIB) release(a, 1);
+    return 0;
 }
 
-/* Prepares every array for enc (layout, compression); offsets[k] gets the
+/* Sizes every array for enc (zlib: compresses it now, raw and base64 lay
+ * it out only when it is written); offsets[k] gets the
  * appended offset of array k. */
 static int prepare(varr *a, size_t n, ctl_vtk_enc enc, size_t *offsets)
 {
     size_t off = 0;
     if (enc == CTL_VTK_ASCII) return 0;
     for (size_t k = 0; k < n; k++) {
-        if (layout(&a[k])) return CTL_ESYS;
-        if (enc == CTL_VTK_ZLIB && compress_array(&a[k])) return CTL_ESYS;
+        if (enc == CTL_VTK_ZLIB) {
+            /* the compressed size is known only once compressed */
+            if (layout(&a[k]) || compress_array(&a[k])) return CTL_ESYS;
+            if (a[k].own) free(a[k].bytes);
+            a[k].bytes = NULL;
+            a[k].own = 0;
+        } else {
+            a[k].nbytes = a[k].ntuples * (size_t)a[k].ncomp * type_size(a[k].type);
+        }
         offsets[k] = off;
         off += appended_size(&a[k], enc);
     }
@@ -416,15 +424,17 @@ static void xml_head(FILE *f, const char *type, ctl_vtk_enc enc)
             enc == CTL_VTK_ZLIB ? " compressor=\"vtkZLibDataCompressor\"" : "");
 }
 
-static void xml_tail(FILE *f, const varr *a, size_t n, ctl_vtk_enc enc)
+static int xml_tail(FILE *f, varr *a, size_t n, ctl_vtk_enc enc)
 {
     if (enc != CTL_VTK_ASCII) {
         fprintf(f, "  <AppendedData encoding=\"%s\">\n   _",
                 enc == CTL_VTK_BASE64 ? "base64" : "raw");
-        for (size_t k = 0; k < n; k++) appended_write(f, &a[k], enc);
+        for (size_t k = 0; k < n; k++)
+            if (appended_write(f, &a[k], enc)) return CTL_ESYS;
         fputs("\n  </AppendedData>\n", f);
     }
     fputs("</VTKFile>\n", f);
+    return 0;
 }
 
 enum { A_POINTS, A_CONN, A_OFFS, A_V, A_STRESS, A_P, A_VOL, A_EP, A_F, A_Y, A_MAX };
@@ -504,9 +514,9 @@ int ctl_vtk_write_vtp(const char *path, const mpp_snapshot *s, ctl_vtk_enc enc)
     xml_array(f, &a[idx[A_CONN]], enc, off[idx[A_CONN]], "        ");
     xml_array(f, &a[idx[A_OFFS]], enc, off[idx[A_OFFS]], "        ");
     fputs("      </Verts>\n    </Piece>\n  </PolyData>\n", f);
-    xml_tail(f, a, na, enc);
+    rc = xml_tail(f, a, na, enc);
     release(a, na);
-    return close_out(f, path, 0);
+    return close_out(f, path, rc);
 }
 
 int ctl_vtk_write_vti(const char *path, const ctl_vtk_grid *g, ctl_vtk_enc enc)
@@ -554,9 +564,9 @@ int ctl_vtk_write_vti(const char *path, const ctl_vtk_grid *g, ctl_vtk_enc enc)
     fputs("      </PointData>\n      <CellData>\n      </CellData>\n    </Piece>\n"
           "  </ImageData>\n",
           f);
-    xml_tail(f, &a, 1, enc);
+    rc = xml_tail(f, &a, 1, enc);
     release(&a, 1);
-    return close_out(f, path, 0);
+    return close_out(f, path, rc);
 }
 
 int ctl_vtk_write_pvd(const char *path, const char *const *files, const double *times, size_t n)
