@@ -2,7 +2,8 @@
  * t_ctl_vtk.c - mpmctl's files for other programs, end to end: a real mpmd
  * (ipc:// in the test's directory, a real SQLite file) runs a 2D elastic
  * block, the 3D cube and the J2 impact with CPDI (plastic strain, the yield
- * flag and F present) with recorded snapshots; the real mpmctl writes
+ * flag and F present) with recorded snapshots, and a 25600-particle block
+ * (zlib arrays of several 1 MiB blocks); the real mpmctl writes
  * `snapshot -o F.vtp` in each encoding (raw, base64, zlib, ASCII) and
  * `export ID DIR --grid`; Debian's python3-vtk9 (/usr/bin/python3,
  * tests/vtk_check.py) reads every .vtp with vtkXMLPolyDataReader, each
@@ -103,7 +104,17 @@ DTEST(ctl_vtk_paraview)
     set_output(c, "snapshotEvery", json_integer(50));
     set_output(c, "recordSnapshots", json_true());
     CHECK(write_case(c, dir, "c3.json", path[2], sizeof path[2]) == 0);
+    /* 4: 25600 particles, so that the zlib arrays span several 1 MiB blocks */
+    char big[400];
+    c = block2d(2, 1, "big");
+    CHECK(c);
+    json_object_set_new(json_object_get(c, "grid"), "spacing", json_pack("[f,f]", 0.005, 0.005));
+    json_object_set_new(json_object_get(c, "grid"), "nodes", json_pack("[i,i]", 201, 201));
+    set_output(c, "snapshotEvery", json_integer(2));
+    set_output(c, "recordSnapshots", json_true());
+    CHECK(write_case(c, dir, "c4.json", big, sizeof big) == 0);
     for (int r = 0; r < 3; r++) CHECK(run_case(&d, path[r]) == 0);
+    CHECK(run_case(&d, big) == 0);
 
     snprintf(manifest, sizeof manifest, "%s/manifest.txt", dir);
     FILE *mf = fopen(manifest, "w");
@@ -165,6 +176,18 @@ DTEST(ctl_vtk_paraview)
         free(csv);
         td_out_free(&o);
         CHECK(same);
+    }
+    {
+        char js[400], f[400];
+        snprintf(js, sizeof js, "%s/big.json", dir);
+        CTL_OK(&d, "snapshot", "4", "-o", js);
+        static const char *const encs[3] = {"--compress", "--base64", "--ascii"};
+        for (int e = 0; e < 3; e++) {
+            snprintf(f, sizeof f, "%s/big%d.vtp", dir, e);
+            CTL_OK(&d, "snapshot", "4", "-o", f, encs[e]);
+            fprintf(mf, "vtp %s %s %s\n", e == 2 ? "ascii" : "exact", js, f);
+            checks++;
+        }
     }
     /* nothing escaped DIR: the name's "/.." became "_.." */
     CHECK(access("block", F_OK) != 0);
