@@ -158,7 +158,12 @@ int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int g
             files[i] = strdup(name);
             times[i] = sr.snapshot.t;
             snprintf(path, plen, "%s/%s", dir, name);
-            rc = files[i] ? ctl_vtk_write_vtp(path, &sr.snapshot, enc) : CTL_ESYS;
+            if (files[i]) {
+                rc = ctl_vtk_write_vtp(path, &sr.snapshot, enc);
+            } else {
+                fprintf(stderr, "mpmctl: export: out of memory\n");
+                rc = CTL_ESYS;
+            }
         }
         mpp_reply_clear(&sr);
         if (rc) {
