@@ -397,6 +397,12 @@ static int parse_args(int argc, char **argv, cli *a)
     if (a->given[O_VTK_COMPRESS]) a->given[O_COMPRESS] = 1;
     if (a->given[O_ASCII] + a->given[O_BASE64] + a->given[O_COMPRESS] > 1)
         return bad_usage("%s: --ascii, --base64 and --compress exclude each other", a->cmd->name);
+    if (a->cmd->bit == C_SNAPSHOT &&
+        (a->given[O_ASCII] || a->given[O_BASE64] || a->given[O_COMPRESS])) {
+        size_t pl = strlen(a->val[O_OUT]);
+        if (pl <= 4 || strcmp(a->val[O_OUT] + pl - 4, ".vtp"))
+            return bad_usage("snapshot: --ascii, --base64 and --compress are for a .vtp file");
+    }
 
     /* positional arguments */
     {
@@ -898,11 +904,6 @@ static int cmd_snapshot(ctl_conn *c, const cli *a)
                     (unsigned long long)snap->n, path);
         mpp_reply_clear(&reply);
         return exit_for_rc(rc);
-    }
-    if (a->given[O_ASCII] || a->given[O_BASE64] || a->given[O_COMPRESS]) {
-        mpp_reply_clear(&reply);
-        fprintf(stderr, "mpmctl: snapshot: --ascii, --base64 and --compress are for a .vtp file\n");
-        return CTL_EXIT_USAGE;
     }
     f = strcmp(path, "-") ? fopen(path, "w") : stdout;
     if (!f) {
