@@ -21,6 +21,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "ctl_vtk.h"
 #include "mpp.h" /* MPP_VERSION: mpmctl and mpmd share the version */
 
 volatile sig_atomic_t ctl_interrupted;
@@ -38,7 +39,9 @@ enum {
     C_PING = 1u << 7,
     C_VERSION = 1u << 8,
     C_KEYGEN = 1u << 9,
-    C_GLOBAL = 0x3ffu
+    C_EXPORT = 1u << 10,
+    C_PLOT = 1u << 11,
+    C_GLOBAL = 0xfffu
 };
 
 typedef struct {
@@ -92,10 +95,29 @@ static const command commands[] = {
     {"energy", C_ENERGY, "ID [--csv|--json]", "the complete energy series of a run",
      "Pages through GetEnergy.  Default: a table; --csv: a header and one row per\n"
      "sample (exact doubles); --json: one EnergySample object per line.\n"},
-    {"snapshot", C_SNAPSHOT, "ID [--step N] -o FILE", "a stored snapshot to a file",
+    {"snapshot", C_SNAPSHOT, "ID [--step N] -o FILE [--ascii|--base64|--compress]",
+     "a stored snapshot to a file",
      "Only snapshots the run recorded (output.recordSnapshots).  Without --step, the\n"
-     "latest.  FILE ending in .json gets the Snapshot object; anything else CSV with a\n"
-     "header (one row per particle); \"-o -\" writes CSV to stdout.\n"},
+     "latest.  FILE ending in .json gets the Snapshot object; .vtp VTK XML PolyData for\n"
+     "ParaView (particles as vertices; velocity, stress as a 3x3 tensor, pressure, volume,\n"
+     "plastic_strain, deformation_gradient, yielded as point data, as recorded; TIME and\n"
+     "STEP as field data), appended raw binary unless --ascii, --base64 or --compress\n"
+     "(zlib); anything else CSV with a header (one row per particle); \"-o -\" writes CSV\n"
+     "to stdout.\n"},
+    {"export", C_EXPORT, "ID DIR [--grid] [--ascii|--base64|--compress]",
+     "a run's snapshots for ParaView",
+     "Writes every recorded snapshot as DIR/NAME_STEP.vtp (as `snapshot -o F.vtp`), the\n"
+     "collection DIR/NAME.pvd with the simulation times (paraview DIR/NAME.pvd opens the\n"
+     "run as a time series) and the energy series as DIR/energy.csv (as `energy --csv`);\n"
+     "--grid adds the case's background grid as DIR/grid.vti (ImageData).  NAME is the\n"
+     "run's name with bytes other than A-Z a-z 0-9 . _ - replaced by _ (\"runID\" when\n"
+     "empty).  DIR is created if missing.  The run must have recorded snapshots\n"
+     "(output.snapshotEvery > 0 and output.recordSnapshots: true).\n"},
+    {"plot", C_PLOT, "ID -o FILE [--terminal T]", "draw the energy curves with gnuplot",
+     "Kinetic, strain and total energy against t, and the energy balance error (%) in a\n"
+     "second panel.  The format follows FILE's extension (.png, .svg, .pdf) unless\n"
+     "--terminal names a gnuplot terminal (e.g. \"pngcairo size 1600,1000\").  Needs\n"
+     "gnuplot (Debian: gnuplot-nox).\n"},
     {"cancel", C_CANCEL, "ID [--json]", "stop a queued or running job",
      "Prints the job's status after the request; a running job stops within one step.\n"},
     {"ping", C_PING, "[--json]", "check the server",
@@ -129,6 +151,12 @@ typedef enum {
     O_OUT,
     O_KEYS,
     O_NAME,
+    O_GRID,
+    O_ASCII,
+    O_BASE64,
+    O_COMPRESS,
+    O_VTK_COMPRESS,
+    O_TERMINAL,
     O_COUNT
 } opt_id;
 
@@ -146,16 +174,22 @@ static const option options[O_COUNT] = {
     [O_HELP] = {"help", 'h', 0, C_GLOBAL},
     [O_WATCH] = {"watch", 0, 0, C_SUBMIT},
     [O_CSV] = {"csv", 0, 0, C_SUBMIT | C_WATCH | C_ENERGY},
-    [O_JSON] = {"json", 0, 0, C_GLOBAL & ~C_SNAPSHOT},
+    [O_JSON] = {"json", 0, 0, C_GLOBAL & ~(C_SNAPSHOT | C_EXPORT | C_PLOT)},
     [O_STATUS] = {"status", 0, 1, C_RUNS},
     [O_LIMIT] = {"limit", 0, 1, C_RUNS},
     [O_BEFORE] = {"before", 0, 1, C_RUNS},
     [O_ALL] = {"all", 0, 0, C_RUNS},
     [O_CASE] = {"case", 0, 0, C_SHOW},
     [O_STEP] = {"step", 0, 1, C_SNAPSHOT},
-    [O_OUT] = {"out", 'o', 1, C_SNAPSHOT | C_KEYGEN},
+    [O_OUT] = {"out", 'o', 1, C_SNAPSHOT | C_KEYGEN | C_PLOT},
     [O_KEYS] = {"keys", 0, 1, C_GLOBAL & ~C_KEYGEN},
     [O_NAME] = {"name", 0, 1, C_KEYGEN},
+    [O_GRID] = {"grid", 0, 0, C_EXPORT},
+    [O_ASCII] = {"ascii", 0, 0, C_SNAPSHOT | C_EXPORT},
+    [O_BASE64] = {"base64", 0, 0, C_SNAPSHOT | C_EXPORT},
+    [O_COMPRESS] = {"compress", 0, 0, C_SNAPSHOT | C_EXPORT},
+    [O_VTK_COMPRESS] = {"vtk-compress", 0, 0, C_SNAPSHOT | C_EXPORT}, /* = --compress */
+    [O_TERMINAL] = {"terminal", 0, 1, C_PLOT},
 };
 
 typedef struct {
@@ -358,13 +392,29 @@ static int parse_args(int argc, char **argv, cli *a)
     }
     if (a->cmd->bit == C_SNAPSHOT && !a->given[O_OUT])
         return bad_usage("snapshot: -o FILE is required (\"-o -\": CSV to stdout)");
+    if (a->cmd->bit == C_PLOT && !a->given[O_OUT])
+        return bad_usage("plot: -o FILE is required (e.g. -o energy.png)");
+    if (a->given[O_VTK_COMPRESS]) a->given[O_COMPRESS] = 1;
+    if (a->given[O_ASCII] + a->given[O_BASE64] + a->given[O_COMPRESS] > 1)
+        return bad_usage("%s: --ascii, --base64 and --compress exclude each other", a->cmd->name);
+    if (a->cmd->bit == C_SNAPSHOT &&
+        (a->given[O_ASCII] || a->given[O_BASE64] || a->given[O_COMPRESS])) {
+        size_t pl = strlen(a->val[O_OUT]);
+        if (pl <= 4 || strcmp(a->val[O_OUT] + pl - 4, ".vtp"))
+            return bad_usage("snapshot: --ascii, --base64 and --compress are for a .vtp file");
+    }
 
     /* positional arguments */
     {
-        int want = (a->cmd->bit & (C_RUNS | C_PING | C_VERSION | C_KEYGEN)) ? 0 : 1;
+        int want = (a->cmd->bit & (C_RUNS | C_PING | C_VERSION | C_KEYGEN)) ? 0
+                   : a->cmd->bit == C_EXPORT                                ? 2
+                                                                            : 1;
         if (a->npos < want)
             return bad_usage("%s needs %s (see mpmctl %s --help)", a->cmd->name,
-                             a->cmd->bit == C_SUBMIT ? "a case file" : "a job id", a->cmd->name);
+                             a->cmd->bit == C_SUBMIT   ? "a case file"
+                             : a->cmd->bit == C_EXPORT ? "a run id and a directory"
+                                                       : "a job id",
+                             a->cmd->name);
         if (a->npos > want)
             return bad_usage("%s: unexpected argument '%s'", a->cmd->name, a->pos[want]);
     }
@@ -818,6 +868,15 @@ static int snapshot_json(FILE *f, const mpp_snapshot *s)
     return rc;
 }
 
+/* The VTK encoding the options ask for (default: appended raw). */
+static ctl_vtk_enc vtk_enc(const cli *a)
+{
+    return a->given[O_ASCII]      ? CTL_VTK_ASCII
+           : a->given[O_BASE64]   ? CTL_VTK_BASE64
+           : a->given[O_COMPRESS] ? CTL_VTK_ZLIB
+                                  : CTL_VTK_RAW;
+}
+
 static int cmd_snapshot(ctl_conn *c, const cli *a)
 {
     mpp_request rq = {.kind = MPP_REQ_GET_SNAPSHOT, .has_step = a->given[O_STEP], .step = a->step};
@@ -825,6 +884,7 @@ static int cmd_snapshot(ctl_conn *c, const cli *a)
     const char *path = a->val[O_OUT];
     size_t pl = strlen(path);
     int as_json = pl > 5 && !strcmp(path + pl - 5, ".json");
+    int as_vtp = pl > 4 && !strcmp(path + pl - 4, ".vtp");
     uint64_t id;
     FILE *f;
     int rc;
@@ -836,6 +896,15 @@ static int cmd_snapshot(ctl_conn *c, const cli *a)
         return exit_for_rc(rc);
     }
     const mpp_snapshot *snap = &reply.snapshot;
+    if (as_vtp) {
+        rc = ctl_vtk_write_vtp(path, snap, vtk_enc(a));
+        if (!rc)
+            fprintf(stderr, "run %llu: snapshot at step %lld (t %.10g, %llu particles) -> %s\n",
+                    (unsigned long long)id, (long long)snap->step, cj_norm(snap->t),
+                    (unsigned long long)snap->n, path);
+        mpp_reply_clear(&reply);
+        return exit_for_rc(rc);
+    }
     f = strcmp(path, "-") ? fopen(path, "w") : stdout;
     if (!f) {
         fprintf(stderr, "mpmctl: cannot write %s: %s\n", path, strerror(errno));
@@ -855,6 +924,20 @@ static int cmd_snapshot(ctl_conn *c, const cli *a)
                 (unsigned long long)snap->n, path);
     mpp_reply_clear(&reply);
     return CTL_EXIT_OK;
+}
+
+static int cmd_export(ctl_conn *c, const cli *a)
+{
+    uint64_t id;
+    if (parse_id(a->pos[0], "export", &id)) return CTL_EXIT_USAGE;
+    return exit_for_rc(ctl_export(c, id, a->pos[1], vtk_enc(a), a->given[O_GRID]));
+}
+
+static int cmd_plot(ctl_conn *c, const cli *a)
+{
+    uint64_t id;
+    if (parse_id(a->pos[0], "plot", &id)) return CTL_EXIT_USAGE;
+    return exit_for_rc(ctl_plot(c, id, a->val[O_OUT], a->val[O_TERMINAL]));
 }
 
 static int cmd_cancel(ctl_conn *c, const cli *a)
@@ -961,6 +1044,8 @@ int main(int argc, char **argv)
     case C_ENERGY: rc = cmd_energy(&c, &a); break;
     case C_SNAPSHOT: rc = cmd_snapshot(&c, &a); break;
     case C_CANCEL: rc = cmd_cancel(&c, &a); break;
+    case C_EXPORT: rc = cmd_export(&c, &a); break;
+    case C_PLOT: rc = cmd_plot(&c, &a); break;
     case C_PING: rc = cmd_ping(&c, &a); break;
     default: rc = cmd_version(&c, &a); break;
     }

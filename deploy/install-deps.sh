@@ -3,7 +3,8 @@
 # those that are missing. Safe to run again: with everything present it does
 # nothing and prints nothing. Called by `make deps` (and so by `make test` and
 # `make demo`); needs root (or sudo) only when something must be installed.
-# `install-deps.sh bench` also installs the benchmark's plotting tool.
+# `install-deps.sh bench` also installs the benchmark's plotting tool, and
+# `install-deps.sh plot` the same for `mpmctl plot`.
 set -euo pipefail
 
 pkgs=(
@@ -17,10 +18,14 @@ pkgs=(
   clang-format cppcheck  # make format-check, make lint (gcc's -fanalyzer comes with gcc)
   libmicrohttpd-dev    # mpmweb, the web monitor's HTTP server
   chromium             # tests: the web monitor's page in a real (headless) browser
+  zlib1g-dev           # mpmctl's VTK writer (--compress)
+  python3-vtk9 python3-numpy  # tests: VTK's own readers read mpmctl's .vtp/.pvd/.vti files
+  groff-base           # tests: the man pages render without warnings (groff -ww)
 )
 # Optional group: `install-deps.sh bench` adds what `make bench-accuracy` uses
-# for its plots (gnuplot-nox), unless some gnuplot is already there.
-if [ "${1:-}" = bench ] && ! command -v gnuplot >/dev/null 2>&1; then
+# for its plots (gnuplot-nox), unless some gnuplot is already there;
+# `install-deps.sh plot` the same for `mpmctl plot`.
+if { [ "${1:-}" = bench ] || [ "${1:-}" = plot ]; } && ! command -v gnuplot >/dev/null 2>&1; then
   pkgs+=(gnuplot-nox)
 fi
 missing=()
