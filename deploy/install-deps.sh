@@ -15,6 +15,7 @@ pkgs=(
   libjansson-dev       # JSON case files
   protobuf-compiler python3-protobuf  # tests: Python's protobuf JSON parser reads the cases too
   clang-format cppcheck  # make format-check, make lint (gcc's -fanalyzer comes with gcc)
+  clang libclang-rt-14-dev llvm  # make fuzz (libFuzzer, run quick by make test); llvm-symbolizer
 )
 # Optional group: `install-deps.sh bench` adds what `make bench-accuracy` uses
 # for its plots (gnuplot-nox), unless some gnuplot is already there.
