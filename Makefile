@@ -48,7 +48,8 @@ LEAN := build/lean
 # libFuzzer (tests/fuzz/): clang's fuzzer + ASan + UBSan, objects in build/fuzz
 FUZZ := build/fuzz
 FUZZ_CC ?= clang
-FUZZF := -O1 -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
+FUZZ_O ?= -O1
+FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
          -fno-sanitize-recover=all
 
 .PHONY: all deps test test-quick tsan bench bench-build bench-accuracy stress demo clean \
@@ -96,8 +97,11 @@ $(eval $(call build_rules,$(REL),$(OPT)))
 $(eval $(call build_rules,$(ASAN),$(SAN)))
 $(eval $(call build_rules,$(TSAN),$(TSANF)))
 $(eval $(call build_rules,$(LEAN),$(OPT) -DMPM_LEAN))
-$(eval $(call build_rules,$(FUZZ),$(FUZZF)))
+$(eval $(call build_rules,$(FUZZ),$$(FUZZF)))
 $(FUZZ)/%.o: CC := $(FUZZ_CC)
+# the solver's kernels take clang many minutes with the sanitizers at -O1,
+# and the fuzzers reach only its case check: the solver is built at -O0
+$(FUZZ)/server/mpm/%.o: FUZZ_O := -O0
 -include $(shell find build -name '*.d' 2>/dev/null)
 
 # Link lines, per build: $(1) build dir.  Libraries go above what they use.

@@ -328,7 +328,8 @@ static int cmp_ll(const void *a, const void *b)
 DTEST(rel_load)
 {
     const char *tmp = t_tmpdir();
-    const char *extra[] = {"--workers", "2", "--solver-threads", "1", NULL};
+    /* a short queue, so that clients meet QUEUE_FULL and retry */
+    const char *extra[] = {"--workers", "2", "--queue-max", "4", "--solver-threads", "1", NULL};
     const int full = t_stress_full(), nc = full ? 50 : 8, nj = full ? 20 : 5;
     char dir[300], st[32];
     td_daemon d;
