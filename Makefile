@@ -99,9 +99,11 @@ $(eval $(call build_rules,$(TSAN),$(TSANF)))
 $(eval $(call build_rules,$(LEAN),$(OPT) -DMPM_LEAN))
 $(eval $(call build_rules,$(FUZZ),$$(FUZZF)))
 $(FUZZ)/%.o: CC := $(FUZZ_CC)
-# the solver's kernels take clang many minutes with the sanitizers at -O1,
-# and the fuzzers reach only its case check: the solver is built at -O0
+# the fuzzers reach only the solver's case check, and clang takes many
+# minutes on its kernels with the sanitizers: the solver is built at -O0,
+# its kernels (never called by a target) without instrumentation
 $(FUZZ)/server/mpm/%.o: FUZZ_O := -O0
+$(FUZZ)/server/mpm/mpm_kernels.o: FUZZF = -O0 -g
 -include $(shell find build -name '*.d' 2>/dev/null)
 
 # Link lines, per build: $(1) build dir.  Libraries go above what they use.

@@ -1,6 +1,6 @@
 /*
  * fuzz_seed.c - writes the seeds of the fuzz corpora (`make fuzz-seed`):
- * for each example case given (proto/examples/*.json) its JSON text
+ * for each example case given (proto/examples/NAME.json) its JSON text
  * (json/), its packed Case (case/) and a Submit request carrying it
  * (request/); a request of every other kind (request/); and a stream
  * message and a reply of every kind (stream/).  The seeds are then merged
@@ -39,15 +39,18 @@ static void put(const char *sub, const char *name, const void *buf, size_t len)
     }
 }
 
-/* Stores an encoder's result (rc, buf, len) under sub/name and frees it. */
-static void put_enc(int rc, const char *sub, const char *name, uint8_t *buf, size_t len)
+/* Stores an encoder's result (rc, *buf, *len: pointers, as the encoder
+ * fills them while the arguments are evaluated) under sub/name and frees
+ * it (*buf NULL again). */
+static void put_enc(int rc, const char *sub, const char *name, uint8_t **buf, size_t *len)
 {
     if (rc) {
         fprintf(stderr, "fuzz_seed: encoding %s/%s failed (%d)\n", sub, name, rc);
         failed++;
     } else
-        put(sub, name, buf, len);
-    free(buf);
+        put(sub, name, *buf, *len);
+    free(*buf);
+    *buf = NULL;
 }
 
 static char *slurp(const char *path, size_t *len)
@@ -91,11 +94,11 @@ static void one_case(const char *path)
     uint8_t *buf = NULL;
     size_t n = 0;
     snprintf(file, sizeof file, "%s.pb", name);
-    put_enc(mpp_case_pack(pb, &buf, &n), "case", file, buf, n);
+    put_enc(mpp_case_pack(pb, &buf, &n), "case", file, &buf, &n);
     mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
     buf = NULL;
     snprintf(file, sizeof file, "submit_%s.bin", name);
-    put_enc(mpp_request_encode(&rq, &buf, &n), "request", file, buf, n);
+    put_enc(mpp_request_encode(&rq, &buf, &n), "request", file, &buf, &n);
     mpp_case_pb_free(&pb);
 }
 
@@ -122,7 +125,7 @@ static void requests(void)
         size_t n = 0;
         char file[64];
         snprintf(file, sizeof file, "%s.bin", k[i].name);
-        put_enc(mpp_request_encode(&k[i].rq, &buf, &n), "request", file, buf, n);
+        put_enc(mpp_request_encode(&k[i].rq, &buf, &n), "request", file, &buf, &n);
     }
 }
 
@@ -150,31 +153,20 @@ static void streams_and_replies(void)
     const char *names[] = {"libzmq", "sqlite"}, *vers[] = {"4.3.4", "3.40.1"};
     uint8_t *b = NULL;
     size_t n = 0;
-    put_enc(mpp_stream_progress(2, 1, &pr, &b, &n), "stream", "progress.bin", b, n);
-    b = NULL;
-    put_enc(mpp_stream_energy(2, 2, &es, &b, &n), "stream", "energy.bin", b, n);
-    b = NULL;
-    put_enc(mpp_stream_snapshot(2, 3, &sn, &b, &n), "stream", "snapshot.bin", b, n);
-    b = NULL;
-    put_enc(mpp_stream_finished(2, 4, &fi, &b, &n), "stream", "finished.bin", b, n);
-    b = NULL;
-    put_enc(mpp_reply_error(3, "bodies[0]: bad", "bodies[0]", &b, &n), "stream", "r_error.bin", b,
-            n);
-    b = NULL;
-    put_enc(mpp_reply_submit_ok(2, 2, &b, &n), "stream", "r_submit_ok.bin", b, n);
-    b = NULL;
-    put_enc(mpp_reply_run(&ri, &b, &n), "stream", "r_run.bin", b, n);
-    b = NULL;
+    put_enc(mpp_stream_progress(2, 1, &pr, &b, &n), "stream", "progress.bin", &b, &n);
+    put_enc(mpp_stream_energy(2, 2, &es, &b, &n), "stream", "energy.bin", &b, &n);
+    put_enc(mpp_stream_snapshot(2, 3, &sn, &b, &n), "stream", "snapshot.bin", &b, &n);
+    put_enc(mpp_stream_finished(2, 4, &fi, &b, &n), "stream", "finished.bin", &b, &n);
+    put_enc(mpp_reply_error(3, "bodies[0]: bad", "bodies[0]", &b, &n), "stream", "r_error.bin",
+            &b, &n);
+    put_enc(mpp_reply_submit_ok(2, 2, &b, &n), "stream", "r_submit_ok.bin", &b, &n);
+    put_enc(mpp_reply_run(&ri, &b, &n), "stream", "r_run.bin", &b, &n);
     mpp_run_info two[2] = {ri, ri};
-    put_enc(mpp_reply_runs_page(two, 2, 1, &b, &n), "stream", "r_runs.bin", b, n);
-    b = NULL;
-    put_enc(mpp_reply_energy(2, &es, 1, 1, &b, &n), "stream", "r_energy.bin", b, n);
-    b = NULL;
-    put_enc(mpp_reply_snapshot(&sn, &b, &n), "stream", "r_snapshot.bin", b, n);
-    b = NULL;
-    put_enc(mpp_reply_pong("1.0", "ipc:///tmp/x.stream", &b, &n), "stream", "r_pong.bin", b, n);
-    b = NULL;
-    put_enc(mpp_reply_version("1.0", names, vers, 2, &b, &n), "stream", "r_version.bin", b, n);
+    put_enc(mpp_reply_runs_page(two, 2, 1, &b, &n), "stream", "r_runs.bin", &b, &n);
+    put_enc(mpp_reply_energy(2, &es, 1, 1, &b, &n), "stream", "r_energy.bin", &b, &n);
+    put_enc(mpp_reply_snapshot(&sn, &b, &n), "stream", "r_snapshot.bin", &b, &n);
+    put_enc(mpp_reply_pong("1.0", "ipc:///tmp/x.stream", &b, &n), "stream", "r_pong.bin", &b, &n);
+    put_enc(mpp_reply_version("1.0", names, vers, 2, &b, &n), "stream", "r_version.bin", &b, &n);
 }
 
 int main(int argc, char **argv)

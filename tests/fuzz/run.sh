@@ -21,11 +21,13 @@ for t in "$@"; do
   dict=()
   [ -f tests/fuzz/$t.dict ] && dict=(-dict=tests/fuzz/$t.dict)
   # -timeout: an input taking 20 s is a hang; -rss_limit_mb: so is 2 GB
+  t0=$(date +%s.%N)
   "$bin" -runs="$runs" -max_total_time="$cap" -timeout=20 -rss_limit_mb=2048 \
     -print_final_stats=1 -artifact_prefix="$art/" "${dict[@]}" "$work" "$corpus" >"$log" 2>&1
   rc=$?
+  secs=$(echo "$(date +%s.%N) $t0" | awk '{print $1 - $2}')
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
-  speed=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
+  speed=$(echo "${execs:-0} $secs" | awk '{printf "%.0f", $2 > 0 ? $1 / $2 : 0}')
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
   found=$(find "$art" -type f | wc -l)
   san=$(grep -c 'ERROR: AddressSanitizer\|ERROR: LeakSanitizer\|runtime error:\|ERROR: libFuzzer' "$log")
