@@ -119,8 +119,7 @@ static int run_intact(const td_daemon *d, unsigned long long id, kill_tally *k)
         }
     if (s.n && (!strcmp(st, "FINISHED") || !strcmp(st, "INTERRUPTED")) &&
         s.step[s.n - 1] != steps) {
-        TLOG("run %llu (%s) at step %lld, its last sample at %lld", id, st, steps,
-             s.step[s.n - 1]);
+        TLOG("run %llu (%s) at step %lld, its last sample at %lld", id, st, steps, s.step[s.n - 1]);
         goto out;
     }
     k->samples += (long)s.n;
@@ -271,10 +270,11 @@ DTEST(rel_kill9)
          "mpmctl submits answered before the kill)",
          kills, td_now() - t0, delay_sum / kills, k.runs, k.finished, k.interrupted, k.other_end,
          k.samples, k.snapshots, accepted, in_flight_ok);
-    printf("reliability: kill9 kills=%d runs=%ld interrupted=%ld finished=%ld integrity_failures=%ld "
-           "bad_state=%ld bad_data=%ld seed=%lu\n",
-           kills, k.runs, k.interrupted, k.finished, k.integrity_failures, k.bad_state, k.bad_data,
-           seed);
+    printf(
+        "reliability: kill9 kills=%d runs=%ld interrupted=%ld finished=%ld integrity_failures=%ld "
+        "bad_state=%ld bad_data=%ld seed=%lu\n",
+        kills, k.runs, k.interrupted, k.finished, k.integrity_failures, k.bad_state, k.bad_data,
+        seed);
     CHECKF(k.integrity_failures == 0 && k.bad_state == 0 && k.bad_data == 0,
            "integrity failures %ld, runs not ended %ld, runs with damaged data %ld",
            k.integrity_failures, k.bad_state, k.bad_data);
@@ -346,7 +346,11 @@ DTEST(rel_load)
     int started = 0;
     double t0 = td_now();
     for (int i = 0; i < nc; i++) {
-        lc[i] = (load_client){.ep = d.ep, .cb = cb, .cl = cl, .jobs = nj, .ids = all + i * nj,
+        lc[i] = (load_client){.ep = d.ep,
+                              .cb = cb,
+                              .cl = cl,
+                              .jobs = nj,
+                              .ids = all + i * nj,
                               .seed = (unsigned)i + 1};
         if (pthread_create(&th[i], NULL, load_run, &lc[i])) break;
         started++;
@@ -370,8 +374,9 @@ DTEST(rel_load)
     long dups = 0;
     for (int i = 1; i < n; i++) dups += all[i] == all[i - 1];
     long long maxid = n ? all[n - 1] : 0;
-    int done = n && td_wait_status(&d, (unsigned long long)maxid,
-                                   "FINISHED|FAILED|CANCELLED|INTERRUPTED", 300, st, sizeof st) == 0;
+    int done =
+        n && td_wait_status(&d, (unsigned long long)maxid, "FINISHED|FAILED|CANCELLED|INTERRUPTED",
+                            300, st, sizeof st) == 0;
     /* recorded once each: the listing holds exactly the accepted ids */
     td_out o;
     char **lines = NULL;

@@ -173,8 +173,8 @@ static int make_readonly(const char *dir)
 {
     char cmd[1200];
     snprintf(cmd, sizeof cmd,
-             "mount --bind '%s' '%s' 2>/dev/null && mount -o remount,bind,ro '%s' 2>/dev/null",
-             dir, dir, dir);
+             "mount --bind '%s' '%s' 2>/dev/null && mount -o remount,bind,ro '%s' 2>/dev/null", dir,
+             dir, dir);
     if (system(cmd) == 0) return 1;
     snprintf(cmd, sizeof cmd, "umount '%s' 2>/dev/null; chattr +i '%s'/* '%s' 2>/dev/null", dir,
              dir, dir);
@@ -287,10 +287,10 @@ static int submit_named(const td_daemon *d, const char *name, size_t n, char *co
     mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_bytes = buf, .case_len = len};
     rc = td_request(d->ep, &rq, 30, &reply);
     snprintf(code, cn, "%s",
-             rc == 1                                 ? "-"
-             : json_object_get(reply, "submitOk")    ? ""
+             rc == 1                                ? "-"
+             : json_object_get(reply, "submitOk")   ? ""
              : !strcmp(td_err_field(reply), "name") ? td_err_code(reply)
-                                                     : "WRONG-FIELD");
+                                                    : "WRONG-FIELD");
 out:
     json_decref(reply);
     json_decref(c);
@@ -327,7 +327,11 @@ DTEST(rel_hostile)
         names[nn++].want_ok = 1;
     }
     memcpy(names[nn].s, "a\x7fz", 3), names[nn].n = 3, names[nn++].want_ok = 1;
-    memcpy(names[nn].s, "a\xc2\x9b" "31mz", 6), names[nn].n = 6, names[nn++].want_ok = 1;
+    memcpy(names[nn].s,
+           "a\xc2\x9b"
+           "31mz",
+           6),
+        names[nn].n = 6, names[nn++].want_ok = 1;
     const char *bad[] = {"a\x80z", "a\xc0\x80z", "a\xed\xa0\x80z", "a\xe2\x82", "a\xffz"};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         names[nn].n = strlen(bad[i]);

@@ -137,18 +137,47 @@ static void streams_and_replies(void)
     double x[6] = {0.1, 0.2, 0.3, 0.4, 0.5, 0.6}, p[3] = {1, 2, 3};
     double st[18] = {0};
     int y[3] = {0, 1, 0};
-    mpp_snapshot sn = {.step = 40, .t = 0.25, .n = 3, .dim = 2, .x = x, .v = x, .stress = st,
-                       .pressure = p, .volume = p, .plastic_strain = p, .yielded = y};
+    mpp_snapshot sn = {.step = 40,
+                       .t = 0.25,
+                       .n = 3,
+                       .dim = 2,
+                       .x = x,
+                       .v = x,
+                       .stress = st,
+                       .pressure = p,
+                       .volume = p,
+                       .plastic_strain = p,
+                       .yielded = y};
     mpp_progress pr = {.step = 40, .steps_total = 100, .t = 0.25, .dt = 1e-3, .wall_s = 0.5};
-    mpp_finished fi = {.status = MPP_STATUS_FAILED, .error = "a particle left the grid",
-                       .steps = 40, .t = 0.25, .wall_s = 0.5, .energy = &es, .has_balance = 1,
-                       .balance_error = 1e-6, .warning = "w"};
+    mpp_finished fi = {.status = MPP_STATUS_FAILED,
+                       .error = "a particle left the grid",
+                       .steps = 40,
+                       .t = 0.25,
+                       .wall_s = 0.5,
+                       .energy = &es,
+                       .has_balance = 1,
+                       .balance_error = 1e-6,
+                       .warning = "w"};
     int64_t steps[2] = {10, 20};
-    mpp_run_info ri = {.run_id = 2, .job_id = 2, .name = "disk", .status = MPP_STATUS_FINISHED,
-                       .error = "", .submitted_at = 1e9, .started_at = 1e9 + 1,
-                       .finished_at = 1e9 + 2, .steps = 40, .steps_total = 40, .t = 0.25,
-                       .wall_s = 1, .particles = 3, .nodes = 9, .dim = 2, .last_energy = &es,
-                       .energy_samples = 5, .n_snapshot_steps = 2, .snapshot_steps = steps,
+    mpp_run_info ri = {.run_id = 2,
+                       .job_id = 2,
+                       .name = "disk",
+                       .status = MPP_STATUS_FINISHED,
+                       .error = "",
+                       .submitted_at = 1e9,
+                       .started_at = 1e9 + 1,
+                       .finished_at = 1e9 + 2,
+                       .steps = 40,
+                       .steps_total = 40,
+                       .t = 0.25,
+                       .wall_s = 1,
+                       .particles = 3,
+                       .nodes = 9,
+                       .dim = 2,
+                       .last_energy = &es,
+                       .energy_samples = 5,
+                       .n_snapshot_steps = 2,
+                       .snapshot_steps = steps,
                        .owner = "local"};
     const char *names[] = {"libzmq", "sqlite"}, *vers[] = {"4.3.4", "3.40.1"};
     uint8_t *b = NULL;
@@ -157,8 +186,8 @@ static void streams_and_replies(void)
     put_enc(mpp_stream_energy(2, 2, &es, &b, &n), "stream", "energy.bin", &b, &n);
     put_enc(mpp_stream_snapshot(2, 3, &sn, &b, &n), "stream", "snapshot.bin", &b, &n);
     put_enc(mpp_stream_finished(2, 4, &fi, &b, &n), "stream", "finished.bin", &b, &n);
-    put_enc(mpp_reply_error(3, "bodies[0]: bad", "bodies[0]", &b, &n), "stream", "r_error.bin",
-            &b, &n);
+    put_enc(mpp_reply_error(3, "bodies[0]: bad", "bodies[0]", &b, &n), "stream", "r_error.bin", &b,
+            &n);
     put_enc(mpp_reply_submit_ok(2, 2, &b, &n), "stream", "r_submit_ok.bin", &b, &n);
     put_enc(mpp_reply_run(&ri, &b, &n), "stream", "r_run.bin", &b, &n);
     mpp_run_info two[2] = {ri, ri};

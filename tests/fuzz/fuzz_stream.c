@@ -16,7 +16,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     mpp_stream s;
     int rc = mpp_stream_decode(data, size, 0, &s, &err);
     fuzz_check_error(rc, &err);
-    if (rc == 0 && (s.kind == MPP_STREAM_ENERGY || (s.kind == MPP_STREAM_FINISHED && s.has_energy))) {
+    if (rc == 0 &&
+        (s.kind == MPP_STREAM_ENERGY || (s.kind == MPP_STREAM_FINISHED && s.has_energy))) {
         rc = mpp_energy_to_json(&s.energy, &json, &err);
         fuzz_check_error(rc, &err);
         free(json);
