@@ -27,7 +27,7 @@ for t in "$@"; do
   rc=$?
   secs=$(echo "$(date +%s.%N) $t0" | awk '{print $1 - $2}')
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
-  speed=$(echo "${execs:-0} $secs" | awk '{printf "%.0f", $2 > 0 ? $1 / $2 : 0}')
+  speed=$(echo "${execs:-0} $secs" | awk '{printf "%.0f", ($2 > 0 ? $1 / $2 : 0)}')
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
   found=$(find "$art" -type f | wc -l)
   san=$(grep -c 'ERROR: AddressSanitizer\|ERROR: LeakSanitizer\|runtime error:\|ERROR: libFuzzer' "$log")
