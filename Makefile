@@ -47,9 +47,15 @@ REL  := build/rel
 ASAN := build/asan
 TSAN := build/tsan
 LEAN := build/lean
+# libFuzzer (tests/fuzz/): clang's fuzzer + ASan + UBSan, objects in build/fuzz
+FUZZ := build/fuzz
+FUZZ_CC ?= clang
+FUZZ_O ?= -O1
+FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
+         -fno-sanitize-recover=all
 
 .PHONY: all deps test test-quick tsan bench bench-build bench-accuracy bench-vtk stress demo clean \
-        format format-check lint
+        format format-check lint fuzz fuzz-quick fuzz-build fuzz-seed
 .SECONDARY: $(GEN_C) $(GEN_H)
 all: bin/mpmd bin/mpmctl bin/mpmtest bin/mpmrun
 
@@ -88,11 +94,18 @@ ALL_LIB_SRCS := $(sort $(MPM_SRCS) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) $(TOOL_
 define srclist
 $(shell mkdir -p $(1); [ "$$(cat $(1)/.sources 2>/dev/null)" = "$(ALL_LIB_SRCS)" ] || echo "$(ALL_LIB_SRCS)" > $(1)/.sources)
 endef
-$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN),$(call srclist,$(b)))
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(call srclist,$(b)))
 $(eval $(call build_rules,$(REL),$(OPT)))
 $(eval $(call build_rules,$(ASAN),$(SAN)))
 $(eval $(call build_rules,$(TSAN),$(TSANF)))
 $(eval $(call build_rules,$(LEAN),$(OPT) -DMPM_LEAN))
+$(eval $(call build_rules,$(FUZZ),$$(FUZZF)))
+$(FUZZ)/%.o: CC := $(FUZZ_CC)
+# the fuzzers reach only the solver's case check, and clang takes many
+# minutes on its kernels with the sanitizers: the solver is built at -O0,
+# its kernels (never called by a target) without instrumentation
+$(FUZZ)/server/mpm/%.o: FUZZ_O := -O0
+$(FUZZ)/server/mpm/mpm_kernels.o: FUZZF = -O0 -g
 -include $(shell find build -name '*.d' 2>/dev/null)
 
 # Link lines, per build: $(1) build dir.  Libraries go above what they use.
@@ -130,12 +143,14 @@ $(TSAN)/mpmtest: $(call mpmtest_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 
 # ---- tests ----------------------------------------------------------------------
-# make test: every test under ASan+UBSan.  T=name runs one test.  Tests that
+# make test: every test under ASan+UBSan, then (without T) the fuzz targets'
+# quick form (make fuzz-quick).  T=name runs one test.  Tests that
 # need the daemon and the client find them through MPMD_BIN and MPMCTL_BIN.
 test: deps
 	@$(MAKE) --no-print-directory $(ASAN)/mpmtest $(ASAN)/mpmd $(ASAN)/mpmctl
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  MPMD_BIN=$(ASAN)/mpmd MPMCTL_BIN=$(ASAN)/mpmctl $(ASAN)/mpmtest $(T)
+	@if [ -z "$(T)" ]; then $(MAKE) --no-print-directory fuzz-quick; fi
 
 # The benchmarks' binaries, built (not run) in CI so that they never rot.
 bench-build: deps
@@ -237,8 +252,9 @@ lint: deps | $(GEN_H)
 #                      there (installed through `deploy/install-deps.sh bench`).
 #                      BENCH_ARGS=--quick for a short run (--help for the rest).
 # make stress          the full stability suite (the stress_* tests with
-#                      MPM_STRESS=full) on the release build; `make test` runs
-#                      their quick form.
+#                      MPM_STRESS=full) and the reliability suite (rel_* at full
+#                      size, make fuzz) on the release build, ending with the
+#                      Reliability table; `make test` runs their quick form.
 bin/mpmbench-accuracy: $(patsubst %.c,$(REL)/%.o,$(BENCH_SRCS)) $(REL)/libtools.a $(REL)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
@@ -251,9 +267,63 @@ bench-accuracy: deps
 	  gnuplot build/bench/accuracy.gp && echo "plots: build/bench/accuracy_time.png accuracy_space.png accuracy_dt.png"; \
 	else echo "bench-accuracy: gnuplot not found, plots skipped (bash deploy/install-deps.sh bench installs it)"; fi
 
+# The reliability part: the rel_* tests (kill -9, load, watchers, disk,
+# hostile input; tests/t_reliab*.c) at full size and `make fuzz`; their
+# "reliability:" lines are gathered into the README's Reliability table
+# (tests/reliab_table.sh) at the end.  Every part runs even if one fails.
+STRESS_LOG := build/stress.log
 stress: deps
-	@$(MAKE) --no-print-directory bin/mpmtest bin/mpmd
-	MPM_STRESS=full MPMD_BIN=bin/mpmd bin/mpmtest stress_
+	@$(MAKE) --no-print-directory bin/mpmtest bin/mpmd bin/mpmctl
+	@mkdir -p build && rm -f $(STRESS_LOG) build/stress.rc
+	@{ MPM_STRESS=full MPMD_BIN=bin/mpmd MPMCTL_BIN=bin/mpmctl bin/mpmtest stress_ rel_ 2>&1; \
+	   echo $$? > build/stress.rc; } | tee $(STRESS_LOG)
+	@{ $(MAKE) --no-print-directory fuzz 2>&1; echo $$? >> build/stress.rc; } | tee -a $(STRESS_LOG)
+	@bash tests/reliab_table.sh $(STRESS_LOG)
+	@! grep -qv '^0$$' build/stress.rc || { echo "stress: FAILED (see $(STRESS_LOG))"; exit 1; }
+
+# ---- fuzzing: make fuzz, make fuzz-quick -------------------------------------------
+# libFuzzer targets (tests/fuzz/fuzz_<target>.c), built with clang into
+# build/fuzz with the protocol and solver libraries compiled there too:
+#   request  the daemon's request path (decode, case check, the reply)
+#   case     packed Case bytes -> the case codec -> mpm_case_check
+#   json     JSON case text -> the JSON mapping -> mpm_case_check
+#   stream   the stream and reply decoders the clients use
+# Each starts from its corpus, tests/fuzz/corpus/<target>/ (kept small:
+# seeds from proto/examples and from encoded messages of every kind,
+# minimised with -merge=1; `make fuzz-seed` renews it).
+# make fuzz        FUZZ_RUNS executions per target (4 x 260000 >= 10^6), at most
+#                  FUZZ_TIME s each; a table; fails on any crash or sanitizer report
+# make fuzz-quick  every target over its corpus plus FUZZ_QUICK_RUNS mutations
+#                  (run by make test)
+FUZZ_TARGETS    := request case json stream
+FUZZ_BINS       := $(patsubst %,$(FUZZ)/fuzz_%,$(FUZZ_TARGETS))
+FUZZ_RUNS       ?= 260000
+FUZZ_TIME       ?= 900
+FUZZ_QUICK_RUNS ?= 20000
+$(FUZZ)/fuzz_%: $(FUZZ)/tests/fuzz/fuzz_%.o $(FUZZ)/libmpp.a $(FUZZ)/libmpm.a
+	$(FUZZ_CC) $(FUZZF) -fsanitize=fuzzer -o $@ $^ -lprotobuf-c -ljansson $(LDLIBS)
+$(FUZZ)/fuzz_seed: $(REL)/tests/fuzz/fuzz_seed.o $(REL)/libmpp.a $(REL)/libmpm.a
+	$(CC) $(OPT) -o $@ $^ -lprotobuf-c -ljansson $(LDLIBS)
+
+fuzz-build: deps
+	@$(MAKE) --no-print-directory $(FUZZ_BINS)
+
+fuzz: fuzz-build
+	bash tests/fuzz/run.sh $(FUZZ_RUNS) $(FUZZ_TIME) $(FUZZ_TARGETS)
+
+fuzz-quick: fuzz-build
+	bash tests/fuzz/run.sh $(FUZZ_QUICK_RUNS) 60 $(FUZZ_TARGETS)
+
+# Renews the corpora: the seeds, merged (-merge=1) with what is there.
+fuzz-seed: fuzz-build
+	@$(MAKE) --no-print-directory $(FUZZ)/fuzz_seed
+	rm -rf $(FUZZ)/seeds && $(FUZZ)/fuzz_seed $(FUZZ)/seeds proto/examples/*.json
+	@for t in $(FUZZ_TARGETS); do \
+	  mkdir -p tests/fuzz/corpus/$$t $(FUZZ)/work/$$t && \
+	  $(FUZZ)/fuzz_$$t -merge=1 tests/fuzz/corpus/$$t $(FUZZ)/seeds/$$t $(FUZZ)/work/$$t \
+	    >$(FUZZ)/merge_$$t.log 2>&1 || { cat $(FUZZ)/merge_$$t.log; exit 1; }; \
+	  echo "fuzz-seed: $$t: $$(ls tests/fuzz/corpus/$$t | wc -l) files"; \
+	done
 
 # ---- the throughput benchmark ----------------------------------------------------
 # make bench  runs bin/mpmbench --all (tests/perf/): disks2d, cube3d and bar1d at

@@ -21,6 +21,7 @@ pkgs=(
   zlib1g-dev           # mpmctl's VTK writer (--compress)
   python3-vtk9 python3-numpy  # tests: VTK's own readers read mpmctl's .vtp/.pvd/.vti files
   groff-base           # tests: the man pages render without warnings (groff -ww)
+  clang libclang-rt-14-dev llvm  # make fuzz (libFuzzer, run quick by make test); llvm-symbolizer
 )
 # Optional group: `install-deps.sh bench` adds what `make bench-accuracy` uses
 # for its plots (gnuplot-nox), unless some gnuplot is already there;

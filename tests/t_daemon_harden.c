@@ -18,49 +18,6 @@
 
 #include "mpp_case.h"
 
-/* A line of /proc/PID/status ("VmHWM:", "VmRSS:") in kB, or -1. */
-static long proc_kb(pid_t pid, const char *key)
-{
-    char path[64], line[256];
-    long v = -1;
-    snprintf(path, sizeof path, "/proc/%ld/status", (long)pid);
-    FILE *f = fopen(path, "r");
-    if (!f) return -1;
-    while (fgets(line, sizeof line, f))
-        if (!strncmp(line, key, strlen(key))) v = strtol(line + strlen(key), NULL, 10);
-    fclose(f);
-    return v;
-}
-
-/* Submits the good 2D case with `from` patched into `to` as a raw request;
- * the reply in *reply (caller frees). */
-static int submit_patched(const td_daemon *d, const char *from, const char *to, json_t **reply)
-{
-    char err[ERRLEN];
-    char *json = td_patch(from, to);
-    Mpmd__Case *pb = NULL;
-    *reply = NULL;
-    if (!json || td_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
-        t_fail(__FILE__, __LINE__, "patch %s -> %s: %s", from, to, json ? err : "not in the case");
-        free(json);
-        return -1;
-    }
-    mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
-    int rc = td_request(d->ep, &rq, 20, reply);
-    mpp_case_pb_free(&pb);
-    free(json);
-    return rc;
-}
-
-static int ping_ok(const td_daemon *d)
-{
-    mpp_request rq = {.kind = MPP_REQ_PING};
-    json_t *reply = NULL;
-    int ok = td_request(d->ep, &rq, 10, &reply) == 0 && json_object_get(reply, "pong");
-    json_decref(reply);
-    return ok;
-}
-
 /* ---- oversized requests --------------------------------------------------------------- */
 
 DTEST(daemon_oversized_request_refused_unread)
@@ -135,17 +92,6 @@ DTEST(daemon_oversized_request_refused_unread)
 
 /* ---- the unpack budget ---------------------------------------------------------------- */
 
-/* Appends a varint. */
-static size_t varint(uint8_t *p, uint64_t v)
-{
-    size_t k = 0;
-    do {
-        p[k++] = (uint8_t)((v & 0x7f) | (v > 0x7f ? 0x80 : 0));
-        v >>= 7;
-    } while (v);
-    return k;
-}
-
 DTEST(daemon_unpack_budget)
 {
     const char *tmp = t_tmpdir();
@@ -155,25 +101,10 @@ DTEST(daemon_unpack_budget)
     snprintf(dir, sizeof dir, "%s/budget", tmp);
     if (td_start(&d, dir, extra)) return;
 
-    /* Request { schema_version = 1, submit { case { bodies: 400000 empty } } }:
-     * 2 bytes on the wire per Body (tag 0x5a, length 0), some 90 in memory
-     * (45x) */
     enum { NB = 400000 };
-    size_t caselen = 2 * (size_t)NB, n = 0;
-    uint8_t *m = malloc(caselen + 32);
+    size_t n = 0;
+    uint8_t *m = inflated_request(NB, &n);
     CHECK(m);
-    uint8_t tmpv[10];
-    size_t clen = varint(tmpv, caselen);
-    m[n++] = 0x08; /* schema_version */
-    m[n++] = 1;
-    m[n++] = 0x12; /* submit */
-    n += varint(m + n, 1 + clen + caselen);
-    m[n++] = 0x0a; /* case */
-    n += varint(m + n, caselen);
-    for (int i = 0; i < NB; i++) {
-        m[n++] = 0x5a; /* Case.bodies = 11, length-delimited */
-        m[n++] = 0;
-    }
     /* at least: the message header protobuf-c puts in every struct (24
      * bytes), Body's fields (over 40) and the pointer to it */
     size_t would = NB * (size_t)(24 + 40 + 8);

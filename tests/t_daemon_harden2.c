@@ -22,56 +22,6 @@
 #include <unistd.h>
 #include <zmq.h>
 
-/* A line of /proc/PID/status ("VmHWM:", "VmRSS:") in kB, or -1. */
-static long proc_kb(pid_t pid, const char *key)
-{
-    char path[64], line[256];
-    long v = -1;
-    snprintf(path, sizeof path, "/proc/%ld/status", (long)pid);
-    FILE *f = fopen(path, "r");
-    if (!f) return -1;
-    while (fgets(line, sizeof line, f))
-        if (!strncmp(line, key, strlen(key))) v = strtol(line + strlen(key), NULL, 10);
-    fclose(f);
-    return v;
-}
-
-/* A SUB on the daemon's stream subscribed to job's topic, receiving at
- * most hwm messages into its queue (a watcher that stalls stalls there). */
-static void *subscribe(void *zctx, const td_daemon *d, unsigned long long job, int hwm)
-{
-    char sep[420], topic[32];
-    int linger = 0, rcvbuf = 4096;
-    snprintf(sep, sizeof sep, "%s.stream", d->ep);
-    snprintf(topic, sizeof topic, "job:%016llx:", job);
-    void *sub = zmq_socket(zctx, ZMQ_SUB);
-    if (!sub || zmq_setsockopt(sub, ZMQ_LINGER, &linger, sizeof linger) ||
-        zmq_setsockopt(sub, ZMQ_RCVHWM, &hwm, sizeof hwm) ||
-        zmq_setsockopt(sub, ZMQ_RCVBUF, &rcvbuf, sizeof rcvbuf) ||
-        zmq_setsockopt(sub, ZMQ_SUBSCRIBE, topic, strlen(topic)) || zmq_connect(sub, sep)) {
-        t_fail(__FILE__, __LINE__, "SUB on %s: %s", sep, zmq_strerror(errno));
-        if (sub) zmq_close(sub);
-        return NULL;
-    }
-    return sub;
-}
-
-/* The snapshot-every-step job: a 2D block at rest, 57600 particles (h =
- * 0.005, 2x2 per cell), every field: 5.5 MB per snapshot, 200 steps. */
-static json_t *snap_case(const char *name)
-{
-    json_t *c = block2d(200, 0, name);
-    if (!c) return NULL;
-    json_object_set_new(json_object_get(c, "grid"), "spacing", json_pack("[f,f]", 0.005, 0.005));
-    json_object_set_new(json_object_get(c, "grid"), "nodes", json_pack("[i,i]", 201, 201));
-    json_t *b = json_array_get(json_object_get(c, "bodies"), 0);
-    json_object_set_new(json_object_get(b, "box"), "lo", json_pack("[f,f]", 0.2, 0.2));
-    json_object_set_new(json_object_get(b, "box"), "hi", json_pack("[f,f]", 0.8, 0.8));
-    json_object_del(b, "velocity");
-    set_output(c, "snapshotEvery", json_integer(1));
-    return c;
-}
-
 DTEST(daemon_stalled_watcher_bounded)
 {
     const char *tmp = t_tmpdir();
@@ -103,7 +53,7 @@ DTEST(daemon_stalled_watcher_bounded)
 #else
     if (td_start(&d, dir, extra)) return;
 #endif
-    CHECK(write_case(snap_case("stall"), dir, "snap.json", path, sizeof path) == 0);
+    CHECK(write_case(snap_case("stall", 200), dir, "snap.json", path, sizeof path) == 0);
 
     /* job 1 alone, then job 2 with a watcher that subscribed before it
      * was submitted and never reads */
@@ -336,7 +286,7 @@ static long long file_size(const char *path)
  * snapshots ends FAILED with the reason, its watcher gets the Finished
  * with it, Status says so, the finished run stays intact, and the daemon
  * keeps answering and starts again. */
-DTEST(daemon_disk_full)
+void disk_full_scenario(const char *name)
 {
     const char *tmp = t_tmpdir();
     /* no disk budget: job 2 records until the disk, not a budget, stops it */
@@ -345,7 +295,7 @@ DTEST(daemon_disk_full)
     td_daemon d;
     td_out o;
     void *zctx = NULL, *sub = NULL;
-    snprintf(dir, sizeof dir, "%s/full", tmp);
+    snprintf(dir, sizeof dir, "%s/%s", tmp, name);
     if (td_start(&d, dir, extra)) return;
     CHECK(write_case(bar_steps(10, 1), dir, "bar.json", path, sizeof path) == 0);
     CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0 && o.status == 0);
@@ -446,4 +396,9 @@ DTEST(daemon_disk_full)
 out:
     if (sub) zmq_close(sub);
     if (zctx) zmq_ctx_term(zctx);
+}
+
+DTEST(daemon_disk_full)
+{
+    disk_full_scenario("full");
 }

@@ -4,9 +4,14 @@
  */
 #include "t_daemon_util.h"
 
+#include <errno.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <zmq.h>
+
+#include "mpp_case.h"
 
 void series_free(series *s)
 {
@@ -292,4 +297,121 @@ int expect_ctl(const td_daemon *d, int status, const char *want, const char *con
     }
     td_out_free(&o);
     return ok;
+}
+
+/* ---- the daemon's memory and its stream ---- */
+
+/* A line of /proc/PID/status ("VmHWM:", "VmRSS:") in kB, or -1. */
+long proc_kb(pid_t pid, const char *key)
+{
+    char path[64], line[256];
+    long v = -1;
+    snprintf(path, sizeof path, "/proc/%ld/status", (long)pid);
+    FILE *f = fopen(path, "r");
+    if (!f) return -1;
+    while (fgets(line, sizeof line, f))
+        if (!strncmp(line, key, strlen(key))) v = strtol(line + strlen(key), NULL, 10);
+    fclose(f);
+    return v;
+}
+
+/* A SUB on the daemon's stream subscribed to job's topic, receiving at
+ * most hwm messages into its queue (a watcher that stalls stalls there). */
+void *subscribe(void *zctx, const td_daemon *d, unsigned long long job, int hwm)
+{
+    char sep[420], topic[32];
+    int linger = 0, rcvbuf = 4096;
+    snprintf(sep, sizeof sep, "%s.stream", d->ep);
+    snprintf(topic, sizeof topic, "job:%016llx:", job);
+    void *sub = zmq_socket(zctx, ZMQ_SUB);
+    if (!sub || zmq_setsockopt(sub, ZMQ_LINGER, &linger, sizeof linger) ||
+        zmq_setsockopt(sub, ZMQ_RCVHWM, &hwm, sizeof hwm) ||
+        zmq_setsockopt(sub, ZMQ_RCVBUF, &rcvbuf, sizeof rcvbuf) ||
+        zmq_setsockopt(sub, ZMQ_SUBSCRIBE, topic, strlen(topic)) || zmq_connect(sub, sep)) {
+        t_fail(__FILE__, __LINE__, "SUB on %s: %s", sep, zmq_strerror(errno));
+        if (sub) zmq_close(sub);
+        return NULL;
+    }
+    return sub;
+}
+
+/* The snapshot-every-step job: a 2D block at rest, 57600 particles (h =
+ * 0.005, 2x2 per cell), every field: 5.5 MB per snapshot, `steps` steps. */
+json_t *snap_case(const char *name, long long steps)
+{
+    json_t *c = block2d(steps, 0, name);
+    if (!c) return NULL;
+    json_object_set_new(json_object_get(c, "grid"), "spacing", json_pack("[f,f]", 0.005, 0.005));
+    json_object_set_new(json_object_get(c, "grid"), "nodes", json_pack("[i,i]", 201, 201));
+    json_t *b = json_array_get(json_object_get(c, "bodies"), 0);
+    json_object_set_new(json_object_get(b, "box"), "lo", json_pack("[f,f]", 0.2, 0.2));
+    json_object_set_new(json_object_get(b, "box"), "hi", json_pack("[f,f]", 0.8, 0.8));
+    json_object_del(b, "velocity");
+    set_output(c, "snapshotEvery", json_integer(1));
+    return c;
+}
+
+/* ---- raw requests ---- */
+
+/* Submits the good 2D case with `from` patched into `to` as a raw request;
+ * the reply in *reply (caller frees). */
+int submit_patched(const td_daemon *d, const char *from, const char *to, json_t **reply)
+{
+    char err[ERRLEN];
+    char *json = td_patch(from, to);
+    Mpmd__Case *pb = NULL;
+    *reply = NULL;
+    if (!json || td_case_from_json(json, strlen(json), &pb, err, sizeof err)) {
+        t_fail(__FILE__, __LINE__, "patch %s -> %s: %s", from, to, json ? err : "not in the case");
+        free(json);
+        return -1;
+    }
+    mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
+    int rc = td_request(d->ep, &rq, 20, reply);
+    mpp_case_pb_free(&pb);
+    free(json);
+    return rc;
+}
+
+int ping_ok(const td_daemon *d)
+{
+    mpp_request rq = {.kind = MPP_REQ_PING};
+    json_t *reply = NULL;
+    int ok = td_request(d->ep, &rq, 10, &reply) == 0 && json_object_get(reply, "pong");
+    json_decref(reply);
+    return ok;
+}
+
+/* Appends a varint. */
+static size_t varint(uint8_t *p, uint64_t v)
+{
+    size_t k = 0;
+    do {
+        p[k++] = (uint8_t)((v & 0x7f) | (v > 0x7f ? 0x80 : 0));
+        v >>= 7;
+    } while (v);
+    return k;
+}
+
+uint8_t *inflated_request(size_t nbodies, size_t *n)
+{
+    /* Request { schema_version = 1, submit { case { bodies: nbodies empty } } }:
+     * 2 bytes on the wire per Body (tag 0x5a, length 0), some 90 in memory
+     * (45x) */
+    size_t caselen = 2 * nbodies, k = 0;
+    uint8_t *m = malloc(caselen + 32), tmpv[10];
+    if (!m) return NULL;
+    size_t clen = varint(tmpv, caselen);
+    m[k++] = 0x08; /* schema_version */
+    m[k++] = 1;
+    m[k++] = 0x12; /* submit */
+    k += varint(m + k, 1 + clen + caselen);
+    m[k++] = 0x0a; /* case */
+    k += varint(m + k, caselen);
+    for (size_t i = 0; i < nbodies; i++) {
+        m[k++] = 0x5a; /* Case.bodies = 11, length-delimited */
+        m[k++] = 0;
+    }
+    *n = k;
+    return m;
 }

@@ -90,6 +90,37 @@ int expect_ctl(const td_daemon *d, int status, const char *want, const char *con
         if (!expect_ctl(d, st, want, a_)) return; \
     } while (0)
 
+/* A line of /proc/PID/status ("VmHWM:", "VmRSS:") in kB, or -1. */
+long proc_kb(pid_t pid, const char *key);
+
+/* A SUB on the daemon's stream subscribed to job's topic, receiving at
+ * most hwm messages into its queue (a watcher that stalls stalls there);
+ * NULL after failing the test. */
+void *subscribe(void *zctx, const td_daemon *d, unsigned long long job, int hwm);
+
+/* The snapshot-every-step job: a 2D block at rest, 57600 particles (h =
+ * 0.005, 2x2 per cell), every field: 5.5 MB per snapshot, `steps` steps. */
+json_t *snap_case(const char *name, long long steps);
+
+/* Submits the good 2D case (td_good2d) with `from` patched into `to` as a
+ * raw request; the reply in *reply (caller frees).  As td_request. */
+int submit_patched(const td_daemon *d, const char *from, const char *to, json_t **reply);
+
+/* 1 when the daemon answers a raw Ping with a Pong within 10 s. */
+int ping_ok(const td_daemon *d);
+
+/* A crafted Request { schema_version 1, submit { case { nbodies empty
+ * bodies } } }: 2 bytes per Body on the wire, some 90 once unpacked (the
+ * daemon's unpack budget refuses it).  malloc'd, *n bytes; NULL if out of
+ * memory. */
+uint8_t *inflated_request(size_t nbodies, size_t *n);
+
+/* A full disk (t_daemon_harden2.c): a daemon in t_tmpdir()/name whose
+ * file size is limited (RLIMIT_FSIZE) while a job records snapshots: the
+ * job ends FAILED with the reason, its watcher is told, the finished run
+ * stays intact and a restart finds it so.  Fails the test otherwise. */
+void disk_full_scenario(const char *name);
+
 /* Room for an error text in the daemon tests. */
 #define ERRLEN 1024
 

@@ -330,4 +330,12 @@ double store_time_now(void);
  * row a statement returned (unchanged if none). */
 int store_exec_raw(const char *path, const char *sql, int64_t *result);
 
+/* PRAGMA integrity_check on the database file at path, with a connection
+ * of its own (as store_exec_raw; a daemon may have it open, from another
+ * process).  *ok = 1 when SQLite answers "ok"; report (len bytes, may be
+ * NULL) gets what it said, rows joined with "; ", truncated to fit.
+ * Returns 0 when the check ran, MPM_EIO when the file cannot be opened or
+ * read (*ok = 0). */
+int store_integrity_check(const char *path, int *ok, char *report, size_t len);
+
 #endif

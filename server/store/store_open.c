@@ -341,11 +341,13 @@ static int raw_row(void *ud, int ncol, char **vals, char **names)
     return 0;
 }
 
-int store_exec_raw(const char *path, const char *sql, int64_t *result)
+/* Opens path with a connection of its own (flags: SQLite's open flags),
+ * runs sql with callback row(ud, ...) and closes it. */
+static int raw_exec(const char *path, int flags, const char *sql,
+                    int (*row)(void *, int, char **, char **), void *ud)
 {
-    if (!path || !sql) return sti_fail(MPM_EINVAL, "store_exec_raw: NULL argument");
     sqlite3 *db = NULL;
-    int rc = sqlite3_open_v2(path, &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL);
+    int rc = sqlite3_open_v2(path, &db, flags, NULL);
     if (rc != SQLITE_OK) {
         int r = sti_fail(MPM_EIO, "cannot open database %s: %s", path,
                          db ? sqlite3_errmsg(db) : sqlite3_errstr(rc));
@@ -353,7 +355,7 @@ int store_exec_raw(const char *path, const char *sql, int64_t *result)
         return r;
     }
     char *msg = NULL;
-    rc = sqlite3_exec(db, sql, raw_row, result, &msg);
+    rc = sqlite3_exec(db, sql, row, ud, &msg);
     int r = 0;
     if (rc != SQLITE_OK)
         r = sti_fail(MPM_EIO, "database %s: %s", path, msg ? msg : sqlite3_errstr(rc));
@@ -362,6 +364,49 @@ int store_exec_raw(const char *path, const char *sql, int64_t *result)
     if (!r && rc != SQLITE_OK)
         r = sti_fail(MPM_EIO, "closing database %s: %s", path, sqlite3_errstr(rc));
     return r;
+}
+
+int store_exec_raw(const char *path, const char *sql, int64_t *result)
+{
+    if (!path || !sql) return sti_fail(MPM_EINVAL, "store_exec_raw: NULL argument");
+    return raw_exec(path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, sql, raw_row, result);
+}
+
+/* What PRAGMA integrity_check said: its rows joined with "; ". */
+typedef struct {
+    char *buf;
+    size_t len, used;
+    int rows;
+} check_report;
+
+static int check_row(void *ud, int ncol, char **vals, char **names)
+{
+    check_report *c = ud;
+    (void)names;
+    const char *v = ncol > 0 && vals[0] ? vals[0] : "(null)";
+    if (c->len > c->used) {
+        int n = snprintf(c->buf + c->used, c->len - c->used, "%s%s", c->rows ? "; " : "", v);
+        c->used = n < 0 ? c->used : c->used + (size_t)n;
+        if (c->used >= c->len) c->used = c->len - 1;
+    }
+    c->rows++;
+    return 0;
+}
+
+int store_integrity_check(const char *path, int *ok, char *report, size_t len)
+{
+    char dummy[8];
+    check_report c = {report && len ? report : dummy, report && len ? len : sizeof dummy, 0, 0};
+    if (!path || !ok) return sti_fail(MPM_EINVAL, "store_integrity_check: NULL argument");
+    c.buf[0] = 0;
+    *ok = 0;
+    /* read-write without create: a missing file is an error, not a new
+     * database; SQLite may need to write the -shm index of a WAL file
+     * whose writer died */
+    int rc = raw_exec(path, SQLITE_OPEN_READWRITE, "PRAGMA integrity_check", check_row, &c);
+    if (rc) return rc;
+    *ok = c.rows == 1 && !strcmp(c.buf, "ok");
+    return 0;
 }
 
 /* ---------------------------------------------------------------------- */
