@@ -141,6 +141,24 @@ def t_submit_watch(c, st):
         assert f.status == "FINISHED", (j, f)
     r3 = c.run(j3)
     assert r3.name == "py-msg" and r3.steps == 400 and r3.energy_samples == 21, r3
+    # watched from its start (most likely live: 600000 steps take about
+    # half a second): Progress and Snapshot events, Finished FINISHED last
+    j4 = c.submit(bar_dict("py-live", steps=600000, every=20000, snapshot_every=200000,
+                           at_rest=True))
+    events = list(c.watch(j4))
+    fin = events[-1]
+    assert fin.status == "FINISHED" and fin.steps == 600000, fin
+    seqs = check_series(events, 31)
+    for e in events:
+        if isinstance(e, mpmd.Snapshot):
+            assert e.step % 200000 == 0 and e.x.shape == (13, 1), e
+        if isinstance(e, mpmd.Progress):
+            assert 0 <= e.step <= 600000 and e.steps_total == 600000, e
+    kinds = {}
+    for e in events:
+        kinds[type(e).__name__] = kinds.get(type(e).__name__, 0) + 1
+    log("watch %d from its start: %s, energy seq 0..%d, %s (from stream: %s)"
+        % (j4.job_id, kinds, seqs[-1], fin.status, fin.from_stream))
     st.update(j1=j1, j2=j2, j3=j3)
 
 
@@ -210,13 +228,50 @@ def t_snapshot_equals_mpmctl(c, st):
     log("snapshot at a step without one: %s" % e)
 
 
+def t_2d_arrays_equal_mpmctl(c, st):
+    """2D, Neo-Hookean (the particles carry F): energy with the angular
+    momentum, and a snapshot with F (n, 2, 2), equal to mpmctl's."""
+    case = {
+        "name": "py-2d",
+        "grid": {"dim": 2, "spacing": [0.05, 0.05], "nodes": [21, 21]},
+        "method": "MPM", "update": "USF", "dt": 0.001, "steps": 200,
+        "materials": [{"model": "NEO_HOOKEAN", "youngsModulus": 1, "poissonRatio": 0.2,
+                       "density": 1}],
+        "bodies": [{"box": {"lo": [0.3, 0.3], "hi": [0.7, 0.7]}, "velocity": [0.01, 0.005],
+                    "ppc": 2}],
+        "output": {"energyEvery": 20, "snapshotEvery": 100, "recordSnapshots": True},
+    }
+    j = c.submit(case)
+    fin = list(c.watch(j))[-1]
+    assert fin.status == "FINISHED", fin
+    e = c.energy(j)
+    lines = [json.loads(x) for x in ctl("energy", str(j.run_id), "--json").splitlines()]
+    assert len(lines) == len(e) == 11 and e["momentum"].shape == (11, 2), e.shape
+    assert e["angular_momentum"].shape == (11, 1)
+    for i, js in enumerate(lines):
+        assert same([jnum(x) for x in js["momentum"]], e["momentum"][i])
+        assert same([jnum(x) for x in js["angularMomentum"]], e["angular_momentum"][i])
+        assert same(jnum(js["total"]), e["total"][i]) and same(jnum(js["strain"]), e["strain"][i])
+    s = c.snapshot(j, 100)
+    js = snapshot_json(j.run_id, 100)
+    n = jnum(js["n"])
+    assert s.dim == 2 and s.n == n == 256 and s.x.shape == (n, 2) and s.F.shape == (n, 2, 2)
+    assert same(s.x.ravel(), [jnum(x) for x in js["x"]])
+    assert same(s.F.ravel(), [jnum(x) for x in js["deformationGradient"]])
+    assert same(s.stress.ravel(), [jnum(x) for x in js["stress"]])
+    # F row-major: F[i] = [[Fxx, Fxy], [Fyx, Fyy]], near the identity here
+    assert np.abs(s.F - np.eye(2)).max() < 0.1
+    log("2D Neo-Hookean: energy (11 x momentum 2, angular momentum 1) and snapshot "
+        "(x %s, F %s, stress %s) equal to mpmctl's" % (s.x.shape, s.F.shape, s.stress.shape))
+
+
 def t_runs_run_cancel(c, st):
     j1, j2, j3 = st["j1"], st["j2"], st["j3"]
     rs = c.runs()
     ids = [r.run_id for r in rs]
-    assert ids[:3] == [j3.run_id, j2.run_id, j1.run_id], ids
+    assert ids == [j3.run_id + 1, j3.run_id, j2.run_id, j1.run_id], ids
     assert rs.next_before_run_id is None
-    page = c.runs(limit=2)
+    page = c.runs(limit=2, before=j3.run_id + 1)
     assert [r.run_id for r in page] == [j3.run_id, j2.run_id] and page.next_before_run_id == j2.run_id, page
     rest = c.runs(before=page.next_before_run_id)
     assert [r.run_id for r in rest] == [j1.run_id], rest
@@ -476,6 +531,7 @@ def t_curve(c, st):
 
 PHASES = {
     "api": [t_submit_watch, t_energy_equals_mpmctl, t_snapshot_equals_mpmctl, t_runs_run_cancel,
+            t_2d_arrays_equal_mpmctl,
             t_late_join, t_errors, t_timeout, t_env_endpoint],
     "stop": [t_stop],
     "kill": [t_kill],
