@@ -344,6 +344,22 @@ def t_late_join(c, st):
         log("late join%s: %d from the history, %d live, seq 0..%d without gap, %d snapshots, %s"
             % (" (every 3rd streamed sample dropped)" if drop else "", hist, live, seqs[-1],
                len(snaps), fin.status))
+    # a stream that never delivers (a wrong stream endpoint): the samples
+    # come from the store at each quiet second, the end from Status
+    with mpmd.Client(EP, timeout=30, stream="ipc://%s/no-stream" % DIR) as m:
+        j = m.submit(bar_dict("py-mute", steps=99000000, every=20000, at_rest=True))
+        events, cancelled = [], False
+        for ev in m.watch(j):
+            events.append(ev)
+            if isinstance(ev, mpmd.Energy) and ev.seq >= 3 and not cancelled:
+                m.cancel(j)
+                cancelled = True
+        fin = events[-1]
+        assert fin.status == "CANCELLED" and not fin.from_stream, fin
+        seqs = check_series(events, m.run(j).energy_samples)
+        assert all(e.stream_seq is None for e in events)
+        log("mute stream: %d samples from the store, then %s (from the record)"
+            % (len(seqs), fin.status))
     # joining after the end: the history and a Finished made from the record
     events = list(c.watch(st["j2"]))
     fin = events[-1]

@@ -589,10 +589,12 @@ class _Watch:
                     yield self.finished
                     return
                 continue
-            # quiet for a while: has the job ended unheard?
+            # quiet for a while: has the job ended unheard?  (and the samples
+            # a silent stream did not bring: the store has them)
             run = self.c.status(self.job)
-            if run.ended:
+            if run.ended or run.energy_samples > self.next:
                 yield from self._history()
+            if run.ended:
                 yield self._finished_from_run(run)
                 return
             last_msg = time.monotonic()
