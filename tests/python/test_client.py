@@ -141,19 +141,20 @@ def t_submit_watch(c, st):
         assert f.status == "FINISHED", (j, f)
     r3 = c.run(j3)
     assert r3.name == "py-msg" and r3.steps == 400 and r3.energy_samples == 21, r3
-    # watched from its start (most likely live: 600000 steps take about
-    # half a second): Progress and Snapshot events, Finished FINISHED last
-    j4 = c.submit(bar_dict("py-live", steps=600000, every=20000, snapshot_every=200000,
+    # watched from its start (most likely live: 150000 steps take about
+    # 0.2 s, 3 s under the sanitizers): Progress and Snapshot events,
+    # Finished FINISHED last
+    j4 = c.submit(bar_dict("py-live", steps=150000, every=5000, snapshot_every=50000,
                            at_rest=True))
     events = list(c.watch(j4))
     fin = events[-1]
-    assert fin.status == "FINISHED" and fin.steps == 600000, fin
+    assert fin.status == "FINISHED" and fin.steps == 150000, fin
     seqs = check_series(events, 31)
     for e in events:
         if isinstance(e, mpmd.Snapshot):
-            assert e.step % 200000 == 0 and e.x.shape == (13, 1), e
+            assert e.step % 50000 == 0 and e.x.shape == (13, 1), e
         if isinstance(e, mpmd.Progress):
-            assert 0 <= e.step <= 600000 and e.steps_total == 600000, e
+            assert 0 <= e.step <= 150000 and e.steps_total == 150000, e
     kinds = {}
     for e in events:
         kinds[type(e).__name__] = kinds.get(type(e).__name__, 0) + 1
@@ -314,8 +315,8 @@ def t_late_join(c, st):
     duplicate; cancelled from the loop; the same series as the store."""
     for drop in (0, 3):
         c._drop_every = drop  # 3: the stream "loses" every third sample
-        j = c.submit(bar_dict("py-late-%d" % drop, steps=99000000, every=20000,
-                              snapshot_every=0 if drop else 40000, at_rest=True))
+        j = c.submit(bar_dict("py-late-%d" % drop, steps=99000000, every=5000,
+                              snapshot_every=0 if drop else 10000, at_rest=True))
         wait_samples(c, j, 5)
         events, live, cancelled = [], 0, False
         for ev in c.watch(j):
@@ -339,7 +340,7 @@ def t_late_join(c, st):
         if not drop:  # snapshots stream while somebody watches
             assert snaps, "no snapshot streamed to a watcher"
             for s in snaps:
-                assert s.step % 40000 == 0 and s.x.shape == (13, 1) and s.stress.shape == (13, 6), s
+                assert s.step % 10000 == 0 and s.x.shape == (13, 1) and s.stress.shape == (13, 6), s
                 assert s.stream_seq is not None
         log("late join%s: %d from the history, %d live, seq 0..%d without gap, %d snapshots, %s"
             % (" (every 3rd streamed sample dropped)" if drop else "", hist, live, seqs[-1],
@@ -347,7 +348,7 @@ def t_late_join(c, st):
     # a stream that never delivers (a wrong stream endpoint): the samples
     # come from the store at each quiet second, the end from Status
     with mpmd.Client(EP, timeout=30, stream="ipc://%s/no-stream" % DIR) as m:
-        j = m.submit(bar_dict("py-mute", steps=99000000, every=20000, at_rest=True))
+        j = m.submit(bar_dict("py-mute", steps=99000000, every=5000, at_rest=True))
         events, cancelled = [], False
         for ev in m.watch(j):
             events.append(ev)
@@ -431,7 +432,7 @@ def watch_until_gone(c, sig):
     live samples; returns the events and the exception the watch ended
     with (None if it ended normally)."""
     pid = int(os.environ["MPMD_TEST_PID"])
-    j = c.submit(bar_dict("py-gone-%d" % sig, steps=99000000, every=20000, at_rest=True))
+    j = c.submit(bar_dict("py-gone-%d" % sig, steps=99000000, every=5000, at_rest=True))
     events, live, sent = [], 0, False
     try:
         for ev in c.watch(j):
