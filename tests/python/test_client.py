@@ -499,7 +499,21 @@ def t_curve(c, st):
         check_series(events, 31)
         pub = ca.curve.public_key
         assert ca.run(j).owner == pub, (ca.run(j).owner, pub)
-        log("authorized key %s: submit, watch (31 samples over CURVE), owner ok" % pub)
+        # the stream over CURVE: a long job, cancelled once a live sample came
+        # (or, if the stream never delivers, after 40 from the store: failed)
+        j = ca.submit(bar_dict("py-curve-long", steps=99000000, every=5000, at_rest=True))
+        events, live, cancelled = [], 0, False
+        for ev in ca.watch(j):
+            events.append(ev)
+            if isinstance(ev, mpmd.Energy):
+                live += ev.stream_seq is not None
+                if (live >= 3 or ev.seq >= 40) and not cancelled:
+                    ca.cancel(j)
+                    cancelled = True
+        assert events[-1].status == "CANCELLED" and live >= 3, (live, events[-1])
+        check_series(events, ca.run(j).energy_samples)
+        log("authorized key %s: submit, watch (%d live samples over CURVE), owner ok"
+            % (pub, live))
     with mpmd.Client(EP, keys=u, timeout=20) as cu:
         t0 = time.monotonic()
         e = expect_error("AUTH", None, cu.ping)
