@@ -14,7 +14,8 @@ pkgs=(
   libprotobuf-c-dev    # protobuf-c runtime
   protobuf-c-compiler  # protoc-c, generates proto/*.pb-c.[ch]
   libjansson-dev       # JSON case files
-  protobuf-compiler python3-protobuf  # tests: Python's protobuf JSON parser reads the cases too
+  protobuf-compiler python3-protobuf  # make python; tests: Python's protobuf JSON parser reads the cases too
+  python3-zmq python3-numpy python3-matplotlib  # the Python client (clients/python) and its example
   clang-format cppcheck  # make format-check, make lint (gcc's -fanalyzer comes with gcc)
   libmicrohttpd-dev    # mpmweb, the web monitor's HTTP server
   chromium             # tests: the web monitor's page in a real (headless) browser
