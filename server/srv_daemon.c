@@ -228,7 +228,10 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
         ri->steps = ji.steps;
         ri->t = ji.t;
         ri->wall_s = ji.wall_s;
-    } else if (srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
+    } else if (!MPP_STATUS_ENDED(r->status) && srv_pool_info(d->pool, (uint64_t)r->id, &ji) == 0) {
+        /* a live job: the pool's figures (once its row has ended, the row
+         * is the truth: the pool may hold the job, RUNNING, a moment
+         * longer, after its Finished went out) */
         ri->status = ji.status;
         ri->steps = ji.steps;
         ri->steps_total = ji.steps_total;
