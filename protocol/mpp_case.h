@@ -78,6 +78,9 @@ typedef struct mpp_case {
     unsigned snapshot_every;  /* Output.snapshot_every (0: none) */
     unsigned snapshot_fields; /* MPP_SNAP_* bits; MPP_SNAP_ALL when none listed */
     int record_snapshots;     /* Output.record_snapshots */
+    int has_checkpoint;       /* Case.checkpoint present (0: the server's default) */
+    unsigned checkpoint_every_steps; /* Checkpoint.every_steps (0: not by steps) */
+    double checkpoint_every_wall_s;  /* Checkpoint.every_wall_s (0: not by time) */
     size_t explicit_points;   /* particles given as explicit points */
 
     /* Storage behind c (owned). */
