@@ -117,8 +117,8 @@ int srv_ckpt_write(const char *db, int64_t run, const mpm_sim *sim, int64_t ener
                    srv_ckpt_buf *b, store_checkpoint *rec, char *err, size_t errlen)
 {
     char tmp[1500], path[1500], dir[1200];
-    if (srv_ckpt_path(db, run, 1, tmp, sizeof tmp) || srv_ckpt_path(db, run, 0, path, sizeof path) ||
-        dir_path(db, dir, sizeof dir)) {
+    if (srv_ckpt_path(db, run, 1, tmp, sizeof tmp) ||
+        srv_ckpt_path(db, run, 0, path, sizeof path) || dir_path(db, dir, sizeof dir)) {
         snprintf(err, errlen, "checkpoint: the path of %s is too long", db);
         return MPM_EINVAL;
     }
@@ -245,8 +245,7 @@ int srv_ckpt_read(const char *db, int64_t run, srv_ckpt_file *out, char *err, si
     else if (checksum(&h, buf + sizeof h, (size_t)h.blob_len) != h.sum)
         bad = "checksum mismatch";
     if (bad) {
-        snprintf(err, errlen, "run %lld's checkpoint %s is damaged: %s", (long long)run, path,
-                 bad);
+        snprintf(err, errlen, "run %lld's checkpoint %s is damaged: %s", (long long)run, path, bad);
         free(buf);
         return MPM_ESYNTAX;
     }

@@ -505,9 +505,8 @@ static void do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
                     mpp_status_name((int)r.status));
     } else if ((rc = srv_ckpt_read(d->cfg->db, (int64_t)run, &ck, err, sizeof err))) {
         if (rc == MPM_ESYNTAX) srv_warn(run, "resume refused: %s", err);
-        reply_error(d, id, rc == MPM_ENOTFOUND || rc == MPM_ESYNTAX ? MPM_ECONFLICT : rc,
-                    "run_id", "%s%s", err,
-                    rc == MPM_ESYNTAX ? "; the run stays INTERRUPTED" : "");
+        reply_error(d, id, rc == MPM_ENOTFOUND || rc == MPM_ESYNTAX ? MPM_ECONFLICT : rc, "run_id",
+                    "%s%s", err, rc == MPM_ESYNTAX ? "; the run stays INTERRUPTED" : "");
     } else if (mpp_case_unpack(r.case_pb, r.case_len, 0, &pb, &cerr) ||
                mpp_case_from_pb(pb, (size_t)d->cfg->max_particles, &sc, &cerr)) {
         reply_mpm_error(d, id, &cerr);
@@ -527,8 +526,8 @@ static void do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
         if ((rc = store_run_resume(d->st, (int64_t)run, &rec))) {
             reply_error(d, id, MPM_EINTERNAL, "", "cannot record the resume: %s",
                         store_error()->message);
-        } else if ((rc = srv_pool_resume(d->pool, run, &sc, r.submitted_at, np, nodes, watched,
-                                         who, &ck, isnan(r.wall_s) ? 0 : r.wall_s,
+        } else if ((rc = srv_pool_resume(d->pool, run, &sc, r.submitted_at, np, nodes, watched, who,
+                                         &ck, isnan(r.wall_s) ? 0 : r.wall_s,
                                          last.step >= 0 ? &last : NULL))) {
             store_run_end end = {0};
             end.status = MPP_STATUS_INTERRUPTED;

@@ -575,15 +575,15 @@ static int resume_load(ctx *c, mpm_sim *sim)
     mpm_error me;
     if (mpm_sim_checkpoint_load(sim, j->ck.blob, j->ck.blob_len, &me) == 0) {
         j->energy_seq = (uint64_t)j->ck.rec.energy_seq;
-        srv_log(j->id, "resumed from its checkpoint at step %lld, t = %g", (long long)j->ck.rec.step,
-                j->ck.rec.t);
+        srv_log(j->id, "resumed from its checkpoint at step %lld, t = %g",
+                (long long)j->ck.rec.step, j->ck.rec.t);
         srv_ckpt_file_clear(&j->ck); /* the blob is in sim now */
         return 0;
     }
     char text[700], why[800];
     mpm_error_text(&me, MPM_FIELD_PROTO, text, sizeof text);
-    snprintf(why, sizeof why, "checkpoint at step %lld not loadable: %s",
-             (long long)j->ck.rec.step, text);
+    snprintf(why, sizeof why, "checkpoint at step %lld not loadable: %s", (long long)j->ck.rec.step,
+             text);
     finish(c, MPP_STATUS_INTERRUPTED, why, j->ck.rec.step, j->ck.rec.t, j->prior_wall, 0,
            j->last.step >= 0 ? &j->last : NULL, NULL, NULL);
     return -1;
@@ -685,8 +685,8 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             if (watched || sc->record_snapshots)
                 snaps_ok = snapshot(&c, sim, &sb, watched, sc->record_snapshots) == 0;
         }
-        if (ck_on && ((ck_steps && k % ck_steps == 0) ||
-                      (ck_wall > 0 && mono_now() - ck_last >= ck_wall))) {
+        if (ck_on &&
+            ((ck_steps && k % ck_steps == 0) || (ck_wall > 0 && mono_now() - ck_last >= ck_wall))) {
             /* the solver or memory refusing is for good; a file error may pass */
             int rc = take_checkpoint(&c, sim, &ckb, &ck_step);
             if (rc && rc != MPM_EIO) ck_on = 0;

@@ -142,7 +142,7 @@ static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out, s
     "id, name, length(case_pb), method, \"update\", dim, particles, nodes,"   \
     " status, submitted_at, started_at, finished_at, steps, wall_s,"          \
     " psteps_per_s, kinetic, strain, potential, external_work, total, error," \
-    " server_version, transfer, balance_error, warning, owner,"             \
+    " server_version, transfer, balance_error, warning, owner,"               \
     " checkpoint_step, checkpoint_t, checkpoint_bytes, checkpoint_seq, resumes"
 #define RUN_COL_CASE 31
 
