@@ -194,6 +194,8 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->owner = r->owner && r->owner[0] ? r->owner : NULL;
     ri->has_balance = r->has_balance;
     ri->balance_error = r->balance_error;
+    ri->has_checkpoint = r->has_checkpoint, ri->checkpoint_step = r->checkpoint_step;
+    ri->checkpoint_t = r->checkpoint_t, ri->resumes = (uint32_t)r->resumes;
     if (!isnan(r->energy.total)) {
         memset(e, 0, sizeof *e);
         e->step = r->steps;

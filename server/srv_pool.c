@@ -547,10 +547,14 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
 static int take_checkpoint(ctx *c, mpm_sim *sim, srv_ckpt_buf *b, int64_t *ck_step)
 {
     srv_job *j = c->j;
+    double t0 = mono_now();
+    /* every sample and snapshot before it committed first: a resume finds
+     * the run's record complete up to the checkpoint, whenever the daemon
+     * dies (a failed write shows in store_losses(), which ends the run) */
     flush_samples(c);
+    store_flush(c->p->st);
     store_checkpoint rec;
     char err[1600];
-    double t0 = mono_now();
     int rc = srv_ckpt_write(c->p->cfg->db, (int64_t)j->id, sim, (int64_t)j->energy_seq, b, &rec,
                             err, sizeof err);
     if (rc) {
