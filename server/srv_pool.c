@@ -690,8 +690,11 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
                 snaps_ok = snapshot(&c, sim, &sb, watched, sc->record_snapshots) == 0;
         }
         if (ck_on &&
-            ((ck_steps && k % ck_steps == 0) || (ck_wall > 0 && mono_now() - ck_last >= ck_wall))) {
-            /* the solver or memory refusing is for good; a file error may pass */
+            ((ck_steps && k % ck_steps == 0) || (ck_wall > 0 && mono_now() - ck_last >= ck_wall)) &&
+            !(sc->has_end_time ? mpm_sim_time(sim) >= sc->end_time - 0.5 * mpm_sim_dt(sim)
+                               : k >= (int64_t)sc->steps)) {
+            /* (none after the last step: the run ends there.)  The solver
+             * or memory refusing is for good; a file error may pass */
             int rc = take_checkpoint(&c, sim, &ckb, &ck_step);
             if (rc && rc != MPM_EIO) ck_on = 0;
             ck_last = mono_now();
