@@ -1025,6 +1025,9 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         mpp_finished f = {MPP_STATUS_CANCELLED, end.error, 0, 0, 0, NULL, 0, 0, NULL};
         if (mpp_stream_finished(id, j->msg_seq++, &f, msg, len))
             srv_warn(id, "out of memory encoding the end of the stream");
+        if (j->resume && (srv_ckpt_remove(p->cfg->db, (int64_t)id) ||
+                          store_run_checkpoint(p->st, (int64_t)id, NULL)))
+            srv_warn(id, "its checkpoint not removed");
         srv_log(id, "cancelled while queued");
         job_free(j);
     }
