@@ -214,9 +214,15 @@ DTEST(daemon_resume_bits)
     r = show_json(&d, 2);
     CHECK(r);
     long long kk = jint(r, "checkpointStep"), steps = jint(r, "steps");
+    double wall0 = jnum(r, "wallS");
     ok = !strcmp(jstr(r, "status"), "INTERRUPTED") && kk >= k && kk % R_CKPT == 0 && kk < R_STEPS &&
          jnum(r, "checkpointT") > 0;
     json_decref(r);
+    {
+        char want[64];
+        snprintf(want, sizeof want, "checkpoint  step %lld, t ", kk);
+        EXPECT_CTL(&d, 0, want, "show", "2");
+    }
     CHECKF(ok, "run 2 after kill -9: checkpoint at %lld (seen %lld), steps %lld", kk, k, steps);
     TLOG("run 2 killed (-9) after its checkpoint at step %lld; restarted: INTERRUPTED at step "
          "%lld (its last stored sample), the recorded checkpoint at step %lld",
@@ -230,9 +236,12 @@ DTEST(daemon_resume_bits)
     CHECK(r);
     ok = !strcmp(jstr(r, "status"), "FINISHED") && jint(r, "resumes") == 1 &&
          jint(r, "steps") == R_STEPS && !json_object_get(r, "checkpointStep") &&
-         json_array_size(json_object_get(r, "snapshotSteps")) == R_STEPS / 3000;
+         json_array_size(json_object_get(r, "snapshotSteps")) == R_STEPS / 3000 &&
+         jnum(r, "wallS") > wall0;
     json_decref(r);
-    CHECKF(ok, "run 2 after its resume is not FINISHED with one resume and no checkpoint");
+    CHECKF(ok, "run 2 after its resume is not FINISHED with one resume, no checkpoint and its "
+               "wall time added up");
+    EXPECT_CTL(&d, 0, "resumed     1 time", "show", "2");
     ckpt_path(&d, 2, 0, ck, sizeof ck);
     CHECKF(stat(ck, &st) && errno == ENOENT, "run 2's checkpoint file remains");
     EXPECT_CTL(&d, 1, "run 2 is FINISHED", "resume", "2");
