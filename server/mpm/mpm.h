@@ -525,7 +525,21 @@ void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
  * checkpoint, truncated, checksum mismatch), MPM_EVERSION (another format
  * version) or MPM_EINVAL (a blob of another case's layout), with err
  * filled.  After a load, the run goes on exactly as the saved one would
- * have: with the same thread count it gives the same bits. */
+ * have: with the same thread count it gives the same bits.
+ *
+ * Details (docs/solver.md, "Checkpoints"): the blob is the host's memory
+ * layout (little-endian on the machines we build for) and is read back by
+ * the same build on the same machine type; another byte order is
+ * MPM_EVERSION.  The thread count is not part of the layout: a blob loads
+ * into a simulation with another count (the run then differs in
+ * round-off).  The case's numeric parameters (grid, time step, materials,
+ * gravity, damping) are fingerprinted: another value of one is MPM_EINVAL
+ * too; the loads' and conditions' values are not (keep the case with its
+ * checkpoint).  A refused load leaves sim as it was.  The load also
+ * returns MPM_ENOMEM (a blob saved after mpm_sim_set_particle_forces()
+ * needs one slot per particle) and MPM_ESYNTAX for counters or indices
+ * that cannot belong to this case.  A failed run's blob keeps its failure:
+ * after the load every step returns MPM_ESTATE. */
 size_t mpm_sim_checkpoint_size(const mpm_sim *sim);
 int mpm_sim_checkpoint_save(const mpm_sim *sim, void *buf, size_t n);
 int mpm_sim_checkpoint_load(mpm_sim *sim, const void *buf, size_t n, mpm_error *err);

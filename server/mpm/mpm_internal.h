@@ -15,6 +15,7 @@
  *                  Coulomb friction on grid faces
  *   mpm_case.c     checking a case and generating its particles
  *   mpm_bspline.c  the B-splines' clamped boundary spans, node positions
+ *   mpm_checkpoint.c  the solver state as a self-checking blob (save, load)
  *
  * Hot data is struct-of-arrays: particle field c of particle p is
  * P.field[c][p].  The grid is padded by two ghost layers per side for GMPM,
@@ -682,6 +683,11 @@ void mpm_loads_end_step(mpm_sim *s);
 /* mpm_sim_set_particle_forces() once f is checked (f NULL: zero).  0 or
  * MPM_ENOMEM. */
 int mpm_loads_set_forces(mpm_sim *s, const double *f);
+/* The switch mpm_loads_set_forces() makes at its first call: one load slot
+ * per particle (load_p[i] = i), the tractions' shares kept in trac_f, the
+ * forces those shares (pforces = 1); nothing when already done.  0 or
+ * MPM_ENOMEM (nothing changed). */
+int mpm_loads_per_particle(mpm_sim *s);
 
 /* ---- prescribed velocities and face friction (mpm_cond.c) ---- */
 

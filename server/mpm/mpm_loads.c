@@ -228,12 +228,11 @@ void mpm_loads_end_step(mpm_sim *s)
         }
 }
 
-int mpm_loads_set_forces(mpm_sim *s, const double *f)
+int mpm_loads_per_particle(mpm_sim *s)
 {
     size_t n = s->P.n;
     int dim = s->dim;
     if (!s->pforces) {
-        if (!f) return 0;
         /* one slot per particle; the tractions' shares move to trac_f */
         size_t *lp = malloc((n ? n : 1) * sizeof *lp);
         double *tf[3] = {0}, *xo[3] = {0}, *lf[3] = {0};
@@ -268,6 +267,15 @@ int mpm_loads_set_forces(mpm_sim *s, const double *f)
         s->nload = n;
         s->pforces = 1;
     }
+    return 0;
+}
+
+int mpm_loads_set_forces(mpm_sim *s, const double *f)
+{
+    size_t n = s->P.n;
+    int dim = s->dim;
+    if (!s->pforces && !f) return 0;
+    if (mpm_loads_per_particle(s)) return MPM_ENOMEM;
     for (size_t i = 0; i < n; i++)
         for (int d = 0; d < dim; d++)
             s->load_f[d][i] =
