@@ -22,12 +22,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-/* Steps of the test case, and its checkpoint interval. */
-#define R_STEPS 12000
+/* Steps of the test case, its snapshot and checkpoint intervals. */
+#define R_STEPS 6000 /* a multiple of R_SNAP */
+#define R_SNAP 2000
 #define R_CKPT 200
 
 /* The 2D block on two solver threads: energy every 10 steps, a recorded
- * snapshot every 3000 (and so at the end), a checkpoint every R_CKPT
+ * snapshot every 2000 (and so at the end), a checkpoint every R_CKPT
  * steps (ck_steps < 0: Case.checkpoint left out; 0: checkpoints off). */
 static json_t *resume_case(const char *name, int ck_steps)
 {
@@ -37,7 +38,7 @@ static json_t *resume_case(const char *name, int ck_steps)
     json_object_set_new(b, "velocity", json_pack("[f,f]", 0.004, 0.002));
     json_object_set_new(b, "ppc", json_integer(4));
     json_object_set_new(c, "threads", json_integer(2));
-    set_output(c, "snapshotEvery", json_integer(3000));
+    set_output(c, "snapshotEvery", json_integer(R_SNAP));
     set_output(c, "recordSnapshots", json_true());
     if (ck_steps >= 0)
         json_object_set_new(c, "checkpoint",
@@ -125,7 +126,7 @@ static double *csv_doubles(const char *text, size_t *n)
     return v;
 }
 
-/* Run `id`'s energy series and its snapshots at 3000, 6000, ... equal the
+/* Run `id`'s energy series and its snapshots at 2000, 4000, 6000 equal the
  * reference run's bit for bit: every row (seq, step, t, every energy) as
  * text and the decoded doubles compared with memcmp. */
 static int same_bits(const td_daemon *d, unsigned long long ref, unsigned long long id)
@@ -151,7 +152,7 @@ static int same_bits(const td_daemon *d, unsigned long long ref, unsigned long l
     series_free(&b);
     free(ca);
     free(cb);
-    for (long long step = 3000; ok && step <= R_STEPS; step += 3000) {
+    for (long long step = R_SNAP; ok && step <= R_STEPS; step += R_SNAP) {
         char *sa = snapshot_of(d, ref, step), *sb = snapshot_of(d, id, step);
         size_t na = 0, nb = 0;
         double *va = sa ? csv_doubles(sa, &na) : NULL, *vb = sb ? csv_doubles(sb, &nb) : NULL;
@@ -161,8 +162,8 @@ static int same_bits(const td_daemon *d, unsigned long long ref, unsigned long l
             t_fail(__FILE__, __LINE__,
                    "run %llu's snapshot at step %lld differs (%zu / %zu values)", id, step, nb, na);
         else if (step == R_STEPS)
-            TLOG("run %llu: snapshots at 3000 .. %lld bitwise equal (%zu values at the end)", id,
-                 step, na);
+            TLOG("run %llu: snapshots every %d steps to %lld bitwise equal (%zu values at the end)",
+                 id, R_SNAP, step, na);
         free(va);
         free(vb);
         free(sa);
@@ -236,7 +237,7 @@ DTEST(daemon_resume_bits)
     CHECK(r);
     ok = !strcmp(jstr(r, "status"), "FINISHED") && jint(r, "resumes") == 1 &&
          jint(r, "steps") == R_STEPS && !json_object_get(r, "checkpointStep") &&
-         json_array_size(json_object_get(r, "snapshotSteps")) == R_STEPS / 3000 &&
+         json_array_size(json_object_get(r, "snapshotSteps")) == R_STEPS / R_SNAP &&
          jnum(r, "wallS") > wall0;
     json_decref(r);
     CHECKF(ok, "run 2 after its resume is not FINISHED with one resume, no checkpoint and its "
