@@ -104,23 +104,21 @@ static double *csv_doubles(const char *text, size_t *n)
 {
     size_t cap = 1024, k = 0;
     double *v = malloc(cap * sizeof *v);
+    *n = 0;
+    if (!v) return NULL;
+    /* p: at the separator before the next value */
     const char *p = strchr(text, '\n');
-    while (v && p && *p) {
-        p++;
+    while (p && p[1]) {
         char *end;
-        double x = strtod(p, &end);
-        if (end == p) {
-            p = strpbrk(p, ",\n");
-            continue;
-        }
+        double x = strtod(p + 1, &end);
+        if (end == p + 1 || (*end && *end != ',' && *end != '\n')) break;
         if (k == cap) {
             double *nv = realloc(v, (cap *= 2) * sizeof *v);
             if (!nv) break;
             v = nv;
         }
         v[k++] = x;
-        p = end;
-        if (*p != ',' && *p != '\n') break;
+        p = *end ? end : NULL;
     }
     *n = k;
     return v;
@@ -274,7 +272,7 @@ DTEST(daemon_resume_refused)
 {
     const char *tmp = t_tmpdir();
     const char *extra[] = {"--workers", "2", "--solver-threads", "1", NULL};
-    char dir[300], path[400], offp[400], bad[400], ck[700], tmpf[700];
+    char dir[300], path[400] = "", offp[400] = "", bad[400], ck[700], tmpf[700];
     td_daemon d;
     td_out o;
     struct stat st;
