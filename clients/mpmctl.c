@@ -41,7 +41,8 @@ enum {
     C_KEYGEN = 1u << 9,
     C_EXPORT = 1u << 10,
     C_PLOT = 1u << 11,
-    C_GLOBAL = 0xfffu
+    C_RESUME = 1u << 12,
+    C_GLOBAL = 0x1fffu
 };
 
 typedef struct {
@@ -118,6 +119,16 @@ static const command commands[] = {
      "second panel.  The format follows FILE's extension (.png, .svg, .pdf) unless\n"
      "--terminal names a gnuplot terminal (e.g. \"pngcairo size 1600,1000\").  Needs\n"
      "gnuplot (Debian: gnuplot-nox).\n"},
+    {"resume", C_RESUME, "ID [--watch] [--csv|--json]",
+     "continue an interrupted run from its checkpoint",
+     "A run INTERRUPTED by a crash (kill -9, power loss) or a daemon restart goes on\n"
+     "from the last checkpoint mpmd saved of it (Case.checkpoint, or the daemon's\n"
+     "--checkpoint-every-s; at a clean shutdown always): the energy samples and\n"
+     "snapshots recorded after it are computed again, identically with the same\n"
+     "solver threads.  Refused (exit 1) for a run that is not INTERRUPTED, has no\n"
+     "checkpoint, or whose checkpoint file is damaged (it stays INTERRUPTED).\n"
+     "Prints \"job N\" (N: the run's id; --json: the SubmitOk object).  --watch\n"
+     "continues as `watch N`, with its exit status.\n"},
     {"cancel", C_CANCEL, "ID [--json]", "stop a queued or running job",
      "Prints the job's status after the request; a running job stops within one step.\n"},
     {"ping", C_PING, "[--json]", "check the server",
@@ -172,8 +183,8 @@ static const option options[O_COUNT] = {
     [O_STREAM] = {"stream", 0, 1, C_GLOBAL},
     [O_TIMEOUT] = {"timeout", 0, 1, C_GLOBAL},
     [O_HELP] = {"help", 'h', 0, C_GLOBAL},
-    [O_WATCH] = {"watch", 0, 0, C_SUBMIT},
-    [O_CSV] = {"csv", 0, 0, C_SUBMIT | C_WATCH | C_ENERGY},
+    [O_WATCH] = {"watch", 0, 0, C_SUBMIT | C_RESUME},
+    [O_CSV] = {"csv", 0, 0, C_SUBMIT | C_RESUME | C_WATCH | C_ENERGY},
     [O_JSON] = {"json", 0, 0, C_GLOBAL & ~(C_SNAPSHOT | C_EXPORT | C_PLOT)},
     [O_STATUS] = {"status", 0, 1, C_RUNS},
     [O_LIMIT] = {"limit", 0, 1, C_RUNS},
@@ -227,7 +238,8 @@ static void usage(FILE *f)
             "                  MPMD_SERVER_KEY (a key or a file) and\n"
             "                  MPMD_CLIENT_KEY (your secret key file) override them\n"
             "  -h, --help      this help; `mpmctl COMMAND --help` for one command\n"
-            "\nExit status: 0 success, 1 error, 2 bad command line; watch and submit --watch:\n"
+            "\nExit status: 0 success, 1 error, 2 bad command line; watch, submit --watch and\n"
+            "resume --watch:\n"
             "3 FAILED, 4 CANCELLED, 5 INTERRUPTED.\n",
             CTL_DEFAULT_ENDPOINT, CTL_DEFAULT_TIMEOUT);
 }
@@ -351,8 +363,8 @@ static int parse_args(int argc, char **argv, cli *a)
     if (a->given[O_CSV] && a->given[O_JSON])
         return bad_usage("--csv and --json exclude each other");
     a->fmt = a->given[O_CSV] ? CTL_OUT_CSV : a->given[O_JSON] ? CTL_OUT_JSON : CTL_OUT_TEXT;
-    if (a->cmd->bit == C_SUBMIT && a->given[O_CSV] && !a->given[O_WATCH])
-        return bad_usage("submit: --csv needs --watch");
+    if ((a->cmd->bit & (C_SUBMIT | C_RESUME)) && a->given[O_CSV] && !a->given[O_WATCH])
+        return bad_usage("%s: --csv needs --watch", a->cmd->name);
     if (a->given[O_STATUS]) {
         char up[32];
         size_t k;
@@ -413,6 +425,7 @@ static int parse_args(int argc, char **argv, cli *a)
             return bad_usage("%s needs %s (see mpmctl %s --help)", a->cmd->name,
                              a->cmd->bit == C_SUBMIT   ? "a case file"
                              : a->cmd->bit == C_EXPORT ? "a run id and a directory"
+                             : a->cmd->bit == C_RESUME ? "a run id"
                                                        : "a job id",
                              a->cmd->name);
         if (a->npos > want)
@@ -501,6 +514,8 @@ static int do_watch(ctl_conn *c, uint64_t job, ctl_out fmt)
     return exit_for_status(st);
 }
 
+static int submitted(ctl_conn *c, json_t *ok, const cli *a);
+
 static int cmd_submit(ctl_conn *c, const cli *a)
 {
     const char *path = a->pos[0];
@@ -512,7 +527,6 @@ static int cmd_submit(ctl_conn *c, const cli *a)
     mpp_case *sc = NULL;
     mpp_request rq = {.kind = MPP_REQ_SUBMIT};
     json_t *reply = NULL, *ok = NULL;
-    uint64_t job;
     int rc;
     if (!text) {
         fprintf(stderr, "mpmctl: cannot read %s: %s\n", path, strerror(errno));
@@ -538,10 +552,19 @@ static int cmd_submit(ctl_conn *c, const cli *a)
         json_decref(reply);
         return exit_for_rc(rc);
     }
-    job = cj_u64(ok, "jobId", 0);
+    rc = submitted(c, ok, a);
+    json_decref(reply);
+    return rc;
+}
+
+/* The rest of submit and resume: prints the SubmitOk (or, with --watch,
+ * watches the job); an exit status. */
+static int submitted(ctl_conn *c, json_t *ok, const cli *a)
+{
+    int rc = 0;
+    uint64_t job = cj_u64(ok, "jobId", 0);
     if (!job) {
         fprintf(stderr, "mpmctl: the server's SubmitOk has no job id\n");
-        json_decref(reply);
         return CTL_EXIT_ERROR;
     }
     if (a->given[O_WATCH] && a->fmt != CTL_OUT_TEXT) {
@@ -552,10 +575,23 @@ static int cmd_submit(ctl_conn *c, const cli *a)
         printf("job %llu\n", (unsigned long long)job);
     }
     fflush(stdout);
-    json_decref(reply);
     if (rc) return CTL_EXIT_ERROR;
     if (a->given[O_WATCH]) return do_watch(c, job, a->fmt);
     return CTL_EXIT_OK;
+}
+
+static int cmd_resume(ctl_conn *c, const cli *a)
+{
+    mpp_request rq = {.kind = MPP_REQ_RESUME};
+    json_t *reply = NULL, *ok = NULL;
+    if (parse_id(a->pos[0], "resume", &rq.id)) return CTL_EXIT_USAGE;
+    int rc = ctl_call(c, &rq, "submitOk", &reply, &ok);
+    if (!rc)
+        rc = submitted(c, ok, a);
+    else
+        rc = exit_for_rc(rc);
+    json_decref(reply);
+    return rc;
 }
 
 static int cmd_watch(ctl_conn *c, const cli *a)
@@ -699,6 +735,12 @@ static void show_text(const json_t *r)
         else
             printf("  stop        after %lld steps\n", cj_int(cs, "steps", 0));
     }
+    if (json_object_get(r, "checkpointStep"))
+        printf("  checkpoint  step %lld, t %.10g\n", cj_int(r, "checkpointStep", 0),
+               cj_num(r, "checkpointT", 0));
+    if (cj_u64(r, "resumes", 0))
+        printf("  resumed     %llu time%s\n", (unsigned long long)cj_u64(r, "resumes", 0),
+               cj_u64(r, "resumes", 0) > 1 ? "s" : "");
     printf("  energy      %llu samples\n", (unsigned long long)cj_u64(r, "energySamples", 0));
     if (le) {
         printf("  last energy step %lld, t %.10g: kinetic %.10e, strain %.10e, potential %.10e, "
@@ -1046,6 +1088,7 @@ int main(int argc, char **argv)
     case C_CANCEL: rc = cmd_cancel(&c, &a); break;
     case C_EXPORT: rc = cmd_export(&c, &a); break;
     case C_PLOT: rc = cmd_plot(&c, &a); break;
+    case C_RESUME: rc = cmd_resume(&c, &a); break;
     case C_PING: rc = cmd_ping(&c, &a); break;
     default: rc = cmd_version(&c, &a); break;
     }

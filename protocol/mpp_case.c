@@ -627,6 +627,16 @@ static int conv_run(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
         return mpm_fail(err, MPM_EINVAL, "threads", "must be 0..%d (got %u)", MPM_MAX_THREADS,
                         pb->threads);
     mc->c.threads = pb->has_threads ? (int)pb->threads : 0;
+    if (pb->checkpoint) {
+        const Mpmd__Checkpoint *ck = pb->checkpoint;
+        double w = ck->has_every_wall_s ? ck->every_wall_s : 0;
+        if (!isfinite(w) || w < 0 || w > 1e9)
+            return mpm_fail(err, MPM_EINVAL, "checkpoint.every_wall_s",
+                            "must be 0 (off) or a time in seconds up to 1e9 (got %g)", w);
+        mc->has_checkpoint = 1;
+        mc->checkpoint_every_steps = ck->has_every_steps ? ck->every_steps : 0;
+        mc->checkpoint_every_wall_s = w;
+    }
     mc->snapshot_fields = MPP_SNAP_ALL;
     if (!o) return 0;
     mc->energy_every = o->has_energy_every ? o->energy_every : 0;

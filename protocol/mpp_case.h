@@ -74,11 +74,14 @@ typedef struct mpp_case {
     int has_end_time;   /* 1: run until end_time; 0: run `steps` steps */
     double end_time;
     long long steps;
-    unsigned energy_every;    /* Output.energy_every (0: only the final sample) */
-    unsigned snapshot_every;  /* Output.snapshot_every (0: none) */
-    unsigned snapshot_fields; /* MPP_SNAP_* bits; MPP_SNAP_ALL when none listed */
-    int record_snapshots;     /* Output.record_snapshots */
-    size_t explicit_points;   /* particles given as explicit points */
+    unsigned energy_every;           /* Output.energy_every (0: only the final sample) */
+    unsigned snapshot_every;         /* Output.snapshot_every (0: none) */
+    unsigned snapshot_fields;        /* MPP_SNAP_* bits; MPP_SNAP_ALL when none listed */
+    int record_snapshots;            /* Output.record_snapshots */
+    int has_checkpoint;              /* Case.checkpoint present (0: the server's default) */
+    unsigned checkpoint_every_steps; /* Checkpoint.every_steps (0: not by steps) */
+    double checkpoint_every_wall_s;  /* Checkpoint.every_wall_s (0: not by time) */
+    size_t explicit_points;          /* particles given as explicit points */
 
     /* Storage behind c (owned). */
     mpm_material_desc *materials;

@@ -60,14 +60,16 @@ typedef enum {
     MPP_REQ_GET_ENERGY,
     MPP_REQ_GET_SNAPSHOT,
     MPP_REQ_PING,
-    MPP_REQ_VERSION
+    MPP_REQ_VERSION,
+    MPP_REQ_RESUME /* Resume: id = run_id */
 } mpp_req_kind;
 
 /* A Request. */
 typedef struct {
     mpp_req_kind kind;
     uint32_t schema_version;
-    uint64_t id;        /* Cancel, Status: job_id; GetRun, GetEnergy, GetSnapshot: run_id */
+    uint64_t id;        /* Cancel, Status: job_id; GetRun, GetEnergy, GetSnapshot, Resume:
+                           run_id */
     int status;         /* ListRuns: mpp_status filter, 0 = all */
     uint32_t limit;     /* ListRuns, GetEnergy: 0 = server default */
     uint64_t before_id; /* ListRuns: only runs with a smaller id; 0 = from the newest */
@@ -133,14 +135,18 @@ typedef struct {
     uint64_t energy_samples;
     size_t n_snapshot_steps;
     const int64_t *snapshot_steps;
-    mpm_method method;      /* always sent (RunInfo.method) */
-    mpm_update update;      /* always sent (RunInfo.update) */
-    mpm_transfer transfer;  /* always sent (RunInfo.transfer; decoded
-                               absent: FLIP) */
-    const char *warning;    /* RunInfo.warning: NULL (decoded: "") when none */
-    const char *owner;      /* RunInfo.owner: NULL (decoded: "") when not recorded */
-    int has_balance;        /* balance_error recorded (RunInfo.balance_error) */
-    double balance_error;   /* the balance error at the run's end */
+    mpm_method method;     /* always sent (RunInfo.method) */
+    mpm_update update;     /* always sent (RunInfo.update) */
+    mpm_transfer transfer; /* always sent (RunInfo.transfer; decoded
+                              absent: FLIP) */
+    const char *warning;   /* RunInfo.warning: NULL (decoded: "") when none */
+    const char *owner;     /* RunInfo.owner: NULL (decoded: "") when not recorded */
+    int has_balance;       /* balance_error recorded (RunInfo.balance_error) */
+    double balance_error;  /* the balance error at the run's end */
+    int has_checkpoint;    /* RunInfo.checkpoint_step / _t sent (decoded: present) */
+    int64_t checkpoint_step;
+    double checkpoint_t;
+    uint32_t resumes;       /* RunInfo.resumes: sent when > 0 */
     const void *case_bytes; /* packed Case to include, or NULL; its
                                method, update and transfer are sent as
                                the three fields above say (encode only:

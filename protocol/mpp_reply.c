@@ -54,6 +54,11 @@ static int fill_run(Mpmd__RunInfo *pi, Mpmd__EnergySample *es, const mpp_run_inf
     pi->owner = (char *)ri->owner;
     pi->has_balance_error = ri->has_balance != 0;
     pi->balance_error = ri->balance_error;
+    pi->has_checkpoint_step = pi->has_checkpoint_t = ri->has_checkpoint != 0;
+    pi->checkpoint_step = ri->checkpoint_step;
+    pi->checkpoint_t = ri->checkpoint_t;
+    pi->has_resumes = ri->resumes > 0;
+    pi->resumes = ri->resumes;
     if (ri->case_bytes) {
         ProtobufCMessage *cm;
         if (mpp_unpack(&mpmd__case__descriptor, ri->case_bytes, ri->case_len, (size_t)-1, &cm,
@@ -324,6 +329,10 @@ static void take_run(mpp_run_info *ri, mpm_energy_sample *e, const Mpmd__RunInfo
     ri->owner = str(pi->owner);
     ri->has_balance = pi->has_balance_error;
     ri->balance_error = pi->balance_error;
+    ri->has_checkpoint = pi->has_checkpoint_step;
+    ri->checkpoint_step = pi->checkpoint_step;
+    ri->checkpoint_t = pi->checkpoint_t;
+    ri->resumes = pi->has_resumes ? pi->resumes : 0;
 }
 
 int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mpm_error *err)

@@ -85,10 +85,14 @@ int mpp_request_decode(const void *buf, size_t len, size_t max, mpp_request *rq,
         break;
     case MPMD__REQUEST__BODY_PING: rq->kind = MPP_REQ_PING; break;
     case MPMD__REQUEST__BODY_VERSION: rq->kind = MPP_REQ_VERSION; break;
+    case MPMD__REQUEST__BODY_RESUME:
+        rq->kind = MPP_REQ_RESUME;
+        NEED_ID(resume, run_id, "resume.run_id");
+        break;
     default:
         rc = mpm_fail(err, MPM_EREQUEST, NULL,
                       "request: no body (one of submit, cancel, status, listRuns, getRun, "
-                      "getEnergy, getSnapshot, ping, version)");
+                      "getEnergy, getSnapshot, ping, version, resume)");
         break;
     }
 out:
@@ -161,6 +165,7 @@ int mpp_request_encode(const mpp_request *rq, uint8_t **buf, size_t *len)
     Mpmd__Request__GetSnapshot gs = MPMD__REQUEST__GET_SNAPSHOT__INIT;
     Mpmd__Request__Ping pi = MPMD__REQUEST__PING__INIT;
     Mpmd__Request__Version ve = MPMD__REQUEST__VERSION__INIT;
+    Mpmd__Request__Resume res = MPMD__REQUEST__RESUME__INIT;
     *buf = NULL;
     *len = 0;
     r.has_schema_version = 1;
@@ -240,6 +245,12 @@ int mpp_request_encode(const mpp_request *rq, uint8_t **buf, size_t *len)
     case MPP_REQ_VERSION:
         r.body_case = MPMD__REQUEST__BODY_VERSION;
         r.version = &ve;
+        break;
+    case MPP_REQ_RESUME:
+        res.has_run_id = 1;
+        res.run_id = rq->id;
+        r.body_case = MPMD__REQUEST__BODY_RESUME;
+        r.resume = &res;
         break;
     default: return MPM_EINVAL;
     }

@@ -39,6 +39,9 @@ static const setting settings[] = {
     {"max-steps", NULL, T_LL, F(max_steps), 1, 1e15, "steps per job (default 100000000)"},
     {"max-wall-s", NULL, T_DBL, F(max_wall_s), 0, 1e9,
      "wall seconds per job, 0 = no limit (default 0)"},
+    {"checkpoint-every-s", NULL, T_DBL, F(checkpoint_every_s), 0, 1e9,
+     "wall seconds between checkpoints of a run whose case sets none (files in <db>.ckpt/, "
+     "for mpmctl resume), 0 = none (default 300)"},
     {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30,
      "largest request accepted (default 67108864)"},
     {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20,
@@ -88,6 +91,7 @@ static void defaults(srv_config *c)
     c->max_particles = (long long)MPP_DEFAULT_MAX_PARTICLES;
     c->max_steps = 100000000;
     c->max_wall_s = 0;
+    c->checkpoint_every_s = 300;
     c->max_request_bytes = 64LL << 20;
     c->stream_buffer_mb = 64;
     c->job_max_disk_mb = 4096;

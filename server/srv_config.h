@@ -22,6 +22,7 @@ typedef struct {
     long long max_particles;        /* per job */
     long long max_steps;            /* per job */
     double max_wall_s;              /* per job, 0 = none */
+    double checkpoint_every_s;      /* checkpoint interval of a case without one, 0 = none */
     long long max_request_bytes;    /* largest request accepted */
     int stream_buffer_mb;           /* snapshot bytes queued for watchers, per job (0: no bound) */
     int allow_remote;               /* deprecated: non-loopback binds need CURVE now */

@@ -196,6 +196,8 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->owner = r->owner && r->owner[0] ? r->owner : NULL;
     ri->has_balance = r->has_balance;
     ri->balance_error = r->balance_error;
+    ri->has_checkpoint = r->has_checkpoint, ri->checkpoint_step = r->checkpoint_step;
+    ri->checkpoint_t = r->checkpoint_t, ri->resumes = (uint32_t)r->resumes;
     if (!isnan(r->energy.total)) {
         memset(e, 0, sizeof *e);
         e->step = r->steps;
@@ -307,6 +309,71 @@ static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
 
 /* ---- requests ---- */
 
+/* The per-client quotas of a new job (Submit, Resume) of nparticles:
+ * 1 when one refuses it (answered), else 0. */
+/* The client's quotas that do not depend on the case's records: its key's
+ * settings, else the --client-max-* (particles per job, live jobs); *q gets
+ * them for the disk checks that follow.  Replies and returns 1 when one
+ * refuses, else 0.  Shared by Submit and Resume. */
+static int quota_refused(daemon_t *d, zmq_msg_t *id, const char *owner, size_t nparticles,
+                         srv_quota *q)
+{
+    srv_auth_quota(d->auth, d->cfg, owner, q);
+    if (q->max_particles > 0 && nparticles > (unsigned long long)q->max_particles) {
+        reply_error(d, id, MPM_ETOOBIG, "bodies",
+                    "the case has %zu particles, above this server's per-client quota of %lld "
+                    "(%s) for %s",
+                    nparticles, q->max_particles,
+                    q->max_particles == d->cfg->client_max_particles ? "--client-max-particles"
+                                                                     : "max-particles of its key",
+                    owner);
+        return 1;
+    }
+    if (q->max_jobs > 0) {
+        int live = srv_pool_owner_jobs(d->pool, owner);
+        if (live >= q->max_jobs) {
+            reply_error(d, id, MPM_EFULL, "",
+                        "%s has %d queued or running jobs, this server's per-client quota "
+                        "(%s %lld); retry when one has ended",
+                        owner, live,
+                        q->max_jobs == d->cfg->client_max_jobs ? "--client-max-jobs"
+                                                               : "max-jobs of its key",
+                        q->max_jobs);
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Resume: the client's recorded bytes below its disk quota, and room in
+ * the queue (the budgets then count the resumed run's writes as it runs).
+ * Replies and returns 1 when refused. */
+static int resume_refused(daemon_t *d, zmq_msg_t *id, const char *owner, const srv_quota *q)
+{
+    if (q->max_disk_mb > 0) {
+        int64_t used = 0;
+        if (store_owner_bytes(d->st, owner, &used)) {
+            reply_error(d, id, MPM_EINTERNAL, "", "cannot check the disk quota: %s",
+                        store_error()->message);
+            return 1;
+        }
+        if (used >= q->max_disk_mb * 1048576LL) {
+            reply_error(d, id, MPM_ETOOBIG, "",
+                        "%s's recorded runs take %.1f MiB, this server's per-client quota is "
+                        "%lld MiB; ask its admin to free space",
+                        owner, (double)used / 1048576.0, q->max_disk_mb);
+            return 1;
+        }
+    }
+    if (!srv_pool_has_room(d->pool)) {
+        reply_error(d, id, MPM_EFULL, "",
+                    "the job queue is full (%d running, %d queued at most); retry later",
+                    d->cfg->workers, d->cfg->queue_max);
+        return 1;
+    }
+    return 0;
+}
+
 static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     if (stop_signal || d->stopping) {
@@ -324,31 +391,9 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
     size_t nparticles = sc->info.particles;
     /* the client's quotas: its key's settings, else the --client-max-* */
     srv_quota q;
-    srv_auth_quota(d->auth, d->cfg, owner, &q);
-    if (q.max_particles > 0 && nparticles > (unsigned long long)q.max_particles) {
-        reply_error(d, id, MPM_ETOOBIG, "bodies",
-                    "the case has %zu particles, above this server's per-client quota of %lld "
-                    "(%s) for %s",
-                    nparticles, q.max_particles,
-                    q.max_particles == d->cfg->client_max_particles ? "--client-max-particles"
-                                                                    : "max-particles of its key",
-                    owner);
+    if (quota_refused(d, id, owner, nparticles, &q)) {
         mpp_case_destroy(&sc);
         return;
-    }
-    if (q.max_jobs > 0) {
-        int live = srv_pool_owner_jobs(d->pool, owner);
-        if (live >= q.max_jobs) {
-            reply_error(d, id, MPM_EFULL, "",
-                        "%s has %d queued or running jobs, this server's per-client quota "
-                        "(%s %lld); retry when one has ended",
-                        owner, live,
-                        q.max_jobs == d->cfg->client_max_jobs ? "--client-max-jobs"
-                                                              : "max-jobs of its key",
-                        q.max_jobs);
-            mpp_case_destroy(&sc);
-            return;
-        }
     }
     /* in floating point: endTime / dt can be far beyond any integer type.
      * With automatic dt, the largest dt the CFL condition can give (the
@@ -460,6 +505,93 @@ static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request
     size_t len = 0;
     mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
     send_reply(d, id, buf, len);
+}
+
+/* Queues an INTERRUPTED run again to continue from its checkpoint file,
+ * read and verified here (a damaged one is refused in the reply), with the
+ * stored case; the job keeps the run's id and owner (issue 12). */
+static void do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
+{
+    unsigned long long run = rq->id;
+    srv_job_info ji;
+    store_run r;
+    if (stop_signal || d->stopping) {
+        reply_error(d, id, MPM_EUNAVAIL, "", "mpmd is shutting down");
+        return;
+    }
+    if (srv_pool_info(d->pool, run, &ji) == 0) {
+        reply_error(d, id, MPM_ECONFLICT, "run_id", "run %llu is %s", run,
+                    mpp_status_name(ji.status));
+        return;
+    }
+    int rc = store_run_get(d->st, (int64_t)run, &r), nf = rc == MPM_ENOTFOUND;
+    if (rc) {
+        reply_error(d, id, nf ? rc : MPM_EINTERNAL, nf ? "run_id" : "", "%s %llu%s%s",
+                    nf ? "no run" : "reading run", run, nf ? "" : ": ",
+                    nf ? "" : store_error()->message);
+        return;
+    }
+    const char *who = r.owner && r.owner[0] ? r.owner : owner;
+    char err[1700];
+    srv_ckpt_file ck = {0};
+    Mpmd__Case *pb = NULL;
+    mpp_case *sc = NULL;
+    mpm_error cerr;
+    srv_quota q;
+    if (strcmp(who, owner) && !srv_auth_is_admin(d->auth, owner)) {
+        reply_error(d, id, MPM_EFORBIDDEN, "run_id",
+                    "run %llu was submitted by %s: only its owner or an admin key "
+                    "(--admin-keys) may resume it",
+                    run, who);
+    } else if (r.status != MPP_STATUS_INTERRUPTED) {
+        reply_error(d, id, MPM_ECONFLICT, "run_id",
+                    "run %llu is %s: only an INTERRUPTED run can be resumed", run,
+                    mpp_status_name((int)r.status));
+    } else if ((rc = srv_ckpt_read(d->cfg->db, (int64_t)run, &ck, err, sizeof err))) {
+        if (rc == MPM_ESYNTAX) srv_warn(run, "resume refused: %s", err);
+        reply_error(d, id, rc == MPM_ENOTFOUND || rc == MPM_ESYNTAX ? MPM_ECONFLICT : rc, "run_id",
+                    "%s%s", err, rc == MPM_ESYNTAX ? "; the run stays INTERRUPTED" : "");
+    } else if (mpp_case_unpack(r.case_pb, r.case_len, 0, &pb, &cerr) ||
+               mpp_case_from_pb(pb, (size_t)d->cfg->max_particles, &sc, &cerr)) {
+        reply_mpm_error(d, id, &cerr);
+    } else if (!quota_refused(d, id, who, sc->info.particles, &q) &&
+               !resume_refused(d, id, who, &q)) {
+        /* the last sample before the checkpoint (the end's if it ends there) */
+        mpm_energy_sample last = {.step = -1}, *es = NULL;
+        size_t n = 0;
+        if (ck.rec.energy_seq > 0 &&
+            store_energy_read(d->st, (int64_t)run, ck.rec.energy_seq - 1, 1, &es, &n) == 0 &&
+            n == 1 && es[0].seq == (uint64_t)(ck.rec.energy_seq - 1))
+            last = es[0];
+        free(es);
+        int watched = 0;
+        for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == run;
+        size_t np = sc->info.particles, nodes = sc->info.nodes;
+        store_checkpoint rec = ck.rec;
+        if ((rc = store_run_resume(d->st, (int64_t)run, &rec))) {
+            reply_error(d, id, MPM_EINTERNAL, "", "cannot record the resume: %s",
+                        store_error()->message);
+        } else if ((rc = srv_pool_resume(d->pool, run, &sc, r.submitted_at, np, nodes, watched, who,
+                                         &ck, isnan(r.wall_s) ? 0 : r.wall_s,
+                                         last.step >= 0 ? &last : NULL))) {
+            store_run_end end = {0};
+            end.status = MPP_STATUS_INTERRUPTED;
+            end.steps = rec.step;
+            end.error = rc == MPM_EFULL ? "resume refused: job queue full" : "resume failed";
+            store_run_finish(d->st, (int64_t)run, &end);
+            reply_error(d, id, rc, "", "%s", end.error);
+        } else {
+            srv_log(run, "resumed by %s from its checkpoint at step %lld (t = %g)", owner,
+                    (long long)rec.step, rec.t);
+            uint8_t *buf = NULL;
+            size_t len = 0;
+            if (!mpp_reply_submit_ok(run, run, &buf, &len)) send_reply(d, id, buf, len);
+        }
+    }
+    mpp_case_destroy(&sc);
+    mpp_case_pb_free(&pb);
+    srv_ckpt_file_clear(&ck);
+    store_run_clear(&r);
 }
 
 /* ---- requests in order, reads after their commit ---- */
@@ -830,13 +962,15 @@ static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *
     store_run_list_free(runs, n);
 }
 
-/* Requests that read nothing a worker writes: Submit, Ping, Version. */
+/* Requests that read nothing a worker writes: Submit, Resume (of a run no
+ * worker has), Ping, Version. */
 static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     uint8_t *buf = NULL;
     size_t len = 0;
     switch (rq->kind) {
     case MPP_REQ_SUBMIT: do_submit(d, id, owner, rq); break;
+    case MPP_REQ_RESUME: do_resume(d, id, owner, rq); break;
     case MPP_REQ_PING:
         mpp_reply_pong(MPP_VERSION, d->cfg->stream_endpoint, &buf, &len);
         send_reply(d, id, buf, len);
@@ -1108,6 +1242,12 @@ int srv_daemon_run(const srv_config *cfg)
     so.log = srv_log_store;
     if (store_open(cfg->db, &so, &d.st)) {
         srv_error(0, "%s", store_error()->message);
+        srv_auth_destroy(&d.auth);
+        return 1;
+    }
+    if (srv_ckpt_init(cfg->db, err, sizeof err)) {
+        srv_error(0, "%s", err);
+        store_close(&d.st);
         srv_auth_destroy(&d.auth);
         return 1;
     }

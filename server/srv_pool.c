@@ -18,6 +18,14 @@
  * sampling every step does not wake the other threads at every step;
  * snapshots are packed into one buffer per job and handed to zmq without
  * a copy (see publish_snapshot()).
+ *
+ * Checkpoints (srv_ckpt.h) are taken by the worker between two steps, when
+ * the case's schedule (Case.checkpoint, else --checkpoint-every-s of wall
+ * time) says so and at a shutdown: the samples held so far reach the store
+ * first, then the file is written, then its record; the file goes when the
+ * run ends other than INTERRUPTED.  A resumed job loads its checkpoint into
+ * a fresh simulation and goes on with the next step, its samples numbered
+ * after the checkpoint's, its wall time added to the run's.
  */
 #include "srv_pool.h"
 
@@ -51,6 +59,11 @@ typedef struct srv_job {
     struct srv_job *next; /* FIFO link */
     /* worker-private */
     uint64_t msg_seq, energy_seq;
+    /* a resumed run (srv_pool_resume) */
+    int resume;
+    srv_ckpt_file ck;
+    double prior_wall;
+    mpm_energy_sample last; /* step -1: none */
 } srv_job;
 
 typedef struct {
@@ -122,6 +135,7 @@ static void job_free(srv_job *j)
 {
     if (!j) return;
     mpp_case_destroy(&j->sc);
+    srv_ckpt_file_clear(&j->ck);
     free(j);
 }
 
@@ -570,13 +584,65 @@ static void finish(ctx *c, int status, const char *error, int64_t steps, double 
             warning ? "; warning: " : "", warning ? warning : "");
 }
 
+/* Saves a checkpoint of the job's run (see srv_pool.c's header); on
+ * success *ck_step is its step.  0, or the srv_ckpt_write() code (warned). */
+static int take_checkpoint(ctx *c, mpm_sim *sim, srv_ckpt_buf *b, int64_t *ck_step)
+{
+    srv_job *j = c->j;
+    double t0 = mono_now();
+    /* every sample and snapshot before it committed first: a resume finds
+     * the run's record complete up to the checkpoint, whenever the daemon
+     * dies (a failed write shows in store_losses(), which ends the run) */
+    flush_samples(c);
+    store_flush(c->p->st);
+    store_checkpoint rec;
+    char err[1600];
+    int rc = srv_ckpt_write(c->p->cfg->db, (int64_t)j->id, sim, (int64_t)j->energy_seq, b, &rec,
+                            err, sizeof err);
+    if (rc) {
+        srv_warn(j->id, "checkpoint at step %lld not saved: %s", (long long)mpm_sim_steps(sim),
+                 err);
+        return rc;
+    }
+    *ck_step = rec.step;
+    if (store_run_checkpoint(c->p->st, (int64_t)j->id, &rec))
+        srv_warn(j->id, "checkpoint at step %lld not recorded: %s", (long long)rec.step,
+                 store_error()->message);
+    srv_debug(j->id, "checkpoint at step %lld: %lld bytes in %.3f s", (long long)rec.step,
+              (long long)rec.bytes, mono_now() - t0);
+    return 0;
+}
+
+/* Loads a resumed job's checkpoint into sim; 0, or -1 after ending the
+ * job INTERRUPTED again (its checkpoint kept) with the reason. */
+static int resume_load(ctx *c, mpm_sim *sim)
+{
+    srv_job *j = c->j;
+    mpm_error me;
+    if (mpm_sim_checkpoint_load(sim, j->ck.blob, j->ck.blob_len, &me) == 0) {
+        j->energy_seq = (uint64_t)j->ck.rec.energy_seq;
+        srv_log(j->id, "resumed from its checkpoint at step %lld, t = %g",
+                (long long)j->ck.rec.step, j->ck.rec.t);
+        srv_ckpt_file_clear(&j->ck); /* the blob is in sim now */
+        return 0;
+    }
+    char text[700], why[800];
+    mpm_error_text(&me, MPM_FIELD_PROTO, text, sizeof text);
+    snprintf(why, sizeof why, "checkpoint at step %lld not loadable: %s", (long long)j->ck.rec.step,
+             text);
+    finish(c, MPP_STATUS_INTERRUPTED, why, j->ck.rec.step, j->ck.rec.t, j->prior_wall, 0,
+           j->last.step >= 0 ? &j->last : NULL, NULL, NULL);
+    return -1;
+}
+
 static void run_job(srv_pool *p, void *push, srv_job *j)
 {
     ctx c = {p, push, j, "", NULL, 0, 0, ""};
     srv_topic(j->id, c.topic);
     mpp_case *sc = j->sc;
     const srv_config *cfg = p->cfg;
-    double start = wall_now(), t0 = mono_now();
+    /* a resumed run's wall time adds up */
+    double start = wall_now(), t0 = mono_now() - j->prior_wall;
     store_run_set_status(p->st, (int64_t)j->id, MPP_STATUS_RUNNING, start, NULL);
     int threads = sc->c.threads > 0 && sc->c.threads < cfg->solver_threads ? sc->c.threads
                                                                            : cfg->solver_threads;
@@ -604,18 +670,36 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     /* without it (out of memory) samples go out one by one */
     c.pe = sc->energy_every ? calloc(1, sizeof *c.pe) : NULL;
     if (c.pe) c.pe->last_flush = c.pe->last_sample = mono_now();
+    /* checkpoints: the case's schedule, else the server's default */
+    unsigned ck_steps = sc->has_checkpoint ? sc->checkpoint_every_steps : 0;
+    double ck_wall = sc->has_checkpoint ? sc->checkpoint_every_wall_s : cfg->checkpoint_every_s;
+    int ck_on = ck_steps || ck_wall > 0;
+    int64_t ck_step = j->resume ? j->ck.rec.step : -1; /* the last one's */
+    srv_ckpt_buf ckb = {0};
+    if (j->resume && resume_load(&c, sim)) {
+        free(c.pe);
+        mpm_sim_destroy(&sim);
+        return;
+    }
+    double ck_last = mono_now();
     int snaps_ok = 1, status = MPP_STATUS_FINISHED;
     char why[512] = "", loss[400];
     /* writes the store loses whole (a full disk) end the run: its record
      * would be missing its samples, and nobody would know */
     uint64_t lost0 = store_losses(p->st, NULL, 0);
-    energy_sample(&c, sim, &last);
-    progress(&c, sim, 0);
-    double next_progress = 0.2;
+    if (j->resume)
+        last = j->last; /* the step-0 sample and those up to the checkpoint are stored */
+    else
+        energy_sample(&c, sim, &last);
+    progress(&c, sim, j->prior_wall);
+    double next_progress = j->prior_wall + 0.2;
     unsigned every = sc->energy_every, severy = sc->snapshot_every;
     for (;;) {
         int cancel = atomic_load_explicit(&j->cancel, memory_order_relaxed);
         if (cancel) {
+            /* a shutdown keeps what the run has done for a resume */
+            if (cancel == CANCEL_SHUTDOWN && ck_on && ck_step != mpm_sim_steps(sim))
+                take_checkpoint(&c, sim, &ckb, &ck_step);
             status = cancel == CANCEL_USER ? MPP_STATUS_CANCELLED : MPP_STATUS_INTERRUPTED;
             snprintf(why, sizeof why, "%s at step %ld",
                      cancel == CANCEL_USER ? "cancelled by a client" : "daemon shutting down",
@@ -651,6 +735,16 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             int watched = atomic_load_explicit(&j->watched, memory_order_relaxed);
             if (watched || sc->record_snapshots)
                 snaps_ok = snapshot(&c, sim, &sb, watched, sc->record_snapshots) == 0;
+        }
+        if (ck_on &&
+            ((ck_steps && k % ck_steps == 0) || (ck_wall > 0 && mono_now() - ck_last >= ck_wall)) &&
+            !(sc->has_end_time ? mpm_sim_time(sim) >= sc->end_time - 0.5 * mpm_sim_dt(sim)
+                               : k >= (int64_t)sc->steps)) {
+            /* (none after the last step: the run ends there.)  The solver
+             * or memory refusing is for good; a file error may pass */
+            int rc = take_checkpoint(&c, sim, &ckb, &ck_step);
+            if (rc && rc != MPM_EIO) ck_on = 0;
+            ck_last = mono_now();
         }
         if ((k & 31) == 0) {
             double w = mono_now() - t0;
@@ -720,6 +814,15 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     }
     finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last,
            &balance, over && warn[0] ? warn : NULL);
+    /* only an interrupted run may be resumed: any other end drops its
+     * checkpoint (a run that never took one touches nothing) */
+    if (status != MPP_STATUS_INTERRUPTED && ck_step >= 0) {
+        if (srv_ckpt_remove(cfg->db, (int64_t)j->id))
+            srv_warn(j->id, "its checkpoint file not removed: %s", strerror(errno));
+        if (store_run_checkpoint(p->st, (int64_t)j->id, NULL))
+            srv_warn(j->id, "checkpoint removal not recorded: %s", store_error()->message);
+    }
+    free(ckb.buf);
     if (sb.dropped)
         srv_log(j->id, "%llu snapshot(s) not streamed: a watcher lagged (--stream-buffer-mb %d)",
                 (unsigned long long)sb.dropped, cfg->stream_buffer_mb);
@@ -832,12 +935,13 @@ int srv_pool_has_room(srv_pool *p)
     return room;
 }
 
-int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
-                    size_t nodes, int watched, const char *owner)
+static srv_job *job_new(uint64_t id, double submitted_at, size_t particles, size_t nodes,
+                        int watched, const char *owner)
 {
     srv_job *j = calloc(1, sizeof *j);
-    if (!j) return MPM_ENOMEM;
+    if (!j) return NULL;
     j->id = id;
+    j->last.step = -1;
     snprintf(j->owner, sizeof j->owner, "%s", owner ? owner : "");
     atomic_init(&j->cancel, 0);
     atomic_init(&j->watched, watched != 0);
@@ -845,6 +949,12 @@ int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at
     j->submitted_at = submitted_at;
     j->particles = particles;
     j->nodes = nodes;
+    return j;
+}
+
+/* Queues j (taking *sc on success); on failure j is the caller's. */
+static int job_enqueue(srv_pool *p, srv_job *j, mpp_case **sc)
+{
     pthread_mutex_lock(&p->mu);
     int busy = 0;
     for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
@@ -865,7 +975,36 @@ int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at
         pthread_cond_signal(&p->cv);
     }
     pthread_mutex_unlock(&p->mu);
+    return rc;
+}
+
+int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
+                    size_t nodes, int watched, const char *owner)
+{
+    srv_job *j = job_new(id, submitted_at, particles, nodes, watched, owner);
+    if (!j) return MPM_ENOMEM;
+    int rc = job_enqueue(p, j, sc);
     if (rc) free(j);
+    return rc;
+}
+
+int srv_pool_resume(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
+                    size_t nodes, int watched, const char *owner, srv_ckpt_file *ck,
+                    double prior_wall_s, const mpm_energy_sample *last)
+{
+    srv_job *j = job_new(id, submitted_at, particles, nodes, watched, owner);
+    if (!j) return MPM_ENOMEM;
+    j->resume = 1;
+    j->ck = *ck;
+    j->prior_wall = prior_wall_s > 0 ? prior_wall_s : 0;
+    if (last) j->last = *last;
+    int rc = job_enqueue(p, j, sc);
+    if (rc) {
+        *ck = j->ck; /* still the caller's */
+        free(j);
+    } else {
+        memset(ck, 0, sizeof *ck);
+    }
     return rc;
 }
 
@@ -946,6 +1085,9 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         mpp_finished f = {MPP_STATUS_CANCELLED, end.error, 0, 0, 0, NULL, 0, 0, NULL};
         if (mpp_stream_finished(id, j->msg_seq++, &f, msg, len))
             srv_warn(id, "out of memory encoding the end of the stream");
+        if (j->resume && (srv_ckpt_remove(p->cfg->db, (int64_t)id) ||
+                          store_run_checkpoint(p->st, (int64_t)id, NULL)))
+            srv_warn(id, "its checkpoint not removed");
         srv_log(id, "cancelled while queued");
         job_free(j);
     }

@@ -16,6 +16,7 @@
 #include <stdint.h>
 
 #include "mpp_msg.h"
+#include "srv_ckpt.h"
 #include "srv_config.h"
 #include "store.h"
 
@@ -59,6 +60,19 @@ void srv_pool_set_budget(srv_pool *p, struct srv_budget *b);
 int srv_pool_submit(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
                     size_t nodes, int watched, const char *owner);
 
+/* Queues run `id` again to continue from checkpoint *ck (read and
+ * verified by srv_ckpt_read(); the run already set 'queued' by
+ * store_run_resume()), as srv_pool_submit() does a new one: the worker
+ * builds the simulation from *sc, loads the checkpoint (a blob the solver
+ * refuses ends the job INTERRUPTED again, its checkpoint kept, the reason
+ * in its error), numbers its energy samples from ck->rec.energy_seq on and
+ * adds its wall time to prior_wall_s.  last: the run's last energy sample
+ * before the checkpoint (NULL: none).  Takes ownership of *sc and of
+ * ck's buffer (both emptied) on success. */
+int srv_pool_resume(srv_pool *p, uint64_t id, mpp_case **sc, double submitted_at, size_t particles,
+                    size_t nodes, int watched, const char *owner, srv_ckpt_file *ck,
+                    double prior_wall_s, const mpm_energy_sample *last);
+
 /* Number of queued and running jobs whose owner is `owner`. */
 int srv_pool_owner_jobs(srv_pool *p, const char *owner);
 
@@ -92,7 +106,8 @@ typedef void (*srv_pool_publish_fn)(void *arg, uint64_t id, uint8_t *msg, size_t
 
 /* Begins the shutdown without waiting: no job is accepted any more,
  * running jobs are told to end INTERRUPTED before their next step (their
- * workers publish Finished as usual), and queued ones are recorded
+ * workers first save a checkpoint of a run that takes them, unless its
+ * last one is of the current step, then publish Finished as usual), and queued ones are recorded
  * INTERRUPTED at once, each with its Finished message passed to publish
  * (may be NULL: dropped).  Idempotent. */
 void srv_pool_stop(srv_pool *p, srv_pool_publish_fn publish, void *arg);

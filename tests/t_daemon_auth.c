@@ -5,13 +5,14 @@
  * CURVE), shows its run with itself as the owner; an unknown key and a
  * missing key are refused at the handshake, quickly and with mpmctl naming
  * the key; a subscriber without a key never reaches the stream; another
- * authorized key cannot cancel a job (FORBIDDEN) while an admin key and the
- * owner can; a key removed from the list is refused after SIGHUP; a
- * non-loopback bind without CURVE, a secret key file readable by others and
- * CURVE without a key list are refused at start; the per-client quotas
- * (queued jobs, particles per job, recorded bytes: the estimate at
- * submit) refuse with QUEUE_FULL and TOO_LARGE naming the quota; under
- * CURVE a job's stream reaches only its owner and the admin keys.
+ * authorized key cannot cancel a job (FORBIDDEN), or resume its run, while
+ * an admin key and the owner can cancel it; a key removed from the list is
+ * refused after SIGHUP; a non-loopback bind without CURVE, a secret key
+ * file readable by others and CURVE without a key list are refused at
+ * start; the per-client quotas (queued jobs, particles per job, recorded
+ * bytes: the estimate at submit) refuse with QUEUE_FULL and TOO_LARGE
+ * naming the quota; under CURVE a job's stream reaches only its owner and
+ * the admin keys.
  */
 #define _GNU_SOURCE
 #include "t_daemon.h"
@@ -253,6 +254,16 @@ DTEST(daemon_auth_curve)
     td_out_free(&o);
     CHECKF(ok, "the admin's cancel failed");
     CHECK(td_wait_status(&d, job1, "CANCELLED", 20, st, sizeof st) == 0);
+    /* nor resume it (issue 12); its owner is told why it cannot */
+    CTL_AS(&d, dir, "b", &o, "resume", "1");
+    snprintf(want, sizeof want, "run %llu was submitted by %s", job1, apub);
+    ok = o.status == 1 && strstr(o.err, "FORBIDDEN") && strstr(o.err, want);
+    td_out_free(&o);
+    CHECKF(ok, "b's resume of a's run was not FORBIDDEN");
+    CTL_AS(&d, dir, "a", &o, "resume", "1");
+    ok = o.status == 1 && strstr(o.err, "CONFLICT") && strstr(o.err, "run 1 is CANCELLED");
+    td_out_free(&o);
+    CHECKF(ok, "a's resume of its cancelled run was not a CONFLICT naming why");
     /* the owner may cancel its own */
     CTL_AS(&d, dir, "a", &o, "submit", cpath);
     unsigned long long job3 = job_of(o.out);

@@ -4,7 +4,8 @@
  * verbatim), a schema-2 and a schema-4 one are migrated in place, and
  * every run, energy sample and snapshot reads back as it was written; runs
  * written before schema 5 read back as FLIP, the transfer they ran; runs
- * written before schema 7 read back with no owner ("").
+ * written before schema 7 read back with no owner (""), runs written before
+ * schema 8 with no checkpoint and no resumes.
  */
 #include "store.h"
 #include "t.h"
@@ -116,11 +117,11 @@ TEST(store_migrate_old_schema)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 7"), "%s",
+    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 8"), "%s",
            lc.migrated);
     int v = -1;
     CHECK(store_schema_version(s, &v) == 0);
-    CHECKF(v == 7 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
+    CHECKF(v == 8 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
     store_stats st;
     store_get_stats(s, &st);
     CHECK(st.recovered_running == 1 && st.recovered_queued == 0);
@@ -307,9 +308,9 @@ TEST(store_migrate_v2)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-2 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 7"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 8"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 7);
+    CHECK(store_schema_version(s, &v) == 0 && v == 8);
 
     mpm_energy_sample *es = NULL;
     size_t nes = 0;
@@ -449,9 +450,9 @@ TEST(store_migrate_v4)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-4 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 7"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 8"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 7 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
 
     /* the old runs: FLIP, everything else as written */
     store_run r;
@@ -586,9 +587,9 @@ TEST(store_migrate_v5)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-5 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 5 to 7"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 5 to 8"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 7 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
 
     store_run r;
     CHECK(store_run_get(s, 7, &r) == 0);
@@ -679,9 +680,9 @@ TEST(store_migrate_v6)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-6 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 6 to 7"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 6 to 8"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 7 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
 
     store_run r;
     CHECK(store_run_get(s, 7, &r) == 0);
@@ -716,6 +717,138 @@ TEST(store_migrate_v6)
          list[3].id == 7 && list[3].owner && !strcmp(list[3].owner, "");
     store_run_list_free(list, n);
     CHECKF(ok, "the listing's owners differ");
+    store_close(&s);
+    int64_t cnt = -1;
+    CHECK(store_exec_raw(path,
+                         "SELECT count(*) FROM pragma_integrity_check WHERE"
+                         " integrity_check != 'ok'",
+                         &cnt) == 0 &&
+          cnt == 0);
+}
+
+/* A version-7 database (version 6 as above, then 6 -> 7 as released) with
+ * the version-4 rows and an interrupted run 9 with three energy samples
+ * and two snapshots.  Opening it migrates 7 -> 8 alone: the old runs read
+ * back with no checkpoint and no resumes.  Then the checkpoint calls: one
+ * recorded reads back; a resume of the interrupted run from it deletes the
+ * samples and snapshots after it and queues the run again, in one write;
+ * a resume of a finished run is refused (a write error) and changes
+ * nothing; a cleared checkpoint reads back as none. */
+TEST(store_migrate_v7)
+{
+    const char *p = db_path("v7.db");
+    char path[600];
+    snprintf(path, sizeof path, "%s", p);
+    CHECKF(store_exec_raw(path, old_schema_v1, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v1_to_v2, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, migrate_v2_to_v4, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path, old_rows_v4, NULL) == 0, "%s", store_error()->message);
+    CHECKF(store_exec_raw(path,
+                          "ALTER TABLE runs ADD COLUMN transfer TEXT NOT NULL DEFAULT 'flip'"
+                          " CHECK (transfer IN ('flip','apic'));"
+                          "ALTER TABLE energy ADD COLUMN plastic_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN damping_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN friction_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN prescribed_work REAL DEFAULT 0;"
+                          "ALTER TABLE energy ADD COLUMN balance_error REAL DEFAULT 0;"
+                          "ALTER TABLE runs ADD COLUMN balance_error REAL;"
+                          "ALTER TABLE runs ADD COLUMN warning TEXT;"
+                          "ALTER TABLE runs ADD COLUMN owner TEXT NOT NULL DEFAULT '';"
+                          "CREATE INDEX runs_by_owner ON runs(owner, id);"
+                          "INSERT INTO runs (id, name, case_pb, method, \"update\", dim,"
+                          " particles, nodes, status, submitted_at, started_at, steps, wall_s,"
+                          " error, owner) VALUES (9, 'v7 cut', X'', 'mpm', 'musl', 2, 4, 9,"
+                          " 'interrupted', 1700000300.0, 1700000301.0, 20, 2.0,"
+                          " 'daemon stopped before the run ended', 'local');"
+                          "INSERT INTO energy (run_id, seq, step, t, total) VALUES"
+                          " (9, 0, 0, 0.0, 1.0), (9, 1, 10, 0.1, 1.0), (9, 2, 20, 0.2, 1.0);"
+                          "INSERT INTO snapshots VALUES (9, 10, 0.1, 1, 2, 1, X'01'),"
+                          " (9, 20, 0.2, 1, 2, 1, X'02');"
+                          "PRAGMA user_version = 7;",
+                          NULL) == 0,
+           "%s", store_error()->message);
+
+    logcap lc = {.mu = PTHREAD_MUTEX_INITIALIZER};
+    store_options o = {.log = cap_log, .log_ud = &lc};
+    store *s = NULL;
+    CHECKF(store_open(path, &o, &s) == 0, "opening a version-7 database: %s",
+           store_error()->message);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 7 to 8"), "%s", lc.migrated);
+    int v = -1;
+    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
+
+    store_run r;
+    CHECK(store_run_get(s, 7, &r) == 0);
+    int ok = !r.has_checkpoint && r.checkpoint_step == -1 && r.resumes == 0 &&
+             !strcmp(r.name, "v4 run") && r.energy.total == 0.75;
+    store_run_clear(&r);
+    CHECKF(ok, "the version-7 finished run reads back differently");
+    CHECK(store_run_get(s, 9, &r) == 0);
+    ok = !r.has_checkpoint && r.resumes == 0 && r.status == MPP_STATUS_INTERRUPTED &&
+         r.steps == 20 && r.owner && !strcmp(r.owner, "local");
+    store_run_clear(&r);
+    CHECKF(ok, "the version-7 interrupted run reads back differently");
+
+    /* a checkpoint at step 10 (after samples 0 and 1) */
+    store_checkpoint ck = {.step = 10, .t = 0.1, .bytes = 4096, .energy_seq = 2};
+    CHECK(store_run_checkpoint(s, 9, &ck) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_run_get(s, 9, &r) == 0);
+    ok = r.has_checkpoint && r.checkpoint_step == 10 && r.checkpoint_t == 0.1 &&
+         r.checkpoint_bytes == 4096 && r.checkpoint_seq == 2 && r.resumes == 0 &&
+         r.status == MPP_STATUS_INTERRUPTED;
+    store_run_clear(&r);
+    CHECKF(ok, "the recorded checkpoint reads back differently");
+
+    /* the resume: samples seq >= 2 and the snapshot at 20 go */
+    CHECK(store_run_resume(s, 9, &ck) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_run_get(s, 9, &r) == 0);
+    ok = r.status == MPP_STATUS_QUEUED && r.steps == 10 && r.resumes == 1 && r.error == NULL &&
+         r.finished_at == 0 && r.started_at == 1700000301.0 && r.has_checkpoint &&
+         r.checkpoint_step == 10;
+    store_run_clear(&r);
+    CHECKF(ok, "the resumed run reads back differently");
+    mpm_energy_sample *es = NULL;
+    size_t nes = 0;
+    CHECK(store_energy_read(s, 9, 0, 0, &es, &nes) == 0);
+    ok = nes == 2 && es[0].step == 0 && es[1].step == 10;
+    free(es);
+    CHECKF(ok, "%zu samples after the resume, expected 2", nes);
+    store_run_extra x;
+    CHECK(store_run_extras(s, 9, &x) == 0);
+    ok = x.n_snapshots == 1 && x.snapshot_steps[0] == 10 && x.energy_count == 2 && x.last_seq == 1;
+    store_run_extra_clear(&x);
+    CHECKF(ok, "the snapshots after the checkpoint were not deleted");
+    /* running again: started_at stays the first start */
+    CHECK(store_run_set_status(s, 9, MPP_STATUS_RUNNING, 1700000400.0, NULL) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_run_get(s, 9, &r) == 0);
+    ok = r.status == MPP_STATUS_RUNNING && r.started_at == 1700000301.0;
+    store_run_clear(&r);
+    CHECKF(ok, "a resumed run's start time changed");
+
+    /* a finished run cannot be resumed: nothing of it changes */
+    CHECK(store_run_resume(s, 7, &ck) == 0); /* enqueued; fails when applied */
+    char werr[512];
+    CHECK(store_flush(s) == MPM_EIO);
+    store_last_write_error(s, werr, sizeof werr);
+    CHECKF(strstr(werr, "run 7 already ended (finished)"), "%s", werr);
+    CHECK(store_energy_read(s, 7, 0, 0, &es, &nes) == 0);
+    free(es);
+    CHECKF(nes == 2, "a refused resume deleted samples (%zu left)", nes);
+    CHECK(store_run_get(s, 7, &r) == 0);
+    ok = r.status == MPP_STATUS_FINISHED && r.resumes == 0 && !r.has_checkpoint;
+    store_run_clear(&r);
+    CHECKF(ok, "a refused resume changed the run");
+
+    /* cleared */
+    CHECK(store_run_checkpoint(s, 9, NULL) == 0);
+    CHECK(store_flush(s) == 0);
+    CHECK(store_run_get(s, 9, &r) == 0);
+    ok = !r.has_checkpoint && r.checkpoint_step == -1 && r.resumes == 1;
+    store_run_clear(&r);
+    CHECKF(ok, "a cleared checkpoint still reads back");
     store_close(&s);
     int64_t cnt = -1;
     CHECK(store_exec_raw(path,

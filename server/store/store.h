@@ -46,7 +46,7 @@
 #include <stdint.h>
 
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 7
+#define STORE_SCHEMA_VERSION 8
 
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))
@@ -91,7 +91,27 @@ typedef struct {
     /* who submitted it (schema 7): a client's CURVE public key in Z85, or
      * "local"; NULL on insert: ""; runs stored before read "" */
     const char *owner;
+    /* the run's last checkpoint (schema 8; store_run_checkpoint): has_checkpoint
+     * 0 = none (checkpoint_step -1); its step, simulated time, file size and
+     * the seq its run's next energy sample takes; and how many times
+     * store_run_resume() continued the run (insert ignores all of them) */
+    int has_checkpoint;
+    int64_t checkpoint_step;
+    double checkpoint_t;
+    int64_t checkpoint_bytes, checkpoint_seq;
+    int64_t resumes;
 } store_run;
+
+/* A checkpoint of a run as the store records it (store_run_checkpoint,
+ * store_run_resume): the step and simulated time it holds, its file's size
+ * and the seq of the first energy sample after it (the samples recorded
+ * then: seq 0 .. energy_seq - 1). */
+typedef struct {
+    int64_t step;
+    double t;
+    int64_t bytes;
+    int64_t energy_seq;
+} store_checkpoint;
 
 /* How a run ended (store_run_finish). */
 typedef struct {
@@ -231,6 +251,20 @@ int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s, doubl
 
 /* Ends a run: terminal status, end time, final counters, energies, error. */
 int store_run_finish(store *s, int64_t id, const store_run_end *end);
+
+/* Records a run's last checkpoint (ck), or that it has none (ck NULL), in
+ * any status: the run's checkpoint file (srv) is written before, deleted
+ * after this. */
+int store_run_checkpoint(store *s, int64_t id, const store_checkpoint *ck);
+
+/* Continues an INTERRUPTED run from checkpoint ck, in one transaction: the
+ * energy samples with seq >= ck->energy_seq and the snapshots past
+ * ck->step are deleted (a resumed run records them again), and the run
+ * becomes 'queued' again with steps = ck->step, its end time, error,
+ * warning and balance cleared, the checkpoint recorded and resumes + 1.
+ * Fails as a write error ("run N already ended" / not interrupted) when
+ * the run is not INTERRUPTED when the write applies. */
+int store_run_resume(store *s, int64_t id, const store_checkpoint *ck);
 
 /* Appends n energy samples of run_id (one queue entry; each sample keeps
  * its seq).  Every field is stored but dim: reads give the run's dim.

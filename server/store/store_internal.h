@@ -37,7 +37,9 @@ typedef enum {
     OP_RUN_PROGRESS,
     OP_RUN_FINISH,
     OP_ENERGY,
-    OP_SNAPSHOT
+    OP_SNAPSHOT,
+    OP_RUN_CHECKPOINT,
+    OP_RUN_RESUME
 } op_kind;
 
 typedef struct op {
@@ -64,6 +66,10 @@ typedef struct op {
             mpm_energy_sample *v;
         } en;                /* ENERGY */
         store_snapshot snap; /* SNAPSHOT */
+        struct {
+            int has;
+            store_checkpoint ck;
+        } ck; /* RUN_CHECKPOINT, RUN_RESUME */
     } u;
     /* copies of strings / blobs / samples follow, at OP_HDR */
 } op;
@@ -80,6 +86,10 @@ enum {
     WS_INS_ENERGY,
     WS_PUT_SNAP,
     WS_GET_STATUS,
+    WS_CHECKPOINT,
+    WS_RESUME_RUN,
+    WS_RESUME_ENERGY,
+    WS_RESUME_SNAPS,
     WS_COUNT
 };
 

@@ -153,6 +153,16 @@ static const char *const migrations[] = {
      * index serves the per-client disk quota (store_owner_bytes). */
     "ALTER TABLE runs ADD COLUMN owner TEXT NOT NULL DEFAULT '';"
     "CREATE INDEX runs_by_owner ON runs(owner, id);",
+    /* 7 -> 8: resumable runs (issue 12, RunInfo.checkpoint_step/_t,
+     * .resumes): the run's last checkpoint (its step, simulated time, file
+     * size and the seq of the next energy sample; NULL = none) and the
+     * number of times it was resumed.  Runs stored before have none and
+     * were never resumed. */
+    "ALTER TABLE runs ADD COLUMN checkpoint_step INTEGER;"
+    "ALTER TABLE runs ADD COLUMN checkpoint_t REAL;"
+    "ALTER TABLE runs ADD COLUMN checkpoint_bytes INTEGER;"
+    "ALTER TABLE runs ADD COLUMN checkpoint_seq INTEGER;"
+    "ALTER TABLE runs ADD COLUMN resumes INTEGER NOT NULL DEFAULT 0;",
 };
 
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,

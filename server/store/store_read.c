@@ -142,8 +142,9 @@ static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out, s
     "id, name, length(case_pb), method, \"update\", dim, particles, nodes,"   \
     " status, submitted_at, started_at, finished_at, steps, wall_s,"          \
     " psteps_per_s, kinetic, strain, potential, external_work, total, error," \
-    " server_version, transfer, balance_error, warning, owner"
-#define RUN_COL_CASE 26
+    " server_version, transfer, balance_error, warning, owner,"               \
+    " checkpoint_step, checkpoint_t, checkpoint_bytes, checkpoint_seq, resumes"
+#define RUN_COL_CASE 31
 
 void store_run_clear(store_run *r)
 {
@@ -193,6 +194,12 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     r->energy.total = col_real_nan(st, 19);
     r->has_balance = sqlite3_column_type(st, 23) != SQLITE_NULL;
     r->balance_error = r->has_balance ? sqlite3_column_double(st, 23) : 0;
+    r->has_checkpoint = sqlite3_column_type(st, 26) != SQLITE_NULL;
+    r->checkpoint_step = r->has_checkpoint ? sqlite3_column_int64(st, 26) : -1;
+    r->checkpoint_t = r->has_checkpoint ? sqlite3_column_double(st, 27) : 0;
+    r->checkpoint_bytes = r->has_checkpoint ? sqlite3_column_int64(st, 28) : 0;
+    r->checkpoint_seq = r->has_checkpoint ? sqlite3_column_int64(st, 29) : 0;
+    r->resumes = sqlite3_column_int64(st, 30);
     int rc;
     if ((rc = col_strdup(db, st, 1, &r->name)) || (rc = col_strdup(db, st, 20, &r->error)) ||
         (rc = col_strdup(db, st, 21, &r->server_version)) ||

@@ -92,7 +92,8 @@ static const char *const writer_sql[WS_COUNT] = {
                    " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14,"
                    " ?15, ?16, ?17, ?18, ?19)",
     [WS_UPD_STATUS] = "UPDATE runs SET status = ?2,"
-                      " started_at = CASE WHEN ?2 = 'running' THEN ?3 ELSE started_at END,"
+                      " started_at = CASE WHEN ?2 = 'running' THEN COALESCE(started_at, ?3)"
+                      "   ELSE started_at END,"
                       " finished_at = CASE WHEN ?2 IN ('finished','failed','cancelled',"
                       "   'interrupted') THEN ?3 ELSE finished_at END,"
                       " error = COALESCE(?4, error)"
@@ -114,6 +115,16 @@ static const char *const writer_sql[WS_COUNT] = {
     [WS_PUT_SNAP] = "INSERT OR REPLACE INTO snapshots (run_id, step, t, n, dim, fields, data)"
                     " VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
     [WS_GET_STATUS] = "SELECT status FROM runs WHERE id = ?1",
+    [WS_CHECKPOINT] = "UPDATE runs SET checkpoint_step = ?2, checkpoint_t = ?3,"
+                      " checkpoint_bytes = ?4, checkpoint_seq = ?5 WHERE id = ?1",
+    [WS_RESUME_RUN] = "UPDATE runs SET status = 'queued', finished_at = NULL, error = NULL,"
+                      " warning = NULL, balance_error = NULL, steps = ?2,"
+                      " kinetic = NULL, strain = NULL, potential = NULL, external_work = NULL,"
+                      " total = NULL, checkpoint_step = ?2, checkpoint_t = ?3,"
+                      " checkpoint_bytes = ?4, checkpoint_seq = ?5, resumes = resumes + 1"
+                      " WHERE id = ?1 AND status = 'interrupted'",
+    [WS_RESUME_ENERGY] = "DELETE FROM energy WHERE run_id = ?1 AND seq >= ?2",
+    [WS_RESUME_SNAPS] = "DELETE FROM snapshots WHERE run_id = ?1 AND step > ?2",
 };
 
 static struct timespec to_timespec(double t)
@@ -272,6 +283,42 @@ static int apply_energy(store *s, const op *o)
     return 0;
 }
 
+/* Records a checkpoint (OP_RUN_CHECKPOINT), or resumes a run from one
+ * (OP_RUN_RESUME: the run first, then, if it was interrupted, what the
+ * resumed run records again goes); 0 or -1 after recording the error. */
+static int apply_checkpoint(store *s, const op *o)
+{
+    const store_checkpoint *ck = &o->u.ck.ck;
+    int resume = o->kind == OP_RUN_RESUME, has = o->u.ck.has;
+    sqlite3_stmt *st = s->ws[resume ? WS_RESUME_RUN : WS_CHECKPOINT];
+    const char *what = resume ? "resume run" : "record checkpoint";
+    int rc = SQLITE_OK;
+    BIND(sqlite3_bind_int64(st, 1, o->run_id));
+    BIND(has ? sqlite3_bind_int64(st, 2, ck->step) : sqlite3_bind_null(st, 2));
+    BIND(has ? sqlite3_bind_double(st, 3, ck->t) : sqlite3_bind_null(st, 3));
+    BIND(has ? sqlite3_bind_int64(st, 4, ck->bytes) : sqlite3_bind_null(st, 4));
+    BIND(has ? sqlite3_bind_int64(st, 5, ck->energy_seq) : sqlite3_bind_null(st, 5));
+    rc = ws_run(st, rc);
+    if (rc == SQLITE_DONE && sqlite3_changes(s->wdb) == 0) {
+        char why[160];
+        run_state(s, o->run_id, why, sizeof why);
+        write_error(s, 1, "%s: %s%s", what, why, resume ? " (not interrupted)" : "");
+        return -1;
+    }
+    for (int k = 0; resume && rc == SQLITE_DONE && k < 2; k++) {
+        st = s->ws[k ? WS_RESUME_SNAPS : WS_RESUME_ENERGY];
+        rc = SQLITE_OK;
+        BIND(sqlite3_bind_int64(st, 1, o->run_id));
+        BIND(sqlite3_bind_int64(st, 2, k ? ck->step : ck->energy_seq));
+        rc = ws_run(st, rc);
+    }
+    if (rc != SQLITE_DONE) {
+        write_error(s, 1, "%s (run %" PRId64 "): %s", what, o->run_id, sqlite3_errmsg(s->wdb));
+        return -1;
+    }
+    return 0;
+}
+
 /* Applies one op inside the open transaction.  Returns 0, or -1 after
  * recording the error. */
 static int apply_op(store *s, op *o)
@@ -348,6 +395,8 @@ static int apply_op(store *s, op *o)
         break;
     }
     case OP_ENERGY: return apply_energy(s, o);
+    case OP_RUN_CHECKPOINT:
+    case OP_RUN_RESUME: return apply_checkpoint(s, o);
     case OP_SNAPSHOT: {
         const store_snapshot *sn = &o->u.snap;
         st = s->ws[WS_PUT_SNAP];
@@ -764,6 +813,30 @@ int store_run_finish(store *s, int64_t id, const store_run_end *end)
     o->u.fin.warning = tail_str(&cur, end->warning);
     if (o->u.fin.finished_at == 0) o->u.fin.finished_at = store_time_now();
     return submit(s, o, 0);
+}
+
+static int checkpoint_op(store *s, op_kind kind, int64_t id, const store_checkpoint *ck)
+{
+    if (!s) return sti_fail(MPM_EINVAL, "store_run_checkpoint: NULL store");
+    if (ck && (ck->step < 0 || ck->energy_seq < 0 || ck->bytes < 0))
+        return sti_fail(MPM_EINVAL, "negative checkpoint step, seq or size");
+    char *cur;
+    op *o = op_new(kind, id, 0, &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.ck.has = ck != NULL;
+    if (ck) o->u.ck.ck = *ck;
+    return submit(s, o, 0);
+}
+
+int store_run_checkpoint(store *s, int64_t id, const store_checkpoint *ck)
+{
+    return checkpoint_op(s, OP_RUN_CHECKPOINT, id, ck);
+}
+
+int store_run_resume(store *s, int64_t id, const store_checkpoint *ck)
+{
+    if (!ck) return sti_fail(MPM_EINVAL, "store_run_resume: NULL checkpoint");
+    return checkpoint_op(s, OP_RUN_RESUME, id, ck);
 }
 
 int store_energy_append(store *s, int64_t run_id, const mpm_energy_sample *e, size_t n)
