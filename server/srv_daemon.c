@@ -34,6 +34,7 @@
  * the Finished(INTERRUPTED) of every job still reaches its watchers.
  */
 #include "srv_daemon.h"
+#include "srv_daemon_int.h"
 
 #include "mpp_msg.h"
 #include "srv_auth.h"
@@ -63,12 +64,6 @@
  * shutdown (a vanished peer holds the exit up this long, no longer). */
 #define SHUTDOWN_LINGER_MS 1000
 
-/* Job topics remembered as subscribed (so that a job submitted after its
- * watcher subscribed is streamed in full); more are not remembered (the
- * XPUB passes on only the first subscription of a topic and its last
- * unsubscription, so one entry per topic). */
-#define WATCHED_MAX 4096
-
 static volatile sig_atomic_t stop_signal, hup_signal;
 
 static void on_signal(int sig)
@@ -76,29 +71,16 @@ static void on_signal(int sig)
     stop_signal = sig;
 }
 
+int srv_daemon_stopping(const daemon_t *d)
+{
+    return stop_signal || d->stopping;
+}
+
 static void on_hup(int sig)
 {
     (void)sig;
     hup_signal = 1;
 }
-
-/* Size of an owner string: a Z85 key or SRV_OWNER_LOCAL, with its NUL. */
-#define OWNER_SIZE 48
-
-typedef struct {
-    const srv_config *cfg;
-    void *zctx, *router, *xpub, *pull;
-    store *st;
-    srv_pool *pool;
-    srv_auth *auth;
-    srv_budget *budget; /* the disk budgets */
-    int stopping;       /* shutting down: no new jobs */
-    uint64_t requests, bad_requests;
-    struct pending *pending, **pending_tail; /* reads waiting for a commit */
-    size_t npending;
-    uint64_t watched[WATCHED_MAX]; /* job topics somebody subscribes to */
-    size_t nwatched;
-} daemon_t;
 
 /* A request that waits, off the event loop: a read until the store has
  * committed every write its run (or, for a listing, any run) had enqueued
@@ -117,7 +99,7 @@ typedef struct pending {
  * keep up is not hidden behind an ever longer queue). */
 #define PENDING_MAX 4096
 
-static double wall_now(void)
+double srv_wall_now(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);
@@ -126,7 +108,7 @@ static double wall_now(void)
 
 /* ---- replies ---- */
 
-static void send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len)
+void srv_send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len)
 {
     if (!buf) {
         srv_warn(0, "out of memory encoding a reply");
@@ -141,20 +123,17 @@ static void send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len)
 
 /* Answers with the Error reply of an mpm_error (wire code, camelCase
  * field and text from the protocol library). */
-static void reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e)
+void srv_reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e)
 {
     uint8_t *buf = NULL;
     size_t len = 0;
     mpp_reply_error_from(e, &buf, &len);
-    send_reply(d, id, buf, len);
+    srv_send_reply(d, id, buf, len);
 }
 
 /* Answers with an error: code an MPM_E* code, field a path in the schema's
  * spelling ("" or NULL: none), the message without the field. */
-static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt,
-                        ...) __attribute__((format(printf, 5, 6)));
-static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt,
-                        ...)
+void srv_reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
 {
     char msg[1024];
     va_list ap;
@@ -163,7 +142,7 @@ static void reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field,
     va_end(ap);
     mpm_error e;
     mpm_fail(&e, code, field, "%s", msg);
-    reply_mpm_error(d, id, &e);
+    srv_reply_mpm_error(d, id, &e);
 }
 
 /* RunInfo from a stored run, with its last energy sample and stored
@@ -268,12 +247,12 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
         rc = 0;
     }
     if (rc == MPM_ENOTFOUND) {
-        reply_error(d, id, MPM_ENOTFOUND, field, "no %s %llu", what, (unsigned long long)run);
+        srv_reply_error(d, id, MPM_ENOTFOUND, field, "no %s %llu", what, (unsigned long long)run);
         return;
     }
     if (rc) {
-        reply_error(d, id, MPM_EINTERNAL, "", "reading %s %llu: %s", what, (unsigned long long)run,
-                    store_error()->message);
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "reading %s %llu: %s", what,
+                        (unsigned long long)run, store_error()->message);
         return;
     }
     mpp_run_info ri;
@@ -287,9 +266,10 @@ static void reply_run(daemon_t *d, zmq_msg_t *id, uint64_t run, int with_case, c
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_run(&ri, &buf, &len))
-        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode run %llu", (unsigned long long)run);
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot encode run %llu",
+                        (unsigned long long)run);
     else
-        send_reply(d, id, buf, len);
+        srv_send_reply(d, id, buf, len);
     store_run_extra_clear(&x);
     store_run_clear(&r);
 }
@@ -309,290 +289,7 @@ static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
 
 /* ---- requests ---- */
 
-/* The per-client quotas of a new job (Submit, Resume) of nparticles:
- * 1 when one refuses it (answered), else 0. */
-/* The client's quotas that do not depend on the case's records: its key's
- * settings, else the --client-max-* (particles per job, live jobs); *q gets
- * them for the disk checks that follow.  Replies and returns 1 when one
- * refuses, else 0.  Shared by Submit and Resume. */
-static int quota_refused(daemon_t *d, zmq_msg_t *id, const char *owner, size_t nparticles,
-                         srv_quota *q)
-{
-    srv_auth_quota(d->auth, d->cfg, owner, q);
-    if (q->max_particles > 0 && nparticles > (unsigned long long)q->max_particles) {
-        reply_error(d, id, MPM_ETOOBIG, "bodies",
-                    "the case has %zu particles, above this server's per-client quota of %lld "
-                    "(%s) for %s",
-                    nparticles, q->max_particles,
-                    q->max_particles == d->cfg->client_max_particles ? "--client-max-particles"
-                                                                     : "max-particles of its key",
-                    owner);
-        return 1;
-    }
-    if (q->max_jobs > 0) {
-        int live = srv_pool_owner_jobs(d->pool, owner);
-        if (live >= q->max_jobs) {
-            reply_error(d, id, MPM_EFULL, "",
-                        "%s has %d queued or running jobs, this server's per-client quota "
-                        "(%s %lld); retry when one has ended",
-                        owner, live,
-                        q->max_jobs == d->cfg->client_max_jobs ? "--client-max-jobs"
-                                                               : "max-jobs of its key",
-                        q->max_jobs);
-            return 1;
-        }
-    }
-    return 0;
-}
-
-/* Resume: the client's recorded bytes below its disk quota, and room in
- * the queue (the budgets then count the resumed run's writes as it runs).
- * Replies and returns 1 when refused. */
-static int resume_refused(daemon_t *d, zmq_msg_t *id, const char *owner, const srv_quota *q)
-{
-    if (q->max_disk_mb > 0) {
-        int64_t used = 0;
-        if (store_owner_bytes(d->st, owner, &used)) {
-            reply_error(d, id, MPM_EINTERNAL, "", "cannot check the disk quota: %s",
-                        store_error()->message);
-            return 1;
-        }
-        if (used >= q->max_disk_mb * 1048576LL) {
-            reply_error(d, id, MPM_ETOOBIG, "",
-                        "%s's recorded runs take %.1f MiB, this server's per-client quota is "
-                        "%lld MiB; ask its admin to free space",
-                        owner, (double)used / 1048576.0, q->max_disk_mb);
-            return 1;
-        }
-    }
-    if (!srv_pool_has_room(d->pool)) {
-        reply_error(d, id, MPM_EFULL, "",
-                    "the job queue is full (%d running, %d queued at most); retry later",
-                    d->cfg->workers, d->cfg->queue_max);
-        return 1;
-    }
-    return 0;
-}
-
-static void do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
-{
-    if (stop_signal || d->stopping) {
-        reply_error(d, id, MPM_EUNAVAIL, "", "mpmd is shutting down");
-        return;
-    }
-    mpp_case *sc = NULL;
-    mpm_error cerr;
-    /* checked and counted once, under this server's --max-particles */
-    int rc = mpp_case_from_pb(rq->case_pb, (size_t)d->cfg->max_particles, &sc, &cerr);
-    if (rc) {
-        reply_mpm_error(d, id, &cerr);
-        return;
-    }
-    size_t nparticles = sc->info.particles;
-    /* the client's quotas: its key's settings, else the --client-max-* */
-    srv_quota q;
-    if (quota_refused(d, id, owner, nparticles, &q)) {
-        mpp_case_destroy(&sc);
-        return;
-    }
-    /* in floating point: endTime / dt can be far beyond any integer type.
-     * With automatic dt, the largest dt the CFL condition can give (the
-     * materials' wave speed alone, particles at rest) makes the fewest
-     * steps: a case over the limit even so is refused now, any other is
-     * stopped at the limit while it runs (FAILED). */
-    double steps = 0, hmin = sc->c.grid.h[0];
-    for (int k = 1; k < sc->c.grid.dim; k++) hmin = fmin(hmin, sc->c.grid.h[k]);
-    double cfl = sc->c.cfl > 0 ? sc->c.cfl : MPM_DEFAULT_CFL; /* no default is larger */
-    int automatic = sc->has_end_time && !(sc->c.dt > 0);
-    if (!sc->has_end_time)
-        steps = (double)sc->steps;
-    else if (!automatic)
-        steps = ceil(sc->end_time / sc->c.dt - 0.5);
-    else if (sc->info.cmax > 0 && hmin > 0)
-        steps = ceil(sc->end_time * sc->info.cmax / (cfl * hmin) - 0.5);
-    if (!(steps <= (double)d->cfg->max_steps)) {
-        reply_error(d, id, MPM_ETOOBIG, sc->has_end_time ? "end_time" : "steps",
-                    "the case asks for %s%.15g steps%s, above this server's limit %lld "
-                    "(--max-steps)",
-                    automatic ? "at least " : "", steps,
-                    automatic          ? " (endTime / the largest CFL dt, C h / c)"
-                    : sc->has_end_time ? " (endTime / dt)"
-                                       : "",
-                    d->cfg->max_steps);
-        mpp_case_destroy(&sc);
-        return;
-    }
-    /* the disk budgets, on the bytes the run would record in those steps */
-    srv_disk_estimate de;
-    srv_budget_estimate(sc, steps, &de);
-    if (srv_budget_admit(d->budget, owner, q.max_disk_mb, &de, automatic, &cerr)) {
-        reply_mpm_error(d, id, &cerr);
-        mpp_case_destroy(&sc);
-        return;
-    }
-    if (!srv_pool_has_room(d->pool)) {
-        reply_error(d, id, MPM_EFULL, "",
-                    "the job queue is full (%d running, %d queued at most); retry later",
-                    d->cfg->workers, d->cfg->queue_max);
-        mpp_case_destroy(&sc);
-        return;
-    }
-    uint8_t *pb = NULL;
-    size_t pblen = 0;
-    /* the stored case names its method and update: it keeps its meaning
-     * whatever later defaults say */
-    mpp_case_pin_defaults(rq->case_pb);
-    if (mpp_case_pack(rq->case_pb, &pb, &pblen)) {
-        reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
-        mpp_case_destroy(&sc);
-        return;
-    }
-    size_t nodes = sc->info.nodes;
-    store_run r = {0};
-    r.name = sc->name;
-    r.case_pb = pb;
-    r.case_len = pblen;
-    r.method = sc->c.method;
-    r.update = sc->c.update;
-    r.transfer = sc->c.transfer;
-    r.dim = sc->c.grid.dim;
-    r.particles = (int64_t)nparticles;
-    r.nodes = (int64_t)nodes;
-    r.status = MPP_STATUS_QUEUED;
-    r.submitted_at = wall_now();
-    r.server_version = MPP_VERSION;
-    r.owner = owner;
-    int64_t run = 0;
-    rc = store_run_insert(d->st, &r, &run);
-    free(pb);
-    if (rc) {
-        reply_error(d, id, MPM_EINTERNAL, "", "cannot record the run: %s", store_error()->message);
-        mpp_case_destroy(&sc);
-        return;
-    }
-    const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
-    char namebuf[128];
-    snprintf(namebuf, sizeof namebuf, "%s", name);
-    /* a watcher may have subscribed before the job existed: it is watched
-     * from its first step */
-    int watched = 0;
-    for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == (uint64_t)run;
-    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes, watched,
-                         owner);
-    if (rc) {
-        store_run_end end = {0};
-        end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
-        end.error = rc == MPM_EFULL      ? "job queue full"
-                    : rc == MPM_EUNAVAIL ? STORE_INTERRUPTED_QUEUED
-                                         : "out of memory";
-        store_run_finish(d->st, run, &end);
-        reply_error(d, id, rc, "", "%s", end.error);
-        mpp_case_destroy(&sc);
-        return;
-    }
-    srv_log((uint64_t)run, "queued '%s' of %s: %ldD %s %s %s, %zu particles", namebuf, owner,
-            (long)r.dim,
-            r.method == MPM_METHOD_GIMP       ? "GMPM"
-            : r.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
-            : r.method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
-            : r.method == MPM_METHOD_CPDI     ? "CPDI"
-                                              : "MPM",
-            r.update == MPM_MUSL  ? "musl"
-            : r.update == MPM_USL ? "usl"
-                                  : "usf",
-            r.transfer == MPM_TRANSFER_APIC ? "APIC" : "FLIP", nparticles);
-    uint8_t *buf = NULL;
-    size_t len = 0;
-    mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
-    send_reply(d, id, buf, len);
-}
-
-/* Queues an INTERRUPTED run again to continue from its checkpoint file,
- * read and verified here (a damaged one is refused in the reply), with the
- * stored case; the job keeps the run's id and owner (issue 12). */
-static void do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
-{
-    unsigned long long run = rq->id;
-    srv_job_info ji;
-    store_run r;
-    if (stop_signal || d->stopping) {
-        reply_error(d, id, MPM_EUNAVAIL, "", "mpmd is shutting down");
-        return;
-    }
-    if (srv_pool_info(d->pool, run, &ji) == 0) {
-        reply_error(d, id, MPM_ECONFLICT, "run_id", "run %llu is %s", run,
-                    mpp_status_name(ji.status));
-        return;
-    }
-    int rc = store_run_get(d->st, (int64_t)run, &r), nf = rc == MPM_ENOTFOUND;
-    if (rc) {
-        reply_error(d, id, nf ? rc : MPM_EINTERNAL, nf ? "run_id" : "", "%s %llu%s%s",
-                    nf ? "no run" : "reading run", run, nf ? "" : ": ",
-                    nf ? "" : store_error()->message);
-        return;
-    }
-    const char *who = r.owner && r.owner[0] ? r.owner : owner;
-    char err[1700];
-    srv_ckpt_file ck = {0};
-    Mpmd__Case *pb = NULL;
-    mpp_case *sc = NULL;
-    mpm_error cerr;
-    srv_quota q;
-    if (strcmp(who, owner) && !srv_auth_is_admin(d->auth, owner)) {
-        reply_error(d, id, MPM_EFORBIDDEN, "run_id",
-                    "run %llu was submitted by %s: only its owner or an admin key "
-                    "(--admin-keys) may resume it",
-                    run, who);
-    } else if (r.status != MPP_STATUS_INTERRUPTED) {
-        reply_error(d, id, MPM_ECONFLICT, "run_id",
-                    "run %llu is %s: only an INTERRUPTED run can be resumed", run,
-                    mpp_status_name((int)r.status));
-    } else if ((rc = srv_ckpt_read(d->cfg->db, (int64_t)run, &ck, err, sizeof err))) {
-        if (rc == MPM_ESYNTAX) srv_warn(run, "resume refused: %s", err);
-        reply_error(d, id, rc == MPM_ENOTFOUND || rc == MPM_ESYNTAX ? MPM_ECONFLICT : rc, "run_id",
-                    "%s%s", err, rc == MPM_ESYNTAX ? "; the run stays INTERRUPTED" : "");
-    } else if (mpp_case_unpack(r.case_pb, r.case_len, 0, &pb, &cerr) ||
-               mpp_case_from_pb(pb, (size_t)d->cfg->max_particles, &sc, &cerr)) {
-        reply_mpm_error(d, id, &cerr);
-    } else if (!quota_refused(d, id, who, sc->info.particles, &q) &&
-               !resume_refused(d, id, who, &q)) {
-        /* the last sample before the checkpoint (the end's if it ends there) */
-        mpm_energy_sample last = {.step = -1}, *es = NULL;
-        size_t n = 0;
-        if (ck.rec.energy_seq > 0 &&
-            store_energy_read(d->st, (int64_t)run, ck.rec.energy_seq - 1, 1, &es, &n) == 0 &&
-            n == 1 && es[0].seq == (uint64_t)(ck.rec.energy_seq - 1))
-            last = es[0];
-        free(es);
-        int watched = 0;
-        for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == run;
-        size_t np = sc->info.particles, nodes = sc->info.nodes;
-        store_checkpoint rec = ck.rec;
-        if ((rc = store_run_resume(d->st, (int64_t)run, &rec))) {
-            reply_error(d, id, MPM_EINTERNAL, "", "cannot record the resume: %s",
-                        store_error()->message);
-        } else if ((rc = srv_pool_resume(d->pool, run, &sc, r.submitted_at, np, nodes, watched, who,
-                                         &ck, isnan(r.wall_s) ? 0 : r.wall_s,
-                                         last.step >= 0 ? &last : NULL))) {
-            store_run_end end = {0};
-            end.status = MPP_STATUS_INTERRUPTED;
-            end.steps = rec.step;
-            end.error = rc == MPM_EFULL ? "resume refused: job queue full" : "resume failed";
-            store_run_finish(d->st, (int64_t)run, &end);
-            reply_error(d, id, rc, "", "%s", end.error);
-        } else {
-            srv_log(run, "resumed by %s from its checkpoint at step %lld (t = %g)", owner,
-                    (long long)rec.step, rec.t);
-            uint8_t *buf = NULL;
-            size_t len = 0;
-            if (!mpp_reply_submit_ok(run, run, &buf, &len)) send_reply(d, id, buf, len);
-        }
-    }
-    mpp_case_destroy(&sc);
-    mpp_case_pb_free(&pb);
-    srv_ckpt_file_clear(&ck);
-    store_run_clear(&r);
-}
+/* Submit and Resume: srv_submit.c. */
 
 /* ---- requests in order, reads after their commit ---- */
 
@@ -621,10 +318,10 @@ static int read_denied(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_reques
         srv_auth_is_admin(d->auth, owner))
         return 0;
     srv_log(rq->id, "read by %s refused: the run is %s's (--private-runs)", owner, who);
-    reply_error(d, id, MPM_EFORBIDDEN, rq->kind == MPP_REQ_STATUS ? "job_id" : "run_id",
-                "run %llu is another client's: this server shows each key only its own runs "
-                "(--private-runs)",
-                (unsigned long long)rq->id);
+    srv_reply_error(d, id, MPM_EFORBIDDEN, rq->kind == MPP_REQ_STATUS ? "job_id" : "run_id",
+                    "run %llu is another client's: this server shows each key only its own runs "
+                    "(--private-runs)",
+                    (unsigned long long)rq->id);
     return 1;
 }
 
@@ -639,7 +336,8 @@ static void answer_read(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_reque
     case MPP_REQ_LIST_RUNS: do_list(d, id, owner, rq); break;
     case MPP_REQ_GET_ENERGY: do_energy(d, id, rq); break;
     case MPP_REQ_GET_SNAPSHOT: do_snapshot(d, id, rq); break;
-    default: reply_error(d, id, MPM_EINTERNAL, "", "request kind %d is not a read", (int)rq->kind);
+    default:
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "request kind %d is not a read", (int)rq->kind);
     }
 }
 
@@ -699,10 +397,10 @@ static void enqueue(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *
     }
     if (p) zmq_msg_close(&p->id);
     free(p);
-    reply_error(d, id, MPM_EUNAVAIL, "",
-                "%zu requests are waiting for the store; retry "
-                "later",
-                d->npending);
+    srv_reply_error(d, id, MPM_EUNAVAIL, "",
+                    "%zu requests are waiting for the store; retry "
+                    "later",
+                    d->npending);
 }
 
 /* Runs a decoded request, in arrival order per client: behind a waiting
@@ -767,10 +465,10 @@ static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t jo
     }
     if (who[0] && strcmp(who, owner) && !srv_auth_is_admin(d->auth, owner)) {
         srv_warn(job, "cancel by %s refused: the job is %s's", owner, who);
-        reply_error(d, id, MPM_EFORBIDDEN, "job_id",
-                    "job %llu was submitted by %s: only its owner or an admin key "
-                    "(--admin-keys) may cancel it",
-                    (unsigned long long)job, who);
+        srv_reply_error(d, id, MPM_EFORBIDDEN, "job_id",
+                        "job %llu was submitted by %s: only its owner or an admin key "
+                        "(--admin-keys) may cancel it",
+                        (unsigned long long)job, who);
         return 1;
     }
     int rc = srv_pool_cancel(d->pool, job, &msg, &len);
@@ -779,17 +477,17 @@ static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t jo
         store_run r;
         int src = store_run_get(d->st, (int64_t)job, &r);
         if (src == MPM_ENOTFOUND) {
-            reply_error(d, id, MPM_ENOTFOUND, "job_id", "no job %llu", (unsigned long long)job);
+            srv_reply_error(d, id, MPM_ENOTFOUND, "job_id", "no job %llu", (unsigned long long)job);
             return 1;
         }
         if (!src) {
-            reply_error(d, id, MPM_ECONFLICT, "job_id", "job %llu already ended (%s)",
-                        (unsigned long long)job, mpp_status_name((int)r.status));
+            srv_reply_error(d, id, MPM_ECONFLICT, "job_id", "job %llu already ended (%s)",
+                            (unsigned long long)job, mpp_status_name((int)r.status));
             store_run_clear(&r);
             return 1;
         }
-        reply_error(d, id, MPM_EINTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
-                    store_error()->message);
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "reading job %llu: %s", (unsigned long long)job,
+                        store_error()->message);
         return 1;
     }
     if (rc == SRV_CANCEL_RUNNING) srv_log(job, "cancel requested by %s", owner);
@@ -803,7 +501,7 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == MPM_ENOTFOUND) {
-        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu", (unsigned long long)rq->id);
+        srv_reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu", (unsigned long long)rq->id);
         return;
     }
     int dim = rc ? 3 : r.dim;
@@ -813,8 +511,8 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     int64_t from = rq->from_seq > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)rq->from_seq;
     rc = store_energy_read(d->st, (int64_t)rq->id, from, limit + 1, &es, &nes);
     if (rc) {
-        reply_error(d, id, MPM_EINTERNAL, "", "reading energies of run %llu: %s",
-                    (unsigned long long)rq->id, store_error()->message);
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "reading energies of run %llu: %s",
+                        (unsigned long long)rq->id, store_error()->message);
         return;
     }
     int more = nes > limit;
@@ -823,9 +521,9 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_energy(rq->id, es, n, more, &buf, &len))
-        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu energy samples", n);
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu energy samples", n);
     else
-        send_reply(d, id, buf, len);
+        srv_send_reply(d, id, buf, len);
     free(es);
 }
 
@@ -834,7 +532,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == MPM_ENOTFOUND) {
-        reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu", (unsigned long long)rq->id);
+        srv_reply_error(d, id, MPM_ENOTFOUND, "run_id", "no run %llu", (unsigned long long)rq->id);
         return;
     }
     if (!rc) store_run_clear(&r); /* else the snapshot read reports it */
@@ -845,19 +543,19 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
              : store_snapshot_get(d->st, (int64_t)rq->id, rq->has_step ? rq->step : -1, &ss);
     if (rc == MPM_ENOTFOUND) {
         if (rq->has_step)
-            reply_error(d, id, MPM_ENOTFOUND, "step",
-                        "run %llu has no stored snapshot at "
-                        "step %lld",
-                        (unsigned long long)rq->id, (long long)rq->step);
+            srv_reply_error(d, id, MPM_ENOTFOUND, "step",
+                            "run %llu has no stored snapshot at "
+                            "step %lld",
+                            (unsigned long long)rq->id, (long long)rq->step);
         else
-            reply_error(d, id, MPM_ENOTFOUND, "run_id",
-                        "run %llu has no stored snapshot "
-                        "(the case must set output.recordSnapshots)",
-                        (unsigned long long)rq->id);
+            srv_reply_error(d, id, MPM_ENOTFOUND, "run_id",
+                            "run %llu has no stored snapshot "
+                            "(the case must set output.recordSnapshots)",
+                            (unsigned long long)rq->id);
         return;
     }
     if (rc) {
-        reply_error(d, id, MPM_EINTERNAL, "", "reading a snapshot: %s", store_error()->message);
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "reading a snapshot: %s", store_error()->message);
         return;
     }
     size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
@@ -872,16 +570,17 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
             off += cnt[i];
         }
     if (off * sizeof(double) != ss.size) {
-        reply_error(d, id, MPM_EINTERNAL, "",
-                    "stored snapshot of run %llu at step %lld is "
-                    "corrupt (%zu bytes, expected %zu)",
-                    (unsigned long long)rq->id, (long long)ss.step, ss.size, off * sizeof(double));
+        srv_reply_error(d, id, MPM_EINTERNAL, "",
+                        "stored snapshot of run %llu at step %lld is "
+                        "corrupt (%zu bytes, expected %zu)",
+                        (unsigned long long)rq->id, (long long)ss.step, ss.size,
+                        off * sizeof(double));
         store_snapshot_clear(&ss);
         return;
     }
     int *yl = arr[7] ? malloc(n * sizeof(int) + 1) : NULL;
     if (arr[7] && !yl) {
-        reply_error(d, id, MPM_ENOMEM, "", "out of memory for a snapshot of %zu particles", n);
+        srv_reply_error(d, id, MPM_ENOMEM, "", "out of memory for a snapshot of %zu particles", n);
         store_snapshot_clear(&ss);
         return;
     }
@@ -891,9 +590,9 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_snapshot(&s, &buf, &len))
-        reply_error(d, id, MPM_EINTERNAL, "", "cannot encode the snapshot");
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot encode the snapshot");
     else
-        send_reply(d, id, buf, len);
+        srv_send_reply(d, id, buf, len);
     free(yl);
     store_snapshot_clear(&ss);
 }
@@ -905,24 +604,24 @@ static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *
     if (d->cfg->private_runs && !srv_auth_is_admin(d->auth, owner)) f.owner = owner;
     if (rq->status) {
         if (rq->status < MPP_STATUS_MIN || rq->status > MPP_STATUS_MAX) {
-            reply_error(d, id, MPM_EREQUEST, "list_runs.status",
-                        "unknown "
-                        "value %d",
-                        rq->status);
+            srv_reply_error(d, id, MPM_EREQUEST, "list_runs.status",
+                            "unknown "
+                            "value %d",
+                            rq->status);
             return;
         }
         f.status_mask = STORE_STATUS_BIT(rq->status);
     }
     if (rq->limit > LIST_MAX) {
-        reply_error(d, id, MPM_ETOOBIG, "list_runs.limit",
-                    "%u is above this "
-                    "server's maximum of %u runs per listing",
-                    rq->limit, LIST_MAX);
+        srv_reply_error(d, id, MPM_ETOOBIG, "list_runs.limit",
+                        "%u is above this "
+                        "server's maximum of %u runs per listing",
+                        rq->limit, LIST_MAX);
         return;
     }
     if (rq->before_id > (uint64_t)INT64_MAX) {
-        reply_error(d, id, MPM_EREQUEST, "list_runs.before_run_id", "%llu: not a run id",
-                    (unsigned long long)rq->before_id);
+        srv_reply_error(d, id, MPM_EREQUEST, "list_runs.before_run_id", "%llu: not a run id",
+                        (unsigned long long)rq->before_id);
         return;
     }
     /* one more than asked for: whether a next page exists */
@@ -931,14 +630,14 @@ static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *
     store_run *runs = NULL;
     size_t n = 0;
     if (store_run_list(d->st, &f, &runs, &n)) {
-        reply_error(d, id, MPM_EINTERNAL, "", "listing runs: %s", store_error()->message);
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "listing runs: %s", store_error()->message);
         return;
     }
     mpp_run_info *ri = calloc(n ? n : 1, sizeof *ri);
     mpm_energy_sample *es = calloc(n ? n : 1, sizeof *es);
     store_run_extra *xs = calloc(n ? n : 1, sizeof *xs);
     if (!ri || !es || !xs) {
-        reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
     } else {
         uint64_t next = 0;
         size_t ns = n;
@@ -950,9 +649,9 @@ static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *
         uint8_t *buf = NULL;
         size_t len = 0;
         if (mpp_reply_runs_page(ri, ns, next, &buf, &len))
-            reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", ns);
+            srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", ns);
         else
-            send_reply(d, id, buf, len);
+            srv_send_reply(d, id, buf, len);
     }
     if (xs) /* calloc'd: an entry run_info() did not fill clears as nothing */
         for (size_t i = 0; i < n; i++) store_run_extra_clear(&xs[i]);
@@ -969,11 +668,11 @@ static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request 
     uint8_t *buf = NULL;
     size_t len = 0;
     switch (rq->kind) {
-    case MPP_REQ_SUBMIT: do_submit(d, id, owner, rq); break;
-    case MPP_REQ_RESUME: do_resume(d, id, owner, rq); break;
+    case MPP_REQ_SUBMIT: srv_do_submit(d, id, owner, rq); break;
+    case MPP_REQ_RESUME: srv_do_resume(d, id, owner, rq); break;
     case MPP_REQ_PING:
         mpp_reply_pong(MPP_VERSION, d->cfg->stream_endpoint, &buf, &len);
-        send_reply(d, id, buf, len);
+        srv_send_reply(d, id, buf, len);
         break;
     case MPP_REQ_VERSION: {
         int maj, min, pat;
@@ -985,10 +684,10 @@ static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request 
         snprintf(sv, sizeof sv, "%d", MPP_SCHEMA_VERSION);
         const char *vers[] = {zv, store_sqlite_version(), mpp_protobuf_c_version(), sv};
         mpp_reply_version(MPP_VERSION, names, vers, 4, &buf, &len);
-        send_reply(d, id, buf, len);
+        srv_send_reply(d, id, buf, len);
         break;
     }
-    default: reply_error(d, id, MPM_EREQUEST, "", "unknown request kind %d", (int)rq->kind);
+    default: srv_reply_error(d, id, MPM_EREQUEST, "", "unknown request kind %d", (int)rq->kind);
     }
 }
 
@@ -1000,10 +699,10 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const char *owner, const 
     if (size > (size_t)d->cfg->max_request_bytes) {
         d->bad_requests++;
         srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
-        reply_error(d, id, MPM_ETOOBIG, "",
-                    "request of %zu bytes is above this server's "
-                    "limit of %lld bytes (--max-request-bytes)",
-                    size, d->cfg->max_request_bytes);
+        srv_reply_error(d, id, MPM_ETOOBIG, "",
+                        "request of %zu bytes is above this server's "
+                        "limit of %lld bytes (--max-request-bytes)",
+                        size, d->cfg->max_request_bytes);
         return;
     }
     mpm_error rerr;
@@ -1012,7 +711,7 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const char *owner, const 
         char text[sizeof rerr.message + 256];
         d->bad_requests++;
         srv_debug(0, "bad request: %s", mpm_error_text(&rerr, MPM_FIELD_JSON, text, sizeof text));
-        reply_mpm_error(d, id, &rerr);
+        srv_reply_mpm_error(d, id, &rerr);
         mpp_request_clear(&rq);
         return;
     }
@@ -1058,8 +757,9 @@ static void on_router(daemon_t *d)
                  total);
         /* answerable when the delimiter is there: the peer speaks the protocol */
         if (nparts >= 2 && zmq_msg_size(&part[1]) == 0)
-            reply_error(d, &part[0], MPM_EREQUEST, "",
-                        "expected 1 request frame after the empty delimiter, got %zu", total - 2);
+            srv_reply_error(d, &part[0], MPM_EREQUEST, "",
+                            "expected 1 request frame after the empty delimiter, got %zu",
+                            total - 2);
     }
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
 }

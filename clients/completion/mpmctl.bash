@@ -27,7 +27,7 @@ _mpmctl()
 {
     local cur=${COMP_WORDS[COMP_CWORD]} prev=""
     ((COMP_CWORD > 0)) && prev=${COMP_WORDS[COMP_CWORD - 1]}
-    local commands="submit watch runs show energy snapshot export plot cancel ping version keygen"
+    local commands="submit watch runs show energy snapshot export plot resume cancel ping version keygen"
     local global="--endpoint --stream --timeout --keys --help"
     local withval="--endpoint --stream --timeout --keys --status --limit --before --step -o --out --name --terminal"
     COMPREPLY=()
@@ -81,7 +81,7 @@ _mpmctl()
 
     local opts
     case $cmd in
-    submit) opts="--watch --csv --json" ;;
+    submit | resume) opts="--watch --csv --json" ;;
     watch | energy) opts="--csv --json" ;;
     runs) opts="--status --limit --before --all --json" ;;
     show) opts="--json --case" ;;
@@ -100,7 +100,7 @@ _mpmctl()
     submit)
         ((npos == 0)) && COMPREPLY=($(compgen -f -X '!*.json' -- "$cur") $(compgen -d -S / -- "$cur"))
         ;;
-    watch | show | energy | snapshot | plot | cancel)
+    watch | show | energy | snapshot | plot | resume | cancel)
         ((npos == 0)) && COMPREPLY=($(compgen -W "$(_mpmctl_runs)" -- "$cur"))
         ;;
     export)

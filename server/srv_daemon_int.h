@@ -1,0 +1,70 @@
+/*
+ * srv_daemon_int.h - what the daemon's files share inside it: the daemon's
+ * state (daemon_t, owned by srv_daemon.c's event loop, used on the main
+ * thread only), the reply helpers, and the request handlers that live
+ * outside srv_daemon.c (srv_submit.c: Submit and Resume).  Not an API:
+ * nothing outside server/srv_daemon*.c and srv_submit.c includes it.
+ */
+#ifndef SRV_DAEMON_INT_H
+#define SRV_DAEMON_INT_H
+
+#include "mpp_msg.h"
+#include "srv_auth.h"
+#include "srv_budget.h"
+#include "srv_config.h"
+#include "srv_pool.h"
+#include "store.h"
+
+#include <stddef.h>
+#include <stdint.h>
+#include <zmq.h>
+
+/* Size of an owner string: a Z85 key or SRV_OWNER_LOCAL, with its NUL. */
+#define OWNER_SIZE 48
+
+/* Job topics remembered as subscribed (so that a job submitted after its
+ * watcher subscribed is streamed in full); more are not remembered (the
+ * XPUB passes on only the first subscription of a topic and its last
+ * unsubscription, so one entry per topic). */
+#define WATCHED_MAX 4096
+
+typedef struct {
+    const srv_config *cfg;
+    void *zctx, *router, *xpub, *pull;
+    store *st;
+    srv_pool *pool;
+    srv_auth *auth;
+    srv_budget *budget; /* the disk budgets */
+    int stopping;       /* shutting down: no new jobs */
+    uint64_t requests, bad_requests;
+    struct pending *pending, **pending_tail; /* reads waiting for a commit */
+    size_t npending;
+    uint64_t watched[WATCHED_MAX]; /* job topics somebody subscribes to */
+    size_t nwatched;
+} daemon_t;
+
+/* 1 once a signal asked the daemon to stop or it is shutting down: no new
+ * jobs. */
+int srv_daemon_stopping(const daemon_t *d);
+
+/* Sends one reply (buf, len; freed; NULL: out of memory, logged) to the
+ * client whose identity frame is id. */
+void srv_send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len);
+/* Answers with the Error reply of an mpm_error (wire code, camelCase
+ * field and text from the protocol library). */
+void srv_reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e);
+/* Answers with an error: code an MPM_E* code, field a path in the schema's
+ * spelling ("" or NULL: none), the message without the field. */
+void srv_reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+/* Unix time now, in seconds. */
+double srv_wall_now(void);
+
+/* Submit: checks the case, the limits, the quotas and the disk budgets,
+ * records the run and queues its job; answers SubmitOk or an Error. */
+void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
+/* Resume: an INTERRUPTED run of the requester's (or any, for an admin key)
+ * goes on from its checkpoint file; answers SubmitOk or an Error. */
+void srv_do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
+
+#endif
