@@ -93,6 +93,9 @@ typedef struct pending {
     mpp_request rq;         /* the decoded request (a read: owns nothing big) */
     int begun;              /* its action is done and its ticket taken */
     uint64_t ticket;        /* store_ticket() when it began */
+    uint8_t *reply;         /* a reply made, waiting for ticket's commit
+                             * (srv_reply_after_commit()), or NULL */
+    size_t reply_len;
     struct pending *next;
 } pending;
 /* Reads waiting at once, at most; more get UNAVAILABLE (a store that cannot
@@ -379,28 +382,48 @@ static int peer_waits(daemon_t *d, zmq_msg_t *id, const pending *before)
 
 /* Queues a request (taken over: *rq is emptied); on failure answers
  * UNAVAILABLE. */
-static void enqueue(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq, int begun,
-                    uint64_t ticket)
+static pending *enqueue(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq, int begun,
+                        uint64_t ticket)
 {
     pending *p = d->npending < PENDING_MAX ? calloc(1, sizeof *p) : NULL;
     if (p && zmq_msg_init(&p->id) == 0 && zmq_msg_copy(&p->id, id) == 0) {
         snprintf(p->owner, sizeof p->owner, "%s", owner);
-        p->rq = *rq;
-        memset(rq, 0, sizeof *rq);
+        if (rq) {
+            p->rq = *rq;
+            memset(rq, 0, sizeof *rq);
+        }
         p->begun = begun;
         p->ticket = ticket;
         if (!d->pending_tail) d->pending_tail = &d->pending;
         *d->pending_tail = p;
         d->pending_tail = &p->next;
         d->npending++;
-        return;
+        return p;
     }
     if (p) zmq_msg_close(&p->id);
     free(p);
-    srv_reply_error(d, id, MPM_EUNAVAIL, "",
-                    "%zu requests are waiting for the store; retry "
-                    "later",
-                    d->npending);
+    if (rq)
+        srv_reply_error(d, id, MPM_EUNAVAIL, "",
+                        "%zu requests are waiting for the store; retry "
+                        "later",
+                        d->npending);
+    return NULL;
+}
+
+void srv_reply_after_commit(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run,
+                            uint8_t *buf, size_t len)
+{
+    uint64_t ticket = store_ticket(d->st, run);
+    pending *p = NULL;
+    if (buf && !store_ticket_done(d->st, ticket) && (p = enqueue(d, id, owner, NULL, 1, ticket))) {
+        p->reply = buf;
+        p->reply_len = len;
+        return;
+    }
+    /* committed already, or no room to wait: the commit first, then the
+     * reply (a blocking flush; only when PENDING_MAX requests wait) */
+    if (buf && !store_ticket_done(d->st, ticket)) store_flush(d->st);
+    srv_send_reply(d, id, buf, len);
 }
 
 /* Runs a decoded request, in arrival order per client: behind a waiting
@@ -422,8 +445,19 @@ static void serve_pending(daemon_t *d)
     d->pending_tail = &d->pending;
     while (*pp) {
         pending *p = *pp;
-        if (!peer_waits(d, &p->id, p) &&
-            run_request(d, &p->id, p->owner, &p->rq, &p->begun, &p->ticket)) {
+        int done = 0;
+        if (p->reply) {
+            /* a reply that waited for its write's commit */
+            if (store_ticket_done(d->st, p->ticket)) {
+                srv_send_reply(d, &p->id, p->reply, p->reply_len);
+                p->reply = NULL;
+                done = 1;
+            }
+        } else {
+            done = !peer_waits(d, &p->id, p) &&
+                   run_request(d, &p->id, p->owner, &p->rq, &p->begun, &p->ticket);
+        }
+        if (done) {
             *pp = p->next;
             zmq_msg_close(&p->id);
             mpp_request_clear(&p->rq);
@@ -442,6 +476,20 @@ static void drain_pending(daemon_t *d)
     if (!d->pending) return;
     store_flush(d->st);
     serve_pending(d);
+    /* what still waits (a store that lost its writes): answered, freed */
+    while (d->pending) {
+        pending *p = d->pending;
+        d->pending = p->next;
+        if (p->reply)
+            srv_send_reply(d, &p->id, p->reply, p->reply_len);
+        else
+            srv_reply_error(d, &p->id, MPM_EUNAVAIL, "", "mpmd is shutting down");
+        zmq_msg_close(&p->id);
+        mpp_request_clear(&p->rq);
+        free(p);
+        d->npending--;
+    }
+    d->pending_tail = &d->pending;
 }
 
 /* A cancel's action: 0 when the job was live (its reply, the run, follows

@@ -57,6 +57,12 @@ void srv_reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e);
  * spelling ("" or NULL: none), the message without the field. */
 void srv_reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
+/* Sends a reply (buf, len; taken over) once the store has committed every
+ * write run's record had enqueued (store_ticket()): so that a client told
+ * "accepted" finds its run recorded, whatever happens to the daemon after
+ * the reply.  Later requests of the same client wait behind it. */
+void srv_reply_after_commit(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run,
+                            uint8_t *buf, size_t len);
 /* Unix time now, in seconds. */
 double srv_wall_now(void);
 

@@ -209,7 +209,9 @@ void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
     uint8_t *buf = NULL;
     size_t len = 0;
     mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
-    srv_send_reply(d, id, buf, len);
+    /* "accepted" only once the run's row is on disk: a crash after the
+     * reply cannot lose the job */
+    srv_reply_after_commit(d, id, owner, run, buf, len);
 }
 
 /* Queues an INTERRUPTED run again to continue from its checkpoint file,
@@ -291,7 +293,8 @@ void srv_do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
                     (long long)rec.step, rec.t);
             uint8_t *buf = NULL;
             size_t len = 0;
-            if (!mpp_reply_submit_ok(run, run, &buf, &len)) srv_send_reply(d, id, buf, len);
+            if (!mpp_reply_submit_ok(run, run, &buf, &len))
+                srv_reply_after_commit(d, id, owner, (int64_t)run, buf, len);
         }
     }
     mpp_case_destroy(&sc);

@@ -70,6 +70,12 @@ static unsigned long rel_seed(void)
     return e && *e ? strtoul(e, NULL, 10) : (unsigned long)time(NULL) ^ (unsigned long)getpid();
 }
 
+static int cmp_ll(const void *a, const void *b)
+{
+    long long x = *(const long long *)a, y = *(const long long *)b;
+    return (x > y) - (x < y);
+}
+
 /* ---- kill -9 ------------------------------------------------------------------------ */
 
 typedef struct {
@@ -204,7 +210,11 @@ DTEST(rel_kill9)
     size_t shortl = 0, longl = 0;
     kill_tally k = {0};
     unsigned long long checked = 0;
-    long accepted = 0, in_flight_ok = 0;
+    long accepted = 0, in_flight_ok = 0, nids = 0;
+    /* every id a SubmitOk gave (mpmd replies only once the run's row is
+     * committed): each must be found after the kills */
+    long long *ids = calloc((size_t)kills * 4 + 1, sizeof *ids);
+    CHECK(ids);
     unsigned long seed = rel_seed();
     srand48((long)seed);
     snprintf(dir, sizeof dir, "%s/kill9", tmp);
@@ -234,9 +244,11 @@ DTEST(rel_kill9)
          * while the kill comes */
         long long id = submit_bytes(d.ep, longb, longl, 30, code, sizeof code);
         accepted += id > 0;
+        if (id > 0) ids[nids++] = id;
         for (int j = 0; j < 2; j++) {
             long long s = submit_bytes(d.ep, shortb, shortl, 30, code, sizeof code);
             accepted += s > 0;
+            if (s > 0) ids[nids++] = s;
             if (s < 0) t_fail(__FILE__, __LINE__, "kill %d: a submit got no reply", round);
         }
         td_bg bg;
@@ -248,9 +260,12 @@ DTEST(rel_kill9)
          * may or may not have been recorded */
         td_kill9(&d);
         kill(bg.pid, SIGKILL);
-        td_out o;
+        td_out o = {0};
         CHECK(td_bg_wait(&bg, 60, &o) == 0);
-        in_flight_ok += o.status == 0 && job_of(o.out) > 0;
+        if (o.status == 0 && job_of(o.out) > 0) {
+            in_flight_ok++;
+            ids[nids++] = (long long)job_of(o.out);
+        }
         td_out_free(&o);
         if (td_start(&d, dir, extra)) return;
         check_after_restart(&d, &checked, &k);
@@ -263,6 +278,33 @@ DTEST(rel_kill9)
     check_after_restart(&d, &none, &last);
     k.integrity_failures += last.integrity_failures;
     k.bad_state += last.bad_state;
+    /* nothing accepted is lost: every id a SubmitOk gave is listed */
+    long lost = nids;
+    {
+        td_out o = {0};
+        char **lines = NULL;
+        long long *listed = NULL;
+        size_t nl = 0, nlisted = 0;
+        if (td_ctl(&d, 60, &o, "runs", "--all", "--json", NULL) == 0 && o.status == 0) {
+            nl = td_lines(o.out, &lines);
+            listed = calloc(nl + 1, sizeof *listed);
+            for (size_t i = 0; listed && i < nl; i++) {
+                json_t *r = parse_line(lines[i]);
+                if (r) listed[nlisted++] = jint(r, "runId");
+                json_decref(r);
+            }
+            free(lines);
+            if (listed) {
+                qsort(listed, nlisted, sizeof *listed, cmp_ll);
+                lost = 0;
+                for (long i = 0; i < nids; i++)
+                    lost += !bsearch(&ids[i], listed, nlisted, sizeof *listed, cmp_ll);
+            }
+        }
+        td_out_free(&o);
+        free(listed);
+    }
+    free(ids);
     free(shortb);
     free(longb);
     TLOG("%d kills in %.1f s (mean delay %.0f ms): %ld runs, %ld finished, %ld interrupted, "
@@ -272,9 +314,10 @@ DTEST(rel_kill9)
          k.samples, k.snapshots, accepted, in_flight_ok);
     printf(
         "reliability: kill9 kills=%d runs=%ld interrupted=%ld finished=%ld integrity_failures=%ld "
-        "bad_state=%ld bad_data=%ld seed=%lu\n",
+        "bad_state=%ld bad_data=%ld accepted=%ld accepted_lost=%ld seed=%lu\n",
         kills, k.runs, k.interrupted, k.finished, k.integrity_failures, k.bad_state, k.bad_data,
-        seed);
+        nids, lost, seed);
+    CHECKF(lost == 0, "%ld of the %ld jobs a SubmitOk accepted are not recorded", lost, nids);
     CHECKF(k.integrity_failures == 0 && k.bad_state == 0 && k.bad_data == 0,
            "integrity failures %ld, runs not ended %ld, runs with damaged data %ld",
            k.integrity_failures, k.bad_state, k.bad_data);
@@ -317,12 +360,6 @@ static void *load_run(void *arg)
         }
     }
     return NULL;
-}
-
-static int cmp_ll(const void *a, const void *b)
-{
-    long long x = *(const long long *)a, y = *(const long long *)b;
-    return (x > y) - (x < y);
 }
 
 DTEST(rel_load)
