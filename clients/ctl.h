@@ -117,6 +117,11 @@ int ctl_call_reply(ctl_conn *c, const mpp_request *rq, mpp_reply_kind want, mpp_
  * reports and the control endpoint. */
 int ctl_stream_endpoint(ctl_conn *c, char *out, size_t n);
 
+/* Reads and drops the rest of a multipart message on sock (a stream
+ * message with more frames than [topic][body]), once its last frame read
+ * had ZMQ_RCVMORE set. */
+void ctl_drain_more(void *sock);
+
 /* Fetches every energy sample of a run with seq >= from (paging while the
  * server says `more`) and calls fn for each in order with the decoded
  * sample; fn returns 0 to go on, negative to stop with that code. */

@@ -426,3 +426,16 @@ int ctl_fetch_energy(ctl_conn *c, uint64_t run_id, uint64_t from, ctl_sample_fn 
         from = last + 1;
     }
 }
+
+void ctl_drain_more(void *sock)
+{
+    int more = 1;
+    size_t ml = sizeof more;
+    while (more) {
+        zmq_msg_t x;
+        if (zmq_msg_init(&x)) break;
+        if (zmq_msg_recv(&x, sock, 0) < 0 || zmq_getsockopt(sock, ZMQ_RCVMORE, &more, &ml))
+            more = 0;
+        zmq_msg_close(&x);
+    }
+}

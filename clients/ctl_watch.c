@@ -401,13 +401,7 @@ static int recv_stream(watch_t *w, void *sub)
     if (zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml)) more = 0;
     if (more) {
         /* more than two frames: drain and drop */
-        while (more) {
-            zmq_msg_t x;
-            if (zmq_msg_init(&x)) break;
-            if (zmq_msg_recv(&x, sub, 0) < 0 || zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml))
-                more = 0;
-            zmq_msg_close(&x);
-        }
+        ctl_drain_more(sub);
         goto out;
     }
     rc = on_message(w, zmq_msg_data(&body), zmq_msg_size(&body));

@@ -26,7 +26,7 @@ DTEST(daemon_stalled_watcher_bounded)
 {
     const char *tmp = t_tmpdir();
     const char *extra[] = {"--workers", "1", "--verbose", NULL};
-    char dir[300], path[400], st[32];
+    char dir[300], path[400];
     td_daemon d;
     td_out o;
     void *zctx = NULL, *sub = NULL;
@@ -74,15 +74,7 @@ DTEST(daemon_stalled_watcher_bounded)
             goto out;
         }
         td_out_free(&o);
-        if (td_wait_status(&d, job, "FINISHED|FAILED|CANCELLED|INTERRUPTED", 300, st, sizeof st) ||
-            strcmp(st, "FINISHED")) {
-            t_fail(__FILE__, __LINE__, "job %llu: %s", job, st);
-            goto out;
-        }
-        json_t *r = show_json(&d, job);
-        wall[job - 1] = r ? jnum(r, "wallS") : -1;
-        json_decref(r);
-        hwm[job - 1] = proc_kb(d.pid, "VmHWM:");
+        if (td_job_peak(&d, job, &wall[job - 1], &hwm[job - 1])) goto out;
     }
     {
         size_t len = 0;

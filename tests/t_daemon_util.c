@@ -415,3 +415,18 @@ uint8_t *inflated_request(size_t nbodies, size_t *n)
     *n = k;
     return m;
 }
+
+int td_job_peak(const td_daemon *d, unsigned long long job, double *wall, long *hwm)
+{
+    char st[32];
+    if (td_wait_status(d, job, "FINISHED|FAILED|CANCELLED|INTERRUPTED", 300, st, sizeof st) ||
+        strcmp(st, "FINISHED")) {
+        t_fail(__FILE__, __LINE__, "job %llu: %s", job, st);
+        return -1;
+    }
+    json_t *r = show_json(d, job);
+    *wall = r ? jnum(r, "wallS") : -1;
+    json_decref(r);
+    *hwm = proc_kb(d->pid, "VmHWM:");
+    return 0;
+}

@@ -92,6 +92,10 @@ int expect_ctl(const td_daemon *d, int status, const char *want, const char *con
 
 /* A line of /proc/PID/status ("VmHWM:", "VmRSS:") in kB, or -1. */
 long proc_kb(pid_t pid, const char *key);
+/* Waits (300 s at most) for job to end: 0 when it FINISHED, with its
+ * RunInfo.wallS in *wall and mpmd's peak RSS so far (VmHWM, kB) in *hwm;
+ * else a test failure naming the status it ended with, and -1. */
+int td_job_peak(const td_daemon *d, unsigned long long job, double *wall, long *hwm);
 
 /* A SUB on the daemon's stream subscribed to job's topic, receiving at
  * most hwm messages into its queue (a watcher that stalls stalls there);

@@ -69,7 +69,7 @@ DTEST(rel_watchers)
     const long stream_mb = 64;
     const int full = t_stress_full();
     const long long steps = full ? 200 : 40;
-    char dir[300], path[400], st[32];
+    char dir[300], path[400];
     td_daemon d;
     td_out o;
     void *zctx = NULL, *sub = NULL;
@@ -117,15 +117,7 @@ DTEST(rel_watchers)
             waitpid(watcher, NULL, 0);
             watcher = 0;
         }
-        if (td_wait_status(&d, job, "FINISHED|FAILED|CANCELLED|INTERRUPTED", 300, st, sizeof st) ||
-            strcmp(st, "FINISHED")) {
-            t_fail(__FILE__, __LINE__, "job %llu: %s", job, st);
-            goto out;
-        }
-        json_t *r = show_json(&d, job);
-        wall[job - 1] = r ? jnum(r, "wallS") : -1;
-        json_decref(r);
-        hwm[job - 1] = proc_kb(d.pid, "VmHWM:");
+        if (td_job_peak(&d, job, &wall[job - 1], &hwm[job - 1])) goto out;
     }
     /* the bound: the peak with no watcher + --stream-buffer-mb + a margin
      * for one message in flight (5.5 MB) and the allocator; under ASan the

@@ -199,13 +199,7 @@ static void recv_one(void *sub)
     if (zmq_msg_recv(&body, sub, 0) < 0) goto out;
     if (zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml)) more = 0;
     if (more) {
-        while (more) {
-            zmq_msg_t x;
-            if (zmq_msg_init(&x)) break;
-            if (zmq_msg_recv(&x, sub, 0) < 0 || zmq_getsockopt(sub, ZMQ_RCVMORE, &more, &ml))
-                more = 0;
-            zmq_msg_close(&x);
-        }
+        ctl_drain_more(sub);
         goto out;
     }
     on_message(zmq_msg_data(&body), zmq_msg_size(&body));
