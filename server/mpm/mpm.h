@@ -543,6 +543,11 @@ void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
 size_t mpm_sim_checkpoint_size(const mpm_sim *sim);
 int mpm_sim_checkpoint_save(const mpm_sim *sim, void *buf, size_t n);
 int mpm_sim_checkpoint_load(mpm_sim *sim, const void *buf, size_t n, mpm_error *err);
+/* The checks of mpm_sim_checkpoint_load() that need no simulation: the
+ * header, the sizes and the checksum (for a caller that stores blobs and
+ * wants to refuse a damaged one before building a simulation).  Returns 0,
+ * MPM_ESYNTAX or MPM_EVERSION with err filled. */
+int mpm_checkpoint_verify(const void *buf, size_t n, mpm_error *err);
 
 /* Copies the requested particle fields into caller arrays. */
 void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);

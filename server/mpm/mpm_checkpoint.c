@@ -422,9 +422,8 @@ static const char *layout_value(int i, uint64_t v, char *buf, size_t n)
     return buf;
 }
 
-/* Everything checked before anything is written. */
-static int check_blob(const mpm_sim *s, const unsigned char *b, size_t n, ck_header *h,
-                      mpm_error *err)
+/* The checks that need no simulation: header, sizes, checksum. */
+static int verify_blob(const unsigned char *b, size_t n, ck_header *h, mpm_error *err)
 {
     if (!b || n < sizeof *h)
         return mpm_fail(err, MPM_ESYNTAX, CK_FIELD,
@@ -459,6 +458,22 @@ static int check_blob(const mpm_sim *s, const unsigned char *b, size_t n, ck_hea
                         "checksum mismatch: the checkpoint is corrupted (%016llx stored, "
                         "%016llx computed)",
                         (unsigned long long)h->checksum, (unsigned long long)ck);
+    return 0;
+}
+
+int mpm_checkpoint_verify(const void *buf, size_t n, mpm_error *err)
+{
+    ck_header h;
+    mpm_error_clear(err);
+    return verify_blob(buf, n, &h, err);
+}
+
+/* Everything checked before anything is written. */
+static int check_blob(const mpm_sim *s, const unsigned char *b, size_t n, ck_header *h,
+                      mpm_error *err)
+{
+    int rc = verify_blob(b, n, h, err);
+    if (rc) return rc;
     uint64_t L[L_COUNT];
     layout_of(s, L);
     for (int i = 0; i < L_COUNT; i++)
