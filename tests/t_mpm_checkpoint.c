@@ -17,6 +17,7 @@
  */
 #include "t.h"
 #include "mpm.h"
+#include "mpm_internal.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -429,58 +430,60 @@ static int ck_matrix(const ck_spec *specs, size_t n)
     return fails;
 }
 
+static const ck_spec ck_1d[] = {
+    {"1D MPM USF elastic gravity", 1, MPM_METHOD_MPM, MPM_USF, FL, 0, LE, SI, F_GRAV, 1, 21},
+    {"1D GIMP MUSL neo-Hookean traction(t)", 1, MPM_METHOD_GIMP, MPM_MUSL, FL, 0, NH, SI,
+     F_TRAC_TF | F_FIXED_DT, 2, 21},
+    {"1D BSPLINE2 USL J2 PIC-blend", 1, MPM_METHOD_BSPLINE2, MPM_USL, FL, 0.3, J2, SI, F_GRAV, 1,
+     32},
+    {"1D BSPLINE3 USF elastic point load", 1, MPM_METHOD_BSPLINE3, MPM_USF, FL, 0, LE, CV,
+     F_POINT | F_GRAV, 2, 17},
+    {"1D CPDI USF elastic viscous damping", 1, MPM_METHOD_CPDI, MPM_USF, FL, 0, LE, DF,
+     F_DAMP_V | F_GRAV, 2, 21},
+};
+
+static const ck_spec ck_2d[] = {
+    {"2D GIMP USF elastic gravity K=32", 2, MPM_METHOD_GIMP, MPM_USF, FL, 0, LE, SI, F_GRAV, 1, 32},
+    {"2D MPM MUSL APIC forces+point", 2, MPM_METHOD_MPM, MPM_MUSL, AP, 0, LE, SI,
+     F_POINT | F_PFORCES, 2, 21},
+    {"2D BSPLINE2 USL DP geostatic", 2, MPM_METHOD_BSPLINE2, MPM_USL, FL, 0, DP, SI, F_GEO, 2, 21},
+    {"2D BSPLINE3 MUSL MC friction", 2, MPM_METHOD_BSPLINE3, MPM_MUSL, FL, 0, MC, SI,
+     F_GRAV | F_FRIC, 1, 21},
+    {"2D CPDI USF neo-Hookean DET_F", 2, MPM_METHOD_CPDI, MPM_USF, FL, 0, NH, DF,
+     F_POINT | F_FIXED_DT, 2, 21},
+    {"2D GIMP USL J2 prescribed(t) CONSTANT", 2, MPM_METHOD_GIMP, MPM_USL, FL, 0, J2, CV,
+     F_GRAV | F_PRES, 1, 21},
+    {"2D GIMP USF APIC DP local damping", 2, MPM_METHOD_GIMP, MPM_USF, AP, 0, DP, SI,
+     F_GEO | F_DAMP_L, 2, 21},
+    {"2D MPM MUSL MC prescribed traction(t)", 2, MPM_METHOD_MPM, MPM_MUSL, FL, 0.2, MC, DF,
+     F_GRAV | F_PRES | F_TRAC_TF | F_FIXED_DT, 2, 32},
+};
+
+static const ck_spec ck_3d[] = {
+    {"3D GIMP MUSL elastic traction(t)", 3, MPM_METHOD_GIMP, MPM_MUSL, FL, 0, LE, SI,
+     F_GRAV | F_TRAC_TF, 2, 21},
+    {"3D CPDI USL MC friction", 3, MPM_METHOD_CPDI, MPM_USL, FL, 0, MC, SI, F_GRAV | F_FRIC, 2, 21},
+    {"3D MPM USF J2 PIC-blend forces", 3, MPM_METHOD_MPM, MPM_USF, FL, 0.5, J2, SI,
+     F_GRAV | F_PFORCES, 1, 21},
+    {"3D BSPLINE2 MUSL DP viscous damping", 3, MPM_METHOD_BSPLINE2, MPM_MUSL, FL, 0, DP, SI,
+     F_GEO | F_DAMP_V, 2, 32},
+};
+
+#define NSPEC(a) (sizeof(a) / sizeof *(a))
+
 TEST(ckpt_same_bits_1d)
 {
-    static const ck_spec specs[] = {
-        {"1D MPM USF elastic gravity", 1, MPM_METHOD_MPM, MPM_USF, FL, 0, LE, SI, F_GRAV, 1, 21},
-        {"1D GIMP MUSL neo-Hookean traction(t)", 1, MPM_METHOD_GIMP, MPM_MUSL, FL, 0, NH, SI,
-         F_TRAC_TF | F_FIXED_DT, 2, 21},
-        {"1D BSPLINE2 USL J2 PIC-blend", 1, MPM_METHOD_BSPLINE2, MPM_USL, FL, 0.3, J2, SI, F_GRAV,
-         1, 32},
-        {"1D BSPLINE3 USF elastic point load", 1, MPM_METHOD_BSPLINE3, MPM_USF, FL, 0, LE, CV,
-         F_POINT | F_GRAV, 2, 17},
-        {"1D CPDI USF elastic viscous damping", 1, MPM_METHOD_CPDI, MPM_USF, FL, 0, LE, DF,
-         F_DAMP_V | F_GRAV, 2, 21},
-    };
-    CHECK(ck_matrix(specs, sizeof specs / sizeof *specs) == 0);
+    CHECK(ck_matrix(ck_1d, NSPEC(ck_1d)) == 0);
 }
 
 TEST(ckpt_same_bits_2d)
 {
-    static const ck_spec specs[] = {
-        {"2D GIMP USF elastic gravity K=32", 2, MPM_METHOD_GIMP, MPM_USF, FL, 0, LE, SI, F_GRAV, 1,
-         32},
-        {"2D MPM MUSL APIC forces+point", 2, MPM_METHOD_MPM, MPM_MUSL, AP, 0, LE, SI,
-         F_POINT | F_PFORCES, 2, 21},
-        {"2D BSPLINE2 USL DP geostatic", 2, MPM_METHOD_BSPLINE2, MPM_USL, FL, 0, DP, SI, F_GEO, 2,
-         21},
-        {"2D BSPLINE3 MUSL MC friction", 2, MPM_METHOD_BSPLINE3, MPM_MUSL, FL, 0, MC, SI,
-         F_GRAV | F_FRIC, 1, 21},
-        {"2D CPDI USF neo-Hookean DET_F", 2, MPM_METHOD_CPDI, MPM_USF, FL, 0, NH, DF,
-         F_POINT | F_FIXED_DT, 2, 21},
-        {"2D GIMP USL J2 prescribed(t) CONSTANT", 2, MPM_METHOD_GIMP, MPM_USL, FL, 0, J2, CV,
-         F_GRAV | F_PRES, 1, 21},
-        {"2D GIMP USF APIC DP local damping", 2, MPM_METHOD_GIMP, MPM_USF, AP, 0, DP, SI,
-         F_GEO | F_DAMP_L, 2, 21},
-        {"2D MPM MUSL MC prescribed traction(t)", 2, MPM_METHOD_MPM, MPM_MUSL, FL, 0.2, MC, DF,
-         F_GRAV | F_PRES | F_TRAC_TF | F_FIXED_DT, 2, 32},
-    };
-    CHECK(ck_matrix(specs, sizeof specs / sizeof *specs) == 0);
+    CHECK(ck_matrix(ck_2d, NSPEC(ck_2d)) == 0);
 }
 
 TEST(ckpt_same_bits_3d)
 {
-    static const ck_spec specs[] = {
-        {"3D GIMP MUSL elastic traction(t)", 3, MPM_METHOD_GIMP, MPM_MUSL, FL, 0, LE, SI,
-         F_GRAV | F_TRAC_TF, 2, 21},
-        {"3D CPDI USL MC friction", 3, MPM_METHOD_CPDI, MPM_USL, FL, 0, MC, SI, F_GRAV | F_FRIC, 2,
-         21},
-        {"3D MPM USF J2 PIC-blend forces", 3, MPM_METHOD_MPM, MPM_USF, FL, 0.5, J2, SI,
-         F_GRAV | F_PFORCES, 1, 21},
-        {"3D BSPLINE2 MUSL DP viscous damping", 3, MPM_METHOD_BSPLINE2, MPM_MUSL, FL, 0, DP, SI,
-         F_GEO | F_DAMP_V, 2, 32},
-    };
-    CHECK(ck_matrix(specs, sizeof specs / sizeof *specs) == 0);
+    CHECK(ck_matrix(ck_3d, NSPEC(ck_3d)) == 0);
 }
 
 /* ---- refusals ---- */
@@ -734,4 +737,98 @@ TEST(ckpt_failed_run_stays_failed)
     TLOG("loaded failed run: %s", mpm_sim_error(b)->message);
     mpm_sim_destroy(&a);
     mpm_sim_destroy(&b);
+}
+
+/* ---- fused steps (issue 14) ----
+ *
+ * A step's moving pass also scatters the next step's first grid fields
+ * (G2P2G), except before a step that sorts the particles.  The same
+ * spec run straight to CK_N with fusion off (mpm_sim_set_fused(s, 0):
+ * every step scatters on its own, as every release before) and on must end
+ * with the same bits: the fused scatter does the same arithmetic in the
+ * same order into the same per-thread sums.  The fused run must have
+ * fused: after step 17 the next scatter is made, after step 16 (the next
+ * step sorts) it is not; CPDI has no fused passes and refuses to fuse. */
+static int fu_compare(const ck_spec *sp, char *msg, size_t nmsg)
+{
+    ck_case k;
+    ck_build(&k, sp);
+    mpm_error err;
+    ck_state st[2];
+    memset(st, 0, sizeof st);
+    int ok = 0, cpdi = sp->method == MPM_METHOD_CPDI;
+    for (int fused = 0; fused < 2; fused++) {
+        mpm_sim *s = mpm_sim_new(&k.c, NULL, &err);
+        if (!s) {
+            snprintf(msg, nmsg, "%s: mpm_sim_new failed", sp->name);
+            goto out;
+        }
+        int rc = mpm_sim_set_fused(s, fused);
+        if (fused && cpdi ? rc != MPM_EINVAL : rc != 0) {
+            snprintf(msg, nmsg, "%s: mpm_sim_set_fused(%d) returned %d", sp->name, fused, rc);
+            mpm_sim_destroy(&s);
+            goto out;
+        }
+        rc = (sp->feat & F_PFORCES) ? ck_forces(s, 0.2) : 0;
+        if (!rc) rc = ck_run(s, sp, 16);
+        int g16 = s->gnext;
+        if (!rc) rc = ck_run(s, sp, 17);
+        int g17 = s->gnext;
+        if (!rc) rc = ck_run(s, sp, CK_N);
+        if (rc || ck_state_get(s, &st[fused])) {
+            snprintf(msg, nmsg, "%s: the %s run failed (%d)", sp->name, fused ? "fused" : "unfused",
+                     rc);
+            mpm_sim_destroy(&s);
+            goto out;
+        }
+        mpm_sim_destroy(&s);
+        int want17 = fused && !cpdi;
+        if (g16 != 0 || g17 != want17) {
+            snprintf(msg, nmsg,
+                     "%s: %s run: next scatter made after step 16: %d, 17: %d (want 0, %d)",
+                     sp->name, fused ? "fused" : "unfused", g16, g17, want17);
+            goto out;
+        }
+    }
+    const char *d = ck_state_diff(&st[0], &st[1]);
+    if (*d) {
+        snprintf(msg, nmsg, "%s: after %d steps, %s differs between fused and unfused steps",
+                 sp->name, CK_N, d);
+        goto out;
+    }
+    ok = 1;
+out:
+    ck_state_free(&st[0]);
+    ck_state_free(&st[1]);
+    return ok ? 0 : -1;
+}
+
+/* the transfers and updates the checkpoint matrix lacks */
+static const ck_spec fu_more[] = {
+    {"1D MPM USL elastic gravity", 1, MPM_METHOD_MPM, MPM_USL, FL, 0, LE, SI, F_GRAV, 2, 0},
+    {"2D MPM USF elastic 3 threads", 2, MPM_METHOD_MPM, MPM_USF, FL, 0, LE, SI, F_GRAV, 3, 0},
+    {"2D BSPLINE2 MUSL APIC gravity", 2, MPM_METHOD_BSPLINE2, MPM_MUSL, AP, 0, LE, SI, F_GRAV, 2,
+     0},
+    {"2D BSPLINE2 USL APIC point load", 2, MPM_METHOD_BSPLINE2, MPM_USL, AP, 0, LE, SI, F_POINT, 1,
+     0},
+    {"3D BSPLINE3 USL APIC elastic", 3, MPM_METHOD_BSPLINE3, MPM_USL, AP, 0, LE, SI, F_GRAV, 2, 0},
+    {"3D GIMP MUSL PIC-blend", 3, MPM_METHOD_GIMP, MPM_MUSL, FL, 0.3, LE, SI, F_GRAV, 2, 0},
+};
+
+TEST(fuse_same_bits)
+{
+    const ck_spec *lists[] = {ck_1d, ck_2d, ck_3d, fu_more};
+    size_t counts[] = {NSPEC(ck_1d), NSPEC(ck_2d), NSPEC(ck_3d), NSPEC(fu_more)};
+    int n = 0;
+    for (int l = 0; l < 4; l++)
+        for (size_t i = 0; i < counts[l]; i++) {
+            char msg[768] = "";
+            if (fu_compare(&lists[l][i], msg, sizeof msg)) {
+                t_fail(__FILE__, __LINE__, "%s", msg);
+                continue;
+            }
+            n++;
+            TLOG("%-38s fused = unfused, bit for bit, after %d steps", lists[l][i].name, CK_N);
+        }
+    CHECK(n == (int)(counts[0] + counts[1] + counts[2] + counts[3]));
 }

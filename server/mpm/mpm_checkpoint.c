@@ -611,8 +611,11 @@ int mpm_sim_checkpoint_load(mpm_sim *s, const void *buf, size_t n, mpm_error *er
     }
     s->ecache_ok = 0;
     s->step_energy = 0;
-    /* what the last particle pass recorded: the slices' support boxes and
-     * row extents of the particles as they are; then the active rows */
+    /* a fused scatter of the next step belongs to the particles replaced:
+     * dropped (the next step scatters anew); then what the last particle
+     * pass recorded: the slices' support boxes and row extents of the
+     * particles as they are; then the active rows */
+    mpm_rows_drop_next(s);
     mpm_team_run(s, mpm_ph_bbox);
     mpm_rows_update(s);
     return 0;

@@ -665,10 +665,21 @@ INLINE void scatter_loads_t(mpm_sim *s, int D)
         (void)o;                                                                                \
         g2p_v_t(s, a, b, D, BL);                                                                \
     }                                                                                           \
-    static const mpm_kernels cpdi_##P##D = {                                                    \
-        p2g_mq_##D,           p2g_mqf_##D,  p2g_q2_##D,       stress_force_##D,  g2p_xv_##P##D, \
-        g2p_xv_stress_##P##D, g2p_v_##P##D, g2p_x_stress_##D, scatter_loads_##D, bbox_##D,      \
-        cell_keys_##D};
+    static const mpm_kernels cpdi_##P##D = {p2g_mq_##D,                                         \
+                                            p2g_mqf_##D,                                        \
+                                            p2g_q2_##D,                                         \
+                                            stress_force_##D,                                   \
+                                            g2p_xv_##P##D,                                      \
+                                            g2p_xv_stress_##P##D,                               \
+                                            g2p_v_##P##D,                                       \
+                                            g2p_x_stress_##D,                                   \
+                                            scatter_loads_##D,                                  \
+                                            bbox_##D,                                           \
+                                            cell_keys_##D,                                      \
+                                            NULL,                                               \
+                                            NULL,                                               \
+                                            NULL,                                               \
+                                            NULL};
 
 FAMILY(1)
 FAMILY(2)

@@ -296,6 +296,14 @@ struct mpm_sim {
 
     /* kernels chosen once per job */
     const mpm_kernels *k;
+    /* Fused steps (G2P2G): fuse, the family and update scheme allow it
+     * (every family but CPDI); p2g_fields, the fields the first scatter of a
+     * step writes (MPM_F_M | MPM_F_Q, and MPM_F_F for USL and MUSL), kept
+     * all zero in the private buffers tbuf[t] between uses (the reduction
+     * zeroes what it has read); fuse_next, the running step's moving pass
+     * also scatters the next step's P2G fields into tbuf[t] (never before
+     * a step that sorts); gnext, it did: the step starts with them */
+    int fuse, p2g_fields, fuse_next, gnext;
 
     /* active region: the padded nodes the particles' supports touch.  A row
      * is the run of nodes along x at fixed (y, z), row index y + z np[1],
@@ -321,8 +329,9 @@ struct mpm_sim {
 
     /* threads */
     int nthreads;
-    mpm_gridbuf *tbuf; /* per-thread scatter buffers (nthreads > 1; thread
-                        * 0 scatters into g, tbuf[0] stays empty) */
+    mpm_gridbuf *tbuf; /* per-thread scatter buffers (thread 0 scatters
+                        * into g; tbuf[0], with the P2G fields only, exists
+                        * when fuse: the fused passes' target) */
     mpm_thread_out *tout;
     pthread_t *threads;
     pthread_barrier_t bar_start, bar_end; /* bar_end also parts the passes
@@ -368,6 +377,21 @@ struct mpm_kernels {
     /* sort keys: cell (x, row) of each particle numbered row-major over
      * the rows' extents, rowoff[row] + x - ulo[row] */
     void (*cell_keys)(const mpm_sim *, uint32_t *key, size_t p0, size_t p1);
+    /* The fused passes (G2P2G; NULL in a family without them, CPDI): the
+     * pass that moves the particles also scatters the next step's P2G
+     * fields of each particle it moved, at its new position, into nb
+     * (nb NULL: not this step), exactly as p2g_mq (USF) or p2g_mqf (USL,
+     * MUSL) would scatter them at the start of the next step; a particle
+     * is scattered only while the thread has met no bad particle (a step
+     * that fails scatters nothing beyond the grid). */
+    void (*g2p_xv_nx)(mpm_sim *, mpm_gridbuf *nb, mpm_thread_out *o, size_t p0, size_t p1, int en);
+    void (*g2p_xv_stress_nx)(mpm_sim *, mpm_gridbuf *nb, mpm_thread_out *o, size_t p0, size_t p1,
+                             int en);
+    void (*g2p_x_stress_nx)(mpm_sim *, mpm_gridbuf *nb, mpm_thread_out *o, size_t p0, size_t p1,
+                            int en);
+    /* MUSL: the velocity update and, with the same weights, the momentum
+     * of the updated velocity into q2b (g2p_v then p2g_q2, in one pass) */
+    void (*g2p_v_q2)(mpm_sim *, mpm_gridbuf *q2b, size_t p0, size_t p1);
 };
 
 /* The family of dimension dim with ns nodes per axis: 2 (MPM), 3 (uGIMP,
@@ -392,6 +416,11 @@ int mpm_needs_F(const mpm_case *c);
  * to the ns-node family (3 only if every lp <= h/2).  Returns 0 or
  * MPM_EINVAL. */
 int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
+/* Tests and benchmarks: on 0 the steps no longer fuse the next step's
+ * first scatter into their moving pass (a scatter already made is
+ * dropped), on nonzero they do again.  Returns 0, or MPM_EINVAL to turn
+ * fusion on where the family has no fused passes (CPDI). */
+int mpm_sim_set_fused(mpm_sim *s, int on);
 
 /* Constitutive model interface.  A model declares the per-particle state it
  * needs (needs: MPM_NEED_*), allocated at creation only when a material of
@@ -643,7 +672,8 @@ enum {
     MPM_N_BC1Q2 = 128,
     MPM_N_BC2 = 256,
     MPM_N_UPD = 512,
-    MPM_N_DAMP = 1024 /* damping (after BC2, before the update; mpm.h) */
+    MPM_N_DAMP = 1024, /* damping (after BC2, before the update; mpm.h) */
+    MPM_N_Z0 = 2048    /* zero thread 0's next-step buffer (fused steps) */
 };
 
 /* Allocates the row extents (all empty) of the simulation and of each
@@ -651,8 +681,16 @@ enum {
 int mpm_rows_init(mpm_sim *s);
 /* Makes the active rows those the last particle pass recorded (serial). */
 void mpm_rows_update(mpm_sim *s);
-/* Thread tid's scatter target, zeroed over its rows for the fields named. */
+/* Thread tid's scatter target, zeroed over its rows for the fields named
+ * (a private buffer's P2G fields, s->p2g_fields, are all zero already). */
 mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields);
+/* Fused steps: swaps the main grid's P2G fields with thread 0's next-step
+ * buffer (serial, between steps), which then holds the last grid until
+ * the step's first node pass zeroes it (MPM_N_Z0). */
+void mpm_rows_swap_next(mpm_sim *s);
+/* Drops a next-step scatter that will not be used (the private buffers'
+ * P2G fields zeroed over the rows they were scattered into); serial. */
+void mpm_rows_drop_next(mpm_sim *s);
 /* A node pass over thread tid's share of the active nodes: ops is MPM_F_*
  * fields to reduce | MPM_N_* operations. */
 void mpm_node_pass(mpm_sim *s, int tid, int ops);

@@ -530,38 +530,53 @@ INLINE void p2g_weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *W
         weights_ap(s, p, D, NS, BS, W, R);
 }
 
-/* AP: APIC, the momentum with the affine part (scatter_affine()). */
-INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
-                     int AP)
+/* The first scatter of one particle: mass and momentum (AP: APIC, the
+ * momentum with the affine part, scatter_affine()) and, WF, the internal
+ * force.  Also what the fused passes scatter for the next step. */
+INLINE void p2g_one(mpm_sim *s, mpm_gridbuf *gb, size_t p, int D, int NS, int BS, int AP, int WF)
 {
     pw W;
     aoff R;
-    for (size_t p = p0; p < p1; p++) {
-        if (AP) {
-            p2g_weights(s, p, D, NS, BS, &W, &R);
-            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS, 1);
-        } else {
-            weights(s, p, D, NS, BS, &W);
-            scatter_mq(s, gb, &W, p, D, NS);
-        }
+    if (AP) {
+        p2g_weights(s, p, D, NS, BS, &W, &R);
+        scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS, 1);
+    } else {
+        weights(s, p, D, NS, BS, &W);
+        scatter_mq(s, gb, &W, p, D, NS);
     }
+    if (WF) scatter_force(s, gb, &W, p, D, NS);
+}
+
+INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
+                     int AP)
+{
+    for (size_t p = p0; p < p1; p++) p2g_one(s, gb, p, D, NS, BS, AP, 0);
 }
 
 INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
                       int AP)
 {
-    pw W;
-    aoff R;
-    for (size_t p = p0; p < p1; p++) {
-        if (AP) {
-            p2g_weights(s, p, D, NS, BS, &W, &R);
-            scatter_affine(s, gb->m, gb->q, &W, &R, p, D, NS, 1);
-        } else {
-            weights(s, p, D, NS, BS, &W);
-            scatter_mq(s, gb, &W, p, D, NS);
+    for (size_t p = p0; p < p1; p++) p2g_one(s, gb, p, D, NS, BS, AP, 1);
+}
+
+/* MUSL: momentum of the updated velocity of particle p into q (weights W). */
+INLINE void scatter_q2(const mpm_sim *s, double *const q[3], const pw *W, size_t p, int D, int NS)
+{
+    double *restrict q0 = q[0], *restrict q1 = q[1], *restrict q2 = q[2];
+    double mp = s->P.m[p];
+    double mv0 = mp * s->P.v[0][p];
+    double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
+    ROWS(D, NS, *W, s, {
+        double a0 = A * mv0, a1 = A * mv1, a2 = A * mv2;
+        UNROLL
+        for (int kx = 0; kx < NS; kx++) {
+            double S = W->w[0][kx];
+            size_t n = row + (size_t)kx;
+            q0[n] += S * a0;
+            if (D > 1) q1[n] += S * a1;
+            if (D > 2) q2[n] += S * a2;
         }
-        scatter_force(s, gb, &W, p, D, NS);
-    }
+    });
 }
 
 /* MUSL: momentum of the updated particle velocities (AP: APIC, with the
@@ -571,7 +586,6 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
 {
     pw W;
     aoff R;
-    double *restrict q0 = gb->q2[0], *restrict q1 = gb->q2[1], *restrict q2 = gb->q2[2];
     for (size_t p = p0; p < p1; p++) {
         if (AP) {
             p2g_weights(s, p, D, NS, BS, &W, &R);
@@ -579,20 +593,7 @@ INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, i
             continue;
         }
         weights(s, p, D, NS, BS, &W);
-        double mp = s->P.m[p];
-        double mv0 = mp * s->P.v[0][p];
-        double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
-        ROWS(D, NS, W, s, {
-            double a0 = A * mv0, a1 = A * mv1, a2 = A * mv2;
-            UNROLL
-            for (int kx = 0; kx < NS; kx++) {
-                double S = W.w[0][kx];
-                size_t n = row + (size_t)kx;
-                q0[n] += S * a0;
-                if (D > 1) q1[n] += S * a1;
-                if (D > 2) q2[n] += S * a2;
-            }
-        });
+        scatter_q2(s, gb->q2, &W, p, D, NS);
     }
 }
 
@@ -631,7 +632,7 @@ INLINE void ap_store(mpm_sim *s, size_t p, int D, const double vpic[3], double B
  * BL: the velocity blended with PIC (v_update()); AP: APIC, v = sum S q/m
  * and B_p = sum S q/m (x_I - x_p)^T (ap_store()). */
 INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS,
-                     int EN, int BL, int AP)
+                     int EN, int BL, int AP, mpm_gridbuf *nx)
 {
     pw W;
     aoff R;
@@ -661,6 +662,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
         check_particle(s, o, p, D);
         if (EN) esum_particle(s, &e, p, D, AP);
         box_add(s, &bc, o, &a, xn, D, NS, BS);
+        if (nx && o->bad == SIZE_MAX) p2g_one(s, nx, p, D, NS, BS, AP, 0);
     }
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 0);
@@ -669,7 +671,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 /* USL (Fig. 6 step 7, then Fig. 7 with the updated grid momentum): the
  * weights of the step's start positions serve both, in one gather. */
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                            int BS, int EN, int BL, int AP)
+                            int BS, int EN, int BL, int AP, mpm_gridbuf *nx)
 {
     pw W;
     aoff R;
@@ -705,31 +707,35 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
         }
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
+        if (nx && o->bad == SIZE_MAX)
+            for (size_t i = 0; i < nb; i++) p2g_one(s, nx, b0 + i, D, NS, BS, AP, 1);
     }
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 1);
 }
 
 /* MUSL: the velocity only (BL: blended with PIC; AP: APIC's velocity and
- * B_p; what p2g_q2 maps back to the grid). */
-INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS,
+ * B_p) and, q2b not NULL, with the same weights, what p2g_q2 maps back to
+ * the grid: the momentum of the updated velocity (and B_p) into q2b. */
+INLINE void g2p_v_t(mpm_sim *s, mpm_gridbuf *q2b, size_t p0, size_t p1, int D, int NS, int BS,
                     int BL, int AP)
 {
     pw W;
     aoff R;
     double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
-    (void)o;
     for (size_t p = p0; p < p1; p++) {
         double dv[3], vp[3] = {0, 0, 0}, Bm[3][3];
         if (AP) {
             weights_ap(s, p, D, NS, BS, &W, &R);
             gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm);
             ap_store(s, p, D, vp, Bm);
+            if (q2b) scatter_affine(s, NULL, q2b->q2, &W, &R, p, D, NS, 0);
             continue;
         }
         weights(s, p, D, NS, BS, &W);
         gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL);
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
+        if (q2b) scatter_q2(s, q2b->q2, &W, p, D, NS);
     }
 }
 
@@ -737,7 +743,7 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, 
  * of the updated particle velocities (q2).  AP: the in-pass angular
  * momentum counts B_p. */
 INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
-                           int BS, int EN, int AP)
+                           int BS, int EN, int AP, mpm_gridbuf *nx)
 {
     pw W;
     rowrun a;
@@ -765,6 +771,8 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
         }
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
+        if (nx && o->bad == SIZE_MAX)
+            for (size_t i = 0; i < nb; i++) p2g_one(s, nx, b0 + i, D, NS, BS, AP, 1);
     }
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 1);
@@ -825,148 +833,142 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
  * arguments after them: EN (energies), BL (PIC/FLIP blend), AP (APIC). */
 #define K(name, D, NS, BS) name##_##D##_##NS##_##BS
 
+/* The passes that move the particles, of variant V (empty: FLIP, _bl:
+ * the blend, _ap: APIC) of family (D, NS, BS): the fused ones (_nx, with
+ * the next step's target, or NULL) and the plain ones, which call them
+ * with NULL. */
+#define MOVERS(V, D, NS, BS, BL, AP)                                                              \
+    static void K(g2p_xv_nx##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * nx, mpm_thread_out * o,     \
+                                           size_t a, size_t b, int en)                            \
+    {                                                                                             \
+        if (en)                                                                                   \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 1, BL, AP, nx);                                       \
+        else                                                                                      \
+            g2p_xv_t(s, o, a, b, D, NS, BS, 0, BL, AP, nx);                                       \
+    }                                                                                             \
+    static void K(g2p_xv##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,      \
+                                        int en)                                                   \
+    {                                                                                             \
+        K(g2p_xv_nx##V, D, NS, BS)(s, NULL, o, a, b, en);                                         \
+    }                                                                                             \
+    static void K(g2p_xv_stress_nx##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * nx,                  \
+                                                  mpm_thread_out * o, size_t a, size_t b, int en) \
+    {                                                                                             \
+        if (en)                                                                                   \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, BL, AP, nx);                                \
+        else                                                                                      \
+            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, BL, AP, nx);                                \
+    }                                                                                             \
+    static void K(g2p_xv_stress##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a,         \
+                                               size_t b, int en)                                  \
+    {                                                                                             \
+        K(g2p_xv_stress_nx##V, D, NS, BS)(s, NULL, o, a, b, en);                                  \
+    }                                                                                             \
+    static void K(g2p_v_q2##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * q2b, size_t a, size_t b)     \
+    {                                                                                             \
+        g2p_v_t(s, q2b, a, b, D, NS, BS, BL, AP);                                                 \
+    }                                                                                             \
+    static void K(g2p_v##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)       \
+    {                                                                                             \
+        (void)o;                                                                                  \
+        K(g2p_v_q2##V, D, NS, BS)(s, NULL, a, b);                                                 \
+    }
+
+/* MUSL's last pass: the blend shares FLIP's (the velocity is final). */
+#define XSTRESS(V, D, NS, BS, AP)                                                                  \
+    static void K(g2p_x_stress_nx##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * nx,                    \
+                                                 mpm_thread_out * o, size_t a, size_t b, int en)   \
+    {                                                                                              \
+        if (en)                                                                                    \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1, AP, nx);                                      \
+        else                                                                                       \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0, AP, nx);                                      \
+    }                                                                                              \
+    static void K(g2p_x_stress##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b, \
+                                              int en)                                              \
+    {                                                                                              \
+        K(g2p_x_stress_nx##V, D, NS, BS)(s, NULL, o, a, b, en);                                    \
+    }
+
+/* The table of variant V; P (empty or _ap) names its scatters of momentum
+ * and X (empty or _ap) its MUSL last pass. */
+#define TABLE_OF(V, P, X, D, NS, BS)                                                       \
+    static const mpm_kernels K(family##V, D, NS, BS) = {K(p2g_mq##P, D, NS, BS),           \
+                                                        K(p2g_mqf##P, D, NS, BS),          \
+                                                        K(p2g_q2##P, D, NS, BS),           \
+                                                        K(stress_force, D, NS, BS),        \
+                                                        K(g2p_xv##V, D, NS, BS),           \
+                                                        K(g2p_xv_stress##V, D, NS, BS),    \
+                                                        K(g2p_v##V, D, NS, BS),            \
+                                                        K(g2p_x_stress##X, D, NS, BS),     \
+                                                        K(scatter_loads, D, NS, BS),       \
+                                                        K(bbox, D, NS, BS),                \
+                                                        K(cell_keys, D, NS, BS),           \
+                                                        K(g2p_xv_nx##V, D, NS, BS),        \
+                                                        K(g2p_xv_stress_nx##V, D, NS, BS), \
+                                                        K(g2p_x_stress_nx##X, D, NS, BS),  \
+                                                        K(g2p_v_q2##V, D, NS, BS)};
+
 /* The PIC/FLIP blend of family (D, NS, BS): its own velocity updates,
  * every other pass shared. */
-#define BLEND(D, NS, BS)                                                                        \
-    static void K(g2p_xv_bl, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,    \
-                                        int en)                                                 \
-    {                                                                                           \
-        if (en)                                                                                 \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 1, 0);                                           \
-        else                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 1, 0);                                           \
-    }                                                                                           \
-    static void K(g2p_xv_stress_bl, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a,       \
-                                               size_t b, int en)                                \
-    {                                                                                           \
-        if (en)                                                                                 \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 1, 0);                                    \
-        else                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 1, 0);                                    \
-    }                                                                                           \
-    static void K(g2p_v_bl, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)     \
-    {                                                                                           \
-        g2p_v_t(s, o, a, b, D, NS, BS, 1, 0);                                                   \
-    }                                                                                           \
-    static const mpm_kernels K(family_bl, D, NS, BS) = {                                        \
-        K(p2g_mq, D, NS, BS),       K(p2g_mqf, D, NS, BS),      K(p2g_q2, D, NS, BS),           \
-        K(stress_force, D, NS, BS), K(g2p_xv_bl, D, NS, BS),    K(g2p_xv_stress_bl, D, NS, BS), \
-        K(g2p_v_bl, D, NS, BS),     K(g2p_x_stress, D, NS, BS), K(scatter_loads, D, NS, BS),    \
-        K(bbox, D, NS, BS),         K(cell_keys, D, NS, BS)};
+#define BLEND(D, NS, BS)         \
+    MOVERS(_bl, D, NS, BS, 1, 0) \
+    TABLE_OF(_bl, , , D, NS, BS)
 
 /* The APIC family of (D, NS, BS): its own scatters of momentum and
  * velocity updates, and the in-pass angular momentum with B_p; the stress
  * pass, loads, boxes and sort keys shared. */
-#define APIC(D, NS, BS)                                                                            \
-    static void K(p2g_mq_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)         \
-    {                                                                                              \
-        p2g_mq_t(s, gb, a, b, D, NS, BS, 1);                                                       \
-    }                                                                                              \
-    static void K(p2g_mqf_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)        \
-    {                                                                                              \
-        p2g_mqf_t(s, gb, a, b, D, NS, BS, 1);                                                      \
-    }                                                                                              \
-    static void K(p2g_q2_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)         \
-    {                                                                                              \
-        p2g_q2_t(s, gb, a, b, D, NS, BS, 1);                                                       \
-    }                                                                                              \
-    static void K(g2p_xv_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,       \
-                                        int en)                                                    \
-    {                                                                                              \
-        if (en)                                                                                    \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 0, 1);                                              \
-        else                                                                                       \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 0, 1);                                              \
-    }                                                                                              \
-    static void K(g2p_xv_stress_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a,          \
-                                               size_t b, int en)                                   \
-    {                                                                                              \
-        if (en)                                                                                    \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 0, 1);                                       \
-        else                                                                                       \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 0, 1);                                       \
-    }                                                                                              \
-    static void K(g2p_v_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)        \
-    {                                                                                              \
-        g2p_v_t(s, o, a, b, D, NS, BS, 0, 1);                                                      \
-    }                                                                                              \
-    static void K(g2p_x_stress_ap, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b, \
-                                              int en)                                              \
-    {                                                                                              \
-        if (en)                                                                                    \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1, 1);                                           \
-        else                                                                                       \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0, 1);                                           \
-    }                                                                                              \
-    static const mpm_kernels K(family_ap, D, NS, BS) = {                                           \
-        K(p2g_mq_ap, D, NS, BS),    K(p2g_mqf_ap, D, NS, BS),      K(p2g_q2_ap, D, NS, BS),        \
-        K(stress_force, D, NS, BS), K(g2p_xv_ap, D, NS, BS),       K(g2p_xv_stress_ap, D, NS, BS), \
-        K(g2p_v_ap, D, NS, BS),     K(g2p_x_stress_ap, D, NS, BS), K(scatter_loads, D, NS, BS),    \
-        K(bbox, D, NS, BS),         K(cell_keys, D, NS, BS)};
+#define APIC(D, NS, BS)                                                                     \
+    static void K(p2g_mq_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)  \
+    {                                                                                       \
+        p2g_mq_t(s, gb, a, b, D, NS, BS, 1);                                                \
+    }                                                                                       \
+    static void K(p2g_mqf_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b) \
+    {                                                                                       \
+        p2g_mqf_t(s, gb, a, b, D, NS, BS, 1);                                               \
+    }                                                                                       \
+    static void K(p2g_q2_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)  \
+    {                                                                                       \
+        p2g_q2_t(s, gb, a, b, D, NS, BS, 1);                                                \
+    }                                                                                       \
+    MOVERS(_ap, D, NS, BS, 0, 1)                                                            \
+    XSTRESS(_ap, D, NS, BS, 1)                                                              \
+    TABLE_OF(_ap, _ap, _ap, D, NS, BS)
 
-#define FAMILY(D, NS, BS)                                                                         \
-    static void K(p2g_mq, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)           \
-    {                                                                                             \
-        p2g_mq_t(s, gb, a, b, D, NS, BS, 0);                                                      \
-    }                                                                                             \
-    static void K(p2g_mqf, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)          \
-    {                                                                                             \
-        p2g_mqf_t(s, gb, a, b, D, NS, BS, 0);                                                     \
-    }                                                                                             \
-    static void K(p2g_q2, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)           \
-    {                                                                                             \
-        p2g_q2_t(s, gb, a, b, D, NS, BS, 0);                                                      \
-    }                                                                                             \
-    static void K(stress_force, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, mpm_thread_out * o,     \
-                                           size_t a, size_t b, int en)                            \
-    {                                                                                             \
-        if (en)                                                                                   \
-            stress_force_t(s, gb, o, a, b, D, NS, BS, 1);                                         \
-        else                                                                                      \
-            stress_force_t(s, gb, o, a, b, D, NS, BS, 0);                                         \
-    }                                                                                             \
-    static void K(g2p_xv, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b, int en) \
-    {                                                                                             \
-        if (en)                                                                                   \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 1, 0, 0);                                             \
-        else                                                                                      \
-            g2p_xv_t(s, o, a, b, D, NS, BS, 0, 0, 0);                                             \
-    }                                                                                             \
-    static void K(g2p_xv_stress, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,  \
-                                            int en)                                               \
-    {                                                                                             \
-        if (en)                                                                                   \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 1, 0, 0);                                      \
-        else                                                                                      \
-            g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, 0, 0);                                      \
-    }                                                                                             \
-    static void K(g2p_v, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)          \
-    {                                                                                             \
-        g2p_v_t(s, o, a, b, D, NS, BS, 0, 0);                                                     \
-    }                                                                                             \
-    static void K(g2p_x_stress, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,   \
-                                           int en)                                                \
-    {                                                                                             \
-        if (en)                                                                                   \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1, 0);                                          \
-        else                                                                                      \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0, 0);                                          \
-    }                                                                                             \
-    LOADS(D, NS, BS)                                                                              \
-    static void K(bbox, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)           \
-    {                                                                                             \
-        bbox_t(s, o, a, b, D, NS, BS);                                                            \
-    }                                                                                             \
-    static void K(cell_keys, D, NS, BS)(const mpm_sim *s, uint32_t *key, size_t a, size_t b)      \
-    {                                                                                             \
-        cell_keys_t(s, key, a, b, D);                                                             \
-    }                                                                                             \
-    static const mpm_kernels K(family, D, NS, BS) = {                                             \
-        K(p2g_mq, D, NS, BS),       K(p2g_mqf, D, NS, BS),      K(p2g_q2, D, NS, BS),             \
-        K(stress_force, D, NS, BS), K(g2p_xv, D, NS, BS),       K(g2p_xv_stress, D, NS, BS),      \
-        K(g2p_v, D, NS, BS),        K(g2p_x_stress, D, NS, BS), K(scatter_loads, D, NS, BS),      \
-        K(bbox, D, NS, BS),         K(cell_keys, D, NS, BS)};                                     \
-    BLEND(D, NS, BS)                                                                              \
+#define FAMILY(D, NS, BS)                                                                     \
+    static void K(p2g_mq, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)       \
+    {                                                                                         \
+        p2g_mq_t(s, gb, a, b, D, NS, BS, 0);                                                  \
+    }                                                                                         \
+    static void K(p2g_mqf, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)      \
+    {                                                                                         \
+        p2g_mqf_t(s, gb, a, b, D, NS, BS, 0);                                                 \
+    }                                                                                         \
+    static void K(p2g_q2, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)       \
+    {                                                                                         \
+        p2g_q2_t(s, gb, a, b, D, NS, BS, 0);                                                  \
+    }                                                                                         \
+    static void K(stress_force, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, mpm_thread_out * o, \
+                                           size_t a, size_t b, int en)                        \
+    {                                                                                         \
+        if (en)                                                                               \
+            stress_force_t(s, gb, o, a, b, D, NS, BS, 1);                                     \
+        else                                                                                  \
+            stress_force_t(s, gb, o, a, b, D, NS, BS, 0);                                     \
+    }                                                                                         \
+    MOVERS(, D, NS, BS, 0, 0)                                                                 \
+    XSTRESS(, D, NS, BS, 0)                                                                   \
+    LOADS(D, NS, BS)                                                                          \
+    static void K(bbox, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)       \
+    {                                                                                         \
+        bbox_t(s, o, a, b, D, NS, BS);                                                        \
+    }                                                                                         \
+    static void K(cell_keys, D, NS, BS)(const mpm_sim *s, uint32_t *key, size_t a, size_t b)  \
+    {                                                                                         \
+        cell_keys_t(s, key, a, b, D);                                                         \
+    }                                                                                         \
+    TABLE_OF(, , , D, NS, BS)                                                                 \
+    BLEND(D, NS, BS)                                                                          \
     APIC(D, NS, BS)
 
 FAMILY(1, 2, 0)

@@ -64,6 +64,45 @@ static int grid_fields(const mpm_sim *s, const mpm_gridbuf *b, double **out)
     return k;
 }
 
+/* the P2G fields (s->p2g_fields) of buffer b, as a list */
+static int p2g_list(const mpm_sim *s, const mpm_gridbuf *b, double **out)
+{
+    int k = 0;
+    out[k++] = b->m;
+    for (int d = 0; d < s->dim; d++) {
+        out[k++] = b->q[d];
+        if (s->p2g_fields & MPM_F_F) out[k++] = b->f[d];
+    }
+    return k;
+}
+
+static void swap_ptr(double **a, double **b)
+{
+    double *t = *a;
+    *a = *b;
+    *b = t;
+}
+
+void mpm_rows_swap_next(mpm_sim *s)
+{
+    mpm_gridbuf *n = &s->tbuf[0];
+    swap_ptr(&s->g.m, &n->m);
+    for (int d = 0; d < s->dim; d++) {
+        swap_ptr(&s->g.q[d], &n->q[d]);
+        if (s->p2g_fields & MPM_F_F) swap_ptr(&s->g.f[d], &n->f[d]);
+    }
+}
+
+void mpm_rows_drop_next(mpm_sim *s)
+{
+    for (int t = 0; s->gnext && t < s->nthreads; t++) {
+        double *z[7];
+        int nz = p2g_list(s, &s->tbuf[t], z);
+        for (int i = 0; i < nz; i++) zero_rows(s, z[i], &s->tout[t]);
+    }
+    s->gnext = 0;
+}
+
 /* box lo..hi = the union of the threads' boxes (clamped when recorded) */
 static void union_box(const mpm_sim *s, int lo[3], int hi[3])
 {
@@ -140,11 +179,16 @@ void mpm_rows_update(mpm_sim *s)
 /* The scatter target of thread tid, zeroed over the thread's rows for the
  * fields named: thread 0 scatters straight into the main grid (its sums
  * come first in the reduction anyway), the others into private grids.
- * While a pass scatters, nobody reads the fields it scatters into. */
+ * While a pass scatters, nobody reads the fields it scatters into.  The
+ * private grids' P2G fields (s->p2g_fields: those of a step's first
+ * scatter) are kept all zero between uses instead: the reduction zeroes
+ * what it has read, so that a fused pass can scatter the next step's into
+ * them before it knows the rows it will touch. */
 mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields)
 {
     mpm_gridbuf *b = tid == 0 ? &s->g : &s->tbuf[tid];
     const mpm_thread_out *o = &s->tout[tid];
+    if (tid) fields &= ~s->p2g_fields; /* all zero already (reduce_seg) */
     if (fields & MPM_F_M) zero_rows(s, b->m, o);
     for (int d = 0; d < s->dim; d++) {
         if (fields & MPM_F_Q) zero_rows(s, b->q[d], o);
@@ -246,7 +290,7 @@ static void reduce_seg(mpm_sim *s, int fields, size_t row, int a, int b)
                     ib = hi;
                     continue;
                 }
-                const double *src = field_of(&s->tbuf[t], fl, d) + base;
+                double *src = field_of(&s->tbuf[t], fl, d) + base;
                 if (ia > ib) {
                     span_copy(dst, src, (size_t)lo, (size_t)hi);
                     ia = lo;
@@ -262,6 +306,14 @@ static void reduce_seg(mpm_sim *s, int fields, size_t row, int a, int b)
                 if (lo < ia) ia = lo;
                 if (hi > ib) ib = hi;
             }
+            if (fl & s->p2g_fields) /* read: back to zero (mpm_scatter_buf()) */
+                for (int t = 1; t < T; t++) {
+                    const mpm_thread_out *o = &s->tout[t];
+                    long lo = o->rlo[row] > a ? o->rlo[row] : a;
+                    long hi = o->rhi[row] < b ? o->rhi[row] : b;
+                    if (lo <= hi)
+                        span_zero(field_of(&s->tbuf[t], fl, d) + base, (size_t)lo, (size_t)hi);
+                }
             if (ia > ib) {
                 span_zero(dst, (size_t)a, (size_t)b);
             } else {
@@ -331,6 +383,11 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
     while (seg_next(s, &it, &row, &lo, &hi)) {
         if (fields && s->nthreads > 1) reduce_seg(s, fields, row, lo, hi);
         size_t base = mpm_row_node(s, row, lo), w = (size_t)(hi - lo + 1);
+        if (ops & MPM_N_Z0) {
+            double *z[7];
+            int nz = p2g_list(s, &s->tbuf[0], z);
+            for (int i = 0; i < nz; i++) memset(z[i] + base, 0, w * sizeof(double));
+        }
         if (ops & MPM_N_MINV) {
             const double *restrict m = s->g.m + base;
             double *restrict mi = s->minv + base;

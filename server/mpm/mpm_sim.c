@@ -78,13 +78,15 @@ static void free_gridbuf(mpm_gridbuf *b)
     memset(b, 0, sizeof *b);
 }
 
-static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int musl)
+/* fields: MPM_F_* of the buffer (m and q always) */
+static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int fields)
 {
     memset(b, 0, sizeof *b);
     if (!(b->m = mpm_dalloc(nn))) return MPM_ENOMEM;
     for (int d = 0; d < dim; d++) {
-        if (!(b->q[d] = mpm_dalloc(nn)) || !(b->f[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
-        if (musl && !(b->q2[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
+        if (!(b->q[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
+        if ((fields & MPM_F_F) && !(b->f[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
+        if ((fields & MPM_F_Q2) && !(b->q2[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
     }
     return 0;
 }
@@ -195,12 +197,22 @@ static void ph_stress_force(mpm_sim *s, int tid)
     s->k->stress_force(s, mpm_scatter_buf(s, tid, MPM_F_F), &s->tout[tid], a, b, s->step_energy);
 }
 
+/* the fused passes' target of thread tid: NULL when the step does not
+ * scatter the next one's fields */
+static mpm_gridbuf *next_buf(mpm_sim *s, int tid)
+{
+    return s->fuse_next ? &s->tbuf[tid] : NULL;
+}
+
 static void ph_g2p_xv(mpm_sim *s, int tid)
 {
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    s->k->g2p_xv(s, &s->tout[tid], a, b, s->step_energy);
+    if (s->fuse)
+        s->k->g2p_xv_nx(s, next_buf(s, tid), &s->tout[tid], a, b, s->step_energy);
+    else
+        s->k->g2p_xv(s, &s->tout[tid], a, b, s->step_energy);
 }
 
 static void ph_g2p_xv_stress(mpm_sim *s, int tid)
@@ -208,7 +220,10 @@ static void ph_g2p_xv_stress(mpm_sim *s, int tid)
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    s->k->g2p_xv_stress(s, &s->tout[tid], a, b, s->step_energy);
+    if (s->fuse)
+        s->k->g2p_xv_stress_nx(s, next_buf(s, tid), &s->tout[tid], a, b, s->step_energy);
+    else
+        s->k->g2p_xv_stress(s, &s->tout[tid], a, b, s->step_energy);
 }
 
 static void ph_g2p_v(mpm_sim *s, int tid)
@@ -218,12 +233,23 @@ static void ph_g2p_v(mpm_sim *s, int tid)
     s->k->g2p_v(s, &s->tout[tid], a, b);
 }
 
+/* MUSL: the velocity update and the momentum q2 in one pass */
+static void ph_g2p_v_q2(mpm_sim *s, int tid)
+{
+    size_t a, b;
+    mpm_particle_slice(s, tid, &a, &b);
+    s->k->g2p_v_q2(s, mpm_scatter_buf(s, tid, MPM_F_Q2), a, b);
+}
+
 static void ph_g2p_x_stress(mpm_sim *s, int tid)
 {
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    s->k->g2p_x_stress(s, &s->tout[tid], a, b, s->step_energy);
+    if (s->fuse)
+        s->k->g2p_x_stress_nx(s, next_buf(s, tid), &s->tout[tid], a, b, s->step_energy);
+    else
+        s->k->g2p_x_stress(s, &s->tout[tid], a, b, s->step_energy);
 }
 
 /* ---- the step on the team ----
@@ -247,11 +273,21 @@ static void forces_update(mpm_sim *s, int tid, int reduce_ops)
     mpm_node_pass(s, tid, MPM_N_BC2 | damp | MPM_N_UPD);
 }
 
+/* The first scatter of a step, unless the last step's fused pass made it
+ * (then its node pass zeroes thread 0's buffer, the last grid: MPM_N_Z0).
+ * Returns the node pass's extra operation. */
+static int first_scatter(mpm_sim *s, int tid, void (*p2g)(mpm_sim *, int))
+{
+    if (s->gnext) return MPM_N_Z0;
+    p2g(s, tid);
+    mpm_team_sync(s);
+    return 0;
+}
+
 static void ph_step_usf(mpm_sim *s, int tid)
 {
-    ph_p2g_mq(s, tid);
-    mpm_team_sync(s);
-    mpm_node_pass(s, tid, MPM_F_M | MPM_F_Q | MPM_N_MINV | MPM_N_BC1);
+    int z0 = first_scatter(s, tid, ph_p2g_mq);
+    mpm_node_pass(s, tid, MPM_F_M | MPM_F_Q | MPM_N_MINV | MPM_N_BC1 | z0);
     mpm_team_sync(s);
     ph_stress_force(s, tid);
     mpm_team_sync(s);
@@ -262,17 +298,20 @@ static void ph_step_usf(mpm_sim *s, int tid)
 
 static void ph_step_usl(mpm_sim *s, int tid)
 {
-    ph_p2g_mqf(s, tid);
-    mpm_team_sync(s);
-    forces_update(s, tid, MPM_F_M | MPM_F_Q | MPM_F_F | MPM_N_MINV | MPM_N_GRAV | MPM_N_BC1);
+    int z0 = first_scatter(s, tid, ph_p2g_mqf);
+    forces_update(s, tid, MPM_F_M | MPM_F_Q | MPM_F_F | MPM_N_MINV | MPM_N_GRAV | MPM_N_BC1 | z0);
     mpm_team_sync(s);
     if (s->update == MPM_USL) {
         ph_g2p_xv_stress(s, tid);
         return;
     }
-    ph_g2p_v(s, tid);
-    mpm_team_sync(s);
-    ph_p2g_q2(s, tid);
+    if (s->k->g2p_v_q2) {
+        ph_g2p_v_q2(s, tid);
+    } else {
+        ph_g2p_v(s, tid);
+        mpm_team_sync(s);
+        ph_p2g_q2(s, tid);
+    }
     mpm_team_sync(s);
     mpm_node_pass(s, tid, MPM_F_Q2 | MPM_N_BC1Q2); /* BC1 on the recomputed momentum */
     mpm_team_sync(s);
@@ -360,6 +399,14 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
     s->ns = ns;
     s->k = select_kernels(s);
     init_order(s);
+    return 0;
+}
+
+int mpm_sim_set_fused(mpm_sim *s, int on)
+{
+    if (on && (!s->k->g2p_xv_nx || !s->tbuf || !s->tbuf[0].m)) return MPM_EINVAL;
+    mpm_rows_drop_next(s);
+    s->fuse = on != 0;
     return 0;
 }
 
@@ -452,17 +499,23 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
         goto nomem;
-    if (alloc_gridbuf(&s->g, s->nn, dim, musl)) goto nomem;
+    int gfields = MPM_F_M | MPM_F_Q | MPM_F_F | (musl ? MPM_F_Q2 : 0);
+    if (alloc_gridbuf(&s->g, s->nn, dim, gfields)) goto nomem;
     if (!(s->minv = mpm_dalloc(s->nn))) goto nomem;
     for (int d = 0; d < 3; d++) {
         if (!(s->ncoord[d] = mpm_dalloc((size_t)s->np[d]))) goto nomem;
         for (int i = 0; d < dim && i < s->np[d]; i++)
             s->ncoord[d][i] = mpm_node_coord_calc(s, d, i);
     }
-    if (s->nthreads > 1) {
+    s->p2g_fields = MPM_F_M | MPM_F_Q | (c->update == MPM_USF ? 0 : MPM_F_F);
+    s->fuse = s->k->g2p_xv_nx != NULL;
+    if (s->nthreads > 1 || s->fuse) {
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
-        for (int t = 1; t < s->nthreads; t++) /* thread 0 scatters into the grid */
-            if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, musl)) goto nomem;
+        /* thread 0 scatters into the grid, and the fused passes into
+         * tbuf[0] (the P2G fields) */
+        if (s->fuse && alloc_gridbuf(&s->tbuf[0], s->nn, dim, s->p2g_fields)) goto nomem;
+        for (int t = 1; t < s->nthreads; t++)
+            if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, gfields)) goto nomem;
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
     for (int t = 0; t < s->nthreads; t++) {
@@ -678,7 +731,12 @@ int mpm_sim_step(mpm_sim *s)
     s->step_energy = s->want_energy;
     s->want_energy = 0;
     s->damp_on = s->damp != MPM_DAMPING_NONE && (!(s->damp_until > 0) || s->t < s->damp_until);
+    /* fused: the step starts with the grid the last one scattered, and
+     * scatters the next one's unless the next step sorts the particles */
+    if (s->gnext) mpm_rows_swap_next(s);
+    s->fuse_next = s->fuse && (s->steps + 1) % MPM_SORT_EVERY != 0;
     mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
+    s->gnext = s->fuse_next;
     if (s->general) /* the plastic work of the step, in thread order */
         for (int t = 0; t < s->nthreads; t++) {
             s->plastic_work += s->tout[t].wplast;
