@@ -265,7 +265,11 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
 }
 
 /* Gradient weight k of axis d: MPM's are the constants -1/h, 1/h. */
-#define GRAD(s, W, NS, d, k) ((NS) == 2 ? ((k) ? (s)->inv_h[d] : -(s)->inv_h[d]) : (W).g[d][k])
+#define GRAD(s, W, NS, d, k) ((NS) == 2 ? ((k) ? ih_[d] : -ih_[d]) : (W).g[d][k])
+/* MPM's gradient constants in locals, read before the loops store into the
+ * grid (a store through a double pointer could otherwise change s->inv_h
+ * as far as the compiler knows, and each node would load them again) */
+#define IH(s) const double ih_[3] = {(s)->inv_h[0], (s)->inv_h[1], (s)->inv_h[2]}
 
 /* Loop over the support of one particle row by row: for each (ky, kz) the
  * body sees row (flat index of node kx = 0), A = wy wz, B = gy wz and
@@ -289,8 +293,10 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
     } while (0)
 
 /* Mass and momentum (Eqs. 25-26: momentum extrapolated directly). */
-INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p, int D, int NS)
+INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_t p, int D, int NS)
 {
+    const pw Wc = *W0, *W = &Wc; /* locals: the stores below cannot change them */
+    IH(s);
     double *restrict m = gb->m;
     double *restrict q0 = gb->q[0], *restrict q1 = gb->q[1], *restrict q2 = gb->q[2];
     double mp = s->P.m[p];
@@ -341,6 +347,7 @@ INLINE void affine_matrix(const mpm_sim *s, const pw *W, const aoff *R, size_t p
 INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q[3], const pw *W,
                            const aoff *R, size_t p, int D, int NS, int WM)
 {
+    IH(s);
     double *restrict q0 = q[0], *restrict q1 = q[1], *restrict q2 = q[2];
     double mp = s->P.m[p], Cm[3][3];
     double mv[3] = {0, 0, 0};
@@ -378,8 +385,10 @@ INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q
 
 /* Internal force of particle p onto its nodes: f -= V sigma . G (Eq. 15).
  * With G = (gx A, wx B, wx C): f_a -= gx (V s_a0 A) + wx (V s_a1 B + V s_a2 C). */
-INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t p, int D, int NS)
+INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_t p, int D, int NS)
 {
+    const pw Wc = *W0, *W = &Wc; /* locals: the stores below cannot change them */
+    IH(s);
     double *restrict f0 = gb->f[0], *restrict f1 = gb->f[1], *restrict f2 = gb->f[2];
     const mpm_particles *P = &s->P;
     double V = P->vol[p];
@@ -389,7 +398,9 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W, size_t
     double sxz = D > 2 ? V * P->sig[5][p] : 0.0;
     ROWS(D, NS, *W, s, {
         double P0 = sxx * A, P1 = sxy * A, P2 = sxz * A;
-        double Q0 = sxy * B + sxz * C, Q1 = syy * B + syz * C, Q2 = syz * B + szz * C;
+        /* 2D: no z terms (C is 0 there, and 0 * C is not folded away) */
+        double Q0 = D > 2 ? sxy * B + sxz * C : sxy * B;
+        double Q1 = D > 2 ? syy * B + syz * C : syy * B, Q2 = syz * B + szz * C;
         UNROLL
         for (int kx = 0; kx < NS; kx++) {
             double gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx];
@@ -426,6 +437,7 @@ typedef struct {
 __attribute__((noinline, cold)) static phantom_corr
 phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS)
 {
+    IH(s);
     const double *restrict minv = s->minv;
     double U[3] = {0, 0, 0}, Gp[3] = {0, 0, 0}, Sp = 0;
     ROWS(D, NS, *W, s, {
@@ -464,6 +476,7 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
                    double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
                    double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3])
 {
+    IH(s);
     const double *restrict minv = s->minv;
     double L[3][3] = {{0}};
     double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
@@ -560,8 +573,10 @@ INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, 
 }
 
 /* MUSL: momentum of the updated velocity of particle p into q (weights W). */
-INLINE void scatter_q2(const mpm_sim *s, double *const q[3], const pw *W, size_t p, int D, int NS)
+INLINE void scatter_q2(const mpm_sim *s, double *const q[3], const pw *W0, size_t p, int D, int NS)
 {
+    const pw Wc = *W0, *W = &Wc; /* locals: the stores below cannot change them */
+    IH(s);
     double *restrict q0 = q[0], *restrict q1 = q[1], *restrict q2 = q[2];
     double mp = s->P.m[p];
     double mv0 = mp * s->P.v[0][p];
@@ -798,6 +813,7 @@ INLINE void bbox_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, i
 /* Point forces of the loaded particles (tractions), f += S f_p (Eq. 14). */
 INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
 {
+    IH(s);
     pw W;
     for (size_t i = 0; i < s->nload; i++) {
         weights(s, s->load_p[i], D, NS, BS, &W);
