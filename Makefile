@@ -1,6 +1,8 @@
 # mpmd build.  `make` builds everything; `make test` installs missing Debian
 # packages, builds the sanitizer build and runs every test; `make bench` runs
-# the throughput benchmark.  docs/architecture.md tells what each folder owns.
+# the throughput benchmark (with its STREAM triad roof), and `make bench-compare
+# REF=<commit>` the same bench of another commit against this tree's,
+# interleaved.  docs/architecture.md tells what each folder owns.
 #
 # Layers (each a static library, linked only by what needs it; sources are
 # picked up by wildcard, so a new file joins its layer by being there):
