@@ -118,7 +118,9 @@ HEAD_DESC=$(git describe --always --dirty 2>/dev/null || echo "this tree")
 
 # can REF's bench run these arguments?
 ref_can() {
-    local a=($1) i
+    local -a a
+    local i
+    read -r -a a <<<"$1"
     for ((i = 0; i < ${#a[@]}; i++)); do
         case "${a[i]}" in
         --transfer) grep -q -- "--transfer" <<<"$REF_HELP" || return 1 ;;
@@ -144,9 +146,9 @@ steps_for() {
         echo "$STEPS"
         return
     fi
-    local a=" $1 " dim=2 rate
-    case "$a" in *" cube3d "*) dim=3 ;; esac
-    if [[ "$a" == *" --method mpm "* || "$a" != *" --method "* ]] && [[ "$a" != *" collapse2d "* ]]; then
+    local cs=" $1 " dim=2 rate
+    case "$cs" in *" cube3d "*) dim=3 ;; esac
+    if [[ "$cs" == *" --method mpm "* || "$cs" != *" --method "* ]] && [[ "$cs" != *" collapse2d "* ]]; then
         rate=$([ $dim = 3 ] && echo 16 || echo 30)
     else
         rate=$([ $dim = 3 ] && echo 3 || echo 12)
@@ -164,7 +166,7 @@ TRI=$OUT/triad.tsv  # threads gbs
 CPU=$(awk -F': *' '/^model name/ { print $2; exit }' /proc/cpuinfo)
 IFS=';' read -r -a CFGS <<<"$ARGS"
 THREADS=$(for c in "${CFGS[@]}"; do
-    a=($c)
+    read -r -a a <<<"$c"
     t=2
     for ((i = 0; i < ${#a[@]}; i++)); do [ "${a[i]}" = --threads ] && t=${a[i + 1]}; done
     echo "$t"
@@ -184,7 +186,9 @@ run_one() { # side cfg-index bench args...
         echo "bench-compare: $side ($*) failed:" >&2
         grep -v "^mpmbench: .*CPU(s) online" "$OUT/err" | tail -2 >&2
         # a failed run: a "fail" sample under the configuration's scene
-        local a=($*) i sc=? xf=
+        local -a a
+        local i sc='?' xf=''
+        read -r -a a <<<"$*"
         for ((i = 0; i < ${#a[@]}; i++)); do
             [ "${a[i]}" = --scene ] && sc=${a[i + 1]}
             [ "${a[i]}" = --transfer ] && [ "${a[i + 1]}" = apic ] && xf=+apic
