@@ -1,6 +1,8 @@
 # mpmd build.  `make` builds everything; `make test` installs missing Debian
 # packages, builds the sanitizer build and runs every test; `make bench` runs
-# the throughput benchmark.  docs/architecture.md tells what each folder owns.
+# the throughput benchmark (with its STREAM triad roof), and `make bench-compare
+# REF=<commit>` the same bench of another commit against this tree's,
+# interleaved.  docs/architecture.md tells what each folder owns.
 #
 # Layers (each a static library, linked only by what needs it; sources are
 # picked up by wildcard, so a new file joins its layer by being there):
@@ -54,7 +56,8 @@ FUZZ_O ?= -O1
 FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
          -fno-sanitize-recover=all
 
-.PHONY: all deps test test-quick tsan bench bench-build bench-accuracy bench-vtk stress demo clean \
+.PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-accuracy bench-vtk stress \
+        demo clean \
         format format-check lint fuzz fuzz-quick fuzz-build fuzz-seed
 .SECONDARY: $(GEN_C) $(GEN_H)
 all: bin/mpmd bin/mpmctl bin/mpmtest bin/mpmrun
@@ -356,6 +359,22 @@ bench: deps
 	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmd
 	bin/mpmbench --all
 	@echo "bench: rows appended to build/bench/throughput.csv"
+
+# make bench-compare REF=<commit>  this tree's bin/mpmbench against REF's, on
+#             the same machine, interleaved (tests/perf/compare.sh): REF is
+#             checked out as a git worktree in build/compare/<short-sha> and its
+#             bench built there with its own Makefile; then COMPARE_ROUNDS (3)
+#             rounds of a triad (bin/mpmbench --triad) and every configuration,
+#             before then after; a table of the medians, after / before and
+#             after's fraction of the triad roof.  Default: disks2d and cube3d,
+#             10^6 particles, MPM / GIMP / BSPLINE2 (USF, MUSL, MUSL APIC) and
+#             MPM USL on 2 threads, MPM USF on 1, the collapse2d elastic and
+#             Drucker-Prager pair (~25 min).  COMPARE_QUICK=1: a short sanity
+#             run; COMPARE_ARGS, COMPARE_PARTICLES, COMPARE_STEPS, COMPARE_RUN_S:
+#             see the script's head.
+bench-compare:
+	@test -n "$(REF)" || { echo "usage: make bench-compare REF=<commit> [COMPARE_QUICK=1]" >&2; exit 2; }
+	@bash tests/perf/compare.sh $(REF)
 
 # ---- the demo ----------------------------------------------------------------------
 # make demo: mpmd on loopback with its default database, the paper's fine

@@ -511,6 +511,29 @@ typedef struct {
 } mpm_plastic_stats;
 void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
 
+/* The modelled particle-array traffic of one step (mpm_traffic.c): for
+ * each particle pass of the configured job's step, the bytes per particle
+ * of particle arrays it reads and writes, and their sums.  The model: each
+ * particle array a pass touches counts once per pass (8 bytes per double
+ * per particle; mat 2, id 4), read when the pass loads its old value,
+ * written when the pass stores it (an array both read and written counts
+ * twice; one only written, once: STREAM's counting, no write-allocate).
+ * Grid arrays, the per-thread scratch, the sort (every 16 steps), point
+ * loads and the energy sums of mpm_sim_want_energy() steps are not
+ * counted.  A lower bound on the step's memory traffic, and the figure a
+ * bandwidth roof is measured against (bin/mpmbench). */
+#define MPM_TRAFFIC_MAX_PASSES 8
+typedef struct {
+    int npass;
+    struct {
+        const char *name;   /* "p2g_mq", "stress_force", "g2p_xv", ... */
+        double read, write; /* bytes per particle */
+    } pass[MPM_TRAFFIC_MAX_PASSES];
+    double read, write, total; /* per particle-step: the passes' sums */
+} mpm_traffic;
+/* Fills *out for sim's job; returns 0, or MPM_EINVAL (sim or out NULL). */
+int mpm_sim_traffic(const mpm_sim *sim, mpm_traffic *out);
+
 /* Checkpoints (mpm_checkpoint.c): the solver state a case does not
  * determine -- the particles (in their current, sorted order), time, step,
  * dt, the cumulative works and counters, the balance and guard references

@@ -30,15 +30,17 @@ static int collecting; /* --all: keep result lines for the summary */
 static char *summary[MAX_SUMMARY];
 static int nsummary;
 static int progress_shown;
+static pb_triad triads[MPM_MAX_THREADS + 1]; /* by thread count; gbs 0: not measured */
 
 static const char usage[] =
     "usage: mpmbench --scene NAME [--particles N] [--steps S] [--threads T]\n"
     "                [--method mpm|gimp|bspline2|bspline3|cpdi] [--update usf|usl|musl]\n"
-    "                [--pic F] [--transfer flip|apic|both] [--csv]\n"
+    "                [--pic F] [--transfer flip|apic|both] [--csv] [--no-triad]\n"
     "       mpmbench --all [--particles N] [--steps S] [--csv]\n"
     "       mpmbench --bspline [--particles N] [--steps S] [--csv]\n"
     "       mpmbench --cpdi-vs-gimp [--particles N] [--steps S] [--update U] [--csv]\n"
     "       mpmbench --checkpoint [--particles N] [--threads T]\n"
+    "       mpmbench --triad [--threads T] [--csv]\n"
     "Throughput of the mpmd solver (issue #5): millions of particle-steps per second,\n"
     "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
     "Scenes:\n"
@@ -69,6 +71,9 @@ static const char usage[] =
     "                 FLIP time per particle-step; APIC rows are scene+apic (disks2d, cube3d,\n"
     "                 bar1d; not with --pic, the daemon scene or --all)\n"
     "  --csv          print CSV rows instead of the table\n"
+    "  --no-triad     skip the STREAM triad (the roof columns stay empty)\n"
+    "  --triad        only the triad (and the CPU model), on T threads or on 1 and 2; with\n"
+    "                 --csv: triad_threads,triad_gbs,lo_gbs,hi_gbs,array_mib,reps rows\n"
     "  --all          every scene, MPM and GIMP, 1 and 2 threads; the lean build; the daemon\n"
     "  --bspline      disks2d and cube3d at 1 and 2 threads, GIMP, BSPLINE2 and BSPLINE3\n"
     "                 interleaved (two rounds): the B-splines' speed as ratios to GIMP\n"
@@ -83,7 +88,14 @@ static const char usage[] =
     "bytes_per_particle is the peak RSS of a forked child that builds and runs the one\n"
     "configuration (ru_maxrss from wait4), over the particle count; for daemon rows, the\n"
     "peak RSS of that row's mpmd process.  Environment: MPMD_BIN (default: mpmd next to\n"
-    "this program), MPMBENCH_LEAN (default: mpmbench-lean next to it).\n";
+    "this program), MPMBENCH_LEAN (default: mpmbench-lean next to it).\n"
+    "The roof (issue #14): before the scenes, a STREAM triad a = b + s c on each thread\n"
+    "count the rows use (the threads first-touch their slices; median of 7 passes, 24 B\n"
+    "per element; each array max(4 x last-level cache, 64 MiB), at most a twelfth of\n"
+    "the RAM; MPMBENCH_TRIAD_MIB sets MiB per array).  model_bytes_per_pstep is\n"
+    "mpm_sim_traffic(): the particle-array bytes the step's passes read and write per\n"
+    "particle (grid traffic not counted); achieved_gbs = Mpsteps/s x that; roof_fraction\n"
+    "= achieved_gbs / triad_gbs (docs/performance.md).\n";
 
 /* ---- output ---- */
 
@@ -134,11 +146,29 @@ void pb_progress(const char *fmt, ...)
     progress_shown = 1;
 }
 
+/* Achieved GB/s of a row (its rate times the modelled bytes; 0: no model)
+ * and its fraction of the triad (0: either unknown). */
+static double achieved_gbs(const pb_row *r)
+{
+    return r->traffic_b > 0 ? r->mpsteps * r->traffic_b / 1e3 : 0;
+}
+
+static double roof_fraction(const pb_row *r)
+{
+    return r->triad_gbs > 0 ? achieved_gbs(r) / r->triad_gbs : 0;
+}
+
 static void csv_line(FILE *f, const pb_row *r)
 {
-    fprintf(f, "%s,%s,%s,%d,%zu,%zu,%ld,%d,%.4f,%.3f,%.1f\n", r->scene, pb_method_name(r->method),
-            pb_update_name(r->update), r->dim, r->particles, r->nodes, r->steps, r->threads,
-            r->wall_s, r->mpsteps, r->bytes_pp);
+    char roof[128] = ",,,";
+    if (r->traffic_b > 0 && r->triad_gbs > 0)
+        snprintf(roof, sizeof roof, "%.0f,%.3f,%.3f,%.4f", r->traffic_b, achieved_gbs(r),
+                 r->triad_gbs, roof_fraction(r));
+    else if (r->traffic_b > 0)
+        snprintf(roof, sizeof roof, "%.0f,%.3f,,", r->traffic_b, achieved_gbs(r));
+    fprintf(f, "%s,%s,%s,%d,%zu,%zu,%ld,%d,%.4f,%.3f,%.1f,%s\n", r->scene,
+            pb_method_name(r->method), pb_update_name(r->update), r->dim, r->particles, r->nodes,
+            r->steps, r->threads, r->wall_s, r->mpsteps, r->bytes_pp, roof);
 }
 
 static void append_csv(const pb_row *r)
@@ -163,8 +193,11 @@ static void append_csv(const pb_row *r)
 
 /* A row already written to the CSV file by another process (the lean
  * binary): printed only. */
-static void show_row(const pb_row *r)
+static void show_row(const pb_row *r0)
 {
+    pb_row rr = *r0;
+    const pb_row *r = &rr;
+    if (rr.threads > 0 && rr.threads <= MPM_MAX_THREADS) rr.triad_gbs = triads[rr.threads].gbs;
     if (csv_mode) {
         if (!header_done++) printf("%s\n", PB_CSV_HEADER);
         csv_line(stdout, r);
@@ -172,9 +205,9 @@ static void show_row(const pb_row *r)
         return;
     }
     if (!header_done++)
-        pb_note("%-15s %-4s %-4s %3s %9s %9s %6s %3s %8s %10s %8s  %s", "scene", "meth", "upd",
-                "dim", "particles", "nodes", "steps", "thr", "wall_s", "Mpsteps/s", "B/part",
-                "runs (Mpsteps/s), notes");
+        pb_note("%-15s %-4s %-4s %3s %9s %9s %6s %3s %8s %10s %8s %7s %6s %5s  %s", "scene", "meth",
+                "upd", "dim", "particles", "nodes", "steps", "thr", "wall_s", "Mpsteps/s", "B/part",
+                "B/pstep", "GB/s", "roof", "runs (Mpsteps/s), notes");
     char notes[200] = "";
     if (r->runs > 1) snprintf(notes, sizeof notes, "%.3g..%.3g", r->rate_lo, r->rate_hi);
     if (r->cpus > 0) {
@@ -191,15 +224,23 @@ static void show_row(const pb_row *r)
         snprintf(notes + k, sizeof notes - k, "%ssteps cut from %ld (slow warm-up)", k ? "; " : "",
                  r->default_steps);
     }
-    pb_note("%-15s %-4s %-4s %3d %9zu %9zu %6ld %3d %8.3f %10.3f %8.1f  %s", r->scene,
+    char tb[16] = "-", gb[16] = "-", rf[16] = "-";
+    if (r->traffic_b > 0) {
+        snprintf(tb, sizeof tb, "%.0f", r->traffic_b);
+        snprintf(gb, sizeof gb, "%.2f", achieved_gbs(r));
+    }
+    if (roof_fraction(r) > 0) snprintf(rf, sizeof rf, "%.0f%%", 100 * roof_fraction(r));
+    pb_note("%-15s %-4s %-4s %3d %9zu %9zu %6ld %3d %8.3f %10.3f %8.1f %7s %6s %5s  %s", r->scene,
             pb_method_name(r->method), pb_update_name(r->update), r->dim, r->particles, r->nodes,
-            r->steps, r->threads, r->wall_s, r->mpsteps, r->bytes_pp, notes);
+            r->steps, r->threads, r->wall_s, r->mpsteps, r->bytes_pp, tb, gb, rf, notes);
 }
 
-void pb_emit(const pb_row *r)
+void pb_emit(const pb_row *r0)
 {
-    show_row(r);
-    append_csv(r);
+    pb_row r = *r0;
+    if (r.threads > 0 && r.threads <= MPM_MAX_THREADS) r.triad_gbs = triads[r.threads].gbs;
+    show_row(&r);
+    append_csv(&r);
 }
 
 static void row_failed(const pb_row *r)
@@ -234,7 +275,7 @@ const char *pb_exe_dir(void)
 /* ---- the command line ---- */
 
 typedef struct {
-    int all, bspline, csv, have_scene, cpdi_vs_gimp, checkpoint;
+    int all, bspline, csv, have_scene, cpdi_vs_gimp, checkpoint, no_triad, triad_only;
     const char *scene;
     long particles, steps;
     int threads, have_threads, have_method, have_update;
@@ -276,6 +317,14 @@ static int parse_args(int argc, char **argv, opts *o)
         }
         if (!strcmp(a, "--all")) {
             o->all = 1;
+            continue;
+        }
+        if (!strcmp(a, "--no-triad")) {
+            o->no_triad = 1;
+            continue;
+        }
+        if (!strcmp(a, "--triad")) {
+            o->triad_only = 1;
             continue;
         }
         if (!strcmp(a, "--bspline")) {
@@ -396,7 +445,13 @@ static int parse_args(int argc, char **argv, opts *o)
                         "and --threads\n");
         return -1;
     }
-    if (o->cpdi_vs_gimp || o->checkpoint) return 0;
+    if (o->triad_only && (o->all || o->bspline || o->cpdi_vs_gimp || o->checkpoint ||
+                          o->have_scene || o->no_triad)) {
+        fprintf(stderr, "mpmbench: --triad measures only the triad; it takes only --threads and "
+                        "--csv\n");
+        return -1;
+    }
+    if (o->cpdi_vs_gimp || o->checkpoint || o->triad_only) return 0;
     if (!o->all && !o->bspline && !o->have_scene) {
         fprintf(stderr, "mpmbench: give --scene NAME or --all (see --help)\n");
         return -1;
@@ -566,6 +621,7 @@ static int run_lean(const pb_cfg *c, long steps, pb_row *r)
                     "--particles",
                     sparts,
                     "--csv",
+                    "--no-triad",
                     NULL};
     int fds[2];
     if (pipe(fds)) {
@@ -611,10 +667,11 @@ static int run_lean(const pb_cfg *c, long steps, pb_row *r)
     for (char *line = strtok(out, "\n"); line; line = strtok(NULL, "\n")) {
         char scene[40], meth[12], upd[8];
         memset(r, 0, sizeof *r);
-        if (sscanf(line, "%39[^,],%11[^,],%7[^,],%d,%zu,%zu,%ld,%d,%lf,%lf,%lf", scene, meth, upd,
-                   &r->dim, &r->particles, &r->nodes, &r->steps, &r->threads, &r->wall_s,
-                   &r->mpsteps, &r->bytes_pp) == 11 &&
-            strcmp(scene, "scene")) {
+        int k = sscanf(line, "%39[^,],%11[^,],%7[^,],%d,%zu,%zu,%ld,%d,%lf,%lf,%lf,%lf", scene,
+                       meth, upd, &r->dim, &r->particles, &r->nodes, &r->steps, &r->threads,
+                       &r->wall_s, &r->mpsteps, &r->bytes_pp, &r->traffic_b);
+        if (k < 12) r->traffic_b = 0;
+        if (k >= 11 && strcmp(scene, "scene")) {
             snprintf(r->scene, sizeof r->scene, "%s", scene);
             r->method = !strcmp(meth, "GIMP")       ? MPM_METHOD_GIMP
                         : !strcmp(meth, "BSPLINE2") ? MPM_METHOD_BSPLINE2
@@ -642,6 +699,8 @@ static double load_avg(void)
 
 static void machine_info(void)
 {
+    static int done;
+    if (done++) return;
     char model[256] = "unknown CPU", line[512];
     FILE *f = fopen("/proc/cpuinfo", "r");
     if (f) {
@@ -666,9 +725,50 @@ static void machine_info(void)
             load_avg(), when);
 }
 
+/* The triads of the thread counts the rows will use, measured before the
+ * scenes (triad.c). */
+static int measure_triads(const opts *o)
+{
+    int ts[2] = {o->threads, 0}, n = 1;
+    if (o->no_triad || o->checkpoint) return 0;
+    if (o->have_scene && !strcmp(o->scene, "daemon")) return 0; /* no model in the daemon */
+    if (o->all || o->bspline || o->cpdi_vs_gimp || (o->triad_only && !o->have_threads)) {
+        ts[0] = 1;
+        ts[1] = 2;
+        n = 2;
+    }
+    int bad = 0;
+    for (int i = 0; i < n; i++) {
+        pb_triad *t = &triads[ts[i]];
+        pb_progress("STREAM triad, %d thread%s", ts[i], ts[i] > 1 ? "s" : "");
+        if (pb_triad_measure(ts[i], t)) {
+            fprintf(stderr, "mpmbench: triad on %d threads: %s\n", ts[i], t->msg);
+            t->gbs = 0;
+            bad = 1;
+        }
+    }
+    return bad;
+}
+
+/* The triad lines of the report's header. */
+static void triad_notes(void)
+{
+    static int done;
+    if (done++) return;
+    double llc = pb_llc_bytes() / (1024.0 * 1024.0);
+    for (int t = 1; t <= MPM_MAX_THREADS; t++) {
+        const pb_triad *x = &triads[t];
+        if (x->gbs <= 0) continue;
+        pb_note("STREAM triad a = b + s c, %d thread%s: %.2f GB/s (median of %d, %.2f..%.2f; 3 "
+                "arrays of %.0f MiB, last-level cache %.0f MiB)",
+                t, t > 1 ? "s" : "", x->gbs, x->reps, x->lo, x->hi, x->array_mib, llc);
+    }
+}
+
 static void preamble(void)
 {
     machine_info();
+    triad_notes();
     long base = pb_baseline_rss_kb();
     pb_note("Mpsteps/s: millions of particle-steps per second, the median of %d timed runs after a "
             "warm-up run of",
@@ -684,6 +784,10 @@ static void preamble(void)
             "Daemon rows: the peak",
             base);
     pb_note("  RSS of that row's own mpmd process.");
+    pb_note("B/pstep: the particle-array bytes per particle-step the step's passes read and "
+            "write (mpm_sim_traffic();");
+    pb_note("  grid traffic not counted); GB/s: Mpsteps/s x B/pstep; roof: GB/s over the "
+            "triad of the row's threads.");
     pb_note("cpu: CPU time over wall time of the timed runs (all threads; daemon rows: the whole "
             "mpmd), i.e. the");
     pb_note("  CPUs kept busy: below the thread count when the solver waits in serial parts, or "
@@ -917,6 +1021,24 @@ int main(int argc, char **argv)
     int rc = parse_args(argc, argv, &o);
     if (rc) return rc > 0 ? 0 : 2;
     csv_mode = o.csv;
+    int tbad = measure_triads(&o);
+    if (o.triad_only) {
+        machine_info();
+        if (!csv_mode) {
+            triad_notes();
+            return tbad;
+        }
+        printf("triad_threads,triad_gbs,lo_gbs,hi_gbs,array_mib,reps\n");
+        for (int t = 1; t <= MPM_MAX_THREADS; t++)
+            if (triads[t].gbs > 0)
+                printf("%d,%.3f,%.3f,%.3f,%.0f,%d\n", t, triads[t].gbs, triads[t].lo, triads[t].hi,
+                       triads[t].array_mib, triads[t].reps);
+        return tbad;
+    }
+    if (csv_mode) {
+        machine_info(); /* on stderr with --csv */
+        triad_notes();
+    }
     if (o.all) {
         rc = run_all(&o);
     } else if (o.bspline) {

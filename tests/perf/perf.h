@@ -23,7 +23,7 @@
 #define PB_CSV_PATH PB_CSV_DIR "/throughput.csv"
 #define PB_CSV_HEADER                                                             \
     "scene,method,update,dim,particles,nodes,steps,threads,wall_s,mpsteps_per_s," \
-    "bytes_per_particle"
+    "bytes_per_particle,model_bytes_per_pstep,achieved_gbs,triad_gbs,roof_fraction"
 
 #define PB_RUNS 3 /* timed runs per row (the median is reported) */
 #define PB_MAX_RUNS 8
@@ -81,6 +81,8 @@ typedef struct {
     double rate_lo, rate_hi; /* slowest and fastest timed run, M particle-steps/s */
     double bytes_pp;         /* peak RSS / particles */
     long rss_kb;             /* the peak RSS behind it */
+    double traffic_b;        /* mpm_sim_traffic() total, bytes per particle-step (0: none) */
+    double triad_gbs;        /* the triad of the row's thread count (0: not measured) */
     double setup_s;          /* building the case and the simulation */
     double cpus;             /* CPU time / wall time of the timed runs: CPUs kept busy */
     long default_steps;      /* what the defaults asked for */
@@ -136,6 +138,26 @@ double pb_cpu_self(void);
 
 /* The median of n values (n <= PB_MAX_RUNS; the array is left alone). */
 double pb_median(const double *v, int n);
+
+/* ---- triad.c ---- */
+
+#define PB_TRIAD_REPS 7 /* timed triad passes (the median is reported) */
+
+/* A STREAM-style triad a = b + s c on `threads` threads (see triad.c). */
+typedef struct {
+    int threads, reps;
+    double gbs, lo, hi; /* median, slowest and fastest pass, GB/s (24 B per element) */
+    double array_mib;   /* MiB per array */
+    char msg[160];
+} pb_triad;
+
+/* The largest cache of cpu0 (bytes; 0 when unknown). */
+double pb_llc_bytes(void);
+/* Elements per triad array: max(4 x LLC, 64 MiB), capped so that three
+ * arrays fit in a quarter of the RAM; MPMBENCH_TRIAD_MIB overrides. */
+size_t pb_triad_elements(void);
+/* Measures the triad; 0, or -1 with out->msg. */
+int pb_triad_measure(int threads, pb_triad *out);
 
 /* ---- daemon.c ---- */
 

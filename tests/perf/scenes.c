@@ -403,6 +403,8 @@ static int work_collapse(const pb_cfg *c, pb_row *r)
     r->dim = mpm_sim_dim(sim);
     r->particles = mpm_sim_particles(sim);
     r->nodes = mpm_sim_nodes(sim);
+    mpm_traffic tr;
+    r->traffic_b = mpm_sim_traffic(sim, &tr) ? 0 : tr.total;
     int rc = timed_runs(sim, c, r);
     mpm_sim_destroy(&sim);
     mpm_collapse_free(&cc);
@@ -433,6 +435,8 @@ static int work_scene(void *arg, pb_row *r)
     r->dim = mpm_sim_dim(sim);
     r->particles = mpm_sim_particles(sim);
     r->nodes = mpm_sim_nodes(sim);
+    mpm_traffic tr;
+    r->traffic_b = mpm_sim_traffic(sim, &tr) ? 0 : tr.total;
     int rc = timed_runs(sim, c, r);
     mpm_sim_destroy(&sim);
     mpm_paper_free(&t);

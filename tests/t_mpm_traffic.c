@@ -1,0 +1,149 @@
+/*
+ * t_mpm_traffic.c - mpm_sim_traffic(), the modelled particle-array bytes
+ * per particle-step that bin/mpmbench sets against the STREAM triad:
+ * exact figures for a few jobs, each worked out by hand in the comments
+ * from the passes of mpm_kernels.c / mpm_cpdi.c and the model's rules
+ * (mpm_traffic.c: 8 B per double array per particle, mat 2 B; an array
+ * read and written counts twice; grid traffic not counted).  When the
+ * passes change (issue #14's fused G2P2G), these figures change with
+ * them, on purpose.
+ */
+#include "mpm.h"
+#include "t.h"
+
+#include <string.h>
+
+/* A small box of 2 x 2 (x 2) particles per cell in a 12^dim grid. */
+static mpm_sim *job(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_model_kind model)
+{
+    mpm_case c;
+    static mpm_material_desc mat;
+    static mpm_body_desc b;
+    memset(&c, 0, sizeof c);
+    memset(&b, 0, sizeof b);
+    mat = (mpm_material_desc){
+        .model = model, .youngs_modulus = 1e4, .poisson_ratio = 0.3, .density = 1.0};
+    if (model == MPM_MODEL_DRUCKER_PRAGER) {
+        mat.friction_angle = 30;
+        mat.dilatancy_angle = 0;
+        mat.cohesion = 10;
+    }
+    b.shape = MPM_SHAPE_BOX;
+    b.ppc = 2;
+    for (int d = 0; d < dim; d++) {
+        b.lo[d] = 0.3;
+        b.hi[d] = 0.6;
+        c.grid.h[d] = 0.1;
+        c.grid.nodes[d] = 12;
+    }
+    c.grid.dim = dim;
+    c.method = m;
+    c.update = u;
+    c.transfer = tr;
+    c.threads = 1;
+    c.n_materials = 1;
+    c.materials = &mat;
+    c.n_bodies = 1;
+    c.bodies = &b;
+    mpm_error err;
+    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+    if (!s) {
+        char e[T_ERRLEN];
+        mpm_error_text(&err, MPM_FIELD_JSON, e, sizeof e);
+        fprintf(stderr, "    mpm_sim_new: %s\n", e);
+    }
+    return s;
+}
+
+/* the model's figure for a job, its passes logged; -1 on failure */
+static double traffic(mpm_sim *s, const char *what, mpm_traffic *t)
+{
+    if (!s || mpm_sim_traffic(s, t)) return -1;
+    char line[512];
+    size_t k = 0;
+    for (int i = 0; i < t->npass && k < sizeof line; i++)
+        k += (size_t)snprintf(line + k, sizeof line - k, "%s%s r%.0f w%.0f", i ? ", " : "",
+                              t->pass[i].name, t->pass[i].read, t->pass[i].write);
+    TLOG("%s: %.0f B/particle-step (%s)", what, t->total, line);
+    return t->total;
+}
+
+TEST(traffic_usf_mpm_elastic)
+{
+    mpm_traffic t;
+    /* 2D: p2g_mq reads x v m: 2 + 2 + 1 doubles = 40 B; stress_force reads
+     * x (16), mat (2), sig xx yy zz xy (32), eps xx yy xy (24: no eps_zz
+     * array in plane strain), vol (8) = 82 and writes sig eps vol = 64;
+     * g2p_xv reads x v (32) and writes them (32).  40 + 82 + 64 + 64 = 250
+     * (the issue's "about 250": 248 without the material index). */
+    mpm_sim *s = job(2, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
+    CHECK(traffic(s, "2D MPM USF elastic", &t) == 250);
+    CHECK(t.npass == 3 && t.pass[0].read == 40 && t.pass[0].write == 0);
+    CHECK(t.pass[1].read == 82 && t.pass[1].write == 64);
+    CHECK(t.pass[2].read == 32 && t.pass[2].write == 32);
+    CHECK(t.read == 154 && t.write == 96);
+    mpm_sim_destroy(&s);
+    /* 3D: p2g x v m = 56; stress reads x 24 + mat 2 + sig 48 + eps 48 +
+     * vol 8 = 130, writes 104; g2p 48 + 48.  56 + 130 + 104 + 96 = 386. */
+    s = job(3, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
+    CHECK(traffic(s, "3D MPM USF elastic", &t) == 386);
+    mpm_sim_destroy(&s);
+}
+
+TEST(traffic_usl_gimp_elastic)
+{
+    mpm_traffic t;
+    /* 2D uGIMP USL: the weights read lp too.  p2g_mqf reads x 16, lp 16,
+     * m 8, v 16, sig 32, vol 8 = 96; g2p_xv_stress reads x lp v (48), mat
+     * 2, sig 32, eps 24, vol 8 = 114 and writes x v (32), sig eps vol (64)
+     * = 96.  96 + 114 + 96 = 306. */
+    mpm_sim *s = job(2, MPM_METHOD_GIMP, MPM_USL, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
+    CHECK(traffic(s, "2D GIMP USL elastic", &t) == 306);
+    CHECK(t.npass == 2 && t.pass[0].read == 96 && t.pass[1].read == 114 && t.pass[1].write == 96);
+    mpm_sim_destroy(&s);
+}
+
+TEST(traffic_musl_bspline_apic)
+{
+    mpm_traffic t;
+    /* 2D BSPLINE2 MUSL APIC (no lp; B is 2 x 2 = 4 doubles = 32 B):
+     *   p2g_mqf      reads x 16, m 8, v 16, B 32, sig 32, vol 8     = 112
+     *   g2p_v        reads x 16; writes v 16, B 32 (v not read)     = 16 + 48
+     *   p2g_q2       reads x 16, m 8, v 16, B 32                    = 72
+     *   g2p_x_stress reads x 16, v 16 (the particle check), mat 2,
+     *                sig 32, eps 24, vol 8 = 98; writes x 16, sig 32,
+     *                eps 24, vol 8 = 80
+     * 112 + 64 + 72 + 178 = 426. */
+    mpm_sim *s = job(2, MPM_METHOD_BSPLINE2, MPM_MUSL, MPM_TRANSFER_APIC, MPM_MODEL_LINEAR_ELASTIC);
+    CHECK(traffic(s, "2D BSPLINE2 MUSL APIC elastic", &t) == 426);
+    CHECK(t.npass == 4 && t.pass[1].read == 16 && t.pass[1].write == 48);
+    CHECK(t.pass[3].read == 98 && t.pass[3].write == 80);
+    mpm_sim_destroy(&s);
+    /* the same with FLIP: p2g_mqf 80, g2p_v reads x v 32 writes v 16,
+     * p2g_q2 40, g2p_x_stress 98 + 80: 80 + 48 + 40 + 178 = 346 */
+    s = job(2, MPM_METHOD_BSPLINE2, MPM_MUSL, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
+    CHECK(traffic(s, "2D BSPLINE2 MUSL FLIP elastic", &t) == 346);
+    mpm_sim_destroy(&s);
+}
+
+TEST(traffic_usf_plastic_and_cpdi)
+{
+    mpm_traffic t;
+    /* 2D MPM USF Drucker-Prager: the stress pass also reads epsp (8) and
+     * writes epsp and the yield flag (16): reads 82 + 8 = 90, writes 64 +
+     * 16 = 80; p2g 40, g2p 64.  40 + 90 + 80 + 64 = 274. */
+    mpm_sim *s = job(2, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_DRUCKER_PRAGER);
+    CHECK(traffic(s, "2D MPM USF Drucker-Prager", &t) == 274);
+    CHECK(t.pass[1].read == 90 && t.pass[1].write == 80);
+    mpm_sim_destroy(&s);
+    /* 2D CPDI USF elastic: the weights read x 16, lp 16, F 32 (64 B);
+     *   p2g_mq       64 + m 8 + v 16                               = 88
+     *   stress_force 64 + mat 2 + sig 32 + eps 24 + vol 8 = 130; writes 64
+     *   g2p_xv       reads 64 + v 16 = 80; writes x 16, F 32, v 16 = 64
+     * 88 + 130 + 64 + 144 = 426. */
+    s = job(2, MPM_METHOD_CPDI, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
+    CHECK(traffic(s, "2D CPDI USF elastic", &t) == 426);
+    CHECK(t.pass[2].read == 80 && t.pass[2].write == 64);
+    mpm_sim_destroy(&s);
+    CHECK(mpm_sim_traffic(NULL, &t) == MPM_EINVAL);
+}
