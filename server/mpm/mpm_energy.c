@@ -60,7 +60,7 @@ static inline void energy_slice(mpm_sim *s, int tid, int ang)
         if (gen) /* the model's stored energy (the in-pass sums: the same) */
             es += mpm_model_energy(s, p);
         else
-            es += 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
+            es += 0.5 * mpm_strain_density(s->mats, P, dim, p) * P->vol[p];
         ms += m;
     }
     mpm_thread_out *o = &s->tout[tid];

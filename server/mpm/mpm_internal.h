@@ -65,7 +65,12 @@ typedef struct {
      * MUSL the gather of the strain increment; USF the position pass, from
      * the velocity before the nodal update).  Sorted with the particles. */
     double *F[9];
-    double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL) */
+    /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL).  The strain
+     * record eps exists only when something reads it (mpm_sim.c
+     * needs_strain(): a rate-form model's record, or a linear elastic
+     * material with an initial stress); else all NULL, and the strain
+     * energy comes from the stress (mpm_strain_density()). */
+    double *sig[6], *eps[6];
     /* Model state, allocated only when a material's model declares it
      * (mpm_model_ops.needs), else NULL; sorted with the particles:
      * epsp the equivalent plastic strain, yld 1.0 when the particle flowed
@@ -486,9 +491,18 @@ static inline double mpm_model_energy(const mpm_sim *s, size_t p)
 }
 
 /* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
- * eps_zz array, its term is zero) */
-static inline double mpm_strain_density(const mpm_particles *P, int dim, size_t p)
+ * eps_zz array, its term is zero).  Without a strain record (P.eps NULL:
+ * every material elastic from a zero stress, mpm_sim.c) the strain is
+ * C^-1 sigma of the particle's material, and sigma : eps is twice
+ * mpm_elastic_stored() (equal up to round-off to the record's sum). */
+static inline double mpm_strain_density(const mpm_mat_params *mats, const mpm_particles *P, int dim,
+                                        size_t p)
 {
+    if (!P->eps[0]) {
+        double sig[6] = {0, 0, 0, 0, 0, 0};
+        for (int c = 0; c < MPM_NCOMP(dim); c++) sig[c] = P->sig[c][p];
+        return 2.0 * mpm_elastic_stored(&mats[P->mat[p]], sig, dim);
+    }
     double se = 0;
     for (int c = 0; c < MPM_NCOMP(dim); c++)
         if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];

@@ -129,9 +129,24 @@ int mpm_needs_F(const mpm_case *c)
            (model_needs(c) & MPM_NEED_F);
 }
 
+/* Whether the particles keep a strain record P.eps (mpm_internal.h): the
+ * plastic models' total strain (the elastic part follows from the stress,
+ * the rest is plastic), and linear elasticity from an initial stress
+ * (given or geostatic), where the strain energy 1/2 sigma : eps counts
+ * strain from the initial state.  Otherwise nothing reads it: linear
+ * elasticity's energy comes from the stress through the compliance, the
+ * neo-Hookean's from F. */
+static int needs_strain(const mpm_case *c)
+{
+    if (model_needs(c) & MPM_NEED_PLASTIC) return 1;
+    for (size_t b = 0; b < c->n_bodies; b++)
+        if (c->bodies[b].stress || c->bodies[b].geostatic) return 1;
+    return 0;
+}
+
 /* lp: the half-widths (GMPM, CPDI); F: the deformation gradient, set to I;
- * apic: the affine matrices B_p, set to 0 */
-static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic)
+ * apic: the affine matrices B_p, set to 0; eps: the strain record */
+static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic, int eps)
 {
     memset(P, 0, sizeof *P);
     P->n = n;
@@ -146,7 +161,7 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, i
     }
     for (int c = 0; c < MPM_NCOMP(dim); c++) {
         if (!(P->sig[c] = mpm_dalloc(n))) return MPM_ENOMEM;
-        if (!(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
+        if (eps && !(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
             return MPM_ENOMEM; /* eps_zz = 0 */
     }
     for (int a = 0; a < dim && apic; a++)
@@ -438,7 +453,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->transfer = c->transfer;
     if (alloc_particles(&s->P, np, dim,
                         c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
-                        mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC))
+                        mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC, needs_strain(c)))
         goto nomem;
     if ((needs & MPM_NEED_PLASTIC) &&
         (!(s->P.epsp = mpm_dalloc(np)) || !(s->P.yld = mpm_dalloc(np))))
