@@ -539,7 +539,7 @@ int mpm_sim_checkpoint_load(mpm_sim *s, const void *buf, size_t n, mpm_error *er
             return mpm_fail(err, MPM_ESYNTAX, CK_FIELD, "particle slot %zu has material %u of %zu",
                             p, (unsigned)m, s->nmat);
     }
-    unsigned char *seen = (unsigned char *)s->sscr; /* scratch between steps: np doubles */
+    unsigned char *seen = (unsigned char *)s->sperm; /* scratch between sorts: 4 np bytes */
     memset(seen, 0, np);
     for (size_t p = 0; p < np; p++) {
         uint32_t id;

@@ -317,12 +317,12 @@ struct mpm_sim {
     size_t *acc;
     size_t nact;
     /* sorting by cell: every MPM_SORT_EVERY steps, stable counting sort
-     * with scratch made at creation (the keys live in sscr, the cells are
-     * numbered over the rows' extents only: rowoff[row] is the first key of
-     * a row) */
+     * with scratch made at creation (the keys, then the new slots, live in
+     * sperm; the cells are numbered over the rows' extents only:
+     * rowoff[row] is the first key of a row).  Between sorts sperm is
+     * free scratch of n 32-bit words (mpm_checkpoint.c). */
     uint32_t *sperm, *shist;
     size_t *rowoff;
-    double *sscr;
 
     /* threads */
     int nthreads;

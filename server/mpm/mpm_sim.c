@@ -464,8 +464,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
     s->k = select_kernels(s);
-    if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
-        !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
+    if (!(s->sperm = malloc((np ? np : 1) * sizeof *s->sperm)) ||
+        !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
     if (alloc_gridbuf(&s->g, s->nn, dim, musl)) goto nomem;
     if (!(s->minv = mpm_dalloc(s->nn))) goto nomem;
@@ -558,7 +558,6 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->acc);
     free(s->sperm);
     free(s->shist);
-    free(s->sscr);
     free(s->tout);
     free(s->minv);
     for (int d = 0; d < 3; d++) free(s->ncoord[d]);
