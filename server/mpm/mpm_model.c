@@ -51,15 +51,18 @@ static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
                        double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
-    double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s2 = P->sig[2] + p0, *s3 = P->sig[3] + p0;
+    double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s3 = P->sig[3] + p0;
     for (size_t i = 0; i < n; i++) {
         const mpm_mat_params *mp = &mats[mat[i]];
         double dxx = deps[0][i], dyy = deps[1][i], dxy = deps[3][i];
         double lt = mp->lambda * (dxx + dyy), m2 = 2.0 * mp->mu;
         s0[i] += lt + m2 * dxx;
         s1[i] += lt + m2 * dyy;
-        s2[i] += lt; /* plane strain: eps_zz = 0 */
         s3[i] += m2 * dxy;
+    }
+    if (P->sig[2]) { /* plane strain: eps_zz = 0 (else derived, mpm_sig_zz()) */
+        double *s2 = P->sig[2] + p0;
+        for (size_t i = 0; i < n; i++) s2[i] += mats[mat[i]].lambda * (deps[0][i] + deps[1][i]);
     }
     if (P->eps[0]) { /* the strain record, when kept (mpm_internal.h) */
         double *e0 = P->eps[0] + p0, *e1 = P->eps[1] + p0, *e3 = P->eps[3] + p0;
@@ -103,8 +106,8 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
 static double elastic_energy(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p)
 {
     if (!P->eps[0]) { /* no strain record: mpm_strain_density()'s bits */
-        double sig[6] = {0, 0, 0, 0, 0, 0};
-        for (int c = 0; c < MPM_NCOMP(dim); c++) sig[c] = P->sig[c][p];
+        double sig[6];
+        mpm_particle_stress(mp, P, dim, p, sig);
         return 0.5 * (2.0 * mpm_elastic_stored(mp, sig, dim)) * P->vol[p];
     }
     return 0.5 * mpm_strain_density(NULL, P, dim, p) * P->vol[p];

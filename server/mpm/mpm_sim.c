@@ -144,9 +144,23 @@ static int needs_strain(const mpm_case *c)
     return 0;
 }
 
+/* Whether 2D particles store sigma_zz: unless every body's material is
+ * linear elastic and there is no strain record, when it is nu (sigma_xx +
+ * sigma_yy) (plane strain, from a zero stress) and nothing in the step
+ * reads it (mpm_sig_zz()). */
+static int needs_szz(const mpm_case *c)
+{
+    if (needs_strain(c)) return 1;
+    for (size_t b = 0; b < c->n_bodies; b++)
+        if (c->materials[c->bodies[b].material].model != MPM_MODEL_LINEAR_ELASTIC) return 1;
+    return 0;
+}
+
 /* lp: the half-widths (GMPM, CPDI); F: the deformation gradient, set to I;
- * apic: the affine matrices B_p, set to 0; eps: the strain record */
-static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic, int eps)
+ * apic: the affine matrices B_p, set to 0; eps: the strain record; szz:
+ * 2D's sigma_zz (needs_szz()) */
+static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic, int eps,
+                           int szz)
 {
     memset(P, 0, sizeof *P);
     P->n = n;
@@ -160,6 +174,7 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, i
             for (size_t p = 0; p < n; p++) P->F[c][p] = 1.0;
     }
     for (int c = 0; c < MPM_NCOMP(dim); c++) {
+        if (dim == 2 && c == 2 && !szz) continue; /* derived (mpm_sig_zz()) */
         if (!(P->sig[c] = mpm_dalloc(n))) return MPM_ENOMEM;
         if (eps && !(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
             return MPM_ENOMEM; /* eps_zz = 0 */
@@ -451,9 +466,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
 
     int musl = c->update == MPM_MUSL;
     s->transfer = c->transfer;
-    if (alloc_particles(&s->P, np, dim,
-                        c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
-                        mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC, needs_strain(c)))
+    if (alloc_particles(
+            &s->P, np, dim, c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
+            mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC, needs_strain(c), needs_szz(c)))
         goto nomem;
     if ((needs & MPM_NEED_PLASTIC) &&
         (!(s->P.epsp = mpm_dalloc(np)) || !(s->P.yld = mpm_dalloc(np))))
@@ -830,7 +845,7 @@ void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out)
 void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
 {
     const mpm_particles *P = &s->P;
-    int dim = s->dim, nc = MPM_NCOMP(dim);
+    int dim = s->dim;
     /* slot p holds the particle created as number P->id[p] */
     for (size_t p = 0; p < P->n; p++) {
         size_t q = P->id[p];
@@ -838,11 +853,13 @@ void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
             if (o->x) o->x[q * dim + d] = P->x[d][p];
             if (o->v) o->v[q * dim + d] = P->v[d][p];
         }
+        double sig[6];
+        mpm_particle_stress(&s->mats[P->mat[p]], P, dim, p, sig);
         if (o->stress)
-            for (int c = 0; c < 6; c++) o->stress[q * 6 + c] = c < nc ? P->sig[c][p] : 0.0;
+            for (int c = 0; c < 6; c++) o->stress[q * 6 + c] = sig[c];
         if (o->pressure) {
-            double tr = P->sig[0][p];
-            if (dim > 1) tr += P->sig[1][p] + P->sig[2][p];
+            double tr = sig[0];
+            if (dim > 1) tr += sig[1] + sig[2];
             o->pressure[q] = tr / 3.0;
         }
         if (o->volume) o->volume[q] = P->vol[p];

@@ -48,7 +48,7 @@ static int sort_arrays(mpm_sim *s, double **arr[NARR])
         if (P->lp[d]) arr[na++] = &P->lp[d];
     }
     for (int c = 0; c < MPM_NCOMP(s->dim); c++) {
-        arr[na++] = &P->sig[c];
+        if (P->sig[c]) arr[na++] = &P->sig[c];
         if (P->eps[c]) arr[na++] = &P->eps[c];
     }
     for (int c = 0; c < 9; c++)
