@@ -44,7 +44,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#define CK_VERSION 1u
+#define CK_VERSION 2u /* 2: the strain record is optional (A_EPS) */
 #define CK_ORDER 0x0102030405060708ull
 static const char ck_magic[8] = {'M', 'P', 'M', 'C', 'K', 'P', 'T', '\n'};
 
@@ -136,7 +136,7 @@ enum {
 enum { I_STEPS, I_PLUPD, I_PLSUB, I_PLMAX, I_PFORCES, I_NLOAD, I_FAILED, I_COUNT };
 
 /* bit of each optional particle array in L_ARRAYS */
-enum { A_LP = 1, A_F = 2, A_B = 4, A_EPSP = 8, A_YLD = 16, A_VOL0 = 32 };
+enum { A_LP = 1, A_F = 2, A_B = 4, A_EPSP = 8, A_YLD = 16, A_VOL0 = 32, A_EPS = 64, A_SZZ = 128 };
 
 #define CK_NARR (3 * 3 + 9 + 2 * 6 + 9 + 5)
 
@@ -202,7 +202,7 @@ static int part_arrays(const mpm_particles *P, int dim, double *arr[CK_NARR])
     for (int c = 0; c < 9; c++)
         if (P->F[c]) arr[na++] = P->F[c];
     for (int c = 0; c < MPM_NCOMP(dim); c++) {
-        arr[na++] = P->sig[c];
+        if (P->sig[c]) arr[na++] = P->sig[c];
         if (P->eps[c]) arr[na++] = P->eps[c];
     }
     for (int c = 0; c < 9; c++)
@@ -228,7 +228,8 @@ static void layout_of(const mpm_sim *s, uint64_t L[L_COUNT])
     L[L_PARTICLES] = P->n;
     L[L_MATERIALS] = s->nmat;
     L[L_ARRAYS] = (P->lp[0] ? A_LP : 0) | (P->F[0] ? A_F : 0) | (P->B[0] ? A_B : 0) |
-                  (P->epsp ? A_EPSP : 0) | (P->yld ? A_YLD : 0) | (P->vol0 ? A_VOL0 : 0);
+                  (P->epsp ? A_EPSP : 0) | (P->yld ? A_YLD : 0) | (P->vol0 ? A_VOL0 : 0) |
+                  (P->eps[0] ? A_EPS : 0) | (P->sig[2] ? A_SZZ : 0);
     L[L_FIXED] = s->nfixed;
     L[L_PRES_NODES] = s->npres;
     L[L_PRES_SRC] = s->npsrc;
@@ -396,8 +397,9 @@ static const char *layout_value(int i, uint64_t v, char *buf, size_t n)
     static const char *const transfer[] = {"FLIP", "APIC"};
     static const char *const volume[] = {"STRAIN_INCREMENT", "DET_F", "CONSTANT"};
     static const char *const damping[] = {"NONE", "LOCAL", "VISCOUS"};
-    static const char *const arrays[] = {"half-widths",    "F",       "APIC B",
-                                         "plastic strain", "yielded", "initial volume"};
+    static const char *const arrays[] = {"half-widths",    "F",        "APIC B",
+                                         "plastic strain", "yielded",  "initial volume",
+                                         "strain",         "stress zz"};
     const char *const *names = NULL;
     size_t nn = 0;
     switch (i) {
@@ -412,7 +414,7 @@ static const char *layout_value(int i, uint64_t v, char *buf, size_t n)
         snprintf(buf, n, "%s", names[v]);
     } else if (i == L_ARRAYS) {
         size_t w = (size_t)snprintf(buf, n, "(");
-        for (int b = 0; b < 6; b++)
+        for (int b = 0; b < 8; b++)
             if ((v & (1u << b)) && w < n)
                 w += (size_t)snprintf(buf + w, n - w, "%s%s", w > 1 ? ", " : "", arrays[b]);
         if (w < n) snprintf(buf + w, n - w, ")");
@@ -538,7 +540,7 @@ int mpm_sim_checkpoint_load(mpm_sim *s, const void *buf, size_t n, mpm_error *er
             return mpm_fail(err, MPM_ESYNTAX, CK_FIELD, "particle slot %zu has material %u of %zu",
                             p, (unsigned)m, s->nmat);
     }
-    unsigned char *seen = (unsigned char *)s->sscr; /* scratch between steps: np doubles */
+    unsigned char *seen = (unsigned char *)s->sperm; /* scratch between sorts: 4 np bytes */
     memset(seen, 0, np);
     for (size_t p = 0; p < np; p++) {
         uint32_t id;

@@ -60,7 +60,7 @@ static inline void energy_slice(mpm_sim *s, int tid, int ang)
         if (gen) /* the model's stored energy (the in-pass sums: the same) */
             es += mpm_model_energy(s, p);
         else
-            es += 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
+            es += 0.5 * mpm_strain_density(s->mats, P, dim, p) * P->vol[p];
         ms += m;
     }
     mpm_thread_out *o = &s->tout[tid];
@@ -188,7 +188,8 @@ double mpm_initial_stress_energy(const mpm_sim *s)
         if (dim == 1) {
             w = P->sig[0][p] * P->sig[0][p] / E;
         } else {
-            double xx = P->sig[0][p], yy = P->sig[1][p], zz = P->sig[2][p],
+            double xx = P->sig[0][p], yy = P->sig[1][p],
+                   zz = dim == 2 ? mpm_sig_zz(mp, P, p) : P->sig[2][p],
                    sh = P->sig[3][p] * P->sig[3][p];
             if (dim == 3) sh += P->sig[4][p] * P->sig[4][p] + P->sig[5][p] * P->sig[5][p];
             w = (xx * xx + yy * yy + zz * zz - 2 * nu * (xx * yy + yy * zz + zz * xx) +

@@ -65,7 +65,16 @@ typedef struct {
      * MUSL the gather of the strain increment; USF the position pass, from
      * the velocity before the nodal update).  Sorted with the particles. */
     double *F[9];
-    double *sig[6], *eps[6]; /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL) */
+    /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL).  The strain
+     * record eps exists only when something reads it (mpm_sim.c
+     * needs_strain(): a rate-form model's record, or a linear elastic
+     * material with an initial stress); else all NULL, and the strain
+     * energy comes from the stress (mpm_strain_density()).  2D plane
+     * strain without a strain record with every material linear elastic:
+     * sig[2] is NULL too, sigma_zz = nu (sigma_xx + sigma_yy) being
+     * derived where it is read (mpm_sig_zz(); nothing in the step reads
+     * it). */
+    double *sig[6], *eps[6];
     /* Model state, allocated only when a material's model declares it
      * (mpm_model_ops.needs), else NULL; sorted with the particles:
      * epsp the equivalent plastic strain, yld 1.0 when the particle flowed
@@ -320,12 +329,12 @@ struct mpm_sim {
     size_t *acc;
     size_t nact;
     /* sorting by cell: every MPM_SORT_EVERY steps, stable counting sort
-     * with scratch made at creation (the keys live in sscr, the cells are
-     * numbered over the rows' extents only: rowoff[row] is the first key of
-     * a row) */
+     * with scratch made at creation (the keys, then the new slots, live in
+     * sperm; the cells are numbered over the rows' extents only:
+     * rowoff[row] is the first key of a row).  Between sorts sperm is
+     * free scratch of n 32-bit words (mpm_checkpoint.c). */
     uint32_t *sperm, *shist;
     size_t *rowoff;
-    double *sscr;
 
     /* threads */
     int nthreads;
@@ -514,10 +523,37 @@ static inline double mpm_model_energy(const mpm_sim *s, size_t p)
     return mp->ops->energy(mp, &s->P, s->dim, p);
 }
 
-/* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
- * eps_zz array, its term is zero) */
-static inline double mpm_strain_density(const mpm_particles *P, int dim, size_t p)
+/* sigma_zz of 2D particle p of material mp: stored, or, without the array
+ * (mpm_particles.sig), plane strain linear elasticity's nu (sigma_xx +
+ * sigma_yy) */
+static inline double mpm_sig_zz(const mpm_mat_params *mp, const mpm_particles *P, size_t p)
 {
+    return P->sig[2] ? P->sig[2][p] : mp->nu * (P->sig[0][p] + P->sig[1][p]);
+}
+
+/* The 6 Voigt stress components of particle p (material mp): those not
+ * stored are 0, 2D's sigma_zz is mpm_sig_zz(). */
+static inline void mpm_particle_stress(const mpm_mat_params *mp, const mpm_particles *P, int dim,
+                                       size_t p, double sig[6])
+{
+    for (int c = 0; c < 6; c++) sig[c] = c < MPM_NCOMP(dim) && P->sig[c] ? P->sig[c][p] : 0.0;
+    if (dim == 2) sig[2] = mpm_sig_zz(mp, P, p);
+}
+
+/* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
+ * eps_zz array, its term is zero).  Without a strain record (P.eps NULL:
+ * every material elastic from a zero stress, mpm_sim.c) the strain is
+ * C^-1 sigma of the particle's material, and sigma : eps is twice
+ * mpm_elastic_stored() (equal up to round-off to the record's sum). */
+static inline double mpm_strain_density(const mpm_mat_params *mats, const mpm_particles *P, int dim,
+                                        size_t p)
+{
+    if (!P->eps[0]) {
+        const mpm_mat_params *mp = &mats[P->mat[p]];
+        double sig[6];
+        mpm_particle_stress(mp, P, dim, p, sig);
+        return 2.0 * mpm_elastic_stored(mp, sig, dim);
+    }
     double se = 0;
     for (int c = 0; c < MPM_NCOMP(dim); c++)
         if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];

@@ -41,31 +41,36 @@ static void elastic_1d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
                        double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
-    double *sxx = P->sig[0] + p0, *exx = P->eps[0] + p0;
-    for (size_t i = 0; i < n; i++) {
-        double d = deps[0][i];
-        exx[i] += d;
-        sxx[i] += mats[mat[i]].E * d;
-    }
+    double *sxx = P->sig[0] + p0;
+    for (size_t i = 0; i < n; i++) sxx[i] += mats[mat[i]].E * deps[0][i];
+    if (P->eps[0]) /* the strain record, when kept (mpm_internal.h) */
+        for (size_t i = 0; i < n; i++) P->eps[0][p0 + i] += deps[0][i];
 }
 
 static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
                        double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
-    double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s2 = P->sig[2] + p0, *s3 = P->sig[3] + p0;
-    double *e0 = P->eps[0] + p0, *e1 = P->eps[1] + p0, *e3 = P->eps[3] + p0;
+    double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s3 = P->sig[3] + p0;
     for (size_t i = 0; i < n; i++) {
         const mpm_mat_params *mp = &mats[mat[i]];
         double dxx = deps[0][i], dyy = deps[1][i], dxy = deps[3][i];
         double lt = mp->lambda * (dxx + dyy), m2 = 2.0 * mp->mu;
-        e0[i] += dxx;
-        e1[i] += dyy;
-        e3[i] += dxy;
         s0[i] += lt + m2 * dxx;
         s1[i] += lt + m2 * dyy;
-        s2[i] += lt; /* plane strain: eps_zz = 0 */
         s3[i] += m2 * dxy;
+    }
+    if (P->sig[2]) { /* plane strain: eps_zz = 0 (else derived, mpm_sig_zz()) */
+        double *s2 = P->sig[2] + p0;
+        for (size_t i = 0; i < n; i++) s2[i] += mats[mat[i]].lambda * (deps[0][i] + deps[1][i]);
+    }
+    if (P->eps[0]) { /* the strain record, when kept (mpm_internal.h) */
+        double *e0 = P->eps[0] + p0, *e1 = P->eps[1] + p0, *e3 = P->eps[3] + p0;
+        for (size_t i = 0; i < n; i++) {
+            e0[i] += deps[0][i];
+            e1[i] += deps[1][i];
+            e3[i] += deps[3][i];
+        }
     }
 }
 
@@ -73,11 +78,10 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
                        double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
-    double *restrict s[6], *restrict e[6];
+    double *restrict s[6];
     const double *restrict de[6];
     for (int c = 0; c < 6; c++) {
         s[c] = P->sig[c] + p0;
-        e[c] = P->eps[c] + p0;
         de[c] = deps[c];
     }
     for (size_t i = 0; i < n; i++) {
@@ -85,12 +89,6 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
         double d0 = de[0][i], d1 = de[1][i], d2 = de[2][i], d3 = de[3][i], d4 = de[4][i],
                d5 = de[5][i];
         double lt = mp->lambda * (d0 + d1 + d2), m2 = 2.0 * mp->mu;
-        e[0][i] += d0;
-        e[1][i] += d1;
-        e[2][i] += d2;
-        e[3][i] += d3;
-        e[4][i] += d4;
-        e[5][i] += d5;
         s[0][i] += lt + m2 * d0;
         s[1][i] += lt + m2 * d1;
         s[2][i] += lt + m2 * d2;
@@ -98,12 +96,21 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
         s[4][i] += m2 * d4;
         s[5][i] += m2 * d5;
     }
+    if (P->eps[0]) /* the strain record, when kept (mpm_internal.h) */
+        for (int c = 0; c < 6; c++) {
+            double *restrict e = P->eps[c] + p0;
+            for (size_t i = 0; i < n; i++) e[i] += de[c][i];
+        }
 }
 
 static double elastic_energy(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p)
 {
-    (void)mp;
-    return 0.5 * mpm_strain_density(P, dim, p) * P->vol[p];
+    if (!P->eps[0]) { /* no strain record: mpm_strain_density()'s bits */
+        double sig[6];
+        mpm_particle_stress(mp, P, dim, p, sig);
+        return 0.5 * (2.0 * mpm_elastic_stored(mp, sig, dim)) * P->vol[p];
+    }
+    return 0.5 * mpm_strain_density(NULL, P, dim, p) * P->vol[p];
 }
 
 /* Block slots [i0, i1) of deps as arrays from slot i0. */

@@ -179,7 +179,8 @@ INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
         for (size_t p = b0; p < b0 + nb; p++) e->es += mpm_model_energy(s, p);
         return;
     }
-    for (size_t p = b0; p < b0 + nb; p++) e->es += 0.5 * mpm_strain_density(P, D, p) * P->vol[p];
+    for (size_t p = b0; p < b0 + nb; p++)
+        e->es += 0.5 * mpm_strain_density(s->mats, P, D, p) * P->vol[p];
 }
 
 /* the slice's sums into o: the kinematic ones (XV) and/or the strain (S) */

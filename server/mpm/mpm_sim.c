@@ -131,9 +131,38 @@ int mpm_needs_F(const mpm_case *c)
            (model_needs(c) & MPM_NEED_F);
 }
 
+/* Whether the particles keep a strain record P.eps (mpm_internal.h): the
+ * plastic models' total strain (the elastic part follows from the stress,
+ * the rest is plastic), and linear elasticity from an initial stress
+ * (given or geostatic), where the strain energy 1/2 sigma : eps counts
+ * strain from the initial state.  Otherwise nothing reads it: linear
+ * elasticity's energy comes from the stress through the compliance, the
+ * neo-Hookean's from F. */
+static int needs_strain(const mpm_case *c)
+{
+    if (model_needs(c) & MPM_NEED_PLASTIC) return 1;
+    for (size_t b = 0; b < c->n_bodies; b++)
+        if (c->bodies[b].stress || c->bodies[b].geostatic) return 1;
+    return 0;
+}
+
+/* Whether 2D particles store sigma_zz: unless every body's material is
+ * linear elastic and there is no strain record, when it is nu (sigma_xx +
+ * sigma_yy) (plane strain, from a zero stress) and nothing in the step
+ * reads it (mpm_sig_zz()). */
+static int needs_szz(const mpm_case *c)
+{
+    if (needs_strain(c)) return 1;
+    for (size_t b = 0; b < c->n_bodies; b++)
+        if (c->materials[c->bodies[b].material].model != MPM_MODEL_LINEAR_ELASTIC) return 1;
+    return 0;
+}
+
 /* lp: the half-widths (GMPM, CPDI); F: the deformation gradient, set to I;
- * apic: the affine matrices B_p, set to 0 */
-static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic)
+ * apic: the affine matrices B_p, set to 0; eps: the strain record; szz:
+ * 2D's sigma_zz (needs_szz()) */
+static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic, int eps,
+                           int szz)
 {
     memset(P, 0, sizeof *P);
     P->n = n;
@@ -147,8 +176,9 @@ static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, i
             for (size_t p = 0; p < n; p++) P->F[c][p] = 1.0;
     }
     for (int c = 0; c < MPM_NCOMP(dim); c++) {
+        if (dim == 2 && c == 2 && !szz) continue; /* derived (mpm_sig_zz()) */
         if (!(P->sig[c] = mpm_dalloc(n))) return MPM_ENOMEM;
-        if (!(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
+        if (eps && !(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
             return MPM_ENOMEM; /* eps_zz = 0 */
     }
     for (int a = 0; a < dim && apic; a++)
@@ -483,9 +513,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
 
     int musl = c->update == MPM_MUSL;
     s->transfer = c->transfer;
-    if (alloc_particles(&s->P, np, dim,
-                        c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
-                        mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC))
+    if (alloc_particles(
+            &s->P, np, dim, c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
+            mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC, needs_strain(c), needs_szz(c)))
         goto nomem;
     if ((needs & MPM_NEED_PLASTIC) &&
         (!(s->P.epsp = mpm_dalloc(np)) || !(s->P.yld = mpm_dalloc(np))))
@@ -496,8 +526,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
     s->k = select_kernels(s);
-    if (!(s->sperm = malloc(np * sizeof *s->sperm)) ||
-        !(s->shist = calloc(s->nn + 1, sizeof *s->shist)) || !(s->sscr = mpm_dalloc(np)))
+    if (!(s->sperm = malloc((np ? np : 1) * sizeof *s->sperm)) ||
+        !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
     int gfields = MPM_F_M | MPM_F_Q | MPM_F_F | (musl ? MPM_F_Q2 : 0);
     if (alloc_gridbuf(&s->g, s->nn, dim, gfields)) goto nomem;
@@ -596,7 +626,6 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->acc);
     free(s->sperm);
     free(s->shist);
-    free(s->sscr);
     free(s->tout);
     free(s->minv);
     for (int d = 0; d < 3; d++) free(s->ncoord[d]);
@@ -874,7 +903,7 @@ void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out)
 void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
 {
     const mpm_particles *P = &s->P;
-    int dim = s->dim, nc = MPM_NCOMP(dim);
+    int dim = s->dim;
     /* slot p holds the particle created as number P->id[p] */
     for (size_t p = 0; p < P->n; p++) {
         size_t q = P->id[p];
@@ -882,11 +911,13 @@ void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
             if (o->x) o->x[q * dim + d] = P->x[d][p];
             if (o->v) o->v[q * dim + d] = P->v[d][p];
         }
+        double sig[6];
+        mpm_particle_stress(&s->mats[P->mat[p]], P, dim, p, sig);
         if (o->stress)
-            for (int c = 0; c < 6; c++) o->stress[q * 6 + c] = c < nc ? P->sig[c][p] : 0.0;
+            for (int c = 0; c < 6; c++) o->stress[q * 6 + c] = sig[c];
         if (o->pressure) {
-            double tr = P->sig[0][p];
-            if (dim > 1) tr += P->sig[1][p] + P->sig[2][p];
+            double tr = sig[0];
+            if (dim > 1) tr += sig[1] + sig[2];
             o->pressure[q] = tr / 3.0;
         }
         if (o->volume) o->volume[q] = P->vol[p];

@@ -8,12 +8,14 @@
  * rows' extents only (the histogram follows the particles, not the box).
  * P.id keeps each particle's creation index: everything public (snapshots,
  * error messages, per-particle inputs) speaks creation order.  The scratch
- * is made at creation: the keys and the integer fields go through the
- * double scratch array.  The keys, the check that they are in order
- * already (then nothing moves: the common case between cell crossings)
- * and the permutation of the arrays run on the team; the histogram and the
- * permutation itself are serial.  The order does not depend on the thread
- * count.
+ * is made at creation and is one 32-bit word per particle (sperm) and the
+ * histogram: the keys, turned in place into each particle's new slot, and
+ * the particles then swapped into their slots along the permutation's
+ * cycles, every array at once, in place (no second copy of any array).
+ * The keys and the check that they are in order already (then nothing
+ * moves: the common case between cell crossings) run on the team; the
+ * histogram and the permutation are serial.  The order does not depend on
+ * the thread count.
  */
 #include "mpm_internal.h"
 
@@ -24,7 +26,7 @@ static void ph_keys(mpm_sim *s, int tid)
 {
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
-    uint32_t *key = (uint32_t *)(void *)s->sscr;
+    uint32_t *key = s->sperm;
     s->k->cell_keys(s, key, a, b);
     mpm_thread_out *o = &s->tout[tid];
     int sorted = 1;
@@ -46,7 +48,7 @@ static int sort_arrays(mpm_sim *s, double **arr[NARR])
         if (P->lp[d]) arr[na++] = &P->lp[d];
     }
     for (int c = 0; c < MPM_NCOMP(s->dim); c++) {
-        arr[na++] = &P->sig[c];
+        if (P->sig[c]) arr[na++] = &P->sig[c];
         if (P->eps[c]) arr[na++] = &P->eps[c];
     }
     for (int c = 0; c < 9; c++)
@@ -61,46 +63,42 @@ static int sort_arrays(mpm_sim *s, double **arr[NARR])
     return na;
 }
 
-/* The permutation applied on the team, each thread gathering its slice of
- * slots (slot p takes particle perm[p]) of one array at a time through the
- * scratch: the integer fields are copied back, and each double array's
- * permuted copy goes into the scratch, the old array then being the
- * scratch of the next (mpm_sort_particles() swaps the pointers after).  Only
- * copies: the result does not depend on the thread count. */
-static void ph_permute(mpm_sim *s, int tid)
+/* Swaps the fields of particles i and k (na double arrays a, material,
+ * creation index). */
+static inline void swap_particles(double *const *a, int na, mpm_particles *P, size_t i, size_t k)
+{
+    for (int f = 0; f < na; f++) {
+        double t = a[f][i];
+        a[f][i] = a[f][k];
+        a[f][k] = t;
+    }
+    uint16_t m = P->mat[i];
+    P->mat[i] = P->mat[k];
+    P->mat[k] = m;
+    uint32_t id = P->id[i];
+    P->id[i] = P->id[k];
+    P->id[k] = id;
+}
+
+/* Moves every particle p to slot dest[p], in place, by swaps along the
+ * permutation's cycles: dest[j] is always the slot the particle now in
+ * slot j belongs to, and a particle that reached its slot k leaves
+ * dest[k] = k.  At most n - 1 swaps of whole particles; only copies, so
+ * the result is that of any other way of applying the permutation.
+ * dest ends as the identity. */
+static void permute_in_place(mpm_sim *s, uint32_t *restrict dest)
 {
     mpm_particles *P = &s->P;
-    const uint32_t *restrict perm = s->sperm;
-    size_t a, b;
-    mpm_particle_slice(s, tid, &a, &b);
-    uint16_t *m16 = (uint16_t *)(void *)s->sscr;
-    for (size_t p = a; p < b; p++) m16[p] = P->mat[perm[p]];
-    mpm_team_sync(s);
-    memcpy(P->mat + a, m16 + a, (b - a) * sizeof *P->mat);
-    mpm_team_sync(s);
-    uint32_t *u32 = (uint32_t *)(void *)s->sscr;
-    for (size_t p = a; p < b; p++) u32[p] = P->id[perm[p]];
-    mpm_team_sync(s);
-    memcpy(P->id + a, u32 + a, (b - a) * sizeof *P->id);
-    mpm_team_sync(s);
-    if (s->nload) { /* the inverse map for the loaded particles */
-        for (size_t p = a; p < b; p++) u32[perm[p]] = (uint32_t)p;
-        mpm_team_sync(s);
-        size_t i0, i1;
-        mpm_slice(s->nload, s->nthreads, tid, &i0, &i1);
-        for (size_t i = i0; i < i1; i++) s->load_p[i] = u32[s->load_p[i]];
-        mpm_team_sync(s);
-    }
-    double **arr[NARR];
+    double **arr[NARR], *a[NARR];
     int na = sort_arrays(s, arr);
-    double *dst = s->sscr;
-    for (int i = 0; i < na; i++) {
-        const double *restrict src = *arr[i];
-        double *restrict d = dst;
-        for (size_t p = a; p < b; p++) d[p] = src[perm[p]];
-        mpm_team_sync(s);
-        dst = *arr[i];
-    }
+    for (int f = 0; f < na; f++) a[f] = *arr[f];
+    for (size_t i = 0; i < P->n; i++)
+        while (dest[i] != i) {
+            size_t k = dest[i];
+            swap_particles(a, na, P, i, k);
+            dest[i] = dest[k];
+            dest[k] = (uint32_t)k;
+        }
 }
 
 void mpm_sort_particles(mpm_sim *s)
@@ -127,18 +125,12 @@ void mpm_sort_particles(mpm_sim *s)
         last = s->tout[t].klast;
     }
     if (sorted) return;
-    uint32_t *key = (uint32_t *)(void *)s->sscr, *perm = s->sperm, *h = s->shist;
+    /* counting sort: each key becomes its particle's new slot, in place */
+    uint32_t *key = s->sperm, *h = s->shist;
     memset(h, 0, (nk + 1) * sizeof *h);
     for (size_t p = 0; p < n; p++) h[key[p] + 1]++;
     for (size_t k = 0; k < nk; k++) h[k + 1] += h[k];
-    for (size_t p = 0; p < n; p++) perm[h[key[p]]++] = (uint32_t)p;
-    /* the keys are spent: the scratch carries the permuted copies */
-    mpm_team_run(s, ph_permute);
-    double **arr[NARR];
-    int na = sort_arrays(s, arr);
-    for (int i = 0; i < na; i++) {
-        double *old = *arr[i];
-        *arr[i] = s->sscr;
-        s->sscr = old;
-    }
+    for (size_t p = 0; p < n; p++) key[p] = h[key[p]]++;
+    for (size_t i = 0; i < s->nload; i++) s->load_p[i] = key[s->load_p[i]];
+    permute_in_place(s, key);
 }
