@@ -5,10 +5,11 @@
  * from the passes of mpm_kernels.c / mpm_cpdi.c and the model's rules
  * (mpm_traffic.c: 8 B per double array per particle, mat 2 B; an array
  * read and written counts twice; grid traffic not counted).  When the
- * passes change (issue #14's fused G2P2G), these figures change with
- * them, on purpose.
+ * passes change, these figures change with them, on purpose; both the
+ * fused steps (the default) and the unfused ones are checked.
  */
 #include "mpm.h"
+#include "mpm_internal.h"
 #include "t.h"
 
 #include <string.h>
@@ -68,82 +69,120 @@ static double traffic(mpm_sim *s, const char *what, mpm_traffic *t)
     return t->total;
 }
 
+/* the job's figure unfused (mpm_sim_set_fused(s, 0)), then fused again */
+static double unfused(mpm_sim *s, const char *what, mpm_traffic *t)
+{
+    if (!s || mpm_sim_set_fused(s, 0)) return -1;
+    double r = traffic(s, what, t);
+    return mpm_sim_set_fused(s, 1) ? -1 : r;
+}
+
+/* Linear elasticity from a stress-free start keeps no strain record, and
+ * 2D no sigma_zz (mpm_needs and docs/solver.md): 2D sig is xx yy xy (24
+ * B), 3D all six (48 B).  Fused jobs: the pass that moves the particles
+ * makes the next step's first scatter, reading only what it has not
+ * touched (m), and the sort step's scatter counts 1/16. */
 TEST(traffic_usf_mpm_elastic)
 {
     mpm_traffic t;
-    /* 2D: p2g_mq reads x v m: 2 + 2 + 1 doubles = 40 B; stress_force reads
-     * x (16), mat (2), sig xx yy zz xy (32), eps xx yy xy (24: no eps_zz
-     * array in plane strain), vol (8) = 82 and writes sig eps vol = 64;
-     * g2p_xv reads x v (32) and writes them (32).  40 + 82 + 64 + 64 = 250
-     * (the issue's "about 250": 248 without the material index). */
+    /* 2D unfused: p2g_mq reads x v m: 2 + 2 + 1 doubles = 40 B;
+     * stress_force reads x (16), mat (2), sig (24), vol (8) = 50 and writes
+     * sig vol = 32; g2p_xv reads x v (32) and writes them (32):
+     * 40 + 50 + 32 + 64 = 186.  (Before issue #14, with eps and sig_zz:
+     * 250, the issue's "about 250".) */
     mpm_sim *s = job(2, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
-    CHECK(traffic(s, "2D MPM USF elastic", &t) == 250);
+    CHECK(unfused(s, "2D MPM USF elastic, unfused", &t) == 186);
     CHECK(t.npass == 3 && t.pass[0].read == 40 && t.pass[0].write == 0);
-    CHECK(t.pass[1].read == 82 && t.pass[1].write == 64);
+    CHECK(t.pass[1].read == 50 && t.pass[1].write == 32);
     CHECK(t.pass[2].read == 32 && t.pass[2].write == 32);
-    CHECK(t.read == 154 && t.write == 96);
+    /* fused: stress_force 50 + 32; g2p_xv + next p2g_mq reads x v m 40,
+     * writes x v 32; the sort step's p2g 40 / 16 = 2.5: 156.5 */
+    CHECK(traffic(s, "2D MPM USF elastic", &t) == 156.5);
+    CHECK(t.npass == 3 && t.pass[1].read == 40 && t.pass[1].write == 32);
+    CHECK(t.pass[2].read == 2.5 && t.pass[2].write == 0);
+    CHECK(t.read == 92.5 && t.write == 64);
     mpm_sim_destroy(&s);
-    /* 3D: p2g x v m = 56; stress reads x 24 + mat 2 + sig 48 + eps 48 +
-     * vol 8 = 130, writes 104; g2p 48 + 48.  56 + 130 + 104 + 96 = 386. */
+    /* 3D unfused: p2g x v m = 56; stress reads x 24 + mat 2 + sig 48 + vol
+     * 8 = 82, writes 56; g2p 48 + 48: 56 + 82 + 56 + 96 = 290.  Fused:
+     * 82 + 56, g2p + next reads x v m 56 writes 48, 56 / 16 = 3.5: 245.5 */
     s = job(3, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
-    CHECK(traffic(s, "3D MPM USF elastic", &t) == 386);
+    CHECK(unfused(s, "3D MPM USF elastic, unfused", &t) == 290);
+    CHECK(traffic(s, "3D MPM USF elastic", &t) == 245.5);
     mpm_sim_destroy(&s);
 }
 
 TEST(traffic_usl_gimp_elastic)
 {
     mpm_traffic t;
-    /* 2D uGIMP USL: the weights read lp too.  p2g_mqf reads x 16, lp 16,
-     * m 8, v 16, sig 32, vol 8 = 96; g2p_xv_stress reads x lp v (48), mat
-     * 2, sig 32, eps 24, vol 8 = 114 and writes x v (32), sig eps vol (64)
-     * = 96.  96 + 114 + 96 = 306. */
+    /* 2D uGIMP USL: the weights read lp too.  Unfused: p2g_mqf reads x 16,
+     * lp 16, m 8, v 16, sig 24, vol 8 = 88; g2p_xv_stress reads x lp v
+     * (48), mat 2, sig 24, vol 8 = 82 and writes x v (32), sig vol (32) =
+     * 64: 88 + 82 + 64 = 234.  Fused: one pass reading 82 + m 8 = 90,
+     * writing 64, and 88 / 16 = 5.5: 159.5 */
     mpm_sim *s = job(2, MPM_METHOD_GIMP, MPM_USL, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
-    CHECK(traffic(s, "2D GIMP USL elastic", &t) == 306);
-    CHECK(t.npass == 2 && t.pass[0].read == 96 && t.pass[1].read == 114 && t.pass[1].write == 96);
+    CHECK(unfused(s, "2D GIMP USL elastic, unfused", &t) == 234);
+    CHECK(t.npass == 2 && t.pass[0].read == 88 && t.pass[1].read == 82 && t.pass[1].write == 64);
+    CHECK(traffic(s, "2D GIMP USL elastic", &t) == 159.5);
+    CHECK(t.npass == 2 && t.pass[0].read == 90 && t.pass[0].write == 64 && t.pass[1].read == 5.5);
     mpm_sim_destroy(&s);
 }
 
 TEST(traffic_musl_bspline_apic)
 {
     mpm_traffic t;
-    /* 2D BSPLINE2 MUSL APIC (no lp; B is 2 x 2 = 4 doubles = 32 B):
-     *   p2g_mqf      reads x 16, m 8, v 16, B 32, sig 32, vol 8     = 112
+    /* 2D BSPLINE2 MUSL APIC (no lp; B is 2 x 2 = 4 doubles = 32 B), unfused:
+     *   p2g_mqf      reads x 16, m 8, v 16, B 32, sig 24, vol 8     = 104
      *   g2p_v        reads x 16; writes v 16, B 32 (v not read)     = 16 + 48
      *   p2g_q2       reads x 16, m 8, v 16, B 32                    = 72
      *   g2p_x_stress reads x 16, v 16 (the particle check), mat 2,
-     *                sig 32, eps 24, vol 8 = 98; writes x 16, sig 32,
-     *                eps 24, vol 8 = 80
-     * 112 + 64 + 72 + 178 = 426. */
+     *                sig 24, vol 8 = 66; writes x 16, sig 24, vol 8 = 48
+     * 104 + 64 + 72 + 114 = 354.  Fused:
+     *   g2p_v + p2g_q2  reads x 16 and m 8 (v, B: just written) = 24,
+     *                   writes v B 48
+     *   g2p_x_stress + next p2g_mqf  reads 66 + m 8 + B 32 = 106, writes 48
+     *   the sort step's p2g_mqf 104 / 16 = 6.5
+     * 72 + 154 + 6.5 = 232.5. */
     mpm_sim *s = job(2, MPM_METHOD_BSPLINE2, MPM_MUSL, MPM_TRANSFER_APIC, MPM_MODEL_LINEAR_ELASTIC);
-    CHECK(traffic(s, "2D BSPLINE2 MUSL APIC elastic", &t) == 426);
+    CHECK(unfused(s, "2D BSPLINE2 MUSL APIC elastic, unfused", &t) == 354);
     CHECK(t.npass == 4 && t.pass[1].read == 16 && t.pass[1].write == 48);
-    CHECK(t.pass[3].read == 98 && t.pass[3].write == 80);
+    CHECK(t.pass[3].read == 66 && t.pass[3].write == 48);
+    CHECK(traffic(s, "2D BSPLINE2 MUSL APIC elastic", &t) == 232.5);
+    CHECK(t.npass == 3 && t.pass[0].read == 24 && t.pass[0].write == 48);
+    CHECK(t.pass[1].read == 106 && t.pass[1].write == 48 && t.pass[2].read == 6.5);
     mpm_sim_destroy(&s);
-    /* the same with FLIP: p2g_mqf 80, g2p_v reads x v 32 writes v 16,
-     * p2g_q2 40, g2p_x_stress 98 + 80: 80 + 48 + 40 + 178 = 346 */
+    /* the same with FLIP, unfused: p2g_mqf 72, g2p_v reads x v 32 writes v
+     * 16, p2g_q2 40, g2p_x_stress 66 + 48: 72 + 48 + 40 + 114 = 274.
+     * Fused: g2p_v + p2g_q2 reads x v m 40 writes v 16; g2p_x_stress +
+     * next reads 66 + m 8 writes 48; 72 / 16 = 4.5: 56 + 122 + 4.5 = 182.5 */
     s = job(2, MPM_METHOD_BSPLINE2, MPM_MUSL, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
-    CHECK(traffic(s, "2D BSPLINE2 MUSL FLIP elastic", &t) == 346);
+    CHECK(unfused(s, "2D BSPLINE2 MUSL FLIP elastic, unfused", &t) == 274);
+    CHECK(traffic(s, "2D BSPLINE2 MUSL FLIP elastic", &t) == 182.5);
     mpm_sim_destroy(&s);
 }
 
 TEST(traffic_usf_plastic_and_cpdi)
 {
     mpm_traffic t;
-    /* 2D MPM USF Drucker-Prager: the stress pass also reads epsp (8) and
-     * writes epsp and the yield flag (16): reads 82 + 8 = 90, writes 64 +
-     * 16 = 80; p2g 40, g2p 64.  40 + 90 + 80 + 64 = 274. */
+    /* 2D MPM USF Drucker-Prager (the plastic models keep the strain record
+     * and sig_zz: sig 32, eps 24): unfused, p2g 40; the stress pass reads
+     * x 16, mat 2, sig 32, eps 24, vol 8, epsp 8 = 90 and writes sig eps
+     * vol epsp yld = 80; g2p 64: 40 + 90 + 80 + 64 = 274.  Fused: 170 +
+     * (40 + 32) + 2.5 = 244.5 */
     mpm_sim *s = job(2, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_DRUCKER_PRAGER);
-    CHECK(traffic(s, "2D MPM USF Drucker-Prager", &t) == 274);
+    CHECK(unfused(s, "2D MPM USF Drucker-Prager, unfused", &t) == 274);
     CHECK(t.pass[1].read == 90 && t.pass[1].write == 80);
+    CHECK(traffic(s, "2D MPM USF Drucker-Prager", &t) == 244.5);
     mpm_sim_destroy(&s);
-    /* 2D CPDI USF elastic: the weights read x 16, lp 16, F 32 (64 B);
+    /* 2D CPDI USF elastic (never fused): the weights read x 16, lp 16, F 32
+     * (64 B);
      *   p2g_mq       64 + m 8 + v 16                               = 88
-     *   stress_force 64 + mat 2 + sig 32 + eps 24 + vol 8 = 130; writes 64
+     *   stress_force 64 + mat 2 + sig 24 + vol 8 = 98; writes 32
      *   g2p_xv       reads 64 + v 16 = 80; writes x 16, F 32, v 16 = 64
-     * 88 + 130 + 64 + 144 = 426. */
+     * 88 + 98 + 32 + 144 = 362. */
     s = job(2, MPM_METHOD_CPDI, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
-    CHECK(traffic(s, "2D CPDI USF elastic", &t) == 426);
-    CHECK(t.pass[2].read == 80 && t.pass[2].write == 64);
+    CHECK(traffic(s, "2D CPDI USF elastic", &t) == 362);
+    CHECK(t.npass == 3 && t.pass[2].read == 80 && t.pass[2].write == 64);
+    CHECK(mpm_sim_set_fused(s, 1) == MPM_EINVAL);
     mpm_sim_destroy(&s);
     CHECK(mpm_sim_traffic(NULL, &t) == MPM_EINVAL);
 }

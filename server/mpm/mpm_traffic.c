@@ -12,7 +12,11 @@
  * update reads and writes (upd(): the model's arrays and the volume
  * update's), and the fixed arrays of the scatters and gathers.  When the
  * passes of mpm_kernels.c / mpm_cpdi.c change (fusing G2P with the next
- * P2G, narrower storage), the table here changes with them.
+ * P2G, narrower storage), the table here changes with them.  Fused jobs
+ * (mpm_sim.fuse, every family but CPDI): the pass that moves the particles
+ * also makes the next step's first scatter, which then reads only what
+ * that pass has not touched yet (mass, mostly), and the step before each
+ * sort (1 in MPM_SORT_EVERY) scatters on its own: 1/16 of that pass.
  *
  * The model (also in mpm.h and docs/performance.md):
  *   - a particle array counts once per pass that touches it: read when the
@@ -32,9 +36,14 @@
  *     a step that wants energies (esum: m, v, x again).
  *   - several materials with different models: the union of their
  *     arrays (an upper bound).
- * Example, 2D MPM USF linear elastic: p2g_mq reads x v m (40 B);
- * stress_force reads x mat sig eps vol (16 + 2 + 32 + 24 + 8 = 82) and
- * writes sig eps vol (64); g2p_xv reads and writes x v (32 + 32): 250 B.
+ * Example, 2D MPM USF linear elastic, unfused and with a strain record
+ * and sigma_zz stored (every release before issue #14): p2g_mq reads x v
+ * m (40 B); stress_force reads x mat sig eps vol (16 + 2 + 32 + 24 + 8 =
+ * 82) and writes sig eps vol (64); g2p_xv reads and writes x v (32 + 32):
+ * 250 B.  Fused, without the strain record and sigma_zz (now):
+ * stress_force reads x mat sig vol (16 + 2 + 24 + 8 = 50) and writes sig
+ * vol (32); g2p_xv + next p2g_mq reads x v m (40) and writes x v (32); the
+ * sort step's p2g_mq 40 / 16 = 2.5: 156.5 B.
  */
 #include "mpm_internal.h"
 
@@ -172,48 +181,91 @@ static void moves(const mpm_sim *s, unsigned *rd, unsigned *wr)
     }
 }
 
+/* The next step's first scatter, made by a fused pass (s->fuse) at the
+ * particles' new positions: it reads what its scatter needs (scat) that
+ * the pass has not read or written already (mpm_kernels.c p2g_one()). */
+static void next_scatter(unsigned scat, unsigned *rd, unsigned wr)
+{
+    *rd |= scat & ~(*rd | wr);
+}
+
+/* A fused job's sort step (every MPM_SORT_EVERY steps) scatters on its
+ * own: its first scatter's pass, counted as 1/MPM_SORT_EVERY of a pass. */
+#define TP_SORTSTEP "p2g (1 step in 16)"
+
 /* USF: P2G (m, q); the stress pass (gather the strain increment, the
  * update, scatter the internal force with the new stress and volume);
- * G2P (x, v). */
-static int usf(const mpm_sim *s, tpass *t)
+ * G2P (x, v).  Fused: G2P also scatters the next step's m and q. */
+static int usf(const mpm_sim *s, tpass *t, double *scale)
 {
     unsigned w = wts(s), rd = w, wr = 0;
-    t[0] = (tpass){"p2g_mq", w | mq(s), 0};
+    int n = 0;
+    tpass first = {s->fuse ? TP_SORTSTEP : "p2g_mq", w | mq(s), 0};
+    if (s->fuse) scale[2] = 1.0 / MPM_SORT_EVERY;
     upd(s, &rd, &wr);
     rd |= (TF_SIG | TF_VOL) & ~wr; /* the force scatter: what the update left unread */
-    t[1] = (tpass){"stress_force", rd, wr};
+    tpass sf = {"stress_force", rd, wr};
     rd = w, wr = 0;
     moves(s, &rd, &wr);
     vel(s, &rd, &wr);
-    t[2] = (tpass){"g2p_xv", rd, wr};
-    return 3;
+    if (s->fuse) next_scatter(w | mq(s), &rd, wr);
+    tpass mv = {s->fuse ? "g2p_xv + next p2g_mq" : "g2p_xv", rd, wr};
+    if (!s->fuse) t[n++] = first;
+    t[n++] = sf;
+    t[n++] = mv;
+    if (s->fuse) t[n++] = first;
+    return n;
 }
 
 /* USL: P2G (m, q, f with the old stress); G2P (x, v) with the strain
- * gather and the update. */
-static int usl(const mpm_sim *s, tpass *t)
+ * gather and the update.  Fused: one pass, the G2P scattering the next
+ * step's m, q, f with the new stress. */
+static int usl(const mpm_sim *s, tpass *t, double *scale)
 {
-    unsigned w = wts(s), rd = w, wr = 0;
-    t[0] = (tpass){"p2g_mqf", w | mq(s) | TF_SIG | TF_VOL, 0};
+    unsigned w = wts(s), rd = w, wr = 0, scat = w | mq(s) | TF_SIG | TF_VOL;
+    tpass first = {s->fuse ? TP_SORTSTEP : "p2g_mqf", scat, 0};
     moves(s, &rd, &wr);
     vel(s, &rd, &wr);
     upd(s, &rd, &wr);
+    if (s->fuse) {
+        next_scatter(scat, &rd, wr);
+        t[0] = (tpass){"g2p_xv_stress + next p2g_mqf", rd, wr};
+        t[1] = first;
+        scale[1] = 1.0 / MPM_SORT_EVERY;
+        return 2;
+    }
+    t[0] = first;
     t[1] = (tpass){"g2p_xv_stress", rd, wr};
     return 2;
 }
 
 /* MUSL: P2G (m, q, f); G2P v; P2G q2 (m v of the new velocities); G2P x
- * with the strain from q2 and the update (check_particle() reads v). */
-static int musl(const mpm_sim *s, tpass *t)
+ * with the strain from q2 and the update (check_particle() reads v).
+ * Fused: G2P v scatters q2 with its weights, and G2P x the next step's
+ * m, q, f. */
+static int musl(const mpm_sim *s, tpass *t, double *scale)
 {
-    unsigned w = wts(s), rd = w, wr = 0;
-    t[0] = (tpass){"p2g_mqf", w | mq(s) | TF_SIG | TF_VOL, 0};
+    unsigned w = wts(s), rd = w, wr = 0, scat = w | mq(s) | TF_SIG | TF_VOL;
+    tpass first = {s->fuse ? TP_SORTSTEP : "p2g_mqf", scat, 0};
     vel(s, &rd, &wr);
-    t[1] = (tpass){"g2p_v", rd, wr};
-    t[2] = (tpass){"p2g_q2", w | mq(s), 0};
+    if (s->fuse) {
+        next_scatter(w | mq(s), &rd, wr);
+        t[0] = (tpass){"g2p_v + p2g_q2", rd, wr};
+    } else {
+        t[0] = first;
+        t[1] = (tpass){"g2p_v", rd, wr};
+        t[2] = (tpass){"p2g_q2", w | mq(s), 0};
+    }
     rd = w | TF_V, wr = 0;
     moves(s, &rd, &wr);
     upd(s, &rd, &wr);
+    if (s->fuse) {
+        next_scatter(scat, &rd, wr);
+        t[1] = (tpass){"g2p_x_stress + next p2g_mqf", rd, wr};
+        t[2] = first;
+        scale[2] = 1.0 / MPM_SORT_EVERY;
+        return 3;
+    }
     t[3] = (tpass){"g2p_x_stress", rd, wr};
     return 4;
 }
@@ -222,13 +274,17 @@ int mpm_sim_traffic(const mpm_sim *s, mpm_traffic *out)
 {
     if (!s || !out) return MPM_EINVAL;
     tpass t[MPM_TRAFFIC_MAX_PASSES];
-    int n = s->update == MPM_USL ? usl(s, t) : s->update == MPM_MUSL ? musl(s, t) : usf(s, t);
+    double scale[MPM_TRAFFIC_MAX_PASSES];
+    for (int i = 0; i < MPM_TRAFFIC_MAX_PASSES; i++) scale[i] = 1.0;
+    int n = s->update == MPM_USL    ? usl(s, t, scale)
+            : s->update == MPM_MUSL ? musl(s, t, scale)
+                                    : usf(s, t, scale);
     memset(out, 0, sizeof *out);
     out->npass = n;
     for (int i = 0; i < n; i++) {
         out->pass[i].name = t[i].name;
-        out->pass[i].read = field_bytes(s, t[i].rd);
-        out->pass[i].write = field_bytes(s, t[i].wr);
+        out->pass[i].read = scale[i] * field_bytes(s, t[i].rd);
+        out->pass[i].write = scale[i] * field_bytes(s, t[i].wr);
         out->read += out->pass[i].read;
         out->write += out->pass[i].write;
     }
