@@ -520,8 +520,11 @@ void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
  * twice; one only written, once: STREAM's counting, no write-allocate).
  * Grid arrays, the per-thread scratch, the sort (every 16 steps), point
  * loads and the energy sums of mpm_sim_want_energy() steps are not
- * counted.  A lower bound on the step's memory traffic, and the figure a
- * bandwidth roof is measured against (bin/mpmbench). */
+ * counted.  Fused steps (every method but CPDI): the moving pass also
+ * makes the next step's first scatter and reads only what it has not
+ * touched yet, and the step before each sort scatters on its own (counted
+ * as 1/16 of that pass).  A lower bound on the step's memory traffic, and
+ * the figure a bandwidth roof is measured against (bin/mpmbench). */
 #define MPM_TRAFFIC_MAX_PASSES 8
 typedef struct {
     int npass;
