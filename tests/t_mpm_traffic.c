@@ -48,6 +48,8 @@ static mpm_sim *job(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_mo
     c.bodies = &b;
     mpm_error err;
     mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+    /* a box this small would not fuse (mpm_rows.c fuse_pays()): forced */
+    if (s && m != MPM_METHOD_CPDI && mpm_sim_set_fused(s, 2)) mpm_sim_destroy(&s);
     if (!s) {
         char e[T_ERRLEN];
         mpm_error_text(&err, MPM_FIELD_JSON, e, sizeof e);
@@ -69,12 +71,13 @@ static double traffic(mpm_sim *s, const char *what, mpm_traffic *t)
     return t->total;
 }
 
-/* the job's figure unfused (mpm_sim_set_fused(s, 0)), then fused again */
+/* the job's figure unfused (mpm_sim_set_fused(s, 0)), then fused again
+ * (forced, as job() makes it) */
 static double unfused(mpm_sim *s, const char *what, mpm_traffic *t)
 {
     if (!s || mpm_sim_set_fused(s, 0)) return -1;
     double r = traffic(s, what, t);
-    return mpm_sim_set_fused(s, 1) ? -1 : r;
+    return mpm_sim_set_fused(s, 2) ? -1 : r;
 }
 
 /* Linear elasticity from a stress-free start keeps no strain record, and
@@ -185,4 +188,63 @@ TEST(traffic_usf_plastic_and_cpdi)
     CHECK(mpm_sim_set_fused(s, 1) == MPM_EINVAL);
     mpm_sim_destroy(&s);
     CHECK(mpm_sim_traffic(NULL, &t) == MPM_EINVAL);
+}
+
+/* A 2D elastic box of cells x cells cells (2 x 2 particles a cell) at the
+ * origin of an nodes x nodes grid of h = 0.01, moving, on 1 thread. */
+static mpm_sim *box2d(int nodes, int cells)
+{
+    mpm_case c;
+    static mpm_material_desc mat;
+    static mpm_body_desc b;
+    memset(&c, 0, sizeof c);
+    memset(&b, 0, sizeof b);
+    mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                              .youngs_modulus = 1e4,
+                              .poisson_ratio = 0.3,
+                              .density = 1.0};
+    b.shape = MPM_SHAPE_BOX;
+    b.ppc = 2;
+    b.velocity[0] = 0.1;
+    for (int d = 0; d < 2; d++) {
+        b.lo[d] = 0.05;
+        b.hi[d] = 0.05 + 0.01 * cells;
+        c.grid.h[d] = 0.01;
+        c.grid.nodes[d] = nodes;
+    }
+    c.grid.dim = 2;
+    c.method = MPM_METHOD_MPM;
+    c.update = MPM_USF;
+    c.threads = 1;
+    c.n_materials = 1;
+    c.materials = &mat;
+    c.n_bodies = 1;
+    c.bodies = &b;
+    mpm_error err;
+    return mpm_sim_new(&c, NULL, &err);
+}
+
+/* Fused steps where they pay (mpm_rows.c fuse_pays()): the same body of
+ * 1600 particles over 21 rows fuses in a tight grid (rows 256 B apart: 2
+ * pages a field, 800 particles needed) and not in a 1024-node-wide grid
+ * (every row its own page: 21 pages, 8400 needed), the sparse2d case that
+ * ran 13 % slower fused; forced (2), it fuses there too.  Whether a step
+ * fuses never changes its results (fuse_same_bits). */
+TEST(fuse_where_it_pays)
+{
+    static const struct {
+        int nodes, force, want;
+    } cs[] = {{32, 0, 1}, {1024, 0, 0}, {1024, 1, 1}};
+    for (size_t i = 0; i < sizeof cs / sizeof *cs; i++) {
+        mpm_sim *s = box2d(cs[i].nodes, 20);
+        CHECK(s != NULL);
+        CHECK(mpm_sim_particles(s) == 1600);
+        if (cs[i].force) CHECK(mpm_sim_set_fused(s, 2) == 0);
+        CHECK(mpm_sim_step(s) == 0 && mpm_sim_step(s) == 0);
+        TLOG("%4d-node-wide grid%s: %s", cs[i].nodes, cs[i].force ? ", forced" : "",
+             s->gnext ? "fused" : "not fused");
+        CHECKF(s->gnext == cs[i].want, "grid %d force %d: gnext %d", cs[i].nodes, cs[i].force,
+               s->gnext);
+        mpm_sim_destroy(&s);
+    }
 }

@@ -311,8 +311,10 @@ struct mpm_sim {
      * all zero in the private buffers tbuf[t] between uses (the reduction
      * zeroes what it has read); fuse_next, the running step's moving pass
      * also scatters the next step's P2G fields into tbuf[t] (never before
-     * a step that sorts); gnext, it did: the step starts with them */
-    int fuse, p2g_fields, fuse_next, gnext;
+     * a step that sorts, nor when fuse_pays, set with the active rows,
+     * says the extra buffer's pages would cost more than the pass saves,
+     * unless fuse_force); gnext, it did: the step starts with them */
+    int fuse, p2g_fields, fuse_next, gnext, fuse_pays, fuse_force;
 
     /* active region: the padded nodes the particles' supports touch.  A row
      * is the run of nodes along x at fixed (y, z), row index y + z np[1],
@@ -427,8 +429,9 @@ int mpm_needs_F(const mpm_case *c);
 int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
 /* Tests and benchmarks: on 0 the steps no longer fuse the next step's
  * first scatter into their moving pass (a scatter already made is
- * dropped), on nonzero they do again.  Returns 0, or MPM_EINVAL to turn
- * fusion on where the family has no fused passes (CPDI). */
+ * dropped), on 1 they do again where it pays (the default), on 2 always.
+ * Returns 0, or MPM_EINVAL to turn fusion on where the family has no
+ * fused passes (CPDI). */
 int mpm_sim_set_fused(mpm_sim *s, int on);
 
 /* Constitutive model interface.  A model declares the per-particle state it
@@ -736,6 +739,9 @@ void mpm_ph_bbox(mpm_sim *s, int tid);
 /* ---- sorting by cell (mpm_sort.c) ---- */
 
 #define MPM_SORT_EVERY 16
+/* Fused steps need this many particles per page of a grid field the
+ * active rows touch (mpm_rows.c fuse_pays()). */
+#define MPM_FUSE_PER_PAGE 400
 /* Sorts the particles by cell over the active rows (stable; nothing moves
  * when they are in order already).  The rows stay valid. */
 void mpm_sort_particles(mpm_sim *s);

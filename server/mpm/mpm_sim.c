@@ -437,6 +437,7 @@ int mpm_sim_set_fused(mpm_sim *s, int on)
     if (on && (!s->k->g2p_xv_nx || !s->tbuf || !s->tbuf[0].m)) return MPM_EINVAL;
     mpm_rows_drop_next(s);
     s->fuse = on != 0;
+    s->fuse_force = on == 2;
     return 0;
 }
 
@@ -763,7 +764,8 @@ int mpm_sim_step(mpm_sim *s)
     /* fused: the step starts with the grid the last one scattered, and
      * scatters the next one's unless the next step sorts the particles */
     if (s->gnext) mpm_rows_swap_next(s);
-    s->fuse_next = s->fuse && (s->steps + 1) % MPM_SORT_EVERY != 0;
+    s->fuse_next =
+        s->fuse && (s->fuse_pays || s->fuse_force) && (s->steps + 1) % MPM_SORT_EVERY != 0;
     mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
     s->gnext = s->fuse_next;
     if (s->general) /* the plastic work of the step, in thread order */

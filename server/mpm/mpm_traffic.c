@@ -181,6 +181,12 @@ static void moves(const mpm_sim *s, unsigned *rd, unsigned *wr)
     }
 }
 
+/* the job's steps fuse (mpm_sim.fuse, where it pays or forced) */
+static int fused(const mpm_sim *s)
+{
+    return s->fuse && (s->fuse_pays || s->fuse_force);
+}
+
 /* The next step's first scatter, made by a fused pass (s->fuse) at the
  * particles' new positions: it reads what its scatter needs (scat) that
  * the pass has not read or written already (mpm_kernels.c p2g_one()). */
@@ -200,20 +206,20 @@ static int usf(const mpm_sim *s, tpass *t, double *scale)
 {
     unsigned w = wts(s), rd = w, wr = 0;
     int n = 0;
-    tpass first = {s->fuse ? TP_SORTSTEP : "p2g_mq", w | mq(s), 0};
-    if (s->fuse) scale[2] = 1.0 / MPM_SORT_EVERY;
+    tpass first = {fused(s) ? TP_SORTSTEP : "p2g_mq", w | mq(s), 0};
+    if (fused(s)) scale[2] = 1.0 / MPM_SORT_EVERY;
     upd(s, &rd, &wr);
     rd |= (TF_SIG | TF_VOL) & ~wr; /* the force scatter: what the update left unread */
     tpass sf = {"stress_force", rd, wr};
     rd = w, wr = 0;
     moves(s, &rd, &wr);
     vel(s, &rd, &wr);
-    if (s->fuse) next_scatter(w | mq(s), &rd, wr);
-    tpass mv = {s->fuse ? "g2p_xv + next p2g_mq" : "g2p_xv", rd, wr};
-    if (!s->fuse) t[n++] = first;
+    if (fused(s)) next_scatter(w | mq(s), &rd, wr);
+    tpass mv = {fused(s) ? "g2p_xv + next p2g_mq" : "g2p_xv", rd, wr};
+    if (!fused(s)) t[n++] = first;
     t[n++] = sf;
     t[n++] = mv;
-    if (s->fuse) t[n++] = first;
+    if (fused(s)) t[n++] = first;
     return n;
 }
 
@@ -223,11 +229,11 @@ static int usf(const mpm_sim *s, tpass *t, double *scale)
 static int usl(const mpm_sim *s, tpass *t, double *scale)
 {
     unsigned w = wts(s), rd = w, wr = 0, scat = w | mq(s) | TF_SIG | TF_VOL;
-    tpass first = {s->fuse ? TP_SORTSTEP : "p2g_mqf", scat, 0};
+    tpass first = {fused(s) ? TP_SORTSTEP : "p2g_mqf", scat, 0};
     moves(s, &rd, &wr);
     vel(s, &rd, &wr);
     upd(s, &rd, &wr);
-    if (s->fuse) {
+    if (fused(s)) {
         next_scatter(scat, &rd, wr);
         t[0] = (tpass){"g2p_xv_stress + next p2g_mqf", rd, wr};
         t[1] = first;
@@ -246,9 +252,9 @@ static int usl(const mpm_sim *s, tpass *t, double *scale)
 static int musl(const mpm_sim *s, tpass *t, double *scale)
 {
     unsigned w = wts(s), rd = w, wr = 0, scat = w | mq(s) | TF_SIG | TF_VOL;
-    tpass first = {s->fuse ? TP_SORTSTEP : "p2g_mqf", scat, 0};
+    tpass first = {fused(s) ? TP_SORTSTEP : "p2g_mqf", scat, 0};
     vel(s, &rd, &wr);
-    if (s->fuse) {
+    if (fused(s)) {
         next_scatter(w | mq(s), &rd, wr);
         t[0] = (tpass){"g2p_v + p2g_q2", rd, wr};
     } else {
@@ -259,7 +265,7 @@ static int musl(const mpm_sim *s, tpass *t, double *scale)
     rd = w | TF_V, wr = 0;
     moves(s, &rd, &wr);
     upd(s, &rd, &wr);
-    if (s->fuse) {
+    if (fused(s)) {
         next_scatter(scat, &rd, wr);
         t[1] = (tpass){"g2p_x_stress + next p2g_mqf", rd, wr};
         t[2] = first;
