@@ -14,8 +14,15 @@
 
 #include <string.h>
 
-/* A small box of 2 x 2 (x 2) particles per cell in a 12^dim grid. */
-static mpm_sim *job(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_model_kind model)
+/* A box [lo, hi]^dim of 2 x 2 (x 2) particles per cell, moving at vx along
+ * x, in a grid of nodes^dim nodes of spacing h, on 1 thread. */
+typedef struct {
+    int nodes;
+    double h, lo, hi, vx;
+} geom;
+
+static mpm_sim *sim_of(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_model_kind model,
+                       geom g)
 {
     mpm_case c;
     static mpm_material_desc mat;
@@ -31,11 +38,12 @@ static mpm_sim *job(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_mo
     }
     b.shape = MPM_SHAPE_BOX;
     b.ppc = 2;
+    b.velocity[0] = g.vx;
     for (int d = 0; d < dim; d++) {
-        b.lo[d] = 0.3;
-        b.hi[d] = 0.6;
-        c.grid.h[d] = 0.1;
-        c.grid.nodes[d] = 12;
+        b.lo[d] = g.lo;
+        b.hi[d] = g.hi;
+        c.grid.h[d] = g.h;
+        c.grid.nodes[d] = g.nodes;
     }
     c.grid.dim = dim;
     c.method = m;
@@ -48,13 +56,20 @@ static mpm_sim *job(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_mo
     c.bodies = &b;
     mpm_error err;
     mpm_sim *s = mpm_sim_new(&c, NULL, &err);
-    /* a box this small would not fuse (mpm_rows.c fuse_pays()): forced */
-    if (s && m != MPM_METHOD_CPDI && mpm_sim_set_fused(s, 2)) mpm_sim_destroy(&s);
     if (!s) {
         char e[T_ERRLEN];
         mpm_error_text(&err, MPM_FIELD_JSON, e, sizeof e);
         fprintf(stderr, "    mpm_sim_new: %s\n", e);
     }
+    return s;
+}
+
+/* A small box in a 12^dim grid, its steps fused (forced: a box this small
+ * would not fuse, mpm_rows.c fuse_pays()) where the family can. */
+static mpm_sim *job(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_model_kind model)
+{
+    mpm_sim *s = sim_of(dim, m, u, tr, model, (geom){12, 0.1, 0.3, 0.6, 0.0});
+    if (s && m != MPM_METHOD_CPDI && mpm_sim_set_fused(s, 2)) mpm_sim_destroy(&s);
     return s;
 }
 
@@ -190,38 +205,12 @@ TEST(traffic_usf_plastic_and_cpdi)
     CHECK(mpm_sim_traffic(NULL, &t) == MPM_EINVAL);
 }
 
-/* A 2D elastic box of cells x cells cells (2 x 2 particles a cell) at the
- * origin of an nodes x nodes grid of h = 0.01, moving, on 1 thread. */
+/* A 2D elastic box of cells x cells cells at the origin of a nodes x nodes
+ * grid of h = 0.01, moving along x. */
 static mpm_sim *box2d(int nodes, int cells)
 {
-    mpm_case c;
-    static mpm_material_desc mat;
-    static mpm_body_desc b;
-    memset(&c, 0, sizeof c);
-    memset(&b, 0, sizeof b);
-    mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
-                              .youngs_modulus = 1e4,
-                              .poisson_ratio = 0.3,
-                              .density = 1.0};
-    b.shape = MPM_SHAPE_BOX;
-    b.ppc = 2;
-    b.velocity[0] = 0.1;
-    for (int d = 0; d < 2; d++) {
-        b.lo[d] = 0.05;
-        b.hi[d] = 0.05 + 0.01 * cells;
-        c.grid.h[d] = 0.01;
-        c.grid.nodes[d] = nodes;
-    }
-    c.grid.dim = 2;
-    c.method = MPM_METHOD_MPM;
-    c.update = MPM_USF;
-    c.threads = 1;
-    c.n_materials = 1;
-    c.materials = &mat;
-    c.n_bodies = 1;
-    c.bodies = &b;
-    mpm_error err;
-    return mpm_sim_new(&c, NULL, &err);
+    return sim_of(2, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC,
+                  (geom){nodes, 0.01, 0.05, 0.05 + 0.01 * cells, 0.1});
 }
 
 /* Fused steps where they pay (mpm_rows.c fuse_pays()): the same body of

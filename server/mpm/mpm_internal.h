@@ -388,7 +388,9 @@ struct mpm_kernels {
     /* sort keys: cell (x, row) of each particle numbered row-major over
      * the rows' extents, rowoff[row] + x - ulo[row] */
     void (*cell_keys)(const mpm_sim *, uint32_t *key, size_t p0, size_t p1);
-    /* The fused passes (G2P2G; NULL in a family without them, CPDI): the
+    /* A family has either the plain moving passes above and p2g_q2
+     * (CPDI) or, NULL there, the fused ones below (every other family).
+     * The fused passes (G2P2G): the
      * pass that moves the particles also scatters the next step's P2G
      * fields of each particle it moved, at its new position, into nb
      * (nb NULL: not this step), exactly as p2g_mq (USF) or p2g_mqf (USL,

@@ -658,24 +658,6 @@ INLINE void scatter_q2(const mpm_sim *s, double *const q[3], const pw *W0, size_
     });
 }
 
-/* MUSL: momentum of the updated particle velocities (AP: APIC, with the
- * affine part of the updated B_p, as the step's first scatter). */
-INLINE void p2g_q2_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
-                     int AP)
-{
-    pw W;
-    aoff R;
-    for (size_t p = p0; p < p1; p++) {
-        if (AP) {
-            p2g_weights(s, p, D, NS, BS, &W, &R);
-            scatter_affine(s, NULL, gb->q2, &W, &R, p, D, NS, 0);
-            continue;
-        }
-        weights(s, p, D, NS, BS, &W);
-        scatter_q2(s, gb->q2, &W, p, D, NS);
-    }
-}
-
 /* USF: strain and stress from the grid velocity, then internal forces with
  * the new stress; the weights of the block are kept between the two. */
 INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1,
@@ -914,9 +896,10 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
 #define K(name, D, NS, BS) name##_##D##_##NS##_##BS
 
 /* The passes that move the particles, of variant V (empty: FLIP, _bl:
- * the blend, _ap: APIC) of family (D, NS, BS): the fused ones (_nx, with
- * the next step's target, or NULL) and the plain ones, which call them
- * with NULL. */
+ * the blend, _ap: APIC) of family (D, NS, BS): only the fused ones (_nx,
+ * with the next step's target, or NULL for a step that does not fuse),
+ * and MUSL's velocity pass with its q2 scatter; the plain entries of the
+ * table (mpm_kernels: g2p_xv, ..., p2g_q2) are CPDI's alone. */
 #define MOVERS(V, D, NS, BS, BL, AP)                                                              \
     static void K(g2p_xv_nx##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * nx, mpm_thread_out * o,     \
                                            size_t a, size_t b, int en)                            \
@@ -926,11 +909,6 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
         else                                                                                      \
             g2p_xv_t(s, o, a, b, D, NS, BS, 0, BL, AP, nx);                                       \
     }                                                                                             \
-    static void K(g2p_xv##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b,      \
-                                        int en)                                                   \
-    {                                                                                             \
-        K(g2p_xv_nx##V, D, NS, BS)(s, NULL, o, a, b, en);                                         \
-    }                                                                                             \
     static void K(g2p_xv_stress_nx##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * nx,                  \
                                                   mpm_thread_out * o, size_t a, size_t b, int en) \
     {                                                                                             \
@@ -939,48 +917,34 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
         else                                                                                      \
             g2p_xv_stress_t(s, o, a, b, D, NS, BS, 0, BL, AP, nx);                                \
     }                                                                                             \
-    static void K(g2p_xv_stress##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a,         \
-                                               size_t b, int en)                                  \
-    {                                                                                             \
-        K(g2p_xv_stress_nx##V, D, NS, BS)(s, NULL, o, a, b, en);                                  \
-    }                                                                                             \
     static void K(g2p_v_q2##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * q2b, size_t a, size_t b)     \
     {                                                                                             \
         g2p_v_t(s, q2b, a, b, D, NS, BS, BL, AP);                                                 \
-    }                                                                                             \
-    static void K(g2p_v##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b)       \
-    {                                                                                             \
-        (void)o;                                                                                  \
-        K(g2p_v_q2##V, D, NS, BS)(s, NULL, a, b);                                                 \
     }
 
 /* MUSL's last pass: the blend shares FLIP's (the velocity is final). */
-#define XSTRESS(V, D, NS, BS, AP)                                                                  \
-    static void K(g2p_x_stress_nx##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * nx,                    \
-                                                 mpm_thread_out * o, size_t a, size_t b, int en)   \
-    {                                                                                              \
-        if (en)                                                                                    \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1, AP, nx);                                      \
-        else                                                                                       \
-            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0, AP, nx);                                      \
-    }                                                                                              \
-    static void K(g2p_x_stress##V, D, NS, BS)(mpm_sim * s, mpm_thread_out * o, size_t a, size_t b, \
-                                              int en)                                              \
-    {                                                                                              \
-        K(g2p_x_stress_nx##V, D, NS, BS)(s, NULL, o, a, b, en);                                    \
+#define XSTRESS(V, D, NS, BS, AP)                                                                \
+    static void K(g2p_x_stress_nx##V, D, NS, BS)(mpm_sim * s, mpm_gridbuf * nx,                  \
+                                                 mpm_thread_out * o, size_t a, size_t b, int en) \
+    {                                                                                            \
+        if (en)                                                                                  \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 1, AP, nx);                                    \
+        else                                                                                     \
+            g2p_x_stress_t(s, o, a, b, D, NS, BS, 0, AP, nx);                                    \
     }
 
 /* The table of variant V; P (empty or _ap) names its scatters of momentum
- * and X (empty or _ap) its MUSL last pass. */
+ * and X (empty or _ap) its MUSL last pass; the plain moving passes and
+ * p2g_q2 are NULL (the fused ones with no target do their work). */
 #define TABLE_OF(V, P, X, D, NS, BS)                                                       \
     static const mpm_kernels K(family##V, D, NS, BS) = {K(p2g_mq##P, D, NS, BS),           \
                                                         K(p2g_mqf##P, D, NS, BS),          \
-                                                        K(p2g_q2##P, D, NS, BS),           \
+                                                        NULL,                              \
                                                         K(stress_force, D, NS, BS),        \
-                                                        K(g2p_xv##V, D, NS, BS),           \
-                                                        K(g2p_xv_stress##V, D, NS, BS),    \
-                                                        K(g2p_v##V, D, NS, BS),            \
-                                                        K(g2p_x_stress##X, D, NS, BS),     \
+                                                        NULL,                              \
+                                                        NULL,                              \
+                                                        NULL,                              \
+                                                        NULL,                              \
                                                         K(scatter_loads, D, NS, BS),       \
                                                         K(bbox, D, NS, BS),                \
                                                         K(cell_keys, D, NS, BS),           \
@@ -1007,10 +971,6 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
     {                                                                                       \
         p2g_mqf_t(s, gb, a, b, D, NS, BS, 1);                                               \
     }                                                                                       \
-    static void K(p2g_q2_ap, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)  \
-    {                                                                                       \
-        p2g_q2_t(s, gb, a, b, D, NS, BS, 1);                                                \
-    }                                                                                       \
     MOVERS(_ap, D, NS, BS, 0, 1)                                                            \
     XSTRESS(_ap, D, NS, BS, 1)                                                              \
     TABLE_OF(_ap, _ap, _ap, D, NS, BS)
@@ -1023,10 +983,6 @@ INLINE void scatter_loads_t(mpm_sim *s, int D, int NS, int BS)
     static void K(p2g_mqf, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)      \
     {                                                                                         \
         p2g_mqf_t(s, gb, a, b, D, NS, BS, 0);                                                 \
-    }                                                                                         \
-    static void K(p2g_q2, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, size_t a, size_t b)       \
-    {                                                                                         \
-        p2g_q2_t(s, gb, a, b, D, NS, BS, 0);                                                  \
     }                                                                                         \
     static void K(stress_force, D, NS, BS)(mpm_sim * s, mpm_gridbuf * gb, mpm_thread_out * o, \
                                            size_t a, size_t b, int en)                        \

@@ -228,7 +228,7 @@ static void ph_stress_force(mpm_sim *s, int tid)
 }
 
 /* the fused passes' target of thread tid: NULL when the step does not
- * scatter the next one's fields */
+ * scatter the next one's fields (never when !s->fuse) */
 static mpm_gridbuf *next_buf(mpm_sim *s, int tid)
 {
     return s->fuse_next ? &s->tbuf[tid] : NULL;
@@ -239,7 +239,7 @@ static void ph_g2p_xv(mpm_sim *s, int tid)
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    if (s->fuse)
+    if (s->k->g2p_xv_nx)
         s->k->g2p_xv_nx(s, next_buf(s, tid), &s->tout[tid], a, b, s->step_energy);
     else
         s->k->g2p_xv(s, &s->tout[tid], a, b, s->step_energy);
@@ -250,7 +250,7 @@ static void ph_g2p_xv_stress(mpm_sim *s, int tid)
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    if (s->fuse)
+    if (s->k->g2p_xv_stress_nx)
         s->k->g2p_xv_stress_nx(s, next_buf(s, tid), &s->tout[tid], a, b, s->step_energy);
     else
         s->k->g2p_xv_stress(s, &s->tout[tid], a, b, s->step_energy);
@@ -276,7 +276,7 @@ static void ph_g2p_x_stress(mpm_sim *s, int tid)
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
     reset_out(&s->tout[tid]);
-    if (s->fuse)
+    if (s->k->g2p_x_stress_nx)
         s->k->g2p_x_stress_nx(s, next_buf(s, tid), &s->tout[tid], a, b, s->step_energy);
     else
         s->k->g2p_x_stress(s, &s->tout[tid], a, b, s->step_energy);
