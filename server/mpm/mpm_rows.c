@@ -51,28 +51,26 @@ static void zero_rows(const mpm_sim *s, double *a, const mpm_thread_out *o)
     }
 }
 
-/* the grid fields in use, as a list */
-static int grid_fields(const mpm_sim *s, const mpm_gridbuf *b, double **out)
+/* The fields of b named by mask (MPM_F_*) that b has, as a list of the
+ * buffer's pointers (at most 10). */
+static int field_ptrs(const mpm_sim *s, mpm_gridbuf *b, int mask, double **out[10])
 {
     int k = 0;
-    out[k++] = b->m;
+    if (mask & MPM_F_M) out[k++] = &b->m;
     for (int d = 0; d < s->dim; d++) {
-        out[k++] = b->q[d];
-        out[k++] = b->f[d];
-        if (b->q2[d]) out[k++] = b->q2[d];
+        if (mask & MPM_F_Q) out[k++] = &b->q[d];
+        if ((mask & MPM_F_F) && b->f[d]) out[k++] = &b->f[d];
+        if ((mask & MPM_F_Q2) && b->q2[d]) out[k++] = &b->q2[d];
     }
     return k;
 }
 
-/* the P2G fields (s->p2g_fields) of buffer b, as a list */
-static int p2g_list(const mpm_sim *s, const mpm_gridbuf *b, double **out)
+/* the same, as the fields themselves */
+static int field_list(const mpm_sim *s, mpm_gridbuf *b, int mask, double *out[10])
 {
-    int k = 0;
-    out[k++] = b->m;
-    for (int d = 0; d < s->dim; d++) {
-        out[k++] = b->q[d];
-        if (s->p2g_fields & MPM_F_F) out[k++] = b->f[d];
-    }
+    double **p[10];
+    int k = field_ptrs(s, b, mask, p);
+    for (int i = 0; i < k; i++) out[i] = *p[i];
     return k;
 }
 
@@ -85,19 +83,17 @@ static void swap_ptr(double **a, double **b)
 
 void mpm_rows_swap_next(mpm_sim *s)
 {
-    mpm_gridbuf *n = &s->tbuf[0];
-    swap_ptr(&s->g.m, &n->m);
-    for (int d = 0; d < s->dim; d++) {
-        swap_ptr(&s->g.q[d], &n->q[d]);
-        if (s->p2g_fields & MPM_F_F) swap_ptr(&s->g.f[d], &n->f[d]);
-    }
+    double **g[10], **n[10];
+    int k = field_ptrs(s, &s->g, s->p2g_fields, g);
+    field_ptrs(s, &s->tbuf[0], s->p2g_fields, n); /* the same fields, in order */
+    for (int i = 0; i < k; i++) swap_ptr(g[i], n[i]);
 }
 
 void mpm_rows_drop_next(mpm_sim *s)
 {
     for (int t = 0; s->gnext && t < s->nthreads; t++) {
-        double *z[7];
-        int nz = p2g_list(s, &s->tbuf[t], z);
+        double *z[10];
+        int nz = field_list(s, &s->tbuf[t], s->p2g_fields, z);
         for (int i = 0; i < nz; i++) zero_rows(s, z[i], &s->tout[t]);
     }
     s->gnext = 0;
@@ -163,7 +159,7 @@ void mpm_rows_update(mpm_sim *s)
         ahi[d] = has_old && (!has_new || s->bhi[d] > hi[d]) ? s->bhi[d] : hi[d];
     }
     double *f[10];
-    int nf = grid_fields(s, &s->g, f);
+    int nf = field_list(s, &s->g, MPM_F_M | MPM_F_Q | MPM_F_F | MPM_F_Q2, f);
     size_t nr = has_old || has_new ? mpm_box_rows(alo, ahi) : 0;
     for (size_t r = 0; r < nr; r++) {
         size_t row = mpm_box_row(s, alo, ahi, r);
@@ -313,7 +309,7 @@ static void reduce_seg(mpm_sim *s, int fields, size_t row, int a, int b)
                     ib = hi;
                     continue;
                 }
-                double *src = field_of(&s->tbuf[t], fl, d) + base;
+                const double *src = field_of(&s->tbuf[t], fl, d) + base;
                 if (ia > ib) {
                     span_copy(dst, src, (size_t)lo, (size_t)hi);
                     ia = lo;
@@ -407,8 +403,8 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
         if (fields && s->nthreads > 1) reduce_seg(s, fields, row, lo, hi);
         size_t base = mpm_row_node(s, row, lo), w = (size_t)(hi - lo + 1);
         if (ops & MPM_N_Z0) {
-            double *z[7];
-            int nz = p2g_list(s, &s->tbuf[0], z);
+            double *z[10];
+            int nz = field_list(s, &s->tbuf[0], s->p2g_fields, z);
             for (int i = 0; i < nz; i++) memset(z[i] + base, 0, w * sizeof(double));
         }
         if (ops & MPM_N_MINV) {
