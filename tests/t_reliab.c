@@ -307,6 +307,7 @@ DTEST(rel_kill9)
     free(ids);
     free(shortb);
     free(longb);
+    CHECK(td_stop(&d) == 0); /* the last daemon too: none is left running */
     TLOG("%d kills in %.1f s (mean delay %.0f ms): %ld runs, %ld finished, %ld interrupted, "
          "%ld other ends; %ld energy samples and %ld snapshots verified; accepted %ld (+%ld "
          "mpmctl submits answered before the kill)",
