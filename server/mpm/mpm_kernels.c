@@ -584,7 +584,7 @@ typedef struct {
 INLINE tcorner tent_corners(const double *restrict q, const v2d mi[2][2], const size_t row[2][2],
                             int D)
 {
-    tcorner t;
+    tcorner t = {{{{0, 0}, {0, 0}}, {{0, 0}, {0, 0}}}}; /* the corners D leaves out: 0 */
     for (int kz = 0; kz < (D > 2 ? 2 : 1); kz++)
         for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++)
             t.c[kz][ky] = v2_ld(q + row[kz][ky]) * mi[kz][ky];
