@@ -833,10 +833,9 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
     if (EN) esum_init(s, &e);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
-        for (size_t i = 0; i < nb; i++) {
-            weights(s, b0 + i, D, NS, BS, &Wb[i]);
+        for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
+        for (size_t i = 0; i < nb; i++)
             gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL);
-        }
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
         for (size_t i = 0; i < nb; i++) scatter_force(s, gb, &Wb[i], b0 + i, D, NS);
