@@ -995,7 +995,7 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_gridbuf *q2b, size_t p0, size_t p1, int D, i
 INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
                            int BS, int EN, int AP, mpm_gridbuf *nx)
 {
-    pw W;
+    pw *Wb = o->wblk;
     rowrun a;
     boxc bc;
     chk ck;
@@ -1008,11 +1008,11 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
     chk_init(o, &ck);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
+        for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3];
-            weights(s, p, D, NS, BS, &W);
-            gather(s, s->g.q2, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL);
+            gather(s, s->g.q2, &Wb[i], D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL);
             for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
         }
         moved_block(s, o, &bc, &ck, &e, &a, b0, b0 + nb, D, NS, BS, EN, AP);
