@@ -878,7 +878,7 @@ INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, 
 INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS, int BS,
                      int EN, int BL, int AP, mpm_gridbuf *nx)
 {
-    pw W;
+    pw W, *Wb = o->wblk;
     aoff R;
     rowrun a;
     boxc bc;
@@ -894,6 +894,11 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
      * step's scatter, three small loops rather than one that spills */
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t b1 = p1 - b0 < MPM_BLOCK ? p1 : b0 + MPM_BLOCK;
+        /* tents and B-splines: the block's weights first (1.05-1.09x);
+         * uGIMP's heavier weights are better taken where they are used */
+        const int WF = !AP && (NS == 2 || BS);
+        if (WF)
+            for (size_t p = b0; p < b1; p++) weights(s, p, D, NS, BS, &Wb[p - b0]);
         for (size_t p = b0; p < b1; p++) {
             double dx[3], dv[3], Bm[3][3];
             if (AP) {
@@ -901,8 +906,12 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
                 gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
                 ap_store(s, p, D, dx, Bm);
             } else {
-                weights(s, p, D, NS, BS, &W);
-                gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+                const pw *Wp = &W;
+                if (WF)
+                    Wp = &Wb[p - b0];
+                else
+                    weights(s, p, D, NS, BS, &W);
+                gather(s, NULL, Wp, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
