@@ -932,7 +932,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D, int NS,
                             int BS, int EN, int BL, int AP, mpm_gridbuf *nx)
 {
-    pw W;
+    pw W, *Wb = o->wblk;
     aoff R;
     rowrun a;
     boxc bc;
@@ -946,6 +946,9 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     chk_init(o, &ck);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
+        const int WF = !AP && (NS == 2 || BS); /* as g2p_xv_t() */
+        if (WF)
+            for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3], dv[3], Bm[3][3];
@@ -954,8 +957,12 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                 gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
                 ap_store(s, p, D, dx, Bm);
             } else {
-                weights(s, p, D, NS, BS, &W);
-                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+                const pw *Wp = &W;
+                if (WF)
+                    Wp = &Wb[i];
+                else
+                    weights(s, p, D, NS, BS, &W);
+                gather(s, s->g.q, Wp, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
