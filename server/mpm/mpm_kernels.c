@@ -12,8 +12,9 @@
  *   NS = 4: uGIMP with wider particles (explicit points, lp up to h);
  *   BS = 1: B-splines of degree NS - 1 (BSPLINE2: NS = 3, BSPLINE3:
  *           NS = 4) on the open knot vector, control points c .. c + p.
- * BS only changes the per-axis weights (weights(), bs_axis()) and the
- * support's first node (box_add()); the node loops are shared.
+ * BS only changes the per-axis weights (weights(), bs_axis(), in
+ * mpm_shape.h) and the support's first node (box_add()); the node loops
+ * are shared.
  * mpm_kernels_select() picks the family once per job, so no particle loop
  * branches on dimension, method, update scheme or features.  A PIC/FLIP
  * blend (mpm_case.pic_fraction > 0) selects the family's blend twin, whose
@@ -65,113 +66,11 @@
 
 #include "mpm_internal.h"
 #include "mpm_pass.h"
+#include "mpm_shape.h"
 
 #include <limits.h>
 #include <math.h>
 #include <stdint.h>
-
-#define UNROLL _Pragma("GCC unroll 4")
-
-/* Two doubles at once (SSE2, the x86-64 baseline; GCC and Clang vector
- * extensions elsewhere): the scatters update nodes kx and kx + 1 of a row
- * in one operation.  Each lane does the scalar code's arithmetic in its
- * order, so the results are the same bits.  Unaligned: any node may start
- * a pair. */
-typedef double v2d __attribute__((vector_size(16), aligned(8), may_alias));
-
-typedef long long v2l __attribute__((vector_size(16))); /* v2d comparisons */
-
-INLINE v2d v2_ld(const double *p)
-{
-    return *(const v2d *)p;
-}
-
-INLINE void v2_st(double *p, v2d v)
-{
-    *(v2d *)p = v;
-}
-
-INLINE double tent(double s)
-{
-    double a = 1.0 - fabs(s);
-    return a > 0 ? a : 0;
-}
-
-INLINE double tent_int(double s)
-{
-    s = s < -1 ? -1 : s > 1 ? 1 : s;
-    return 0.5 + s - 0.5 * s * fabs(s);
-}
-
-/* uGIMP weight and gradient of the node at distance s (in cells) */
-INLINE void gimp_w(double s, double a, double i2a, double i2lp, double *w, double *g)
-{
-    *w = (tent_int(s + a) - tent_int(s - a)) * i2a;
-    *g = (tent(s + a) - tent(s - a)) * i2lp;
-}
-
-/* Weights of one axis for r = (x - x0)/h; returns the first node. */
-INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
-{
-    int c = (int)r;
-    double f = r - c;
-    if (NS == 2) {
-        w[0] = 1.0 - f;
-        w[1] = f;
-        if (g) { /* the kernels take the tents' gradients from inv_h (GRAD) */
-            g[0] = -inv_h;
-            g[1] = inv_h;
-        }
-        return c;
-    }
-    int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
-    double a = lp * inv_h, i2a = 0.5 / a, i2lp = 0.5 / lp;
-    UNROLL
-    for (int k = 0; k < NS; k++) gimp_w(r - (double)(n0 + k), a, i2a, i2lp, &w[k], &g[k]);
-    return n0;
-}
-
-/* B-spline weights of one axis for r = (x - x0)/h in [0, n] (r = n, a
- * rounding at the top face, is taken in the last cell); returns the first
- * control point, c.  Interior spans: the uniform B-splines in closed form;
- * the p - 1 clamped spans at each end (rare, and contiguous once the
- * particles are sorted by cell, so the branch predicts well): Horner on the
- * coefficients made at creation (mpm_bspline.c). */
-INLINE int bs_axis(const mpm_bspline_axis *ax, double r, double inv_h, int NS, double *w, double *g)
-{
-    int n = ax->n, c = (int)r;
-    c = c < n - 1 ? c : n - 1;
-    double f = r - c;
-    if (__builtin_expect((c < NS - 2) | (c > n - NS + 1), 0)) {
-        const double(*C)[4] = c < NS - 2 ? ax->lo[c] : ax->hi[c - (n - NS + 2)];
-        UNROLL
-        for (int k = 0; k < NS; k++) {
-            w[k] = ((C[k][3] * f + C[k][2]) * f + C[k][1]) * f + C[k][0];
-            g[k] = ((3.0 * C[k][3] * f + 2.0 * C[k][2]) * f + C[k][1]) * inv_h;
-        }
-        return c;
-    }
-    double a = 1.0 - f;
-    if (NS == 3) { /* (1-f)^2/2, 1/2 + f(1-f), f^2/2 */
-        w[0] = 0.5 * a * a;
-        w[1] = 0.5 + f * a;
-        w[2] = 0.5 * f * f;
-        g[0] = -a * inv_h;
-        g[1] = (a - f) * inv_h;
-        g[2] = f * inv_h;
-    } else { /* (1-f)^3/6, 2/3 - f^2 + f^3/2, its mirror, f^3/6 */
-        double f2 = f * f, a2 = a * a;
-        w[0] = a2 * a * (1.0 / 6.0);
-        w[1] = 2.0 / 3.0 - f2 * (1.0 - 0.5 * f);
-        w[2] = 2.0 / 3.0 - a2 * (1.0 - 0.5 * a);
-        w[3] = f2 * f * (1.0 / 6.0);
-        g[0] = -0.5 * a2 * inv_h;
-        g[1] = f * (1.5 * f - 2.0) * inv_h;
-        g[2] = -a * (1.5 * a - 2.0) * inv_h;
-        g[3] = 0.5 * f2 * inv_h;
-    }
-    return c;
-}
 
 int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, int nodes, double *w,
                  double *g)
@@ -187,74 +86,12 @@ int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, in
     return axis(r, inv_h, lp, 2, w, g);
 }
 
-/* Per-axis weights of one particle: w[d][k], g[d][k] belong to node
- * base + k stride[d] along axis d. */
-typedef struct {
-    size_t base;
-    double w[3][4], g[3][4];
-} pw;
-
-/* The part of *src a (D, NS) family reads, into *dst (not the whole
- * struct: 200 bytes, of which 2D tents read 40); returns dst. */
-INLINE const pw *pw_copy(pw *dst, const pw *src, int D, int NS)
-{
-    dst->base = src->base;
-    for (int d = 0; d < D; d++)
-        for (int k = 0; k < NS; k++) {
-            dst->w[d][k] = src->w[d][k];
-            if (NS != 2) dst->g[d][k] = src->g[d][k];
-        }
-    return dst;
-}
-
 size_t mpm_kernels_scratch(void)
 {
     return MPM_BLOCK * sizeof(pw);
 }
 
-/* BS: B-spline family (NS = p + 1) instead of tents / uGIMP.  n0 (APIC;
- * NULL otherwise): the first node of each axis, padded index */
-INLINE void weights_n0(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o, int *n0)
-{
-    size_t base = 0;
-    for (int d = 0; d < D; d++) {
-        double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
-        int c;
-        if (BS) {
-            c = bs_axis(&s->bs[d], r, s->inv_h[d], NS, o->w[d], o->g[d]);
-        } else {
-            double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
-            c = axis(r, s->inv_h[d], lp, NS, o->w[d], NS == 2 ? NULL : o->g[d]);
-        }
-        if (n0) n0[d] = c;
-        base += (size_t)c * s->stride[d];
-    }
-    o->base = base;
-}
-
-INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
-{
-    weights_n0(s, p, D, NS, BS, o, NULL);
-}
-
-/* APIC: the weights of particle p and the offsets x_i - x_p of its
- * support's nodes, r[d][k] along axis d for node k of the axis (node
- * coordinates from mpm_node_coord()). */
-typedef struct {
-    double r[3][4];
-} aoff;
-
-INLINE void weights_ap(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o, aoff *R)
-{
-    int n0[3] = {0, 0, 0};
-    weights_n0(s, p, D, NS, BS, o, n0);
-    for (int d = 0; d < D; d++) {
-        double x = s->P.x[d][p];
-        for (int k = 0; k < NS; k++) R->r[d][k] = mpm_node_coord(s, d, n0[d] + k) - x;
-    }
-}
-
-/* Constants of box_add() and check_xv(), in locals so that the stores to
+/* Constants of box_add() and check_xv()'s bounds, in locals so that the stores to
  * the particles do not make the loop reload them. */
 typedef struct {
     double x0[3], ih[3], rmax[3], lo[3], hi[3];
@@ -269,48 +106,6 @@ INLINE void boxc_init(const mpm_sim *s, boxc *b)
         b->lo[d] = s->lo[d];
         b->hi[d] = s->hi[d];
     }
-}
-
-/* check_particle() of the moving passes, on the new position xn and
- * velocity vn in registers, the largest |v|^2 and the first bad particle
- * in locals (chk_init() .. chk_store()).  The same tests: x in [lo, hi)
- * and |v| <= 1.79e308 (not a NaN), axes 0 and 1 two at a time. */
-typedef struct {
-    double vmax2;
-    size_t bad;
-} chk;
-
-INLINE void chk_init(const mpm_thread_out *o, chk *c)
-{
-    c->vmax2 = o->vmax2;
-    c->bad = o->bad;
-}
-
-INLINE void chk_store(const chk *c, mpm_thread_out *o)
-{
-    o->vmax2 = c->vmax2;
-    o->bad = c->bad;
-}
-
-INLINE void check_xv(const boxc *b, chk *c, size_t p, const double xn[3], const double vn[3], int D)
-{
-    const double big = 1.79e308;
-    int ok = 1, d0 = 0;
-    double v2 = 0;
-    if (D > 1) {
-        v2d x = {xn[0], xn[1]}, v = {vn[0], vn[1]};
-        v2d lo = {b->lo[0], b->lo[1]}, hi = {b->hi[0], b->hi[1]}, bg = {big, big};
-        v2l m = (x >= lo) & (x < hi) & (v <= bg) & (v >= -bg);
-        ok = (m[0] & m[1]) != 0;
-        v2 = v2 + vn[0] * vn[0] + vn[1] * vn[1];
-        d0 = 2;
-    }
-    for (int d = d0; d < D; d++) {
-        ok &= (xn[d] >= b->lo[d]) & (xn[d] < b->hi[d]) & (fabs(vn[d]) <= big);
-        v2 += vn[d] * vn[d];
-    }
-    c->vmax2 = v2 > c->vmax2 ? v2 : c->vmax2;
-    if (__builtin_expect(!ok, 0) && c->bad == SIZE_MAX) c->bad = p;
 }
 
 /* The support of a particle at x, added to the current run (or starting a
@@ -376,8 +171,7 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
 /* Mass and momentum (Eqs. 25-26: momentum extrapolated directly). */
 INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_t p, int D, int NS)
 {
-    pw Wc; /* locals: the stores below cannot change them */
-    const pw *W = pw_copy(&Wc, W0, D, NS);
+    const pw Wc = *W0, *W = &Wc; /* locals: the stores below cannot change them */
     IH(s);
     double *restrict m = gb->m;
     double *restrict q0 = gb->q[0], *restrict q1 = gb->q[1], *restrict q2 = gb->q[2];
@@ -477,8 +271,7 @@ INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q
  * With G = (gx A, wx B, wx C): f_a -= gx (V s_a0 A) + wx (V s_a1 B + V s_a2 C). */
 INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_t p, int D, int NS)
 {
-    pw Wc; /* locals: the stores below cannot change them */
-    const pw *W = pw_copy(&Wc, W0, D, NS);
+    const pw Wc = *W0, *W = &Wc; /* locals: the stores below cannot change them */
     IH(s);
     double *restrict f0 = gb->f[0], *restrict f1 = gb->f[1], *restrict f2 = gb->f[2];
     const mpm_particles *P = &s->P;
@@ -803,8 +596,7 @@ INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, 
 /* MUSL: momentum of the updated velocity of particle p into q (weights W). */
 INLINE void scatter_q2(const mpm_sim *s, double *const q[3], const pw *W0, size_t p, int D, int NS)
 {
-    pw Wc; /* locals: the stores below cannot change them */
-    const pw *W = pw_copy(&Wc, W0, D, NS);
+    const pw Wc = *W0, *W = &Wc; /* locals: the stores below cannot change them */
     IH(s);
     double *restrict q0 = q[0], *restrict q1 = q[1], *restrict q2 = q[2];
     double mp = s->P.m[p];
@@ -866,7 +658,7 @@ INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, 
             xn[d] = s->P.x[d][p];
             vn[d] = s->P.v[d][p];
         }
-        check_xv(bc, ck, p, xn, vn, D);
+        check_xv(bc->lo, bc->hi, ck, p, xn, vn, D);
         if (EN) esum_particle(s, e, p, D, AP);
         box_add(s, bc, o, a, xn, D, NS, BS);
     }
@@ -896,8 +688,8 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
         size_t b1 = p1 - b0 < MPM_BLOCK ? p1 : b0 + MPM_BLOCK;
         /* tents and B-splines: the block's weights first (1.05-1.09x);
          * uGIMP's heavier weights are better taken where they are used */
-        const int WF = !AP && (NS == 2 || BS);
-        if (WF)
+        const int BW = !AP && (NS == 2 || BS);
+        if (BW)
             for (size_t p = b0; p < b1; p++) weights(s, p, D, NS, BS, &Wb[p - b0]);
         for (size_t p = b0; p < b1; p++) {
             double dx[3], dv[3], Bm[3][3];
@@ -907,7 +699,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
-                if (WF)
+                if (BW)
                     Wp = &Wb[p - b0];
                 else
                     weights(s, p, D, NS, BS, &W);
@@ -946,8 +738,8 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     chk_init(o, &ck);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
-        const int WF = !AP && (NS == 2 || BS); /* as g2p_xv_t() */
-        if (WF)
+        const int BW = !AP && (NS == 2 || BS); /* as g2p_xv_t() */
+        if (BW)
             for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
@@ -958,7 +750,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
-                if (WF)
+                if (BW)
                     Wp = &Wb[i];
                 else
                     weights(s, p, D, NS, BS, &W);

@@ -2,9 +2,10 @@
  * mpm_pass.h - the inline pieces every particle pass shares: the MPM,
  * uGIMP and B-spline families of mpm_kernels.c and the CPDI family of
  * mpm_cpdi.c.  A particle's cell, the runs that record the supports a pass
- * moves (rowrun) and the thread's box and row extents they merge into, the
- * check of a moved particle, the strain increment and the constitutive
- * update of a block, the energy sums made in the pass (esum, with the
+ * moves (rowrun) and the thread's box and row extents they merge into,
+ * two doubles at once (v2d), the checks of a moved particle (check_xv,
+ * check_particle), the strain increment and the constitutive update of a
+ * block, the energy sums made in the pass (esum, with the
  * energy pass's arithmetic; AP: APIC's affine angular momentum), the
  * velocity update (FLIP or blended with PIC) and the sort keys.
  * Private: included only by mpm_kernels.c and mpm_cpdi.c, after
@@ -31,6 +32,25 @@
 #else
 #define INLINE static inline __attribute__((always_inline))
 #endif
+
+/* Two doubles at once (SSE2, the x86-64 baseline; GCC and Clang vector
+ * extensions elsewhere): the scatters update nodes kx and kx + 1 of a row
+ * in one operation.  Each lane does the scalar code's arithmetic in its
+ * order, so the results are the same bits.  Unaligned: any node may start
+ * a pair. */
+typedef double v2d __attribute__((vector_size(16), aligned(8), may_alias));
+
+typedef long long v2l __attribute__((vector_size(16))); /* v2d comparisons */
+
+INLINE v2d v2_ld(const double *p)
+{
+    return *(const v2d *)p;
+}
+
+INLINE void v2_st(double *p, v2d v)
+{
+    *(v2d *)p = v;
+}
 
 /* Cell of p along axis d (trunc of r), clamped to the padded grid: a
  * position outside the grid (the step then fails) or not finite is
@@ -198,19 +218,63 @@ INLINE void esum_store(const esum *e, mpm_thread_out *o, int XV, int S)
     if (S) o->estr = e->es;
 }
 
-/* Checks the updated particle: inside [lo, hi) and finite; the first bad
- * particle of the pass is recorded. */
+/* The checks of a moved particle p, on its new position xn and velocity
+ * vn in registers and the bounds lo_, hi_: x in [lo, hi) and |v| <=
+ * 1.79e308 (not a NaN), axes 0 and 1 two at a time; the largest |v|^2 and
+ * the first bad particle go to a chk (locals across a pass: chk_init() ..
+ * chk_store()). */
+typedef struct {
+    double vmax2;
+    size_t bad;
+} chk;
+
+INLINE void chk_init(const mpm_thread_out *o, chk *c)
+{
+    c->vmax2 = o->vmax2;
+    c->bad = o->bad;
+}
+
+INLINE void chk_store(const chk *c, mpm_thread_out *o)
+{
+    o->vmax2 = c->vmax2;
+    o->bad = c->bad;
+}
+
+INLINE void check_xv(const double lo_[3], const double hi_[3], chk *c, size_t p, const double xn[3],
+                     const double vn[3], int D)
+{
+    const double big = 1.79e308;
+    int ok = 1, d0 = 0;
+    double v2 = 0;
+    if (D > 1) {
+        v2d x = {xn[0], xn[1]}, v = {vn[0], vn[1]};
+        v2d lo = {lo_[0], lo_[1]}, hi = {hi_[0], hi_[1]}, bg = {big, big};
+        v2l m = (x >= lo) & (x < hi) & (v <= bg) & (v >= -bg);
+        ok = (m[0] & m[1]) != 0;
+        v2 = v2 + vn[0] * vn[0] + vn[1] * vn[1];
+        d0 = 2;
+    }
+    for (int d = d0; d < D; d++) {
+        ok &= (xn[d] >= lo_[d]) & (xn[d] < hi_[d]) & (fabs(vn[d]) <= big);
+        v2 += vn[d] * vn[d];
+    }
+    c->vmax2 = v2 > c->vmax2 ? v2 : c->vmax2;
+    if (__builtin_expect(!ok, 0) && c->bad == SIZE_MAX) c->bad = p;
+}
+
+/* Checks the updated particle p in memory (check_xv() on its stored
+ * position and velocity, the bounds of s, the sums of o). */
 INLINE void check_particle(const mpm_sim *s, mpm_thread_out *o, size_t p, int D)
 {
-    int ok = 1;
-    double v2 = 0;
+    double xn[3], vn[3];
+    chk c;
     for (int d = 0; d < D; d++) {
-        double x = s->P.x[d][p], v = s->P.v[d][p];
-        ok &= (x >= s->lo[d]) & (x < s->hi[d]) & (fabs(v) <= 1.79e308);
-        v2 += v * v;
+        xn[d] = s->P.x[d][p];
+        vn[d] = s->P.v[d][p];
     }
-    if (v2 > o->vmax2) o->vmax2 = v2;
-    if (!ok && o->bad == SIZE_MAX) o->bad = p;
+    chk_init(o, &c);
+    check_xv(s->lo, s->hi, &c, p, xn, vn, D);
+    chk_store(&c, o);
 }
 
 /* Empty box (axes the grid lacks: node 0), and empty rows: only those of

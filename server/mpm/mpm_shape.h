@@ -1,0 +1,153 @@
+/*
+ * mpm_shape.h - the shape functions of one axis and the per-axis weights of
+ * one particle, for the particle loops of mpm_kernels.c: MPM tents, uGIMP
+ * (Eqs. 17-18: the tent integrated over the particle) and the B-splines
+ * of the open knot vector; pw, a particle's weights and gradients along
+ * each axis, and APIC's node offsets (aoff).  The formulas are in
+ * mpm_kernels.c's opening comment.  Private: included only by
+ * mpm_kernels.c, after mpm_pass.h; everything is static and always inlined
+ * (INLINE), so that each (D, NS, BS) family folds its constants.
+ */
+#ifndef MPM_SHAPE_H
+#define MPM_SHAPE_H
+
+#include "mpm_internal.h"
+#include "mpm_pass.h"
+
+#include <math.h>
+#include <stddef.h>
+
+#define UNROLL _Pragma("GCC unroll 4")
+
+INLINE double tent(double s)
+{
+    double a = 1.0 - fabs(s);
+    return a > 0 ? a : 0;
+}
+
+INLINE double tent_int(double s)
+{
+    s = s < -1 ? -1 : s > 1 ? 1 : s;
+    return 0.5 + s - 0.5 * s * fabs(s);
+}
+
+/* uGIMP weight and gradient of the node at distance s (in cells) */
+INLINE void gimp_w(double s, double a, double i2a, double i2lp, double *w, double *g)
+{
+    *w = (tent_int(s + a) - tent_int(s - a)) * i2a;
+    *g = (tent(s + a) - tent(s - a)) * i2lp;
+}
+
+/* Weights of one axis for r = (x - x0)/h; returns the first node. */
+INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
+{
+    int c = (int)r;
+    double f = r - c;
+    if (NS == 2) {
+        w[0] = 1.0 - f;
+        w[1] = f;
+        if (g) { /* the kernels take the tents' gradients from inv_h (GRAD) */
+            g[0] = -inv_h;
+            g[1] = inv_h;
+        }
+        return c;
+    }
+    int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
+    double a = lp * inv_h, i2a = 0.5 / a, i2lp = 0.5 / lp;
+    UNROLL
+    for (int k = 0; k < NS; k++) gimp_w(r - (double)(n0 + k), a, i2a, i2lp, &w[k], &g[k]);
+    return n0;
+}
+
+/* B-spline weights of one axis for r = (x - x0)/h in [0, n] (r = n, a
+ * rounding at the top face, is taken in the last cell); returns the first
+ * control point, c.  Interior spans: the uniform B-splines in closed form;
+ * the p - 1 clamped spans at each end (rare, and contiguous once the
+ * particles are sorted by cell, so the branch predicts well): Horner on the
+ * coefficients made at creation (mpm_bspline.c). */
+INLINE int bs_axis(const mpm_bspline_axis *ax, double r, double inv_h, int NS, double *w, double *g)
+{
+    int n = ax->n, c = (int)r;
+    c = c < n - 1 ? c : n - 1;
+    double f = r - c;
+    if (__builtin_expect((c < NS - 2) | (c > n - NS + 1), 0)) {
+        const double(*C)[4] = c < NS - 2 ? ax->lo[c] : ax->hi[c - (n - NS + 2)];
+        UNROLL
+        for (int k = 0; k < NS; k++) {
+            w[k] = ((C[k][3] * f + C[k][2]) * f + C[k][1]) * f + C[k][0];
+            g[k] = ((3.0 * C[k][3] * f + 2.0 * C[k][2]) * f + C[k][1]) * inv_h;
+        }
+        return c;
+    }
+    double a = 1.0 - f;
+    if (NS == 3) { /* (1-f)^2/2, 1/2 + f(1-f), f^2/2 */
+        w[0] = 0.5 * a * a;
+        w[1] = 0.5 + f * a;
+        w[2] = 0.5 * f * f;
+        g[0] = -a * inv_h;
+        g[1] = (a - f) * inv_h;
+        g[2] = f * inv_h;
+    } else { /* (1-f)^3/6, 2/3 - f^2 + f^3/2, its mirror, f^3/6 */
+        double f2 = f * f, a2 = a * a;
+        w[0] = a2 * a * (1.0 / 6.0);
+        w[1] = 2.0 / 3.0 - f2 * (1.0 - 0.5 * f);
+        w[2] = 2.0 / 3.0 - a2 * (1.0 - 0.5 * a);
+        w[3] = f2 * f * (1.0 / 6.0);
+        g[0] = -0.5 * a2 * inv_h;
+        g[1] = f * (1.5 * f - 2.0) * inv_h;
+        g[2] = -a * (1.5 * a - 2.0) * inv_h;
+        g[3] = 0.5 * f2 * inv_h;
+    }
+    return c;
+}
+
+/* Per-axis weights of one particle: w[d][k], g[d][k] belong to node
+ * base + k stride[d] along axis d. */
+typedef struct {
+    size_t base;
+    double w[3][4], g[3][4];
+} pw;
+
+/* BS: B-spline family (NS = p + 1) instead of tents / uGIMP.  n0 (APIC;
+ * NULL otherwise): the first node of each axis, padded index */
+INLINE void weights_n0(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o, int *n0)
+{
+    size_t base = 0;
+    for (int d = 0; d < D; d++) {
+        double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+        int c;
+        if (BS) {
+            c = bs_axis(&s->bs[d], r, s->inv_h[d], NS, o->w[d], o->g[d]);
+        } else {
+            double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
+            c = axis(r, s->inv_h[d], lp, NS, o->w[d], NS == 2 ? NULL : o->g[d]);
+        }
+        if (n0) n0[d] = c;
+        base += (size_t)c * s->stride[d];
+    }
+    o->base = base;
+}
+
+INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
+{
+    weights_n0(s, p, D, NS, BS, o, NULL);
+}
+
+/* APIC: the weights of particle p and the offsets x_i - x_p of its
+ * support's nodes, r[d][k] along axis d for node k of the axis (node
+ * coordinates from mpm_node_coord()). */
+typedef struct {
+    double r[3][4];
+} aoff;
+
+INLINE void weights_ap(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o, aoff *R)
+{
+    int n0[3] = {0, 0, 0};
+    weights_n0(s, p, D, NS, BS, o, n0);
+    for (int d = 0; d < D; d++) {
+        double x = s->P.x[d][p];
+        for (int k = 0; k < NS; k++) R->r[d][k] = mpm_node_coord(s, d, n0[d] + k) - x;
+    }
+}
+
+#endif /* MPM_SHAPE_H */
