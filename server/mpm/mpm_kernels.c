@@ -310,6 +310,101 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_
     });
 }
 
+/* MPM tents scattered a run at a time.  Particles sorted by cell come in
+ * runs that share one cell, and so its 2^D corners: the run's
+ * contributions are summed in registers and added to the grid once per
+ * run, not once per particle (each of those adds waits on the store of the
+ * one before to the same node): the step 1.02x in 2D, 1.06x in 3D, 1.11x
+ * in 1D.  Other sums than the adds particle by particle, so other last
+ * bits; the runs depend only on the order of the particles, so the fused
+ * and unfused scatters agree bit for bit.  a[k][kz][ky]: the x pair of the corner row
+ * (ky, kz) of field k (m, q0..q2, f0..f2). */
+typedef struct {
+    size_t base; /* the run's cell (its first corner); SIZE_MAX: no run yet */
+    v2d a[7][2][2];
+} trun;
+
+INLINE void trun_zero(trun *r)
+{
+    for (int k = 0; k < 7; k++)
+        for (int kz = 0; kz < 2; kz++)
+            for (int ky = 0; ky < 2; ky++) r->a[k][kz][ky] = (v2d){0, 0};
+}
+
+INLINE void trun_init(trun *r)
+{
+    r->base = SIZE_MAX;
+    trun_zero(r);
+}
+
+/* Adds the run's sums to the grid: WQ mass and momentum, WF force. */
+INLINE void trun_flush(const mpm_sim *s, const trun *r, mpm_gridbuf *gb, int D, int WQ, int WF)
+{
+    if (r->base == SIZE_MAX) return;
+    const size_t sy = s->stride[1], sz = s->stride[2];
+    for (int kz = 0; kz < (D > 2 ? 2 : 1); kz++)
+        for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++) {
+            size_t n = r->base + (size_t)ky * sy + (size_t)kz * sz;
+            if (WQ) {
+                v2_st(gb->m + n, v2_ld(gb->m + n) + r->a[0][kz][ky]);
+                for (int c = 0; c < D; c++)
+                    v2_st(gb->q[c] + n, v2_ld(gb->q[c] + n) + r->a[1 + c][kz][ky]);
+            }
+            if (WF)
+                for (int c = 0; c < D; c++)
+                    v2_st(gb->f[c] + n, v2_ld(gb->f[c] + n) - r->a[4 + c][kz][ky]);
+        }
+}
+
+/* Particle p (weights W) into the run: WQ its mass and momentum
+ * (scatter_mq()), WF its internal force (scatter_force()). */
+INLINE void trun_add(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const pw *W, size_t p, int D,
+                     int WQ, int WF)
+{
+    IH(s);
+    if (W->base != r->base) {
+        trun_flush(s, r, gb, D, WQ, WF);
+        r->base = W->base;
+        trun_zero(r);
+    }
+    const mpm_particles *P = &s->P;
+    const v2d wx = {W->w[0][0], W->w[0][1]}, gx = {-ih_[0], ih_[0]};
+    double mp = 0, mv[3] = {0, 0, 0}, sg[6] = {0, 0, 0, 0, 0, 0};
+    if (WQ) {
+        mp = P->m[p];
+        for (int c = 0; c < D; c++) mv[c] = mp * P->v[c][p];
+    }
+    if (WF) {
+        double V = P->vol[p];
+        /* the sig[] order: xx, yy, zz, xy, yz, xz (2D: no zz) */
+        for (int c = 0; c < MPM_NCOMP(D); c++)
+            if (D > 2 || c != 2) sg[c] = V * P->sig[c][p];
+    }
+    for (int kz = 0; kz < (D > 2 ? 2 : 1); kz++)
+        for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++) {
+            double wy = D > 1 ? W->w[1][ky] : 1.0, wz = D > 2 ? W->w[2][kz] : 1.0;
+            double gy = D > 1 ? (ky ? ih_[1] : -ih_[1]) : 0.0;
+            double gz = D > 2 ? (kz ? ih_[2] : -ih_[2]) : 0.0;
+            double A = wy * wz, B = gy * wz, C = wy * gz;
+            if (WQ) {
+                r->a[0][kz][ky] += wx * (A * mp);
+                for (int c = 0; c < D; c++) r->a[1 + c][kz][ky] += wx * (A * mv[c]);
+            }
+            if (WF) {
+                if (D == 1) {
+                    r->a[4][kz][ky] += gx * (sg[0] * A);
+                } else if (D == 2) {
+                    r->a[4][kz][ky] += gx * (sg[0] * A) + wx * (sg[3] * B);
+                    r->a[5][kz][ky] += gx * (sg[3] * A) + wx * (sg[1] * B);
+                } else {
+                    r->a[4][kz][ky] += gx * (sg[0] * A) + wx * (sg[3] * B + sg[5] * C);
+                    r->a[5][kz][ky] += gx * (sg[3] * A) + wx * (sg[1] * B + sg[4] * C);
+                    r->a[6][kz][ky] += gx * (sg[5] * A) + wx * (sg[4] * B + sg[2] * C);
+                }
+            }
+        }
+}
+
 /* Phantom nodes in the velocity gradient.  A phantom node (m <= M_TOL,
  * minv 0) has no velocity, but its gradient weight need not be small: with
  * MPM tents it is +-1/h however small the weight S (a particle on a grid
@@ -581,16 +676,52 @@ INLINE void p2g_one(mpm_sim *s, mpm_gridbuf *gb, size_t p, int D, int NS, int BS
     if (WF) scatter_force(s, gb, &W, p, D, NS);
 }
 
+/* Tents without APIC scatter by runs (trun). */
+#define TR(NS, BS, AP) ((NS) == 2 && !(BS) && !(AP))
+
+/* The first scatter of particles [p0, p1) (WF: with the force). */
+INLINE void p2g_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS, int AP,
+                  int WF)
+{
+    if (TR(NS, BS, AP)) {
+        trun r;
+        pw W;
+        trun_init(&r);
+        for (size_t p = p0; p < p1; p++) {
+            weights(s, p, D, NS, BS, &W);
+            trun_add(s, &r, gb, &W, p, D, 1, WF);
+        }
+        trun_flush(s, &r, gb, D, 1, WF);
+        return;
+    }
+    for (size_t p = p0; p < p1; p++) p2g_one(s, gb, p, D, NS, BS, AP, WF);
+}
+
 INLINE void p2g_mq_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
                      int AP)
 {
-    for (size_t p = p0; p < p1; p++) p2g_one(s, gb, p, D, NS, BS, AP, 0);
+    p2g_t(s, gb, p0, p1, D, NS, BS, AP, 0);
 }
 
 INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS,
                       int AP)
 {
-    for (size_t p = p0; p < p1; p++) p2g_one(s, gb, p, D, NS, BS, AP, 1);
+    p2g_t(s, gb, p0, p1, D, NS, BS, AP, 1);
+}
+
+/* The next step's scatter from a moving pass, particles [b0, b1) at their
+ * new positions (WF: with the force); tents by runs into r (flushed by
+ * the caller after the last block), with the block's weight slots Wb as
+ * scratch. */
+INLINE void next_scatter(mpm_sim *s, mpm_gridbuf *nx, trun *r, pw *Wb, size_t b0, size_t b1, int D,
+                         int NS, int BS, int AP, int WF)
+{
+    if (!TR(NS, BS, AP)) {
+        for (size_t p = b0; p < b1; p++) p2g_one(s, nx, p, D, NS, BS, AP, WF);
+        return;
+    }
+    for (size_t p = b0; p < b1; p++) weights(s, p, D, NS, BS, &Wb[p - b0]);
+    for (size_t p = b0; p < b1; p++) trun_add(s, r, nx, &Wb[p - b0], p, D, 1, WF);
 }
 
 /* MUSL: momentum of the updated velocity of particle p into q (weights W). */
@@ -622,6 +753,8 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
 {
     pw *Wb = o->wblk;
     esum e;
+    trun r;
+    trun_init(&r);
     if (EN) esum_init(s, &e);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
@@ -630,8 +763,13 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
             gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL);
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
-        for (size_t i = 0; i < nb; i++) scatter_force(s, gb, &Wb[i], b0 + i, D, NS);
+        for (size_t i = 0; i < nb; i++)
+            if (TR(NS, BS, 0))
+                trun_add(s, &r, gb, &Wb[i], b0 + i, D, 0, 1);
+            else
+                scatter_force(s, gb, &Wb[i], b0 + i, D, NS);
     }
+    if (TR(NS, BS, 0)) trun_flush(s, &r, gb, D, 0, 1);
     if (EN) esum_store(&e, o, 0, 1);
 }
 
@@ -682,6 +820,8 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
     run_init(&a);
     boxc_init(s, &bc);
     chk_init(o, &ck);
+    trun nr;
+    trun_init(&nr);
     /* by blocks: the update, then the checks and supports, then the next
      * step's scatter, three small loops rather than one that spills */
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
@@ -711,9 +851,9 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
             }
         }
         moved_block(s, o, &bc, &ck, &e, &a, b0, b1, D, NS, BS, EN, AP);
-        if (nx && ck.bad == SIZE_MAX)
-            for (size_t p = b0; p < b1; p++) p2g_one(s, nx, p, D, NS, BS, AP, 0);
+        if (nx && ck.bad == SIZE_MAX) next_scatter(s, nx, &nr, Wb, b0, b1, D, NS, BS, AP, 0);
     }
+    if (nx && TR(NS, BS, AP)) trun_flush(s, &nr, nx, D, 1, 0);
     chk_store(&ck, o);
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 0);
@@ -736,6 +876,8 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     run_init(&a);
     boxc_init(s, &bc);
     chk_init(o, &ck);
+    trun nr;
+    trun_init(&nr);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         const int BW = !AP && (NS == 2 || BS); /* as g2p_xv_t() */
@@ -764,9 +906,9 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
         moved_block(s, o, &bc, &ck, &e, &a, b0, b0 + nb, D, NS, BS, EN, AP);
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
-        if (nx && ck.bad == SIZE_MAX)
-            for (size_t i = 0; i < nb; i++) p2g_one(s, nx, b0 + i, D, NS, BS, AP, 1);
+        if (nx && ck.bad == SIZE_MAX) next_scatter(s, nx, &nr, Wb, b0, b0 + nb, D, NS, BS, AP, 1);
     }
+    if (nx && TR(NS, BS, AP)) trun_flush(s, &nr, nx, D, 1, 1);
     chk_store(&ck, o);
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 1);
@@ -814,6 +956,8 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
     run_init(&a);
     boxc_init(s, &bc);
     chk_init(o, &ck);
+    trun nr;
+    trun_init(&nr);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
@@ -826,9 +970,9 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
         moved_block(s, o, &bc, &ck, &e, &a, b0, b0 + nb, D, NS, BS, EN, AP);
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
-        if (nx && ck.bad == SIZE_MAX)
-            for (size_t i = 0; i < nb; i++) p2g_one(s, nx, b0 + i, D, NS, BS, AP, 1);
+        if (nx && ck.bad == SIZE_MAX) next_scatter(s, nx, &nr, Wb, b0, b0 + nb, D, NS, BS, AP, 1);
     }
+    if (nx && TR(NS, BS, AP)) trun_flush(s, &nr, nx, D, 1, 1);
     chk_store(&ck, o);
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 1);
