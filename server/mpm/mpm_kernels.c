@@ -720,7 +720,7 @@ INLINE void next_scatter(mpm_sim *s, mpm_gridbuf *nx, trun *r, pw *Wb, size_t b0
         for (size_t p = b0; p < b1; p++) p2g_one(s, nx, p, D, NS, BS, AP, WF);
         return;
     }
-    for (size_t p = b0; p < b1; p++) weights(s, p, D, NS, BS, &Wb[p - b0]);
+    weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
     for (size_t p = b0; p < b1; p++) trun_add(s, r, nx, &Wb[p - b0], p, D, 1, WF);
 }
 
@@ -758,7 +758,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
     if (EN) esum_init(s, &e);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
-        for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
+        weights_block(s, b0, nb, D, NS, BS, Wb);
         for (size_t i = 0; i < nb; i++)
             gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL);
         block_update(s, o, b0, nb, D);
@@ -829,8 +829,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
         /* tents and B-splines: the block's weights first (1.05-1.09x);
          * uGIMP's heavier weights are better taken where they are used */
         const int BW = !AP && (NS == 2 || BS);
-        if (BW)
-            for (size_t p = b0; p < b1; p++) weights(s, p, D, NS, BS, &Wb[p - b0]);
+        if (BW) weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
         for (size_t p = b0; p < b1; p++) {
             double dx[3], dv[3], Bm[3][3];
             if (AP) {
@@ -881,8 +880,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         const int BW = !AP && (NS == 2 || BS); /* as g2p_xv_t() */
-        if (BW)
-            for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
+        if (BW) weights_block(s, b0, nb, D, NS, BS, Wb);
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3], dv[3], Bm[3][3];
@@ -960,7 +958,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
     trun_init(&nr);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
-        for (size_t i = 0; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
+        weights_block(s, b0, nb, D, NS, BS, Wb);
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3];

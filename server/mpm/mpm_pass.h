@@ -8,9 +8,10 @@
  * block, the energy sums made in the pass (esum, with the
  * energy pass's arithmetic; AP: APIC's affine angular momentum), the
  * velocity update (FLIP or blended with PIC) and the sort keys.
- * Private: included only by mpm_kernels.c and mpm_cpdi.c, after
- * mpm_internal.h; everything is static and always inlined, so that each
- * specialised loop (dimension, nodes per axis, ...) compiles as before.
+ * Private to the solver (the particle passes of mpm_kernels.c and
+ * mpm_cpdi.c; mpm_rows.c's node loops take v2d), after mpm_internal.h; everything is static and
+ * always inlined, so that each specialised loop (dimension, nodes per axis, ...) compiles as
+ * before.
  */
 #ifndef MPM_PASS_H
 #define MPM_PASS_H

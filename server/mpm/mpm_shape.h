@@ -133,6 +133,34 @@ INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
     weights_n0(s, p, D, NS, BS, o, NULL);
 }
 
+/* The weights of particles [b0, b0 + nb) into Wb[0..nb).  MPM tents take
+ * two particles at a time (the cell coordinates, truncations and
+ * fractions as pairs: the same operations as weights(), so the same
+ * bits); the rest, and an odd last particle, one by one. */
+typedef int v2i __attribute__((vector_size(8)));
+INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS, int BS, pw *Wb)
+{
+    size_t i = 0;
+    if (NS == 2 && !BS)
+        for (; i + 1 < nb; i += 2) {
+            size_t base0 = 0, base1 = 0;
+            for (int d = 0; d < D; d++) {
+                v2d r = (v2_ld(s->P.x[d] + b0 + i) - s->x0[d]) * s->inv_h[d];
+                v2i c = __builtin_convertvector(r, v2i);
+                v2d f = r - __builtin_convertvector(c, v2d), a = 1.0 - f;
+                Wb[i].w[d][0] = a[0];
+                Wb[i].w[d][1] = f[0];
+                Wb[i + 1].w[d][0] = a[1];
+                Wb[i + 1].w[d][1] = f[1];
+                base0 += (size_t)c[0] * s->stride[d];
+                base1 += (size_t)c[1] * s->stride[d];
+            }
+            Wb[i].base = base0;
+            Wb[i + 1].base = base1;
+        }
+    for (; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
+}
+
 /* APIC: the weights of particle p and the offsets x_i - x_p of its
  * support's nodes, r[d][k] along axis d for node k of the axis (node
  * coordinates from mpm_node_coord()). */
