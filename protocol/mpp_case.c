@@ -399,6 +399,7 @@ static int conv_timefn(const Mpmd__TimeFunction *f, const char *path, mpm_timefn
             return mpm_fail(err, MPM_EINVAL, AT("%s.v", path),
                             "expected as many values as times (%zu), got %zu", f->n_t, f->n_v);
         out->n = f->n_t;
+        if (f->n_t == 0) return 0; /* the solver names the empty table */
         memcpy(*data, f->t, f->n_t * sizeof **data);
         memcpy(*data + f->n_t, f->v, f->n_t * sizeof **data);
         out->t = *data;

@@ -690,4 +690,19 @@ TEST(mpm_cond_decode)
     mpm_error_text(&err, MPM_FIELD_JSON, txt, sizeof txt);
     TLOG("%s", txt);
     CHECK(rc == MPM_EINVAL && strstr(txt, "prescribed[0].timeFunction.v") == txt);
+    /* an empty TABLE (no t, no v; the fuzzer's find: the decoder copied from
+     * a NULL array) is refused with the field's name */
+    static const char empty[] =
+        "{\"grid\": {\"dim\": 1, \"spacing\": [0.1], \"nodes\": [11]},"
+        " \"materials\": [{\"youngsModulus\": 1, \"density\": 1}],"
+        " \"bodies\": [{\"box\": {\"lo\": [0.2], \"hi\": [0.6]}, \"ppc\": 1}],"
+        " \"prescribed\": [{\"face\": \"X_LO\", \"velocity\": [1],"
+        "   \"timeFunction\": {\"kind\": \"TABLE\"}}],"
+        " \"endTime\": 1}";
+    rc = mpp_case_load(empty, strlen(empty), 0, &mc, &err);
+    mpm_error_text(&err, MPM_FIELD_JSON, txt, sizeof txt);
+    TLOG("%s", txt);
+    CHECK(rc == MPM_EINVAL && strstr(txt, "prescribed[0].timeFunction") == txt &&
+          strstr(txt, "at least 1 point"));
+    mpp_case_destroy(&mc);
 }
