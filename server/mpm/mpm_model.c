@@ -420,6 +420,16 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
         const mpm_mat_params *mp = &b->mats[P->mat[p]];
         double sig[6], de[6];
         rate_gather(b, i, p, sig, de);
+        if (mp->pl->kind == MPM_PLASTIC_DRUCKER_PRAGER) {
+            /* the elastic case in the loop, with the update's own test */
+            double De[6], tr[6], f;
+            int on = 0;
+            if (mpm_dp_trial(mp->pl, sig, de, De, tr, &f, &on) == MPM_DP_ELASTIC) {
+                rate_put(b, p, tr, de);
+                P->yld[p] = on ? 1.0 : 0.0;
+                continue;
+            }
+        }
         mpm_plastic_state st = {P->epsp[p], 0, 0};
         double dwp = 0;
         if (mpm_plastic_update(mp->pl, sig, de, &st, &dwp)) {

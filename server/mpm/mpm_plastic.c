@@ -385,23 +385,21 @@ static int dp_substep(const mpm_plastic_params *P, double s[6], dp_inv *v, const
 static int dp_update(const mpm_plastic_params *P, double sig[6], const double deps[6],
                      mpm_plastic_state *st, double *dissip)
 {
-    double De[6], tr[6], s[6], dis = 0, epq = 0, sctr;
-    hooke(P, deps, De);
-    for (int i = 0; i < 6; i++) tr[i] = sig[i] + De[i];
-    if (!finite6(tr)) return MPM_EDIVERGED;
-    double ftr = dp_f(P, tr, &sctr), ptr = meanp(tr);
+    double De[6], tr[6], s[6], dis = 0, epq = 0, ftr;
+    int on = 0, k = mpm_dp_trial(P, sig, deps, De, tr, &ftr, &on);
+    if (k == MPM_DP_NONFINITE) return MPM_EDIVERGED;
     int nsub = 0;
-    if (ptr > P->pt + P->ftol * (fabs(P->pt) + fabs(ptr))) {
+    if (k == MPM_DP_TENSION) {
         /* the tension region (the cut-off, its corner with the cone, the apex) */
         double sa[6];
         first_yield(P, sig, De, sa);
         dp_tension(P, tr, sa, &dis, &epq);
         memcpy(s, tr, sizeof s);
         nsub = 1;
-    } else if (ftr <= P->ftol * sctr) {
+    } else if (k == MPM_DP_ELASTIC) {
         memcpy(sig, tr, sizeof tr);
         st->substeps = 0;
-        st->yielded = ftr > -P->ftol * sctr;
+        st->yielded = on;
         if (dissip) *dissip = 0;
         return 0;
     } else {

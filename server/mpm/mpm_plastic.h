@@ -87,6 +87,8 @@
 
 #include "mpm_error.h"
 
+#include <math.h>
+
 typedef enum { MPM_PLASTIC_DRUCKER_PRAGER = 0, MPM_PLASTIC_MOHR_COULOMB = 1 } mpm_plastic_kind;
 typedef enum { MPM_DP_COMPRESSION = 0, MPM_DP_EXTENSION = 1, MPM_DP_PLANE_STRAIN = 2 } mpm_dp_match;
 
@@ -133,6 +135,43 @@ typedef struct {
  * p must have been through mpm_plastic_init(). */
 int mpm_plastic_update(const mpm_plastic_params *p, double sig[6], const double deps[6],
                        mpm_plastic_state *st, double *dissip);
+
+/* Drucker-Prager's elastic trial: the first test of its update, here so
+ * that a caller's particle loop takes the elastic case without a call (the
+ * same operations in the same order as mpm_plastic_update(), so the same
+ * bits).  De = D deps, tr = sig + De and *ftr = f(tr).  Returns
+ * MPM_DP_ELASTIC when tr is admissible (finite, at or below the cut-off,
+ * f(tr) <= ftol scale; *on_surface: f(tr) within ftol of 0), else what the
+ * update must do: MPM_DP_TENSION (past the cut-off), MPM_DP_CONE (outside
+ * the cone) or MPM_DP_NONFINITE (refuse). */
+enum { MPM_DP_ELASTIC, MPM_DP_CONE, MPM_DP_TENSION, MPM_DP_NONFINITE };
+static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
+                               const double deps[6], double De[6], double tr[6], double *ftr,
+                               int *on_surface)
+{
+    double etr = deps[0] + deps[1] + deps[2];
+    for (int i = 0; i < 3; i++) De[i] = P->lam * etr + 2 * P->G * deps[i];
+    for (int i = 3; i < 6; i++) De[i] = 2 * P->G * deps[i];
+    int fin = 1;
+    for (int i = 0; i < 6; i++) {
+        tr[i] = sig[i] + De[i];
+        fin &= isfinite(tr[i]) != 0;
+    }
+    if (!fin) return MPM_DP_NONFINITE;
+    /* the mean stress, sqrt(J2) from the deviator, f and its scale */
+    double p = (tr[0] + tr[1] + tr[2]) / 3, d[3];
+    for (int i = 0; i < 3; i++) d[i] = tr[i] - p;
+    double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] +
+                2 * (tr[3] * tr[3] + tr[4] * tr[4] + tr[5] * tr[5]);
+    double r = sqrt(0.5 * dd);
+    double scale = r + fabs(P->eta * p) + P->xi * P->c;
+    double f = r + P->eta * p - P->xi * P->c;
+    *ftr = f;
+    if (p > P->pt + P->ftol * (fabs(P->pt) + fabs(p))) return MPM_DP_TENSION;
+    if (!(f <= P->ftol * scale)) return MPM_DP_CONE;
+    *on_surface = f > -P->ftol * scale;
+    return MPM_DP_ELASTIC;
+}
 
 /* The yield function at sig (the largest of the model's surfaces, in
  * stress units: <= 0 admissible) and the scale its tolerance is relative
