@@ -43,6 +43,13 @@ BENCH_SRCS := $(wildcard tests/bench/*.c)
 PERF_SRCS  := $(wildcard tests/perf/*.c)
 INC        := -Iserver/mpm -Iserver -Iserver/store -Iprotocol -Itools -Ibuild/gen -Itests
 
+# The AVX2+FMA kernels (server/mpm/mpm_kernels_avx2.c, chosen at run time)
+# on x86-64: that file with these flags, every file told that it exists.
+ifneq ($(findstring x86_64,$(shell $(CC) -dumpmachine 2>/dev/null)),)
+CSTD    += -DMPM_HAVE_AVX2_KERNELS
+AVX2F   := -mavx2 -mfma -ffp-contract=fast
+endif
+
 # Builds: release (build/rel, bin/), sanitizers (build/asan), ThreadSanitizer
 # (build/tsan), and the lean solver for the feature-cost bench (build/lean).
 REL  := build/rel
@@ -76,7 +83,7 @@ build/gen/%.pb-c.c build/gen/%.pb-c.h: proto/%.proto
 define build_rules
 $(1)/%.o: %.c | $(GEN_H)
 	@mkdir -p $$(dir $$@)
-	$$(CC) $$(CSTD) $$(WARN) $(2) $$(INC) -MMD -MP -c $$< -o $$@
+	$$(CC) $$(CSTD) $$(WARN) $(2) $$(XFLAGS) $$(INC) -MMD -MP -c $$< -o $$@
 $(1)/gen/%.o: build/gen/%.c $(GEN_H)
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(CSTD) $(2) $$(INC) -MMD -MP -c $$< -o $$@
@@ -108,7 +115,8 @@ $(FUZZ)/%.o: CC := $(FUZZ_CC)
 # minutes on its kernels with the sanitizers: the solver is built at -O0,
 # its kernels (never called by a target) without instrumentation
 $(FUZZ)/server/mpm/%.o: FUZZ_O := -O0
-$(FUZZ)/server/mpm/mpm_kernels.o: FUZZF = -O0 -g
+$(FUZZ)/server/mpm/mpm_kernels.o $(FUZZ)/server/mpm/mpm_kernels_avx2.o: FUZZF = -O0 -g
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/server/mpm/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
 -include $(shell find build -name '*.d' 2>/dev/null)
 
 # Link lines, per build: $(1) build dir.  Libraries go above what they use.
@@ -215,7 +223,9 @@ CPPCHECK ?= cppcheck
 CPPCHECK_FLAGS := --enable=warning,performance,portability --std=c11 --max-configs=12 \
   --error-exitcode=1 --inline-suppr --suppressions-list=tests/cppcheck.supp -q \
   -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE -DPROTOBUF_C_VERSION_NUMBER=1004001 \
-  --cppcheck-build-dir=build/cppcheck -j2
+  --cppcheck-build-dir=build/cppcheck -j2 -i server/mpm/mpm_kernels_avx2.c
+# (mpm_kernels_avx2.c is mpm_kernels.c again with other flags: both tools
+# read it there)
 # -fanalyzer (gcc only) at -O0, its objects in build/analyze.  Turned off:
 #  -Wanalyzer-use-of-uninitialized-value: gcc 12's first version of it cannot
 #    relate a loop bound to the part of an array that was filled (w[d] for
@@ -231,7 +241,7 @@ ANALYZER_CC ?= gcc
 ANALYZE := build/analyze
 ANAF := -O0 -g -fanalyzer -Wno-analyzer-use-of-uninitialized-value -Wno-format-truncation
 $(ANALYZE)/tests/%.o: ANAF += -Wno-analyzer-malloc-leak -Wno-analyzer-file-leak
-LINT_SRCS = $(MPM_SRCS) $(MPP_SRCS) $(STORE_SRCS) $(wildcard server/*.c) $(CLI_SRCS) \
+LINT_SRCS = $(filter-out server/mpm/mpm_kernels_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(wildcard server/*.c) $(CLI_SRCS) \
             $(wildcard tools/*.c) $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS)
 $(ANALYZE)/%.o: %.c | $(GEN_H)
 	@mkdir -p $(dir $@)

@@ -76,6 +76,9 @@ static const setting settings[] = {
      "cancel and read (trusted networks only)"},
     {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1,
      "obsolete: a non-loopback bind needs --curve-secret (or the insecure flag above)"},
+    {"portable-kernels", "MPMD_PORTABLE_KERNELS", T_FLAG, F(portable_kernels), 0, 1,
+     "run every job on the portable kernels, whose bits are the same on every x86-64 machine "
+     "(default: the AVX2+FMA kernels where the CPU has them; they differ in round-off)"},
     {"verbose", NULL, T_FLAG, F(verbose), 0, 1, "debug log lines"},
 };
 #define NSET (sizeof settings / sizeof settings[0])

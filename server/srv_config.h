@@ -36,6 +36,7 @@ typedef struct {
     long long job_max_disk_mb;      /* MiB of stored records per job, 0 = no limit */
     long long max_disk_mb;          /* MiB of stored records in the database, 0 = no limit */
     int private_runs;               /* a client reads only its own runs (admins: all) */
+    int portable_kernels;           /* every job on MPM_KERNELS_PORTABLE */
     int verbose;
 } srv_config;
 

@@ -36,6 +36,7 @@
 #include "srv_daemon.h"
 #include "srv_daemon_int.h"
 
+#include "mpm.h"
 #include "mpp_msg.h"
 #include "srv_auth.h"
 #include "srv_budget.h"
@@ -1035,8 +1036,9 @@ int srv_daemon_run(const srv_config *cfg)
     srv_pool_set_budget(d.pool, d.budget);
     srv_log(0,
             "mpmd %s ready: requests on %s, streams on %s, runs in %s, %d worker(s), "
-            "queue %d, %s",
+            "queue %d, %s kernels, %s",
             MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers, cfg->queue_max,
+            cfg->portable_kernels || !mpm_kernels_avx2_available() ? "portable" : "avx2-fma",
             srv_auth_curve(d.auth) ? "CURVE" : "no authentication");
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},

@@ -647,6 +647,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     int threads = sc->c.threads > 0 && sc->c.threads < cfg->solver_threads ? sc->c.threads
                                                                            : cfg->solver_threads;
     sc->c.threads = threads;
+    if (cfg->portable_kernels) sc->c.kernels = MPM_KERNELS_PORTABLE;
     char err[512];
     mpm_error me;
     /* the case passed the codec's check (sc->info); threads is checked again */

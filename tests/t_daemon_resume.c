@@ -342,3 +342,91 @@ DTEST(daemon_resume_refused)
     EXPECT_CTL(&d, 1, "damaged", "resume", "1");
     CHECK(td_stop(&d) == 0);
 }
+
+/* mpmd --portable-kernels (issue 14): every job runs on the portable
+ * kernels.  The same case (the coarse disks, 4000 steps) through a
+ * default daemon and through one with the flag; each run's last energy
+ * sample equals, bit for bit, an in-process run of the same case on the
+ * kernels the daemon names in its ready line (AVX2+FMA where the CPU has
+ * them, else portable; portable with the flag); where the CPU has AVX2 the
+ * two runs' bits differ (the flag took effect). */
+DTEST(daemon_portable_kernels)
+{
+    const char *tmp = t_tmpdir();
+    json_t *c = example("disks2d_coarse");
+    CHECK(c);
+    set_output(c, "energyEvery", json_integer(100));
+    char *text = json_dumps(c, JSON_COMPACT);
+    CHECK(text);
+    double last[2][2] = {{0}};
+    long long step[2] = {0, 0};
+    int ok = 1;
+    for (int k = 0; ok && k < 2; k++) {
+        char dir[300], path[400], *csv = NULL;
+        const char *extra[] = {"--workers", "1", k ? "--portable-kernels" : NULL, NULL};
+        td_daemon d;
+        td_out o;
+        series s = {0};
+        snprintf(dir, sizeof dir, "%s/d%d", tmp, k);
+        if (td_start(&d, dir, extra)) {
+            ok = 0;
+            break;
+        }
+        ok = write_case(json_incref(c), dir, "case.json", path, sizeof path) == 0 &&
+             td_ctl(&d, 120, &o, "submit", path, "--watch", NULL) == 0;
+        ok = ok && o.status == 0 && job_of(o.out) == 1;
+        if (ok) td_out_free(&o);
+        ok = ok && energy_of(&d, 1, &csv, &s) == 0 && s.n > 10;
+        if (ok) {
+            step[k] = s.step[s.n - 1];
+            last[k][0] = s.kinetic[s.n - 1];
+            last[k][1] = s.strain[s.n - 1];
+        }
+        series_free(&s);
+        free(csv);
+        /* the ready line names the kernels */
+        const char *want =
+            k || !mpm_kernels_avx2_available() ? "portable kernels" : "avx2-fma kernels";
+        size_t loglen = 0;
+        char *log = td_slurp(d.log, &loglen);
+        int named = log && strstr(log, want);
+        free(log);
+        ok = td_stop(&d) == 0 && ok;
+        CHECKF(ok, "daemon %d: the run failed", k);
+        CHECKF(named, "daemon %d's log does not say '%s'", k, want);
+        TLOG("daemon %s: %s; step %lld: kinetic %.17g, strain %.17g",
+             k ? "--portable-kernels" : "(default)", want, step[k], last[k][0], last[k][1]);
+    }
+    CHECK(ok);
+    /* the same case in-process, on each daemon's kernels */
+    for (int k = 0; k < 2; k++) {
+        mpp_case *sc = NULL;
+        char err[256];
+        CHECKF(td_case_load(text, strlen(text), &sc, err, sizeof err) == 0, "%s", err);
+        sc->c.kernels = k ? MPM_KERNELS_PORTABLE : MPM_KERNELS_AUTO;
+        mpm_error me;
+        mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me);
+        /* as the daemon samples: the energies asked for ahead of the step
+         * (summed in its passes) */
+        int rc = sim ? mpm_sim_run(sim, step[k] - 1) : -1;
+        if (!rc) {
+            mpm_sim_want_energy(sim);
+            rc = mpm_sim_step(sim);
+        }
+        mpm_energy e = {0};
+        if (sim) mpm_sim_energy(sim, &e);
+        mpm_sim_destroy(&sim);
+        mpp_case_destroy(&sc);
+        CHECKF(rc == 0, "in-process run %d: %d", k, rc);
+        CHECKF(!memcmp(&e.kinetic, &last[k][0], sizeof e.kinetic) &&
+                   !memcmp(&e.strain, &last[k][1], sizeof e.strain),
+               "in-process %s: kinetic %.17g, strain %.17g; the daemon's %.17g, %.17g",
+               k ? "portable" : "auto", e.kinetic, e.strain, last[k][0], last[k][1]);
+    }
+    free(text);
+    json_decref(c);
+    TLOG("each daemon's last sample equals the in-process run on its kernels, bit for bit");
+    if (mpm_kernels_avx2_available())
+        CHECKF(memcmp(last[0], last[1], sizeof last[0]),
+               "the AVX2 and the portable daemons gave the same bits");
+}

@@ -87,6 +87,20 @@ typedef enum { MPM_SHAPE_BOX = 0, MPM_SHAPE_SPHERE = 1 } mpm_shape;
  * without the dissipation of PIC. */
 typedef enum { MPM_TRANSFER_FLIP = 0, MPM_TRANSFER_APIC = 1 } mpm_transfer;
 
+/* The particle kernels' instruction set (mpm_case.kernels).  AUTO takes
+ * the AVX2+FMA kernels where the CPU has both (x86-64) and the portable
+ * ones elsewhere; PORTABLE always the portable (SSE2 on x86-64) kernels,
+ * whose bits are the same on every machine of the architecture; AVX2
+ * insists (MPM_EINVAL on a CPU without them).  FMA rounds a * b + c once,
+ * so the two kernels' results differ in round-off (docs/solver.md,
+ * "Kernels"): each is reproducible bit for bit for a given thread count.
+ * CPDI has portable kernels only. */
+typedef enum {
+    MPM_KERNELS_AUTO = 0,
+    MPM_KERNELS_PORTABLE = 1,
+    MPM_KERNELS_AVX2 = 2
+} mpm_kernels_isa;
+
 /* Structured grid: nodes[d] nodes along axis d, spacing h[d], first node at
  * origin[d].  Only the first `dim` entries are used. */
 typedef struct {
@@ -295,9 +309,10 @@ typedef struct {
     double energy_budget;
     int fail_on_budget;
 
-    int threads;          /* solver threads (0 or 1: serial) */
-    size_t max_particles; /* most particles the case may make (0:
-                           * MPM_MAX_PARTICLES, which also caps it) */
+    int threads;             /* solver threads (0 or 1: serial) */
+    mpm_kernels_isa kernels; /* the kernels' instruction set (default AUTO) */
+    size_t max_particles;    /* most particles the case may make (0:
+                              * MPM_MAX_PARTICLES, which also caps it) */
 } mpm_case;
 
 #define MPM_DEFAULT_CFL 0.5
@@ -474,6 +489,10 @@ int mpm_sim_set_particle_forces(mpm_sim *sim, const double *f);
 size_t mpm_sim_particles(const mpm_sim *sim);
 size_t mpm_sim_nodes(const mpm_sim *sim); /* real grid nodes */
 int mpm_sim_dim(const mpm_sim *sim);
+/* The kernels the simulation runs: "avx2-fma" or "portable". */
+const char *mpm_sim_kernels(const mpm_sim *sim);
+/* 1 when this build has the AVX2+FMA kernels and this CPU runs them. */
+int mpm_kernels_avx2_available(void);
 /* The error that stopped the simulation or refused the last call (code 0
  * when none).  Valid as long as the simulation. */
 const mpm_error *mpm_sim_error(const mpm_sim *sim);
@@ -491,7 +510,7 @@ void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out);
 
 /* The next step also computes the energies, summed inside the particle
  * passes it runs anyway (per thread, combined in thread order: the same
- * sums as mpm_sim_energy()'s pass); mpm_sim_energy() right after that step
+ * sums as mpm_sim_energy()'s pass, with either kernels); mpm_sim_energy() right after that step
  * then costs nothing.  The request holds for one step; the physics is
  * unchanged.  Not to be called while a step runs. */
 void mpm_sim_want_energy(mpm_sim *sim);

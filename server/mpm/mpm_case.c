@@ -477,6 +477,12 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (c->threads < 0 || c->threads > MPM_MAX_THREADS)
         return mpm_fail(err, MPM_EINVAL, "threads", "must be in [0, %d] (got %d)", MPM_MAX_THREADS,
                         c->threads);
+    int krc = mpm_kernels_check(c->kernels, err);
+    if (krc) return krc;
+    if (c->kernels == MPM_KERNELS_AVX2 && c->method == MPM_METHOD_CPDI)
+        return mpm_fail(err, MPM_EINVAL, "kernels",
+                        "AVX2 asked for, but CPDI has portable "
+                        "kernels only (use AUTO or PORTABLE)");
     for (int d = 0; d < dim; d++)
         if (!isfinite(c->gravity[d]))
             return mpm_fail(err, MPM_EINVAL, PATH("gravity[%d]", d), "must be finite");

@@ -170,6 +170,7 @@ typedef struct {
 
 struct mpm_sim {
     int dim;
+    int avx2; /* the AVX2+FMA kernel families (mpm_case.kernels) */
     mpm_method method;
     mpm_update update;
     int ns;  /* nodes per axis per particle: 2 (MPM; CPDI: per corner), 3 or 4
@@ -416,6 +417,12 @@ struct mpm_kernels {
  * scatters of momentum (with the affine part) and velocity updates (PIC
  * velocity and B_p), every other pass shared; blend is then ignored. */
 const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, int apic);
+/* The same families built for AVX2 and FMA (mpm_kernels_avx2.c): only
+ * where mpm_kernels_avx2_available(). */
+const mpm_kernels *mpm_kernels_select_avx2(int dim, int ns, int bspline, int blend, int apic);
+/* 0 when the case's kernels field is valid on this machine, else
+ * MPM_EINVAL naming "kernels". */
+int mpm_kernels_check(mpm_kernels_isa isa, mpm_error *err);
 /* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
 size_t mpm_kernels_scratch(void);
 /* CPDI1's family of dimension dim (mpm_cpdi.c), blend as above, and its
@@ -550,6 +557,20 @@ static inline void mpm_particle_stress(const mpm_mat_params *mp, const mpm_parti
  * every material elastic from a zero stress, mpm_sim.c) the strain is
  * C^-1 sigma of the particle's material, and sigma : eps is twice
  * mpm_elastic_stored() (equal up to round-off to the record's sum). */
+/* x, rounded to a double where it stands.  In the AVX2+FMA build of the
+ * kernels (mpm_kernels_avx2.c, -ffp-contract=fast) an empty asm that the
+ * compiler must assume reads and rewrites x keeps a product from being
+ * fused with the sum it feeds; the energy sums below use it, so that the
+ * step's in-pass sums give the bits of the energy pass (built without
+ * contraction) with either kernels.  Elsewhere it is x. */
+static inline double mpm_rn(double x)
+{
+#if defined(MPM_KERNELS_VARIANT) && defined(__GNUC__) && defined(__x86_64__)
+    __asm__("" : "+x"(x));
+#endif
+    return x;
+}
+
 static inline double mpm_strain_density(const mpm_mat_params *mats, const mpm_particles *P, int dim,
                                         size_t p)
 {
@@ -561,7 +582,7 @@ static inline double mpm_strain_density(const mpm_mat_params *mats, const mpm_pa
     }
     double se = 0;
     for (int c = 0; c < MPM_NCOMP(dim); c++)
-        if (P->eps[c]) se += (c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p];
+        if (P->eps[c]) se += mpm_rn((c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p]);
     return se;
 }
 
@@ -572,13 +593,13 @@ static inline double mpm_strain_density(const mpm_mat_params *mats, const mpm_pa
 static inline void mpm_angmom_add(const mpm_particles *P, int D, size_t p, double m, double L[3])
 {
     if (D == 2) {
-        L[2] += m * (P->x[0][p] * P->v[1][p] - P->x[1][p] * P->v[0][p]);
+        L[2] += mpm_rn(m * (mpm_rn(P->x[0][p] * P->v[1][p]) - mpm_rn(P->x[1][p] * P->v[0][p])));
     } else if (D == 3) {
         double x = P->x[0][p], y = P->x[1][p], z = P->x[2][p];
         double vx = P->v[0][p], vy = P->v[1][p], vz = P->v[2][p];
-        L[0] += m * (y * vz - z * vy);
-        L[1] += m * (z * vx - x * vz);
-        L[2] += m * (x * vy - y * vx);
+        L[0] += mpm_rn(m * (mpm_rn(y * vz) - mpm_rn(z * vy)));
+        L[1] += mpm_rn(m * (mpm_rn(z * vx) - mpm_rn(x * vz)));
+        L[2] += mpm_rn(m * (mpm_rn(x * vy) - mpm_rn(y * vx)));
     }
 }
 
@@ -589,11 +610,11 @@ static inline void mpm_angmom_add_affine(const mpm_particles *P, int D, size_t p
                                          double L[3])
 {
     if (D == 2) {
-        L[2] += m * (P->B[3][p] - P->B[1][p]);
+        L[2] += mpm_rn(m * (P->B[3][p] - P->B[1][p]));
     } else if (D == 3) {
-        L[0] += m * (P->B[7][p] - P->B[5][p]);
-        L[1] += m * (P->B[2][p] - P->B[6][p]);
-        L[2] += m * (P->B[3][p] - P->B[1][p]);
+        L[0] += mpm_rn(m * (P->B[7][p] - P->B[5][p]));
+        L[1] += mpm_rn(m * (P->B[2][p] - P->B[6][p]));
+        L[2] += mpm_rn(m * (P->B[3][p] - P->B[1][p]));
     }
 }
 

@@ -72,6 +72,7 @@
 #include <math.h>
 #include <stdint.h>
 
+#ifndef MPM_KERNELS_VARIANT /* once, in the portable build of this file */
 int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, int nodes, double *w,
                  double *g)
 {
@@ -90,6 +91,34 @@ size_t mpm_kernels_scratch(void)
 {
     return MPM_BLOCK * sizeof(pw);
 }
+
+int mpm_kernels_avx2_available(void)
+{
+#if defined(MPM_HAVE_AVX2_KERNELS) && defined(__x86_64__) && defined(__GNUC__)
+    /* libgcc's (and compiler-rt's) CPU model: the feature bits, and for
+     * AVX2 also the OS's saving of the YMM state (XGETBV) */
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+    return 0;
+#endif
+}
+
+int mpm_kernels_check(mpm_kernels_isa isa, mpm_error *err)
+{
+    if (isa != MPM_KERNELS_AUTO && isa != MPM_KERNELS_PORTABLE && isa != MPM_KERNELS_AVX2)
+        return mpm_fail(err, MPM_EINVAL, "kernels", "unknown value %d (AUTO, PORTABLE or AVX2)",
+                        (int)isa);
+    if (isa == MPM_KERNELS_AVX2 && !mpm_kernels_avx2_available())
+        return mpm_fail(err, MPM_EINVAL, "kernels", "AVX2 asked for, but %s (use AUTO or PORTABLE)",
+#ifdef MPM_HAVE_AVX2_KERNELS
+                        "this CPU lacks AVX2 or FMA"
+#else
+                        "this build has no AVX2 kernels (not x86-64)"
+#endif
+        );
+    return 0;
+}
+#endif /* MPM_KERNELS_VARIANT */
 
 /* Constants of box_add() and check_xv()'s bounds, in locals so that the stores to
  * the particles do not make the loop reload them. */
@@ -1172,7 +1201,11 @@ FAMILY(3, 4, 1)
         ROW(V, 1), ROW(V, 2), ROW(V, 3) \
     }
 
+#ifdef MPM_KERNELS_VARIANT
+const mpm_kernels *mpm_kernels_select_avx2(int dim, int ns, int bspline, int blend, int apic)
+#else
 const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, int apic)
+#endif
 {
     static const mpm_kernels *const tables[3][3][6] = {TABLE(family), TABLE(family_bl),
                                                        TABLE(family_ap)};

@@ -183,13 +183,13 @@ INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP)
     double m = P->m[p], v2 = 0;
     for (int d = 0; d < D; d++) {
         double v = P->v[d][p];
-        v2 += v * v;
-        e->mom[d] += m * v;
-        e->ep -= m * e->g[d] * P->x[d][p];
+        v2 += mpm_rn(v * v);
+        e->mom[d] += mpm_rn(m * v);
+        e->ep -= mpm_rn(m * e->g[d] * P->x[d][p]);
     }
     mpm_angmom_add(P, D, p, m, e->L);
     if (AP) mpm_angmom_add_affine(P, D, p, m, e->L);
-    e->ek += 0.5 * m * v2;
+    e->ek += mpm_rn(0.5 * m * v2);
     e->ms += m;
 }
 
@@ -201,7 +201,7 @@ INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
         return;
     }
     for (size_t p = b0; p < b0 + nb; p++)
-        e->es += 0.5 * mpm_strain_density(s->mats, P, D, p) * P->vol[p];
+        e->es += mpm_rn(0.5 * mpm_strain_density(s->mats, P, D, p) * P->vol[p]);
 }
 
 /* the slice's sums into o: the kinematic ones (XV) and/or the strain (S) */

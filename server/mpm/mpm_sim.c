@@ -395,6 +395,11 @@ static int gimp_fits3(const mpm_sim *s)
 static const mpm_kernels *select_kernels(const mpm_sim *s)
 {
     if (s->method == MPM_METHOD_CPDI) return mpm_cpdi_select(s->dim, s->pic != 0);
+#ifdef MPM_HAVE_AVX2_KERNELS
+    if (s->avx2)
+        return mpm_kernels_select_avx2(s->dim, s->ns, s->bsp != 0, s->pic != 0,
+                                       s->transfer == MPM_TRANSFER_APIC);
+#endif
     return mpm_kernels_select(s->dim, s->ns, s->bsp != 0, s->pic != 0,
                               s->transfer == MPM_TRANSFER_APIC);
 }
@@ -452,6 +457,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         mpm_fail(err, MPM_EINVAL, "threads", "must be in [0, %d] (got %d)", MPM_MAX_THREADS,
                  c->threads);
         return NULL;
+    } else if (mpm_kernels_check(c->kernels, err)) {
+        return NULL;
     }
     size_t np = checked->particles;
 
@@ -465,6 +472,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     /* CPDI: the corners may reach one cell outside the grid */
     s->pad = c->method == MPM_METHOD_GIMP ? 2 : c->method == MPM_METHOD_CPDI ? 1 : 0;
     s->nthreads = c->threads > 1 ? c->threads : 1;
+    s->avx2 = c->method != MPM_METHOD_CPDI && c->kernels != MPM_KERNELS_PORTABLE &&
+              mpm_kernels_avx2_available();
     atomic_init(&s->cancel, 0);
     s->nn = 1;
     for (int d = 0; d < 3; d++) {
@@ -857,6 +866,10 @@ size_t mpm_sim_particles(const mpm_sim *s)
 int mpm_sim_dim(const mpm_sim *s)
 {
     return s->dim;
+}
+const char *mpm_sim_kernels(const mpm_sim *s)
+{
+    return s->avx2 ? "avx2-fma" : "portable";
 }
 const mpm_error *mpm_sim_error(const mpm_sim *s)
 {

@@ -88,6 +88,7 @@ static int ck_scene_run(const ck_scene *sc, long particles, int threads)
     mpm_body_desc b;
     mpm_error err;
     ck_case(sc, particles, threads, &c, &m, &b);
+    c.kernels = pb_kernels();
     mpm_sim *s = mpm_sim_new(&c, NULL, &err), *r = NULL;
     void *blob = NULL, *again = NULL;
     int rc = 1;

@@ -305,7 +305,9 @@ static int start_daemon(dmn *d, const char *bin, int threads)
     char sthreads[16];
     snprintf(sthreads, sizeof sthreads, "%d", threads);
     char *argv[] = {(char *)bin, "--endpoint",       d->ep,    "--db",        d->db, "--workers",
-                    "1",         "--solver-threads", sthreads, "--queue-max", "4",   NULL};
+                    "1",         "--solver-threads", sthreads, "--queue-max", "4",   NULL,
+                    NULL};
+    if (pb_kernels() == MPM_KERNELS_PORTABLE) argv[11] = "--portable-kernels";
     fflush(NULL);
     d->pid = fork();
     if (d->pid < 0) {
@@ -538,6 +540,7 @@ static int ref_job(const char *json, pb_row *r)
     }
     double t0 = pb_now(), c0 = pb_cpu_self();
     mpm_error me;
+    sc->c.kernels = pb_kernels();                       /* as the daemon's flag does */
     mpm_sim *sim = mpm_sim_new(&sc->c, &sc->info, &me); /* checked by mpp_case_load */
     if (!sim) {
         snprintf(r->msg, sizeof r->msg, "mpm_sim_new: %.200s",

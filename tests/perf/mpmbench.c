@@ -70,6 +70,8 @@ static const char usage[] =
     "                 FLIP and APIC interleaved (FLIP, APIC, FLIP, APIC) and prints the APIC /\n"
     "                 FLIP time per particle-step; APIC rows are scene+apic (disks2d, cube3d,\n"
     "                 bar1d; not with --pic, the daemon scene or --all)\n"
+    "  --portable-kernels  run on the portable kernels (default: AVX2+FMA where the CPU has\n"
+    "                 them; the header names the kernels)\n"
     "  --csv          print CSV rows instead of the table\n"
     "  --no-triad     skip the STREAM triad (the roof columns stay empty)\n"
     "  --triad        only the triad (and the CPU model), on T threads or on 1 and 2; with\n"
@@ -321,6 +323,10 @@ static int parse_args(int argc, char **argv, opts *o)
         }
         if (!strcmp(a, "--no-triad")) {
             o->no_triad = 1;
+            continue;
+        }
+        if (!strcmp(a, "--portable-kernels")) {
+            pb_set_kernels(MPM_KERNELS_PORTABLE);
             continue;
         }
         if (!strcmp(a, "--triad")) {
@@ -721,8 +727,10 @@ static void machine_info(void)
     time_t now = time(NULL);
     char when[64];
     strftime(when, sizeof when, "%Y-%m-%d %H:%M", localtime(&now));
-    pb_note("mpmbench%s: %s, %ld CPU(s) online, load average %.2f, %s", PB_SUFFIX, model, ncpu,
-            load_avg(), when);
+    pb_note("mpmbench%s: %s, %ld CPU(s) online, load average %.2f, %s; %s kernels", PB_SUFFIX,
+            model, ncpu, load_avg(), when,
+            pb_kernels() != MPM_KERNELS_PORTABLE && mpm_kernels_avx2_available() ? "avx2-fma"
+                                                                                 : "portable");
 }
 
 /* The triads of the thread counts the rows will use, measured before the

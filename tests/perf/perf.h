@@ -68,6 +68,11 @@ typedef struct {
     mpm_transfer transfer; /* mpm_case.transfer; APIC rows carry "+apic" in the scene */
 } pb_cfg;
 
+/* The kernels every in-process scene and the daemon scene's mpmd run on
+ * (mpm_case.kernels; default AUTO). */
+void pb_set_kernels(mpm_kernels_isa k);
+mpm_kernels_isa pb_kernels(void);
+
 /* One measured row. */
 typedef struct {
     char scene[40];

@@ -66,6 +66,16 @@ static const char *const scene_names[PB_NSCENES] = {
     "disks2d",        "cube3d",        "bar1d",        "sparse2d-4096",
     "sparse2d-tight", "collapse2d-dp", "collapse2d-el"};
 
+static mpm_kernels_isa kernels_isa; /* set once from the command line */
+void pb_set_kernels(mpm_kernels_isa k)
+{
+    kernels_isa = k;
+}
+mpm_kernels_isa pb_kernels(void)
+{
+    return kernels_isa;
+}
+
 const char *pb_scene_name(pb_scene s)
 {
     return (unsigned)s < PB_NSCENES ? scene_names[s] : "?";
@@ -294,6 +304,7 @@ static int build(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
         t->c.threads = c->threads;
         t->c.pic_fraction = c->pic;
         t->c.transfer = c->transfer;
+        t->c.kernels = kernels_isa;
     }
     return rc;
 }
@@ -390,6 +401,7 @@ static int work_collapse(const pb_cfg *c, pb_row *r)
     cc.c.update = c->update;
     cc.c.pic_fraction = c->pic;
     cc.c.transfer = c->transfer;
+    cc.c.kernels = kernels_isa;
     mpm_error me;
     mpm_sim *sim = mpm_sim_new(&cc.c, NULL, &me);
     if (!sim) {
