@@ -420,6 +420,8 @@ const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, i
 /* The same families built for AVX2 and FMA (mpm_kernels_avx2.c): only
  * where mpm_kernels_avx2_available(). */
 const mpm_kernels *mpm_kernels_select_avx2(int dim, int ns, int bspline, int blend, int apic);
+/* 1 when that build fuses a * b + c (not in the sanitizer builds, -O1). */
+int mpm_kernels_avx2_fuses(void);
 /* 0 when the case's kernels field is valid on this machine, else
  * MPM_EINVAL naming "kernels". */
 int mpm_kernels_check(mpm_kernels_isa isa, mpm_error *err);

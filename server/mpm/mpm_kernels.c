@@ -103,6 +103,13 @@ int mpm_kernels_avx2_available(void)
 #endif
 }
 
+#ifndef MPM_HAVE_AVX2_KERNELS
+int mpm_kernels_avx2_fuses(void)
+{
+    return 0; /* no AVX2 families in this build */
+}
+#endif
+
 int mpm_kernels_check(mpm_kernels_isa isa, mpm_error *err)
 {
     if (isa != MPM_KERNELS_AUTO && isa != MPM_KERNELS_PORTABLE && isa != MPM_KERNELS_AVX2)
@@ -1202,6 +1209,17 @@ FAMILY(3, 4, 1)
     }
 
 #ifdef MPM_KERNELS_VARIANT
+/* 1 when this build of the families fuses a * b + c: the exact product
+ * 1 - 2^-60 rounds to 1, so only a fused operation leaves -2^-60.  (GCC
+ * forms FMAs from -O2 on: the sanitizer builds, at -O1, run these families
+ * without them, and so with the portable kernels' bits.) */
+int mpm_kernels_avx2_fuses(void)
+{
+    volatile double va = 1.0 + 0x1p-30, vb = 1.0 - 0x1p-30, vc = -1.0;
+    double a = va, b = vb, c = vc;
+    return a * b + c != 0.0;
+}
+
 const mpm_kernels *mpm_kernels_select_avx2(int dim, int ns, int bspline, int blend, int apic)
 #else
 const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, int apic)
