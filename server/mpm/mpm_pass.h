@@ -43,6 +43,12 @@ typedef double v2d __attribute__((vector_size(16), aligned(8), may_alias));
 
 typedef long long v2l __attribute__((vector_size(16))); /* v2d comparisons */
 
+/* Four doubles at once: one AVX register in the AVX2 kernels, two SSE2
+ * registers in the portable ones (the same lane arithmetic, so the same
+ * bits).  Only inside inline code and structs, never passed by value to
+ * a function that is not inlined. */
+typedef double v4d __attribute__((vector_size(32)));
+
 INLINE v2d v2_ld(const double *p)
 {
     return *(const v2d *)p;
