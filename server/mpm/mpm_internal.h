@@ -306,6 +306,12 @@ struct mpm_sim {
 
     /* kernels chosen once per job */
     const mpm_kernels *k;
+    /* gvel: the family gathers grid velocities (MPM tents without APIC,
+     * not CPDI): the node pass that updates the momentum stores q/m and
+     * f/m in place of q and f, and the one that applies BC1 to q2 stores
+     * q2/m (phantom nodes: 0); gvel_now: the grid holds them (set after
+     * a step, cleared when one starts; mpm_sim_node() answers momenta) */
+    int gvel, gvel_now;
     /* Fused steps (G2P2G): fuse, the family and update scheme allow it
      * (every family but CPDI); p2g_fields, the fields the first scatter of a
      * step writes (MPM_F_M | MPM_F_Q, and MPM_F_F for USL and MUSL), kept
@@ -737,7 +743,8 @@ enum {
     MPM_N_BC2 = 256,
     MPM_N_UPD = 512,
     MPM_N_DAMP = 1024, /* damping (after BC2, before the update; mpm.h) */
-    MPM_N_Z0 = 2048    /* zero thread 0's next-step buffer (fused steps) */
+    MPM_N_Z0 = 2048,   /* zero thread 0's next-step buffer (fused steps) */
+    MPM_N_VQ2 = 4096   /* q2/m in place of q2, last (mpm_sim.gvel) */
 };
 
 /* Allocates the row extents (all empty) of the simulation and of each

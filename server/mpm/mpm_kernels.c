@@ -457,7 +457,7 @@ typedef struct {
 } phantom_corr;
 
 __attribute__((noinline, cold)) static phantom_corr
-phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS)
+phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS, int VP)
 {
     IH(s);
     const double *restrict minv = s->minv;
@@ -471,7 +471,7 @@ phantom_grad(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS)
             double ph = mi == 0.0 ? 1.0 : 0.0;
             pg += ph * gx;
             ps += ph * wx;
-            for (int a = 0; a < D; a++) r1[a] += qg[a][n] * mi * wx;
+            for (int a = 0; a < D; a++) r1[a] += (VP ? qg[a][n] : qg[a][n] * mi) * wx;
         }
         Gp[0] += A * pg;
         if (D > 1) Gp[1] += B * ps;
@@ -502,12 +502,15 @@ typedef struct {
 } tcorner;
 
 INLINE tcorner tent_corners(const double *restrict q, const v2d mi[2][2], const size_t row[2][2],
-                            int D)
+                            int D, int VP)
 {
     tcorner t = {{{{0, 0}, {0, 0}}, {{0, 0}, {0, 0}}}}; /* the corners D leaves out: 0 */
     for (int kz = 0; kz < (D > 2 ? 2 : 1); kz++)
-        for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++)
-            t.c[kz][ky] = v2_ld(q + row[kz][ky]) * mi[kz][ky];
+        for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++) {
+            v2d c = v2_ld(q + row[kz][ky]);
+            if (!VP) c = c * mi[kz][ky];
+            t.c[kz][ky] = c;
+        }
     return t;
 }
 
@@ -531,7 +534,7 @@ INLINE double dot2(v2d a, v2d w)
 
 INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int D,
                         double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
-                        double dx[3], int DV, double dv[3])
+                        double dx[3], int DV, double dv[3], int VP)
 {
     IH(s);
     const double *restrict minv = s->minv;
@@ -546,17 +549,17 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
     for (int kz = 0; kz < (D > 2 ? 2 : 1); kz++)
         for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++) {
             row[kz][ky] = W->base + (size_t)ky * sy + (size_t)kz * sz;
-            mi[kz][ky] = v2_ld(minv + row[kz][ky]);
+            if (DS || !VP) mi[kz][ky] = v2_ld(minv + row[kz][ky]);
             if (DS) ph |= mi[kz][ky] == zero;
         }
     for (int a = 0; a < D; a++) {
         v2d Yz[2];
         if (DX) {
-            tcorner t = tent_corners(qx[a], mi, row, D);
+            tcorner t = tent_corners(qx[a], mi, row, D, VP);
             dx[a] = dot2(tent_yz(&t, wy, wz, D, Yz), wx);
         }
         if (DV) {
-            tcorner t = tent_corners(s->g.f[a], mi, row, D);
+            tcorner t = tent_corners(s->g.f[a], mi, row, D, VP);
             dv[a] = dot2(tent_yz(&t, wy, wz, D, Yz), wx);
         }
     }
@@ -564,7 +567,7 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
     double L[3][3] = {{0}};
     for (int a = 0; a < D; a++) {
         v2d Yz[2];
-        tcorner t = tent_corners(qg[a], mi, row, D);
+        tcorner t = tent_corners(qg[a], mi, row, D, VP);
         v2d Z = tent_yz(&t, wy, wz, D, Yz);
         L[a][0] = (Z[1] - Z[0]) * ih_[0];
         if (D > 1) {
@@ -575,7 +578,7 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
         if (D > 2) L[a][2] = dot2(Yz[1] - Yz[0], wx) * ih_[2];
     }
     if (__builtin_expect((ph[0] | ph[1]) != 0, 0)) {
-        phantom_corr c = phantom_grad(s, qg, W, D, 2);
+        phantom_corr c = phantom_grad(s, qg, W, D, 2, VP);
         if ((c.g[0] != 0.0) | (c.g[1] != 0.0) | (c.g[2] != 0.0))
             for (int a = 0; a < D; a++)
                 for (int b = 0; b < D; b++) L[a][b] += c.u[a] * c.g[b];
@@ -590,10 +593,11 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
  * nodes in the support go through phantom_grad(). */
 INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
                    double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
-                   double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3])
+                   double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3],
+                   int VP)
 {
     if (NS == 2 && !AF) {
-        gather_tent(s, qg, W, D, deps, i, DS, DX, qx, dx, DV, dv);
+        gather_tent(s, qg, W, D, deps, i, DS, DX, qx, dx, DV, dv, VP);
         return;
     }
     IH(s);
@@ -673,7 +677,7 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
     if (!DS) return;
     if (__builtin_expect(nph != 0, 0)) {
         /* a copy, so that L never has its address taken */
-        phantom_corr c = phantom_grad(s, qg, W, D, NS);
+        phantom_corr c = phantom_grad(s, qg, W, D, NS, 0);
         if ((c.g[0] != 0.0) | (c.g[1] != 0.0) | (c.g[2] != 0.0))
             for (int a = 0; a < D; a++)
                 for (int b = 0; b < D; b++) L[a][b] += c.u[a] * c.g[b];
@@ -710,6 +714,13 @@ INLINE void p2g_one(mpm_sim *s, mpm_gridbuf *gb, size_t p, int D, int NS, int BS
 
 /* Tents without APIC scatter by runs (trun). */
 #define TR(NS, BS, AP) ((NS) == 2 && !(BS) && !(AP))
+/* Tents without APIC gather velocities: once the node pass has updated the
+ * momentum it stores q/m and f/m in place of q and f (and q2/m in place of
+ * q2; mpm_sim.gvel), so the moving passes' gathers read them without the
+ * per-corner product by 1/m (the same product, once per node instead of
+ * once per particle and node: the same bits).  The USF stress pass gathers
+ * the momentum before the update, times 1/m as before. */
+#define GV(NS, AP) ((NS) == 2 && !(AP))
 
 /* The first scatter of particles [p0, p1) (WF: with the force). */
 INLINE void p2g_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS, int AP,
@@ -792,7 +803,8 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         weights_block(s, b0, nb, D, NS, BS, Wb);
         for (size_t i = 0; i < nb; i++)
-            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL);
+            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL,
+                   0);
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
         for (size_t i = 0; i < nb; i++)
@@ -866,7 +878,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
             double dx[3], dv[3], Bm[3][3];
             if (AP) {
                 weights_ap(s, p, D, NS, BS, &W, &R);
-                gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
+                gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 0);
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
@@ -874,7 +886,8 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
                     Wp = &Wb[p - b0];
                 else
                     weights(s, p, D, NS, BS, &W);
-                gather(s, NULL, Wp, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+                gather(s, NULL, Wp, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL,
+                       GV(NS, AP));
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
@@ -918,7 +931,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             double dx[3], dv[3], Bm[3][3];
             if (AP) {
                 weights_ap(s, p, D, NS, BS, &W, &R);
-                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm);
+                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 0);
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
@@ -926,7 +939,8 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                     Wp = &Wb[i];
                 else
                     weights(s, p, D, NS, BS, &W);
-                gather(s, s->g.q, Wp, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL);
+                gather(s, s->g.q, Wp, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL,
+                       GV(NS, AP));
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
@@ -957,13 +971,13 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_gridbuf *q2b, size_t p0, size_t p1, int D, i
         double dv[3], vp[3] = {0, 0, 0}, Bm[3][3];
         if (AP) {
             weights_ap(s, p, D, NS, BS, &W, &R);
-            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm, 0);
             ap_store(s, p, D, vp, Bm);
             if (q2b) scatter_affine(s, NULL, q2b->q2, &W, &R, p, D, NS, 0);
             continue;
         }
         weights(s, p, D, NS, BS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL);
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL, GV(NS, AP));
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
         if (q2b) scatter_q2(s, q2b->q2, &W, p, D, NS);
     }
@@ -994,7 +1008,8 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3];
-            gather(s, s->g.q2, &Wb[i], D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL);
+            gather(s, s->g.q2, &Wb[i], D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL,
+                   GV(NS, AP));
             for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
         }
         moved_block(s, o, &bc, &ck, &e, &a, b0, b0 + nb, D, NS, BS, EN, AP);

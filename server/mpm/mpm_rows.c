@@ -403,11 +403,39 @@ static void axpy_seg(double *restrict y, const double *restrict x, double a, siz
     for (; i < w; i++) y[i] += x[i] * a;
 }
 
+/* q += f dt, then q/m and f/m in their place (mpm_sim.gvel; 1/m is 0 at
+ * phantom nodes), two at a time: the products the gathers took per
+ * corner, the same bits. */
+static void upd_vel_seg(double *restrict q, double *restrict f, const double *restrict mi,
+                        double dt, size_t w)
+{
+    size_t i = 0;
+    for (; i + 1 < w; i += 2) {
+        v2d m = v2_ld(mi + i), fi = v2_ld(f + i);
+        v2_st(q + i, (v2_ld(q + i) + fi * dt) * m);
+        v2_st(f + i, fi * m);
+    }
+    for (; i < w; i++) {
+        q[i] = (q[i] + f[i] * dt) * mi[i];
+        f[i] *= mi[i];
+    }
+}
+
+/* y *= x over w nodes, two at a time. */
+static void scale_seg(double *restrict y, const double *restrict x, size_t w)
+{
+    size_t i = 0;
+    for (; i + 1 < w; i += 2) v2_st(y + i, v2_ld(y + i) * v2_ld(x + i));
+    for (; i < w; i++) y[i] *= x[i];
+}
+
 /* A node pass over the thread's share of the extents' nodes, each node in
  * the step's order: reduce the fields named (MPM_F_*), then inverse mass with
  * phantom nodes (m <= M_TOL) at 0 (MPM_N_MINV), gravity f += m g (MPM_N_GRAV,
  * sum_p m_p b S_np), BC1 on q (MPM_N_BC1) or on q2 (MPM_N_BC1Q2), BC2 on f
- * (MPM_N_BC2), damping (MPM_N_DAMP), and q += f dt (MPM_N_UPD: Eq. 13 integrated, Fig. 6 step 6).
+ * (MPM_N_BC2), damping (MPM_N_DAMP), and q += f dt (MPM_N_UPD: Eq. 13 integrated, Fig. 6 step 6),
+ * for the families that gather velocities (mpm_sim.gvel) followed by q/m and
+ * f/m in place of q and f; then q2/m in place of q2 (MPM_N_VQ2, gvel).
  */
 void mpm_node_pass(mpm_sim *s, int tid, int ops)
 {
@@ -456,7 +484,12 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
             if (s->has_cond) mpm_cond_bc2(s, tid, base, base + w - 1);
             mpm_bc_zero(s, s->g.f, base, base + w - 1);
         }
-        if (ops & MPM_N_UPD)
+        if ((ops & MPM_N_UPD) && s->gvel)
+            for (int d = 0; d < s->dim; d++)
+                upd_vel_seg(s->g.q[d] + base, s->g.f[d] + base, s->minv + base, dt, w);
+        else if (ops & MPM_N_UPD)
             for (int d = 0; d < s->dim; d++) axpy_seg(s->g.q[d] + base, s->g.f[d] + base, dt, w);
+        if ((ops & MPM_N_VQ2) && s->gvel)
+            for (int d = 0; d < s->dim; d++) scale_seg(s->g.q2[d] + base, s->minv + base, w);
     }
 }

@@ -343,7 +343,8 @@ static void ph_step_usl(mpm_sim *s, int tid)
         ph_p2g_q2(s, tid);
     }
     mpm_team_sync(s);
-    mpm_node_pass(s, tid, MPM_F_Q2 | MPM_N_BC1Q2); /* BC1 on the recomputed momentum */
+    /* BC1 on the recomputed momentum (and, gvel, q2/m in its place) */
+    mpm_node_pass(s, tid, MPM_F_Q2 | MPM_N_BC1Q2 | MPM_N_VQ2);
     mpm_team_sync(s);
     ph_g2p_x_stress(s, tid);
 }
@@ -536,6 +537,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
     s->k = select_kernels(s);
+    s->gvel = c->method == MPM_METHOD_MPM && c->transfer != MPM_TRANSFER_APIC;
     if (!(s->sperm = malloc((np ? np : 1) * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
@@ -775,7 +777,9 @@ int mpm_sim_step(mpm_sim *s)
     if (s->gnext) mpm_rows_swap_next(s);
     s->fuse_next =
         s->fuse && (s->fuse_pays || s->fuse_force) && (s->steps + 1) % MPM_SORT_EVERY != 0;
+    s->gvel_now = 0;
     mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
+    s->gvel_now = s->gvel;
     s->gnext = s->fuse_next;
     if (s->general) /* the plastic work of the step, in thread order */
         for (int t = 0; t < s->nthreads; t++) {
@@ -968,5 +972,9 @@ void mpm_sim_node(const mpm_sim *s, const int ijk[3], double *mass, double q[MPM
 {
     size_t n = mpm_node_index(s, ijk);
     if (mass) *mass = s->g.m[n];
-    for (int d = 0; d < MPM_MAX_DIM; d++) q[d] = d < s->dim ? s->g.q[d][n] : 0.0;
+    /* a grid of velocities (gvel_now): m v, 0 at phantom nodes */
+    for (int d = 0; d < MPM_MAX_DIM; d++)
+        q[d] = d >= s->dim   ? 0.0
+               : s->gvel_now ? (s->minv[n] != 0.0 ? s->g.m[n] * s->g.q[d][n] : 0.0)
+                             : s->g.q[d][n];
 }
