@@ -614,12 +614,16 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
         UNROLL
         for (int kx = 0; kx + 1 < NS; kx += 2) {
             size_t n = row + (size_t)kx;
-            v2d mi = v2_ld(minv + n), wx = {W->w[0][kx], W->w[0][kx + 1]}, sm = wx * mi;
+            v2d mi = {0, 0}, wx = {W->w[0][kx], W->w[0][kx + 1]}, sm = wx;
+            if (DS || !VP) mi = v2_ld(minv + n);
+            if (!VP) sm = wx * mi; /* VP: the fields are velocities already */
             v2d gx = {GRAD(s, *W, NS, 0, kx), GRAD(s, *W, NS, 0, kx + 1)};
             if (DS) nph += (mi[0] == 0.0) + (mi[1] == 0.0);
             for (int a = 0; a < D; a++) {
                 if (DS) {
-                    v2d va = v2_ld(qg[a] + n) * mi, t0 = va * gx, t1 = va * wx;
+                    v2d va = v2_ld(qg[a] + n);
+                    if (!VP) va = va * mi;
+                    v2d t0 = va * gx, t1 = va * wx;
                     r0[a] = r0[a] + t0[0] + t0[1];
                     r1[a] = r1[a] + t1[0] + t1[1];
                 }
@@ -640,11 +644,12 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
         if (NS & 1) {
             const int kx = NS - 1;
             size_t n = row + (size_t)kx;
-            double mi = minv[n], gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx], sm = wx * mi;
+            double mi = DS || !VP ? minv[n] : 0.0, gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx];
+            double sm = VP ? wx : wx * mi;
             if (DS) nph += mi == 0.0;
             for (int a = 0; a < D; a++) {
                 if (DS) {
-                    double va = qg[a][n] * mi;
+                    double va = VP ? qg[a][n] : qg[a][n] * mi;
                     r0[a] += va * gx;
                     r1[a] += va * wx;
                 }
@@ -677,7 +682,7 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
     if (!DS) return;
     if (__builtin_expect(nph != 0, 0)) {
         /* a copy, so that L never has its address taken */
-        phantom_corr c = phantom_grad(s, qg, W, D, NS, 0);
+        phantom_corr c = phantom_grad(s, qg, W, D, NS, VP);
         if ((c.g[0] != 0.0) | (c.g[1] != 0.0) | (c.g[2] != 0.0))
             for (int a = 0; a < D; a++)
                 for (int b = 0; b < D; b++) L[a][b] += c.u[a] * c.g[b];
@@ -714,13 +719,16 @@ INLINE void p2g_one(mpm_sim *s, mpm_gridbuf *gb, size_t p, int D, int NS, int BS
 
 /* Tents without APIC scatter by runs (trun). */
 #define TR(NS, BS, AP) ((NS) == 2 && !(BS) && !(AP))
-/* Tents without APIC gather velocities: once the node pass has updated the
- * momentum it stores q/m and f/m in place of q and f (and q2/m in place of
- * q2; mpm_sim.gvel), so the moving passes' gathers read them without the
- * per-corner product by 1/m (the same product, once per node instead of
- * once per particle and node: the same bits).  The USF stress pass gathers
- * the momentum before the update, times 1/m as before. */
-#define GV(NS, AP) ((NS) == 2 && !(AP))
+/* The families without APIC gather velocities: once the node pass has
+ * updated the momentum it stores q/m and f/m in place of q and f (and q2/m
+ * in place of q2; mpm_sim.gvel), so the moving passes' gathers read them
+ * without the product by 1/m per particle and node.  MPM tents took the
+ * same product per corner (q/m), so their bits stay; uGIMP and B-splines
+ * summed (S 1/m) q and now sum S (q/m), another rounding of the position
+ * and velocity sums (their strain gathers took q/m: same bits).  The USF
+ * stress pass gathers the momentum before the update, times 1/m as
+ * before. */
+#define GV(NS, AP) (!(AP))
 
 /* The first scatter of particles [p0, p1) (WF: with the force). */
 INLINE void p2g_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS, int AP,
