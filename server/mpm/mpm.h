@@ -607,7 +607,7 @@ int mpm_case_has_field(const mpm_case *c, mpm_field f);
 /* Grid state after the last step, for tests and diagnostics: node mass and
  * momentum of real node (i, j, k) (unused indices 0): the momentum the step
  * updated (q + f dt), read back as m (q/m) where the step stored velocities
- * (every method but CPDI, without APIC), 0 at phantom nodes (mass <= M_TOL:
+ * (every method but CPDI), 0 at phantom nodes (mass <= M_TOL:
  * no velocity, Fig. 7).  B-splines: the
  * values of control point (i, j, k), i in [0, nodes + p - 1) along an axis
  * of `nodes` grid nodes (degree p); mpm_sim_nodes() counts control points. */

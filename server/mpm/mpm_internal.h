@@ -306,8 +306,8 @@ struct mpm_sim {
 
     /* kernels chosen once per job */
     const mpm_kernels *k;
-    /* gvel: the family gathers grid velocities (every family but APIC's
-     * and CPDI's): the node pass that updates the momentum stores q/m and
+    /* gvel: the family gathers grid velocities (every family but CPDI's):
+     * the node pass that updates the momentum stores q/m and
      * f/m in place of q and f, and the one that applies BC1 to q2 stores
      * q2/m (phantom nodes: 0); gvel_now: the grid holds them (set after
      * a step, cleared when one starts; mpm_sim_node() answers momenta) */

@@ -590,7 +590,17 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
  * phantom nodes: Fig. 7) into block slot i.  Optionally (DX) also the
  * position increment sum S q/m from the momenta qx of the same nodes, and
  * (DV) the velocity increment sum S f/m.  Phantom
- * nodes in the support go through phantom_grad(). */
+ * nodes in the support go through phantom_grad().
+ *
+ * VP: the fields hold velocities q/m and f/m already.  Every family here
+ * gathers velocities in its moving passes: once the node pass has updated
+ * the momentum it stores q/m and f/m in place of q and f (and q2/m in
+ * place of q2; mpm_sim.gvel), so the gathers read them without the product
+ * by 1/m per particle and node.  MPM tents took the same product per corner
+ * (q/m), so their bits stay; uGIMP, B-splines and APIC summed (S 1/m) q and
+ * now sum S (q/m), another rounding of the position, velocity and B_p sums
+ * (their strain gathers took q/m: same bits).  The USF stress pass gathers
+ * the momentum before the update, times 1/m as before (VP 0). */
 INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
                    double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
                    double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3],
@@ -719,16 +729,6 @@ INLINE void p2g_one(mpm_sim *s, mpm_gridbuf *gb, size_t p, int D, int NS, int BS
 
 /* Tents without APIC scatter by runs (trun). */
 #define TR(NS, BS, AP) ((NS) == 2 && !(BS) && !(AP))
-/* The families without APIC gather velocities: once the node pass has
- * updated the momentum it stores q/m and f/m in place of q and f (and q2/m
- * in place of q2; mpm_sim.gvel), so the moving passes' gathers read them
- * without the product by 1/m per particle and node.  MPM tents took the
- * same product per corner (q/m), so their bits stay; uGIMP and B-splines
- * summed (S 1/m) q and now sum S (q/m), another rounding of the position
- * and velocity sums (their strain gathers took q/m: same bits).  The USF
- * stress pass gathers the momentum before the update, times 1/m as
- * before. */
-#define GV(NS, AP) (!(AP))
 
 /* The first scatter of particles [p0, p1) (WF: with the force). */
 INLINE void p2g_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS, int AP,
@@ -886,7 +886,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
             double dx[3], dv[3], Bm[3][3];
             if (AP) {
                 weights_ap(s, p, D, NS, BS, &W, &R);
-                gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 0);
+                gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 1);
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
@@ -894,8 +894,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
                     Wp = &Wb[p - b0];
                 else
                     weights(s, p, D, NS, BS, &W);
-                gather(s, NULL, Wp, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL,
-                       GV(NS, AP));
+                gather(s, NULL, Wp, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL, 1);
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
@@ -939,7 +938,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
             double dx[3], dv[3], Bm[3][3];
             if (AP) {
                 weights_ap(s, p, D, NS, BS, &W, &R);
-                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 0);
+                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 1);
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
@@ -947,8 +946,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                     Wp = &Wb[i];
                 else
                     weights(s, p, D, NS, BS, &W);
-                gather(s, s->g.q, Wp, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL,
-                       GV(NS, AP));
+                gather(s, s->g.q, Wp, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL, 1);
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
@@ -979,13 +977,13 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_gridbuf *q2b, size_t p0, size_t p1, int D, i
         double dv[3], vp[3] = {0, 0, 0}, Bm[3][3];
         if (AP) {
             weights_ap(s, p, D, NS, BS, &W, &R);
-            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm, 0);
+            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm, 1);
             ap_store(s, p, D, vp, Bm);
             if (q2b) scatter_affine(s, NULL, q2b->q2, &W, &R, p, D, NS, 0);
             continue;
         }
         weights(s, p, D, NS, BS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL, GV(NS, AP));
+        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL, 1);
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
         if (q2b) scatter_q2(s, q2b->q2, &W, p, D, NS);
     }
@@ -1017,7 +1015,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             size_t p = b0 + i;
             double dx[3];
             gather(s, s->g.q2, &Wb[i], D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL,
-                   GV(NS, AP));
+                   1);
             for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
         }
         moved_block(s, o, &bc, &ck, &e, &a, b0, b0 + nb, D, NS, BS, EN, AP);

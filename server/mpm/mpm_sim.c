@@ -537,7 +537,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
     s->k = select_kernels(s);
-    s->gvel = c->method != MPM_METHOD_CPDI && c->transfer != MPM_TRANSFER_APIC;
+    s->gvel = c->method != MPM_METHOD_CPDI;
     if (!(s->sperm = malloc((np ? np : 1) * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
