@@ -767,6 +767,17 @@ INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, 
 INLINE void next_scatter(mpm_sim *s, mpm_gridbuf *nx, trun *r, pw *Wb, size_t b0, size_t b1, int D,
                          int NS, int BS, int AP, int WF)
 {
+    if (BS && !AP && WF) {
+        /* B-splines with the force (USL, MUSL): the block's weights first,
+         * four at a time (1.01x 2D, 1.035x 3D MUSL; without the force, USF's
+         * scatter, 0.986x) */
+        weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
+        for (size_t p = b0; p < b1; p++) {
+            scatter_mq(s, nx, &Wb[p - b0], p, D, NS);
+            scatter_force(s, nx, &Wb[p - b0], p, D, NS);
+        }
+        return;
+    }
     if (!TR(NS, BS, AP)) {
         for (size_t p = b0; p < b1; p++) p2g_one(s, nx, p, D, NS, BS, AP, WF);
         return;
@@ -973,6 +984,22 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_gridbuf *q2b, size_t p0, size_t p1, int D, i
     pw W;
     aoff R;
     double dt = s->dt, al = BL ? s->pic : 0.0, bl = 1.0 - al;
+    if (BS && !AP) { /* B-splines: a block's weights first, four at a time */
+        enum { NB = 16 };
+        pw Wl[NB];
+        for (size_t b0 = p0; b0 < p1; b0 += NB) {
+            size_t nb = p1 - b0 < NB ? p1 - b0 : NB;
+            weights_block(s, b0, nb, D, NS, BS, Wl);
+            for (size_t i = 0; i < nb; i++) {
+                size_t p = b0 + i;
+                double dv[3], vp[3] = {0, 0, 0};
+                gather(s, NULL, &Wl[i], D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL, 1);
+                for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
+                if (q2b) scatter_q2(s, q2b->q2, &Wl[i], p, D, NS);
+            }
+        }
+        return;
+    }
     for (size_t p = p0; p < p1; p++) {
         double dv[3], vp[3] = {0, 0, 0}, Bm[3][3];
         if (AP) {

@@ -138,9 +138,69 @@ INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
  * fractions as pairs: the same operations as weights(), so the same
  * bits); the rest, and an odd last particle, one by one. */
 typedef int v2i __attribute__((vector_size(8)));
+typedef int v4i __attribute__((vector_size(16)));
+
+/* B-spline weights of four particles i .. i + 3 of the block when every
+ * one lies in an interior span along every axis (bs_axis()'s closed forms,
+ * lane by lane the same operations, so the same bits); returns 0, having
+ * written nothing, when one of them is in a clamped span. */
+INLINE int bs_block4(const mpm_sim *s, size_t p, int D, int NS, pw *W)
+{
+    v4i cc[3];
+    v4d fr[3];
+    for (int d = 0; d < D; d++) {
+        const double *x = s->P.x[d] + p;
+        v4d r = ((v4d){x[0], x[1], x[2], x[3]} - s->x0[d]) * s->inv_h[d];
+        v4i c = __builtin_convertvector(r, v4i);
+        int n = s->bs[d].n;
+        v4i top = {n - 1, n - 1, n - 1, n - 1};
+        c -= (c > top) & (c - top); /* min(c, n - 1) */
+        v4i out = (c < NS - 2) | (c > n - NS + 1);
+        if (out[0] | out[1] | out[2] | out[3]) return 0;
+        cc[d] = c;
+        fr[d] = r - __builtin_convertvector(c, v4d);
+    }
+    for (int j = 0; j < 4; j++) W[j].base = 0;
+    for (int d = 0; d < D; d++) {
+        v4d f = fr[d], a = 1.0 - f;
+        double ih = s->inv_h[d];
+        v4d w[4], g[4];
+        if (NS == 3) {
+            w[0] = 0.5 * a * a;
+            w[1] = 0.5 + f * a;
+            w[2] = 0.5 * f * f;
+            g[0] = -a * ih;
+            g[1] = (a - f) * ih;
+            g[2] = f * ih;
+        } else {
+            v4d f2 = f * f, a2 = a * a;
+            w[0] = a2 * a * (1.0 / 6.0);
+            w[1] = 2.0 / 3.0 - f2 * (1.0 - 0.5 * f);
+            w[2] = 2.0 / 3.0 - a2 * (1.0 - 0.5 * a);
+            w[3] = f2 * f * (1.0 / 6.0);
+            g[0] = -0.5 * a2 * ih;
+            g[1] = f * (1.5 * f - 2.0) * ih;
+            g[2] = -a * (1.5 * a - 2.0) * ih;
+            g[3] = 0.5 * f2 * ih;
+        }
+        for (int j = 0; j < 4; j++) {
+            for (int k = 0; k < NS; k++) {
+                W[j].w[d][k] = w[k][j];
+                W[j].g[d][k] = g[k][j];
+            }
+            W[j].base += (size_t)cc[d][j] * s->stride[d];
+        }
+    }
+    return 1;
+}
+
 INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS, int BS, pw *Wb)
 {
     size_t i = 0;
+    if (BS)
+        for (; i + 3 < nb; i += 4)
+            if (!bs_block4(s, b0 + i, D, NS, Wb + i))
+                for (int j = 0; j < 4; j++) weights(s, b0 + i + j, D, NS, BS, &Wb[i + j]);
     if (NS == 2 && !BS)
         for (; i + 1 < nb; i += 2) {
             size_t base0 = 0, base1 = 0;
