@@ -16,6 +16,7 @@
 
 #include <math.h>
 #include <stddef.h>
+#include <stdint.h>
 
 #define UNROLL _Pragma("GCC unroll 4")
 
@@ -38,6 +39,47 @@ INLINE void gimp_w(double s, double a, double i2a, double i2lp, double *w, doubl
     *g = (tent(s + a) - tent(s - a)) * i2lp;
 }
 
+/* uGIMP weights of one axis for r = (x - x0)/h, a = lp/h and the factors
+ * i2a = 1/(2a), i2lp = 1/(2 lp); returns the first node. */
+typedef long long v4l __attribute__((vector_size(32)));
+
+/* Four lanes: |x|, m ? x : y (m all ones or zero), and tent_int() and
+ * tent() of x into out, lane by lane the scalar operations (the same
+ * bits).  Macros: a function may not take or return a 32-byte vector
+ * where AVX is not enabled (the portable kernels' ABI). */
+#define V4ABS(x) ((v4d)((v4l)(x) & (v4l){INT64_MAX, INT64_MAX, INT64_MAX, INT64_MAX}))
+#define V4SEL(m, x, y) ((v4d)(((v4l)(x) & (v4l)(m)) | ((v4l)(y) & ~(v4l)(m))))
+#define TENT_INT4(x, out)                                                 \
+    do {                                                                  \
+        const v4d one_ = {1, 1, 1, 1};                                    \
+        v4d c_ = V4SEL((x) < -one_, -one_, V4SEL((x) > one_, one_, (x))); \
+        (out) = 0.5 + c_ - 0.5 * c_ * V4ABS(c_);                          \
+    } while (0)
+#define TENT4(x, out)                             \
+    do {                                          \
+        v4d a_ = 1.0 - V4ABS(x);                  \
+        (out) = (v4d)((v4l)a_ & (v4l)(a_ > 0.0)); \
+    } while (0)
+
+INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double *w, double *g)
+{
+    int c = (int)r;
+    double f = r - c;
+    int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
+    /* the NS nodes' distances as lanes */
+    v4d sd = r - ((v4d){0, 1, 2, 3} + (double)n0), sp = sd + a, sm = sd - a, ip, im, tp, tm;
+    TENT_INT4(sp, ip);
+    TENT_INT4(sm, im);
+    TENT4(sp, tp);
+    TENT4(sm, tm);
+    v4d W = (ip - im) * i2a, G = (tp - tm) * i2lp;
+    for (int k = 0; k < NS; k++) {
+        w[k] = W[k];
+        g[k] = G[k];
+    }
+    return n0;
+}
+
 /* Weights of one axis for r = (x - x0)/h; returns the first node. */
 INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
 {
@@ -52,11 +94,8 @@ INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
         }
         return c;
     }
-    int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
-    double a = lp * inv_h, i2a = 0.5 / a, i2lp = 0.5 / lp;
-    UNROLL
-    for (int k = 0; k < NS; k++) gimp_w(r - (double)(n0 + k), a, i2a, i2lp, &w[k], &g[k]);
-    return n0;
+    double a = lp * inv_h;
+    return axis_gimp(r, a, 0.5 / a, 0.5 / lp, NS, w, g);
 }
 
 /* B-spline weights of one axis for r = (x - x0)/h in [0, n] (r = n, a
@@ -113,6 +152,27 @@ typedef struct {
 INLINE void weights_n0(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o, int *n0)
 {
     size_t base = 0;
+    if (NS > 2 && !BS) {
+        /* uGIMP: the 2D quotients 1/(2a), 1/(2 lp) of all axes in one
+         * four-lane division (each lane the scalar quotient, the same
+         * bits; six divisions in 3D cost more than the rest of the weights) */
+        double r[3], a[3] = {1, 1, 1}, lp[3] = {1, 1, 1};
+        for (int d = 0; d < D; d++) {
+            r[d] = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+            lp[d] = s->P.lp[d][p];
+            a[d] = lp[d] * s->inv_h[d];
+        }
+        v4d q0 = (v4d){0.5, 0.5, 0.5, 0.5} / (v4d){a[0], a[1], a[2], lp[0]};
+        v4d q1 = (v4d){0.5, 0.5, 0.5, 0.5} / (v4d){lp[1], lp[2], 1.0, 1.0};
+        const double i2lp[3] = {q0[3], q1[0], q1[1]};
+        for (int d = 0; d < D; d++) {
+            int c = axis_gimp(r[d], a[d], q0[d], i2lp[d], NS, o->w[d], o->g[d]);
+            if (n0) n0[d] = c;
+            base += (size_t)c * s->stride[d];
+        }
+        o->base = base;
+        return;
+    }
     for (int d = 0; d < D; d++) {
         double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
         int c;
