@@ -98,6 +98,34 @@ INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
     return axis_gimp(r, a, 0.5 / a, 0.5 / lp, NS, w, g);
 }
 
+/* The uniform B-splines' weights w[k] and gradients g[k] (k < NS) in an
+ * interior span at the fraction f, for T double or v4d (bs_block4(): four
+ * particles as lanes): one text for both, so that each lane does exactly
+ * the scalar operations (the same bits).  NS = 3: (1-f)^2/2, 1/2 + f(1-f),
+ * f^2/2; NS = 4: (1-f)^3/6, 2/3 - f^2 + f^3/2, its mirror, f^3/6. */
+#define BS_INTERIOR(T, f, inv_h, NS, w, g)                \
+    do {                                                  \
+        T a_ = 1.0 - (f);                                 \
+        if ((NS) == 3) {                                  \
+            (w)[0] = 0.5 * a_ * a_;                       \
+            (w)[1] = 0.5 + (f)*a_;                        \
+            (w)[2] = 0.5 * (f) * (f);                     \
+            (g)[0] = -a_ * (inv_h);                       \
+            (g)[1] = (a_ - (f)) * (inv_h);                \
+            (g)[2] = (f) * (inv_h);                       \
+        } else {                                          \
+            T f2_ = (f) * (f), a2_ = a_ * a_;             \
+            (w)[0] = a2_ * a_ * (1.0 / 6.0);              \
+            (w)[1] = 2.0 / 3.0 - f2_ * (1.0 - 0.5 * (f)); \
+            (w)[2] = 2.0 / 3.0 - a2_ * (1.0 - 0.5 * a_);  \
+            (w)[3] = f2_ * (f) * (1.0 / 6.0);             \
+            (g)[0] = -0.5 * a2_ * (inv_h);                \
+            (g)[1] = (f) * (1.5 * (f)-2.0) * (inv_h);     \
+            (g)[2] = -a_ * (1.5 * a_ - 2.0) * (inv_h);    \
+            (g)[3] = 0.5 * f2_ * (inv_h);                 \
+        }                                                 \
+    } while (0)
+
 /* B-spline weights of one axis for r = (x - x0)/h in [0, n] (r = n, a
  * rounding at the top face, is taken in the last cell); returns the first
  * control point, c.  Interior spans: the uniform B-splines in closed form;
@@ -118,25 +146,7 @@ INLINE int bs_axis(const mpm_bspline_axis *ax, double r, double inv_h, int NS, d
         }
         return c;
     }
-    double a = 1.0 - f;
-    if (NS == 3) { /* (1-f)^2/2, 1/2 + f(1-f), f^2/2 */
-        w[0] = 0.5 * a * a;
-        w[1] = 0.5 + f * a;
-        w[2] = 0.5 * f * f;
-        g[0] = -a * inv_h;
-        g[1] = (a - f) * inv_h;
-        g[2] = f * inv_h;
-    } else { /* (1-f)^3/6, 2/3 - f^2 + f^3/2, its mirror, f^3/6 */
-        double f2 = f * f, a2 = a * a;
-        w[0] = a2 * a * (1.0 / 6.0);
-        w[1] = 2.0 / 3.0 - f2 * (1.0 - 0.5 * f);
-        w[2] = 2.0 / 3.0 - a2 * (1.0 - 0.5 * a);
-        w[3] = f2 * f * (1.0 / 6.0);
-        g[0] = -0.5 * a2 * inv_h;
-        g[1] = f * (1.5 * f - 2.0) * inv_h;
-        g[2] = -a * (1.5 * a - 2.0) * inv_h;
-        g[3] = 0.5 * f2 * inv_h;
-    }
+    BS_INTERIOR(double, f, inv_h, NS, w, g);
     return c;
 }
 
@@ -222,27 +232,8 @@ INLINE int bs_block4(const mpm_sim *s, size_t p, int D, int NS, pw *W)
     }
     for (int j = 0; j < 4; j++) W[j].base = 0;
     for (int d = 0; d < D; d++) {
-        v4d f = fr[d], a = 1.0 - f;
-        double ih = s->inv_h[d];
-        v4d w[4], g[4];
-        if (NS == 3) {
-            w[0] = 0.5 * a * a;
-            w[1] = 0.5 + f * a;
-            w[2] = 0.5 * f * f;
-            g[0] = -a * ih;
-            g[1] = (a - f) * ih;
-            g[2] = f * ih;
-        } else {
-            v4d f2 = f * f, a2 = a * a;
-            w[0] = a2 * a * (1.0 / 6.0);
-            w[1] = 2.0 / 3.0 - f2 * (1.0 - 0.5 * f);
-            w[2] = 2.0 / 3.0 - a2 * (1.0 - 0.5 * a);
-            w[3] = f2 * f * (1.0 / 6.0);
-            g[0] = -0.5 * a2 * ih;
-            g[1] = f * (1.5 * f - 2.0) * ih;
-            g[2] = -a * (1.5 * a - 2.0) * ih;
-            g[3] = 0.5 * f2 * ih;
-        }
+        v4d f = fr[d], w[4], g[4];
+        BS_INTERIOR(v4d, f, s->inv_h[d], NS, w, g);
         for (int j = 0; j < 4; j++) {
             for (int k = 0; k < NS; k++) {
                 W[j].w[d][k] = w[k][j];
