@@ -67,7 +67,8 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
     double f = r - c;
     int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
     /* the NS nodes' distances as lanes */
-    v4d sd = r - ((v4d){0, 1, 2, 3} + (double)n0), sp = sd + a, sm = sd - a, ip, im, tp, tm;
+    const v4d k4 = {0, 1, 2, 3};
+    v4d sd = r - (k4 + (double)n0), sp = sd + a, sm = sd - a, ip, im, tp, tm;
     TENT_INT4(sp, ip);
     TENT_INT4(sm, im);
     TENT4(sp, tp);
@@ -172,8 +173,9 @@ INLINE void weights_n0(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o,
             lp[d] = s->P.lp[d][p];
             a[d] = lp[d] * s->inv_h[d];
         }
-        v4d q0 = (v4d){0.5, 0.5, 0.5, 0.5} / (v4d){a[0], a[1], a[2], lp[0]};
-        v4d q1 = (v4d){0.5, 0.5, 0.5, 0.5} / (v4d){lp[1], lp[2], 1.0, 1.0};
+        const v4d half = {0.5, 0.5, 0.5, 0.5}, d0 = {a[0], a[1], a[2], lp[0]};
+        const v4d d1 = {lp[1], lp[2], 1.0, 1.0};
+        v4d q0 = half / d0, q1 = half / d1;
         const double i2lp[3] = {q0[3], q1[0], q1[1]};
         for (int d = 0; d < D; d++) {
             int c = axis_gimp(r[d], a[d], q0[d], i2lp[d], NS, o->w[d], o->g[d]);
@@ -220,7 +222,8 @@ INLINE int bs_block4(const mpm_sim *s, size_t p, int D, int NS, pw *W)
     v4d fr[3];
     for (int d = 0; d < D; d++) {
         const double *x = s->P.x[d] + p;
-        v4d r = ((v4d){x[0], x[1], x[2], x[3]} - s->x0[d]) * s->inv_h[d];
+        v4d xv = {x[0], x[1], x[2], x[3]};
+        v4d r = (xv - s->x0[d]) * s->inv_h[d];
         v4i c = __builtin_convertvector(r, v4i);
         int n = s->bs[d].n;
         v4i top = {n - 1, n - 1, n - 1, n - 1};
