@@ -464,111 +464,159 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
     strain_of(s, L, deps, i, D);
 }
 
-/* Strain increment (Eq. 29) from grid momenta qg (velocity q/m, zero at
- * phantom nodes: Fig. 7) into block slot i.  Optionally (DX) also the
- * position increment sum S q/m from the momenta qx of the same nodes, and
- * (DV) the velocity increment sum S f/m.  Phantom
- * nodes in the support go through phantom_grad().
- *
- * VP: the fields hold velocities q/m and f/m already.  Every family here
- * gathers velocities in its moving passes: once the node pass has updated
- * the momentum it stores q/m and f/m in place of q and f (and q2/m in
- * place of q2; mpm_sim.gvel), so the gathers read them without the product
- * by 1/m per particle and node.  MPM tents took the same product per corner
- * (q/m), so their bits stay; uGIMP, B-splines and APIC summed (S 1/m) q and
- * now sum S (q/m), another rounding of the position, velocity and B_p sums
- * (their strain gathers took q/m: same bits).  The USF stress pass gathers
- * the momentum before the update, times 1/m as before (VP 0). */
-INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
-                   double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
-                   double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3],
-                   int VP)
+/* One row of a support along x: nodes 0 and 1 in lo, 2 and 3 in hi
+ * (NS 3: node 2 in hi[0] and 0 in hi[1]; NS 2: hi unused). */
+typedef struct {
+    v2d lo, hi;
+} xrow;
+
+INLINE xrow xr_ld(const double *restrict q, size_t n, int NS, double fill)
 {
-    if (NS == 2 && !AF) {
-        gather_tent(s, qg, W, D, deps, i, DS, DX, qx, dx, DV, dv, VP);
-        return;
+    xrow r = {v2_ld(q + n), {fill, fill}};
+    if (NS == 4) r.hi = v2_ld(q + n + 2);
+    if (NS == 3) r.hi[0] = q[n + 2];
+    return r;
+}
+
+/* acc += c v */
+INLINE void xr_axpy(xrow *acc, double c, const xrow *v, int NS)
+{
+    acc->lo = acc->lo + v->lo * c;
+    if (NS > 2) acc->hi = acc->hi + v->hi * c;
+}
+
+/* sum_k a_k w_k in node order */
+INLINE double xr_dot(const xrow *a, const xrow *w, int NS)
+{
+    v2d t = a->lo * w->lo;
+    double r = t[0] + t[1];
+    if (NS > 2) {
+        v2d u = a->hi * w->hi;
+        r += u[0];
+        if (NS == 4) r += u[1];
     }
+    return r;
+}
+
+/* The rows of a support with their factors: rw[r] the flat index of the
+ * row's node kx = 0, A, B, C as in ROWS(), and for APIC (AF) the factors
+ * of B_p's y and z columns, A (x_i - x_p)_y and A (x_i - x_p)_z. */
+typedef struct {
+    size_t rw[16];
+    double A[16], B[16], C[16], Y[16], Z[16];
+} srows;
+
+/* Everything but MPM tents without APIC, factored like gather_tent(): the
+ * rows of each field are summed first with their y and z factors, as
+ * x rows (a few two-lane multiply-adds per row), and the x weights applied
+ * once to the sums.  The node-by-node form summed each row with its x
+ * weights and added the row's scalar times its y and z factors: about
+ * 40 % more operations, and sums across the lanes in every row.  Another
+ * order of the same sums (so other last bits than before the sixth stop
+ * of issue 14; docs/solver.md, "Gathers by rows"). */
+INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
+                        double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
+                        double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3],
+                        int VP)
+{
     IH(s);
     const double *restrict minv = s->minv;
-    double L[3][3] = {{0}};
-    double X[3] = {0, 0, 0}, Vv[3] = {0, 0, 0};
-    double Bm[3][3] = {{0}};
-    int nph = 0; /* phantom nodes in the support */
+    const int NR = D == 1 ? 1 : D == 2 ? NS : NS * NS;
+    srows sr;
+    int nr = 0;
     ROWS(D, NS, *W, s, {
-        double r0[3] = {0, 0, 0}, r1[3] = {0, 0, 0}, rx[3] = {0, 0, 0}, rv[3] = {0, 0, 0};
-        double rb[3] = {0, 0, 0};
-        /* nodes in pairs: the products two at a time, the sums lane by
-         * lane in node order (the scalar code's sums) */
-        UNROLL
-        for (int kx = 0; kx + 1 < NS; kx += 2) {
-            size_t n = row + (size_t)kx;
-            v2d mi = {0, 0}, wx = {W->w[0][kx], W->w[0][kx + 1]}, sm = wx;
-            if (DS || !VP) mi = v2_ld(minv + n);
-            if (!VP) sm = wx * mi; /* VP: the fields are velocities already */
-            v2d gx = {GRAD(s, *W, NS, 0, kx), GRAD(s, *W, NS, 0, kx + 1)};
-            if (DS) nph += (mi[0] == 0.0) + (mi[1] == 0.0);
-            for (int a = 0; a < D; a++) {
-                if (DS) {
-                    v2d va = v2_ld(qg[a] + n);
-                    if (!VP) va = va * mi;
-                    v2d t0 = va * gx, t1 = va * wx;
-                    r0[a] = r0[a] + t0[0] + t0[1];
-                    r1[a] = r1[a] + t1[0] + t1[1];
-                }
-                if (DX) {
-                    v2d t = sm * v2_ld(qx[a] + n);
-                    rx[a] = rx[a] + t[0] + t[1];
-                }
-                if (AF) {
-                    v2d rr = {R->r[0][kx], R->r[0][kx + 1]}, t = sm * v2_ld(qx[a] + n) * rr;
-                    rb[a] = rb[a] + t[0] + t[1];
-                }
-                if (DV) {
-                    v2d t = sm * v2_ld(s->g.f[a] + n);
-                    rv[a] = rv[a] + t[0] + t[1];
-                }
-            }
+        sr.rw[nr] = row;
+        sr.A[nr] = A;
+        sr.B[nr] = B;
+        sr.C[nr] = C;
+        if (AF) {
+            sr.Y[nr] = D > 1 ? A * R->r[1][ky] : 0.0;
+            sr.Z[nr] = D > 2 ? A * R->r[2][kz] : 0.0;
         }
-        if (NS & 1) {
-            const int kx = NS - 1;
-            size_t n = row + (size_t)kx;
-            double mi = DS || !VP ? minv[n] : 0.0, gx = GRAD(s, *W, NS, 0, kx), wx = W->w[0][kx];
-            double sm = VP ? wx : wx * mi;
-            if (DS) nph += mi == 0.0;
-            for (int a = 0; a < D; a++) {
-                if (DS) {
-                    double va = VP ? qg[a][n] : qg[a][n] * mi;
-                    r0[a] += va * gx;
-                    r1[a] += va * wx;
-                }
-                if (DX) rx[a] += sm * qx[a][n];
-                if (AF) rb[a] += sm * qx[a][n] * R->r[0][kx];
-                if (DV) rv[a] += sm * s->g.f[a][n];
-            }
-        }
-        for (int a = 0; a < D; a++) {
-            if (DS) {
-                L[a][0] += A * r0[a];
-                if (D > 1) L[a][1] += B * r1[a];
-                if (D > 2) L[a][2] += C * r1[a];
-            }
-            if (DX) X[a] += A * rx[a];
-            if (DV) Vv[a] += A * rv[a];
-            if (AF) {
-                Bm[a][0] += A * rb[a];
-                if (D > 1) Bm[a][1] += A * R->r[1][ky] * rx[a];
-                if (D > 2) Bm[a][2] += A * R->r[2][kz] * rx[a];
-            }
-        }
+        nr++;
     });
+    xrow wx = {{W->w[0][0], W->w[0][1]}, {0, 0}},
+         gx = {{GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1)}, {0, 0}};
+    if (NS > 2) {
+        wx.hi[0] = W->w[0][2];
+        gx.hi[0] = GRAD(s, *W, NS, 0, 2);
+    }
+    if (NS > 3) {
+        wx.hi[1] = W->w[0][3];
+        gx.hi[1] = GRAD(s, *W, NS, 0, 3);
+    }
+    double L[3][3] = {{0}};
+    v2l ph = {0, 0}; /* lanes of phantom nodes (1/m = 0), or-ed */
+    if (DS) {
+        const v2d zero = {0, 0};
+        UNROLL
+        for (int r = 0; r < NR; r++) {
+            xrow mi = xr_ld(minv, sr.rw[r], NS, 1.0); /* the unused lane: not phantom */
+            ph |= (mi.lo == zero) | (mi.hi == zero);
+        }
+    }
     for (int a = 0; a < D; a++) {
-        if (DX) dx[a] = X[a];
-        if (DV) dv[a] = Vv[a];
-        if (AF)
-            for (int b = 0; b < D; b++) Bo[a][b] = Bm[a][b];
+        if (DS) {
+            xrow P0 = {{0, 0}, {0, 0}}, P1 = P0, P2 = P0;
+            UNROLL
+            for (int r = 0; r < NR; r++) {
+                xrow v = xr_ld(qg[a], sr.rw[r], NS, 0.0);
+                if (!VP) {
+                    xrow mi = xr_ld(minv, sr.rw[r], NS, 0.0);
+                    v.lo = v.lo * mi.lo;
+                    v.hi = v.hi * mi.hi;
+                }
+                xr_axpy(&P0, sr.A[r], &v, NS);
+                if (D > 1) xr_axpy(&P1, sr.B[r], &v, NS);
+                if (D > 2) xr_axpy(&P2, sr.C[r], &v, NS);
+            }
+            L[a][0] = xr_dot(&P0, &gx, NS);
+            if (D > 1) L[a][1] = xr_dot(&P1, &wx, NS);
+            if (D > 2) L[a][2] = xr_dot(&P2, &wx, NS);
+        }
+        if (DX || AF) {
+            xrow PX = {{0, 0}, {0, 0}}, PY = PX, PZ = PX;
+            UNROLL
+            for (int r = 0; r < NR; r++) {
+                xrow v = xr_ld(qx[a], sr.rw[r], NS, 0.0);
+                if (!VP) {
+                    xrow mi = xr_ld(minv, sr.rw[r], NS, 0.0);
+                    v.lo = v.lo * mi.lo;
+                    v.hi = v.hi * mi.hi;
+                }
+                xr_axpy(&PX, sr.A[r], &v, NS);
+                if (AF && D > 1) xr_axpy(&PY, sr.Y[r], &v, NS);
+                if (AF && D > 2) xr_axpy(&PZ, sr.Z[r], &v, NS);
+            }
+            if (DX) dx[a] = xr_dot(&PX, &wx, NS);
+            if (AF) {
+                const v2d r01 = {R->r[0][0], R->r[0][1]};
+                v2d r23 = {0, 0};
+                if (NS > 2) r23[0] = R->r[0][2];
+                if (NS > 3) r23[1] = R->r[0][3];
+                const xrow wr = {wx.lo * r01, wx.hi * r23};
+                Bo[a][0] = xr_dot(&PX, &wr, NS);
+                if (D > 1) Bo[a][1] = xr_dot(&PY, &wx, NS);
+                if (D > 2) Bo[a][2] = xr_dot(&PZ, &wx, NS);
+            }
+        }
+        if (DV) {
+            xrow PV = {{0, 0}, {0, 0}};
+            UNROLL
+            for (int r = 0; r < NR; r++) {
+                xrow v = xr_ld(s->g.f[a], sr.rw[r], NS, 0.0);
+                if (!VP) {
+                    xrow mi = xr_ld(minv, sr.rw[r], NS, 0.0);
+                    v.lo = v.lo * mi.lo;
+                    v.hi = v.hi * mi.hi;
+                }
+                xr_axpy(&PV, sr.A[r], &v, NS);
+            }
+            dv[a] = xr_dot(&PV, &wx, NS);
+        }
     }
     if (!DS) return;
-    if (__builtin_expect(nph != 0, 0)) {
+    if (__builtin_expect((ph[0] | ph[1]) != 0, 0)) {
         /* a copy, so that L never has its address taken */
         phantom_corr c = phantom_grad(s, qg, W, D, NS, VP);
         if ((c.g[0] != 0.0) | (c.g[1] != 0.0) | (c.g[2] != 0.0))
@@ -576,6 +624,30 @@ INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, in
                 for (int b = 0; b < D; b++) L[a][b] += c.u[a] * c.g[b];
     }
     strain_of(s, L, deps, i, D);
+}
+
+/* Strain increment (Eq. 29) from grid momenta qg (velocity q/m, zero at
+ * phantom nodes: Fig. 7) into block slot i.  Optionally (DX) also the
+ * position increment sum S q/m from the momenta qx of the same nodes, and
+ * (DV) the velocity increment sum S f/m; AF (APIC): B_p = sum S q/m
+ * (x_i - x_p)^T into Bo.  Phantom nodes in the support go through
+ * phantom_grad().
+ *
+ * VP: the fields hold velocities q/m and f/m already.  Every family here
+ * gathers velocities in its moving passes: once the node pass has updated
+ * the momentum it stores q/m and f/m in place of q and f (and q2/m in
+ * place of q2; mpm_sim.gvel), so the gathers read them without the product
+ * by 1/m per particle and node.  The USF stress pass gathers the momentum
+ * before the update, times 1/m (VP 0). */
+INLINE void gather(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
+                   double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
+                   double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3],
+                   int VP)
+{
+    if (NS == 2 && !AF)
+        gather_tent(s, qg, W, D, deps, i, DS, DX, qx, dx, DV, dv, VP);
+    else
+        gather_rows(s, qg, W, D, NS, deps, i, DS, DX, qx, dx, DV, dv, AF, R, Bo, VP);
 }
 
 /* APIC's scatter weights: MPM tents scatter with the gradients and need
