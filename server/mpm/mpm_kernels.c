@@ -257,10 +257,26 @@ INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q
             u[a] = A * Cm[a][0];
         }
         double am = A * mp;
+        /* nodes in pairs, each lane the scalar tail's operations */
         UNROLL
-        for (int kx = 0; kx < NS; kx++) {
-            double S = W->w[0][kx];
-            double e = NS == 2 ? GRAD(s, *W, NS, 0, kx) : S * R->r[0][kx];
+        for (int kx = 0; kx + 1 < NS; kx += 2) {
+            v2d S = {W->w[0][kx], W->w[0][kx + 1]}, e;
+            if (NS == 2) {
+                v2d g = {GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1)};
+                e = g;
+            } else {
+                v2d r = {R->r[0][kx], R->r[0][kx + 1]};
+                e = S * r;
+            }
+            size_t n = row + (size_t)kx;
+            if (WM) v2_st(m + n, v2_ld(m + n) + S * am);
+            v2_st(q0 + n, v2_ld(q0 + n) + (S * t[0] + e * u[0]));
+            if (D > 1) v2_st(q1 + n, v2_ld(q1 + n) + (S * t[1] + e * u[1]));
+            if (D > 2) v2_st(q2 + n, v2_ld(q2 + n) + (S * t[2] + e * u[2]));
+        }
+        if (NS & 1) {
+            const int kx = NS - 1;
+            double S = W->w[0][kx], e = S * R->r[0][kx];
             size_t n = row + (size_t)kx;
             if (WM) m[n] += S * am;
             q0[n] += S * t[0] + e * u[0];
