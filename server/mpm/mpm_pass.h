@@ -48,6 +48,8 @@ typedef long long v2l __attribute__((vector_size(16))); /* v2d comparisons */
  * bits).  Only inside inline code and structs, never passed by value to
  * a function that is not inlined. */
 typedef double v4d __attribute__((vector_size(32)));
+/* v4d at any 8-byte boundary (four doubles of a struct's array) */
+typedef double v4du __attribute__((vector_size(32), aligned(8), may_alias));
 
 INLINE v2d v2_ld(const double *p)
 {

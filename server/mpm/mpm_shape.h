@@ -73,11 +73,10 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
     TENT_INT4(sm, im);
     TENT4(sp, tp);
     TENT4(sm, tm);
-    v4d W = (ip - im) * i2a, G = (tp - tm) * i2lp;
-    for (int k = 0; k < NS; k++) {
-        w[k] = W[k];
-        g[k] = G[k];
-    }
+    /* the four lanes stored at once (NS 3: w[3], g[3] get the fourth
+     * node's values, which no kernel reads; w and g hold 4) */
+    *(v4du *)w = (ip - im) * i2a;
+    *(v4du *)g = (tp - tm) * i2lp;
     return n0;
 }
 
