@@ -20,46 +20,39 @@
 
 #define UNROLL _Pragma("GCC unroll 4")
 
-INLINE double tent(double s)
-{
-    double a = 1.0 - fabs(s);
-    return a > 0 ? a : 0;
-}
-
-INLINE double tent_int(double s)
-{
-    s = s < -1 ? -1 : s > 1 ? 1 : s;
-    return 0.5 + s - 0.5 * s * fabs(s);
-}
-
-/* uGIMP weight and gradient of the node at distance s (in cells) */
-INLINE void gimp_w(double s, double a, double i2a, double i2lp, double *w, double *g)
-{
-    *w = (tent_int(s + a) - tent_int(s - a)) * i2a;
-    *g = (tent(s + a) - tent(s - a)) * i2lp;
-}
-
 /* uGIMP weights of one axis for r = (x - x0)/h, a = lp/h and the factors
- * i2a = 1/(2a), i2lp = 1/(2 lp); returns the first node. */
+ * i2a = 1/(2a), i2lp = 1/(2 lp); returns the first node.
+ *
+ * With N the unit tent and F its antiderivative, a node at distance s (in
+ * cells) has S = (F(s + a) - F(s - a)) / (2a) and G = (N(s + a) - N(s - a))
+ * / (2 lp) (Eqs. 17-18).  Both ends clamped to [-1, 1] (cp, cm: outside,
+ * N is 0 and F constant), N(t) = 1 - |c| and F(t) = 1/2 + c - c|c|/2, so
+ * that S = ((cp - cm) - (cp|cp| - cm|cm|)/2) / (2a) and G = (|cm| - |cp|)
+ * / (2 lp): one clamp and one |c| per end serve both, and the constants
+ * cancel before rounding.  A node outside the support has cp = cm = +-1,
+ * so S and G exactly 0 (the 3-node family leaves out only such nodes). */
 typedef long long v4l __attribute__((vector_size(32)));
 
-/* Four lanes: |x|, m ? x : y (m all ones or zero), and tent_int() and
- * tent() of x into out, lane by lane the scalar operations (the same
- * bits).  Macros: a function may not take or return a 32-byte vector
- * where AVX is not enabled (the portable kernels' ABI). */
+/* Four lanes: |x|, m ? x : y (m all ones or zero), and x clamped to
+ * [-1, 1] into out.  Macros: a function may not take or return a 32-byte
+ * vector where AVX is not enabled (the portable kernels' ABI). */
 #define V4ABS(x) ((v4d)((v4l)(x) & (v4l){INT64_MAX, INT64_MAX, INT64_MAX, INT64_MAX}))
 #define V4SEL(m, x, y) ((v4d)(((v4l)(x) & (v4l)(m)) | ((v4l)(y) & ~(v4l)(m))))
-#define TENT_INT4(x, out)                                                 \
-    do {                                                                  \
-        const v4d one_ = {1, 1, 1, 1};                                    \
-        v4d c_ = V4SEL((x) < -one_, -one_, V4SEL((x) > one_, one_, (x))); \
-        (out) = 0.5 + c_ - 0.5 * c_ * V4ABS(c_);                          \
+#if defined(__AVX__)
+/* one vminpd and one vmaxpd (the selects cost a compare and a two-uop
+ * blend each); the same values as the selects for every number */
+#define CLAMP1_4(x, out)                                                            \
+    do {                                                                            \
+        const v4d one_ = {1, 1, 1, 1};                                              \
+        (out) = __builtin_ia32_maxpd256(__builtin_ia32_minpd256((x), one_), -one_); \
     } while (0)
-#define TENT4(x, out)                             \
-    do {                                          \
-        v4d a_ = 1.0 - V4ABS(x);                  \
-        (out) = (v4d)((v4l)a_ & (v4l)(a_ > 0.0)); \
+#else
+#define CLAMP1_4(x, out)                                                 \
+    do {                                                                 \
+        const v4d one_ = {1, 1, 1, 1};                                   \
+        (out) = V4SEL((x) < -one_, -one_, V4SEL((x) > one_, one_, (x))); \
     } while (0)
+#endif
 
 INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double *w, double *g)
 {
@@ -68,15 +61,14 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
     int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
     /* the NS nodes' distances as lanes */
     const v4d k4 = {0, 1, 2, 3};
-    v4d sd = r - (k4 + (double)n0), sp = sd + a, sm = sd - a, ip, im, tp, tm;
-    TENT_INT4(sp, ip);
-    TENT_INT4(sm, im);
-    TENT4(sp, tp);
-    TENT4(sm, tm);
+    v4d sd = r - (k4 + (double)n0), cp, cm;
+    CLAMP1_4(sd + a, cp);
+    CLAMP1_4(sd - a, cm);
+    v4d ap = V4ABS(cp), am = V4ABS(cm);
     /* the four lanes stored at once (NS 3: w[3], g[3] get the fourth
      * node's values, which no kernel reads; w and g hold 4) */
-    *(v4du *)w = (ip - im) * i2a;
-    *(v4du *)g = (tp - tm) * i2lp;
+    *(v4du *)w = ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a;
+    *(v4du *)g = (am - ap) * i2lp;
     return n0;
 }
 
