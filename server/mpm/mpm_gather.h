@@ -162,37 +162,31 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
     strain_of(s, L, deps, i, D);
 }
 
-/* One row of a support along x: nodes 0 and 1 in lo, 2 and 3 in hi
- * (NS 3: node 2 in hi[0] and 0 in hi[1]; NS 2: hi unused). */
+/* One row of a support along x as four lanes, node k in lane k; lanes
+ * NS .. 3 hold whatever the grid has past the row (the grid arrays have
+ * MPM_GRID_SLACK doubles past their end for it) and no sum reads them. */
 typedef struct {
-    v2d lo, hi;
+    v4d v;
 } xrow;
 
-INLINE xrow xr_ld(const double *restrict q, size_t n, int NS, double fill)
+INLINE void xr_ld(xrow *r, const double *restrict q, size_t n)
 {
-    xrow r = {v2_ld(q + n), {fill, fill}};
-    if (NS == 4) r.hi = v2_ld(q + n + 2);
-    if (NS == 3) r.hi[0] = q[n + 2];
-    return r;
+    r->v = *(const v4du *)(q + n);
 }
 
 /* acc += c v */
-INLINE void xr_axpy(xrow *acc, double c, const xrow *v, int NS)
+INLINE void xr_axpy(xrow *acc, double c, const xrow *v)
 {
-    acc->lo = acc->lo + v->lo * c;
-    if (NS > 2) acc->hi = acc->hi + v->hi * c;
+    acc->v = acc->v + v->v * c;
 }
 
-/* sum_k a_k w_k in node order */
+/* sum_k a_k w_k over the NS nodes, in node order */
 INLINE double xr_dot(const xrow *a, const xrow *w, int NS)
 {
-    v2d t = a->lo * w->lo;
+    v4d t = a->v * w->v;
     double r = t[0] + t[1];
-    if (NS > 2) {
-        v2d u = a->hi * w->hi;
-        r += u[0];
-        if (NS == 4) r += u[1];
-    }
+    if (NS > 2) r += t[2];
+    if (NS == 4) r += t[3];
     return r;
 }
 
@@ -233,88 +227,91 @@ INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int 
         }
         nr++;
     });
-    xrow wx = {{W->w[0][0], W->w[0][1]}, {0, 0}},
-         gx = {{GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1)}, {0, 0}};
+    xrow wx = {{W->w[0][0], W->w[0][1], 0, 0}},
+         gx = {{GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1), 0, 0}};
     if (NS > 2) {
-        wx.hi[0] = W->w[0][2];
-        gx.hi[0] = GRAD(s, *W, NS, 0, 2);
+        wx.v[2] = W->w[0][2];
+        gx.v[2] = GRAD(s, *W, NS, 0, 2);
     }
     if (NS > 3) {
-        wx.hi[1] = W->w[0][3];
-        gx.hi[1] = GRAD(s, *W, NS, 0, 3);
+        wx.v[3] = W->w[0][3];
+        gx.v[3] = GRAD(s, *W, NS, 0, 3);
     }
     double L[3][3] = {{0}};
-    v2l ph = {0, 0}; /* lanes of phantom nodes (1/m = 0), or-ed */
+    v4l ph = {0, 0, 0, 0}; /* lanes of phantom nodes (1/m = 0), or-ed */
     if (DS) {
-        const v2d zero = {0, 0};
+        const v4d zero = {0, 0, 0, 0};
         UNROLL
         for (int r = 0; r < NR; r++) {
-            xrow mi = xr_ld(minv, sr.rw[r], NS, 1.0); /* the unused lane: not phantom */
-            ph |= (mi.lo == zero) | (mi.hi == zero);
+            xrow mi;
+            xr_ld(&mi, minv, sr.rw[r]);
+            ph |= (mi.v == zero);
         }
+        const v4l live = {-1, -1, NS > 2 ? -1 : 0, NS > 3 ? -1 : 0}; /* the support's lanes */
+        ph &= live;
     }
     for (int a = 0; a < D; a++) {
         if (DS) {
-            xrow P0 = {{0, 0}, {0, 0}}, P1 = P0, P2 = P0;
+            xrow P0 = {{0, 0, 0, 0}}, P1 = P0, P2 = P0;
             UNROLL
             for (int r = 0; r < NR; r++) {
-                xrow v = xr_ld(qg[a], sr.rw[r], NS, 0.0);
+                xrow v;
+                xr_ld(&v, qg[a], sr.rw[r]);
                 if (!VP) {
-                    xrow mi = xr_ld(minv, sr.rw[r], NS, 0.0);
-                    v.lo = v.lo * mi.lo;
-                    v.hi = v.hi * mi.hi;
+                    xrow mi;
+                    xr_ld(&mi, minv, sr.rw[r]);
+                    v.v = v.v * mi.v;
                 }
-                xr_axpy(&P0, sr.A[r], &v, NS);
-                if (D > 1) xr_axpy(&P1, sr.B[r], &v, NS);
-                if (D > 2) xr_axpy(&P2, sr.C[r], &v, NS);
+                xr_axpy(&P0, sr.A[r], &v);
+                if (D > 1) xr_axpy(&P1, sr.B[r], &v);
+                if (D > 2) xr_axpy(&P2, sr.C[r], &v);
             }
             L[a][0] = xr_dot(&P0, &gx, NS);
             if (D > 1) L[a][1] = xr_dot(&P1, &wx, NS);
             if (D > 2) L[a][2] = xr_dot(&P2, &wx, NS);
         }
         if (DX || AF) {
-            xrow PX = {{0, 0}, {0, 0}}, PY = PX, PZ = PX;
+            xrow PX = {{0, 0, 0, 0}}, PY = PX, PZ = PX;
             UNROLL
             for (int r = 0; r < NR; r++) {
-                xrow v = xr_ld(qx[a], sr.rw[r], NS, 0.0);
+                xrow v;
+                xr_ld(&v, qx[a], sr.rw[r]);
                 if (!VP) {
-                    xrow mi = xr_ld(minv, sr.rw[r], NS, 0.0);
-                    v.lo = v.lo * mi.lo;
-                    v.hi = v.hi * mi.hi;
+                    xrow mi;
+                    xr_ld(&mi, minv, sr.rw[r]);
+                    v.v = v.v * mi.v;
                 }
-                xr_axpy(&PX, sr.A[r], &v, NS);
-                if (AF && D > 1) xr_axpy(&PY, sr.Y[r], &v, NS);
-                if (AF && D > 2) xr_axpy(&PZ, sr.Z[r], &v, NS);
+                xr_axpy(&PX, sr.A[r], &v);
+                if (AF && D > 1) xr_axpy(&PY, sr.Y[r], &v);
+                if (AF && D > 2) xr_axpy(&PZ, sr.Z[r], &v);
             }
             if (DX) dx[a] = xr_dot(&PX, &wx, NS);
             if (AF) {
-                const v2d r01 = {R->r[0][0], R->r[0][1]};
-                v2d r23 = {0, 0};
-                if (NS > 2) r23[0] = R->r[0][2];
-                if (NS > 3) r23[1] = R->r[0][3];
-                const xrow wr = {wx.lo * r01, wx.hi * r23};
+                xrow wr = wx;
+                for (int k = 0; k < NS; k++) wr.v[k] = wx.v[k] * R->r[0][k];
                 Bo[a][0] = xr_dot(&PX, &wr, NS);
                 if (D > 1) Bo[a][1] = xr_dot(&PY, &wx, NS);
                 if (D > 2) Bo[a][2] = xr_dot(&PZ, &wx, NS);
             }
         }
         if (DV) {
-            xrow PV = {{0, 0}, {0, 0}};
+            xrow PV = {{0, 0, 0, 0}};
             UNROLL
             for (int r = 0; r < NR; r++) {
-                xrow v = xr_ld(s->g.f[a], sr.rw[r], NS, 0.0);
+                xrow v;
+                xr_ld(&v, s->g.f[a], sr.rw[r]);
                 if (!VP) {
-                    xrow mi = xr_ld(minv, sr.rw[r], NS, 0.0);
-                    v.lo = v.lo * mi.lo;
-                    v.hi = v.hi * mi.hi;
+                    xrow mi;
+                    xr_ld(&mi, minv, sr.rw[r]);
+                    v.v = v.v * mi.v;
                 }
-                xr_axpy(&PV, sr.A[r], &v, NS);
+                xr_axpy(&PV, sr.A[r], &v);
             }
             dv[a] = xr_dot(&PV, &wx, NS);
         }
     }
     if (!DS) return;
-    if (__builtin_expect((ph[0] | ph[1]) != 0, 0)) {
+    if (__builtin_expect((ph[0] | ph[1] | ph[2] | ph[3]) != 0, 0)) {
         /* a copy, so that L never has its address taken */
         phantom_corr c = phantom_grad(s, qg, W, D, NS, VP);
         if ((c.g[0] != 0.0) | (c.g[1] != 0.0) | (c.g[2] != 0.0))

@@ -636,6 +636,11 @@ int mpm_case_fill(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mat
 
 /* ---- small shared helpers (inline: some run inside the passes) ---- */
 
+/* Doubles allocated (zeroed) past the end of every grid field and of
+ * minv: the gathers load a support's row of three nodes as four lanes
+ * (gather_rows()), which reads one node past a row that ends the array. */
+#define MPM_GRID_SLACK 4
+
 static inline double *mpm_dalloc(size_t n)
 {
     return calloc(n ? n : 1, sizeof(double));

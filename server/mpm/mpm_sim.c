@@ -78,10 +78,12 @@ static void free_gridbuf(mpm_gridbuf *b)
     memset(b, 0, sizeof *b);
 }
 
-/* fields: MPM_F_* of the buffer (m and q always) */
+/* fields: MPM_F_* of the buffer (m and q always); nn nodes and
+ * MPM_GRID_SLACK more */
 static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int fields)
 {
     memset(b, 0, sizeof *b);
+    nn += MPM_GRID_SLACK;
     if (!(b->m = mpm_dalloc(nn))) return MPM_ENOMEM;
     for (int d = 0; d < dim; d++) {
         if (!(b->q[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
@@ -543,7 +545,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         goto nomem;
     int gfields = MPM_F_M | MPM_F_Q | MPM_F_F | (musl ? MPM_F_Q2 : 0);
     if (alloc_gridbuf(&s->g, s->nn, dim, gfields)) goto nomem;
-    if (!(s->minv = mpm_dalloc(s->nn))) goto nomem;
+    if (!(s->minv = mpm_dalloc(s->nn + MPM_GRID_SLACK))) goto nomem;
     for (int d = 0; d < 3; d++) {
         if (!(s->ncoord[d] = mpm_dalloc((size_t)s->np[d]))) goto nomem;
         for (int i = 0; d < dim && i < s->np[d]; i++)
