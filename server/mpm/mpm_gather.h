@@ -162,32 +162,146 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
     strain_of(s, L, deps, i, D);
 }
 
-/* One row of a support along x as four lanes, node k in lane k; lanes
- * NS .. 3 hold whatever the grid has past the row (the grid arrays have
- * MPM_GRID_SLACK doubles past their end for it) and no sum reads them. */
+/* One row of a support along x, node k in lane k.  AVX builds: four
+ * lanes, loaded at once; lanes NS .. 3 hold whatever the grid has past
+ * the row (the grid arrays have MPM_GRID_SLACK doubles past their end for
+ * the row that ends one) and no sum reads them: one load and one
+ * multiply-add per row and factor (cube3d BSPLINE2 USF and GIMP 1.05x).
+ * Portable builds: two pairs, nodes 0-1 and 2-3, the second loaded only
+ * as far as NS (four-lane vectors there run as pairs anyway, and their
+ * unaligned loads cost 0.78x).  Each lane does the same operations either
+ * way, so the same bits. */
+#if defined(__AVX__)
 typedef struct {
     v4d v;
 } xrow;
+typedef struct {
+    v4l v;
+} xmask;
+#define XR_ZERO        \
+    {                  \
+        {              \
+            0, 0, 0, 0 \
+        }              \
+    }
+#else
+typedef struct {
+    v2d lo, hi;
+} xrow;
+typedef struct {
+    v2l lo, hi;
+} xmask;
+#define XR_ZERO  \
+    {            \
+        {0, 0},  \
+        {        \
+            0, 0 \
+        }        \
+    }
+#endif
 
-INLINE void xr_ld(xrow *r, const double *restrict q, size_t n)
+INLINE void xr_ld(xrow *r, const double *restrict q, size_t n, int NS)
 {
+#if defined(__AVX__)
+    (void)NS;
     r->v = *(const v4du *)(q + n);
+#else
+    r->lo = v2_ld(q + n);
+    r->hi = (v2d){0, 0};
+    if (NS == 4) r->hi = v2_ld(q + n + 2);
+    if (NS == 3) r->hi[0] = q[n + 2];
+#endif
+}
+
+/* lane k */
+INLINE double xr_get(const xrow *r, int k)
+{
+#if defined(__AVX__)
+    return r->v[k];
+#else
+    return k < 2 ? r->lo[k] : r->hi[k - 2];
+#endif
+}
+
+/* the lanes a, b, c, d */
+INLINE void xr_make(xrow *r, double a, double b, double c, double d)
+{
+#if defined(__AVX__)
+    r->v = (v4d){a, b, c, d};
+#else
+    r->lo = (v2d){a, b};
+    r->hi = (v2d){c, d};
+#endif
+}
+
+/* v *= m, lane by lane */
+INLINE void xr_mul(xrow *v, const xrow *m)
+{
+#if defined(__AVX__)
+    v->v = v->v * m->v;
+#else
+    v->lo = v->lo * m->lo;
+    v->hi = v->hi * m->hi;
+#endif
 }
 
 /* acc += c v */
 INLINE void xr_axpy(xrow *acc, double c, const xrow *v)
 {
+#if defined(__AVX__)
     acc->v = acc->v + v->v * c;
+#else
+    acc->lo = acc->lo + v->lo * c;
+    acc->hi = acc->hi + v->hi * c;
+#endif
 }
 
 /* sum_k a_k w_k over the NS nodes, in node order */
 INLINE double xr_dot(const xrow *a, const xrow *w, int NS)
 {
+#if defined(__AVX__)
     v4d t = a->v * w->v;
     double r = t[0] + t[1];
     if (NS > 2) r += t[2];
     if (NS == 4) r += t[3];
+#else
+    v2d t = a->lo * w->lo;
+    double r = t[0] + t[1];
+    if (NS > 2) {
+        v2d u = a->hi * w->hi;
+        r += u[0];
+        if (NS == 4) r += u[1];
+    }
+#endif
     return r;
+}
+
+/* ph |= the lanes of m that are 0 (phantom nodes: 1/m = 0) */
+INLINE void xr_orzero(xmask *ph, const xrow *m)
+{
+#if defined(__AVX__)
+    const v4d zero = {0, 0, 0, 0};
+    ph->v |= m->v == zero;
+#else
+    const v2d zero = {0, 0};
+    ph->lo |= m->lo == zero;
+    ph->hi |= m->hi == zero;
+#endif
+}
+
+/* any of the support's NS lanes set */
+INLINE int xr_any(const xmask *ph, int NS)
+{
+#if defined(__AVX__)
+    long long a = ph->v[0] | ph->v[1];
+    if (NS > 2) a |= ph->v[2];
+    if (NS > 3) a |= ph->v[3];
+#else
+    long long a = ph->lo[0] | ph->lo[1];
+    if (NS > 2) a |= ph->hi[0];
+    if (NS > 3) a |= ph->hi[1];
+#endif
+    return a != 0;
 }
 
 /* The rows of a support with their factors: rw[r] the flat index of the
@@ -227,40 +341,31 @@ INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int 
         }
         nr++;
     });
-    xrow wx = {{W->w[0][0], W->w[0][1], 0, 0}},
-         gx = {{GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1), 0, 0}};
-    if (NS > 2) {
-        wx.v[2] = W->w[0][2];
-        gx.v[2] = GRAD(s, *W, NS, 0, 2);
-    }
-    if (NS > 3) {
-        wx.v[3] = W->w[0][3];
-        gx.v[3] = GRAD(s, *W, NS, 0, 3);
-    }
+    xrow wx, gx;
+    xr_make(&wx, W->w[0][0], W->w[0][1], NS > 2 ? W->w[0][2] : 0.0, NS > 3 ? W->w[0][3] : 0.0);
+    xr_make(&gx, GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1), NS > 2 ? GRAD(s, *W, NS, 0, 2) : 0.0,
+            NS > 3 ? GRAD(s, *W, NS, 0, 3) : 0.0);
     double L[3][3] = {{0}};
-    v4l ph = {0, 0, 0, 0}; /* lanes of phantom nodes (1/m = 0), or-ed */
+    xmask ph = {0}; /* lanes of phantom nodes (1/m = 0), or-ed */
     if (DS) {
-        const v4d zero = {0, 0, 0, 0};
         UNROLL
         for (int r = 0; r < NR; r++) {
             xrow mi;
-            xr_ld(&mi, minv, sr.rw[r]);
-            ph |= (mi.v == zero);
+            xr_ld(&mi, minv, sr.rw[r], NS);
+            xr_orzero(&ph, &mi);
         }
-        const v4l live = {-1, -1, NS > 2 ? -1 : 0, NS > 3 ? -1 : 0}; /* the support's lanes */
-        ph &= live;
     }
     for (int a = 0; a < D; a++) {
         if (DS) {
-            xrow P0 = {{0, 0, 0, 0}}, P1 = P0, P2 = P0;
+            xrow P0 = XR_ZERO, P1 = P0, P2 = P0;
             UNROLL
             for (int r = 0; r < NR; r++) {
                 xrow v;
-                xr_ld(&v, qg[a], sr.rw[r]);
+                xr_ld(&v, qg[a], sr.rw[r], NS);
                 if (!VP) {
                     xrow mi;
-                    xr_ld(&mi, minv, sr.rw[r]);
-                    v.v = v.v * mi.v;
+                    xr_ld(&mi, minv, sr.rw[r], NS);
+                    xr_mul(&v, &mi);
                 }
                 xr_axpy(&P0, sr.A[r], &v);
                 if (D > 1) xr_axpy(&P1, sr.B[r], &v);
@@ -271,15 +376,15 @@ INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int 
             if (D > 2) L[a][2] = xr_dot(&P2, &wx, NS);
         }
         if (DX || AF) {
-            xrow PX = {{0, 0, 0, 0}}, PY = PX, PZ = PX;
+            xrow PX = XR_ZERO, PY = PX, PZ = PX;
             UNROLL
             for (int r = 0; r < NR; r++) {
                 xrow v;
-                xr_ld(&v, qx[a], sr.rw[r]);
+                xr_ld(&v, qx[a], sr.rw[r], NS);
                 if (!VP) {
                     xrow mi;
-                    xr_ld(&mi, minv, sr.rw[r]);
-                    v.v = v.v * mi.v;
+                    xr_ld(&mi, minv, sr.rw[r], NS);
+                    xr_mul(&v, &mi);
                 }
                 xr_axpy(&PX, sr.A[r], &v);
                 if (AF && D > 1) xr_axpy(&PY, sr.Y[r], &v);
@@ -287,23 +392,25 @@ INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int 
             }
             if (DX) dx[a] = xr_dot(&PX, &wx, NS);
             if (AF) {
-                xrow wr = wx;
-                for (int k = 0; k < NS; k++) wr.v[k] = wx.v[k] * R->r[0][k];
+                xrow wr;
+                xr_make(&wr, xr_get(&wx, 0) * R->r[0][0], xr_get(&wx, 1) * R->r[0][1],
+                        NS > 2 ? xr_get(&wx, 2) * R->r[0][2] : 0.0,
+                        NS > 3 ? xr_get(&wx, 3) * R->r[0][3] : 0.0);
                 Bo[a][0] = xr_dot(&PX, &wr, NS);
                 if (D > 1) Bo[a][1] = xr_dot(&PY, &wx, NS);
                 if (D > 2) Bo[a][2] = xr_dot(&PZ, &wx, NS);
             }
         }
         if (DV) {
-            xrow PV = {{0, 0, 0, 0}};
+            xrow PV = XR_ZERO;
             UNROLL
             for (int r = 0; r < NR; r++) {
                 xrow v;
-                xr_ld(&v, s->g.f[a], sr.rw[r]);
+                xr_ld(&v, s->g.f[a], sr.rw[r], NS);
                 if (!VP) {
                     xrow mi;
-                    xr_ld(&mi, minv, sr.rw[r]);
-                    v.v = v.v * mi.v;
+                    xr_ld(&mi, minv, sr.rw[r], NS);
+                    xr_mul(&v, &mi);
                 }
                 xr_axpy(&PV, sr.A[r], &v);
             }
@@ -311,7 +418,7 @@ INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int 
         }
     }
     if (!DS) return;
-    if (__builtin_expect((ph[0] | ph[1] | ph[2] | ph[3]) != 0, 0)) {
+    if (__builtin_expect(xr_any(&ph, NS), 0)) {
         /* a copy, so that L never has its address taken */
         phantom_corr c = phantom_grad(s, qg, W, D, NS, VP);
         if ((c.g[0] != 0.0) | (c.g[1] != 0.0) | (c.g[2] != 0.0))
