@@ -410,24 +410,22 @@ INLINE void p2g_one(mpm_sim *s, mpm_gridbuf *gb, size_t p, int D, int NS, int BS
     if (WF) scatter_force(s, gb, &W, p, D, NS);
 }
 
-/* Tents without APIC scatter by runs (trun); so do 1D/2D quadratic
- * B-splines without APIC where a scatter takes either mass and momentum or
- * the force (USF), not both (MQF: USL's and MUSL's, 15 sums, 0.99x). */
-#define TR(D, NS, BS, AP, MQF) ((((NS) == 2 && !(BS)) || (BR(D, NS, BS) && !(MQF))) && !(AP))
+/* Tents without APIC scatter by runs (trun). */
+#define TR(NS, BS, AP) ((NS) == 2 && !(BS) && !(AP))
 
 /* The first scatter of particles [p0, p1) (WF: with the force). */
 INLINE void p2g_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, int NS, int BS, int AP,
                   int WF)
 {
-    if (TR(D, NS, BS, AP, WF)) {
+    if (TR(NS, BS, AP)) {
         trun r;
         pw W;
-        trun_init(&r, D, NS);
+        trun_init(&r, D);
         for (size_t p = p0; p < p1; p++) {
             weights(s, p, D, NS, BS, &W);
-            trun_add(s, &r, gb, &W, p, D, NS, 1, WF);
+            trun_add(s, &r, gb, &W, p, D, 1, WF);
         }
-        trun_flush(s, &r, gb, D, NS, 1, WF);
+        trun_flush(s, &r, gb, D, 1, WF);
         return;
     }
     for (size_t p = p0; p < p1; p++) p2g_one(s, gb, p, D, NS, BS, AP, WF);
@@ -452,11 +450,6 @@ INLINE void p2g_mqf_t(mpm_sim *s, mpm_gridbuf *gb, size_t p0, size_t p1, int D, 
 INLINE void next_scatter(mpm_sim *s, mpm_gridbuf *nx, trun *r, pw *Wb, size_t b0, size_t b1, int D,
                          int NS, int BS, int AP, int WF)
 {
-    if (TR(D, NS, BS, AP, WF)) {
-        weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
-        for (size_t p = b0; p < b1; p++) trun_add(s, r, nx, &Wb[p - b0], p, D, NS, 1, WF);
-        return;
-    }
     if (BS && !AP && (WF || D > 2)) {
         /* B-splines with the force (USL, MUSL) and 3D USF: the block's
          * weights first, four at a time (1.01x 2D, 1.035x 3D MUSL; 3D USF
@@ -478,7 +471,12 @@ INLINE void next_scatter(mpm_sim *s, mpm_gridbuf *nx, trun *r, pw *Wb, size_t b0
         }
         return;
     }
-    for (size_t p = b0; p < b1; p++) p2g_one(s, nx, p, D, NS, BS, AP, WF);
+    if (!TR(NS, BS, AP)) {
+        for (size_t p = b0; p < b1; p++) p2g_one(s, nx, p, D, NS, BS, AP, WF);
+        return;
+    }
+    weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
+    for (size_t p = b0; p < b1; p++) trun_add(s, r, nx, &Wb[p - b0], p, D, 1, WF);
 }
 
 /* MUSL: momentum of the updated velocity of particle p into q (weights W). */
@@ -520,7 +518,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
     pw *Wb = o->wblk;
     esum e;
     trun r;
-    trun_init(&r, D, NS);
+    trun_init(&r, D);
     if (EN) esum_init(s, &e);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
@@ -531,12 +529,12 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
         for (size_t i = 0; i < nb; i++)
-            if (TR(D, NS, BS, 0, 0))
-                trun_add(s, &r, gb, &Wb[i], b0 + i, D, NS, 0, 1);
+            if (TR(NS, BS, 0))
+                trun_add(s, &r, gb, &Wb[i], b0 + i, D, 0, 1);
             else
                 scatter_force(s, gb, &Wb[i], b0 + i, D, NS);
     }
-    if (TR(D, NS, BS, 0, 0)) trun_flush(s, &r, gb, D, NS, 0, 1);
+    if (TR(NS, BS, 0)) trun_flush(s, &r, gb, D, 0, 1);
     if (EN) esum_store(&e, o, 0, 1);
 }
 
@@ -588,7 +586,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
     boxc_init(s, &bc);
     chk_init(o, &ck);
     trun nr;
-    trun_init(&nr, D, NS);
+    trun_init(&nr, D);
     /* by blocks: the update, then the checks and supports, then the next
      * step's scatter, three small loops rather than one that spills */
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
@@ -619,7 +617,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
         moved_block(s, o, &bc, &ck, &e, &a, b0, b1, D, NS, BS, EN, AP);
         if (nx && ck.bad == SIZE_MAX) next_scatter(s, nx, &nr, Wb, b0, b1, D, NS, BS, AP, 0);
     }
-    if (nx && TR(D, NS, BS, AP, 0)) trun_flush(s, &nr, nx, D, NS, 1, 0);
+    if (nx && TR(NS, BS, AP)) trun_flush(s, &nr, nx, D, 1, 0);
     chk_store(&ck, o);
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 0);
@@ -643,7 +641,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
     boxc_init(s, &bc);
     chk_init(o, &ck);
     trun nr;
-    trun_init(&nr, D, NS);
+    trun_init(&nr, D);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         const int BW = !AP; /* the block's weights first (uGIMP too: 1.07x 2D) */
@@ -673,7 +671,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
         if (EN) esum_strain(s, &e, b0, nb, D);
         if (nx && ck.bad == SIZE_MAX) next_scatter(s, nx, &nr, Wb, b0, b0 + nb, D, NS, BS, AP, 1);
     }
-    if (nx && TR(D, NS, BS, AP, 1)) trun_flush(s, &nr, nx, D, NS, 1, 1);
+    if (nx && TR(NS, BS, AP)) trun_flush(s, &nr, nx, D, 1, 1);
     chk_store(&ck, o);
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 1);
@@ -738,7 +736,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
     boxc_init(s, &bc);
     chk_init(o, &ck);
     trun nr;
-    trun_init(&nr, D, NS);
+    trun_init(&nr, D);
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         weights_block(s, b0, nb, D, NS, BS, Wb);
@@ -754,7 +752,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
         if (EN) esum_strain(s, &e, b0, nb, D);
         if (nx && ck.bad == SIZE_MAX) next_scatter(s, nx, &nr, Wb, b0, b0 + nb, D, NS, BS, AP, 1);
     }
-    if (nx && TR(D, NS, BS, AP, 1)) trun_flush(s, &nr, nx, D, NS, 1, 1);
+    if (nx && TR(NS, BS, AP)) trun_flush(s, &nr, nx, D, 1, 1);
     chk_store(&ck, o);
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 1);

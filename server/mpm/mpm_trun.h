@@ -1,6 +1,5 @@
 /*
- * mpm_trun.h - MPM tents and 1D/2D quadratic B-splines scattered a run of
- * particles at a time.
+ * mpm_trun.h - MPM tents scattered a run of particles at a time.
  *
  * A fragment of the kernel templates, included once by mpm_kernels.c
  * (after its IH() macro and the pass helpers; mpm_kernels_avx2.c builds it
@@ -28,61 +27,23 @@ typedef struct {
     size_t base; /* the run's cell (its first corner); SIZE_MAX: no run yet */
     v4d a[7][2]; /* 3D */
     v2d b[7][2]; /* 1D, 2D */
-    v4d c[7][3]; /* 1D, 2D quadratic B-splines: c[k][ky] */
 } trun;
 
-/* Quadratic B-splines in 1D and 2D (BR) run the same way: particles sorted
- * by cell share the cell's support of 3^D nodes, so the run's sums are
- * c[k][ky], the three nodes of row ky as lanes 0-2 of four (lane 3 adds
- * zeros and is never stored), field k as above: 2D's mass and momentum
- * take 9 registers, its force 6.  3D would need 36 and stays particle by
- * particle.  Other last bits than the adds particle by particle, for the
- * same reason as the tents'. */
-#define BR(D, NS, BS) ((BS) && (NS) == 3 && (D) < 3)
-
-INLINE void trun_zero(trun *r, int D, int NS)
+INLINE void trun_zero(trun *r, int D)
 {
-    for (int k = 0; k < 7; k++) {
-        if (NS == 3) {
-            for (int j = 0; j < 3; j++) r->c[k][j] = (v4d){0, 0, 0, 0};
-            continue;
-        }
+    for (int k = 0; k < 7; k++)
         for (int j = 0; j < 2; j++) {
             if (D > 2)
                 r->a[k][j] = (v4d){0, 0, 0, 0};
             else
                 r->b[k][j] = (v2d){0, 0};
         }
-    }
 }
 
-INLINE void trun_init(trun *r, int D, int NS)
+INLINE void trun_init(trun *r, int D)
 {
     r->base = SIZE_MAX;
-    trun_zero(r, D, NS);
-}
-
-/* B-splines' flush: each row's three nodes, a pair and one more, WQ mass
- * and momentum, WF force. */
-INLINE void brun_flush(const mpm_sim *s, const trun *r, mpm_gridbuf *gb, int D, int WQ, int WF)
-{
-    for (int ky = 0; ky < (D > 1 ? 3 : 1); ky++) {
-        size_t n = r->base + (size_t)ky * s->stride[1];
-        for (int k = 0; k < 7; k++) {
-            int c = k < 4 ? k - 1 : k - 4;
-            if (k < 4 ? !WQ || c >= D : !WF || c >= D) continue;
-            double *g = k == 0 ? gb->m : k < 4 ? gb->q[c] : gb->f[c];
-            v4d a = r->c[k][ky];
-            v2d lo = {a[0], a[1]};
-            if (k < 4) {
-                v2_st(g + n, v2_ld(g + n) + lo);
-                g[n + 2] += a[2];
-            } else {
-                v2_st(g + n, v2_ld(g + n) - lo);
-                g[n + 2] -= a[2];
-            }
-        }
-    }
+    trun_zero(r, D);
 }
 
 /* The x pair of row (ky, kz) of field k. */
@@ -92,14 +53,9 @@ INLINE void brun_flush(const mpm_sim *s, const trun *r, mpm_gridbuf *gb, int D, 
              : (v2d){(r)->a[k][kz][0], (r)->a[k][kz][1]})
 
 /* Adds the run's sums to the grid: WQ mass and momentum, WF force. */
-INLINE void trun_flush(const mpm_sim *s, const trun *r, mpm_gridbuf *gb, int D, int NS, int WQ,
-                       int WF)
+INLINE void trun_flush(const mpm_sim *s, const trun *r, mpm_gridbuf *gb, int D, int WQ, int WF)
 {
     if (r->base == SIZE_MAX) return;
-    if (NS == 3) {
-        brun_flush(s, r, gb, D, WQ, WF);
-        return;
-    }
     const size_t sy = s->stride[1], sz = s->stride[2];
     for (int kz = 0; kz < (D > 2 ? 2 : 1); kz++)
         for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++) {
@@ -118,13 +74,13 @@ INLINE void trun_flush(const mpm_sim *s, const trun *r, mpm_gridbuf *gb, int D, 
 /* Particle p (weights W) into the run: WQ its mass and momentum
  * (scatter_mq()), WF its internal force (scatter_force()). */
 INLINE void trun_add(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const pw *W, size_t p, int D,
-                     int NS, int WQ, int WF)
+                     int WQ, int WF)
 {
     IH(s);
     if (W->base != r->base) {
-        trun_flush(s, r, gb, D, NS, WQ, WF);
+        trun_flush(s, r, gb, D, WQ, WF);
         r->base = W->base;
-        trun_zero(r, D, NS);
+        trun_zero(r, D);
     }
     const mpm_particles *P = &s->P;
     const double w0 = W->w[0][0], w1 = W->w[0][1];
@@ -138,25 +94,6 @@ INLINE void trun_add(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const pw *W, si
         /* the sig[] order: xx, yy, zz, xy, yz, xz (2D: no zz) */
         for (int c = 0; c < MPM_NCOMP(D); c++)
             if (D > 2 || c != 2) sg[c] = V * P->sig[c][p];
-    }
-    if (NS == 3) {
-        const v4d wx = {w0, w1, W->w[0][2], 0}, gx = {W->g[0][0], W->g[0][1], W->g[0][2], 0};
-        for (int ky = 0; ky < (D > 1 ? 3 : 1); ky++) {
-            double A = D > 1 ? W->w[1][ky] : 1.0, B = D > 1 ? W->g[1][ky] : 0.0;
-            if (WQ) {
-                r->c[0][ky] += wx * (A * mp);
-                for (int c = 0; c < D; c++) r->c[1 + c][ky] += wx * (A * mv[c]);
-            }
-            if (WF) {
-                if (D == 1) {
-                    r->c[4][ky] += gx * (sg[0] * A);
-                } else {
-                    r->c[4][ky] += gx * (sg[0] * A) + wx * (sg[3] * B);
-                    r->c[5][ky] += gx * (sg[3] * A) + wx * (sg[1] * B);
-                }
-            }
-        }
-        return;
     }
     if (D > 2) {
         const v4d wx = {w0, w1, w0, w1}, gx = {-ih_[0], ih_[0], -ih_[0], ih_[0]};
