@@ -38,6 +38,7 @@ typedef long long v4l __attribute__((vector_size(32)));
  * vector where AVX is not enabled (the portable kernels' ABI). */
 #define V4ABS(x) ((v4d)((v4l)(x) & (v4l){INT64_MAX, INT64_MAX, INT64_MAX, INT64_MAX}))
 #define V4SEL(m, x, y) ((v4d)(((v4l)(x) & (v4l)(m)) | ((v4l)(y) & ~(v4l)(m))))
+#define V2SEL(m, x, y) ((v2d)(((v2l)(x) & (v2l)(m)) | ((v2l)(y) & ~(v2l)(m))))
 #if defined(__AVX__)
 /* one vminpd and one vmaxpd (the selects cost a compare and a two-uop
  * blend each); the same values as the selects for every number */
@@ -59,16 +60,33 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
     int c = (int)r;
     double f = r - c;
     int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
-    /* the NS nodes' distances as lanes */
+    /* the NS nodes' distances as lanes; the four lanes stored at once
+     * (NS 3: w[3], g[3] get the fourth node's values, which no kernel
+     * reads; w and g hold 4) */
+#if defined(__AVX__)
     const v4d k4 = {0, 1, 2, 3};
     v4d sd = r - (k4 + (double)n0), cp, cm;
     CLAMP1_4(sd + a, cp);
     CLAMP1_4(sd - a, cm);
     v4d ap = V4ABS(cp), am = V4ABS(cm);
-    /* the four lanes stored at once (NS 3: w[3], g[3] get the fourth
-     * node's values, which no kernel reads; w and g hold 4) */
     *(v4du *)w = ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a;
     *(v4du *)g = (am - ap) * i2lp;
+#else
+    /* two pairs: SSE2 lowered the four-lane form's broadcasts through the
+     * stack (two 8-byte stores read back as one 16-byte load, which the
+     * store buffer cannot forward) and ran 3x slower than this */
+    const v2d one = {1, 1}, nd = {(double)n0, (double)n0}, av = {a, a};
+    const v2l mag = {INT64_MAX, INT64_MAX};
+    for (int h = 0; h < 4; h += 2) {
+        const v2d k2 = {(double)h, (double)(h + 1)};
+        v2d sd = r - (k2 + nd), sp = sd + av, sm = sd - av;
+        v2d cp = V2SEL(sp < -one, -one, V2SEL(sp > one, one, sp));
+        v2d cm = V2SEL(sm < -one, -one, V2SEL(sm > one, one, sm));
+        v2d ap = (v2d)((v2l)cp & mag), am = (v2d)((v2l)cm & mag);
+        v2_st(w + h, ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a);
+        v2_st(g + h, (am - ap) * i2lp);
+    }
+#endif
     return n0;
 }
 
