@@ -25,7 +25,14 @@
  * 0.96x).  Each lane does the pair's arithmetic, so the same bits. */
 typedef struct {
     size_t base; /* the run's cell (its first corner); SIZE_MAX: no run yet */
+#if defined(__AVX__)
     v4d a[7][2]; /* 3D */
+#else
+    /* 3D in the portable kernels: a[k][kz][ky], the x pairs (SSE2 lowered
+     * the four-lane sums' broadcasts through the stack: cube3d MPM ran
+     * 2.9x slower than the AVX2 kernels) */
+    v2d a[7][2][2];
+#endif
     v2d b[7][2]; /* 1D, 2D */
 } trun;
 
@@ -34,7 +41,11 @@ INLINE void trun_zero(trun *r, int D)
     for (int k = 0; k < 7; k++)
         for (int j = 0; j < 2; j++) {
             if (D > 2)
+#if defined(__AVX__)
                 r->a[k][j] = (v4d){0, 0, 0, 0};
+#else
+                r->a[k][j][0] = r->a[k][j][1] = (v2d){0, 0};
+#endif
             else
                 r->b[k][j] = (v2d){0, 0};
         }
@@ -47,10 +58,14 @@ INLINE void trun_init(trun *r, int D)
 }
 
 /* The x pair of row (ky, kz) of field k. */
+#if defined(__AVX__)
 #define TPAIR(r, D, k, ky, kz)                           \
     ((D) < 3 ? (r)->b[k][ky]                             \
      : (ky)  ? (v2d){(r)->a[k][kz][2], (r)->a[k][kz][3]} \
              : (v2d){(r)->a[k][kz][0], (r)->a[k][kz][1]})
+#else
+#define TPAIR(r, D, k, ky, kz) ((D) < 3 ? (r)->b[k][ky] : (r)->a[k][kz][ky])
+#endif
 
 /* Adds the run's sums to the grid: WQ mass and momentum, WF force. */
 INLINE void trun_flush(const mpm_sim *s, const trun *r, mpm_gridbuf *gb, int D, int WQ, int WF)
@@ -95,6 +110,28 @@ INLINE void trun_add(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const pw *W, si
         for (int c = 0; c < MPM_NCOMP(D); c++)
             if (D > 2 || c != 2) sg[c] = V * P->sig[c][p];
     }
+#if !defined(__AVX__)
+    if (D > 2) {
+        const v2d wx = {w0, w1}, gx = {-ih_[0], ih_[0]};
+        for (int kz = 0; kz < 2; kz++) {
+            double wz = W->w[2][kz], gz = kz ? ih_[2] : -ih_[2];
+            for (int ky = 0; ky < 2; ky++) {
+                double wy = W->w[1][ky], gy = ky ? ih_[1] : -ih_[1];
+                double A = wy * wz, B = gy * wz, C = wy * gz;
+                if (WQ) {
+                    r->a[0][kz][ky] += wx * (A * mp);
+                    for (int c = 0; c < 3; c++) r->a[1 + c][kz][ky] += wx * (A * mv[c]);
+                }
+                if (WF) {
+                    r->a[4][kz][ky] += gx * (sg[0] * A) + wx * (sg[3] * B + sg[5] * C);
+                    r->a[5][kz][ky] += gx * (sg[3] * A) + wx * (sg[1] * B + sg[4] * C);
+                    r->a[6][kz][ky] += gx * (sg[5] * A) + wx * (sg[4] * B + sg[2] * C);
+                }
+            }
+        }
+        return;
+    }
+#else
     if (D > 2) {
         const v4d wx = {w0, w1, w0, w1}, gx = {-ih_[0], ih_[0], -ih_[0], ih_[0]};
         const double wy0 = W->w[1][0], wy1 = W->w[1][1];
@@ -114,6 +151,7 @@ INLINE void trun_add(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const pw *W, si
         }
         return;
     }
+#endif
     const v2d wx = {w0, w1}, gx = {-ih_[0], ih_[0]};
     for (int ky = 0; ky < (D > 1 ? 2 : 1); ky++) {
         double wy = D > 1 ? W->w[1][ky] : 1.0;
