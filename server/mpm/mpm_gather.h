@@ -171,7 +171,7 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
  * as far as NS (four-lane vectors there run as pairs anyway, and their
  * unaligned loads cost 0.78x).  Each lane does the same operations either
  * way, so the same bits. */
-#if defined(__AVX__)
+#if MPM_V4
 typedef struct {
     v4d v;
 } xrow;
@@ -202,7 +202,7 @@ typedef struct {
 
 INLINE void xr_ld(xrow *r, const double *restrict q, size_t n, int NS)
 {
-#if defined(__AVX__)
+#if MPM_V4
     (void)NS;
     r->v = *(const v4du *)(q + n);
 #else
@@ -216,7 +216,7 @@ INLINE void xr_ld(xrow *r, const double *restrict q, size_t n, int NS)
 /* lane k */
 INLINE double xr_get(const xrow *r, int k)
 {
-#if defined(__AVX__)
+#if MPM_V4
     return r->v[k];
 #else
     return k < 2 ? r->lo[k] : r->hi[k - 2];
@@ -226,7 +226,7 @@ INLINE double xr_get(const xrow *r, int k)
 /* the lanes a, b, c, d */
 INLINE void xr_make(xrow *r, double a, double b, double c, double d)
 {
-#if defined(__AVX__)
+#if MPM_V4
     r->v = (v4d){a, b, c, d};
 #else
     r->lo = (v2d){a, b};
@@ -237,7 +237,7 @@ INLINE void xr_make(xrow *r, double a, double b, double c, double d)
 /* v *= m, lane by lane */
 INLINE void xr_mul(xrow *v, const xrow *m)
 {
-#if defined(__AVX__)
+#if MPM_V4
     v->v = v->v * m->v;
 #else
     v->lo = v->lo * m->lo;
@@ -248,7 +248,7 @@ INLINE void xr_mul(xrow *v, const xrow *m)
 /* acc += c v */
 INLINE void xr_axpy(xrow *acc, double c, const xrow *v)
 {
-#if defined(__AVX__)
+#if MPM_V4
     acc->v = acc->v + v->v * c;
 #else
     acc->lo = acc->lo + v->lo * c;
@@ -259,7 +259,7 @@ INLINE void xr_axpy(xrow *acc, double c, const xrow *v)
 /* sum_k a_k w_k over the NS nodes, in node order */
 INLINE double xr_dot(const xrow *a, const xrow *w, int NS)
 {
-#if defined(__AVX__)
+#if MPM_V4
     v4d t = a->v * w->v;
     double r = t[0] + t[1];
     if (NS > 2) r += t[2];
@@ -279,7 +279,7 @@ INLINE double xr_dot(const xrow *a, const xrow *w, int NS)
 /* ph |= the lanes of m that are 0 (phantom nodes: 1/m = 0) */
 INLINE void xr_orzero(xmask *ph, const xrow *m)
 {
-#if defined(__AVX__)
+#if MPM_V4
     const v4d zero = {0, 0, 0, 0};
     ph->v |= m->v == zero;
 #else
@@ -292,7 +292,7 @@ INLINE void xr_orzero(xmask *ph, const xrow *m)
 /* any of the support's NS lanes set */
 INLINE int xr_any(const xmask *ph, int NS)
 {
-#if defined(__AVX__)
+#if MPM_V4
     long long a = ph->v[0] | ph->v[1];
     if (NS > 2) a |= ph->v[2];
     if (NS > 3) a |= ph->v[3];

@@ -637,8 +637,9 @@ int mpm_case_fill(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mat
 /* ---- small shared helpers (inline: some run inside the passes) ---- */
 
 /* Doubles allocated (zeroed) past the end of every grid field and of
- * minv: the gathers load a support's row of three nodes as four lanes
- * (gather_rows()), which reads one node past a row that ends the array. */
+ * minv: the AVX2 kernels load and store a support's row of three nodes as
+ * four lanes (gather_rows(), the scatters in mpm_kernels.c), which reads,
+ * and adds +0 to, one node past a row that ends the array. */
 #define MPM_GRID_SLACK 4
 
 static inline double *mpm_dalloc(size_t n)

@@ -179,12 +179,7 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
  * after the row: in the thread's own buffer, where a sum started from +0
  * is never -0, so x + 0 = x bit for bit; the grid arrays have
  * MPM_GRID_SLACK doubles past their end for the row that ends one.  Each
- * lane does the pairs' arithmetic, so the same bits. */
-#if defined(__AVX__)
-#define XR4 1
-#else
-#define XR4 0
-#endif
+ * lane does the pairs' arithmetic, so the same bits (MPM_V4: AVX builds). */
 #define V4_ADD(ptr, v) (*(v4du *)(ptr) = *(v4du *)(ptr) + (v))
 #define V4_SUB(ptr, v) (*(v4du *)(ptr) = *(v4du *)(ptr) - (v))
 #define V4_ROW(W, k, NS) ((v4d){(W)[k][0], (W)[k][1], (W)[k][2], (NS) > 3 ? (W)[k][3] : 0.0})
@@ -199,7 +194,7 @@ INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_t p
     double mp = s->P.m[p];
     double mv0 = mp * s->P.v[0][p];
     double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
-    if (XR4 && NS > 2) {
+    if (MPM_V4 && NS > 2) {
         const v4d S = V4_ROW(W->w, 0, NS);
         ROWS(D, NS, *W, s, {
             V4_ADD(m + row, S * (A * mp));
@@ -285,7 +280,7 @@ INLINE void scatter_affine(const mpm_sim *s, double *restrict m, double *const q
             u[a] = A * Cm[a][0];
         }
         double am = A * mp;
-        if (XR4 && NS > 2) {
+        if (MPM_V4 && NS > 2) {
             const v4d S = V4_ROW(W->w, 0, NS), e = S * V4_ROW(R->r, 0, NS);
             if (WM) V4_ADD(m + row, S * am);
             V4_ADD(q0 + row, S * t[0] + e * u[0]);
@@ -335,7 +330,7 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_
     double syy = D > 1 ? V * P->sig[1][p] : 0.0, sxy = D > 1 ? V * P->sig[3][p] : 0.0;
     double szz = D > 2 ? V * P->sig[2][p] : 0.0, syz = D > 2 ? V * P->sig[4][p] : 0.0;
     double sxz = D > 2 ? V * P->sig[5][p] : 0.0;
-    if (XR4 && NS > 2) {
+    if (MPM_V4 && NS > 2) {
         const v4d gx = V4_ROW(W->g, 0, NS), wx = V4_ROW(W->w, 0, NS);
         ROWS(D, NS, *W, s, {
             double P0 = sxx * A, P1 = sxy * A, P2 = sxz * A;
@@ -488,7 +483,7 @@ INLINE void scatter_q2(const mpm_sim *s, double *const q[3], const pw *W0, size_
     double mp = s->P.m[p];
     double mv0 = mp * s->P.v[0][p];
     double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
-    if (XR4 && NS > 2) {
+    if (MPM_V4 && NS > 2) {
         const v4d S = V4_ROW(W->w, 0, NS);
         ROWS(D, NS, *W, s, {
             V4_ADD(q0 + row, S * (A * mv0));

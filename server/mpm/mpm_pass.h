@@ -51,6 +51,18 @@ typedef double v4d __attribute__((vector_size(32)));
 /* v4d at any 8-byte boundary (four doubles of a struct's array) */
 typedef double v4du __attribute__((vector_size(32), aligned(8), may_alias));
 
+/* 1 where four lanes are one register (AVX builds: the AVX2 kernels).
+ * The code built from scalars in four lanes (a row of nodes, uGIMP's axis
+ * weights, the 3D tent runs, bs_block4()) takes that form only there: the
+ * portable kernels' SSE2 lowered its broadcasts through the stack (two
+ * 8-byte stores read back as one 16-byte load, which the store buffer
+ * cannot forward), so they write it as pairs or one particle at a time. */
+#if defined(__AVX__)
+#define MPM_V4 1
+#else
+#define MPM_V4 0
+#endif
+
 INLINE v2d v2_ld(const double *p)
 {
     return *(const v2d *)p;

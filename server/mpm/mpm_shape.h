@@ -63,7 +63,7 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
     /* the NS nodes' distances as lanes; the four lanes stored at once
      * (NS 3: w[3], g[3] get the fourth node's values, which no kernel
      * reads; w and g hold 4) */
-#if defined(__AVX__)
+#if MPM_V4
     const v4d k4 = {0, 1, 2, 3};
     v4d sd = r - (k4 + (double)n0), cp, cm;
     CLAMP1_4(sd + a, cp);
@@ -263,12 +263,7 @@ INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS,
     /* four particles at a time in AVX builds; the portable kernels take
      * the B-spline weights one by one (SSE2 lowers the four-lane form
      * through the stack: 0.88x) */
-#if defined(__AVX__)
-    const int B4 = 1;
-#else
-    const int B4 = 0;
-#endif
-    if (BS && B4)
+    if (BS && MPM_V4)
         for (; i + 3 < nb; i += 4)
             if (!bs_block4(s, b0 + i, D, NS, Wb + i))
                 for (int j = 0; j < 4; j++) weights(s, b0 + i + j, D, NS, BS, &Wb[i + j]);

@@ -25,7 +25,7 @@
  * 0.96x).  Each lane does the pair's arithmetic, so the same bits. */
 typedef struct {
     size_t base; /* the run's cell (its first corner); SIZE_MAX: no run yet */
-#if defined(__AVX__)
+#if MPM_V4
     v4d a[7][2]; /* 3D */
 #else
     /* 3D in the portable kernels: a[k][kz][ky], the x pairs (SSE2 lowered
@@ -41,7 +41,7 @@ INLINE void trun_zero(trun *r, int D)
     for (int k = 0; k < 7; k++)
         for (int j = 0; j < 2; j++) {
             if (D > 2)
-#if defined(__AVX__)
+#if MPM_V4
                 r->a[k][j] = (v4d){0, 0, 0, 0};
 #else
                 r->a[k][j][0] = r->a[k][j][1] = (v2d){0, 0};
@@ -58,7 +58,7 @@ INLINE void trun_init(trun *r, int D)
 }
 
 /* The x pair of row (ky, kz) of field k. */
-#if defined(__AVX__)
+#if MPM_V4
 #define TPAIR(r, D, k, ky, kz)                           \
     ((D) < 3 ? (r)->b[k][ky]                             \
      : (ky)  ? (v2d){(r)->a[k][kz][2], (r)->a[k][kz][3]} \
@@ -110,7 +110,7 @@ INLINE void trun_add(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const pw *W, si
         for (int c = 0; c < MPM_NCOMP(D); c++)
             if (D > 2 || c != 2) sg[c] = V * P->sig[c][p];
     }
-#if !defined(__AVX__)
+#if !MPM_V4
     if (D > 2) {
         const v2d wx = {w0, w1}, gx = {-ih_[0], ih_[0]};
         for (int kz = 0; kz < 2; kz++) {
