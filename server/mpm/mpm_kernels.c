@@ -557,9 +557,9 @@ INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, 
             vn[d] = s->P.v[d][p];
         }
         check_xv(bc->lo, bc->hi, ck, p, xn, vn, D);
-        if (EN) esum_particle(s, e, p, D, AP);
         box_add(s, bc, o, a, xn, D, NS, BS);
     }
+    if (EN) esum_block(s, e, b0, b1, D, AP);
 }
 
 /* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0);
