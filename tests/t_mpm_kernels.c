@@ -276,6 +276,94 @@ TEST(kernels_avx2_matches_portable)
     CHECK(any == fuses);
 }
 
+/* A support whose last row ends the grid arrays.  The AVX2 kernels load
+ * and store a row of a 3-node support as four lanes, so the row that ends
+ * an array reaches one double past its last node: the grid fields and
+ * minv have MPM_GRID_SLACK doubles there (mpm_internal.h).  A box in the
+ * grid's top corner, moving into it at (1, 1) m/s (2D; 3D (1, 1, 1)):
+ * the B-splines' supports reach the last node of the padded grid at once
+ * (no padding), GIMP's when the body has moved into the padding (2D: step
+ * 78).  Each case asserts that the last node of the arrays got mass (so
+ * the row ending there was scattered and gathered), and that the AVX2 run
+ * agrees with the portable one (KTOL): a fourth lane written to a real
+ * node would not.  Under the sanitizers' builds, a grid without the slack
+ * fails here as a heap-buffer-overflow. */
+TEST(kernels_support_at_grid_end)
+{
+    static const struct {
+        int dim;
+        mpm_method m;
+        mpm_update up;
+        int steps;
+        const char *name;
+    } cs[] = {
+        {2, MPM_METHOD_BSPLINE2, MPM_MUSL, 5, "2D BSPLINE2 MUSL"},
+        {2, MPM_METHOD_BSPLINE3, MPM_USF, 5, "2D BSPLINE3 USF"},
+        {2, MPM_METHOD_GIMP, MPM_USF, 90, "2D GIMP USF"},
+        {2, MPM_METHOD_GIMP, MPM_MUSL, 90, "2D GIMP MUSL"},
+        {3, MPM_METHOD_BSPLINE2, MPM_USF, 5, "3D BSPLINE2 USF"},
+        {3, MPM_METHOD_GIMP, MPM_USL, 90, "3D GIMP USL"},
+    };
+    const int avx = mpm_kernels_avx2_available();
+    for (size_t i = 0; i < sizeof cs / sizeof cs[0]; i++) {
+        mpm_case c;
+        mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                 .youngs_modulus = 1e3,
+                                 .poisson_ratio = 0.3,
+                                 .density = 1.0};
+        mpm_body_desc b;
+        memset(&c, 0, sizeof c);
+        memset(&b, 0, sizeof b);
+        b.shape = MPM_SHAPE_BOX;
+        b.ppc = 2;
+        c.grid.dim = cs[i].dim;
+        for (int d = 0; d < cs[i].dim; d++) {
+            b.lo[d] = 0.7;
+            b.hi[d] = 1.0;
+            b.velocity[d] = 1.0;
+            c.grid.h[d] = 0.1;
+            c.grid.nodes[d] = 11;
+        }
+        c.method = cs[i].m;
+        c.update = cs[i].up;
+        c.n_materials = 1;
+        c.materials = &mat;
+        c.n_bodies = 1;
+        c.bodies = &b;
+        mpm_sim *s[2] = {NULL, NULL};
+        double end_m[2] = {0, 0};
+        for (int k = 0; k < 2; k++) {
+            mpm_error err;
+            c.kernels = k && avx ? MPM_KERNELS_AVX2 : MPM_KERNELS_PORTABLE;
+            s[k] = mpm_sim_new(&c, NULL, &err);
+            CHECKF(s[k], "%s: %s", cs[i].name, TERR(&err));
+            CHECKF(mpm_sim_run(s[k], cs[i].steps) == 0, "%s: %s", cs[i].name,
+                   mpm_sim_error(s[k])->message);
+            end_m[k] = s[k]->g.m[s[k]->nn - 1];
+        }
+        size_t n = mpm_sim_particles(s[0]), nd = n * (size_t)cs[i].dim;
+        double *x[2], *v[2];
+        for (int k = 0; k < 2; k++) {
+            x[k] = malloc(nd * sizeof(double));
+            v[k] = malloc(nd * sizeof(double));
+            CHECK(x[k] && v[k]);
+            mpm_sim_snapshot(s[k], &(mpm_snapshot){.x = x[k], .v = v[k]});
+        }
+        double dx = maxrel(x[0], x[1], nd), dv = maxrel(v[0], v[1], nd);
+        TLOG("%-17s %4zu particles, %2d steps: mass at the arrays' last node %.3g (portable) "
+             "%.3g (%s); %s vs portable: dx %.1e, dv %.1e",
+             cs[i].name, n, cs[i].steps, end_m[0], end_m[1], mpm_sim_kernels(s[1]),
+             mpm_sim_kernels(s[1]), dx, dv);
+        CHECKF(end_m[0] > 0 && end_m[1] > 0, "%s: no support reached the arrays' end", cs[i].name);
+        CHECKF(dx <= KTOL && dv <= KTOL, "%s", cs[i].name);
+        for (int k = 0; k < 2; k++) {
+            free(x[k]);
+            free(v[k]);
+            mpm_sim_destroy(&s[k]);
+        }
+    }
+}
+
 TEST(kernels_field_checked)
 {
     mpm_paper t;
