@@ -55,6 +55,23 @@ typedef long long v4l __attribute__((vector_size(32)));
     } while (0)
 #endif
 
+/* Two lanes clamped to [-1, 1]: SSE2's minpd and maxpd where there is
+ * SSE2 (x86-64's baseline: the portable kernels there), else the selects;
+ * the same values for every number (as CLAMP1_4) */
+#if defined(__SSE2__)
+#define CLAMP1_2(x, out)                                                      \
+    do {                                                                      \
+        const v2d one_ = {1, 1};                                              \
+        (out) = __builtin_ia32_maxpd(__builtin_ia32_minpd((x), one_), -one_); \
+    } while (0)
+#else
+#define CLAMP1_2(x, out)                                                 \
+    do {                                                                 \
+        const v2d one_ = {1, 1};                                         \
+        (out) = V2SEL((x) < -one_, -one_, V2SEL((x) > one_, one_, (x))); \
+    } while (0)
+#endif
+
 INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double *w, double *g)
 {
     int c = (int)r;
@@ -75,13 +92,14 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
     /* two pairs: SSE2 lowered the four-lane form's broadcasts through the
      * stack (two 8-byte stores read back as one 16-byte load, which the
      * store buffer cannot forward) and ran 3x slower than this */
-    const v2d one = {1, 1}, nd = {(double)n0, (double)n0}, av = {a, a};
+    const v2d nd = {(double)n0, (double)n0}, av = {a, a};
     const v2l mag = {INT64_MAX, INT64_MAX};
     for (int h = 0; h < 4; h += 2) {
         const v2d k2 = {(double)h, (double)(h + 1)};
         v2d sd = r - (k2 + nd), sp = sd + av, sm = sd - av;
-        v2d cp = V2SEL(sp < -one, -one, V2SEL(sp > one, one, sp));
-        v2d cm = V2SEL(sm < -one, -one, V2SEL(sm > one, one, sm));
+        v2d cp, cm;
+        CLAMP1_2(sp, cp);
+        CLAMP1_2(sm, cm);
         v2d ap = (v2d)((v2l)cp & mag), am = (v2d)((v2l)cm & mag);
         v2_st(w + h, ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a);
         v2_st(g + h, (am - ap) * i2lp);
