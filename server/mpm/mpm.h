@@ -594,7 +594,9 @@ int mpm_sim_checkpoint_load(mpm_sim *sim, const void *buf, size_t n, mpm_error *
  * MPM_ESYNTAX or MPM_EVERSION with err filled. */
 int mpm_checkpoint_verify(const void *buf, size_t n, mpm_error *err);
 
-/* Copies the requested particle fields into caller arrays. */
+/* Copies the requested particle fields into caller arrays, each particle
+ * at its creation number's place, on the simulation's threads (each its
+ * slice of the particles).  Not to be called while a step runs. */
 void mpm_sim_snapshot(const mpm_sim *sim, const mpm_snapshot *out);
 /* 1 when the run's particles carry field f (the plastic strain and the
  * yield flag: a plastic model in the case; F: a model or the volume update

@@ -472,7 +472,7 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
             v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
         }
         moved(s, o, &a, p, D);
-        if (EN) esum_particle(s, &e, p, D, 0);
+        if (EN) esum_particle(s, &e, p, D, 0, 1);
     }
     run_flush(s, o, &a, D);
     if (EN) esum_store(&e, o, 1, 0);
@@ -504,7 +504,7 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                 v_update(&s->P.v[d][p], dt, dv[d], dx[d], BL, al, bl);
             }
             moved(s, o, &a, p, D);
-            if (EN) esum_particle(s, &e, p, D, 0);
+            if (EN) esum_particle(s, &e, p, D, 0, 1);
         }
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
@@ -548,7 +548,7 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
             f_update(s, L, p, D);
             for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
             moved(s, o, &a, p, D);
-            if (EN) esum_particle(s, &e, p, D, 0);
+            if (EN) esum_particle(s, &e, p, D, 0, 1);
         }
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);

@@ -7,6 +7,7 @@
  * can supply.
  */
 #include "mpm_internal.h"
+#include "mpm_pass.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -24,54 +25,57 @@
  * exceeds that in the continuum, and the discrete schemes stay within a few
  * per cent of it on every problem of the stress suite (make stress), the
  * worst +29 % (MPM USF, one particle per cell).  Twice the available energy
- * is a blow-up, recorded as MPM_EDIVERGED.  Cost: one pass over the
- * particles every MPM_GUARD_EVERY steps, and whenever the largest particle
- * speed (known every step) has doubled its square since the last check, so
- * a fast blow-up is caught within a step or two; mpm_sim_check() runs it on
+ * is a blow-up, recorded as MPM_EDIVERGED.  Cost: the step that ends every
+ * MPM_GUARD_EVERY steps sums its energies in its own particle passes
+ * (mpm_sim_step(), as for mpm_sim_want_energy(): the same sums), and a
+ * pass over the particles whenever the largest particle speed (known
+ * every step) has doubled its square since the last check, so a fast
+ * blow-up is caught within a step or two; mpm_sim_check() runs it on
  * demand (at the end of a run). */
 #define MPM_GUARD_FACTOR 2.0
 
-/* The guard's energies on the team: each thread sums its slice exactly as
- * mpm_sim_energy() does, and the partial sums are added in thread order,
- * so the result is reproducible for a given thread count (and with one
- * thread equals mpm_sim_energy()'s).  A step asked for energies
- * (mpm_sim_want_energy()) makes the same per-thread sums inside its
- * kernels (mpm_kernels.c, esum_*), in the same particle order and with the
- * same arithmetic; the guard then uses those. */
-static inline void energy_slice(mpm_sim *s, int tid, int ang)
+/* The energy sums of thread tid's slice, in blocks: the kinematic terms
+ * and the strain energy with the in-pass sums' functions (mpm_pass.h,
+ * esum_block() and esum_strain(): four particles at a time in 2D and 3D),
+ * each sum taken particle after particle in the slice's order.  A step
+ * that asked for its energies (mpm_sim_want_energy()) makes the same sums
+ * inside its passes, and the guard then uses those; the partial sums are
+ * added in thread order, so the result is reproducible for a given thread
+ * count (and with one thread equals the serial mpm_sim_energy()'s). */
+INLINE void energy_blocks(mpm_sim *s, esum *e, size_t a, size_t b, int D, int AP, int ANG)
 {
-    const mpm_particles *P = &s->P;
-    int dim = s->dim, apic = s->transfer == MPM_TRANSFER_APIC, gen = s->general;
+    for (size_t b0 = a; b0 < b; b0 += MPM_BLOCK) {
+        size_t b1 = b - b0 < MPM_BLOCK ? b : b0 + MPM_BLOCK;
+        esum_strain(s, e, b0, b1 - b0, D);
+        esum_block(s, e, b0, b1, D, AP, ANG);
+    }
+}
+
+/* the dimension and the angular momentum's terms chosen once per slice */
+#define ENERGY_BLOCKS(D)                         \
+    do {                                         \
+        if (ang && apic)                         \
+            energy_blocks(s, &e, a, b, D, 1, 1); \
+        else if (ang)                            \
+            energy_blocks(s, &e, a, b, D, 0, 1); \
+        else                                     \
+            energy_blocks(s, &e, a, b, D, 0, 0); \
+    } while (0)
+
+static void energy_slice(mpm_sim *s, int tid, int ang)
+{
+    int apic = s->transfer == MPM_TRANSFER_APIC;
     size_t a, b;
     mpm_particle_slice(s, tid, &a, &b);
-    double ek = 0, es = 0, ep = 0, mom[3] = {0, 0, 0}, ms = 0, L[3] = {0, 0, 0};
-    for (size_t p = a; p < b; p++) {
-        double m = P->m[p], v2 = 0;
-        for (int d = 0; d < dim; d++) {
-            v2 += P->v[d][p] * P->v[d][p];
-            mom[d] += m * P->v[d][p];
-            ep -= m * s->gravity[d] * P->x[d][p];
-        }
-        if (ang) {
-            mpm_angmom_add(P, dim, p, m, L);
-            if (apic) mpm_angmom_add_affine(P, dim, p, m, L);
-        }
-        ek += 0.5 * m * v2;
-        if (gen) /* the model's stored energy (the in-pass sums: the same) */
-            es += mpm_model_energy(s, p);
-        else
-            es += 0.5 * mpm_strain_density(s->mats, P, dim, p) * P->vol[p];
-        ms += m;
-    }
-    mpm_thread_out *o = &s->tout[tid];
-    o->ekin = ek;
-    o->estr = es;
-    o->epot = ep;
-    o->emass = ms;
-    for (int d = 0; d < 3; d++) {
-        o->emom[d] = mom[d];
-        o->eang[d] = L[d];
-    }
+    esum e;
+    esum_init(s, &e);
+    if (s->dim == 1)
+        ENERGY_BLOCKS(1);
+    else if (s->dim == 2)
+        ENERGY_BLOCKS(2);
+    else
+        ENERGY_BLOCKS(3);
+    esum_store(&e, &s->tout[tid], 1, 1);
 }
 
 void mpm_ph_energy(mpm_sim *s, int tid)

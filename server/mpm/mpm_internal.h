@@ -303,6 +303,8 @@ struct mpm_sim {
      * particles as they are (cleared when a step starts) */
     int want_energy, step_energy, ecache_ok;
     mpm_energy ecache;
+    /* mpm_sim_snapshot()'s request while the team copies it out */
+    const mpm_snapshot *snap_out;
 
     /* kernels chosen once per job */
     const mpm_kernels *k;

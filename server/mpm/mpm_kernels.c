@@ -559,7 +559,7 @@ INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, 
         check_xv(bc->lo, bc->hi, ck, p, xn, vn, D);
         box_add(s, bc, o, a, xn, D, NS, BS);
     }
-    if (EN) esum_block(s, e, b0, b1, D, AP);
+    if (EN) esum_block(s, e, b0, b1, D, AP, 1);
 }
 
 /* Eqs. 30-31: x += dt sum S q/m, v += dt sum S qdot/m (phantom nodes: 0);

@@ -177,12 +177,13 @@ INLINE void block_update(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb, in
     }
 }
 
-/* Energy sums of a slice (EN: the step wants them), in the order and with
- * the arithmetic of the energy pass (mpm_energy.c, mpm_ph_energy), so that the
- * sums are the same: kinetic, potential, momentum, angular momentum
- * (mpm_angmom_add) and mass of particle p
- * once its position and velocity are final, strain energy of a block once
- * its stress, strain and volume are. */
+/* Energy sums of a slice: kinetic, potential, momentum, angular momentum
+ * (mpm_angmom_add; ANG, which the guard's pass leaves out) and mass of
+ * particle p once its position and velocity are final, strain energy of a
+ * block once its stress, strain and volume are.  The energy pass
+ * (mpm_energy.c) sums with these functions over a slice, and a step that
+ * wants its energies (EN) inside its passes over the same particles in the
+ * same order, so that the sums are the same, bit for bit. */
 typedef struct {
     double ek, es, ep, mom[3], ms, L[3];
     double g[3];
@@ -197,7 +198,7 @@ INLINE void esum_init(const mpm_sim *s, esum *e)
     }
 }
 
-INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP)
+INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP, int ANG)
 {
     const mpm_particles *P = &s->P;
     double m = P->m[p], v2 = 0;
@@ -207,8 +208,8 @@ INLINE void esum_particle(const mpm_sim *s, esum *e, size_t p, int D, int AP)
         e->mom[d] += mpm_rn(m * v);
         e->ep -= mpm_rn(m * e->g[d] * P->x[d][p]);
     }
-    mpm_angmom_add(P, D, p, m, e->L);
-    if (AP) mpm_angmom_add_affine(P, D, p, m, e->L);
+    if (ANG) mpm_angmom_add(P, D, p, m, e->L);
+    if (ANG && AP) mpm_angmom_add_affine(P, D, p, m, e->L);
     e->ek += mpm_rn(0.5 * m * v2);
     e->ms += m;
 }
@@ -279,7 +280,7 @@ INLINE double es_lin4(const mpm_sim *s, double es, size_t p, int D)
  * after the other in its order: the same bits.  The potential skips the
  * axes without gravity, whose terms m 0 x are zeros (adding one changes
  * no sum). */
-INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, int AP)
+INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, int AP, int ANG)
 {
     const mpm_particles *P = &s->P;
     size_t p = b0;
@@ -288,7 +289,10 @@ INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, i
             const v4d m = *(const v4du *)(P->m + p);
             v4d x[3], v[3], mv[3], pe[3], L[3] = {{0}}, La[3] = {{0}}, v2 = {0, 0, 0, 0};
             for (int d = 0; d < D; d++) {
-                x[d] = *(const v4du *)(P->x[d] + p);
+                /* x is read by the potential where there is gravity and
+                 * by the angular momentum */
+                x[d] = (v4d){0, 0, 0, 0};
+                if (ANG || e->g[d] != 0.0) x[d] = *(const v4du *)(P->x[d] + p);
                 v[d] = *(const v4du *)(P->v[d] + p);
                 v4d q = v[d] * v[d];
                 mv[d] = m * v[d];
@@ -299,7 +303,7 @@ INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, i
                 v2 = v2 + q;
             }
             /* mpm_angmom_add(): 2D L[2] only */
-            for (int a = (D > 2 ? 0 : 2); a < 3; a++) {
+            for (int a = (D > 2 ? 0 : 2); ANG && a < 3; a++) {
                 int i = (a + 1) % 3, j = (a + 2) % 3; /* L_a = m (x_i v_j - x_j v_i) */
                 v4d u = x[i] * v[j], w = x[j] * v[i];
                 V4RN(u);
@@ -307,7 +311,7 @@ INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, i
                 L[a] = m * (u - w);
                 V4RN(L[a]);
             }
-            if (AP) { /* mpm_angmom_add_affine() */
+            if (ANG && AP) { /* mpm_angmom_add_affine() */
                 static const int hi[3] = {7, 2, 3}, lo[3] = {5, 6, 1};
                 for (int a = (D > 2 ? 0 : 2); a < 3; a++) {
                     La[a] =
@@ -322,7 +326,7 @@ INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, i
                     e->mom[d] += mv[d][l];
                     if (e->g[d] != 0.0) e->ep -= pe[d][l];
                 }
-                for (int a = (D > 2 ? 0 : 2); a < 3; a++) {
+                for (int a = (D > 2 ? 0 : 2); ANG && a < 3; a++) {
                     e->L[a] += L[a][l];
                     if (AP) e->L[a] += La[a][l];
                 }
@@ -330,7 +334,7 @@ INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, i
                 e->ms += m[l];
             }
         }
-    for (; p < b1; p++) esum_particle(s, e, p, D, AP);
+    for (; p < b1; p++) esum_particle(s, e, p, D, AP, ANG);
 }
 
 INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)

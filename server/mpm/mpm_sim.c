@@ -770,8 +770,11 @@ int mpm_sim_step(mpm_sim *s)
     mpm_loads_begin_step(s);
     /* energies wanted: the passes that write each particle field for the
      * last time in the step sum them (s->step_energy, read once per pass:
-     * USF stress_force and g2p_xv, USL g2p_xv_stress, MUSL g2p_x_stress) */
-    s->step_energy = s->want_energy;
+     * USF stress_force and g2p_xv, USL g2p_xv_stress, MUSL g2p_x_stress).
+     * A step that ends with the guard's check sums them too: in the
+     * passes they cost less than the guard's own pass over the particles,
+     * and they are the same sums (mpm_guard() takes them from ecache) */
+    s->step_energy = s->want_energy || (s->steps + 1) % MPM_GUARD_EVERY == 0;
     s->want_energy = 0;
     s->damp_on = s->damp != MPM_DAMPING_NONE && (!(s->damp_until > 0) || s->t < s->damp_until);
     /* fused: the step starts with the grid the last one scattered, and
@@ -921,12 +924,13 @@ void mpm_sim_energy_sample(const mpm_sim *sim, mpm_energy_sample *out)
     mpm_sim_energy(sim, &out->e);
 }
 
-void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
+/* The particles [a, b) of a snapshot into o, each at its creation
+ * number's place (slot p holds the particle created as number P->id[p]). */
+static void snapshot_slice(const mpm_sim *s, const mpm_snapshot *o, size_t a, size_t b)
 {
     const mpm_particles *P = &s->P;
     int dim = s->dim;
-    /* slot p holds the particle created as number P->id[p] */
-    for (size_t p = 0; p < P->n; p++) {
+    for (size_t p = a; p < b; p++) {
         size_t q = P->id[p];
         for (int d = 0; d < dim; d++) {
             if (o->x) o->x[q * dim + d] = P->x[d][p];
@@ -948,6 +952,31 @@ void mpm_sim_snapshot(const mpm_sim *s, const mpm_snapshot *o)
             for (int c = 0; c < dim * dim; c++)
                 o->deformation_gradient[q * (size_t)(dim * dim) + (size_t)c] = P->F[c][p];
     }
+}
+
+static void ph_snapshot(mpm_sim *s, int tid)
+{
+    size_t a, b;
+    mpm_particle_slice(s, tid, &a, &b);
+    snapshot_slice(s, s->snap_out, a, b);
+}
+
+/* On the thread team, each thread its slice of the particles (they write
+ * disjoint entries of o: the creation numbers are a permutation), so a
+ * snapshot of 10^6 particles takes the solver's threads, not the caller's
+ * one alone; the values are copies, the same whatever the threads.  The
+ * team is idle between steps and only snap_out is written (the object was
+ * not defined const: the cast is sound, as in mpm_sim_energy()). */
+void mpm_sim_snapshot(const mpm_sim *cs, const mpm_snapshot *o)
+{
+    mpm_sim *s = (mpm_sim *)cs;
+    if (!s->threads || s->nthreads < 2) {
+        snapshot_slice(s, o, 0, s->P.n);
+        return;
+    }
+    s->snap_out = o;
+    mpm_team_run(s, ph_snapshot);
+    s->snap_out = NULL;
 }
 
 int mpm_case_has_field(const mpm_case *c, mpm_field f)
