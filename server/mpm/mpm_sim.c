@@ -31,9 +31,9 @@
  * node-wise that follows (inverse mass, gravity, BC1, BC2, q += f dt) in
  * the same pass.  The divergence guard's energy sums (or the step's own,
  * summed in its last particle passes when mpm_sim_want_energy() asked for
- * them), the sort keys and
- * the sort's permutation run on the team too, sums combined in thread
- * order.  The
+ * them; the guard's step always does), the sort keys, the sort's
+ * permutation and the snapshots run on the team too, sums combined in
+ * thread order.  The
  * same case with the same thread count is therefore bitwise reproducible;
  * a different thread count changes the order of the sums and so the last
  * bits.  Nothing is allocated inside a step.
