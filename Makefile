@@ -375,8 +375,9 @@ bench: deps
 #             checked out as a git worktree in build/compare/<short-sha> and its
 #             bench built there with its own Makefile; then COMPARE_ROUNDS (3)
 #             rounds of a triad (bin/mpmbench --triad) and every configuration,
-#             before then after; a table of the medians, after / before and
-#             after's fraction of the triad roof.  Default: disks2d and cube3d,
+#             before then after; a table of the medians, after / before, the
+#             range of the rounds' own ratios (~: it straddles 1) and after's
+#             fraction of the triad roof.  Default: disks2d and cube3d,
 #             10^6 particles, MPM / GIMP / BSPLINE2 (USF, MUSL, MUSL APIC) and
 #             MPM USL on 2 threads, MPM USF on 1, the collapse2d elastic and
 #             Drucker-Prager pair (~25 min).  COMPARE_QUICK=1: a short sanity

@@ -15,7 +15,9 @@
 #    configuration with REF's bench ("before") and this one ("after"), one
 #    after the other, so that a drift of the machine falls on both alike.
 #    Each run is one bin/mpmbench row (the median of its 3 timed runs after
-#    a warm-up); the table gives the median over the rounds.
+#    a warm-up); the table gives the median over the rounds, and the lowest
+#    and highest ratio after / before of a single round (marked ~ when they
+#    straddle 1: the noise is as large as the difference).
 # 3. Only options REF's bench understands are passed to it (--scene,
 #    --particles, --steps, --threads, --method, --update, --csv, and
 #    --transfer / a method / a scene only when its --help names them): a
@@ -159,7 +161,7 @@ steps_for() {
 
 OUT=$(mktemp -d "${TMPDIR:-/tmp}/bench-compare.XXXXXX")
 trap 'rm -rf "$OUT"' EXIT
-RES=$OUT/rows.tsv   # side cfg scene threads particles rate model_bytes
+RES=$OUT/rows.tsv   # side cfg scene threads particles rate model_bytes round
 TRI=$OUT/triad.tsv  # threads gbs
 : >"$RES"
 : >"$TRI"
@@ -194,15 +196,15 @@ run_one() { # side cfg-index bench args...
             [ "${a[i]}" = --transfer ] && [ "${a[i + 1]}" = apic ] && xf=+apic
         done
         [ "$sc" = collapse2d ] && sc=collapse2d-el
-        printf '%s\t%s\t%s\t?\t?\tfail\t\n' "$side" "$k" "$sc$xf" >>"$RES"
+        printf '%s\t%s\t%s\t?\t?\tfail\t\t%s\n' "$side" "$k" "$sc$xf" "$ROUND" >>"$RES"
         return 0
     fi
-    awk -F, -v side="$side" -v k="$k" '
+    awk -F, -v side="$side" -v k="$k" -v rd="$ROUND" '
         NR == 1 { for (i = 1; i <= NF; i++) col[$i] = i; next }
         $1 != "scene" {
             mb = ("model_bytes_per_pstep" in col) ? $(col["model_bytes_per_pstep"]) : ""
-            printf "%s\t%s\t%s\t%s\t%s\t%s\t%s\n", side, k, $(col["scene"]), $(col["threads"]),
-                $(col["particles"]), $(col["mpsteps_per_s"]), mb
+            printf "%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n", side, k, $(col["scene"]), $(col["threads"]),
+                $(col["particles"]), $(col["mpsteps_per_s"]), mb, rd
         }' <<<"$csv" >>"$RES"
 }
 
@@ -210,6 +212,7 @@ NC=${#CFGS[@]}
 echo "bench-compare: $SHORT (before) against $HEAD_DESC (after): $NC configurations, $ROUNDS rounds, ~$PARTICLES particles" >&2
 T0=$(date +%s)
 for ((r = 1; r <= ROUNDS; r++)); do
+    ROUND=$r
     for t in $THREADS; do
         "$AFTER" --triad --threads "$t" --csv 2>/dev/null | awk -F, 'NR > 1 { print $1 "\t" $2 }' >>"$TRI" || true
     done
@@ -242,6 +245,8 @@ awk -F'\t' '
 echo "Mp-steps/s: the median over the rounds of each run's median of 3 timed runs; ratio = after / before;"
 echo "roof: after's modelled particle bytes (B/pstep) x Mp-steps/s over the triad of its thread count;"
 echo "*: some rounds failed (the median is of the others); failed: every round failed (see above)."
+echo "rounds: the lowest and highest of the rounds' own ratios (after / before within one round);"
+echo "  ~: they straddle 1.00, so this machine's noise is as large as the difference."
 awk -F'\t' -v args="$ARGS" -v tri="$TRI" '
     function median(list,   n, v, i, j, x) {
         n = split(list, v, " ")
@@ -268,12 +273,20 @@ awk -F'\t' -v args="$ARGS" -v tri="$TRI" '
         key = $2 SUBSEP $3
         if (!(key in seen)) { seen[key] = 1; order[++nk] = key }
         if ($6 == "fail") { fails[$1, key]++; if (!(key in thr)) { thr[key] = "?"; np[key] = "?" } }
-        else { rate[$1, key] = rate[$1, key] " " $6; thr[key] = $4; np[key] = $5 }
+        else {
+            rate[$1, key] = rate[$1, key] " " $6; thr[key] = $4; np[key] = $5
+            one[$1, key, $8] = $6
+            if ($1 == "after" && (("before", key, $8) in one)) {
+                q = $6 / one["before", key, $8]
+                if (!(key in qlo) || q < qlo[key]) qlo[key] = q
+                if (!(key in qhi) || q > qhi[key]) qhi[key] = q
+            }
+        }
         if ($1 == "after" && $7 != "") mb[key] = $7
     }
     END {
-        printf "%-15s %-8s %-4s %-4s %3s %9s %8s %8s %6s %7s %6s\n", "scene", "method", "upd",
-            "xfer", "thr", "particles", "before", "after", "ratio", "B/pstep", "roof"
+        printf "%-15s %-8s %-4s %-4s %3s %9s %8s %8s %6s %12s %7s %6s\n", "scene", "method", "upd",
+            "xfer", "thr", "particles", "before", "after", "ratio", "rounds", "B/pstep", "roof"
         for (i = 1; i <= nk; i++) {
             split(order[i], kk, SUBSEP)
             c = cfg[kk[1] + 1]; sc = kk[2]; sub(/\+apic$/, "", sc)
@@ -286,8 +299,10 @@ awk -F'\t' -v args="$ARGS" -v tri="$TRI" '
             t = thr[order[i]]; if (t == "?") t = opt(c, "--threads")
             ms = (order[i] in mb) ? mb[order[i]] : ""
             fs = (ms != "" && a > 0 && (t in triad) && triad[t] > 0) ? sprintf("%.0f%%", 100 * a * ms / 1e3 / triad[t]) : "-"
-            printf "%-15s %-8s %-4s %-4s %3s %9s %8s %8s %6s %7s %6s\n", sc, toupper(m), toupper(u),
-                toupper(x), t, np[order[i]], bs, as, rs, ms == "" ? "-" : ms, fs
+            qs = (order[i] in qlo) ? sprintf("%.2f-%.2f%s", qlo[order[i]], qhi[order[i]],
+                                             qlo[order[i]] < 1 && qhi[order[i]] > 1 ? "~" : "") : "-"
+            printf "%-15s %-8s %-4s %-4s %3s %9s %8s %8s %6s %12s %7s %6s\n", sc, toupper(m), toupper(u),
+                toupper(x), t, np[order[i]], bs, as, rs, qs, ms == "" ? "-" : ms, fs
         }
     }' "$RES"
 echo "bench-compare: $(($(date +%s) - T0)) s of runs"
