@@ -8,6 +8,7 @@
  * here: bin/mpmbench measures those.
  */
 #include "mpm.h"
+#include "mpm_collapse.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
 #include "t.h"
@@ -955,4 +956,79 @@ TEST(perf_energy_pass_matches_formulas)
          "threads), %d steps: energy pass and in-pass sums against the formulas: worst %.3g "
          "relative (%d of the steps summed in their passes for the guard)",
          cases, STEPS, worst, cached);
+}
+
+/* mpm_sim_snapshot() on the team (each thread its slice of the storage
+ * slots, each particle written at its creation number): every field equals,
+ * bit for bit, the particle arrays read here slot by slot through P.id, for
+ * 1 to 3 threads.  A Drucker-Prager column under gravity with the DET_F
+ * volume update carries every field a snapshot can hold (plastic strain,
+ * yield flags, F); 40 steps, and one sort, in. */
+TEST(perf_snapshot_on_team_matches_arrays)
+{
+    for (int T = 1; T <= 3; T++) {
+        mpm_collapse_cfg cfg;
+        memset(&cfg, 0, sizeof cfg);
+        cfg.a = 1;
+        cfg.cells = 8;
+        cfg.method = MPM_METHOD_BSPLINE2;
+        cfg.model = MPM_MODEL_DRUCKER_PRAGER;
+        mpm_collapse_case cc;
+        CHECK(mpm_collapse_setup(&cfg, &cc) == 0);
+        cc.c.threads = T;
+        cc.c.volume_update = MPM_VOLUME_DET_F;
+        mpm_error err;
+        mpm_sim *s = mpm_sim_new(&cc.c, NULL, &err);
+        mpm_collapse_free(&cc);
+        CHECKF(s, "%s", TERR(&err));
+        CHECK(mpm_sim_run(s, 40) == 0);
+        CHECK(mpm_sim_has_field(s, MPM_FIELD_PLASTIC_STRAIN) &&
+              mpm_sim_has_field(s, MPM_FIELD_YIELDED) &&
+              mpm_sim_has_field(s, MPM_FIELD_DEFORMATION_GRADIENT));
+        const mpm_particles *P = &s->P;
+        size_t n = P->n, dim = 2;
+        double *x = calloc(n * dim, sizeof *x), *v = calloc(n * dim, sizeof *v),
+               *sg = calloc(n * 6, sizeof *sg), *pr = calloc(n, sizeof *pr),
+               *vol = calloc(n, sizeof *vol), *ep = calloc(n, sizeof *ep),
+               *F = calloc(n * 4, sizeof *F);
+        uint8_t *yl = calloc(n, 1);
+        CHECK(x && v && sg && pr && vol && ep && F && yl);
+        mpm_sim_snapshot(s, &(mpm_snapshot){.x = x,
+                                            .v = v,
+                                            .stress = sg,
+                                            .pressure = pr,
+                                            .volume = vol,
+                                            .plastic_strain = ep,
+                                            .deformation_gradient = F,
+                                            .yielded = yl});
+        size_t bad = 0, moved = 0, yielded = 0;
+        for (size_t p = 0; p < n; p++) {
+            size_t q = P->id[p];
+            moved += q != p;
+            double sig[6];
+            mpm_particle_stress(&s->mats[P->mat[p]], P, (int)dim, p, sig);
+            int ok = memcmp(sig, sg + 6 * q, sizeof sig) == 0 && vol[q] == P->vol[p] &&
+                     ep[q] == P->epsp[p] && yl[q] == (P->yld[p] != 0.0) &&
+                     pr[q] == (sig[0] + (sig[1] + sig[2])) / 3.0;
+            for (size_t d = 0; d < dim; d++)
+                ok &= x[q * dim + d] == P->x[d][p] && v[q * dim + d] == P->v[d][p];
+            for (int c = 0; c < 4; c++) ok &= F[q * 4 + (size_t)c] == P->F[c][p];
+            bad += !ok;
+            yielded += yl[q];
+        }
+        TLOG("%d thread(s): %zu particles, %zu stored away from their creation slot, %zu "
+             "yielded: %zu snapshot entries differ from the arrays",
+             T, n, moved, yielded, bad);
+        CHECK(bad == 0);
+        CHECK(yielded > 0); /* the flags are exercised */
+        free(x);
+        free(v);
+        free(sg);
+        free(pr);
+        free(vol);
+        free(ep);
+        free(F);
+        free(yl);
+        mpm_sim_destroy(&s);
+    }
 }
