@@ -853,6 +853,42 @@ TEST(perf_step_energies_bitwise_disks)
          cases, mpm_kernels_avx2_available() ? "AVX2+FMA" : "auto (portable here)", STEPS);
 }
 
+/* The energies as the energy pass summed them before issue 14's ninth
+ * stop, one particle at a time with the scalar helpers (mpm_strain_density(),
+ * whose linear-elastic case is mpm_elastic_stored(); mpm_angmom_add()),
+ * slice by slice and combined in thread order.  The pass and the in-pass
+ * sums now take four particles per vector (es_lin4(), esum_block()), whose
+ * lanes keep these helpers' operations: so the same bits. */
+static void scalar_energies(const mpm_sim *s, mpm_energy *out)
+{
+    const mpm_particles *P = &s->P;
+    int dim = s->dim;
+    memset(out, 0, sizeof *out);
+    for (int t = 0; t < s->nthreads; t++) {
+        size_t a, b;
+        mpm_particle_slice(s, t, &a, &b);
+        double ek = 0, es = 0, ep = 0, mom[3] = {0, 0, 0}, ms = 0, L[3] = {0, 0, 0};
+        for (size_t p = a; p < b; p++) {
+            double m = P->m[p], v2 = 0;
+            for (int d = 0; d < dim; d++) {
+                v2 += P->v[d][p] * P->v[d][p];
+                mom[d] += m * P->v[d][p];
+                ep -= m * s->gravity[d] * P->x[d][p];
+            }
+            mpm_angmom_add(P, dim, p, m, L);
+            ek += 0.5 * m * v2;
+            es += 0.5 * mpm_strain_density(s->mats, P, dim, p) * P->vol[p];
+            ms += m;
+        }
+        out->kinetic += ek;
+        out->strain += es;
+        out->potential += ep;
+        out->mass += ms;
+        for (int d = 0; d < dim; d++) out->momentum[d] += mom[d];
+        for (int d = 0; d < 3; d++) out->angular_momentum[d] += L[d];
+    }
+}
+
 /* The energies by the textbook formulas, summed here over the particles'
  * own arrays, against what mpm_sim_energy() returns: the energy pass (and,
  * every MPM_GUARD_EVERY steps, the step's in-pass sums, which the guard's
@@ -863,7 +899,10 @@ TEST(perf_step_energies_bitwise_disks)
  * sigma_zz = nu (sigma_xx + sigma_yy); 1D: sigma^2 / 2E), kinetic
  * 1/2 m v^2, potential -m g . x, momentum, angular momentum m x cross v,
  * mass.  Within 1e-12 of each sum's scale (the order and form of the
- * arithmetic differ). */
+ * arithmetic differ).  And, bit for bit, the scalar sums above
+ * (scalar_energies(): what the lanes of es_lin4() and esum_block() must
+ * reproduce, which the bitwise tests above compared while the energy pass
+ * was scalar). */
 TEST(perf_energy_pass_matches_formulas)
 {
     enum { STEPS = 48 };
@@ -884,8 +923,20 @@ TEST(perf_energy_pass_matches_formulas)
                 for (int i = 0; i < STEPS; i++) {
                     CHECK(mpm_sim_step(s) == 0);
                     cached += s->ecache_ok;
-                    mpm_energy e;
+                    mpm_energy e, r;
                     mpm_sim_energy(s, &e);
+                    scalar_energies(s, &r);
+                    CHECKF(memcmp(&e.kinetic, &r.kinetic, sizeof e.kinetic) == 0 &&
+                               memcmp(&e.strain, &r.strain, sizeof e.strain) == 0 &&
+                               memcmp(&e.potential, &r.potential, sizeof e.potential) == 0 &&
+                               memcmp(&e.mass, &r.mass, sizeof e.mass) == 0 &&
+                               memcmp(e.momentum, r.momentum, sizeof e.momentum) == 0 &&
+                               memcmp(e.angular_momentum, r.angular_momentum,
+                                      sizeof e.angular_momentum) == 0,
+                           "%dD, %s kernels, %d thread(s), step %d: four-lane sums differ from "
+                           "the scalar ones (strain %.17g / %.17g, kinetic %.17g / %.17g)",
+                           dim, k ? "auto" : "portable", T, i + 1, e.strain, r.strain, e.kinetic,
+                           r.kinetic);
                     const mpm_particles *P = &s->P;
                     double K = 0, S = 0, U = 0, M = 0, mom[3] = {0}, L[3] = {0};
                     double sK = 0, sS = 0, sU = 0, sP = 0, sL = 0;
@@ -954,7 +1005,8 @@ TEST(perf_energy_pass_matches_formulas)
     CHECK(cached == cases * (STEPS / MPM_GUARD_EVERY)); /* the guard's steps: in-pass */
     TLOG("%d cases (1D/2D/3D falling box, GIMP USF, gravity, both kernel sets, 1 and 2 "
          "threads), %d steps: energy pass and in-pass sums against the formulas: worst %.3g "
-         "relative (%d of the steps summed in their passes for the guard)",
+         "relative, and bitwise equal to the scalar sums (%d of the steps summed in their "
+         "passes for the guard)",
          cases, STEPS, worst, cached);
 }
 

@@ -597,12 +597,13 @@ static inline double mpm_strain_density(const mpm_mat_params *mats, const mpm_pa
 }
 
 /* Adds particle p's angular momentum about the origin, m x × v, to L (D:
- * the dimension; 2D adds to L[2] only, 1D adds nothing).  The energy pass
- * and the step's in-pass sums of single particles share it; esum_block()
- * (mpm_pass.h) is the same expression in four lanes, so all give the same
- * bits (a change here must go there too: perf_step_energies_bitwise_disks
- * and perf_step_energies_equal_energy_pass fail otherwise).  Likewise
- * mpm_angmom_add_affine() below (apic_step_angular_momentum_equals_energy_pass). */
+ * the dimension; 2D adds to L[2] only, 1D adds nothing).  The energy sums
+ * (esum_particle(), mpm_pass.h) take it for single particles; esum_block()
+ * is the same expression in four lanes, so all give the same bits (a
+ * change here must go there too: perf_energy_pass_matches_formulas
+ * compares the two bit for bit).  Likewise mpm_angmom_add_affine() below
+ * (its four lanes held to APIC's conservation by
+ * apic_spinning_disk_conserves_angular_momentum). */
 static inline void mpm_angmom_add(const mpm_particles *P, int D, size_t p, double m, double L[3])
 {
     if (D == 2) {

@@ -372,9 +372,10 @@ int mpm_j2_point(const mpm_mat_params *mp, int dim, double sig[6], const double 
 
 /* 1/2 sigma : C^-1 : sigma V: s:s/(4 mu) + (tr sigma)^2/(18 K) per volume
  * (1D: sigma^2/(2E)); plane strain with sigma_zz tracked uses the 3D form.
- * es_lin4() (mpm_pass.h) is this formula in four lanes for the step's
- * in-pass sums, with the same operations in the same order: a change here
- * must go there too (perf_step_energies_bitwise_disks fails otherwise). */
+ * es_lin4() (mpm_pass.h) is this formula in four lanes for the energy
+ * sums (the energy pass and the step's in-pass sums), with the same
+ * operations in the same order: a change here must go there too
+ * (perf_energy_pass_matches_formulas compares the two bit for bit). */
 double mpm_elastic_stored(const mpm_mat_params *mp, const double sig[6], int dim)
 {
     if (dim == 1) return 0.5 * sig[0] * sig[0] / mp->E;
