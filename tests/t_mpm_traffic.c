@@ -99,7 +99,7 @@ static double unfused(mpm_sim *s, const char *what, mpm_traffic *t)
  * 2D no sigma_zz (mpm_needs and docs/solver.md): 2D sig is xx yy xy (24
  * B), 3D all six (48 B).  Fused jobs: the pass that moves the particles
  * makes the next step's first scatter, reading only what it has not
- * touched (m), and the sort step's scatter counts 1/16. */
+ * touched (m), in every step (a step that sorts does so after it). */
 TEST(traffic_usf_mpm_elastic)
 {
     mpm_traffic t;
@@ -114,18 +114,18 @@ TEST(traffic_usf_mpm_elastic)
     CHECK(t.pass[1].read == 50 && t.pass[1].write == 32);
     CHECK(t.pass[2].read == 32 && t.pass[2].write == 32);
     /* fused: stress_force 50 + 32; g2p_xv + next p2g_mq reads x v m 40,
-     * writes x v 32; the sort step's p2g 40 / 16 = 2.5: 156.5 */
-    CHECK(traffic(s, "2D MPM USF elastic", &t) == 156.5);
-    CHECK(t.npass == 3 && t.pass[1].read == 40 && t.pass[1].write == 32);
-    CHECK(t.pass[2].read == 2.5 && t.pass[2].write == 0);
-    CHECK(t.read == 92.5 && t.write == 64);
+     * writes x v 32: 154 (156.5 while the step before a sort scattered on
+     * its own, 1 step in 16) */
+    CHECK(traffic(s, "2D MPM USF elastic", &t) == 154);
+    CHECK(t.npass == 2 && t.pass[1].read == 40 && t.pass[1].write == 32);
+    CHECK(t.read == 90 && t.write == 64);
     mpm_sim_destroy(&s);
     /* 3D unfused: p2g x v m = 56; stress reads x 24 + mat 2 + sig 48 + vol
      * 8 = 82, writes 56; g2p 48 + 48: 56 + 82 + 56 + 96 = 290.  Fused:
-     * 82 + 56, g2p + next reads x v m 56 writes 48, 56 / 16 = 3.5: 245.5 */
+     * 82 + 56, g2p + next reads x v m 56 writes 48: 242 */
     s = job(3, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
     CHECK(unfused(s, "3D MPM USF elastic, unfused", &t) == 290);
-    CHECK(traffic(s, "3D MPM USF elastic", &t) == 245.5);
+    CHECK(traffic(s, "3D MPM USF elastic", &t) == 242);
     mpm_sim_destroy(&s);
 }
 
@@ -136,12 +136,12 @@ TEST(traffic_usl_gimp_elastic)
      * lp 16, m 8, v 16, sig 24, vol 8 = 88; g2p_xv_stress reads x lp v
      * (48), mat 2, sig 24, vol 8 = 82 and writes x v (32), sig vol (32) =
      * 64: 88 + 82 + 64 = 234.  Fused: one pass reading 82 + m 8 = 90,
-     * writing 64, and 88 / 16 = 5.5: 159.5 */
+     * writing 64: 154 */
     mpm_sim *s = job(2, MPM_METHOD_GIMP, MPM_USL, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
     CHECK(unfused(s, "2D GIMP USL elastic, unfused", &t) == 234);
     CHECK(t.npass == 2 && t.pass[0].read == 88 && t.pass[1].read == 82 && t.pass[1].write == 64);
-    CHECK(traffic(s, "2D GIMP USL elastic", &t) == 159.5);
-    CHECK(t.npass == 2 && t.pass[0].read == 90 && t.pass[0].write == 64 && t.pass[1].read == 5.5);
+    CHECK(traffic(s, "2D GIMP USL elastic", &t) == 154);
+    CHECK(t.npass == 1 && t.pass[0].read == 90 && t.pass[0].write == 64);
     mpm_sim_destroy(&s);
 }
 
@@ -158,23 +158,22 @@ TEST(traffic_musl_bspline_apic)
      *   g2p_v + p2g_q2  reads x 16 and m 8 (v, B: just written) = 24,
      *                   writes v B 48
      *   g2p_x_stress + next p2g_mqf  reads 66 + m 8 + B 32 = 106, writes 48
-     *   the sort step's p2g_mqf 104 / 16 = 6.5
-     * 72 + 154 + 6.5 = 232.5. */
+     * 72 + 154 = 226. */
     mpm_sim *s = job(2, MPM_METHOD_BSPLINE2, MPM_MUSL, MPM_TRANSFER_APIC, MPM_MODEL_LINEAR_ELASTIC);
     CHECK(unfused(s, "2D BSPLINE2 MUSL APIC elastic, unfused", &t) == 354);
     CHECK(t.npass == 4 && t.pass[1].read == 16 && t.pass[1].write == 48);
     CHECK(t.pass[3].read == 66 && t.pass[3].write == 48);
-    CHECK(traffic(s, "2D BSPLINE2 MUSL APIC elastic", &t) == 232.5);
-    CHECK(t.npass == 3 && t.pass[0].read == 24 && t.pass[0].write == 48);
-    CHECK(t.pass[1].read == 106 && t.pass[1].write == 48 && t.pass[2].read == 6.5);
+    CHECK(traffic(s, "2D BSPLINE2 MUSL APIC elastic", &t) == 226);
+    CHECK(t.npass == 2 && t.pass[0].read == 24 && t.pass[0].write == 48);
+    CHECK(t.pass[1].read == 106 && t.pass[1].write == 48);
     mpm_sim_destroy(&s);
     /* the same with FLIP, unfused: p2g_mqf 72, g2p_v reads x v 32 writes v
      * 16, p2g_q2 40, g2p_x_stress 66 + 48: 72 + 48 + 40 + 114 = 274.
      * Fused: g2p_v + p2g_q2 reads x v m 40 writes v 16; g2p_x_stress +
-     * next reads 66 + m 8 writes 48; 72 / 16 = 4.5: 56 + 122 + 4.5 = 182.5 */
+     * next reads 66 + m 8 writes 48: 56 + 122 = 178 */
     s = job(2, MPM_METHOD_BSPLINE2, MPM_MUSL, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
     CHECK(unfused(s, "2D BSPLINE2 MUSL FLIP elastic, unfused", &t) == 274);
-    CHECK(traffic(s, "2D BSPLINE2 MUSL FLIP elastic", &t) == 182.5);
+    CHECK(traffic(s, "2D BSPLINE2 MUSL FLIP elastic", &t) == 178);
     mpm_sim_destroy(&s);
 }
 
@@ -185,11 +184,11 @@ TEST(traffic_usf_plastic_and_cpdi)
      * and sig_zz: sig 32, eps 24): unfused, p2g 40; the stress pass reads
      * x 16, mat 2, sig 32, eps 24, vol 8, epsp 8 = 90 and writes sig eps
      * vol epsp yld = 80; g2p 64: 40 + 90 + 80 + 64 = 274.  Fused: 170 +
-     * (40 + 32) + 2.5 = 244.5 */
+     * (40 + 32) = 242 */
     mpm_sim *s = job(2, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_DRUCKER_PRAGER);
     CHECK(unfused(s, "2D MPM USF Drucker-Prager, unfused", &t) == 274);
     CHECK(t.pass[1].read == 90 && t.pass[1].write == 80);
-    CHECK(traffic(s, "2D MPM USF Drucker-Prager", &t) == 244.5);
+    CHECK(traffic(s, "2D MPM USF Drucker-Prager", &t) == 242);
     mpm_sim_destroy(&s);
     /* 2D CPDI USF elastic (never fused): the weights read x 16, lp 16, F 32
      * (64 B);

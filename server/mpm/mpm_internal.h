@@ -343,9 +343,13 @@ struct mpm_sim {
      * with scratch made at creation (the keys, then the new slots, live in
      * sperm; the cells are numbered over the rows' extents only:
      * rowoff[row] is the first key of a row).  Between sorts sperm is
-     * free scratch of n 32-bit words (mpm_checkpoint.c). */
+     * free scratch of n 32-bit words (mpm_checkpoint.c).  sort_now: the
+     * running step sorts (after its first node pass); sort_go: the team's
+     * sort goes on (set by thread 0 between barriers, mpm_sort_team()). */
     uint32_t *sperm, *shist;
     size_t *rowoff;
+    int sort_now, sort_go;
+    long sort_moved; /* sorts that moved particles (tests read it) */
 
     /* threads */
     int nthreads;
@@ -789,6 +793,11 @@ void mpm_ph_bbox(mpm_sim *s, int tid);
 /* Sorts the particles by cell over the active rows (stable; nothing moves
  * when they are in order already).  The rows stay valid. */
 void mpm_sort_particles(mpm_sim *s);
+/* The same inside a team phase, called by every thread: the keys and the
+ * moves on the team, the counting sort on thread 0 between barriers; then
+ * each thread records its slice's support box and rows (mpm_ph_bbox()).
+ * Returns after a barrier. */
+void mpm_sort_team(mpm_sim *s, int tid);
 
 /* ---- boundary conditions and loads (mpm_loads.c) ---- */
 

@@ -316,11 +316,25 @@ static int first_scatter(mpm_sim *s, int tid, void (*p2g)(mpm_sim *, int))
     return 0;
 }
 
+/* A step that sorts does so once its first scatter, fused into the last
+ * step's moving pass or not, has been reduced (the sums of the threads'
+ * buffers over the rows that scatter recorded): the order of the particles
+ * only matters to the passes that follow, so the last step's moving pass
+ * scatters the next step's fields in every step, a sort's too, and the
+ * fused and unfused steps give the same bits.  The rows stay: they do not
+ * depend on the order.  (The sort at the start of a step cost a pass: the
+ * step before it could not scatter for it.) */
+static void sort_after_first(mpm_sim *s, int tid)
+{
+    if (s->sort_now) mpm_sort_team(s, tid);
+}
+
 static void ph_step_usf(mpm_sim *s, int tid)
 {
     int z0 = first_scatter(s, tid, ph_p2g_mq);
     mpm_node_pass(s, tid, MPM_F_M | MPM_F_Q | MPM_N_MINV | MPM_N_BC1 | z0);
     mpm_team_sync(s);
+    sort_after_first(s, tid);
     ph_stress_force(s, tid);
     mpm_team_sync(s);
     forces_update(s, tid, MPM_F_F | MPM_N_GRAV);
@@ -333,6 +347,7 @@ static void ph_step_usl(mpm_sim *s, int tid)
     int z0 = first_scatter(s, tid, ph_p2g_mqf);
     forces_update(s, tid, MPM_F_M | MPM_F_Q | MPM_F_F | MPM_N_MINV | MPM_N_GRAV | MPM_N_BC1 | z0);
     mpm_team_sync(s);
+    sort_after_first(s, tid);
     if (s->update == MPM_USL) {
         ph_g2p_xv_stress(s, tid);
         return;
@@ -352,14 +367,12 @@ static void ph_step_usl(mpm_sim *s, int tid)
 }
 
 /* Before a step: the active rows become those the last particle pass
- * recorded (mpm_rows_update()), then the particles are sorted when due. */
+ * recorded (mpm_rows_update()), and whether the step sorts the particles
+ * (after its first scatter has been reduced: sort_after_first()). */
 static void begin_step(mpm_sim *s)
 {
     mpm_rows_update(s);
-    if (s->steps > 0 && s->steps % MPM_SORT_EVERY == 0) {
-        mpm_sort_particles(s); /* the rows stay: they do not depend on the order */
-        mpm_team_run(s, mpm_ph_bbox);
-    }
+    s->sort_now = s->steps > 0 && s->steps % MPM_SORT_EVERY == 0;
 }
 
 /* ---- creation ---- */
@@ -778,10 +791,9 @@ int mpm_sim_step(mpm_sim *s)
     s->want_energy = 0;
     s->damp_on = s->damp != MPM_DAMPING_NONE && (!(s->damp_until > 0) || s->t < s->damp_until);
     /* fused: the step starts with the grid the last one scattered, and
-     * scatters the next one's unless the next step sorts the particles */
+     * scatters the next one's (a sort comes after that scatter) */
     if (s->gnext) mpm_rows_swap_next(s);
-    s->fuse_next =
-        s->fuse && (s->fuse_pays || s->fuse_force) && (s->steps + 1) % MPM_SORT_EVERY != 0;
+    s->fuse_next = s->fuse && (s->fuse_pays || s->fuse_force);
     s->gvel_now = 0;
     mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
     s->gvel_now = s->gvel;

@@ -127,12 +127,12 @@ static void ph_permute(mpm_sim *s, int tid)
     }
 }
 
-void mpm_sort_particles(mpm_sim *s)
+/* Numbers the cells over the active rows' extents (rowoff), serial.
+ * Returns 0 when there is nothing to sort. */
+static int sort_rows(mpm_sim *s)
 {
-    mpm_particles *P = &s->P;
-    size_t n = P->n;
     size_t nr = mpm_box_rows(s->blo, s->bhi);
-    if (n < 2 || !nr) return;
+    if (s->P.n < 2 || !nr) return 0;
     size_t nk = 0;
     for (size_t r = 0; r < nr; r++) {
         size_t row = mpm_box_row(s, s->blo, s->bhi, r);
@@ -140,7 +140,16 @@ void mpm_sort_particles(mpm_sim *s)
         if (s->ulo[row] <= s->uhi[row]) nk += (size_t)(s->uhi[row] - s->ulo[row] + 1);
     }
     s->rowoff[s->nrows] = nk;
-    mpm_team_run(s, ph_keys);
+    return 1;
+}
+
+/* After the keys: whether the particles are in key order already, and if
+ * not, the keys turned into the new slots (counting sort), the load slots
+ * moved with their particles and the cycles marked.  Serial.  Returns 1
+ * when particles move. */
+static int sort_slots(mpm_sim *s)
+{
+    size_t n = s->P.n, nk = s->rowoff[s->nrows];
     int sorted = 1;
     uint32_t last = 0;
     for (int t = 0; t < s->nthreads; t++) {
@@ -150,7 +159,7 @@ void mpm_sort_particles(mpm_sim *s)
         sorted &= s->tout[t].ksorted && s->tout[t].kfirst >= last;
         last = s->tout[t].klast;
     }
-    if (sorted) return;
+    if (sorted) return 0;
     /* counting sort: each key becomes its particle's new slot, in place */
     uint32_t *key = s->sperm, *h = s->shist;
     memset(h, 0, (nk + 1) * sizeof *h);
@@ -159,5 +168,29 @@ void mpm_sort_particles(mpm_sim *s)
     for (size_t p = 0; p < n; p++) key[p] = h[key[p]]++;
     for (size_t i = 0; i < s->nload; i++) s->load_p[i] = key[s->load_p[i]];
     mark_cycles(key, n);
-    mpm_team_run(s, ph_permute);
+    s->sort_moved++;
+    return 1;
+}
+
+void mpm_sort_particles(mpm_sim *s)
+{
+    if (!sort_rows(s)) return;
+    mpm_team_run(s, ph_keys);
+    if (sort_slots(s)) mpm_team_run(s, ph_permute);
+}
+
+void mpm_sort_team(mpm_sim *s, int tid)
+{
+    if (tid == 0) s->sort_go = sort_rows(s);
+    mpm_team_sync(s);
+    if (s->sort_go) {
+        ph_keys(s, tid);
+        mpm_team_sync(s);
+        if (tid == 0) s->sort_go = sort_slots(s);
+        mpm_team_sync(s);
+        if (s->sort_go) ph_permute(s, tid);
+        mpm_team_sync(s);
+    }
+    mpm_ph_bbox(s, tid);
+    mpm_team_sync(s);
 }

@@ -15,8 +15,8 @@
  * P2G, narrower storage), the table here changes with them.  Fused jobs
  * (mpm_sim.fuse, every family but CPDI): the pass that moves the particles
  * also makes the next step's first scatter, which then reads only what
- * that pass has not touched yet (mass, mostly), and the step before each
- * sort (1 in MPM_SORT_EVERY) scatters on its own: 1/16 of that pass.
+ * that pass has not touched yet (mass, mostly), in every step: a step
+ * that sorts does so after that scatter (mpm_sim.c sort_after_first()).
  *
  * The model (also in mpm.h and docs/performance.md):
  *   - a particle array counts once per pass that touches it: read when the
@@ -195,19 +195,14 @@ static void next_scatter(unsigned scat, unsigned *rd, unsigned wr)
     *rd |= scat & ~(*rd | wr);
 }
 
-/* A fused job's sort step (every MPM_SORT_EVERY steps) scatters on its
- * own: its first scatter's pass, counted as 1/MPM_SORT_EVERY of a pass. */
-#define TP_SORTSTEP "p2g (1 step in 16)"
-
 /* USF: P2G (m, q); the stress pass (gather the strain increment, the
  * update, scatter the internal force with the new stress and volume);
  * G2P (x, v).  Fused: G2P also scatters the next step's m and q. */
-static int usf(const mpm_sim *s, tpass *t, double *scale)
+static int usf(const mpm_sim *s, tpass *t)
 {
     unsigned w = wts(s), rd = w, wr = 0;
     int n = 0;
-    tpass first = {fused(s) ? TP_SORTSTEP : "p2g_mq", w | mq(s), 0};
-    if (fused(s)) scale[2] = 1.0 / MPM_SORT_EVERY;
+    tpass first = {"p2g_mq", w | mq(s), 0};
     upd(s, &rd, &wr);
     rd |= (TF_SIG | TF_VOL) & ~wr; /* the force scatter: what the update left unread */
     tpass sf = {"stress_force", rd, wr};
@@ -219,26 +214,23 @@ static int usf(const mpm_sim *s, tpass *t, double *scale)
     if (!fused(s)) t[n++] = first;
     t[n++] = sf;
     t[n++] = mv;
-    if (fused(s)) t[n++] = first;
     return n;
 }
 
 /* USL: P2G (m, q, f with the old stress); G2P (x, v) with the strain
  * gather and the update.  Fused: one pass, the G2P scattering the next
  * step's m, q, f with the new stress. */
-static int usl(const mpm_sim *s, tpass *t, double *scale)
+static int usl(const mpm_sim *s, tpass *t)
 {
     unsigned w = wts(s), rd = w, wr = 0, scat = w | mq(s) | TF_SIG | TF_VOL;
-    tpass first = {fused(s) ? TP_SORTSTEP : "p2g_mqf", scat, 0};
+    tpass first = {"p2g_mqf", scat, 0};
     moves(s, &rd, &wr);
     vel(s, &rd, &wr);
     upd(s, &rd, &wr);
     if (fused(s)) {
         next_scatter(scat, &rd, wr);
         t[0] = (tpass){"g2p_xv_stress + next p2g_mqf", rd, wr};
-        t[1] = first;
-        scale[1] = 1.0 / MPM_SORT_EVERY;
-        return 2;
+        return 1;
     }
     t[0] = first;
     t[1] = (tpass){"g2p_xv_stress", rd, wr};
@@ -249,10 +241,10 @@ static int usl(const mpm_sim *s, tpass *t, double *scale)
  * with the strain from q2 and the update (check_particle() reads v).
  * Fused: G2P v scatters q2 with its weights, and G2P x the next step's
  * m, q, f. */
-static int musl(const mpm_sim *s, tpass *t, double *scale)
+static int musl(const mpm_sim *s, tpass *t)
 {
     unsigned w = wts(s), rd = w, wr = 0, scat = w | mq(s) | TF_SIG | TF_VOL;
-    tpass first = {fused(s) ? TP_SORTSTEP : "p2g_mqf", scat, 0};
+    tpass first = {"p2g_mqf", scat, 0};
     vel(s, &rd, &wr);
     if (fused(s)) {
         next_scatter(w | mq(s), &rd, wr);
@@ -268,9 +260,7 @@ static int musl(const mpm_sim *s, tpass *t, double *scale)
     if (fused(s)) {
         next_scatter(scat, &rd, wr);
         t[1] = (tpass){"g2p_x_stress + next p2g_mqf", rd, wr};
-        t[2] = first;
-        scale[2] = 1.0 / MPM_SORT_EVERY;
-        return 3;
+        return 2;
     }
     t[3] = (tpass){"g2p_x_stress", rd, wr};
     return 4;
@@ -280,17 +270,13 @@ int mpm_sim_traffic(const mpm_sim *s, mpm_traffic *out)
 {
     if (!s || !out) return MPM_EINVAL;
     tpass t[MPM_TRAFFIC_MAX_PASSES];
-    double scale[MPM_TRAFFIC_MAX_PASSES];
-    for (int i = 0; i < MPM_TRAFFIC_MAX_PASSES; i++) scale[i] = 1.0;
-    int n = s->update == MPM_USL    ? usl(s, t, scale)
-            : s->update == MPM_MUSL ? musl(s, t, scale)
-                                    : usf(s, t, scale);
+    int n = s->update == MPM_USL ? usl(s, t) : s->update == MPM_MUSL ? musl(s, t) : usf(s, t);
     memset(out, 0, sizeof *out);
     out->npass = n;
     for (int i = 0; i < n; i++) {
         out->pass[i].name = t[i].name;
-        out->pass[i].read = scale[i] * field_bytes(s, t[i].rd);
-        out->pass[i].write = scale[i] * field_bytes(s, t[i].wr);
+        out->pass[i].read = field_bytes(s, t[i].rd);
+        out->pass[i].write = field_bytes(s, t[i].wr);
         out->read += out->pass[i].read;
         out->write += out->pass[i].write;
     }
