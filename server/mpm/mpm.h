@@ -537,12 +537,11 @@ void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
  * per particle; mat 2, id 4), read when the pass loads its old value,
  * written when the pass stores it (an array both read and written counts
  * twice; one only written, once: STREAM's counting, no write-allocate).
- * Grid arrays, the per-thread scratch, the sort (every 16 steps), point
+ * Grid arrays, the per-thread scratch, the sort (4-16 steps apart), point
  * loads and the energy sums of mpm_sim_want_energy() steps are not
  * counted.  Fused steps (every method but CPDI): the moving pass also
  * makes the next step's first scatter and reads only what it has not
- * touched yet, and the step before each sort scatters on its own (counted
- * as 1/16 of that pass).  A lower bound on the step's memory traffic, and
+ * touched yet.  A lower bound on the step's memory traffic, and
  * the figure a bandwidth roof is measured against (bin/mpmbench). */
 #define MPM_TRAFFIC_MAX_PASSES 8
 typedef struct {

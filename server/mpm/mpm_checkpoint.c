@@ -15,7 +15,8 @@
  * 8-byte aligned sections: the scalars (time, step, dt, the largest speed,
  * the cumulative works and their absolute sums, the guard's and the
  * balance's references, the frictional models' counters, the particle
- * forces' switch, the number of load slots, the failure and its error),
+ * forces' switch, the number of load slots, the failure and its error,
+ * the step of the last sort and the particles' cell changes then),
  * then every particle array that exists, in storage order (the particles
  * are kept sorted by cell: mass, half-widths, material and creation index
  * move with them and are saved too), then the load slots (their particles,
@@ -44,7 +45,9 @@
 #include <stdio.h>
 #include <string.h>
 
-#define CK_VERSION 2u /* 2: the strain record is optional (A_EPS) */
+/* 2: the strain record is optional (A_EPS); 3: when the particles were
+ * last sorted and their cell changes then (the sort follows them) */
+#define CK_VERSION 3u
 #define CK_ORDER 0x0102030405060708ull
 static const char ck_magic[8] = {'M', 'P', 'M', 'C', 'K', 'P', 'T', '\n'};
 
@@ -133,7 +136,18 @@ enum {
     S_BAL_WORST,
     S_COUNT
 };
-enum { I_STEPS, I_PLUPD, I_PLSUB, I_PLMAX, I_PFORCES, I_NLOAD, I_FAILED, I_COUNT };
+enum {
+    I_STEPS,
+    I_PLUPD,
+    I_PLSUB,
+    I_PLMAX,
+    I_PFORCES,
+    I_NLOAD,
+    I_FAILED,
+    I_SORTLAST,
+    I_RUNS0,
+    I_COUNT
+};
 
 /* bit of each optional particle array in L_ARRAYS */
 enum { A_LP = 1, A_F = 2, A_B = 4, A_EPSP = 8, A_YLD = 16, A_VOL0 = 32, A_EPS = 64, A_SZZ = 128 };
@@ -361,6 +375,8 @@ int mpm_sim_checkpoint_save(const mpm_sim *s, void *buf, size_t n)
     iv[I_PFORCES] = s->pforces;
     iv[I_NLOAD] = (int64_t)s->nload;
     iv[I_FAILED] = s->failed;
+    iv[I_SORTLAST] = s->sort_last;
+    iv[I_RUNS0] = (int64_t)s->runs0;
     put(&w, sv, sizeof sv);
     put(&w, iv, sizeof iv);
     put(&w, &s->err, sizeof s->err);
@@ -511,7 +527,9 @@ int mpm_sim_checkpoint_load(mpm_sim *s, const void *buf, size_t n, mpm_error *er
     int pf = iv[I_PFORCES] != 0;
     size_t nload = (size_t)iv[I_NLOAD];
     if (iv[I_PFORCES] < 0 || iv[I_PFORCES] > 1 || iv[I_NLOAD] < 0 || iv[I_STEPS] < 0 ||
-        iv[I_FAILED] > 0 || iv[I_FAILED] < MPM_E_LAST || (pf && nload != np) || (!pf && nload > np))
+        iv[I_FAILED] > 0 || iv[I_FAILED] < MPM_E_LAST || (pf && nload != np) ||
+        (!pf && nload > np) || iv[I_SORTLAST] < 0 || iv[I_SORTLAST] > iv[I_STEPS] ||
+        iv[I_RUNS0] < 0 || (uint64_t)iv[I_RUNS0] > np)
         return mpm_fail(err, MPM_ESYNTAX, CK_FIELD, "inconsistent state counters");
     if (payload_size(s, nload, pf) != h.payload_size)
         return mpm_fail(err, MPM_ESYNTAX, CK_FIELD, "the payload's size does not match its layout");
@@ -586,6 +604,8 @@ int mpm_sim_checkpoint_load(mpm_sim *s, const void *buf, size_t n, mpm_error *er
     s->plstats.substeps = iv[I_PLSUB];
     s->plstats.max_substeps = (int)iv[I_PLMAX];
     s->failed = (int)iv[I_FAILED];
+    s->sort_last = (long)iv[I_SORTLAST];
+    s->runs0 = (size_t)iv[I_RUNS0];
     get(&r, &s->err, sizeof s->err);
     s->err.message[MPM_ERROR_MSG_MAX - 1] = 0; /* kept a valid string */
     if (s->err.depth < 0 || s->err.depth > MPM_PATH_MAX) s->err.depth = 0;

@@ -154,6 +154,9 @@ typedef struct {
     double eang[3];          /* partial angular momentum (mpm_sim_energy) */
     double edamp;            /* damping work of the thread's nodes this step */
     int ksorted;             /* sort keys of the slice non-decreasing */
+    size_t ncell;            /* cell changes along the slice, as the last
+                              * moving pass (or mpm_ph_bbox()) recorded the
+                              * supports: its first particle counts one */
     uint32_t kfirst, klast;  /* the slice's first and last sort key */
     /* this step's work of the prescribed velocities' reactions and of the
      * face friction on the thread's share of the nodes (mpm_cond.c) */
@@ -350,6 +353,10 @@ struct mpm_sim {
     size_t *rowoff;
     int sort_now, sort_go;
     long sort_moved; /* sorts that moved particles (tests read it) */
+    /* when to sort (begin_step()): the step of the last sort, and runs0,
+     * the cell changes along the particles right after it (checkpointed) */
+    long sort_last;
+    size_t runs0;
 
     /* threads */
     int nthreads;
@@ -786,7 +793,11 @@ void mpm_ph_bbox(mpm_sim *s, int tid);
 
 /* ---- sorting by cell (mpm_sort.c) ---- */
 
-#define MPM_SORT_EVERY 16
+#define MPM_SORT_EVERY 16 /* the longest interval between sorts */
+/* the shortest, when the particles' cell runs have fallen apart: more than
+ * MPM_SORT_SPLIT times the cell changes right after the last sort */
+#define MPM_SORT_MIN 4
+#define MPM_SORT_SPLIT 2
 /* Fused steps need this many particles per page of a grid field the
  * active rows touch (mpm_rows.c fuse_pays()). */
 #define MPM_FUSE_PER_PAGE 400
@@ -798,6 +809,11 @@ void mpm_sort_particles(mpm_sim *s);
  * each thread records its slice's support box and rows (mpm_ph_bbox()).
  * Returns after a barrier. */
 void mpm_sort_team(mpm_sim *s, int tid);
+/* The cell changes along all the particles (a particle in another cell
+ * than the one before it, the first one included) as the last moving pass
+ * or mpm_ph_bbox() recorded them in mpm_thread_out.ncell, the same for
+ * every thread count.  Serial. */
+size_t mpm_sort_cell_changes(const mpm_sim *s);
 
 /* ---- boundary conditions and loads (mpm_loads.c) ---- */
 

@@ -131,12 +131,16 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
         run_flush(s, o, a, D);
         a->cy = c[1];
         a->cz = c[2];
+        a->cx = c[0];
+        a->nchg = 1;
         for (int d = 0; d < D; d++) {
             a->lo[d] = n0[d];
             a->hi[d] = n0[d] + NS - 1;
         }
         return;
     }
+    a->nchg += c[0] != a->cx; /* the sort's measure (begin_step()) */
+    a->cx = c[0];
     for (int d = 0; d < (NS == 3 && !BS ? D : 1); d++) {
         a->lo[d] = n0[d] < a->lo[d] ? n0[d] : a->lo[d];
         a->hi[d] = n0[d] + NS - 1 > a->hi[d] ? n0[d] + NS - 1 : a->hi[d];

@@ -96,17 +96,23 @@ INLINE int cell_of(const mpm_sim *s, size_t p, int d, double *rr)
 typedef struct {
     int cy, cz;       /* row of cells of the run (cy = INT_MIN: none) */
     int lo[3], hi[3]; /* its node box, clamped to the padded grid */
+    int cx;           /* cell x of the last particle (box_add()) */
+    size_t nchg;      /* cell changes not yet added to o->ncell */
 } rowrun;
 
 INLINE void run_init(rowrun *a)
 {
     a->cy = INT_MIN;
     a->cz = 0;
+    a->cx = 0;
+    a->nchg = 0;
     for (int d = 0; d < 3; d++) a->lo[d] = a->hi[d] = 0;
 }
 
 INLINE void run_flush(const mpm_sim *s, mpm_thread_out *o, rowrun *a, int D)
 {
+    o->ncell += a->nchg;
+    a->nchg = 0;
     if (a->cy == INT_MIN) return;
     /* clamped here, once per run: the cells are, the supports may reach a
      * node beyond the padded grid only when the step fails (CPDI's corner
@@ -442,6 +448,7 @@ INLINE void box_reset(const mpm_sim *s, mpm_thread_out *o, int D)
         o->blo[d] = d < D ? INT_MAX : 0;
         o->bhi[d] = d < D ? -1 : 0;
     }
+    o->ncell = 0;
 }
 
 /* The particle velocity (Eq. 31), FLIP: v += dt sum S qdot/m; blended

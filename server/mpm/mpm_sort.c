@@ -172,6 +172,33 @@ static int sort_slots(mpm_sim *s)
     return 1;
 }
 
+/* The cell of particle p as box_add() finds it (clamped to the padded
+ * grid), flattened. */
+static size_t flat_cell(const mpm_sim *s, size_t p)
+{
+    size_t k = 0;
+    for (int d = 0; d < s->dim; d++) {
+        double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+        r = r >= 0 ? (r < s->rmax[d] ? r : s->rmax[d]) : 0.0;
+        k += (size_t)(int)r * s->stride[d];
+    }
+    return k;
+}
+
+/* each slice's first particle counted one (box_add()), taken back here
+ * where it shares the cell of the particle before it */
+size_t mpm_sort_cell_changes(const mpm_sim *s)
+{
+    size_t n = 0;
+    for (int t = 0; t < s->nthreads; t++) n += s->tout[t].ncell;
+    for (int t = 1; t < s->nthreads; t++) {
+        size_t a, b;
+        mpm_particle_slice(s, t, &a, &b);
+        if (a < b && a > 0 && n > 0 && flat_cell(s, a) == flat_cell(s, a - 1)) n--;
+    }
+    return n;
+}
+
 void mpm_sort_particles(mpm_sim *s)
 {
     if (!sort_rows(s)) return;
@@ -192,5 +219,7 @@ void mpm_sort_team(mpm_sim *s, int tid)
         mpm_team_sync(s);
     }
     mpm_ph_bbox(s, tid);
+    mpm_team_sync(s);
+    if (tid == 0) s->runs0 = mpm_sort_cell_changes(s); /* before anything moves */
     mpm_team_sync(s);
 }
