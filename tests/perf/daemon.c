@@ -118,7 +118,10 @@ static void log_tail(const dmn *d, int lines)
     for (int i = 0; i < lines; i++) free(ring[i]);
 }
 
-static void remove_dir(const char *dir)
+/* The bench's temporary directory and what the daemon left in it: its
+ * database files and the checkpoint directory beside the database
+ * (mpmd.db.ckpt, emptied by the daemon; removed here with what is left). */
+static void remove_dir(const char *dir, int depth)
 {
     DIR *dp = opendir(dir);
     if (dp) {
@@ -127,7 +130,7 @@ static void remove_dir(const char *dir)
         while ((e = readdir(dp)))
             if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) {
                 snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
-                unlink(path);
+                if (unlink(path) && depth < 2) remove_dir(path, depth + 1);
             }
         closedir(dp);
     }
@@ -855,7 +858,7 @@ out:
             rc = -1;
         }
         close_zmq(&d[w]);
-        if (d[w].dir[0]) remove_dir(d[w].dir);
+        if (d[w].dir[0]) remove_dir(d[w].dir, 0);
     }
     cases_free(&cs);
     if (rc) return rc;
