@@ -1197,3 +1197,53 @@ TEST(perf_sort_follows_cell_runs)
     free(sb);
     mpm_sim_destroy(&a);
 }
+
+/* The sort's two ways of moving the arrays give the same order: the sweep
+ * through each thread's ring (every particle moves less than the ring's
+ * entries) and the walk along the permutation's cycles (the others).  The
+ * same disks and the same 160 steps, once as built and once with a ring
+ * of 2 entries, so that every sort that moves a particle more than one
+ * slot walks the cycles: x, v and sigma end bit for bit equal, on 1 and 2
+ * threads, and the first run swept in all its moving sorts, the second in
+ * none of those that moved a particle farther than one slot. */
+TEST(perf_sort_sweep_equals_cycles)
+{
+    for (int T = 1; T <= 2; T++) {
+        double *out[2][3] = {{NULL}};
+        long moved[2] = {0, 0}, swept[2] = {0, 0};
+        size_t n = 0;
+        for (int k = 0; k < 2; k++) {
+            mpm_paper t;
+            mpm_paper_disks(&t, MPM_METHOD_MPM, MPM_USF, 1.0 / 120);
+            t.c.threads = T;
+            mpm_error err;
+            mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
+            mpm_paper_free(&t);
+            CHECKF(s, "%s", TERR(&err));
+            if (k) s->sort_ring = 2;
+            long m0 = s->sort_moved, w0 = s->sort_swept;
+            CHECK(mpm_sim_run(s, 160) == 0);
+            moved[k] = s->sort_moved - m0;
+            swept[k] = s->sort_swept - w0;
+            n = s->P.n;
+            out[k][0] = calloc(2 * n, sizeof(double));
+            out[k][1] = calloc(2 * n, sizeof(double));
+            out[k][2] = calloc(6 * n, sizeof(double));
+            CHECK(out[k][0] && out[k][1] && out[k][2]);
+            mpm_sim_snapshot(s,
+                             &(mpm_snapshot){.x = out[k][0], .v = out[k][1], .stress = out[k][2]});
+            mpm_sim_destroy(&s);
+        }
+        int same = memcmp(out[0][0], out[1][0], 2 * n * sizeof(double)) == 0 &&
+                   memcmp(out[0][1], out[1][1], 2 * n * sizeof(double)) == 0 &&
+                   memcmp(out[0][2], out[1][2], 6 * n * sizeof(double)) == 0;
+        TLOG("%d thread(s): sorts that moved particles %ld / %ld, swept %ld / %ld (ring as built / "
+             "of 2); x, v, sigma %s",
+             T, moved[0], moved[1], swept[0], swept[1], same ? "bit for bit equal" : "DIFFER");
+        CHECK(same);
+        CHECK(moved[0] >= 5 && moved[0] == moved[1]);
+        CHECK(swept[0] == moved[0] && swept[1] == 0);
+        for (int k = 0; k < 2; k++)
+            for (int j = 0; j < 3; j++) free(out[k][j]);
+    }
+}

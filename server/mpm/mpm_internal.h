@@ -154,6 +154,8 @@ typedef struct {
     double eang[3];          /* partial angular momentum (mpm_sim_energy) */
     double edamp;            /* damping work of the thread's nodes this step */
     int ksorted;             /* sort keys of the slice non-decreasing */
+    uint64_t *rval;          /* the sort's ring of saved slots (sort_ring */
+    uint32_t *rtag;          /* entries: values, and their slots) */
     size_t ncell;            /* cell changes along the slice, as the last
                               * moving pass (or mpm_ph_bbox()) recorded the
                               * supports: its first particle counts one */
@@ -352,7 +354,13 @@ struct mpm_sim {
     uint32_t *sperm, *shist;
     size_t *rowoff;
     int sort_now, sort_go;
+    /* sort_ring: entries of each thread's ring (a power of 2); sort_win:
+     * the running sort moves every particle less than that far, so the
+     * arrays move by a sweep through the ring (mpm_sort.c) */
+    size_t sort_ring;
+    int sort_win;
     long sort_moved; /* sorts that moved particles (tests read it) */
+    long sort_swept; /* of those, the ones that swept (sort_win) */
     /* when to sort (begin_step()): the step of the last sort, and runs0,
      * the cell changes along the particles right after it (checkpointed) */
     long sort_last;
@@ -797,6 +805,11 @@ void mpm_ph_bbox(mpm_sim *s, int tid);
 /* the shortest, when the particles' cell runs have fallen apart: more than
  * MPM_SORT_SPLIT times the cell changes right after the last sort */
 #define MPM_SORT_MIN 4
+/* the largest ring of saved slots a thread keeps for the sort's moves
+ * (12 bytes an entry): sorts that move no particle this far or farther
+ * sweep the arrays through it, the others follow the permutation's
+ * cycles */
+#define MPM_SORT_RING 8192
 #define MPM_SORT_SPLIT 2
 /* Fused steps need this many particles per page of a grid field the
  * active rows touch (mpm_rows.c fuse_pays()). */

@@ -593,6 +593,12 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
             if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, gfields)) goto nomem;
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
+    for (s->sort_ring = 2; s->sort_ring < np && s->sort_ring < MPM_SORT_RING; s->sort_ring *= 2) {
+    }
+    for (int t = 0; t < s->nthreads; t++)
+        if (!(s->tout[t].rval = malloc(s->sort_ring * sizeof *s->tout[t].rval)) ||
+            !(s->tout[t].rtag = malloc(s->sort_ring * sizeof *s->tout[t].rtag)))
+            goto nomem;
     for (int t = 0; t < s->nthreads; t++) {
         s->tout[t].plbad = SIZE_MAX;
         for (int cc = 0; cc < 9; cc++)
@@ -664,6 +670,8 @@ void mpm_sim_destroy(mpm_sim **sp)
             free(s->tout[t].wblk);
             free(s->tout[t].rlo);
             free(s->tout[t].rhi);
+            free(s->tout[t].rval);
+            free(s->tout[t].rtag);
         }
     free(s->ulo);
     free(s->uhi);

@@ -1,8 +1,10 @@
 /*
  * mpm_sort.c - keeps the particles sorted by cell.
  *
- * Every MPM_SORT_EVERY steps (and at creation) the particles are put in the
- * order of their cells, row-major over the active rows, by a stable
+ * At creation, and then when their runs of one cell have fallen apart or
+ * MPM_SORT_EVERY steps after the last sort (mpm_sim.c begin_step()), the
+ * particles are put in the order of their cells, row-major over the
+ * active rows, by a stable
  * counting sort, so that consecutive particles share nodes and each
  * thread's slice covers a compact region.  The cells are numbered over the
  * rows' extents only (the histogram follows the particles, not the box).
@@ -10,11 +12,14 @@
  * error messages, per-particle inputs) speaks creation order.  The scratch
  * is made at creation and is one 32-bit word per particle (sperm) and the
  * histogram: the keys, turned in place into each particle's new slot, and
- * the particles then moved into their slots along the permutation's
- * cycles, in place (no second copy of any array).  The keys and the check
+ * the particles then moved into their slots in place (no second copy of
+ * any array): by a sweep through a ring of MPM_SORT_RING saved slots per
+ * thread when no particle moves that far (the disks' crossings: 10^6
+ * particles sorted in 16 ms instead of 25-29 on 1 thread, the same
+ * order), else along the permutation's cycles.  The keys and the check
  * that they are in order already (then nothing moves: the common case
- * between cell crossings) run on the team; the histogram and the marking
- * of the cycles are serial, and the moves run on the team again, the
+ * between cell crossings) run on the team; the histogram, the farthest
+ * move and the marking of the cycles are serial, and the moves run on the team again, the
  * arrays dealt out to the threads: on 2 threads, 1.8x (disks2d) and 2-5x
  * (cube3d) faster than the serial swaps of every array at once that they
  * replace, 1.04x the whole step; the same on 1 thread.  The order does not
@@ -83,6 +88,42 @@ static void mark_cycles(uint32_t *restrict dest, size_t n)
     }
 }
 
+/* The sweep of one array (elements of type T) to the slots dest[i], when
+ * no particle moves as far as the ring's R entries: in slot order, slot
+ * i's old value (from the ring if a particle before it has already taken
+ * its place, else from the array) goes to slot dest[i], whose old value,
+ * when that slot is still to come, is saved in the ring first (entry
+ * dest[i] mod R, tagged with its slot).  An entry is read before another
+ * slot can reuse it: a slot d is saved at the soonest at i = d - W and
+ * read at i = d, and the next slot of its entry, d + R, not before i =
+ * d + R - W > d.  Each slot is written once and its old value read once,
+ * so the result is the cycles' result; the reads and writes sweep the
+ * array instead of jumping along the cycles. */
+#define RING_SWEEP(NAME, T)                                                     \
+    static void NAME(T *restrict a, const uint32_t *restrict dest, size_t n,    \
+                     uint64_t *restrict val, uint32_t *restrict tag, size_t R)  \
+    {                                                                           \
+        memset(tag, 0xff, R * sizeof *tag); /* no slot: slots are below 2^31 */ \
+        for (size_t i = 0; i < n; i++) {                                        \
+            size_t r = i & (R - 1), d = dest[i];                                \
+            T v;                                                                \
+            if (tag[r] == i)                                                    \
+                memcpy(&v, &val[r], sizeof v);                                  \
+            else                                                                \
+                v = a[i];                                                       \
+            if (d == i) continue;                                               \
+            if (d > i) {                                                        \
+                size_t rd = d & (R - 1);                                        \
+                tag[rd] = (uint32_t)d;                                          \
+                memcpy(&val[rd], &a[d], sizeof a[d]);                           \
+            }                                                                   \
+            a[d] = v;                                                           \
+        }                                                                       \
+    }
+RING_SWEEP(sweep_f64, double)
+RING_SWEEP(sweep_u32, uint32_t)
+RING_SWEEP(sweep_u16, uint16_t)
+
 /* Moves the fields of thread tid's share to their slots along the marked
  * cycles: from each leader i, the carried particle goes to slot dest[k],
  * and the one there is carried on, until the cycle is back at i.  The
@@ -98,6 +139,16 @@ static void ph_permute(mpm_sim *s, int tid)
     for (int f = tid; f < na; f += T) a[nm++] = *arr[f];
     int ids = na % T == tid; /* mat and id: the (na + 1)-th field */
     if (!nm && !ids) return;
+    if (s->sort_win) {
+        mpm_thread_out *o = &s->tout[tid];
+        size_t R = s->sort_ring;
+        for (int f = 0; f < nm; f++) sweep_f64(a[f], dest, P->n, o->rval, o->rtag, R);
+        if (ids) {
+            sweep_u16(P->mat, dest, P->n, o->rval, o->rtag, R);
+            sweep_u32(P->id, dest, P->n, o->rval, o->rtag, R);
+        }
+        return;
+    }
     for (size_t i = 0; i < P->n; i++) {
         if ((dest[i] & VISITED) || dest[i] == i) continue;
         double c[NARR];
@@ -165,9 +216,16 @@ static int sort_slots(mpm_sim *s)
     memset(h, 0, (nk + 1) * sizeof *h);
     for (size_t p = 0; p < n; p++) h[key[p] + 1]++;
     for (size_t k = 0; k < nk; k++) h[k + 1] += h[k];
-    for (size_t p = 0; p < n; p++) key[p] = h[key[p]]++;
+    size_t far = 0; /* the farthest move */
+    for (size_t p = 0; p < n; p++) {
+        size_t d = key[p] = h[key[p]]++;
+        d = d > p ? d - p : p - d;
+        far = d > far ? d : far;
+    }
     for (size_t i = 0; i < s->nload; i++) s->load_p[i] = key[s->load_p[i]];
-    mark_cycles(key, n);
+    s->sort_win = far < s->sort_ring;
+    s->sort_swept += s->sort_win;
+    if (!s->sort_win) mark_cycles(key, n);
     s->sort_moved++;
     return 1;
 }
