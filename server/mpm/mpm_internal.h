@@ -344,7 +344,8 @@ struct mpm_sim {
      * r of the box blo..bhi (r = 0 .. box rows), nact their total */
     size_t *acc;
     size_t nact;
-    /* sorting by cell: every MPM_SORT_EVERY steps, stable counting sort
+    /* sorting by cell (4 to MPM_SORT_EVERY steps apart, begin_step() in
+     * mpm_sim.c, and at creation): a stable counting sort
      * with scratch made at creation (the keys, then the new slots, live in
      * sperm; the cells are numbered over the rows' extents only:
      * rowoff[row] is the first key of a row).  Between sorts sperm is

@@ -43,8 +43,10 @@
  * of nodes their supports touch, and zeroing, reduction, node updates and
  * boundary conditions run over those extents only (the grid outside them
  * stays zero, and pages of the grids that no particle reaches are never
- * touched).  Particles are kept sorted by cell (every MPM_SORT_EVERY steps, a
- * stable counting sort, skipped when the keys are in order already), with
+ * touched).  Particles are kept sorted by cell (when their runs of one cell
+ * fall apart, or MPM_SORT_EVERY steps after the last sort: a stable
+ * counting sort after the step's first scatter, skipped when the keys are
+ * in order already), with
  * P.id mapping storage slots to creation order
  * for everything public.  Built with -DMPM_LEAN, gravity, loads and fixed
  * boundaries are compiled out and cases using them are refused.
