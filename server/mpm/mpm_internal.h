@@ -511,6 +511,10 @@ typedef struct {
     long long nupd, nsub;
     int maxsub;
     size_t bad;
+    /* tests: 1 takes every frictional particle through the general
+     * per-particle path (rate_gather(), mpm_dp_trial(), rate_put()) that
+     * the 2D and 3D blocks write out (t_mpm_frictional_block.c) */
+    int general;
 } mpm_model_blk;
 
 struct mpm_model_ops {

@@ -133,17 +133,8 @@ static void elastic_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 
 /* ---- kinematics ---- */
 
-void mpm_jaumann(double sig[6], const double w[3], int dim)
+static inline void jaumann_3d(double sig[6], const double w[3])
 {
-    if (dim == 1) return;
-    if (dim == 2) {
-        double wxy = w[0], xx = sig[0], yy = sig[1], xy = sig[3];
-        /* (W s - s W) with W = [[0, w], [-w, 0]] */
-        sig[0] = xx + 2.0 * wxy * xy;
-        sig[1] = yy - 2.0 * wxy * xy;
-        sig[3] = xy + wxy * (yy - xx);
-        return;
-    }
     double S[3][3] = {{sig[0], sig[3], sig[5]}, {sig[3], sig[1], sig[4]}, {sig[5], sig[4], sig[2]}};
     double W[3][3] = {{0, w[0], w[2]}, {-w[0], 0, w[1]}, {-w[2], -w[1], 0}};
     double R[3][3];
@@ -159,6 +150,20 @@ void mpm_jaumann(double sig[6], const double w[3], int dim)
     sig[3] = R[0][1];
     sig[4] = R[1][2];
     sig[5] = R[0][2];
+}
+
+void mpm_jaumann(double sig[6], const double w[3], int dim)
+{
+    if (dim == 1) return;
+    if (dim == 2) {
+        double wxy = w[0], xx = sig[0], yy = sig[1], xy = sig[3];
+        /* (W s - s W) with W = [[0, w], [-w, 0]] */
+        sig[0] = xx + 2.0 * wxy * xy;
+        sig[1] = yy - 2.0 * wxy * xy;
+        sig[3] = xy + wxy * (yy - xx);
+        return;
+    }
+    jaumann_3d(sig, w);
 }
 
 /* dt L of block slot i from the increments and spins (mpm_pass.h). */
@@ -412,20 +417,43 @@ static int frictional_point(const mpm_mat_params *mp, int dim, double sig[6], co
     return 0;
 }
 
-/* rate_block() for the frictional models, counting the integrator's
- * substeps (mpm_sim_plastic_stats()) and keeping the first particle whose
- * update failed (its stress and state are left as they were). */
+/* The integrator's update of particle p from its rotated stress sig and
+ * increment de (rate_gather()'s), counting the substeps
+ * (mpm_sim_plastic_stats()) and keeping the first particle whose update
+ * failed (its stress and state are left as they were). */
+static void frictional_update(mpm_model_blk *b, const mpm_mat_params *mp, size_t p, double sig[6],
+                              const double de[6])
+{
+    mpm_particles *P = b->P;
+    mpm_plastic_state st = {P->epsp[p], 0, 0};
+    double dwp = 0;
+    if (mpm_plastic_update(mp->pl, sig, de, &st, &dwp)) {
+        if (b->bad == SIZE_MAX) b->bad = p;
+        return;
+    }
+    rate_put(b, p, sig, de);
+    P->epsp[p] = st.eps_p;
+    P->yld[p] = st.yielded ? 1.0 : 0.0;
+    if (st.substeps) {
+        b->nupd++;
+        b->nsub += st.substeps;
+        if (st.substeps > b->maxsub) b->maxsub = st.substeps;
+    }
+    b->wp += dwp * P->vol[p];
+}
+
+/* rate_block() for the frictional models, with Drucker-Prager's elastic
+ * case in the loop: the update's own first test, mpm_dp_trial(), and the
+ * trial stress stored when it is admissible. */
 static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
     mpm_particles *P = b->P;
-
     for (size_t i = i0; i < i1; i++) {
         size_t p = b0 + i;
         const mpm_mat_params *mp = &b->mats[P->mat[p]];
         double sig[6], de[6];
         rate_gather(b, i, p, sig, de);
         if (mp->pl->kind == MPM_PLASTIC_DRUCKER_PRAGER) {
-            /* the elastic case in the loop, with the update's own test */
             double De[6], tr[6], f;
             int on = 0;
             if (mpm_dp_trial(mp->pl, sig, de, De, tr, &f, &on) == MPM_DP_ELASTIC) {
@@ -434,22 +462,117 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
                 continue;
             }
         }
-        mpm_plastic_state st = {P->epsp[p], 0, 0};
-        double dwp = 0;
-        if (mpm_plastic_update(mp->pl, sig, de, &st, &dwp)) {
-            if (b->bad == SIZE_MAX) b->bad = p;
-            continue;
-        }
-        rate_put(b, p, sig, de);
-        P->epsp[p] = st.eps_p;
-        P->yld[p] = st.yielded ? 1.0 : 0.0;
-        if (st.substeps) {
-            b->nupd++;
-            b->nsub += st.substeps;
-            if (st.substeps > b->maxsub) b->maxsub = st.substeps;
-        }
-        b->wp += dwp * P->vol[p];
+        frictional_update(b, mp, p, sig, de);
     }
+}
+
+/* frictional_block() in 2D (plane strain, with sigma_zz and the strain
+ * record, as the plastic models keep them).  A granular flow's particles
+ * are mostly elastic at a step, and for them rate_gather(),
+ * mpm_jaumann(), mpm_dp_trial() and rate_put() cost more than the rest of
+ * the step's particle work: here they are written out for sig[4] =
+ * sig[5] = 0 and de = (d0, d1, 0, d3, 0, 0), on the arrays' pointers
+ * taken once, with the same operations in the same order (the zero terms
+ * kept where they could turn a -0 into +0), so with the same bits.  A
+ * particle that is not elastic, or not Drucker-Prager, goes to
+ * frictional_update() with sig and de as rate_gather() fills them. */
+static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    mpm_particles *P = b->P;
+    const uint16_t *mat = P->mat + b0;
+    const double *e0 = b->deps[0], *e1 = b->deps[1], *e2 = b->deps[2], *e3 = b->deps[3];
+    double *x0 = P->sig[0] + b0, *x1 = P->sig[1] + b0, *x2 = P->sig[2] + b0, *x3 = P->sig[3] + b0;
+    double *q0 = P->eps[0] + b0, *q1 = P->eps[1] + b0, *q3 = P->eps[3] + b0, *yld = P->yld + b0;
+    for (size_t i = i0; i < i1; i++) {
+        const mpm_mat_params *mp = &b->mats[mat[i]];
+        const mpm_plastic_params *pl = mp->pl;
+        double d0 = e0[i], d1 = e1[i], w = e2[i], d3 = e3[i];
+        double xx = x0[i], yy = x1[i], zz = x2[i], xy = x3[i];
+        /* the Jaumann rotation (mpm_jaumann(), dim 2) */
+        double s0 = xx + 2.0 * w * xy, s1 = yy - 2.0 * w * xy, s3 = xy + w * (yy - xx);
+        if (pl->kind == MPM_PLASTIC_DRUCKER_PRAGER) {
+            /* the trial (mpm_dp_trial()) */
+            double g2 = 2 * pl->G, let = pl->lam * (d0 + d1 + 0.0);
+            double t0 = s0 + (let + g2 * d0), t1 = s1 + (let + g2 * d1), t2 = zz + (let + g2 * 0.0),
+                   t3 = s3 + g2 * d3;
+            /* all four finite (inf - inf and NaN give NaN) */
+            if ((t0 - t0) + (t1 - t1) + (t2 - t2) + (t3 - t3) == 0) {
+                double pm = (t0 + t1 + t2) / 3, a0 = t0 - pm, a1 = t1 - pm, a2 = t2 - pm;
+                double dd = a0 * a0 + a1 * a1 + a2 * a2 + 2 * (t3 * t3 + 0.0 + 0.0);
+                double r = sqrt(0.5 * dd), xc = pl->xi * pl->c;
+                double scale = r + fabs(pl->eta * pm) + xc, f = r + pl->eta * pm - xc;
+                if (!(pm > pl->pt + pl->ftol * (fabs(pl->pt) + fabs(pm))) &&
+                    f <= pl->ftol * scale) {
+                    x0[i] = t0;
+                    x1[i] = t1;
+                    x2[i] = t2;
+                    x3[i] = t3;
+                    q0[i] += d0;
+                    q1[i] += d1;
+                    q3[i] += d3;
+                    yld[i] = f > -pl->ftol * scale ? 1.0 : 0.0;
+                    continue;
+                }
+            }
+        }
+        double sig[6] = {s0, s1, zz, s3, 0, 0}, de[6] = {d0, d1, 0, d3, 0, 0};
+        frictional_update(b, mp, b0 + i, sig, de);
+    }
+}
+
+/* frictional_block() in 3D with the strain record: rate_gather(),
+ * mpm_jaumann() and rate_put() on the arrays' pointers taken once (the
+ * same operations, so the same bits). */
+static void frictional_block_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    mpm_particles *P = b->P;
+    const uint16_t *mat = P->mat + b0;
+    const double *e[9];
+    double *x[6], *q[6];
+    for (int c = 0; c < 9; c++) e[c] = b->deps[c];
+    for (int c = 0; c < 6; c++) {
+        x[c] = P->sig[c] + b0;
+        q[c] = P->eps[c] + b0;
+    }
+    for (size_t i = i0; i < i1; i++) {
+        const mpm_mat_params *mp = &b->mats[mat[i]];
+        double sig[6], de[6], w[3] = {e[6][i], e[7][i], e[8][i]};
+        for (int c = 0; c < 6; c++) {
+            sig[c] = x[c][i];
+            de[c] = e[c][i];
+        }
+        jaumann_3d(sig, w);
+        if (mp->pl->kind == MPM_PLASTIC_DRUCKER_PRAGER) {
+            double De[6], tr[6], f;
+            int on = 0;
+            if (mpm_dp_trial(mp->pl, sig, de, De, tr, &f, &on) == MPM_DP_ELASTIC) {
+                for (int c = 0; c < 6; c++) {
+                    x[c][i] = tr[c];
+                    q[c][i] += de[c];
+                }
+                P->yld[b0 + i] = on ? 1.0 : 0.0;
+                continue;
+            }
+        }
+        frictional_update(b, mp, b0 + i, sig, de);
+    }
+}
+
+/* The frictional models' block: frictional_block_2d() or _3d() where they
+ * apply (the strain record kept, as the plastic models keep it). */
+static void frictional_any(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    const mpm_particles *P = b->P;
+    int rec = 1;
+    for (int c = 0; c < MPM_NCOMP(b->dim); c++) rec &= P->sig[c] && (P->eps[c] || c == 2);
+    if (b->general)
+        frictional_block(b, b0, i0, i1);
+    else if (b->dim == 2 && rec && !P->eps[2])
+        frictional_block_2d(b, b0, i0, i1);
+    else if (b->dim == 3 && rec && P->eps[2])
+        frictional_block_3d(b, b0, i0, i1);
+    else
+        frictional_block(b, b0, i0, i1);
 }
 
 static const mpm_model_ops linear_elastic = {
@@ -460,10 +583,10 @@ static const mpm_model_ops von_mises = {"von_mises",        MPM_NEED_SPIN | MPM_
                                         {NULL, NULL, NULL}, rate_block,
                                         mpm_j2_point,       j2_energy};
 static const mpm_model_ops drucker_prager = {"drucker_prager",   MPM_NEED_SPIN | MPM_NEED_PLASTIC,
-                                             {NULL, NULL, NULL}, frictional_block,
+                                             {NULL, NULL, NULL}, frictional_any,
                                              frictional_point,   j2_energy};
 static const mpm_model_ops mohr_coulomb = {"mohr_coulomb",     MPM_NEED_SPIN | MPM_NEED_PLASTIC,
-                                           {NULL, NULL, NULL}, frictional_block,
+                                           {NULL, NULL, NULL}, frictional_any,
                                            frictional_point,   j2_energy};
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
@@ -486,7 +609,7 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
     double *const *deps = o->deps;
     mpm_particles *P = &s->P;
     if (s->f_block) f_block(s, deps, b0, nb, D);
-    mpm_model_blk b = {s->mats, P, deps, D, 0.0, 0, 0, 0, SIZE_MAX};
+    mpm_model_blk b = {s->mats, P, deps, D, 0.0, 0, 0, 0, SIZE_MAX, 0};
     if (!s->mixed) {
         s->model->block(&b, b0, 0, nb);
     } else { /* runs of particles of one model */

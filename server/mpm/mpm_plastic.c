@@ -42,12 +42,22 @@ static double meanp(const double s[6])
     return (s[0] + s[1] + s[2]) / 3;
 }
 
-/* D e: Hooke's law for a strain-like tensor e */
+/* D e: Hooke's law for a strain-like tensor e.  The hot helpers of the
+ * substepping (hooke(), sqrt_j2(), dp_invariants(), dp_euler()) load
+ * their inputs into locals before they store: a store through a double
+ * pointer could otherwise alias the parameters and force their reloads.
+ * Each keeps the operations and their order of the plain loops (x - 0
+ * is x, and x + 0 is kept where x could be -0), so the same bits. */
 static void hooke(const mpm_plastic_params *P, const double e[6], double s[6])
 {
-    double tr = e[0] + e[1] + e[2];
-    for (int i = 0; i < 3; i++) s[i] = P->lam * tr + 2 * P->G * e[i];
-    for (int i = 3; i < 6; i++) s[i] = 2 * P->G * e[i];
+    const double e0 = e[0], e1 = e[1], e2 = e[2], e3 = e[3], e4 = e[4], e5 = e[5];
+    const double lt = P->lam * (e0 + e1 + e2), g2 = 2 * P->G;
+    s[0] = lt + g2 * e0;
+    s[1] = lt + g2 * e1;
+    s[2] = lt + g2 * e2;
+    s[3] = g2 * e3;
+    s[4] = g2 * e4;
+    s[5] = g2 * e5;
 }
 
 /* C s: the compliance */
@@ -66,19 +76,31 @@ static double eqv_dev(const double e[6])
     return sqrt(2.0 / 3.0 * ddot(d, d));
 }
 
+/* sqrt(J2) and the deviator d, from the mean stress p */
+static double sqrt_j2_p(const double s[6], double p, double d[6])
+{
+    const double d0 = s[0] - p, d1 = s[1] - p, d2 = s[2] - p, d3 = s[3], d4 = s[4], d5 = s[5];
+    d[0] = d0;
+    d[1] = d1;
+    d[2] = d2;
+    d[3] = d3;
+    d[4] = d4;
+    d[5] = d5;
+    return sqrt(0.5 * (d0 * d0 + d1 * d1 + d2 * d2 + 2 * (d3 * d3 + d4 * d4 + d5 * d5)));
+}
+
 /* sqrt(J2) and the deviator d */
 static double sqrt_j2(const double s[6], double d[6])
 {
-    double p = meanp(s);
-    for (int i = 0; i < 6; i++) d[i] = s[i] - (i < 3 ? p : 0);
-    return sqrt(0.5 * ddot(d, d));
+    return sqrt_j2_p(s, meanp(s), d);
 }
 
+/* all six finite: x - x is 0 for a finite x, NaN for an infinity or a NaN */
 static int finite6(const double s[6])
 {
-    for (int i = 0; i < 6; i++)
-        if (!isfinite(s[i])) return 0;
-    return 1;
+    return (s[0] - s[0]) + (s[1] - s[1]) + (s[2] - s[2]) + (s[3] - s[3]) + (s[4] - s[4]) +
+               (s[5] - s[5]) ==
+           0;
 }
 
 /* ---- Drucker-Prager ---- */
@@ -106,10 +128,12 @@ typedef struct {
 
 static void dp_invariants(const mpm_plastic_params *P, const double s[6], dp_inv *v)
 {
-    v->p = meanp(s);
-    v->r = sqrt_j2(s, v->d);
-    double scale = v->r + fabs(P->eta * v->p) + P->xi * P->c;
-    v->inv = v->r > TINY_REL * scale && v->r > 0 ? 1 / (2 * v->r) : 0;
+    const double p = meanp(s), eta = P->eta, xc = P->xi * P->c;
+    const double r = sqrt_j2_p(s, p, v->d);
+    const double scale = r + fabs(eta * p) + xc;
+    v->p = p;
+    v->r = r;
+    v->inv = r > TINY_REL * scale && r > 0 ? 1 / (2 * r) : 0;
 }
 
 static double dp_f_inv(const mpm_plastic_params *P, const dp_inv *v, double *scale)
@@ -130,7 +154,14 @@ static double dp_aDe(const mpm_plastic_params *P, const dp_inv *v, const double 
 
 static void dp_Db(const mpm_plastic_params *P, const dp_inv *v, double Db[6])
 {
-    for (int i = 0; i < 6; i++) Db[i] = 2 * P->G * v->inv * v->d[i] + (i < 3 ? P->K * P->etag : 0);
+    const double g = 2 * P->G * v->inv, k = P->K * P->etag;
+    const double d0 = v->d[0], d1 = v->d[1], d2 = v->d[2], d3 = v->d[3], d4 = v->d[4], d5 = v->d[5];
+    Db[0] = g * d0 + k;
+    Db[1] = g * d1 + k;
+    Db[2] = g * d2 + k;
+    Db[3] = g * d3 + 0.0;
+    Db[4] = g * d4 + 0.0;
+    Db[5] = g * d5 + 0.0;
 }
 
 /* the equivalent plastic strain per unit multiplier */
@@ -145,10 +176,18 @@ static double dp_eq(const dp_inv *v)
 static double dp_euler(const mpm_plastic_params *P, const dp_inv *v, const double de[6],
                        const double De[6], double ds[6])
 {
-    double num = dp_aDe(P, v, de), den = dp_aDb(P, v), Db[6];
-    double dl = num > 0 && den > 0 ? num / den : 0;
+    const double num = dp_aDe(P, v, de), den = dp_aDb(P, v);
+    const double dl = num > 0 && den > 0 ? num / den : 0;
+    double Db[6];
     dp_Db(P, v, Db);
-    for (int i = 0; i < 6; i++) ds[i] = De[i] - dl * Db[i];
+    const double x0 = De[0] - dl * Db[0], x1 = De[1] - dl * Db[1], x2 = De[2] - dl * Db[2],
+                 x3 = De[3] - dl * Db[3], x4 = De[4] - dl * Db[4], x5 = De[5] - dl * Db[5];
+    ds[0] = x0;
+    ds[1] = x1;
+    ds[2] = x2;
+    ds[3] = x3;
+    ds[4] = x4;
+    ds[5] = x5;
     return dl;
 }
 
