@@ -177,7 +177,7 @@ test-quick: bin/mpmtest bin/mpmd bin/mpmctl
 # only).  gcc 12's TSan stops with "unexpected memory mapping" on kernels
 # with more ASLR bits (vm.mmap_rnd_bits > 28); the tests then run with ASLR
 # off for them (setarch -R, inherited by the mpmd they start).
-TSAN_T ?= perf_ inv_thread store_ daemon_ cpdi_two cpdi_active apic_step cond_two material_plastic triaxial_threads ckpt_same_bits_2d ckpt_threads fuse_
+TSAN_T ?= perf_ inv_thread store_ daemon_ cpdi_two cpdi_active apic_step cond_two material_plastic triaxial_threads ckpt_same_bits_2d ckpt_threads fuse_ team_
 TSAN_ENV = TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(CURDIR)/tests/tsan.supp"
 tsan: deps
 	@$(MAKE) --no-print-directory $(TSAN)/mpmtest $(TSAN)/mpmd $(TSAN)/mpmctl

@@ -173,6 +173,27 @@ typedef struct {
     char pad[64];
 } mpm_thread_out;
 
+/* The team's barrier (mpm_team.c).  A thread that arrives before the last
+ * spins on the generation for up to MPM_BAR_SPIN_NS, then sleeps on the
+ * condition variable; the last to arrive starts the next generation and
+ * wakes the sleepers.  pthread_barrier_wait() sleeps at once, and waking
+ * a sleeping thread takes tens to hundreds of microseconds on a VM: at 5
+ * or 6 barriers a step, 2-thread steps of 10-20 ms lost several per cent
+ * to it.  Arrivals order memory as a barrier does (what a thread wrote
+ * before it is visible to every thread after it). */
+#define MPM_BAR_SPIN_NS 200000L
+typedef struct {
+    atomic_uint count; /* arrivals in this generation */
+    atomic_uint gen;   /* the generation; changes when all have arrived */
+    unsigned n;        /* threads */
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+} mpm_bar;
+/* 0, or -1 when the mutex or the condition variable cannot be made. */
+int mpm_bar_init(mpm_bar *b, unsigned n);
+void mpm_bar_destroy(mpm_bar *b);
+void mpm_bar_wait(mpm_bar *b);
+
 struct mpm_sim {
     int dim;
     int avx2; /* the AVX2+FMA kernel families (mpm_case.kernels) */
@@ -374,8 +395,8 @@ struct mpm_sim {
                         * when fuse: the fused passes' target) */
     mpm_thread_out *tout;
     pthread_t *threads;
-    pthread_barrier_t bar_start, bar_end; /* bar_end also parts the passes
-                                           * of a step (mpm_team_sync()) */
+    mpm_bar bar_start, bar_end; /* bar_end also parts the passes of a
+                                 * step (mpm_team_sync()) */
     void (*phase)(mpm_sim *, int tid);
     int quit;
     pthread_mutex_t gate_mu; /* start gate for the team */
@@ -739,7 +760,7 @@ void mpm_team_stop(mpm_sim *s);
 /* A barrier between the passes of one phase. */
 static inline void mpm_team_sync(mpm_sim *s)
 {
-    if (s->nthreads > 1) pthread_barrier_wait(&s->bar_end);
+    if (s->nthreads > 1) mpm_bar_wait(&s->bar_end);
 }
 
 /* ---- the active rows and the node passes (mpm_rows.c) ---- */

@@ -465,23 +465,38 @@ INLINE void v_update(double *v, double dt, double dv, double vpic, int BL, doubl
 
 /* Sort key of particle p: its cell (x, row) numbered row-major over the
  * rows' extents, rowoff[row] + x - ulo[row] (a cell's first node lies in
- * the extents of its row; clamped all the same). */
+ * the extents of its row; clamped all the same).  The simulation's fields
+ * are read into locals first: a store to key[] (uint32_t) may alias the
+ * int fields, which the loop would otherwise reload for every particle
+ * (cell_of()'s operations, so the same keys). */
 INLINE void cell_keys_t(const mpm_sim *s, uint32_t *key, size_t p0, size_t p1, int D)
 {
-    size_t ny = (size_t)s->np[1], nk = s->rowoff[s->nrows];
+    const size_t ny = (size_t)s->np[1], nk = s->rowoff[s->nrows];
+    const int blo1 = s->blo[1], bhi1 = s->bhi[1], blo2 = s->blo[2], bhi2 = s->bhi[2];
+    const int *ulo = s->ulo, *uhi = s->uhi;
+    const size_t *rowoff = s->rowoff;
+    const double *x[3] = {NULL, NULL, NULL};
+    double x0[3] = {0, 0, 0}, ih[3] = {0, 0, 0}, rmax[3] = {0, 0, 0};
+    for (int d = 0; d < D; d++) {
+        x[d] = s->P.x[d];
+        x0[d] = s->x0[d];
+        ih[d] = s->inv_h[d];
+        rmax[d] = s->rmax[d];
+    }
     for (size_t p = p0; p < p1; p++) {
         int c[3] = {0, 0, 0};
         for (int d = 0; d < D; d++) {
-            double r;
-            c[d] = cell_of(s, p, d, &r);
+            double r = (x[d][p] - x0[d]) * ih[d];
+            r = r >= 0 ? (r < rmax[d] ? r : rmax[d]) : 0.0;
+            c[d] = (int)r;
         }
-        for (int d = 1; d < 3; d++)
-            c[d] = c[d] < s->blo[d] ? s->blo[d] : c[d] > s->bhi[d] ? s->bhi[d] : c[d];
-        size_t row = (size_t)c[1] + (size_t)c[2] * ny;
-        int lo = s->ulo[row], w = s->uhi[row] - lo;
-        int x = c[0] - lo;
-        x = x < 0 ? 0 : x > w ? (w > 0 ? w : 0) : x;
-        size_t k = s->rowoff[row] + (size_t)x;
+        int c1 = c[1] < blo1 ? blo1 : c[1] > bhi1 ? bhi1 : c[1];
+        int c2 = c[2] < blo2 ? blo2 : c[2] > bhi2 ? bhi2 : c[2];
+        size_t row = (size_t)c1 + (size_t)c2 * ny;
+        int lo = ulo[row], w = uhi[row] - lo;
+        int xc = c[0] - lo;
+        xc = xc < 0 ? 0 : xc > w ? (w > 0 ? w : 0) : xc;
+        size_t k = rowoff[row] + (size_t)xc;
         key[p] = (uint32_t)(k < nk ? k : nk - 1);
     }
 }
