@@ -238,40 +238,64 @@ INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
  * bits); the rest, and an odd last particle, one by one. */
 typedef int v2i __attribute__((vector_size(8)));
 typedef int v4i __attribute__((vector_size(16)));
+typedef unsigned v4u __attribute__((vector_size(16)));
+
+/* whether any lane of a comparison's mask is set */
+INLINE int v4u_any(v4u m)
+{
+#ifdef __SSE2__
+    return __builtin_ia32_movmskps((__attribute__((vector_size(16))) float)m) != 0;
+#else
+    return (m[0] | m[1] | m[2] | m[3]) != 0;
+#endif
+}
+
+/* The grid's geometry as a block's weights read it, in locals: the
+ * weights' stores (doubles and size_t) may alias the simulation's own
+ * x0, inv_h and stride, so read through s the compiler reloads them for
+ * every particle and axis. */
+typedef struct {
+    double x0[3], ih[3];
+    double st_f[3]; /* the strides as doubles: a base (< 2^53 nodes) is
+                     * summed exactly in a vector and converted once */
+    int n[3];       /* B-splines: the cells of each axis (s->bs[d].n) */
+} wgeo;
 
 /* B-spline weights of four particles i .. i + 3 of the block when every
  * one lies in an interior span along every axis (bs_axis()'s closed forms,
  * lane by lane the same operations, so the same bits); returns 0, having
  * written nothing, when one of them is in a clamped span. */
-INLINE int bs_block4(const mpm_sim *s, size_t p, int D, int NS, pw *W)
+INLINE int bs_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, int NS, pw *W)
 {
-    v4i cc[3];
-    v4d fr[3];
+    v4d fr[3], bd = {0, 0, 0, 0}; /* the bases, exact in doubles */
+    v4u out = {0, 0, 0, 0};
     for (int d = 0; d < D; d++) {
         const double *x = s->P.x[d] + p;
         v4d xv = {x[0], x[1], x[2], x[3]};
-        v4d r = (xv - s->x0[d]) * s->inv_h[d];
+        v4d r = (xv - G->x0[d]) * G->ih[d];
         v4i c = __builtin_convertvector(r, v4i);
-        int n = s->bs[d].n;
-        v4i top = {n - 1, n - 1, n - 1, n - 1};
-        c -= (c > top) & (c - top); /* min(c, n - 1) */
-        v4i out = (c < NS - 2) | (c > n - NS + 1);
-        if (out[0] | out[1] | out[2] | out[3]) return 0;
-        cc[d] = c;
-        fr[d] = r - __builtin_convertvector(c, v4d);
+        /* interior: NS - 2 <= c <= n - NS + 1, one unsigned compare (no
+         * min(c, n - 1) first: for NS > 2 a c it would lower is out
+         * either way, and one that is in is left as it is) */
+        const int span = G->n[d] - 2 * NS + 3;
+        if (span < 0) return 0; /* no interior span on this axis */
+        out |= (v4u)(c - (NS - 2)) > (unsigned)span;
+        v4d cd = __builtin_convertvector(c, v4d);
+        fr[d] = r - cd;
+        bd += cd * G->st_f[d];
     }
-    for (int j = 0; j < 4; j++) W[j].base = 0;
+    if (v4u_any(out)) return 0;
     for (int d = 0; d < D; d++) {
         v4d f = fr[d], w[4], g[4];
-        BS_INTERIOR(v4d, f, s->inv_h[d], NS, w, g);
+        BS_INTERIOR(v4d, f, G->ih[d], NS, w, g);
         for (int j = 0; j < 4; j++) {
             for (int k = 0; k < NS; k++) {
                 W[j].w[d][k] = w[k][j];
                 W[j].g[d][k] = g[k][j];
             }
-            W[j].base += (size_t)cc[d][j] * s->stride[d];
         }
     }
+    for (int j = 0; j < 4; j++) W[j].base = (size_t)(long long)bd[j];
     return 1;
 }
 
@@ -281,10 +305,18 @@ INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS,
     /* four particles at a time in AVX builds; the portable kernels take
      * the B-spline weights one by one (SSE2 lowers the four-lane form
      * through the stack: 0.88x) */
-    if (BS && MPM_V4)
+    if (BS && MPM_V4) {
+        wgeo G;
+        for (int d = 0; d < D; d++) {
+            G.x0[d] = s->x0[d];
+            G.ih[d] = s->inv_h[d];
+            G.st_f[d] = (double)s->stride[d];
+            G.n[d] = s->bs[d].n;
+        }
         for (; i + 3 < nb; i += 4)
-            if (!bs_block4(s, b0 + i, D, NS, Wb + i))
+            if (!bs_block4(s, &G, b0 + i, D, NS, Wb + i))
                 for (int j = 0; j < 4; j++) weights(s, b0 + i + j, D, NS, BS, &Wb[i + j]);
+    }
     if (NS == 2 && !BS)
         for (; i + 1 < nb; i += 2) {
             size_t base0 = 0, base1 = 0;
