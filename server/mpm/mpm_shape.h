@@ -261,6 +261,19 @@ typedef struct {
     int n[3];       /* B-splines: the cells of each axis (s->bs[d].n) */
 } wgeo;
 
+/* Four four-lane vectors v[k] (lane j: particle j) stored transposed:
+ * o_j[k] = v[k][j] */
+INLINE void tr4_store(const v4d v[4], double *o0, double *o1, double *o2, double *o3)
+{
+    const v4l lo = {0, 4, 2, 6}, hi = {1, 5, 3, 7}, l2 = {0, 1, 4, 5}, h2 = {2, 3, 6, 7};
+    v4d t0 = __builtin_shuffle(v[0], v[1], lo), t1 = __builtin_shuffle(v[0], v[1], hi);
+    v4d t2 = __builtin_shuffle(v[2], v[3], lo), t3 = __builtin_shuffle(v[2], v[3], hi);
+    *(v4du *)o0 = __builtin_shuffle(t0, t2, l2);
+    *(v4du *)o1 = __builtin_shuffle(t1, t3, l2);
+    *(v4du *)o2 = __builtin_shuffle(t0, t2, h2);
+    *(v4du *)o3 = __builtin_shuffle(t1, t3, h2);
+}
+
 /* B-spline weights of four particles i .. i + 3 of the block when every
  * one lies in an interior span along every axis (bs_axis()'s closed forms,
  * lane by lane the same operations, so the same bits); returns 0, having
@@ -288,12 +301,9 @@ INLINE int bs_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, int NS, p
     for (int d = 0; d < D; d++) {
         v4d f = fr[d], w[4], g[4];
         BS_INTERIOR(v4d, f, G->ih[d], NS, w, g);
-        for (int j = 0; j < 4; j++) {
-            for (int k = 0; k < NS; k++) {
-                W[j].w[d][k] = w[k][j];
-                W[j].g[d][k] = g[k][j];
-            }
-        }
+        if (NS == 3) w[3] = g[3] = (v4d){0, 0, 0, 0};
+        tr4_store(w, W[0].w[d], W[1].w[d], W[2].w[d], W[3].w[d]);
+        tr4_store(g, W[0].g[d], W[1].g[d], W[2].g[d], W[3].g[d]);
     }
     for (int j = 0; j < 4; j++) W[j].base = (size_t)(long long)bd[j];
     return 1;
