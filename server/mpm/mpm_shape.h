@@ -265,13 +265,16 @@ typedef struct {
  * o_j[k] = v[k][j] */
 INLINE void tr4_store(const v4d v[4], double *o0, double *o1, double *o2, double *o3)
 {
-    const v4l lo = {0, 4, 2, 6}, hi = {1, 5, 3, 7}, l2 = {0, 1, 4, 5}, h2 = {2, 3, 6, 7};
-    v4d t0 = __builtin_shuffle(v[0], v[1], lo), t1 = __builtin_shuffle(v[0], v[1], hi);
-    v4d t2 = __builtin_shuffle(v[2], v[3], lo), t3 = __builtin_shuffle(v[2], v[3], hi);
-    *(v4du *)o0 = __builtin_shuffle(t0, t2, l2);
-    *(v4du *)o1 = __builtin_shuffle(t1, t3, l2);
-    *(v4du *)o2 = __builtin_shuffle(t0, t2, h2);
-    *(v4du *)o3 = __builtin_shuffle(t1, t3, h2);
+    /* __builtin_shufflevector: GCC 12 and Clang both have it (Clang has
+     * no __builtin_shuffle) */
+    v4d t0 = __builtin_shufflevector(v[0], v[1], 0, 4, 2, 6);
+    v4d t1 = __builtin_shufflevector(v[0], v[1], 1, 5, 3, 7);
+    v4d t2 = __builtin_shufflevector(v[2], v[3], 0, 4, 2, 6);
+    v4d t3 = __builtin_shufflevector(v[2], v[3], 1, 5, 3, 7);
+    *(v4du *)o0 = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
+    *(v4du *)o1 = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
+    *(v4du *)o2 = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
+    *(v4du *)o3 = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
 }
 
 /* B-spline weights of four particles i .. i + 3 of the block when every
