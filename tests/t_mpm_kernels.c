@@ -365,6 +365,68 @@ TEST(kernels_support_at_grid_end)
     }
 }
 
+/* Grids too narrow for an interior B-spline span on an axis (quadratic:
+ * fewer than 3 cells, cubic: fewer than 5).  The AVX2 kernels compute
+ * four particles' weights at once from the interior spans' closed forms
+ * (bs_block4()), which must not run there: every span of such an axis is
+ * clamped.  Two boxes filling 1 .. 6 cells along x of a 1D, 2D and 3D
+ * grid, pressed together along y (x in 1D), so that they carry stress,
+ * against the portable kernels (KTOL): the closed forms on a clamped span
+ * give other weights (partition of unity and the first moment broken),
+ * and the runs part by far more. */
+TEST(kernels_bspline_small_grids)
+{
+    if (!mpm_kernels_avx2_available()) {
+        TLOG("no AVX2+FMA here: the four-particle B-spline weights do not run");
+        return;
+    }
+    static const mpm_method ms[] = {MPM_METHOD_BSPLINE2, MPM_METHOD_BSPLINE3};
+    int runs = 0;
+    for (int dim = 1; dim <= 3; dim++)
+        for (size_t m = 0; m < 2; m++)
+            for (int cells = 1; cells <= 6; cells++) {
+                mpm_case c;
+                mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                         .youngs_modulus = 1e3,
+                                         .poisson_ratio = 0.3,
+                                         .density = 1.0};
+                mpm_body_desc b[2];
+                memset(&c, 0, sizeof c);
+                memset(b, 0, sizeof b);
+                const int a = dim > 1; /* the axis the boxes meet along */
+                c.grid.dim = dim;
+                for (int d = 0; d < dim; d++) {
+                    c.grid.h[d] = 0.1;
+                    c.grid.nodes[d] = d == 0 ? cells + 1 : 9;
+                }
+                for (int k = 0; k < 2; k++) {
+                    b[k].shape = MPM_SHAPE_BOX;
+                    b[k].ppc = 4;
+                    for (int d = 0; d < dim; d++) {
+                        double lo = d == 0 ? 0.0 : 0.2, hi = d == 0 ? 0.1 * cells : 0.6;
+                        double mid = 0.5 * (lo + hi);
+                        b[k].lo[d] = d == a && k ? mid : lo;
+                        b[k].hi[d] = d == a && !k ? mid : hi;
+                        b[k].velocity[d] = d == a ? (k ? -0.2 : 0.2) : 0.0;
+                    }
+                }
+                c.method = ms[m];
+                c.update = MPM_MUSL;
+                c.n_materials = 1;
+                c.materials = &mat;
+                c.n_bodies = 2;
+                c.bodies = b;
+                char name[64];
+                snprintf(name, sizeof name, "%dD %s, %d cell%s in x", dim,
+                         ms[m] == MPM_METHOD_BSPLINE2 ? "BSPLINE2" : "BSPLINE3", cells,
+                         cells > 1 ? "s" : "");
+                int differ = 0;
+                CHECKF(compare(name, &c, 20, KTOL, &differ) == 0, "%s", name);
+                runs++;
+            }
+    CHECK(runs == 36);
+}
+
 TEST(kernels_field_checked)
 {
     mpm_paper t;

@@ -256,9 +256,9 @@ INLINE int v4u_any(v4u m)
  * every particle and axis. */
 typedef struct {
     double x0[3], ih[3];
-    double st_f[3]; /* the strides as doubles: a base (< 2^53 nodes) is
-                     * summed exactly in a vector and converted once */
-    int n[3];       /* B-splines: the cells of each axis (s->bs[d].n) */
+    double st_f[3];   /* the strides as doubles: a base (< 2^53 nodes) is
+                       * summed exactly in a vector and converted once */
+    unsigned span[3]; /* interior first cells c - (NS - 2) run 0 .. span */
 } wgeo;
 
 /* Four four-lane vectors v[k] (lane j: particle j) stored transposed:
@@ -280,7 +280,8 @@ INLINE void tr4_store(const v4d v[4], double *o0, double *o1, double *o2, double
 /* B-spline weights of four particles i .. i + 3 of the block when every
  * one lies in an interior span along every axis (bs_axis()'s closed forms,
  * lane by lane the same operations, so the same bits); returns 0, having
- * written nothing, when one of them is in a clamped span. */
+ * written nothing, when one of them is in a clamped span.  Only for grids
+ * with an interior span on every axis (weights_block()). */
 INLINE int bs_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, int NS, pw *W)
 {
     v4d fr[3], bd = {0, 0, 0, 0}; /* the bases, exact in doubles */
@@ -293,9 +294,7 @@ INLINE int bs_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, int NS, p
         /* interior: NS - 2 <= c <= n - NS + 1, one unsigned compare (no
          * min(c, n - 1) first: for NS > 2 a c it would lower is out
          * either way, and one that is in is left as it is) */
-        const int span = G->n[d] - 2 * NS + 3;
-        if (span < 0) return 0; /* no interior span on this axis */
-        out |= (v4u)(c - (NS - 2)) > (unsigned)span;
+        out |= (v4u)(c - (NS - 2)) > G->span[d];
         v4d cd = __builtin_convertvector(c, v4d);
         fr[d] = r - cd;
         bd += cd * G->st_f[d];
@@ -320,13 +319,16 @@ INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS,
      * through the stack: 0.88x) */
     if (BS && MPM_V4) {
         wgeo G;
+        int inner = 1; /* every axis has an interior span (n >= 2 NS - 3) */
         for (int d = 0; d < D; d++) {
             G.x0[d] = s->x0[d];
             G.ih[d] = s->inv_h[d];
             G.st_f[d] = (double)s->stride[d];
-            G.n[d] = s->bs[d].n;
+            int span = s->bs[d].n - 2 * NS + 3;
+            inner &= span >= 0;
+            G.span[d] = (unsigned)span;
         }
-        for (; i + 3 < nb; i += 4)
+        for (; inner && i + 3 < nb; i += 4)
             if (!bs_block4(s, &G, b0 + i, D, NS, Wb + i))
                 for (int j = 0; j < 4; j++) weights(s, b0 + i + j, D, NS, BS, &Wb[i + j]);
     }
