@@ -117,6 +117,9 @@ INLINE void boxc_init(const mpm_sim *s, boxc *b)
  * when the run is flushed.  Within a run the rows of the support change
  * only with 3-node uGIMP.  B-splines (BS): nodes c .. c + NS - 1, the
  * cell clamped to the last one as in bs_axis(). */
+INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c[3],
+                     const int n0[3], int D, int NS, int BS);
+
 INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *a,
                     const double x[3], int D, int NS, int BS)
 {
@@ -127,6 +130,13 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
         c[d] = (int)r;
         n0[d] = NS == 2 || BS ? c[d] : NS == 4 ? c[d] - 1 : c[d] - 1 + (r - c[d] >= 0.5);
     }
+    box_cell(s, o, a, c, n0, D, NS, BS);
+}
+
+/* box_add() from the cell c and the support's first nodes n0. */
+INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c[3],
+                     const int n0[3], int D, int NS, int BS)
+{
     if (c[1] != a->cy || (D > 2 && c[2] != a->cz)) {
         run_flush(s, o, a, D);
         a->cy = c[1];
@@ -554,7 +564,49 @@ INLINE void ap_store(mpm_sim *s, size_t p, int D, const double vpic[3], double B
 INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, esum *e, rowrun *a,
                         size_t b0, size_t b1, int D, int NS, int BS, int EN, int AP)
 {
-    for (size_t p = b0; p < b1; p++) {
+    size_t p = b0;
+#if MPM_V4
+    /* four particles at a time when all four pass the checks (else the
+     * loop below takes them, to find the first bad one): the checks and
+     * cells by lanes, each lane check_xv()'s and box_add()'s operations */
+    for (; p + 4 <= b1; p += 4) {
+        const v4d big = {1.79e308, 1.79e308, 1.79e308, 1.79e308}, zero = {0, 0, 0, 0};
+        v4d x[3], v2 = zero, r[3];
+        v4l ok = {-1, -1, -1, -1};
+        for (int d = 0; d < D; d++) {
+            x[d] = *(const v4du *)(s->P.x[d] + p);
+            v4d v = *(const v4du *)(s->P.v[d] + p);
+            ok &= (x[d] >= bc->lo[d]) & (x[d] < bc->hi[d]) & (v <= big) & (v >= -big);
+            v2 = v2 + v * v;
+            v4d rd = (x[d] - bc->x0[d]) * bc->ih[d], rm = zero + bc->rmax[d];
+            v4l lt = rd < rm, ge = rd >= zero;
+            r[d] = (v4d)((((v4l)rd & lt) | ((v4l)rm & ~lt)) & ge);
+        }
+        if (!v4l_all(ok)) break;
+        double m01 = v2[0] > v2[1] ? v2[0] : v2[1], m23 = v2[2] > v2[3] ? v2[2] : v2[3];
+        double m = m01 > m23 ? m01 : m23;
+        ck->vmax2 = m > ck->vmax2 ? m : ck->vmax2;
+        v4i c[3], n0[3];
+        for (int d = 0; d < D; d++) {
+            c[d] = __builtin_convertvector(r[d], v4i);
+            n0[d] = c[d];
+            if (NS == 4 && !BS) n0[d] = c[d] - 1;
+            if (NS == 3 && !BS) {
+                v4l up = (r[d] - __builtin_convertvector(c[d], v4d)) >= 0.5;
+                n0[d] = c[d] - 1 - __builtin_convertvector(up, v4i);
+            }
+        }
+        for (int j = 0; j < 4; j++) {
+            int cj[3] = {0, 0, 0}, nj[3] = {0, 0, 0};
+            for (int d = 0; d < D; d++) {
+                cj[d] = c[d][j];
+                nj[d] = n0[d][j];
+            }
+            box_cell(s, o, a, cj, nj, D, NS, BS);
+        }
+    }
+#endif
+    for (; p < b1; p++) {
         double xn[3], vn[3];
         for (int d = 0; d < D; d++) {
             xn[d] = s->P.x[d][p];

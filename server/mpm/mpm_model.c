@@ -47,8 +47,55 @@ static void elastic_1d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
         for (size_t i = 0; i < n; i++) P->eps[0][p0 + i] += deps[0][i];
 }
 
-static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
-                       double *const deps[6])
+/* Two doubles, eight material indices: the elastic blocks of one material
+ * run two particles to an SSE2 operation (each lane the scalar loop's
+ * operations, so the same bits; GCC -O2 does not vectorise loops of an
+ * unknown count). */
+typedef double m2d __attribute__((vector_size(16), aligned(8), may_alias));
+typedef uint16_t m8u __attribute__((vector_size(16), aligned(2), may_alias));
+
+/* Whether particles [0, n) are all of material mat[0] (n > 0). */
+static int one_material(const uint16_t *mat, size_t n)
+{
+    const uint16_t m0 = mat[0];
+    size_t i = 0;
+    m8u d = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (; i + 8 <= n; i += 8) d |= *(const m8u *)(mat + i) ^ m0;
+    unsigned diff = 0;
+    for (int k = 0; k < 8; k++) diff |= d[k];
+    for (; i < n; i++) diff |= (unsigned)(mat[i] ^ m0);
+    return diff == 0;
+}
+
+/* elastic_2d() for a block of one material */
+static void elastic_2d_one(const mpm_mat_params *mp, mpm_particles *P, size_t p0, size_t n,
+                           double *const deps[6])
+{
+    const double la = mp->lambda, m2 = 2.0 * mp->mu;
+    const double *dx = deps[0], *dy = deps[1], *dxy = deps[3];
+    double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s3 = P->sig[3] + p0;
+    double *s2 = P->sig[2] ? P->sig[2] + p0 : NULL;
+    size_t i = 0;
+    for (; i + 2 <= n; i += 2) {
+        m2d a = *(const m2d *)(dx + i), b = *(const m2d *)(dy + i);
+        m2d lt = la * (a + b);
+        *(m2d *)(s0 + i) += lt + m2 * a;
+        *(m2d *)(s1 + i) += lt + m2 * b;
+        *(m2d *)(s3 + i) += m2 * *(const m2d *)(dxy + i);
+        if (s2) *(m2d *)(s2 + i) += lt; /* plane strain: eps_zz = 0 */
+    }
+    for (; i < n; i++) {
+        double lt = la * (dx[i] + dy[i]);
+        s0[i] += lt + m2 * dx[i];
+        s1[i] += lt + m2 * dy[i];
+        s3[i] += m2 * dxy[i];
+        if (s2) s2[i] += lt;
+    }
+}
+
+/* elastic_2d() for blocks of several materials */
+static void elastic_2d_mixed(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
+                             double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
     double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s3 = P->sig[3] + p0;
@@ -64,6 +111,15 @@ static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
         double *s2 = P->sig[2] + p0;
         for (size_t i = 0; i < n; i++) s2[i] += mats[mat[i]].lambda * (deps[0][i] + deps[1][i]);
     }
+}
+
+static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
+                       double *const deps[6])
+{
+    if (n && one_material(P->mat + p0, n))
+        elastic_2d_one(&mats[P->mat[p0]], P, p0, n, deps);
+    else
+        elastic_2d_mixed(mats, P, p0, n, deps);
     if (P->eps[0]) { /* the strain record, when kept (mpm_internal.h) */
         double *e0 = P->eps[0] + p0, *e1 = P->eps[1] + p0, *e3 = P->eps[3] + p0;
         for (size_t i = 0; i < n; i++) {
@@ -84,7 +140,19 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
         s[c] = P->sig[c] + p0;
         de[c] = deps[c];
     }
-    for (size_t i = 0; i < n; i++) {
+    const int one = n && one_material(mat, n);
+    size_t i0 = 0;
+    if (one) { /* two particles at a time, then the odd one below */
+        const double la = mats[mat[0]].lambda, m2 = 2.0 * mats[mat[0]].mu;
+        for (; i0 + 2 <= n; i0 += 2) {
+            m2d e[6];
+            for (int c = 0; c < 6; c++) e[c] = *(const m2d *)(de[c] + i0);
+            m2d lt = la * (e[0] + e[1] + e[2]);
+            for (int c = 0; c < 3; c++) *(m2d *)(s[c] + i0) += lt + m2 * e[c];
+            for (int c = 3; c < 6; c++) *(m2d *)(s[c] + i0) += m2 * e[c];
+        }
+    }
+    for (size_t i = i0; i < n; i++) {
         const mpm_mat_params *mp = &mats[mat[i]];
         double d0 = de[0][i], d1 = de[1][i], d2 = de[2][i], d3 = de[3][i], d4 = de[4][i],
                d5 = de[5][i];

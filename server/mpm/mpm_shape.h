@@ -233,12 +233,22 @@ INLINE void weights(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o)
 }
 
 /* The weights of particles [b0, b0 + nb) into Wb[0..nb).  MPM tents take
- * two particles at a time (the cell coordinates, truncations and
- * fractions as pairs: the same operations as weights(), so the same
- * bits); the rest, and an odd last particle, one by one. */
+ * four particles at a time in AVX builds (tent_block4()) and two in the
+ * portable ones (the cell coordinates, truncations and fractions as
+ * lanes: the same operations as weights(), so the same bits), B-splines
+ * four at a time in AVX builds (bs_block4()); the rest, and the last odd
+ * particles, one by one. */
 typedef int v2i __attribute__((vector_size(8)));
 typedef int v4i __attribute__((vector_size(16)));
 typedef unsigned v4u __attribute__((vector_size(16)));
+
+#if MPM_V4
+/* whether every lane of a four-lane comparison's mask is set */
+INLINE int v4l_all(v4l m)
+{
+    return __builtin_ia32_movmskpd256((v4d)m) == 15;
+}
+#endif
 
 /* whether any lane of a comparison's mask is set */
 INLINE int v4u_any(v4u m)
@@ -311,6 +321,32 @@ INLINE int bs_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, int NS, p
     return 1;
 }
 
+#if MPM_V4
+/* MPM tents' weights of four particles p .. p + 3 (the pairs' operations
+ * of weights_block() lane by lane, so the same bits): each particle's
+ * (1 - f, f) of an axis is one two-lane store, and the bases are summed
+ * exactly in doubles, as bs_block4()'s. */
+INLINE void tent_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, pw *W)
+{
+    v4d bd = {0, 0, 0, 0};
+    for (int d = 0; d < D; d++) {
+        const double *x = s->P.x[d] + p;
+        v4d xv = {x[0], x[1], x[2], x[3]};
+        v4d r = (xv - G->x0[d]) * G->ih[d];
+        v4d cd = __builtin_convertvector(__builtin_convertvector(r, v4i), v4d);
+        v4d f = r - cd, a = 1.0 - f;
+        v4d lo = __builtin_shufflevector(a, f, 0, 4, 2, 6); /* particles 0, 2 */
+        v4d hi = __builtin_shufflevector(a, f, 1, 5, 3, 7); /* particles 1, 3 */
+        v2_st(W[0].w[d], __builtin_shufflevector(lo, lo, 0, 1));
+        v2_st(W[1].w[d], __builtin_shufflevector(hi, hi, 0, 1));
+        v2_st(W[2].w[d], __builtin_shufflevector(lo, lo, 2, 3));
+        v2_st(W[3].w[d], __builtin_shufflevector(hi, hi, 2, 3));
+        bd += cd * G->st_f[d];
+    }
+    for (int j = 0; j < 4; j++) W[j].base = (size_t)(long long)bd[j];
+}
+#endif
+
 INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS, int BS, pw *Wb)
 {
     size_t i = 0;
@@ -332,23 +368,43 @@ INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS,
             if (!bs_block4(s, &G, b0 + i, D, NS, Wb + i))
                 for (int j = 0; j < 4; j++) weights(s, b0 + i + j, D, NS, BS, &Wb[i + j]);
     }
-    if (NS == 2 && !BS)
+    if (NS == 2 && !BS) {
+        /* the geometry in locals (wgeo) */
+        double x0[3], ih[3];
+        size_t st[3];
+#if MPM_V4
+        wgeo G;
+#endif
+        for (int d = 0; d < D; d++) {
+            x0[d] = s->x0[d];
+            ih[d] = s->inv_h[d];
+            st[d] = s->stride[d];
+#if MPM_V4
+            G.x0[d] = x0[d];
+            G.ih[d] = ih[d];
+            G.st_f[d] = (double)st[d];
+#endif
+        }
+#if MPM_V4
+        for (; i + 3 < nb; i += 4) tent_block4(s, &G, b0 + i, D, Wb + i);
+#endif
         for (; i + 1 < nb; i += 2) {
             size_t base0 = 0, base1 = 0;
             for (int d = 0; d < D; d++) {
-                v2d r = (v2_ld(s->P.x[d] + b0 + i) - s->x0[d]) * s->inv_h[d];
+                v2d r = (v2_ld(s->P.x[d] + b0 + i) - x0[d]) * ih[d];
                 v2i c = __builtin_convertvector(r, v2i);
                 v2d f = r - __builtin_convertvector(c, v2d), a = 1.0 - f;
                 Wb[i].w[d][0] = a[0];
                 Wb[i].w[d][1] = f[0];
                 Wb[i + 1].w[d][0] = a[1];
                 Wb[i + 1].w[d][1] = f[1];
-                base0 += (size_t)c[0] * s->stride[d];
-                base1 += (size_t)c[1] * s->stride[d];
+                base0 += (size_t)c[0] * st[d];
+                base1 += (size_t)c[1] * st[d];
             }
             Wb[i].base = base0;
             Wb[i + 1].base = base1;
         }
+    }
     for (; i < nb; i++) weights(s, b0 + i, D, NS, BS, &Wb[i]);
 }
 
