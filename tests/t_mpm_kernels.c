@@ -427,6 +427,112 @@ TEST(kernels_bspline_small_grids)
     CHECK(runs == 36);
 }
 
+/* The AVX2 kernels check the moved particles four at a time and take a
+ * group with a bad particle through the one-by-one loop, which must name
+ * the first bad one in storage order, as the portable kernels do.  A
+ * lattice of particles (4 per cell and axis, cells 2 .. 5 of 8; 3D 2 .. 3)
+ * moving uniformly at 0.1 h a step along x, so that its last layer leaves
+ * the grid in one step, in 1D, 2D and 3D, MPM and GIMP, USF and USL; with
+ * 0 .. 3 particles at rest in the first cell, which the sort puts before
+ * the lattice, so that the first bad particle falls in each lane of its
+ * group.  Both kernels must fail with MPM_ELEFTGRID at the same step and
+ * with the same message, which names a particle of the last layer. */
+TEST(kernels_first_bad_particle)
+{
+    if (!mpm_kernels_avx2_available()) {
+        TLOG("no AVX2+FMA here: the four-particle checks do not run");
+        return;
+    }
+    static const mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP};
+    static const mpm_update us[] = {MPM_USF, MPM_USL};
+    const double h = 0.125, dp = h / 4;
+    int runs = 0;
+    for (int dim = 1; dim <= 3; dim++) {
+        int per = dim == 3 ? 8 : 16;
+        size_t n = 1;
+        for (int d = 0; d < dim; d++) n *= (size_t)per;
+        double *x = malloc(n * (size_t)dim * sizeof *x), *vol = malloc(n * sizeof *vol);
+        double *v = calloc(n * (size_t)dim, sizeof *v);
+        double ex[3 * 3], evol[3], ev[3 * 3] = {0};
+        CHECK(x && vol && v);
+        for (size_t i = 0; i < n; i++) {
+            size_t r = i;
+            for (int d = 0; d < dim; d++) {
+                x[i * (size_t)dim + (size_t)d] = 2 * h + (0.5 + (double)(r % (size_t)per)) * dp;
+                r /= (size_t)per;
+            }
+            v[i * (size_t)dim] = 0.1 * h / 0.005;
+            vol[i] = 1.0;
+            for (int d = 0; d < dim; d++) vol[i] *= dp;
+        }
+        for (int e = 0; e < 3; e++) {
+            for (int d = 0; d < dim; d++) ex[e * dim + d] = (0.5 + e) * dp;
+            evol[e] = vol[0];
+        }
+        for (int extra = 0; extra <= 3; extra++)
+            for (size_t m = 0; m < 2; m++)
+                for (size_t u = 0; u < 2; u++) {
+                    mpm_case c;
+                    mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                             .youngs_modulus = 1.0,
+                                             .poisson_ratio = 0.3,
+                                             .density = 1.0};
+                    mpm_body_desc b[2];
+                    memset(&c, 0, sizeof c);
+                    memset(b, 0, sizeof b);
+                    b[0].n_points = n;
+                    b[0].x = x;
+                    b[0].volume = vol;
+                    b[0].v = v;
+                    b[1].n_points = (size_t)extra;
+                    b[1].x = ex;
+                    b[1].volume = evol;
+                    b[1].v = ev;
+                    c.grid.dim = dim;
+                    for (int d = 0; d < dim; d++) {
+                        c.grid.h[d] = h;
+                        c.grid.nodes[d] = 9;
+                    }
+                    c.method = ms[m];
+                    c.update = us[u];
+                    c.dt = 0.005;
+                    c.n_materials = 1;
+                    c.materials = &mat;
+                    c.n_bodies = extra ? 2 : 1;
+                    c.bodies = b;
+                    int rc[2];
+                    long steps[2];
+                    char msg[2][MPM_ERROR_MSG_MAX];
+                    for (int k = 0; k < 2; k++) {
+                        mpm_error err;
+                        c.kernels = k ? MPM_KERNELS_AVX2 : MPM_KERNELS_PORTABLE;
+                        mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+                        CHECKF(s, "%dD: %s", dim, TERR(&err));
+                        rc[k] = mpm_sim_run(s, 400);
+                        steps[k] = mpm_sim_steps(s);
+                        snprintf(msg[k], sizeof msg[k], "%s", mpm_sim_error(s)->message);
+                        mpm_sim_destroy(&s);
+                    }
+                    if (m == 0 && u == 0)
+                        TLOG("%dD, %d at rest: %s", dim, extra, msg[1]);
+                    CHECKF(rc[0] == MPM_ELEFTGRID && rc[1] == MPM_ELEFTGRID, "%dD: rc %d, %d", dim,
+                           rc[0], rc[1]);
+                    CHECKF(steps[0] == steps[1] && !strcmp(msg[0], msg[1]),
+                           "%dD, %d at rest: portable '%s' (%ld steps), AVX2 '%s' (%ld)", dim,
+                           extra, msg[0], steps[0], msg[1], steps[1]);
+                    unsigned long id = 0;
+                    CHECKF(sscanf(msg[1], "particle %lu left", &id) == 1 && id < n &&
+                               id % (unsigned long)per == (unsigned long)per - 1,
+                           "%dD: not a particle of the last layer: %s", dim, msg[1]);
+                    runs++;
+                }
+        free(x);
+        free(vol);
+        free(v);
+    }
+    CHECK(runs == 48);
+}
+
 TEST(kernels_field_checked)
 {
     mpm_paper t;
