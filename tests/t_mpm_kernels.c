@@ -513,8 +513,7 @@ TEST(kernels_first_bad_particle)
                         snprintf(msg[k], sizeof msg[k], "%s", mpm_sim_error(s)->message);
                         mpm_sim_destroy(&s);
                     }
-                    if (m == 0 && u == 0)
-                        TLOG("%dD, %d at rest: %s", dim, extra, msg[1]);
+                    if (m == 0 && u == 0) TLOG("%dD, %d at rest: %s", dim, extra, msg[1]);
                     CHECKF(rc[0] == MPM_ELEFTGRID && rc[1] == MPM_ELEFTGRID, "%dD: rc %d, %d", dim,
                            rc[0], rc[1]);
                     CHECKF(steps[0] == steps[1] && !strcmp(msg[0], msg[1]),

@@ -638,9 +638,9 @@ TEST(material_one_material_block_bits)
                     CHECKF(sim, "%s", err.message);
                     int rc = mpm_sim_run(sim, 60);
                     CHECKF(rc == 0, "%dD: %s", dim, mpm_sim_error(sim)->message);
-                    mpm_sim_snapshot(sim, &(mpm_snapshot){.x = out[two][0],
-                                                          .v = out[two][1],
-                                                          .stress = out[two][2]});
+                    mpm_sim_snapshot(
+                        sim,
+                        &(mpm_snapshot){.x = out[two][0], .v = out[two][1], .stress = out[two][2]});
                     mpm_sim_destroy(&sim);
                 }
                 double smax = 0;
