@@ -451,8 +451,8 @@ TEST(kernels_first_bad_particle)
         int per = dim == 3 ? 8 : 16;
         size_t n = 1;
         for (int d = 0; d < dim; d++) n *= (size_t)per;
-        double *x = malloc(n * (size_t)dim * sizeof *x), *vol = malloc(n * sizeof *vol);
-        double *v = calloc(n * (size_t)dim, sizeof *v);
+        double *x = malloc(n * 3 * sizeof *x), *vol = malloc(n * sizeof *vol);
+        double *v = calloc(n * 3, sizeof *v);
         double ex[3 * 3], evol[3], ev[3 * 3] = {0};
         CHECK(x && vol && v);
         for (size_t i = 0; i < n; i++) {
