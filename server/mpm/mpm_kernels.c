@@ -571,14 +571,13 @@ INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, 
      * cells by lanes, each lane check_xv()'s and box_add()'s operations */
     for (; p + 4 <= b1; p += 4) {
         const v4d big = {1.79e308, 1.79e308, 1.79e308, 1.79e308}, zero = {0, 0, 0, 0};
-        v4d x[3], v2 = zero, r[3];
+        v4d v2 = zero, r[3];
         v4l ok = {-1, -1, -1, -1};
         for (int d = 0; d < D; d++) {
-            x[d] = *(const v4du *)(s->P.x[d] + p);
-            v4d v = *(const v4du *)(s->P.v[d] + p);
-            ok &= (x[d] >= bc->lo[d]) & (x[d] < bc->hi[d]) & (v <= big) & (v >= -big);
+            v4d x = *(const v4du *)(s->P.x[d] + p), v = *(const v4du *)(s->P.v[d] + p);
+            ok &= (x >= bc->lo[d]) & (x < bc->hi[d]) & (v <= big) & (v >= -big);
             v2 = v2 + v * v;
-            v4d rd = (x[d] - bc->x0[d]) * bc->ih[d], rm = zero + bc->rmax[d];
+            v4d rd = (x - bc->x0[d]) * bc->ih[d], rm = zero + bc->rmax[d];
             v4l lt = rd < rm, ge = rd >= zero;
             r[d] = (v4d)((((v4l)rd & lt) | ((v4l)rm & ~lt)) & ge);
         }

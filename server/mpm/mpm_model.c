@@ -67,65 +67,40 @@ static int one_material(const uint16_t *mat, size_t n)
     return diff == 0;
 }
 
-/* elastic_2d() for a block of one material */
-static void elastic_2d_one(const mpm_mat_params *mp, mpm_particles *P, size_t p0, size_t n,
-                           double *const deps[6])
-{
-    const double la = mp->lambda, m2 = 2.0 * mp->mu;
-    const double *dx = deps[0], *dy = deps[1], *dxy = deps[3];
-    double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s3 = P->sig[3] + p0;
-    double *s2 = P->sig[2] ? P->sig[2] + p0 : NULL;
-    size_t i = 0;
-    for (; i + 2 <= n; i += 2) {
-        m2d a = *(const m2d *)(dx + i), b = *(const m2d *)(dy + i);
-        m2d lt = la * (a + b);
-        *(m2d *)(s0 + i) += lt + m2 * a;
-        *(m2d *)(s1 + i) += lt + m2 * b;
-        *(m2d *)(s3 + i) += m2 * *(const m2d *)(dxy + i);
-        if (s2) *(m2d *)(s2 + i) += lt; /* plane strain: eps_zz = 0 */
-    }
-    for (; i < n; i++) {
-        double lt = la * (dx[i] + dy[i]);
-        s0[i] += lt + m2 * dx[i];
-        s1[i] += lt + m2 * dy[i];
-        s3[i] += m2 * dxy[i];
-        if (s2) s2[i] += lt;
-    }
-}
-
-/* elastic_2d() for blocks of several materials */
-static void elastic_2d_mixed(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
-                             double *const deps[6])
+static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
+                       double *const deps[6])
 {
     const uint16_t *mat = P->mat + p0;
     double *s0 = P->sig[0] + p0, *s1 = P->sig[1] + p0, *s3 = P->sig[3] + p0;
-    for (size_t i = 0; i < n; i++) {
+    double *s2 = P->sig[2] ? P->sig[2] + p0 : NULL; /* plane strain: eps_zz = 0 (else
+                                                       derived, mpm_sig_zz()) */
+    size_t i = 0;
+    if (n && one_material(mat, n)) { /* two particles at a time, an odd one below */
+        const double la = mats[mat[0]].lambda, m2 = 2.0 * mats[mat[0]].mu;
+        for (; i + 2 <= n; i += 2) {
+            m2d a = *(const m2d *)(deps[0] + i), b = *(const m2d *)(deps[1] + i);
+            m2d lt = la * (a + b);
+            *(m2d *)(s0 + i) += lt + m2 * a;
+            *(m2d *)(s1 + i) += lt + m2 * b;
+            *(m2d *)(s3 + i) += m2 * *(const m2d *)(deps[3] + i);
+            if (s2) *(m2d *)(s2 + i) += lt;
+        }
+    }
+    for (; i < n; i++) {
         const mpm_mat_params *mp = &mats[mat[i]];
         double dxx = deps[0][i], dyy = deps[1][i], dxy = deps[3][i];
         double lt = mp->lambda * (dxx + dyy), m2 = 2.0 * mp->mu;
         s0[i] += lt + m2 * dxx;
         s1[i] += lt + m2 * dyy;
         s3[i] += m2 * dxy;
+        if (s2) s2[i] += lt;
     }
-    if (P->sig[2]) { /* plane strain: eps_zz = 0 (else derived, mpm_sig_zz()) */
-        double *s2 = P->sig[2] + p0;
-        for (size_t i = 0; i < n; i++) s2[i] += mats[mat[i]].lambda * (deps[0][i] + deps[1][i]);
-    }
-}
-
-static void elastic_2d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
-                       double *const deps[6])
-{
-    if (n && one_material(P->mat + p0, n))
-        elastic_2d_one(&mats[P->mat[p0]], P, p0, n, deps);
-    else
-        elastic_2d_mixed(mats, P, p0, n, deps);
     if (P->eps[0]) { /* the strain record, when kept (mpm_internal.h) */
         double *e0 = P->eps[0] + p0, *e1 = P->eps[1] + p0, *e3 = P->eps[3] + p0;
-        for (size_t i = 0; i < n; i++) {
-            e0[i] += deps[0][i];
-            e1[i] += deps[1][i];
-            e3[i] += deps[3][i];
+        for (size_t k = 0; k < n; k++) {
+            e0[k] += deps[0][k];
+            e1[k] += deps[1][k];
+            e3[k] += deps[3][k];
         }
     }
 }
@@ -140,9 +115,8 @@ static void elastic_3d(const mpm_mat_params *mats, mpm_particles *P, size_t p0, 
         s[c] = P->sig[c] + p0;
         de[c] = deps[c];
     }
-    const int one = n && one_material(mat, n);
     size_t i0 = 0;
-    if (one) { /* two particles at a time, then the odd one below */
+    if (n && one_material(mat, n)) { /* two particles at a time, an odd one below */
         const double la = mats[mat[0]].lambda, m2 = 2.0 * mats[mat[0]].mu;
         for (; i0 + 2 <= n; i0 += 2) {
             m2d e[6];

@@ -266,7 +266,8 @@ INLINE int v4u_any(v4u m)
  * every particle and axis. */
 typedef struct {
     double x0[3], ih[3];
-    double st_f[3];   /* the strides as doubles: a base (< 2^53 nodes) is
+    size_t st[3];     /* the strides */
+    double st_f[3];   /* the same as doubles: a base (< 2^53 nodes) is
                        * summed exactly in a vector and converted once */
     unsigned span[3]; /* interior first cells c - (NS - 2) run 0 .. span */
 } wgeo;
@@ -350,56 +351,42 @@ INLINE void tent_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, pw *W)
 INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS, int BS, pw *Wb)
 {
     size_t i = 0;
-    /* four particles at a time in AVX builds; the portable kernels take
-     * the B-spline weights one by one (SSE2 lowers the four-lane form
-     * through the stack: 0.88x) */
-    if (BS && MPM_V4) {
-        wgeo G;
-        int inner = 1; /* every axis has an interior span (n >= 2 NS - 3) */
-        for (int d = 0; d < D; d++) {
-            G.x0[d] = s->x0[d];
-            G.ih[d] = s->inv_h[d];
-            G.st_f[d] = (double)s->stride[d];
+    wgeo G;
+    int inner = 1; /* B-splines: every axis has an interior span (n >= 2 NS - 3) */
+    for (int d = 0; d < D; d++) {
+        G.x0[d] = s->x0[d];
+        G.ih[d] = s->inv_h[d];
+        G.st[d] = s->stride[d];
+        G.st_f[d] = (double)s->stride[d];
+        if (BS) {
             int span = s->bs[d].n - 2 * NS + 3;
             inner &= span >= 0;
             G.span[d] = (unsigned)span;
         }
+    }
+    /* four particles at a time in AVX builds; the portable kernels take
+     * the B-spline weights one by one (SSE2 lowers the four-lane form
+     * through the stack: 0.88x) */
+    if (BS && MPM_V4)
         for (; inner && i + 3 < nb; i += 4)
             if (!bs_block4(s, &G, b0 + i, D, NS, Wb + i))
                 for (int j = 0; j < 4; j++) weights(s, b0 + i + j, D, NS, BS, &Wb[i + j]);
-    }
     if (NS == 2 && !BS) {
-        /* the geometry in locals (wgeo) */
-        double x0[3], ih[3];
-        size_t st[3];
-#if MPM_V4
-        wgeo G;
-#endif
-        for (int d = 0; d < D; d++) {
-            x0[d] = s->x0[d];
-            ih[d] = s->inv_h[d];
-            st[d] = s->stride[d];
-#if MPM_V4
-            G.x0[d] = x0[d];
-            G.ih[d] = ih[d];
-            G.st_f[d] = (double)st[d];
-#endif
-        }
 #if MPM_V4
         for (; i + 3 < nb; i += 4) tent_block4(s, &G, b0 + i, D, Wb + i);
 #endif
         for (; i + 1 < nb; i += 2) {
             size_t base0 = 0, base1 = 0;
             for (int d = 0; d < D; d++) {
-                v2d r = (v2_ld(s->P.x[d] + b0 + i) - x0[d]) * ih[d];
+                v2d r = (v2_ld(s->P.x[d] + b0 + i) - G.x0[d]) * G.ih[d];
                 v2i c = __builtin_convertvector(r, v2i);
                 v2d f = r - __builtin_convertvector(c, v2d), a = 1.0 - f;
                 Wb[i].w[d][0] = a[0];
                 Wb[i].w[d][1] = f[0];
                 Wb[i + 1].w[d][0] = a[1];
                 Wb[i + 1].w[d][1] = f[1];
-                base0 += (size_t)c[0] * st[d];
-                base1 += (size_t)c[1] * st[d];
+                base0 += (size_t)c[0] * G.st[d];
+                base1 += (size_t)c[1] * G.st[d];
             }
             Wb[i].base = base0;
             Wb[i + 1].base = base1;
