@@ -559,7 +559,7 @@ TEST(material_general_path_bits)
 
 /* Linear elasticity of a block whose particles are all of one material
  * reads the parameters once and runs by pairs (mpm_model.c
- * elastic_2d_one()); a block of several materials goes particle by
+ * elastic_2d(), elastic_3d()); a block of several materials goes particle by
  * particle.  Two interleaved lattices (the even and the odd points of a
  * 2D and a 3D lattice, so that every block of 64 holds both), sheared and
  * compressed, are run with one material and with two of the same
