@@ -14,6 +14,7 @@
 #include "mpm_paper.h"
 #include "t.h"
 
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -530,6 +531,114 @@ TEST(kernels_first_bad_particle)
         free(v);
     }
     CHECK(runs == 48);
+}
+
+/* The tents' gathers by lanes (mpm_tlane.h): four particles of one cell's
+ * run at a time, the lanes past the run kept as they were, a cell with a
+ * phantom corner and the block's or thread's last particles one by one.
+ * Explicit particles put 1 .. 9 (2D) or 1 .. 8 (3D) in a cell, so that
+ * runs of every length start at every lane, with a drift and a scatter
+ * of velocities that moves them across cells; a layer on the grid line
+ * past the body gives its cells phantom corners at the first step.  USF,
+ * USL and the PIC/FLIP blend, on 1, 2 and 3 threads (the threads' ranges
+ * end at other lanes).  Each run: the AVX2 kernels against the portable
+ * ones within KTOL, and bit for bit where this build does not fuse (the
+ * sanitizer builds: there a lane that took another cell's corners, or a
+ * lane past its run that was moved, shows as a bit). */
+static uint64_t lcg(uint64_t *st)
+{
+    *st = *st * 6364136223846793005ull + 1442695040888963407ull;
+    return *st >> 11;
+}
+
+TEST(kernels_tent_lanes)
+{
+    if (!mpm_kernels_avx2_available()) {
+        TLOG("no AVX2+FMA here: the tents' lanes do not run");
+        return;
+    }
+    const double h = 0.125;
+    int any = 0, runs = 0;
+    for (int dim = 2; dim <= 3; dim++) {
+        const int lo = 3, hi = dim == 2 ? 11 : 7, nodes = dim == 2 ? 16 : 12;
+        const int span = hi - lo, maxper = dim == 2 ? 9 : 8;
+        size_t ncell = 1, cap = 0;
+        for (int d = 0; d < dim; d++) ncell *= (size_t)span;
+        cap = ncell * (size_t)maxper + ncell; /* the cells, and the layer on the grid line */
+        double *x = malloc(cap * 3 * sizeof *x), *vol = malloc(cap * sizeof *vol);
+        double *v = malloc(cap * 3 * sizeof *v);
+        CHECK(x && vol && v);
+        uint64_t st = 12345u + (uint64_t)dim;
+        size_t n = 0;
+        for (size_t c = 0; c < ncell; c++) {
+            int ci[3] = {0, 0, 0};
+            size_t r = c;
+            for (int d = 0; d < dim; d++) {
+                ci[d] = lo + (int)(r % (size_t)span);
+                r /= (size_t)span;
+            }
+            int per = 1 + (int)((c * 5 + c / 3) % (size_t)maxper);
+            for (int k = 0; k < per; k++, n++)
+                for (int d = 0; d < dim; d++) {
+                    double u = (double)(lcg(&st) % 1000) / 1000.0;
+                    x[n * (size_t)dim + (size_t)d] = (ci[d] + 0.05 + 0.9 * u) * h;
+                    v[n * (size_t)dim + (size_t)d] =
+                        (d == 0 ? 0.4 : 0.25) + 0.1 * ((double)(lcg(&st) % 1000) / 500.0 - 1.0);
+                }
+            /* the layer on the grid line x = hi h, past the body: its
+             * cells' corners at x = (hi + 1) h have no mass at first */
+            if (ci[0] == hi - 1) {
+                x[n * (size_t)dim] = hi * h;
+                for (int d = 1; d < dim; d++) x[n * (size_t)dim + (size_t)d] = (ci[d] + 0.5) * h;
+                for (int d = 0; d < dim; d++) v[n * (size_t)dim + (size_t)d] = d == 0 ? 0.4 : 0.25;
+                n++;
+            }
+        }
+        for (size_t i = 0; i < n; i++) vol[i] = pow(h, dim) / 5.0;
+        static const mpm_update us[] = {MPM_USF, MPM_USL, MPM_USF};
+        for (int u = 0; u < 3; u++)
+            for (int th = 1; th <= 3; th++) {
+                mpm_case c;
+                mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
+                                         .youngs_modulus = 10.0,
+                                         .poisson_ratio = 0.3,
+                                         .density = 1.0};
+                mpm_body_desc b;
+                memset(&c, 0, sizeof c);
+                memset(&b, 0, sizeof b);
+                b.n_points = n;
+                b.x = x;
+                b.volume = vol;
+                b.v = v;
+                c.grid.dim = dim;
+                for (int d = 0; d < dim; d++) {
+                    c.grid.h[d] = h;
+                    c.grid.nodes[d] = nodes;
+                }
+                c.method = MPM_METHOD_MPM;
+                c.update = us[u];
+                c.pic_fraction = u == 2 ? 0.3 : 0.0;
+                c.dt = 0.002;
+                c.threads = th;
+                c.n_materials = 1;
+                c.materials = &mat;
+                c.n_bodies = 1;
+                c.bodies = &b;
+                char name[64];
+                snprintf(name, sizeof name, "%dD MPM %s%s, %d thr", dim, u == 1 ? "USL" : "USF",
+                         u == 2 ? " blend" : "", th);
+                int differ = 0;
+                CHECKF(compare(name, &c, 300, KTOL, &differ) == 0, "%s", name);
+                any |= differ;
+                runs++;
+            }
+        TLOG("%dD: %zu particles", dim, n);
+        free(x);
+        free(vol);
+        free(v);
+    }
+    CHECK(runs == 18);
+    CHECK(any == mpm_kernels_avx2_fuses());
 }
 
 TEST(kernels_field_checked)

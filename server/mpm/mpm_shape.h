@@ -348,22 +348,30 @@ INLINE void tent_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, pw *W)
 }
 #endif
 
+/* The grid's geometry into G; returns, for B-splines, whether every axis
+ * has an interior span (n >= 2 NS - 3), else 1. */
+INLINE int wgeo_init(const mpm_sim *s, int D, int NS, int BS, wgeo *G)
+{
+    int inner = 1;
+    for (int d = 0; d < D; d++) {
+        G->x0[d] = s->x0[d];
+        G->ih[d] = s->inv_h[d];
+        G->st[d] = s->stride[d];
+        G->st_f[d] = (double)s->stride[d];
+        if (BS) {
+            int span = s->bs[d].n - 2 * NS + 3;
+            inner &= span >= 0;
+            G->span[d] = (unsigned)span;
+        }
+    }
+    return inner;
+}
+
 INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS, int BS, pw *Wb)
 {
     size_t i = 0;
     wgeo G;
-    int inner = 1; /* B-splines: every axis has an interior span (n >= 2 NS - 3) */
-    for (int d = 0; d < D; d++) {
-        G.x0[d] = s->x0[d];
-        G.ih[d] = s->inv_h[d];
-        G.st[d] = s->stride[d];
-        G.st_f[d] = (double)s->stride[d];
-        if (BS) {
-            int span = s->bs[d].n - 2 * NS + 3;
-            inner &= span >= 0;
-            G.span[d] = (unsigned)span;
-        }
-    }
+    int inner = wgeo_init(s, D, NS, BS, &G);
     /* four particles at a time in AVX builds; the portable kernels take
      * the B-spline weights one by one (SSE2 lowers the four-lane form
      * through the stack: 0.88x) */
