@@ -533,6 +533,10 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
     trun r;
     trun_init(&r, D);
     if (EN) esum_init(s, &e);
+#if MPM_V4
+    wgeo G;
+    if (TL(D, NS, BS, 0)) wgeo_init(s, D, NS, BS, &G);
+#endif
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
         weights_block(s, b0, nb, D, NS, BS, Wb);
@@ -542,20 +546,23 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
          * time (the lanes past the run are written and then overwritten
          * by the particles that own them); a cell with a phantom corner,
          * and the block's last particles, one by one */
+        unsigned char kk[MPM_BLOCK];
         if (TL(D, NS, BS, 0)) {
-            wgeo G;
-            wgeo_init(s, D, NS, BS, &G);
+            size_t bb[MPM_BLOCK];
+            for (size_t j = 0; j < nb; j++) bb[j] = Wb[j].base;
+            tl_counts(bb, nb, kk);
             while (i + 4 <= nb) {
-                tlane t;
-                tlane_weights(s, &G, b0 + i, D, &t);
-                if (__builtin_expect(tl_phantom(s, t.base, D), 0)) {
-                    for (unsigned j = 0; j < t.k; j++, i++)
+                unsigned k = kk[i];
+                if (__builtin_expect(tl_phantom(s, Wb[i].base, D), 0)) {
+                    for (unsigned j = 0; j < k; j++, i++)
                         gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0,
                                NULL, NULL, 0);
                     continue;
                 }
+                tlane t;
+                tlane_weights(s, &G, b0 + i, D, Wb[i].base, k, &t);
                 tl_strain(s, s->g.q, &t, D, o->deps, i);
-                i += t.k;
+                i += k;
             }
         }
 #endif
@@ -564,7 +571,18 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
                    0);
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
-        for (i = 0; i < nb; i++)
+        i = 0;
+#if MPM_V4
+        /* 2D tents: the forces by lanes too (a run's four at a time) */
+        if (TL(D, NS, BS, 0) && D == 2)
+            while (i + 4 <= nb) {
+                tlane t;
+                tlane_weights(s, &G, b0 + i, D, Wb[i].base, kk[i], &t);
+                tl_force2(s, &r, gb, &t, b0 + i);
+                i += kk[i];
+            }
+#endif
+        for (; i < nb; i++)
             if (TR(NS, BS, 0))
                 trun_add(s, &r, gb, &Wb[i], b0 + i, D, 0, 1);
             else
@@ -664,26 +682,15 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
     chk_init(o, &ck);
     trun nr;
     trun_init(&nr, D);
-#if MPM_V4
-    wgeo G;
-    if (TL(D, NS, BS, AP)) wgeo_init(s, D, NS, BS, &G);
-#endif
     /* by blocks: the update, then the checks and supports, then the next
      * step's scatter, three small loops rather than one that spills */
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t b1 = p1 - b0 < MPM_BLOCK ? p1 : b0 + MPM_BLOCK;
         /* the block's weights first: tents and B-splines (1.05-1.09x) and
          * 2D uGIMP (1.02x; 3D uGIMP 0.99x: taken where they are used) */
-        const int BW = !AP && !TL(D, NS, BS, AP) && (NS == 2 || BS || D < 3);
+        const int BW = !AP && (NS == 2 || BS || D < 3);
         if (BW) weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
-        size_t p = b0;
-#if MPM_V4
-        /* tents: four particles of a run at a time, while four of the
-         * thread's remain (the last, one by one) */
-        if (TL(D, NS, BS, AP))
-            while (p < b1 && p + 4 <= p1) p += tl_move(s, &G, p, b1 - p, D, BL, al, bl);
-#endif
-        for (; p < b1; p++) {
+        for (size_t p = b0; p < b1; p++) {
             double dx[3], dv[3], Bm[3][3];
             if (AP) {
                 weights_ap(s, p, D, NS, BS, &W, &R);
@@ -740,18 +747,21 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
          * (AVX builds) take theirs there */
         const int BW = !AP && !TL(D, NS, BS, AP);
         if (BW) weights_block(s, b0, nb, D, NS, BS, Wb);
+#if MPM_V4
+        size_t bb[MPM_BLOCK];
+        unsigned char kk[MPM_BLOCK];
+        if (TL(D, NS, BS, AP)) tl_groups(s, &G, b0, nb, D, bb, kk);
+#endif
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3], dv[3], Bm[3][3];
 #if MPM_V4
             /* tents: four particles of a run at a time (the block's last,
              * and a cell with a phantom corner, one by one) */
-            if (TL(D, NS, BS, AP) && i + 4 <= nb) {
-                unsigned k = tl_move_strain(s, &G, p, D, BL, al, bl, o->deps, i);
-                if (k) {
-                    i += k - 1;
-                    continue;
-                }
+            if (TL(D, NS, BS, AP) && i + 4 <= nb &&
+                tl_move_strain(s, &G, p, bb[i], kk[i], D, BL, al, bl, o->deps, i)) {
+                i += kk[i] - 1u;
+                continue;
             }
 #endif
             if (AP) {
