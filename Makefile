@@ -63,7 +63,7 @@ FUZZ_O ?= -O1
 FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
          -fno-sanitize-recover=all
 
-.PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-accuracy bench-vtk stress \
+.PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-inproc inproc-objs bench-accuracy bench-vtk stress \
         demo clean \
         format format-check lint fuzz fuzz-quick fuzz-build fuzz-seed
 .SECONDARY: $(GEN_C) $(GEN_H)
@@ -242,7 +242,7 @@ ANALYZE := build/analyze
 ANAF := -O0 -g -fanalyzer -Wno-analyzer-use-of-uninitialized-value -Wno-format-truncation
 $(ANALYZE)/tests/%.o: ANAF += -Wno-analyzer-malloc-leak -Wno-analyzer-file-leak
 LINT_SRCS = $(filter-out server/mpm/mpm_kernels_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(wildcard server/*.c) $(CLI_SRCS) \
-            $(wildcard tools/*.c) $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS)
+            $(wildcard tools/*.c) $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS) $(wildcard tests/perf/inproc/*.c)
 $(ANALYZE)/%.o: %.c | $(GEN_H)
 	@mkdir -p $(dir $@)
 	$(ANALYZER_CC) $(CSTD) $(WARN) $(ANAF) $(INC) -MMD -MP -c $< -o $@
@@ -386,6 +386,22 @@ bench: deps
 bench-compare:
 	@test -n "$(REF)" || { echo "usage: make bench-compare REF=<commit> [COMPARE_QUICK=1]" >&2; exit 2; }
 	@bash tests/perf/compare.sh $(REF)
+
+# make bench-inproc REF=<commit>  this tree's solver against REF's in one
+#             process, alternated round by round (tests/perf/inproc/): REF's
+#             tree and bench as for bench-compare, REF's solver linked into the
+#             driver with its symbols made local; for each configuration both
+#             simulations resident, a warm-up, then INPROC_ROUNDS (15) rounds,
+#             REF first in even rounds, this tree first in odd; a table of each
+#             side's median, the median of the rounds' own ratios, quartiles,
+#             extremes and the rounds won.  Default: bench-compare's
+#             configurations but collapse2d (~6 min).  INPROC_ARGS,
+#             INPROC_PARTICLES, INPROC_RUN_S: see the script's head.
+INPROC_OBJS := $(REL)/tests/perf/inproc/inproc.o $(REL)/tests/perf/inproc/side.o $(REL)/tests/perf/triad.o
+inproc-objs: $(INPROC_OBJS) $(REL)/libtools.a $(REL)/libmpm.a
+bench-inproc:
+	@test -n "$(REF)" || { echo "usage: make bench-inproc REF=<commit>" >&2; exit 2; }
+	@bash tests/perf/inproc/inproc.sh $(REF)
 
 # ---- the demo ----------------------------------------------------------------------
 # make demo: mpmd on loopback with its default database, the paper's fine

@@ -5,11 +5,9 @@
 #
 #   tests/perf/compare.sh REF
 #
-# 1. REF's tree: a git worktree under build/compare/<short-sha> (reused when
-#    there; `git worktree prune` and a retry when the add fails).  Its
-#    bin/mpmbench is built there with its own Makefile (make -C DIR
-#    bin/mpmbench -j2); its build outputs stay in that tree, its files are
-#    never changed.  This tree's bin/mpmbench is built too.
+# 1. REF's tree: a git worktree under build/compare/<short-sha>, its
+#    bin/mpmbench built there with its own Makefile (reftree.sh).  This
+#    tree's bin/mpmbench is built too.
 # 2. Rounds (COMPARE_ROUNDS, default 3): each round measures the STREAM
 #    triad (bin/mpmbench --triad) on the thread counts used, then every
 #    configuration with REF's bench ("before") and this one ("after"), one
@@ -49,12 +47,8 @@ if [ -z "$REF" ]; then
 fi
 ROOT=$(git rev-parse --show-toplevel)
 cd "$ROOT"
-FULL=$(git rev-parse --verify "$REF^{commit}") || {
-    echo "bench-compare: '$REF' is not a commit" >&2
-    exit 2
-}
-SHORT=$(git rev-parse --short "$FULL")
-DIR=build/compare/$SHORT
+# shellcheck source=tests/perf/reftree.sh
+source tests/perf/reftree.sh
 
 DEFAULT_ARGS=""
 for sc in disks2d cube3d; do
@@ -87,26 +81,7 @@ if [ -n "${COMPARE_QUICK:-}" ] && [ "${COMPARE_QUICK}" != 0 ]; then
 fi
 
 # ---- REF's tree and both builds ----
-if [ -e "$DIR/.git" ]; then
-    HAVE=$(git -C "$DIR" rev-parse HEAD)
-    if [ "$HAVE" != "$FULL" ]; then
-        echo "bench-compare: $DIR holds $HAVE, not $FULL; remove it (git worktree remove $DIR)" >&2
-        exit 1
-    fi
-else
-    mkdir -p build/compare
-    if ! git worktree add --detach "$DIR" "$FULL" >/dev/null 2>&1; then
-        git worktree prune
-        git worktree add --detach "$DIR" "$FULL" >/dev/null
-    fi
-fi
-echo "bench-compare: building $SHORT's bin/mpmbench in $DIR" >&2
-mkdir -p "$DIR/build" # ignored by git there: the log adds no file to REF's tree
-make -C "$DIR" -j2 --no-print-directory bin/mpmbench >"$DIR/build/bench-compare-build.log" 2>&1 || {
-    echo "bench-compare: building $SHORT failed; see $DIR/build/bench-compare-build.log" >&2
-    tail -20 "$DIR/build/bench-compare-build.log" >&2
-    exit 1
-}
+ref_tree bench-compare "$REF"
 echo "bench-compare: building this tree's bin/mpmbench" >&2
 make -j2 --no-print-directory bin/mpmbench >build/.bench-compare-build.log 2>&1 || {
     echo "bench-compare: building this tree failed; see build/.bench-compare-build.log" >&2
