@@ -166,6 +166,7 @@ test: deps
 # The benchmarks' binaries, built (not run) in CI so that they never rot.
 bench-build: deps
 	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmbench-accuracy bin/mpmvtkbench
+	@bash tests/perf/inproc/inproc.sh --self-check
 
 # Release build, no sanitizers: quick local iteration.
 test-quick: bin/mpmtest bin/mpmd bin/mpmctl

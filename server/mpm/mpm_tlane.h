@@ -13,7 +13,7 @@
  * Used by USF's stress pass (the strain gather and, in 2D, the force
  * scatter, whose terms each lane forms as trun_add() does before they are
  * added particle by particle) and USL's moving pass.  USF's moving pass
- * stays one particle at a time: by lanes it ran 0.85-0.92x with its
+ * stays one particle at a time: by lanes it ran 0.82-0.92x with its
  * arrays in cache (1.03-1.06x at 10^6 particles).  Everything is static
  * and inline.
  */

@@ -9,6 +9,13 @@
 # on a machine whose speed moves by tens of per cent within the hour.
 #
 #   tests/perf/inproc/inproc.sh REF
+#   tests/perf/inproc/inproc.sh --self-check   (make bench-build runs it)
+#
+# --self-check: this tree against itself, on this tree's build/rel objects
+# (no worktree): the same REF side build (symbols made local, the entry
+# points kept), the driver linked, and one small configuration in two
+# processes; it fails unless the driver prints its row.  It tests the
+# mechanism, not a speed.
 #
 # 1. REF's tree and its bench, as make bench-compare (../reftree.sh).
 # 2. REF's side: side.c compiled against REF's headers with REF's own
@@ -40,7 +47,7 @@ set -euo pipefail
 
 REF=${1:-}
 if [ -z "$REF" ]; then
-    echo "usage: tests/perf/inproc/inproc.sh REF   (make bench-inproc REF=<commit>)" >&2
+    echo "usage: tests/perf/inproc/inproc.sh REF | --self-check   (make bench-inproc REF=<commit>)" >&2
     exit 2
 fi
 ROOT=$(git rev-parse --show-toplevel)
@@ -71,8 +78,18 @@ PARTICLES=${INPROC_PARTICLES:-1000000}
 RUN_S=${INPROC_RUN_S:-0.5}
 
 # ---- the builds ----
-ref_tree bench-inproc "$REF"
-B=$DIR/build/inproc
+if [ "$REF" = --self-check ]; then
+    DIR=. SHORT=self
+    make -j2 --no-print-directory bin/mpmbench >build/.bench-inproc-build.log 2>&1 || {
+        echo "bench-inproc: building this tree failed; see build/.bench-inproc-build.log" >&2
+        tail -20 build/.bench-inproc-build.log >&2
+        exit 1
+    }
+    B=build/inproc-self
+else
+    ref_tree bench-inproc "$REF"
+    B=$DIR/build/inproc
+fi
 mkdir -p "$B"
 echo "bench-inproc: REF's side ($B/ref.o)" >&2
 CSTD="-std=c11 -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE"
@@ -80,7 +97,7 @@ CSTD="-std=c11 -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE"
 rm -f "$B/ref_objs.a"
 find "$DIR/build/rel" -name '*.o' -not -path '*/tests/*' -print0 | xargs -0 ar rcs "$B/ref_objs.a"
 # shellcheck disable=SC2086
-cc $CSTD -O2 -g -w -DPBI_SIDE=ref -DPBI_SCENES="\"$ROOT/$DIR/tests/perf/scenes.c\"" \
+cc $CSTD -O2 -g -w -DPBI_SIDE=ref -DPBI_SCENES="\"$(cd "$DIR" && pwd)/tests/perf/scenes.c\"" \
     -I"$DIR/server/mpm" -I"$DIR/server" -I"$DIR/tools" -I"$DIR/server/tools" -I"$DIR/tests" \
     -c tests/perf/inproc/side.c -o "$B/side_ref.o"
 ld -r -o "$B/ref_all.o" "$B/side_ref.o" "$B/ref_objs.a"
@@ -99,6 +116,18 @@ make -j2 --no-print-directory inproc-objs >build/.bench-inproc-build.log 2>&1 ||
 }
 cc -O2 -g -o "$B/inproc" build/rel/tests/perf/inproc/inproc.o build/rel/tests/perf/inproc/side.o \
     build/rel/tests/perf/triad.o "$B/ref.o" build/rel/libtools.a build/rel/libmpm.a -lm -lpthread
+
+if [ "$REF" = --self-check ]; then
+    row=$("$B/inproc" --scene disks2d --particles 4000 --steps 3 --rounds 3 --procs 2 --threads 2 --csv)
+    echo "bench-inproc --self-check: $row" >&2
+    # scene,method,update,transfer,threads,particles,steps,rounds,... : 6 rounds of 2 processes
+    awk -F, '$1 == "disks2d" && $6 > 3000 && $8 == 6 && $11 > 0 { ok = 1 } END { exit !ok }' <<<"$row" || {
+        echo "bench-inproc --self-check: FAILED (no row of 6 rounds)" >&2
+        exit 1
+    }
+    echo "bench-inproc --self-check: ok" >&2
+    exit 0
+fi
 
 # steps for a configuration (the issue #5 target speeds, as make bench-compare)
 steps_for() {
