@@ -640,7 +640,20 @@ INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, 
                 n0[d] = c[d] - 1 - __builtin_convertvector(up, v4i);
             }
         }
+        /* a lane in the cell of the lane before it (and with its first
+         * nodes) adds nothing: box_cell() of one cell twice in a row
+         * leaves the run as the first call left it (its row, cx and node
+         * box), so only the lanes that start a cell are added; sorted
+         * particles come in runs of a cell */
+        v4i same = {0, -1, -1, -1};
+        for (int d = 0; d < D; d++) {
+            same &= c[d] == __builtin_shufflevector(c[d], c[d], 0, 0, 1, 2);
+            if (NS == 3 && !BS) same &= n0[d] == __builtin_shufflevector(n0[d], n0[d], 0, 0, 1, 2);
+        }
+        unsigned starts =
+            ~(unsigned)__builtin_ia32_movmskps((__attribute__((vector_size(16))) float)same) & 15u;
         for (int j = 0; j < 4; j++) {
+            if (!(starts >> j & 1u)) continue;
             int cj[3] = {0, 0, 0}, nj[3] = {0, 0, 0};
             for (int d = 0; d < D; d++) {
                 cj[d] = c[d][j];
