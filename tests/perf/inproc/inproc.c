@@ -8,18 +8,15 @@
  * machine over seconds falls on both sides of a round alike, which
  * processes run one after the other (make bench-compare) cannot promise.
  *
- * One process is not enough: where a process's arrays land in memory moves
- * a build's speed for that process's whole life (36facb3 ran disks2d MPM
- * USF at 23-26 M particle-steps/s in three processes out of four and at 31-32
- * in the fourth, on the same VM within minutes).  So the rounds run in
+ * One process is not enough: on the Zen 4 VM of issue 14, 36facb3 ran
+ * disks2d MPM USF at 23-26 M particle-steps/s in most processes and at
+ * 31-32 in some, for a process's whole life and sometimes for several in a
+ * row, while this tree's stayed within 52-59.  The triad measured beside it
+ * does not explain it (25.7 at 43 GB/s, 31.9 at 39).  So the rounds run in
  * `procs` forked children one after the other, each building both
- * simulations afresh, and the row pools the rounds of all of them.
- *
- * And the machine's memory moves under both: 36facb3 ran that scene at 24.5
- * M particle-steps/s in a process whose STREAM triad was 34.6 GB/s and at
- * 31.9 in one with 39.0, a minute apart, while this tree's speed stayed
- * within 52-57.  So each process also measures the triad (triad.c) before
- * and after its rounds, and the row gives it beside the process's ratio.
+ * simulations afresh; the row pools the rounds of all of them and gives
+ * each process's median ratio with the STREAM triad (triad.c) measured
+ * before and after its rounds, so that a reader sees the spread.
  *
  * Prints one row: each side's median M particle-steps/s, the median of the
  * rounds' own ratios new / ref, their quartiles and extremes, in how many

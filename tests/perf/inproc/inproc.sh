@@ -175,7 +175,7 @@ echo "bench-inproc: ref = $SHORT, new = $HEAD_DESC, alternated in one process; $
 echo "Mp-steps/s: each side's median over the rounds; new/ref: the median of the rounds' own ratios,"
 echo "q1-q3 and min-max their quartiles and extremes; new>ref: the rounds in which this tree was faster;"
 echo "per process: each process's median ratio @ the STREAM triad (GB/s) measured before and after its"
-echo "rounds: the memory's speed moves under both sides, and an older build may gain more from it."
+echo "rounds (an older build's speed can shift for a process's whole life; see inproc.c)."
 "$B/inproc" --header-only
 cat "$OUT"
 echo "bench-inproc: $(($(date +%s) - T0)) s of runs"
