@@ -50,22 +50,8 @@ cd "$ROOT"
 # shellcheck source=tests/perf/reftree.sh
 source tests/perf/reftree.sh
 
-DEFAULT_ARGS=""
-for sc in disks2d cube3d; do
-    DEFAULT_ARGS+="--scene $sc --method mpm --update usf --threads 2;"
-    DEFAULT_ARGS+="--scene $sc --method gimp --update usf --threads 2;"
-    DEFAULT_ARGS+="--scene $sc --method bspline2 --update musl --threads 2;"
-    DEFAULT_ARGS+="--scene $sc --method bspline2 --update usf --threads 2;"
-    DEFAULT_ARGS+="--scene $sc --method bspline2 --update musl --transfer apic --threads 2;"
-    # cube3d MPM USL diverges at step 47 in both 36facb3 and this tree (MPM
-    # USL's cell-crossing noise at the impact): 4 runs of 10 steps stay short of it
-    if [ $sc = cube3d ]; then
-        DEFAULT_ARGS+="--scene $sc --method mpm --update usl --threads 2 --steps 10;"
-    else
-        DEFAULT_ARGS+="--scene $sc --method mpm --update usl --threads 2;"
-    fi
-    DEFAULT_ARGS+="--scene $sc --method mpm --update usf --threads 1;"
-done
+# 4 runs of 10 steps of cube3d MPM USL stay short of its step 47
+DEFAULT_ARGS=$(default_configs 10)
 DEFAULT_ARGS+="--scene collapse2d --method bspline2 --update usf --threads 2"
 
 ROUNDS=${COMPARE_ROUNDS:-3}

@@ -10,6 +10,13 @@
 #                       bin/mpmbench -j2; its outputs stay in that tree, whose
 #                       files are never changed).  Exits with a message naming
 #                       TOOL on any failure.  Run from the top of this tree.
+#   default_configs K   prints the configurations both tools run by default,
+#                       ';'-separated bin/mpmbench arguments: disks2d and cube3d
+#                       on 2 threads with MPM USF, GIMP USF, BSPLINE2 MUSL and
+#                       USF, BSPLINE2 MUSL APIC and MPM USL, and MPM USF on 1
+#                       thread; cube3d MPM USL with --steps K (it diverges at
+#                       step 47 of one simulation, in 36facb3 and this tree
+#                       alike: MPM USL's cell-crossing noise at the impact).
 
 ref_tree() {
     local tool=$1 ref=$2
@@ -40,4 +47,22 @@ ref_tree() {
         tail -20 "$DIR/build/bench-compare-build.log" >&2
         exit 1
     }
+}
+
+default_configs() {
+    local k=$1 sc out=""
+    for sc in disks2d cube3d; do
+        out+="--scene $sc --method mpm --update usf --threads 2;"
+        out+="--scene $sc --method gimp --update usf --threads 2;"
+        out+="--scene $sc --method bspline2 --update musl --threads 2;"
+        out+="--scene $sc --method bspline2 --update usf --threads 2;"
+        out+="--scene $sc --method bspline2 --update musl --transfer apic --threads 2;"
+        if [ $sc = cube3d ]; then
+            out+="--scene $sc --method mpm --update usl --threads 2 --steps $k;"
+        else
+            out+="--scene $sc --method mpm --update usl --threads 2;"
+        fi
+        out+="--scene $sc --method mpm --update usf --threads 1;"
+    done
+    printf '%s' "$out"
 }
