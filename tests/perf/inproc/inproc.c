@@ -166,8 +166,10 @@ static void measure(const pbi_cfg *q, long steps, long rounds, proc_out *o)
     o->triad = t0 > 0 && t1 > 0 ? 0.5 * (t0 + t1) : 0.0;
 }
 
-/* measure() in a forked child, its result back through a pipe: each
- * process maps both simulations afresh.  0, or the exit code to give. */
+/* measure() in a forked child, its result back through a pipe
+ * (pb_write_all() / pb_read_all(), from the bench's scenes.c that this
+ * tree's side includes): each process maps both simulations afresh.
+ * 0, or the exit code to give. */
 static int one_process(const pbi_cfg *q, long steps, long rounds, proc_out *o)
 {
     int fd[2];
@@ -187,25 +189,10 @@ static int one_process(const pbi_cfg *q, long steps, long rounds, proc_out *o)
     if (pid == 0) {
         close(fd[0]);
         measure(q, steps, rounds, o);
-        const char *b = (const char *)o;
-        size_t left = sizeof *o;
-        while (left) {
-            ssize_t w = write(fd[1], b, left);
-            if (w <= 0) _exit(1);
-            b += w;
-            left -= (size_t)w;
-        }
-        _exit(0);
+        _exit(pb_write_all(fd[1], o, sizeof *o) ? 1 : 0);
     }
     close(fd[1]);
-    char *b = (char *)o;
-    size_t got = 0;
-    while (got < sizeof *o) {
-        ssize_t k = read(fd[0], b + got, sizeof *o - got);
-        if (k < 0 && errno == EINTR) continue;
-        if (k <= 0) break;
-        got += (size_t)k;
-    }
+    size_t got = pb_read_all(fd[0], o, sizeof *o);
     close(fd[0]);
     int st = 0;
     while (waitpid(pid, &st, 0) < 0 && errno == EINTR) {
