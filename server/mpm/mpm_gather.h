@@ -234,6 +234,18 @@ INLINE void xr_make(xrow *r, double a, double b, double c, double d)
 #endif
 }
 
+/* a weight row w[0 .. NS) of 3 or 4 nodes, the lanes past it 0: AVX
+ * builds load the four lanes whole (a 3-node row's w[3] is 0, pw) */
+INLINE void xr_row(xrow *r, const double *w, int NS)
+{
+#if MPM_V4
+    (void)NS;
+    r->v = *(const v4du *)w;
+#else
+    xr_make(r, w[0], w[1], w[2], NS > 3 ? w[3] : 0.0);
+#endif
+}
+
 /* v *= m, lane by lane */
 INLINE void xr_mul(xrow *v, const xrow *m)
 {
@@ -342,9 +354,13 @@ INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int 
         nr++;
     });
     xrow wx, gx;
-    xr_make(&wx, W->w[0][0], W->w[0][1], NS > 2 ? W->w[0][2] : 0.0, NS > 3 ? W->w[0][3] : 0.0);
-    xr_make(&gx, GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1), NS > 2 ? GRAD(s, *W, NS, 0, 2) : 0.0,
-            NS > 3 ? GRAD(s, *W, NS, 0, 3) : 0.0);
+    if (NS > 2) {
+        xr_row(&wx, W->w[0], NS);
+        xr_row(&gx, W->g[0], NS);
+    } else {
+        xr_make(&wx, W->w[0][0], W->w[0][1], 0.0, 0.0);
+        xr_make(&gx, GRAD(s, *W, NS, 0, 0), GRAD(s, *W, NS, 0, 1), 0.0, 0.0);
+    }
     double L[3][3] = {{0}};
     xmask ph = {0}; /* lanes of phantom nodes (1/m = 0), or-ed */
     if (DS) {

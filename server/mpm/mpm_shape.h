@@ -37,6 +37,10 @@ typedef long long v4l __attribute__((vector_size(32)));
  * [-1, 1] into out.  Macros: a function may not take or return a 32-byte
  * vector where AVX is not enabled (the portable kernels' ABI). */
 #define V4ABS(x) ((v4d)((v4l)(x) & (v4l){INT64_MAX, INT64_MAX, INT64_MAX, INT64_MAX}))
+/* lanes 0-2 of x and +0 in lane 3, by a mask (a lane set to 0 made GCC
+ * emit the register form of vmovq that Valgrind 3.19 cannot decode, and
+ * the callgrind counts of performance.md need Valgrind) */
+#define V4_KEEP3(x) ((v4d)((v4l)(x) & (v4l){-1, -1, -1, 0}))
 #define V4SEL(m, x, y) ((v4d)(((v4l)(x) & (v4l)(m)) | ((v4l)(y) & ~(v4l)(m))))
 #define V2SEL(m, x, y) ((v2d)(((v2l)(x) & (v2l)(m)) | ((v2l)(y) & ~(v2l)(m))))
 #if defined(__AVX__)
@@ -78,16 +82,21 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
     double f = r - c;
     int n0 = NS == 4 ? c - 1 : c - 1 + (f >= 0.5);
     /* the NS nodes' distances as lanes; the four lanes stored at once
-     * (NS 3: w[3], g[3] get the fourth node's values, which no kernel
-     * reads; w and g hold 4) */
+     * (NS 3: w[3], g[3] are the fourth node's, outside the support, so
+     * +0 already; set to 0 all the same, as pw promises) */
 #if MPM_V4
     const v4d k4 = {0, 1, 2, 3};
     v4d sd = r - (k4 + (double)n0), cp, cm;
     CLAMP1_4(sd + a, cp);
     CLAMP1_4(sd - a, cm);
     v4d ap = V4ABS(cp), am = V4ABS(cm);
-    *(v4du *)w = ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a;
-    *(v4du *)g = (am - ap) * i2lp;
+    v4d wv = ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a, gv = (am - ap) * i2lp;
+    if (NS == 3) {
+        wv = V4_KEEP3(wv);
+        gv = V4_KEEP3(gv);
+    }
+    *(v4du *)w = wv;
+    *(v4du *)g = gv;
 #else
     /* two pairs: SSE2 lowered the four-lane form's broadcasts through the
      * stack (two 8-byte stores read back as one 16-byte load, which the
@@ -101,8 +110,10 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
         CLAMP1_2(sp, cp);
         CLAMP1_2(sm, cm);
         v2d ap = (v2d)((v2l)cp & mag), am = (v2d)((v2l)cm & mag);
-        v2_st(w + h, ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a);
-        v2_st(g + h, (am - ap) * i2lp);
+        v2d wv = ((cp - cm) - 0.5 * (cp * ap - cm * am)) * i2a, gv = (am - ap) * i2lp;
+        if (NS == 3 && h == 2) wv[1] = gv[1] = 0.0;
+        v2_st(w + h, wv);
+        v2_st(g + h, gv);
     }
 #endif
     return n0;
@@ -179,11 +190,29 @@ INLINE int bs_axis(const mpm_bspline_axis *ax, double r, double inv_h, int NS, d
 }
 
 /* Per-axis weights of one particle: w[d][k], g[d][k] belong to node
- * base + k stride[d] along axis d. */
+ * base + k stride[d] along axis d.  With NS 3, w[d][3] and g[d][3] are
+ * +0 on every axis d < D (and aoff's r[d][3] too), whichever function
+ * made them: the four-lane rows of the scatters and gathers load a row
+ * whole (V4_ROW(), xr_row()) and need the lane past the support to be 0, as the
+ * zero they built it with before was. */
 typedef struct {
     size_t base;
     double w[3][4], g[3][4];
 } pw;
+
+/* A row of 3 or 4 weights w into o[0 .. 4), o[3] = 0 for 3: AVX builds
+ * store the four lanes at once, since the scatters and gathers load them
+ * at once (V4_ROW(), xr_row()) and a load from one store is forwarded
+ * where a load from several waits for them to reach the cache. */
+INLINE void row_store(double *o, const double *w, int NS)
+{
+#if MPM_V4
+    v4d r = {w[0], w[1], w[2], NS > 3 ? w[3] : w[2]};
+    *(v4du *)o = NS > 3 ? r : V4_KEEP3(r);
+#else
+    for (int k = 0; k < 4; k++) o[k] = k < NS ? w[k] : 0.0;
+#endif
+}
 
 /* BS: B-spline family (NS = p + 1) instead of tents / uGIMP.  n0 (APIC;
  * NULL otherwise): the first node of each axis, padded index */
@@ -214,12 +243,20 @@ INLINE void weights_n0(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o,
     }
     for (int d = 0; d < D; d++) {
         double r = (s->P.x[d][p] - s->x0[d]) * s->inv_h[d];
+        double lw[4] = {0, 0, 0, 0}, lg[4] = {0, 0, 0, 0};
         int c;
         if (BS) {
-            c = bs_axis(&s->bs[d], r, s->inv_h[d], NS, o->w[d], o->g[d]);
+            c = bs_axis(&s->bs[d], r, s->inv_h[d], NS, lw, lg);
         } else {
             double lp = NS == 2 ? 0.0 : s->P.lp[d][p];
-            c = axis(r, s->inv_h[d], lp, NS, o->w[d], NS == 2 ? NULL : o->g[d]);
+            c = axis(r, s->inv_h[d], lp, NS, lw, NS == 2 ? NULL : lg);
+        }
+        if (NS == 2) {
+            o->w[d][0] = lw[0];
+            o->w[d][1] = lw[1];
+        } else {
+            row_store(o->w[d], lw, NS);
+            row_store(o->g[d], lg, NS);
         }
         if (n0) n0[d] = c;
         base += (size_t)c * s->stride[d];
@@ -417,6 +454,7 @@ INLINE void weights_ap(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o,
     for (int d = 0; d < D; d++) {
         double x = s->P.x[d][p];
         for (int k = 0; k < NS; k++) R->r[d][k] = mpm_node_coord(s, d, n0[d] + k) - x;
+        if (NS == 3) R->r[d][3] = 0.0;
     }
 }
 
