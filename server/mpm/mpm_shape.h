@@ -452,9 +452,9 @@ INLINE void weights_ap(const mpm_sim *s, size_t p, int D, int NS, int BS, pw *o,
     int n0[3] = {0, 0, 0};
     weights_n0(s, p, D, NS, BS, o, n0);
     for (int d = 0; d < D; d++) {
-        double x = s->P.x[d][p];
-        for (int k = 0; k < NS; k++) R->r[d][k] = mpm_node_coord(s, d, n0[d] + k) - x;
-        if (NS == 3) R->r[d][3] = 0.0;
+        double x = s->P.x[d][p], r[4] = {0, 0, 0, 0};
+        for (int k = 0; k < NS; k++) r[k] = mpm_node_coord(s, d, n0[d] + k) - x;
+        row_store(R->r[d], r, NS); /* as one store: read back as one load */
     }
 }
 
