@@ -391,8 +391,9 @@ bench-compare:
 # make bench-inproc REF=<commit>  this tree's solver against REF's in one
 #             process, alternated round by round (tests/perf/inproc/): REF's
 #             tree and bench as for bench-compare, REF's solver linked into the
-#             driver with its symbols made local; for each configuration both
-#             simulations resident, a warm-up, then INPROC_ROUNDS (15) rounds,
+#             driver with its symbols made local; for each configuration
+#             INPROC_PROCS (3) processes, each with both simulations resident,
+#             a warm-up, then INPROC_ROUNDS (7) rounds,
 #             REF first in even rounds, this tree first in odd; a table of each
 #             side's median, the median of the rounds' own ratios, quartiles,
 #             extremes and the rounds won.  Default: bench-compare's
