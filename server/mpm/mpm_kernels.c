@@ -200,9 +200,10 @@ INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c
  * a 3-node row's lane 3 is 0 there */
 #define V4_ROW(W, k, NS) ((void)(NS), (v4d)(*(const v4du *)(W)[k]))
 
-/* The rows of a support of 3 or 4 nodes per axis (D > 1) as ROWS(), with
- * the y factors of one z layer as lanes: Ay, By, Cy hold A, B, C of row ky
- * in lane ky (Wy wz, Gy wz, Wy gz: each lane ROWS()'s product), and PRE,
+/* The rows of a support of 3 or 4 nodes per axis as ROWS(), with the y
+ * factors of one z layer as lanes: Ay, By, Cy hold A, B, C of row ky in
+ * lane ky (Wy wz, Gy wz, Wy gz: each lane ROWS()'s product; 1D's one row
+ * has A 1 and B, C 0, as ROWS() gives it), and PRE,
  * run once a layer, forms the products of them that the rows use; the
  * body takes row ky's lane of each with V4_LANE(v, ky).  One vector
  * multiply a layer and a lane broadcast (vpermpd) per row where a scalar
@@ -217,7 +218,8 @@ INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c
 #define ROWS4(D, NS, W, s, PRE, ...)                                                         \
     do {                                                                                     \
         const size_t sy_ = (s)->stride[1], sz_ = (s)->stride[2];                             \
-        const v4d Wy = V4_ROW((W).w, 1, NS), Gy = V4_ROW((W).g, 1, NS);                      \
+        const v4d Wy = (D) > 1 ? V4_ROW((W).w, 1, NS) : (v4d){1, 1, 1, 1};                   \
+        const v4d Gy = (D) > 1 ? V4_ROW((W).g, 1, NS) : (v4d){0, 0, 0, 0};                   \
         for (int kz = 0; kz < ((D) > 2 ? (NS) : 1); kz++) {                                  \
             const double wz = (D) > 2 ? (W).w[2][kz] : 1.0;                                  \
             const double gz = (D) > 2 ? (W).g[2][kz] : 0.0;                                  \
@@ -228,6 +230,7 @@ INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c
             PRE;                                                                             \
             UNROLL                                                                           \
             for (int ky = 0; ky < (NS); ky++) {                                              \
+                if ((D) == 1 && ky > 0) break; /* 1D: one row */                             \
                 size_t row = (W).base + (size_t)ky * sy_ + ((D) > 2 ? (size_t)kz * sz_ : 0); \
                 __VA_ARGS__                                                                  \
             }                                                                                \
@@ -244,22 +247,14 @@ INLINE void scatter_mq(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_t p
     double mp = s->P.m[p];
     double mv0 = mp * s->P.v[0][p];
     double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
-    if (MPM_V4 && NS > 2 && D > 1) {
+    if (MPM_V4 && NS > 2) {
         const v4d S = V4_ROW(W->w, 0, NS);
         v4d am, a0, a1, a2;
         ROWS4(D, NS, *W, s, (am = Ay * mp, a0 = Ay * mv0, a1 = Ay * mv1, a2 = Ay * mv2), {
             V4_ADD(m + row, S * V4_LANE(am, ky));
             V4_ADD(q0 + row, S * V4_LANE(a0, ky));
-            V4_ADD(q1 + row, S * V4_LANE(a1, ky));
+            if (D > 1) V4_ADD(q1 + row, S * V4_LANE(a1, ky));
             if (D > 2) V4_ADD(q2 + row, S * V4_LANE(a2, ky));
-        });
-        return;
-    }
-    if (MPM_V4 && NS > 2) {
-        const v4d S = V4_ROW(W->w, 0, NS);
-        ROWS(D, NS, *W, s, {
-            V4_ADD(m + row, S * (A * mp));
-            V4_ADD(q0 + row, S * (A * mv0));
         });
         return;
     }
@@ -389,7 +384,7 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_
     double syy = D > 1 ? V * P->sig[1][p] : 0.0, sxy = D > 1 ? V * P->sig[3][p] : 0.0;
     double szz = D > 2 ? V * P->sig[2][p] : 0.0, syz = D > 2 ? V * P->sig[4][p] : 0.0;
     double sxz = D > 2 ? V * P->sig[5][p] : 0.0;
-    if (MPM_V4 && NS > 2 && D > 1) {
+    if (MPM_V4 && NS > 2) {
         const v4d gx = V4_ROW(W->g, 0, NS), wx = V4_ROW(W->w, 0, NS);
         v4d P0, P1, P2, Q0, Q1, Q2;
         ROWS4(D, NS, *W, s,
@@ -397,25 +392,13 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_
                Q0 = D > 2 ? By * sxy + Cy * sxz : By * sxy,
                Q1 = D > 2 ? By * syy + Cy * syz : By * syy, Q2 = By * syz + Cy * szz),
               {
-                  V4_SUB(f0 + row, gx * V4_LANE(P0, ky) + wx * V4_LANE(Q0, ky));
-                  V4_SUB(f1 + row, gx * V4_LANE(P1, ky) + wx * V4_LANE(Q1, ky));
+                  if (D == 1)
+                      V4_SUB(f0 + row, gx * V4_LANE(P0, ky));
+                  else
+                      V4_SUB(f0 + row, gx * V4_LANE(P0, ky) + wx * V4_LANE(Q0, ky));
+                  if (D > 1) V4_SUB(f1 + row, gx * V4_LANE(P1, ky) + wx * V4_LANE(Q1, ky));
                   if (D > 2) V4_SUB(f2 + row, gx * V4_LANE(P2, ky) + wx * V4_LANE(Q2, ky));
               });
-        return;
-    }
-    if (MPM_V4 && NS > 2) {
-        const v4d gx = V4_ROW(W->g, 0, NS), wx = V4_ROW(W->w, 0, NS);
-        ROWS(D, NS, *W, s, {
-            double P0 = sxx * A, P1 = sxy * A, P2 = sxz * A;
-            double Q0 = D > 2 ? sxy * B + sxz * C : sxy * B;
-            double Q1 = D > 2 ? syy * B + syz * C : syy * B, Q2 = syz * B + szz * C;
-            if (D == 1)
-                V4_SUB(f0 + row, gx * P0);
-            else
-                V4_SUB(f0 + row, gx * P0 + wx * Q0);
-            if (D > 1) V4_SUB(f1 + row, gx * P1 + wx * Q1);
-            if (D > 2) V4_SUB(f2 + row, gx * P2 + wx * Q2);
-        });
         return;
     }
     ROWS(D, NS, *W, s, {
@@ -560,19 +543,14 @@ INLINE void scatter_q2(const mpm_sim *s, double *const q[3], const pw *W0, size_
     double mp = s->P.m[p];
     double mv0 = mp * s->P.v[0][p];
     double mv1 = D > 1 ? mp * s->P.v[1][p] : 0.0, mv2 = D > 2 ? mp * s->P.v[2][p] : 0.0;
-    if (MPM_V4 && NS > 2 && D > 1) {
+    if (MPM_V4 && NS > 2) {
         const v4d S = V4_ROW(W->w, 0, NS);
         v4d a0, a1, a2;
         ROWS4(D, NS, *W, s, (a0 = Ay * mv0, a1 = Ay * mv1, a2 = Ay * mv2), {
             V4_ADD(q0 + row, S * V4_LANE(a0, ky));
-            V4_ADD(q1 + row, S * V4_LANE(a1, ky));
+            if (D > 1) V4_ADD(q1 + row, S * V4_LANE(a1, ky));
             if (D > 2) V4_ADD(q2 + row, S * V4_LANE(a2, ky));
         });
-        return;
-    }
-    if (MPM_V4 && NS > 2) {
-        const v4d S = V4_ROW(W->w, 0, NS);
-        ROWS(D, NS, *W, s, V4_ADD(q0 + row, S * (A * mv0)););
         return;
     }
     ROWS(D, NS, *W, s, {
