@@ -152,7 +152,7 @@ DTEST(daemon_auth_curve)
     snprintf(text, sizeof text, "%s root\n", dpub);
     CHECK(write_text(path, text) == 0);
 
-    int port = 21000 + (int)(getpid() % 19000);
+    int port = td_tcp_port(0);
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
     const char *extra[] = {"--curve-secret", srvkey, "--authorized-keys", auth,
                            "--admin-keys",   admins, "--verbose",         NULL};
@@ -498,7 +498,7 @@ DTEST(daemon_auth_stream_private)
     snprintf(admins, sizeof admins, "%s/admins", dir);
     snprintf(text, sizeof text, "%s root\n", dpub);
     CHECK(write_text(admins, text) == 0);
-    int port = 21000 + (int)((getpid() + 7919) % 19000);
+    int port = td_tcp_port(2011);
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
     snprintf(sep, sizeof sep, "tcp://127.0.0.1:%d", port + 1);
     const char *extra[] = {"--curve-secret", srvkey,      "--authorized-keys", auth, "--admin-keys",
@@ -625,7 +625,7 @@ DTEST(daemon_auth_key_quotas)
     snprintf(srvkey, sizeof srvkey, "%s/srv/server.key", dir);
     CHECK(give_server_key(dir, "a", spub) == 0 && give_server_key(dir, "b", spub) == 0);
     snprintf(auth, sizeof auth, "%s/authorized_keys", dir);
-    int port = 21000 + (int)((getpid() + 3571) % 19000);
+    int port = td_tcp_port(3571);
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
 
     /* bad settings: the start is refused naming file, line and setting */

@@ -356,6 +356,11 @@ int td_start(td_daemon *d, const char *dir, const char *const *extra)
     return td_start_ep(d, dir, NULL, extra);
 }
 
+int td_tcp_port(int salt)
+{
+    return 21000 + (int)(((long)getpid() + salt) % 5500) * 2;
+}
+
 int td_start_ep(td_daemon *d, const char *dir, const char *ep, const char *const *extra)
 {
     const char *bin = td_bin("MPMD_BIN");

@@ -167,7 +167,7 @@ DTEST(python_client_curve)
     snprintf(text, sizeof text, "%s python-a\n", apub);
     CHECK(td_write(path, text) == 0);
     snprintf(srvkey, sizeof srvkey, "%s/srv/server.key", keys);
-    int port = 41000 + (int)(getpid() % 9000) * 2;
+    int port = td_tcp_port(4099);
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
     const char *extra[] = {"--curve-secret", srvkey, "--authorized-keys", path, NULL};
     char secret[41];
