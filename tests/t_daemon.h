@@ -75,7 +75,8 @@ int td_start(td_daemon *d, const char *dir, const char *const *extra);
 /* The same on endpoint ep (NULL: ipc://dir/ctl). */
 int td_start_ep(td_daemon *d, const char *dir, const char *ep, const char *const *extra);
 /* A loopback TCP port for a test's daemon, from the test process's pid and
- * salt, in 21000..31999 (port + 1 is free for a second endpoint): below
+ * salt: even, in 21000..31998, so that it and the few ports above it (a
+ * second endpoint, a second daemon) stay below
  * the kernel's ephemeral range (32768 and up), where a client connection's
  * local port, bound without SO_REUSEADDR, made a daemon's bind fail with
  * "Address already in use". */

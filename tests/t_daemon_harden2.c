@@ -181,7 +181,7 @@ DTEST(daemon_binds_localhost_and_ipv6_loopback)
         char dir[300], ep[64];
         td_daemon d;
         td_out o;
-        int port = 20000 + (int)(getpid() % 20000) + 2 * k;
+        int port = td_tcp_port(5003) + 2 * k;
         snprintf(dir, sizeof dir, "%s/tcp%d", tmp, k);
         snprintf(ep, sizeof ep, "tcp://%s:%d", eps[k], port);
         if (td_start_ep(&d, dir, ep, NULL)) return;

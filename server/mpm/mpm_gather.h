@@ -408,17 +408,12 @@ INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int 
             }
             if (DX) dx[a] = xr_dot(&PX, &wx, NS);
             if (AF) {
+                /* the offsets' row (aoff, stored whole) times the weights:
+                 * no lane set to 0, whose register vmovq Valgrind 3.19
+                 * cannot decode */
                 xrow wr;
-#if MPM_V4
-                /* the offsets' row whole (aoff: a 3-node row's lane 3 is
-                 * +0): the same lane products, and no lane set to 0, whose
-                 * register vmovq Valgrind 3.19 cannot decode */
-                wr.v = wx.v * (v4d)(*(const v4du *)R->r[0]);
-#else
-                xr_make(&wr, xr_get(&wx, 0) * R->r[0][0], xr_get(&wx, 1) * R->r[0][1],
-                        NS > 2 ? xr_get(&wx, 2) * R->r[0][2] : 0.0,
-                        NS > 3 ? xr_get(&wx, 3) * R->r[0][3] : 0.0);
-#endif
+                xr_row(&wr, R->r[0], NS);
+                xr_mul(&wr, &wx);
                 Bo[a][0] = xr_dot(&PX, &wr, NS);
                 if (D > 1) Bo[a][1] = xr_dot(&PY, &wx, NS);
                 if (D > 2) Bo[a][2] = xr_dot(&PZ, &wx, NS);
