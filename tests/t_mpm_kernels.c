@@ -539,8 +539,9 @@ TEST(kernels_first_bad_particle)
  * (2D) or 1 .. 8 (3D) in a cell, so that runs of every length start at
  * every lane, with a drift and a scatter of velocities that moves them
  * across cells; a layer on the grid line past the body gives its cells
- * phantom corners at the first step.  USF (its stress pass), USL and USL
- * with the PIC/FLIP blend (its moving pass), on 1, 2 and 3 threads (the
+ * phantom corners at the first step.  USF (its stress pass, and in 3D
+ * its moving pass) and USL (its moving pass), each also with the PIC/FLIP
+ * blend, on 1, 2 and 3 threads (the
  * threads' ranges end at other lanes).  Each run: the AVX2 kernels
  * against the portable ones within KTOL, and bit for bit where this build
  * does not fuse (the sanitizer builds: there a lane that took another
@@ -596,8 +597,8 @@ TEST(kernels_tent_lanes)
             }
         }
         for (size_t i = 0; i < n; i++) vol[i] = pow(h, dim) / 5.0;
-        static const mpm_update us[] = {MPM_USF, MPM_USL, MPM_USL};
-        for (int u = 0; u < 3; u++)
+        static const mpm_update us[] = {MPM_USF, MPM_USL, MPM_USL, MPM_USF};
+        for (int u = 0; u < 4; u++)
             for (int th = 1; th <= 3; th++) {
                 mpm_case c;
                 mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
@@ -618,7 +619,7 @@ TEST(kernels_tent_lanes)
                 }
                 c.method = MPM_METHOD_MPM;
                 c.update = us[u];
-                c.pic_fraction = u == 2 ? 0.3 : 0.0;
+                c.pic_fraction = u >= 2 ? 0.3 : 0.0;
                 c.dt = 0.002;
                 c.threads = th;
                 c.n_materials = 1;
@@ -626,8 +627,8 @@ TEST(kernels_tent_lanes)
                 c.n_bodies = 1;
                 c.bodies = &b;
                 char name[64];
-                snprintf(name, sizeof name, "%dD MPM %s%s, %d thr", dim, u ? "USL" : "USF",
-                         u == 2 ? " blend" : "", th);
+                snprintf(name, sizeof name, "%dD MPM %s%s, %d thr", dim,
+                         us[u] == MPM_USL ? "USL" : "USF", u >= 2 ? " blend" : "", th);
                 int differ = 0;
                 CHECKF(compare(name, &c, 300, KTOL, &differ) == 0, "%s", name);
                 any |= differ;
@@ -638,7 +639,7 @@ TEST(kernels_tent_lanes)
         free(vol);
         free(v);
     }
-    CHECK(runs == 18);
+    CHECK(runs == 24);
     CHECK(any == mpm_kernels_avx2_fuses());
 }
 

@@ -12,9 +12,12 @@
  * pairs' sums add are kept out of fused multiply-adds, as dot2()'s are).
  * Used by USF's stress pass (the strain gather and, in 2D, the force
  * scatter, whose terms each lane forms as trun_add() does before they are
- * added particle by particle) and USL's moving pass.  USF's moving pass
+ * added particle by particle), USL's moving pass and, in 3D, USF's moving
+ * pass.  The moving passes' lanes read the block's positions and
+ * velocities from a copy (tlcopy), since the particle arrays' 32-byte
+ * loads overlapped the last group's stores in part.  2D USF's moving pass
  * stays one particle at a time: by lanes it ran 0.82-0.92x with its
- * arrays in cache (1.03-1.06x at 10^6 particles).  Everything is static
+ * arrays in cache, and still 0.97x with the copy.  Everything is static
  * and inline.
  */
 #ifndef MPM_TLANE_H
@@ -31,18 +34,25 @@ typedef struct {
     unsigned k; /* 1 .. 4 */
 } tlane;
 
+/* Axis d of tent_block4()'s weights, lane by lane, from the positions
+ * x[0 .. 3]. */
+INLINE void tlane_axis(const wgeo *G, int d, const double *x, tlane *t)
+{
+    v4d xv = *(const v4du *)x;
+    v4d r = (xv - G->x0[d]) * G->ih[d];
+    v4d cd = __builtin_convertvector(__builtin_convertvector(r, v4i), v4d);
+    v4d f = r - cd;
+    t->w0[d] = 1.0 - f;
+    t->w1[d] = f;
+}
+
 /* tent_block4()'s weights, lane by lane; base and k from tl_groups(). */
 INLINE void tlane_weights(const mpm_sim *s, const wgeo *G, size_t p, int D, size_t base, unsigned k,
                           tlane *t)
 {
     for (int d = 0; d < D; d++) {
         const double *x = s->P.x[d] + p;
-        v4d xv = {x[0], x[1], x[2], x[3]};
-        v4d r = (xv - G->x0[d]) * G->ih[d];
-        v4d cd = __builtin_convertvector(__builtin_convertvector(r, v4i), v4d);
-        v4d f = r - cd;
-        t->w0[d] = 1.0 - f;
-        t->w1[d] = f;
+        tlane_axis(G, d, x, t);
     }
     t->base = base;
     t->k = k;
@@ -61,11 +71,19 @@ INLINE void tl_counts(const size_t *base, size_t n, unsigned char *k)
     }
 }
 
+/* A block's positions and velocities as they were before the moving pass
+ * (tl_groups()): the lanes read them there, not from the particle arrays,
+ * where a 32-byte load overlapping the last group's store in part would
+ * wait for it to leave the store buffer (runs shorter than four). */
+typedef struct {
+    double x[3][MPM_BLOCK], v[3][MPM_BLOCK];
+} tlcopy;
+
 /* The cells of particles b0 .. b0 + nb - 1 into base[] (tent_block4()'s
  * bases, four by lanes, the last one by one), and their counts k[]
  * (tl_counts()). */
 INLINE void tl_groups(const mpm_sim *s, const wgeo *G, size_t b0, size_t nb, int D, size_t *base,
-                      unsigned char *k)
+                      unsigned char *k, tlcopy *cp)
 {
     size_t i = 0;
     for (; i + 4 <= nb; i += 4) {
@@ -73,6 +91,8 @@ INLINE void tl_groups(const mpm_sim *s, const wgeo *G, size_t b0, size_t nb, int
         for (int d = 0; d < D; d++) {
             const double *x = s->P.x[d] + b0 + i;
             v4d xv = {x[0], x[1], x[2], x[3]};
+            *(v4du *)(cp->x[d] + i) = xv;
+            *(v4du *)(cp->v[d] + i) = *(const v4du *)(s->P.v[d] + b0 + i);
             v4d r = (xv - G->x0[d]) * G->ih[d];
             bd += __builtin_convertvector(__builtin_convertvector(r, v4i), v4d) * G->st_f[d];
         }
@@ -80,8 +100,11 @@ INLINE void tl_groups(const mpm_sim *s, const wgeo *G, size_t b0, size_t nb, int
     }
     for (; i < nb; i++) {
         size_t b = 0;
-        for (int d = 0; d < D; d++)
+        for (int d = 0; d < D; d++) {
+            cp->x[d][i] = s->P.x[d][b0 + i];
+            cp->v[d][i] = s->P.v[d][b0 + i];
             b += (size_t)(int)((s->P.x[d][b0 + i] - G->x0[d]) * G->ih[d]) * G->st[d];
+        }
         base[i] = b;
     }
     tl_counts(base, nb, k);
@@ -263,12 +286,13 @@ INLINE v4d tl_keep(v4d a, v4d b, unsigned k)
 
 /* Eqs. 30-31, x += dt dx and v += dt dv (BL: the blend), for the first
  * k lanes of axis a; the other lanes are stored as they were. */
-INLINE void tl_update(mpm_sim *s, int a, size_t p, v4d dx, v4d dv, unsigned k, int BL, double al,
-                      double bl)
+INLINE void tl_update(mpm_sim *s, int a, size_t p, const tlcopy *cp, size_t i, v4d dx, v4d dv,
+                      unsigned k, int BL, double al, double bl)
 {
     const double dt = s->dt;
     double *x = s->P.x[a] + p, *v = s->P.v[a] + p;
-    v4d x0 = *(v4du *)x, v0 = *(v4du *)v, x1 = x0 + dt * dx, v1;
+    v4d x0 = *(const v4du *)(cp->x[a] + i), v0 = *(const v4du *)(cp->v[a] + i), x1 = x0 + dt * dx,
+        v1;
     if (BL)
         v1 = bl * (v0 + dt * dv) + al * dx;
     else
@@ -277,27 +301,34 @@ INLINE void tl_update(mpm_sim *s, int a, size_t p, v4d dx, v4d dv, unsigned k, i
     *(v4du *)v = tl_keep(v1, v0, k);
 }
 
-/* USL's moving pass for particles p .. p + 3 (block index i, i + 4 <=
- * the block's count), the first k in the cell at base: the strain
- * increments from the updated velocity (one set of corners for both) into
- * deps, and the k particles moved.  Returns 0, having written nothing,
+/* The moving pass for particles p .. p + 3 (block index i, i + 4 <= the
+ * block's count), the first k in the cell at base: the k particles moved
+ * and, ST (USL), the strain increments from the updated velocity (one set
+ * of corners for both) into deps.  Returns 0, having written nothing,
  * when the cell has a phantom corner, else 1. */
-INLINE int tl_move_strain(mpm_sim *s, const wgeo *G, size_t p, size_t base, unsigned k, int D,
-                          int BL, double al, double bl, double *const deps[9], size_t i)
+INLINE int tl_move(mpm_sim *s, const wgeo *G, size_t p, size_t base, unsigned k, int D, int BL,
+                   double al, double bl, int ST, double *const deps[9], const tlcopy *cp, size_t i)
 {
     if (__builtin_expect(tl_phantom(s, base, D), 0)) return 0;
     tlane t;
-    tlane_weights(s, G, p, D, base, k, &t);
+    for (int d = 0; d < D; d++) tlane_axis(G, d, cp->x[d] + i, &t);
+    t.base = base;
+    t.k = k;
     v4d L[3][3];
     for (int a = 0; a < D; a++) {
         tlcorner c;
-        v4d Y[2][2], Z[2];
+        v4d Y[2][2], Z[2], dx;
         tl_corners(s, s->g.q[a], t.base, D, 1, &c);
-        tl_grad(s, &c, &t, D, Y, Z, L[a]);
-        v4d dx = tl_dot(Z[0], t.w0[0], Z[1], t.w1[0]), dv = tl_interp(s, s->g.f[a], &t, D, 1);
-        tl_update(s, a, p, dx, dv, k, BL, al, bl);
+        if (ST) {
+            tl_grad(s, &c, &t, D, Y, Z, L[a]);
+        } else {
+            tl_yz(&c, &t, D, Y, Z);
+        }
+        dx = tl_dot(Z[0], t.w0[0], Z[1], t.w1[0]);
+        v4d dv = tl_interp(s, s->g.f[a], &t, D, 1);
+        tl_update(s, a, p, cp, i, dx, dv, k, BL, al, bl);
     }
-    tl_strain_of(s, L, D, deps, i);
+    if (ST) tl_strain_of(s, L, D, deps, i);
     return 1;
 }
 
