@@ -541,12 +541,10 @@ TEST(kernels_first_bad_particle)
  * across cells; a layer on the grid line past the body gives its cells
  * phantom corners at the first step.  USF (its stress pass, and in 3D
  * its moving pass) and USL (its moving pass), each also with the PIC/FLIP
- * blend, on 1, 2 and 3 threads (the
- * threads' ranges end at other lanes).  Each run: the AVX2 kernels
- * against the portable ones within KTOL, and bit for bit where this build
- * does not fuse (the sanitizer builds: there a lane that took another
- * cell's corners, or a lane past its run that was moved, shows as a
- * bit). */
+ * blend, on 1, 2 and 3 threads (the threads' ranges end at other lanes).  Each run: the AVX2
+ * kernels against the portable ones within KTOL, and bit for bit where this build does not fuse
+ * (the sanitizer builds: there a lane that took another cell's corners, or a lane past its run that
+ * was moved, shows as a bit). */
 static uint64_t lcg(uint64_t *st)
 {
     *st = *st * 6364136223846793005ull + 1442695040888963407ull;

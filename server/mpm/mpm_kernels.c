@@ -606,7 +606,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
                     continue;
                 }
                 tlane t;
-                tlane_weights(s, &G, b0 + i, D, Wb[i].base, k, &t);
+                tlane_weights(&G, s->P.x, b0 + i, D, Wb[i].base, k, &t);
                 tl_strain(s, s->g.q, &t, D, o->deps, i);
                 i += k;
             }
@@ -623,7 +623,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         if (TL(D, NS, BS, 0) && D == 2)
             while (i + 4 <= nb) {
                 tlane t;
-                tlane_weights(s, &G, b0 + i, D, Wb[i].base, kk[i], &t);
+                tlane_weights(&G, s->P.x, b0 + i, D, Wb[i].base, kk[i], &t);
                 tl_force2(s, &r, gb, &t, b0 + i);
                 i += kk[i];
             }

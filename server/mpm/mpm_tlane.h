@@ -34,25 +34,19 @@ typedef struct {
     unsigned k; /* 1 .. 4 */
 } tlane;
 
-/* Axis d of tent_block4()'s weights, lane by lane, from the positions
- * x[0 .. 3]. */
-INLINE void tlane_axis(const wgeo *G, int d, const double *x, tlane *t)
-{
-    v4d xv = *(const v4du *)x;
-    v4d r = (xv - G->x0[d]) * G->ih[d];
-    v4d cd = __builtin_convertvector(__builtin_convertvector(r, v4i), v4d);
-    v4d f = r - cd;
-    t->w0[d] = 1.0 - f;
-    t->w1[d] = f;
-}
-
-/* tent_block4()'s weights, lane by lane; base and k from tl_groups(). */
-INLINE void tlane_weights(const mpm_sim *s, const wgeo *G, size_t p, int D, size_t base, unsigned k,
-                          tlane *t)
+/* tent_block4()'s weights, lane by lane, of the positions x[d][p .. p +
+ * 3] (the particle arrays, or a block's copy: tlcopy); base and k from
+ * tl_groups(). */
+INLINE void tlane_weights(const wgeo *G, double *const x[3], size_t p, int D, size_t base,
+                          unsigned k, tlane *t)
 {
     for (int d = 0; d < D; d++) {
-        const double *x = s->P.x[d] + p;
-        tlane_axis(G, d, x, t);
+        v4d xv = *(const v4du *)(x[d] + p);
+        v4d r = (xv - G->x0[d]) * G->ih[d];
+        v4d cd = __builtin_convertvector(__builtin_convertvector(r, v4i), v4d);
+        v4d f = r - cd;
+        t->w0[d] = 1.0 - f;
+        t->w1[d] = f;
     }
     t->base = base;
     t->k = k;
@@ -103,7 +97,7 @@ INLINE void tl_groups(const mpm_sim *s, const wgeo *G, size_t b0, size_t nb, int
         for (int d = 0; d < D; d++) {
             cp->x[d][i] = s->P.x[d][b0 + i];
             cp->v[d][i] = s->P.v[d][b0 + i];
-            b += (size_t)(int)((s->P.x[d][b0 + i] - G->x0[d]) * G->ih[d]) * G->st[d];
+            b += (size_t)(int)((cp->x[d][i] - G->x0[d]) * G->ih[d]) * G->st[d];
         }
         base[i] = b;
     }
@@ -307,25 +301,22 @@ INLINE void tl_update(mpm_sim *s, int a, size_t p, const tlcopy *cp, size_t i, v
  * of corners for both) into deps.  Returns 0, having written nothing,
  * when the cell has a phantom corner, else 1. */
 INLINE int tl_move(mpm_sim *s, const wgeo *G, size_t p, size_t base, unsigned k, int D, int BL,
-                   double al, double bl, int ST, double *const deps[9], const tlcopy *cp, size_t i)
+                   double al, double bl, int ST, double *const deps[9], tlcopy *cp, size_t i)
 {
     if (__builtin_expect(tl_phantom(s, base, D), 0)) return 0;
     tlane t;
-    for (int d = 0; d < D; d++) tlane_axis(G, d, cp->x[d] + i, &t);
-    t.base = base;
-    t.k = k;
+    double *const xc[3] = {cp->x[0], cp->x[1], cp->x[2]};
+    tlane_weights(G, xc, i, D, base, k, &t);
     v4d L[3][3];
     for (int a = 0; a < D; a++) {
         tlcorner c;
-        v4d Y[2][2], Z[2], dx;
+        v4d Y[2][2], Z[2];
         tl_corners(s, s->g.q[a], t.base, D, 1, &c);
-        if (ST) {
+        if (ST)
             tl_grad(s, &c, &t, D, Y, Z, L[a]);
-        } else {
+        else
             tl_yz(&c, &t, D, Y, Z);
-        }
-        dx = tl_dot(Z[0], t.w0[0], Z[1], t.w1[0]);
-        v4d dv = tl_interp(s, s->g.f[a], &t, D, 1);
+        v4d dx = tl_dot(Z[0], t.w0[0], Z[1], t.w1[0]), dv = tl_interp(s, s->g.f[a], &t, D, 1);
         tl_update(s, a, p, cp, i, dx, dv, k, BL, al, bl);
     }
     if (ST) tl_strain_of(s, L, D, deps, i);
