@@ -218,6 +218,7 @@ struct mpm_sim {
     mpm_bspline_axis bs[3]; /* B-splines: per axis */
     mpm_gridbuf g;          /* the grid */
     double *minv;           /* 1/m, or 0 for phantom nodes (m <= M_TOL) */
+    unsigned stag;          /* the next slot of the staggered arrays (mpm_sim.c) */
     double *ncoord[3];      /* node coordinates per axis, np[d] each
                              * (mpm_node_coord()) */
     double mtol;

@@ -55,6 +55,7 @@
 
 #include <limits.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -69,28 +70,62 @@ static void *line_alloc(size_t bytes)
     return p;
 }
 
+/* The particle and grid arrays, staggered: the passes use them index by
+ * index side by side (x, v, sigma, m of particle p; m, q, f of node n),
+ * and the large blocks malloc() maps all start at one offset in their
+ * page (16 bytes in), so element i of every array would share its low 12
+ * address bits: one L1 set for all of them (8 ways), and loads taken for
+ * dependent on stores to another array (4K aliasing).  Slot k of a
+ * simulation (*slot, counted up) starts instead at k * STAG_STEP bytes
+ * modulo a page (64 slots a line apart, in an order that puts the arrays
+ * allocated one after another 17 lines apart), zeroed, the block malloc()
+ * gave kept just in front of it for stag_free().  Addresses only: the
+ * same bits. */
+#define STAG_PAGE 4096u
+#define STAG_STEP (17u * 64u) /* 64 slots, neighbours 17 lines apart */
+
+static double *stag_alloc(size_t n, unsigned *slot)
+{
+    size_t off = (size_t)(*slot)++ * STAG_STEP % STAG_PAGE, bytes = (n ? n : 1) * sizeof(double);
+    if (bytes > SIZE_MAX - 2 * STAG_PAGE) return NULL;
+    unsigned char *raw = calloc(1, bytes + 2 * STAG_PAGE);
+    if (!raw) return NULL;
+    uintptr_t a = (uintptr_t)raw + sizeof(void *), lo = a % STAG_PAGE;
+    a += (off + STAG_PAGE - lo) % STAG_PAGE; /* a % STAG_PAGE == off, a >= raw + 8 */
+    memcpy((unsigned char *)a - sizeof(void *), &raw, sizeof raw);
+    return (double *)a;
+}
+
+static void stag_free(double *p)
+{
+    if (!p) return;
+    void *raw;
+    memcpy(&raw, (unsigned char *)p - sizeof raw, sizeof raw);
+    free(raw);
+}
+
 static void free_gridbuf(mpm_gridbuf *b)
 {
-    free(b->m);
+    stag_free(b->m);
     for (int d = 0; d < 3; d++) {
-        free(b->q[d]);
-        free(b->f[d]);
-        free(b->q2[d]);
+        stag_free(b->q[d]);
+        stag_free(b->f[d]);
+        stag_free(b->q2[d]);
     }
     memset(b, 0, sizeof *b);
 }
 
 /* fields: MPM_F_* of the buffer (m and q always); nn nodes and
- * MPM_GRID_SLACK more */
-static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int fields)
+ * MPM_GRID_SLACK more; slot: stag_alloc()'s */
+static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int fields, unsigned *slot)
 {
     memset(b, 0, sizeof *b);
     nn += MPM_GRID_SLACK;
-    if (!(b->m = mpm_dalloc(nn))) return MPM_ENOMEM;
+    if (!(b->m = stag_alloc(nn, slot))) return MPM_ENOMEM;
     for (int d = 0; d < dim; d++) {
-        if (!(b->q[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
-        if ((fields & MPM_F_F) && !(b->f[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
-        if ((fields & MPM_F_Q2) && !(b->q2[d] = mpm_dalloc(nn))) return MPM_ENOMEM;
+        if (!(b->q[d] = stag_alloc(nn, slot))) return MPM_ENOMEM;
+        if ((fields & MPM_F_F) && !(b->f[d] = stag_alloc(nn, slot))) return MPM_ENOMEM;
+        if ((fields & MPM_F_Q2) && !(b->q2[d] = stag_alloc(nn, slot))) return MPM_ENOMEM;
     }
     return 0;
 }
@@ -98,21 +133,21 @@ static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int fields)
 static void free_particles(mpm_particles *P)
 {
     for (int d = 0; d < 3; d++) {
-        free(P->x[d]);
-        free(P->v[d]);
-        free(P->lp[d]);
+        stag_free(P->x[d]);
+        stag_free(P->v[d]);
+        stag_free(P->lp[d]);
     }
-    for (int c = 0; c < 9; c++) free(P->F[c]);
+    for (int c = 0; c < 9; c++) stag_free(P->F[c]);
     for (int c = 0; c < 6; c++) {
-        free(P->sig[c]);
-        free(P->eps[c]);
+        stag_free(P->sig[c]);
+        stag_free(P->eps[c]);
     }
-    for (int c = 0; c < 9; c++) free(P->B[c]);
-    free(P->m);
-    free(P->vol);
-    free(P->epsp);
-    free(P->yld);
-    free(P->vol0);
+    for (int c = 0; c < 9; c++) stag_free(P->B[c]);
+    stag_free(P->m);
+    stag_free(P->vol);
+    stag_free(P->epsp);
+    stag_free(P->yld);
+    stag_free(P->vol0);
     free(P->mat);
     free(P->id);
     memset(P, 0, sizeof *P);
@@ -166,29 +201,29 @@ static int needs_szz(const mpm_case *c)
  * apic: the affine matrices B_p, set to 0; eps: the strain record; szz:
  * 2D's sigma_zz (needs_szz()) */
 static int alloc_particles(mpm_particles *P, size_t n, int dim, int lp, int F, int apic, int eps,
-                           int szz)
+                           int szz, unsigned *slot)
 {
     memset(P, 0, sizeof *P);
     P->n = n;
     for (int d = 0; d < dim; d++) {
-        if (!(P->x[d] = mpm_dalloc(n)) || !(P->v[d] = mpm_dalloc(n))) return MPM_ENOMEM;
-        if (lp && !(P->lp[d] = mpm_dalloc(n))) return MPM_ENOMEM;
+        if (!(P->x[d] = stag_alloc(n, slot)) || !(P->v[d] = stag_alloc(n, slot))) return MPM_ENOMEM;
+        if (lp && !(P->lp[d] = stag_alloc(n, slot))) return MPM_ENOMEM;
     }
     for (int c = 0; F && c < dim * dim; c++) {
-        if (!(P->F[c] = mpm_dalloc(n))) return MPM_ENOMEM;
+        if (!(P->F[c] = stag_alloc(n, slot))) return MPM_ENOMEM;
         if (c % (dim + 1) == 0)
             for (size_t p = 0; p < n; p++) P->F[c][p] = 1.0;
     }
     for (int c = 0; c < MPM_NCOMP(dim); c++) {
         if (dim == 2 && c == 2 && !szz) continue; /* derived (mpm_sig_zz()) */
-        if (!(P->sig[c] = mpm_dalloc(n))) return MPM_ENOMEM;
-        if (eps && !(dim == 2 && c == 2) && !(P->eps[c] = mpm_dalloc(n)))
+        if (!(P->sig[c] = stag_alloc(n, slot))) return MPM_ENOMEM;
+        if (eps && !(dim == 2 && c == 2) && !(P->eps[c] = stag_alloc(n, slot)))
             return MPM_ENOMEM; /* eps_zz = 0 */
     }
     for (int a = 0; a < dim && apic; a++)
         for (int b = 0; b < dim; b++)
-            if (!(P->B[3 * a + b] = mpm_dalloc(n))) return MPM_ENOMEM; /* B_p = 0 */
-    if (!(P->m = mpm_dalloc(n)) || !(P->vol = mpm_dalloc(n))) return MPM_ENOMEM;
+            if (!(P->B[3 * a + b] = stag_alloc(n, slot))) return MPM_ENOMEM; /* B_p = 0 */
+    if (!(P->m = stag_alloc(n, slot)) || !(P->vol = stag_alloc(n, slot))) return MPM_ENOMEM;
     if (!(P->mat = calloc(n ? n : 1, sizeof *P->mat))) return MPM_ENOMEM;
     if (!(P->id = malloc((n ? n : 1) * sizeof *P->id))) return MPM_ENOMEM;
     for (size_t p = 0; p < n; p++) P->id[p] = (uint32_t)p;
@@ -559,14 +594,15 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
 
     int musl = c->update == MPM_MUSL;
     s->transfer = c->transfer;
-    if (alloc_particles(
-            &s->P, np, dim, c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
-            mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC, needs_strain(c), needs_szz(c)))
+    if (alloc_particles(&s->P, np, dim,
+                        c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
+                        mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC, needs_strain(c),
+                        needs_szz(c), &s->stag))
         goto nomem;
     if ((needs & MPM_NEED_PLASTIC) &&
-        (!(s->P.epsp = mpm_dalloc(np)) || !(s->P.yld = mpm_dalloc(np))))
+        (!(s->P.epsp = stag_alloc(np, &s->stag)) || !(s->P.yld = stag_alloc(np, &s->stag))))
         goto nomem;
-    if (s->volmode == MPM_VOLUME_DET_F && !(s->P.vol0 = mpm_dalloc(np))) goto nomem;
+    if (s->volmode == MPM_VOLUME_DET_F && !(s->P.vol0 = stag_alloc(np, &s->stag))) goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
     if (s->P.vol0) memcpy(s->P.vol0, s->P.vol, np * sizeof *s->P.vol0);
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
@@ -577,8 +613,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
     int gfields = MPM_F_M | MPM_F_Q | MPM_F_F | (musl ? MPM_F_Q2 : 0);
-    if (alloc_gridbuf(&s->g, s->nn, dim, gfields)) goto nomem;
-    if (!(s->minv = mpm_dalloc(s->nn + MPM_GRID_SLACK))) goto nomem;
+    if (alloc_gridbuf(&s->g, s->nn, dim, gfields, &s->stag)) goto nomem;
+    if (!(s->minv = stag_alloc(s->nn + MPM_GRID_SLACK, &s->stag))) goto nomem;
     for (int d = 0; d < 3; d++) {
         if (!(s->ncoord[d] = mpm_dalloc((size_t)s->np[d]))) goto nomem;
         for (int i = 0; d < dim && i < s->np[d]; i++)
@@ -590,9 +626,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
         /* thread 0 scatters into the grid, and the fused passes into
          * tbuf[0] (the P2G fields) */
-        if (s->fuse && alloc_gridbuf(&s->tbuf[0], s->nn, dim, s->p2g_fields)) goto nomem;
+        if (s->fuse && alloc_gridbuf(&s->tbuf[0], s->nn, dim, s->p2g_fields, &s->stag)) goto nomem;
         for (int t = 1; t < s->nthreads; t++)
-            if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, gfields)) goto nomem;
+            if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, gfields, &s->stag)) goto nomem;
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
     for (s->sort_ring = 2; s->sort_ring < np && s->sort_ring < MPM_SORT_RING; s->sort_ring *= 2) {
@@ -682,7 +718,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->sperm);
     free(s->shist);
     free(s->tout);
-    free(s->minv);
+    stag_free(s->minv);
     for (int d = 0; d < 3; d++) free(s->ncoord[d]);
     free(s->mats);
     free(s->fixed_node);
