@@ -90,10 +90,10 @@ static double *stag_alloc(size_t n, unsigned *slot)
     if (bytes > SIZE_MAX - 2 * STAG_PAGE) return NULL;
     unsigned char *raw = calloc(1, bytes + 2 * STAG_PAGE);
     if (!raw) return NULL;
-    uintptr_t a = (uintptr_t)raw + sizeof(void *), lo = a % STAG_PAGE;
-    a += (off + STAG_PAGE - lo) % STAG_PAGE; /* a % STAG_PAGE == off, a >= raw + 8 */
-    memcpy((unsigned char *)a - sizeof(void *), &raw, sizeof raw);
-    return (double *)a;
+    unsigned char *p = raw + sizeof raw;
+    p += (off + STAG_PAGE - (uintptr_t)p % STAG_PAGE) % STAG_PAGE; /* p % STAG_PAGE == off */
+    memcpy(p - sizeof raw, &raw, sizeof raw);
+    return (double *)(void *)p;
 }
 
 static void stag_free(double *p)
