@@ -86,8 +86,9 @@ static void *line_alloc(size_t bytes)
 
 static double *stag_alloc(size_t n, unsigned *slot)
 {
-    size_t off = (size_t)(*slot)++ * STAG_STEP % STAG_PAGE, bytes = (n ? n : 1) * sizeof(double);
-    if (bytes > SIZE_MAX - 2 * STAG_PAGE) return NULL;
+    size_t off = (size_t)(*slot)++ * STAG_STEP % STAG_PAGE;
+    if (n > (SIZE_MAX - 2 * STAG_PAGE) / sizeof(double)) return NULL; /* as calloc() would */
+    size_t bytes = (n ? n : 1) * sizeof(double);
     unsigned char *raw = calloc(1, bytes + 2 * STAG_PAGE);
     if (!raw) return NULL;
     unsigned char *p = raw + sizeof raw;
