@@ -1099,13 +1099,14 @@ static void grid_arrays(const mpm_gridbuf *b, const double *a[], size_t *n)
  * each starts on a cache line at its own offset within a 4 KiB page, so
  * that element i of the arrays a pass uses side by side neither shares
  * one L1 set nor the low 12 address bits (4K aliasing); malloc() maps
- * large blocks all at one page offset, which ran the default 2D step
- * 1.11x slower.  Run here: the paper's disks, BSPLINE2 MUSL with APIC on
- * 2 threads (33 arrays: x, v, sigma, B_p, m, V; the grid, 1/m, both
- * threads' buffers) and 3D MPM USF on 3 threads; the arrays are zero
- * before the particles are filled in (1/m, the buffers), a run steps,
- * and destroying frees each block through the pointer malloc() gave
- * (AddressSanitizer's builds check that). */
+ * large blocks all at one page offset, where the default 2D step ran
+ * 1.05-1.11x slower (10^6 particles, 2 threads).  Run here: the paper's
+ * disks, BSPLINE2 MUSL with APIC on 2 threads (33 arrays: x, v, sigma,
+ * B_p, m, V; the grid, 1/m, both threads' buffers) and 3D MPM USF on 3
+ * threads; 1/m and the grid's mass are zero before the first step (the
+ * blocks come zeroed), a run steps, and destroying frees each block
+ * through the pointer malloc() gave (AddressSanitizer's builds check
+ * that). */
 TEST(perf_arrays_staggered)
 {
     for (int k = 0; k < 2; k++) {
