@@ -1086,13 +1086,17 @@ TEST(perf_snapshot_on_team_matches_arrays)
     }
 }
 
-/* Appends the non-NULL arrays of a grid buffer to a[] (count *n). */
+/* Appends the non-NULL arrays of a grid buffer to a[] (count *n), a
+ * field kept in q's storage (mpm_sim.tshare) not again. */
 static void grid_arrays(const mpm_gridbuf *b, const double *a[], size_t *n)
 {
     const double *f[10] = {b->m,    b->q[0], b->q[1],  b->q[2],  b->f[0],
                            b->f[1], b->f[2], b->q2[0], b->q2[1], b->q2[2]};
-    for (int i = 0; i < 10; i++)
-        if (f[i]) a[(*n)++] = f[i];
+    for (int i = 0; i < 10; i++) {
+        int again = 0;
+        for (int j = 0; j < i; j++) again |= f[j] == f[i];
+        if (f[i] && !again) a[(*n)++] = f[i];
+    }
 }
 
 /* The particle and grid arrays are staggered (mpm_sim.c, stag_alloc()):
@@ -1101,7 +1105,7 @@ static void grid_arrays(const mpm_gridbuf *b, const double *a[], size_t *n)
  * one L1 set nor the low 12 address bits (4K aliasing); malloc() maps
  * large blocks all at one page offset, where the default 2D step ran
  * 1.05-1.11x slower (10^6 particles, 2 threads).  Run here: the paper's
- * disks, BSPLINE2 MUSL with APIC on 2 threads (33 arrays: x, v, sigma,
+ * disks, BSPLINE2 MUSL with APIC on 2 threads (31 arrays: x, v, sigma,
  * B_p, m, V; the grid, 1/m, both threads' buffers) and 3D MPM USF on 3
  * threads; 1/m and the grid's mass are zero before the first step (the
  * blocks come zeroed), a run steps, and destroying frees each block
@@ -1156,10 +1160,17 @@ TEST(perf_arrays_staggered)
              "nodes not zero before the first step",
              k ? "3D MPM USF, 3 threads" : "2D BSPLINE2 MUSL APIC, 2 threads", n, unaligned, shared,
              nonzero);
-        CHECK(n == (k ? 14u + 1u + 7u + 4u + 2u * 7u : 13u + 1u + 7u + 5u + 7u));
+        /* 3D USF: thread 1's and 2's buffers m, q (f in q's storage); 2D
+         * MUSL: thread 1's m, q, f (q2 in q's) */
+        CHECK(n == (k ? 14u + 1u + 7u + 4u + 2u * 4u : 13u + 1u + 7u + 5u + 5u));
         CHECK(unaligned == 0);
         CHECK(shared == 0);
         CHECK(nonzero == 0);
+        /* the private buffers' field of a pass of its own in q's storage */
+        for (int t2 = 1; t2 < s->nthreads; t2++)
+            CHECK(k ? s->tbuf[t2].f[0] == s->tbuf[t2].q[0] && s->tbuf[t2].q2[0] == NULL
+                    : s->tbuf[t2].q2[1] == s->tbuf[t2].q[1] &&
+                          s->tbuf[t2].f[1] != s->tbuf[t2].q[1]);
         CHECK(mpm_sim_run(s, 3) == 0);
         mpm_sim_destroy(&s);
         CHECK(s == NULL);

@@ -203,12 +203,13 @@ void mpm_rows_update(mpm_sim *s)
  * private grids' P2G fields (s->p2g_fields: those of a step's first
  * scatter) are kept all zero between uses instead: the reduction zeroes
  * what it has read, so that a fused pass can scatter the next step's into
- * them before it knows the rows it will touch. */
+ * them before it knows the rows it will touch.  So is the field they keep
+ * in q's storage (s->tshare), which q's zeros serve. */
 mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields)
 {
     mpm_gridbuf *b = tid == 0 ? &s->g : &s->tbuf[tid];
     const mpm_thread_out *o = &s->tout[tid];
-    if (tid) fields &= ~s->p2g_fields; /* all zero already (reduce_seg) */
+    if (tid) fields &= ~s->tzero; /* all zero already (reduce_seg) */
     if (fields & MPM_F_M) zero_rows(s, b->m, o);
     for (int d = 0; d < s->dim; d++) {
         if (fields & MPM_F_Q) zero_rows(s, b->q[d], o);
@@ -326,7 +327,7 @@ static void reduce_seg(mpm_sim *s, int fields, size_t row, int a, int b)
                 if (lo < ia) ia = lo;
                 if (hi > ib) ib = hi;
             }
-            if (fl & s->p2g_fields) /* read: back to zero (mpm_scatter_buf()) */
+            if (fl & s->tzero) /* read: back to zero (mpm_scatter_buf()) */
                 for (int t = 1; t < T; t++) {
                     const mpm_thread_out *o = &s->tout[t];
                     long lo = o->rlo[row] > a ? o->rlo[row] : a;

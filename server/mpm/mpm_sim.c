@@ -109,24 +109,32 @@ static void free_gridbuf(mpm_gridbuf *b)
 {
     stag_free(b->m);
     for (int d = 0; d < 3; d++) {
+        if (b->f[d] != b->q[d]) stag_free(b->f[d]); /* else q's storage (alloc_gridbuf()) */
+        if (b->q2[d] != b->q[d]) stag_free(b->q2[d]);
         stag_free(b->q[d]);
-        stag_free(b->f[d]);
-        stag_free(b->q2[d]);
     }
     memset(b, 0, sizeof *b);
 }
 
 /* fields: MPM_F_* of the buffer (m and q always); nn nodes and
- * MPM_GRID_SLACK more; slot: stag_alloc()'s */
-static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int fields, unsigned *slot)
+ * MPM_GRID_SLACK more; slot: stag_alloc()'s.  shared: the one field of
+ * fields (MPM_F_F or MPM_F_Q2, or 0 for none) that is given q's storage
+ * instead of its own (mpm_sim.tshare). */
+static int alloc_gridbuf(mpm_gridbuf *b, size_t nn, int dim, int fields, int shared, unsigned *slot)
 {
     memset(b, 0, sizeof *b);
     nn += MPM_GRID_SLACK;
     if (!(b->m = stag_alloc(nn, slot))) return MPM_ENOMEM;
     for (int d = 0; d < dim; d++) {
         if (!(b->q[d] = stag_alloc(nn, slot))) return MPM_ENOMEM;
-        if ((fields & MPM_F_F) && !(b->f[d] = stag_alloc(nn, slot))) return MPM_ENOMEM;
-        if ((fields & MPM_F_Q2) && !(b->q2[d] = stag_alloc(nn, slot))) return MPM_ENOMEM;
+        if (fields & MPM_F_F) {
+            b->f[d] = shared == MPM_F_F ? b->q[d] : stag_alloc(nn, slot);
+            if (!b->f[d]) return MPM_ENOMEM;
+        }
+        if (fields & MPM_F_Q2) {
+            b->q2[d] = shared == MPM_F_Q2 ? b->q[d] : stag_alloc(nn, slot);
+            if (!b->q2[d]) return MPM_ENOMEM;
+        }
     }
     return 0;
 }
@@ -614,7 +622,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
     int gfields = MPM_F_M | MPM_F_Q | MPM_F_F | (musl ? MPM_F_Q2 : 0);
-    if (alloc_gridbuf(&s->g, s->nn, dim, gfields, &s->stag)) goto nomem;
+    if (alloc_gridbuf(&s->g, s->nn, dim, gfields, 0, &s->stag)) goto nomem;
     if (!(s->minv = stag_alloc(s->nn + MPM_GRID_SLACK, &s->stag))) goto nomem;
     for (int d = 0; d < 3; d++) {
         if (!(s->ncoord[d] = mpm_dalloc((size_t)s->np[d]))) goto nomem;
@@ -622,14 +630,17 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
             s->ncoord[d][i] = mpm_node_coord_calc(s, d, i);
     }
     s->p2g_fields = MPM_F_M | MPM_F_Q | (c->update == MPM_USF ? 0 : MPM_F_F);
+    s->tshare = c->update == MPM_USF ? MPM_F_F : musl ? MPM_F_Q2 : 0;
+    s->tzero = s->p2g_fields | s->tshare;
     s->fuse = s->k->g2p_xv_nx != NULL;
     if (s->nthreads > 1 || s->fuse) {
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
         /* thread 0 scatters into the grid, and the fused passes into
          * tbuf[0] (the P2G fields) */
-        if (s->fuse && alloc_gridbuf(&s->tbuf[0], s->nn, dim, s->p2g_fields, &s->stag)) goto nomem;
+        if (s->fuse && alloc_gridbuf(&s->tbuf[0], s->nn, dim, s->p2g_fields, 0, &s->stag))
+            goto nomem;
         for (int t = 1; t < s->nthreads; t++)
-            if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, gfields, &s->stag)) goto nomem;
+            if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, gfields, s->tshare, &s->stag)) goto nomem;
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
     for (s->sort_ring = 2; s->sort_ring < np && s->sort_ring < MPM_SORT_RING; s->sort_ring *= 2) {
