@@ -356,10 +356,9 @@ struct mpm_sim {
      * scatters it in a pass of its own, after the reduction has read and
      * zeroed q and before the next scatter into q, so that the two never
      * hold values at once (2D MPM USF on 2 threads: 5 fields' pages of
-     * thread 1 become 3).  tzero = p2g_fields | tshare: the fields kept all
-     * zero in tbuf[t], t >= 1, between uses (mpm_scatter_buf(), the
-     * reduction) */
-    int tshare, tzero;
+     * thread 1 become 3); with p2g_fields, the fields kept all zero in
+     * tbuf[t], t >= 1, between uses (mpm_rows.c, kept_zero()) */
+    int tshare;
 
     /* active region: the padded nodes the particles' supports touch.  A row
      * is the run of nodes along x at fixed (y, z), row index y + z np[1],
@@ -820,7 +819,7 @@ int mpm_rows_init(mpm_sim *s);
 /* Makes the active rows those the last particle pass recorded (serial). */
 void mpm_rows_update(mpm_sim *s);
 /* Thread tid's scatter target, zeroed over its rows for the fields named
- * (a private buffer's s->tzero fields are all zero already). */
+ * (a private buffer's P2G fields and s->tshare are all zero already). */
 mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields);
 /* Fused steps: swaps the main grid's P2G fields with thread 0's next-step
  * buffer (serial, between steps), which then holds the last grid until

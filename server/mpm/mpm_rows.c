@@ -196,6 +196,13 @@ void mpm_rows_update(mpm_sim *s)
     s->fuse_pays = fuse_pays(s, rows, n);
 }
 
+/* The fields the private grids (threads 1 and up) keep all zero between
+ * uses: the P2G fields, and the one they keep in q's storage. */
+static int kept_zero(const mpm_sim *s)
+{
+    return s->p2g_fields | s->tshare;
+}
+
 /* The scatter target of thread tid, zeroed over the thread's rows for the
  * fields named: thread 0 scatters straight into the main grid (its sums
  * come first in the reduction anyway), the others into private grids.
@@ -209,7 +216,7 @@ mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields)
 {
     mpm_gridbuf *b = tid == 0 ? &s->g : &s->tbuf[tid];
     const mpm_thread_out *o = &s->tout[tid];
-    if (tid) fields &= ~s->tzero; /* all zero already (reduce_seg) */
+    if (tid) fields &= ~kept_zero(s); /* all zero already (reduce_seg) */
     if (fields & MPM_F_M) zero_rows(s, b->m, o);
     for (int d = 0; d < s->dim; d++) {
         if (fields & MPM_F_Q) zero_rows(s, b->q[d], o);
@@ -327,7 +334,7 @@ static void reduce_seg(mpm_sim *s, int fields, size_t row, int a, int b)
                 if (lo < ia) ia = lo;
                 if (hi > ib) ib = hi;
             }
-            if (fl & s->tzero) /* read: back to zero (mpm_scatter_buf()) */
+            if (fl & kept_zero(s)) /* read: back to zero (mpm_scatter_buf()) */
                 for (int t = 1; t < T; t++) {
                     const mpm_thread_out *o = &s->tout[t];
                     long lo = o->rlo[row] > a ? o->rlo[row] : a;

@@ -631,7 +631,6 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     }
     s->p2g_fields = MPM_F_M | MPM_F_Q | (c->update == MPM_USF ? 0 : MPM_F_F);
     s->tshare = c->update == MPM_USF ? MPM_F_F : musl ? MPM_F_Q2 : 0;
-    s->tzero = s->p2g_fields | s->tshare;
     s->fuse = s->k->g2p_xv_nx != NULL;
     if (s->nthreads > 1 || s->fuse) {
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
