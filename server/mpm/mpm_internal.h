@@ -369,10 +369,13 @@ struct mpm_sim {
     int blo[3], bhi[3];
     size_t nrows; /* np[1] np[2] */
     int *ulo, *uhi;
-    /* node passes split the nodes of the extents evenly among the threads:
+    /* node passes split the nodes of the extents among the threads:
      * acc[r] is the number of nodes in the extents of the rows before row
-     * r of the box blo..bhi (r = 0 .. box rows), nact their total */
-    size_t *acc;
+     * r of the box blo..bhi (r = 0 .. box rows), nact their total; wacc[r]
+     * the same in work units (mpm_rows.c, MPM_W_*), which the passes that
+     * reduce split evenly instead: a node that a reduction copies from a
+     * private grid counts more than one whose sum is in place */
+    size_t *acc, *wacc;
     size_t nact;
     /* sorting by cell (4 to MPM_SORT_EVERY steps apart, begin_step() in
      * mpm_sim.c, and at creation): a stable counting sort

@@ -726,6 +726,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     free(s->uhi);
     free(s->rowoff);
     free(s->acc);
+    free(s->wacc);
     free(s->sperm);
     free(s->shist);
     free(s->tout);
