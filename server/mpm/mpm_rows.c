@@ -258,46 +258,48 @@ typedef struct {
     size_t r, nr, n, n1;
 } seg_iter;
 
+/* The first row r of the box (0 .. nr - 1) with c[r + 1] > u, for a
+ * running count c (acc or wacc); nr if there is none. */
+static size_t row_of(const size_t *c, size_t nr, size_t u)
+{
+    size_t lo = 0, hi = nr;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (c[mid + 1] > u)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return lo;
+}
+
 /* The node (as counted by acc) at which work unit u of wacc falls: the
  * row's units spread evenly over its nodes.  Only the split moves with
  * it: every node is still computed once, from itself. */
 static size_t node_at_work(const mpm_sim *s, size_t u)
 {
-    size_t lo = 0, hi = mpm_box_rows(s->blo, s->bhi);
-    if (u >= s->wacc[hi]) return s->nact;
-    while (lo < hi) { /* the first row r with wacc[r + 1] > u */
-        size_t mid = lo + (hi - lo) / 2;
-        if (s->wacc[mid + 1] > u)
-            hi = mid;
-        else
-            lo = mid + 1;
-    }
-    size_t w = s->acc[lo + 1] - s->acc[lo], wu = s->wacc[lo + 1] - s->wacc[lo];
-    return s->acc[lo] + (u - s->wacc[lo]) * w / wu;
+    size_t nr = mpm_box_rows(s->blo, s->bhi);
+    if (u >= s->wacc[nr]) return s->nact;
+    size_t r = row_of(s->wacc, nr, u);
+    size_t w = s->acc[r + 1] - s->acc[r], wu = s->wacc[r + 1] - s->wacc[r];
+    return s->acc[r] + (u - s->wacc[r]) * w / wu;
 }
 
 /* weighted: split by the work units of a pass that reduces (wacc), else
  * by nodes */
 static void seg_begin(const mpm_sim *s, int tid, int weighted, seg_iter *it)
 {
-    size_t n0, n1, lo = 0, hi = mpm_box_rows(s->blo, s->bhi);
+    size_t n0, n1, nr = mpm_box_rows(s->blo, s->bhi);
     if (weighted) {
         size_t u0, u1;
-        mpm_slice(s->wacc[hi], s->nthreads, tid, &u0, &u1);
+        mpm_slice(s->wacc[nr], s->nthreads, tid, &u0, &u1);
         n0 = node_at_work(s, u0);
         n1 = tid == s->nthreads - 1 ? s->nact : node_at_work(s, u1);
     } else {
         mpm_slice(s->nact, s->nthreads, tid, &n0, &n1);
     }
-    it->nr = hi;
-    while (lo < hi) { /* the first row r with acc[r + 1] > n0 */
-        size_t mid = lo + (hi - lo) / 2;
-        if (s->acc[mid + 1] > n0)
-            hi = mid;
-        else
-            lo = mid + 1;
-    }
-    it->r = lo;
+    it->nr = nr;
+    it->r = row_of(s->acc, nr, n0);
     it->n = n0;
     it->n1 = n1;
 }
