@@ -546,6 +546,74 @@ TEST(perf_node_split_1d_leaves_no_stale_nodes)
             }
 }
 
+/* The node passes that reduce split work units, not nodes (mpm_rows.c):
+ * a node where thread 0 did not scatter, whose private values the
+ * reduction copies, counts MPM_W_NODE + MPM_W_COPY, one where it did
+ * MPM_W_NODE.  Recounted here from the extents and thread 0's rows: the
+ * shares follow each other and cover every active node once, each
+ * thread's units lie within one row's units of an even split, and on the
+ * disks thread 0, whose nodes hold sums in place, takes more nodes than an
+ * even split of nodes gives it. */
+TEST(perf_node_split_by_work)
+{
+    for (int T = 2; T <= 3; T++) {
+        mpm_paper t;
+        mpm_paper_disks(&t, MPM_METHOD_MPM, MPM_USF, 0.01);
+        t.c.threads = T;
+        mpm_error err;
+        mpm_sim *s = mpm_sim_new(&t.c, NULL, &err);
+        mpm_paper_free(&t);
+        CHECKF(s, "mpm_sim_new: %s", err.message);
+        CHECK(mpm_sim_run(s, 20) == 0);
+        mpm_rows_update(s); /* the split of the rows the last pass recorded */
+        size_t *u = malloc((s->nact + 1) * sizeof *u); /* units before node k */
+        CHECK(u != NULL);
+        if (!u) {
+            mpm_sim_destroy(&s);
+            return;
+        }
+        const mpm_thread_out *o0 = &s->tout[0];
+        size_t k = 0, rowmax = 0, copied = 0;
+        u[0] = 0;
+        for (size_t r = 0; r < mpm_box_rows(s->blo, s->bhi); r++) {
+            size_t row = mpm_box_row(s, s->blo, s->bhi, r), ru = 0;
+            for (int x = s->ulo[row]; x <= s->uhi[row] && k < s->nact; x++, k++) {
+                int in_place = x >= o0->rlo[row] && x <= o0->rhi[row];
+                size_t w = MPM_W_NODE + (in_place ? 0 : MPM_W_COPY);
+                copied += !in_place;
+                u[k + 1] = u[k] + w;
+                ru += w;
+            }
+            if (ru > rowmax) rowmax = ru;
+        }
+        CHECK(k == s->nact);
+        double even = (double)u[k] / T;
+        size_t prev = 0, worst = 0;
+        for (int tid = 0; tid < T; tid++) {
+            size_t n0, n1;
+            mpm_node_share(s, tid, 1, &n0, &n1);
+            CHECK(n0 == prev && n1 >= n0 && n1 <= s->nact);
+            if (!(n0 == prev && n1 >= n0 && n1 <= s->nact)) break;
+            double off = fabs((double)(u[n1] - u[n0]) - even);
+            if (off > (double)worst) worst = (size_t)off;
+            CHECK(off <= (double)rowmax);
+            prev = n1;
+        }
+        CHECK(prev == s->nact);
+        size_t w0, w1, e0, e1;
+        mpm_node_share(s, 0, 1, &w0, &w1);
+        mpm_node_share(s, 0, 0, &e0, &e1);
+        TLOG("disks MPM USF, %d threads, 20 steps: %zu active nodes, %zu copied, %zu units; "
+             "thread 0 takes %zu nodes by work, %zu by nodes; worst share %zu units off even "
+             "(a row up to %zu)",
+             T, s->nact, copied, u[k], w1 - w0, e1 - e0, worst, rowmax);
+        CHECK(copied > 0);
+        CHECK(w0 == 0 && e0 == 0 && w1 > e1);
+        free(u);
+        mpm_sim_destroy(&s);
+    }
+}
+
 /* The step on the team with everything a node pass folds in or splits
  * around: gravity, a wall (BC1, BC2), a traction (point forces scattered
  * serially between the two halves of the node pass), particles crossing

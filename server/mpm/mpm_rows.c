@@ -18,16 +18,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Work units of a node in a pass that reduces (wacc): MPM_W_NODE for
- * every node, MPM_W_COPY more where the main grid holds no sum (thread 0
- * did not scatter there), so that a private grid's values are copied there
- * and zeroed rather than added.  A copied node counts 4/3 of an added one:
- * split by nodes alone, thread 1 (whose rows are the copied ones in 2
- * threads) made the copies and thread 0 waited for it; 4/3, 3/2 and 2
- * measured alike (2D and 3D MPM USF, 2 threads, 10^6: 1.03x and 1.05x). */
-#define MPM_W_NODE 3
-#define MPM_W_COPY 1
-
 int mpm_rows_init(mpm_sim *s)
 {
     s->nrows = (size_t)s->np[1] * (size_t)s->np[2];
@@ -285,19 +275,22 @@ static size_t node_at_work(const mpm_sim *s, size_t u)
     return s->acc[r] + (u - s->wacc[r]) * w / wu;
 }
 
-/* weighted: split by the work units of a pass that reduces (wacc), else
- * by nodes */
+void mpm_node_share(const mpm_sim *s, int tid, int weighted, size_t *n0, size_t *n1)
+{
+    if (weighted) {
+        size_t u0, u1;
+        mpm_slice(s->wacc[mpm_box_rows(s->blo, s->bhi)], s->nthreads, tid, &u0, &u1);
+        *n0 = node_at_work(s, u0);
+        *n1 = tid == s->nthreads - 1 ? s->nact : node_at_work(s, u1);
+    } else {
+        mpm_slice(s->nact, s->nthreads, tid, n0, n1);
+    }
+}
+
 static void seg_begin(const mpm_sim *s, int tid, int weighted, seg_iter *it)
 {
     size_t n0, n1, nr = mpm_box_rows(s->blo, s->bhi);
-    if (weighted) {
-        size_t u0, u1;
-        mpm_slice(s->wacc[nr], s->nthreads, tid, &u0, &u1);
-        n0 = node_at_work(s, u0);
-        n1 = tid == s->nthreads - 1 ? s->nact : node_at_work(s, u1);
-    } else {
-        mpm_slice(s->nact, s->nthreads, tid, &n0, &n1);
-    }
+    mpm_node_share(s, tid, weighted, &n0, &n1);
     it->nr = nr;
     it->r = row_of(s->acc, nr, n0);
     it->n = n0;
