@@ -149,8 +149,9 @@ static int fuse_pays(const mpm_sim *s, size_t rows, size_t n)
  * particle pass recorded them, and zeroes, in every field of the main
  * grid, the nodes of the old extents outside the new ones (which keeps the
  * main grid zero outside the active rows); then counts the new extents'
- * nodes row by row (acc, and in work units wacc, for the node passes' split).  Serial; the rows
- * visited are those of the old and the new box. */
+ * nodes row by row, as nodes (acc) and as work units (wacc), for the node
+ * passes' split.  Serial; the rows visited are those of the old and the
+ * new box. */
 void mpm_rows_update(mpm_sim *s)
 {
     int lo[3], hi[3], alo[3], ahi[3];
@@ -497,11 +498,12 @@ void mpm_node_pass(mpm_sim *s, int tid, int ops)
     if (!s->has_gravity) ops &= ~MPM_N_GRAV;
     if (!s->nfixed && !s->has_cond) ops &= ~(MPM_N_BC1 | MPM_N_BC1Q2 | MPM_N_BC2);
     seg_iter it;
-    seg_begin(s, tid, fields && s->nthreads > 1, &it);
+    int reduce = fields && s->nthreads > 1; /* private grids to sum */
+    seg_begin(s, tid, reduce, &it);
     size_t row;
     int lo, hi;
     while (seg_next(s, &it, &row, &lo, &hi)) {
-        if (fields && s->nthreads > 1) reduce_seg(s, fields, row, lo, hi);
+        if (reduce) reduce_seg(s, fields, row, lo, hi);
         size_t base = mpm_row_node(s, row, lo), w = (size_t)(hi - lo + 1);
         if (ops & MPM_N_Z0) {
             double *z[10];
