@@ -41,6 +41,8 @@ TOOL_LIB   := $(filter-out tools/mpmrun.c,$(wildcard tools/*.c))
 TEST_SRCS  := $(wildcard tests/t_*.c) tests/runner.c
 BENCH_SRCS := $(wildcard tests/bench/*.c)
 PERF_SRCS  := $(wildcard tests/perf/*.c)
+# bin/mpmceiling's lean step (tests/ceiling/: also linked into mpmtest) and its program
+CEIL_SRCS  := tests/ceiling/ceiling.c tests/ceiling/ceiling_avx2.c
 INC        := -Iserver/mpm -Iserver -Iserver/store -Iprotocol -Itools -Ibuild/gen -Itests
 
 # The AVX2+FMA kernels (server/mpm/mpm_kernels_avx2.c, chosen at run time)
@@ -63,7 +65,7 @@ FUZZ_O ?= -O1
 FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
          -fno-sanitize-recover=all
 
-.PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-inproc inproc-objs bench-accuracy bench-vtk stress \
+.PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-inproc inproc-objs bench-accuracy bench-vtk bench-ceiling stress \
         demo clean \
         format format-check lint fuzz fuzz-quick fuzz-build fuzz-seed
 .SECONDARY: $(GEN_C) $(GEN_H)
@@ -117,12 +119,13 @@ $(FUZZ)/%.o: CC := $(FUZZ_CC)
 $(FUZZ)/server/mpm/%.o: FUZZ_O := -O0
 $(FUZZ)/server/mpm/mpm_kernels.o $(FUZZ)/server/mpm/mpm_kernels_avx2.o: FUZZF = -O0 -g
 $(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/server/mpm/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
+$(foreach b,$(REL) $(ASAN) $(TSAN),$(b)/tests/ceiling/ceiling_avx2.o): XFLAGS = $(AVX2F)
 -include $(shell find build -name '*.d' 2>/dev/null)
 
 # Link lines, per build: $(1) build dir.  Libraries go above what they use.
 mpmd_deps    = $(1)/server/main.o $(1)/libsrv.a $(1)/libstore.a $(1)/libmpp.a $(1)/libmpm.a
 mpmctl_deps  = $(patsubst %.c,$(1)/%.o,$(CLI_SRCS)) $(1)/libmpp.a $(1)/libmpm.a
-mpmtest_deps = $(patsubst %.c,$(1)/%.o,$(TEST_SRCS)) $(1)/libtools.a $(1)/libsrv.a \
+mpmtest_deps = $(patsubst %.c,$(1)/%.o,$(TEST_SRCS) $(CEIL_SRCS)) $(1)/libtools.a $(1)/libsrv.a \
                $(1)/libstore.a $(1)/libmpp.a $(1)/libmpm.a
 
 # ---- the daemon, the client and the test runner --------------------------------
@@ -165,8 +168,10 @@ test: deps
 
 # The benchmarks' binaries, built (not run) in CI so that they never rot.
 bench-build: deps
-	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmbench-accuracy bin/mpmvtkbench
+	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmbench-accuracy bin/mpmvtkbench \
+	  bin/mpmceiling
 	@bash tests/perf/inproc/inproc.sh --self-check
+	bin/mpmceiling --check
 
 # Release build, no sanitizers: quick local iteration.
 test-quick: bin/mpmtest bin/mpmd bin/mpmctl
@@ -243,7 +248,8 @@ ANALYZE := build/analyze
 ANAF := -O0 -g -fanalyzer -Wno-analyzer-use-of-uninitialized-value -Wno-format-truncation
 $(ANALYZE)/tests/%.o: ANAF += -Wno-analyzer-malloc-leak -Wno-analyzer-file-leak
 LINT_SRCS = $(filter-out server/mpm/mpm_kernels_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(wildcard server/*.c) $(CLI_SRCS) \
-            $(wildcard tools/*.c) $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS) $(wildcard tests/perf/inproc/*.c)
+            $(wildcard tools/*.c) $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS) $(wildcard tests/perf/inproc/*.c) \
+            $(wildcard tests/ceiling/*.c)
 $(ANALYZE)/%.o: %.c | $(GEN_H)
 	@mkdir -p $(dir $@)
 	$(ANALYZER_CC) $(CSTD) $(WARN) $(ANAF) $(INC) -MMD -MP -c $< -o $@
@@ -365,6 +371,20 @@ bin/mpmvtkbench: $(REL)/tests/vtkbench/mpmvtkbench.o $(REL)/clients/ctl_vtk.o \
 bench-vtk: deps
 	@$(MAKE) --no-print-directory bin/mpmvtkbench
 	bin/mpmvtkbench $(BENCH_ARGS)
+
+# make bench-ceiling  issue 14's ceiling: bin/mpmceiling (tests/ceiling/: the
+#             disks2d scene's 2D MPM USF step with nothing but its arithmetic,
+#             four lanes where the CPU has AVX2 and FMA) against bin/mpmbench's
+#             disks2d MPM USF on 1 thread, alternated (CEILING_ROUNDS, default 3),
+#             at 10^4 and 10^6 particles, with the triad: what a step of the
+#             solver's design can reach here, and what the solver reaches.
+bin/mpmceiling: $(REL)/tests/ceiling/mpmceiling.o $(patsubst %.c,$(REL)/%.o,$(CEIL_SRCS))
+	@mkdir -p bin
+	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
+
+bench-ceiling: deps
+	@$(MAKE) --no-print-directory bin/mpmceiling bin/mpmbench
+	@bash tests/ceiling/ceiling.sh
 
 bench: deps
 	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmd
