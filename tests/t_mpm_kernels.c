@@ -551,79 +551,110 @@ static uint64_t lcg(uint64_t *st)
     return *st >> 11;
 }
 
+/* The particles of kernels_tent_lanes in dim dimensions (cells of 1 ..
+ * maxper particles, the layer on a grid line); h = 0.125, nodes per axis
+ * in *nodes.  Returns the count, 0 when out of memory (nothing to free). */
+static size_t lanes_layout(int dim, double **xo, double **vo, double **volo, int *nodes)
+{
+    const double h = 0.125;
+    const int lo = 3, hi = dim == 2 ? 11 : 7;
+    const int span = hi - lo, maxper = dim == 2 ? 9 : 8;
+    *nodes = dim == 2 ? 16 : 12;
+    size_t ncell = 1, cap = 0;
+    for (int d = 0; d < dim; d++) ncell *= (size_t)span;
+    cap = ncell * (size_t)maxper + ncell; /* the cells, and the layer on the grid line */
+    double *x = malloc(cap * 3 * sizeof *x), *vol = malloc(cap * sizeof *vol);
+    double *v = malloc(cap * 3 * sizeof *v);
+    if (!x || !vol || !v) {
+        free(x);
+        free(vol);
+        free(v);
+        return 0;
+    }
+    uint64_t st = 12345u + (uint64_t)dim;
+    size_t n = 0;
+    for (size_t c = 0; c < ncell; c++) {
+        int ci[3] = {0, 0, 0};
+        size_t r = c;
+        for (int d = 0; d < dim; d++) {
+            ci[d] = lo + (int)(r % (size_t)span);
+            r /= (size_t)span;
+        }
+        int per = 1 + (int)((c * 5 + c / 3) % (size_t)maxper);
+        for (int k = 0; k < per; k++, n++)
+            for (int d = 0; d < dim; d++) {
+                double u = (double)(lcg(&st) % 1000) / 1000.0;
+                x[n * (size_t)dim + (size_t)d] = (ci[d] + 0.05 + 0.9 * u) * h;
+                v[n * (size_t)dim + (size_t)d] =
+                    (d == 0 ? 0.4 : 0.25) + 0.1 * ((double)(lcg(&st) % 1000) / 500.0 - 1.0);
+            }
+        /* the layer on the grid line x = hi h, past the body: its
+         * cells' corners at x = (hi + 1) h have no mass at first */
+        if (ci[0] == hi - 1) {
+            x[n * (size_t)dim] = hi * h;
+            for (int d = 1; d < dim; d++) x[n * (size_t)dim + (size_t)d] = (ci[d] + 0.5) * h;
+            for (int d = 0; d < dim; d++) v[n * (size_t)dim + (size_t)d] = d == 0 ? 0.4 : 0.25;
+            n++;
+        }
+    }
+    for (size_t i = 0; i < n; i++) vol[i] = pow(h, dim) / 5.0;
+    *xo = x;
+    *vo = v;
+    *volo = vol;
+    return n;
+}
+
+/* A case of the lanes' particles: MPM, update up, PIC fraction pic, th
+ * threads, dt 0.002, one linear-elastic material (mat, b: the caller's). */
+static void lanes_case(mpm_case *c, mpm_material_desc *mat, mpm_body_desc *b, int dim, size_t n,
+                       double *x, double *v, double *vol, int nodes, mpm_update up, double pic,
+                       int th)
+{
+    *mat = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
+                               .youngs_modulus = 10.0,
+                               .poisson_ratio = 0.3,
+                               .density = 1.0};
+    memset(c, 0, sizeof *c);
+    memset(b, 0, sizeof *b);
+    b->n_points = n;
+    b->x = x;
+    b->volume = vol;
+    b->v = v;
+    c->grid.dim = dim;
+    for (int d = 0; d < dim; d++) {
+        c->grid.h[d] = 0.125;
+        c->grid.nodes[d] = nodes;
+    }
+    c->method = MPM_METHOD_MPM;
+    c->update = up;
+    c->pic_fraction = pic;
+    c->dt = 0.002;
+    c->threads = th;
+    c->n_materials = 1;
+    c->materials = mat;
+    c->n_bodies = 1;
+    c->bodies = b;
+}
+
 TEST(kernels_tent_lanes)
 {
     if (!mpm_kernels_avx2_available()) {
         TLOG("no AVX2+FMA here: the tents' lanes do not run");
         return;
     }
-    const double h = 0.125;
     int any = 0, runs = 0;
     for (int dim = 2; dim <= 3; dim++) {
-        const int lo = 3, hi = dim == 2 ? 11 : 7, nodes = dim == 2 ? 16 : 12;
-        const int span = hi - lo, maxper = dim == 2 ? 9 : 8;
-        size_t ncell = 1, cap = 0;
-        for (int d = 0; d < dim; d++) ncell *= (size_t)span;
-        cap = ncell * (size_t)maxper + ncell; /* the cells, and the layer on the grid line */
-        double *x = malloc(cap * 3 * sizeof *x), *vol = malloc(cap * sizeof *vol);
-        double *v = malloc(cap * 3 * sizeof *v);
-        CHECK(x && vol && v);
-        uint64_t st = 12345u + (uint64_t)dim;
-        size_t n = 0;
-        for (size_t c = 0; c < ncell; c++) {
-            int ci[3] = {0, 0, 0};
-            size_t r = c;
-            for (int d = 0; d < dim; d++) {
-                ci[d] = lo + (int)(r % (size_t)span);
-                r /= (size_t)span;
-            }
-            int per = 1 + (int)((c * 5 + c / 3) % (size_t)maxper);
-            for (int k = 0; k < per; k++, n++)
-                for (int d = 0; d < dim; d++) {
-                    double u = (double)(lcg(&st) % 1000) / 1000.0;
-                    x[n * (size_t)dim + (size_t)d] = (ci[d] + 0.05 + 0.9 * u) * h;
-                    v[n * (size_t)dim + (size_t)d] =
-                        (d == 0 ? 0.4 : 0.25) + 0.1 * ((double)(lcg(&st) % 1000) / 500.0 - 1.0);
-                }
-            /* the layer on the grid line x = hi h, past the body: its
-             * cells' corners at x = (hi + 1) h have no mass at first */
-            if (ci[0] == hi - 1) {
-                x[n * (size_t)dim] = hi * h;
-                for (int d = 1; d < dim; d++) x[n * (size_t)dim + (size_t)d] = (ci[d] + 0.5) * h;
-                for (int d = 0; d < dim; d++) v[n * (size_t)dim + (size_t)d] = d == 0 ? 0.4 : 0.25;
-                n++;
-            }
-        }
-        for (size_t i = 0; i < n; i++) vol[i] = pow(h, dim) / 5.0;
+        double *x, *v, *vol;
+        int nodes;
+        size_t n = lanes_layout(dim, &x, &v, &vol, &nodes);
+        CHECK(n > 0);
         static const mpm_update us[] = {MPM_USF, MPM_USL, MPM_USL, MPM_USF};
         for (int u = 0; u < 4; u++)
             for (int th = 1; th <= 3; th++) {
                 mpm_case c;
-                mpm_material_desc mat = {.model = MPM_MODEL_LINEAR_ELASTIC,
-                                         .youngs_modulus = 10.0,
-                                         .poisson_ratio = 0.3,
-                                         .density = 1.0};
+                mpm_material_desc mat;
                 mpm_body_desc b;
-                memset(&c, 0, sizeof c);
-                memset(&b, 0, sizeof b);
-                b.n_points = n;
-                b.x = x;
-                b.volume = vol;
-                b.v = v;
-                c.grid.dim = dim;
-                for (int d = 0; d < dim; d++) {
-                    c.grid.h[d] = h;
-                    c.grid.nodes[d] = nodes;
-                }
-                c.method = MPM_METHOD_MPM;
-                c.update = us[u];
-                c.pic_fraction = u >= 2 ? 0.3 : 0.0;
-                c.dt = 0.002;
-                c.threads = th;
-                c.n_materials = 1;
-                c.materials = &mat;
-                c.n_bodies = 1;
-                c.bodies = &b;
+                lanes_case(&c, &mat, &b, dim, n, x, v, vol, nodes, us[u], u >= 2 ? 0.3 : 0.0, th);
                 char name[64];
                 snprintf(name, sizeof name, "%dD MPM %s%s, %d thr", dim,
                          us[u] == MPM_USL ? "USL" : "USF", u >= 2 ? " blend" : "", th);
@@ -639,6 +670,83 @@ TEST(kernels_tent_lanes)
     }
     CHECK(runs == 24);
     CHECK(any == mpm_kernels_avx2_fuses());
+}
+
+/* Runs s for steps steps and snapshots x, v and sigma into k (n
+ * particles, dim); 0 or -1. */
+static int run_snap(mpm_sim *s, long steps, kstate *k)
+{
+    memset(k, 0, sizeof *k);
+    k->n = mpm_sim_particles(s);
+    k->dim = mpm_sim_dim(s);
+    k->x = malloc(k->n * (size_t)k->dim * sizeof *k->x);
+    k->v = malloc(k->n * (size_t)k->dim * sizeof *k->v);
+    k->sig = malloc(k->n * 6 * sizeof *k->sig);
+    if (mpm_sim_run(s, steps) || !k->x || !k->v || !k->sig) {
+        kstate_free(k);
+        return -1;
+    }
+    mpm_sim_snapshot(s, &(mpm_snapshot){.x = k->x, .v = k->v, .stress = k->sig});
+    return 0;
+}
+
+/* 2D USF's stress pass from strain to force in registers (mpm_sim.el2_lanes,
+ * el2_block() of the AVX2 kernels): the same bits as the general pass
+ * (strains, stresses and forces of a block in turn), with runs of 1-9
+ * particles per cell, phantom corners and the blend, on 1-3 threads, with
+ * and without the energies every step (which take the general pass). */
+TEST(kernels_el2_same_bits)
+{
+    if (!mpm_kernels_avx2_available()) {
+        TLOG("no AVX2+FMA here: the AVX2 kernels' fused stress pass does not run");
+        return;
+    }
+    double *x, *v, *vol;
+    int nodes, runs = 0;
+    size_t n = lanes_layout(2, &x, &v, &vol, &nodes);
+    CHECK(n > 0);
+    for (int blend = 0; blend < 2; blend++)
+        for (int th = 1; th <= 3; th++) {
+            mpm_case c;
+            mpm_material_desc mat;
+            mpm_body_desc b;
+            lanes_case(&c, &mat, &b, 2, n, x, v, vol, nodes, MPM_USF, blend ? 0.3 : 0.0, th);
+            c.kernels = MPM_KERNELS_AVX2;
+            kstate k[2];
+            int ok = 1, on = 0;
+            for (int side = 0; side < 2; side++) {
+                mpm_error err;
+                mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+                if (!s) {
+                    ok = 0;
+                    break;
+                }
+                if (side == 0) on = s->el2_lanes;
+                s->el2_lanes = side == 0; /* side 1: the general pass */
+                ok &= run_snap(s, 300, &k[side]) == 0;
+                mpm_sim_destroy(&s);
+            }
+            if (ok) {
+                ok = !memcmp(k[0].x, k[1].x, 2 * n * sizeof *k[0].x) &&
+                     !memcmp(k[0].v, k[1].v, 2 * n * sizeof *k[0].v) &&
+                     !memcmp(k[0].sig, k[1].sig, 6 * n * sizeof *k[0].sig);
+                if (!ok)
+                    TLOG("%s, %d thr: differ, rel. %.3g in x, %.3g in sigma",
+                         blend ? "blend" : "FLIP", th, maxrel(k[0].x, k[1].x, 2 * n),
+                         maxrel(k[0].sig, k[1].sig, 6 * n));
+                kstate_free(&k[0]);
+                kstate_free(&k[1]);
+            }
+            CHECKF(on, "the case did not take the fused stress pass (mpm_sim.el2_lanes 0)");
+            CHECKF(ok, "2D MPM USF%s, %d thr: the fused stress pass and the general one differ",
+                   blend ? " blend" : "", th);
+            runs++;
+        }
+    TLOG("%zu particles, %d runs of 300 steps: x, v and sigma equal bit for bit", n, runs);
+    free(x);
+    free(vol);
+    free(v);
+    CHECK(runs == 6);
 }
 
 TEST(kernels_field_checked)

@@ -237,7 +237,8 @@ INLINE void tl_strain(const mpm_sim *s, double *const qg[3], const tlane *t, int
  * (trun_add()'s WF terms: each lane forms its particle's pair of terms
  * as trun_add() does, gx (sigma A) fused, wx (sigma B) rounded, and the
  * pairs are added to the run's sums particle by particle, in order). */
-INLINE void tl_force2(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *t, size_t p)
+INLINE void tl_force2_of(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *t, v4d V, v4d sxx,
+                         v4d syy, v4d sxy)
 {
     IH(s);
     if (t->base != r->base) {
@@ -245,10 +246,7 @@ INLINE void tl_force2(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *t
         r->base = t->base;
         trun_zero(r, 2);
     }
-    const mpm_particles *P = &s->P;
-    const v4d V = *(const v4du *)(P->vol + p);
-    const v4d s0 = V * *(const v4du *)(P->sig[0] + p), s1 = V * *(const v4du *)(P->sig[1] + p),
-              s3 = V * *(const v4du *)(P->sig[3] + p);
+    const v4d s0 = V * sxx, s1 = V * syy, s3 = V * sxy;
     const unsigned k = t->k;
     for (int ky = 0; ky < 2; ky++) {
         const v4d A = ky ? t->w1[1] : t->w0[1];
@@ -270,12 +268,57 @@ INLINE void tl_force2(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *t
     }
 }
 
+/* the same, with the particles' volumes and stresses as stored */
+INLINE void tl_force2(const mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *t, size_t p)
+{
+    const mpm_particles *P = &s->P;
+    tl_force2_of(s, r, gb, t, *(const v4du *)(P->vol + p), *(const v4du *)(P->sig[0] + p),
+                 *(const v4du *)(P->sig[1] + p), *(const v4du *)(P->sig[3] + p));
+}
+
 /* lanes below k: a; the others: b */
 INLINE v4d tl_keep(v4d a, v4d b, unsigned k)
 {
     const v4l lane = {0, 1, 2, 3};
     v4l m = lane < (long long)k;
     return (v4d)(((v4l)a & m) | ((v4l)b & ~m));
+}
+
+/* 2D USF's stress pass for one run of k particles p .. p + 3 (block slot
+ * i, weights t, no phantom corner) of a job whose one material is linear
+ * elastic, no strain record and no sigma_zz kept (mpm_sim.el2_lanes): tl_strain()'s
+ * strain increments, elastic_2d()'s stress update and block_update()'s
+ * volume, each lane in their order and roundings (the products kept out
+ * of fused multiply-adds, as mpm_model.c, built without them, forms
+ * them), stored for the first k lanes only; then tl_force2()'s forces
+ * from the same registers.  The same bits as those three in turn, without
+ * the strain increments' and stresses' round trip through memory. */
+INLINE void tl_stress_force2(mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *t, size_t p,
+                             double la, double m2)
+{
+    v4d L[2][3];
+    for (int a = 0; a < 2; a++) {
+        tlcorner c;
+        v4d Y[2][2], Z[2];
+        tl_corners(s, s->g.q[a], t->base, 2, 0, &c);
+        tl_grad(s, &c, t, 2, Y, Z, L[a]);
+    }
+    const double dt = s->dt;
+    v4d e0 = L[0][0] * dt, e1 = L[1][1] * dt, e3 = 0.5 * (L[0][1] + L[1][0]) * dt;
+    __asm__("" : "+x"(e0), "+x"(e1), "+x"(e3)); /* stored, in the general pass */
+    mpm_particles *P = &s->P;
+    const unsigned k = t->k;
+    v4d lt = la * (e0 + e1), p0 = m2 * e0, p1 = m2 * e1, p3 = m2 * e3;
+    __asm__("" : "+x"(lt), "+x"(p0), "+x"(p1), "+x"(p3)); /* no fused multiply-add */
+    const v4d sxx0 = *(const v4du *)(P->sig[0] + p), syy0 = *(const v4du *)(P->sig[1] + p),
+              sxy0 = *(const v4du *)(P->sig[3] + p), V0 = *(const v4du *)(P->vol + p);
+    const v4d sxx = sxx0 + (lt + p0), syy = syy0 + (lt + p1), sxy = sxy0 + p3;
+    const v4d V = V0 * (1.0 + (e0 + e1));
+    *(v4du *)(P->sig[0] + p) = tl_keep(sxx, sxx0, k);
+    *(v4du *)(P->sig[1] + p) = tl_keep(syy, syy0, k);
+    *(v4du *)(P->sig[3] + p) = tl_keep(sxy, sxy0, k);
+    *(v4du *)(P->vol + p) = tl_keep(V, V0, k);
+    tl_force2_of(s, r, gb, t, V, sxx, syy, sxy);
 }
 
 /* Eqs. 30-31, x += dt dx and v += dt dv (BL: the blend), for the first
