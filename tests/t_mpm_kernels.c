@@ -690,63 +690,73 @@ static int run_snap(mpm_sim *s, long steps, kstate *k)
     return 0;
 }
 
-/* 2D USF's stress pass from strain to force in registers (mpm_sim.el2_lanes,
- * el2_block() of the AVX2 kernels): the same bits as the general pass
- * (strains, stresses and forces of a block in turn), with runs of 1-9
- * particles per cell, phantom corners and the blend, on 1-3 threads, with
- * and without the energies every step (which take the general pass). */
-TEST(kernels_el2_same_bits)
+/* USF's stress pass from strain to stress (2D: to force) in registers
+ * (mpm_sim.el_lanes, el_block() of the AVX2 kernels): the same bits as the
+ * general pass (strains, stresses and forces of a block in turn), in 2D
+ * and 3D, with runs of 1-9 (3D: 1-8) particles per cell, phantom corners
+ * and the blend, on 1-3 threads. */
+TEST(kernels_el_same_bits)
 {
     if (!mpm_kernels_avx2_available()) {
         TLOG("no AVX2+FMA here: the AVX2 kernels' fused stress pass does not run");
         return;
     }
-    double *x, *v, *vol;
-    int nodes, runs = 0;
-    size_t n = lanes_layout(2, &x, &v, &vol, &nodes);
-    CHECK(n > 0);
-    for (int blend = 0; blend < 2; blend++)
-        for (int th = 1; th <= 3; th++) {
-            mpm_case c;
-            mpm_material_desc mat;
-            mpm_body_desc b;
-            lanes_case(&c, &mat, &b, 2, n, x, v, vol, nodes, MPM_USF, blend ? 0.3 : 0.0, th);
-            c.kernels = MPM_KERNELS_AVX2;
-            kstate k[2];
-            int ok = 1, on = 0;
-            for (int side = 0; side < 2; side++) {
-                mpm_error err;
-                mpm_sim *s = mpm_sim_new(&c, NULL, &err);
-                if (!s) {
-                    ok = 0;
-                    break;
+    int runs = 0;
+    for (int dim = 2; dim <= 3; dim++) {
+        double *x, *v, *vol;
+        int nodes;
+        size_t n = lanes_layout(dim, &x, &v, &vol, &nodes);
+        CHECK(n > 0);
+        for (int blend = 0; blend < 2; blend++)
+            for (int th = 1; th <= 3; th++) {
+                mpm_case c;
+                mpm_material_desc mat;
+                mpm_body_desc b;
+                lanes_case(&c, &mat, &b, dim, n, x, v, vol, nodes, MPM_USF, blend ? 0.3 : 0.0, th);
+                c.kernels = MPM_KERNELS_AVX2;
+                kstate k[2];
+                memset(k, 0, sizeof k);
+                int ok = 1, on = 0;
+                size_t nd = (size_t)dim * n;
+                for (int side = 0; side < 2; side++) {
+                    mpm_error err;
+                    mpm_sim *s = mpm_sim_new(&c, NULL, &err);
+                    if (!s) {
+                        ok = 0;
+                        break;
+                    }
+                    if (side == 0) on = s->el_lanes;
+                    s->el_lanes = side == 0; /* side 1: the general pass */
+                    ok &= run_snap(s, 300, &k[side]) == 0;
+                    mpm_sim_destroy(&s);
                 }
-                if (side == 0) on = s->el2_lanes;
-                s->el2_lanes = side == 0; /* side 1: the general pass */
-                ok &= run_snap(s, 300, &k[side]) == 0;
-                mpm_sim_destroy(&s);
-            }
-            if (ok) {
-                ok = !memcmp(k[0].x, k[1].x, 2 * n * sizeof *k[0].x) &&
-                     !memcmp(k[0].v, k[1].v, 2 * n * sizeof *k[0].v) &&
-                     !memcmp(k[0].sig, k[1].sig, 6 * n * sizeof *k[0].sig);
-                if (!ok)
-                    TLOG("%s, %d thr: differ, rel. %.3g in x, %.3g in sigma",
-                         blend ? "blend" : "FLIP", th, maxrel(k[0].x, k[1].x, 2 * n),
-                         maxrel(k[0].sig, k[1].sig, 6 * n));
+                if (ok) {
+                    ok = !memcmp(k[0].x, k[1].x, nd * sizeof *k[0].x) &&
+                         !memcmp(k[0].v, k[1].v, nd * sizeof *k[0].v) &&
+                         !memcmp(k[0].sig, k[1].sig, 6 * n * sizeof *k[0].sig);
+                    if (!ok)
+                        TLOG("%dD %s, %d thr: differ, rel. %.3g in x, %.3g in sigma", dim,
+                             blend ? "blend" : "FLIP", th, maxrel(k[0].x, k[1].x, nd),
+                             maxrel(k[0].sig, k[1].sig, 6 * n));
+                }
                 kstate_free(&k[0]);
                 kstate_free(&k[1]);
+                if (!on || !ok) {
+                    free(x);
+                    free(vol);
+                    free(v);
+                }
+                CHECKF(on, "%dD: the case did not take the fused stress pass (el_lanes 0)", dim);
+                CHECKF(ok, "%dD MPM USF%s, %d thr: the fused stress pass and the general differ",
+                       dim, blend ? " blend" : "", th);
+                runs++;
             }
-            CHECKF(on, "the case did not take the fused stress pass (mpm_sim.el2_lanes 0)");
-            CHECKF(ok, "2D MPM USF%s, %d thr: the fused stress pass and the general one differ",
-                   blend ? " blend" : "", th);
-            runs++;
-        }
-    TLOG("%zu particles, %d runs of 300 steps: x, v and sigma equal bit for bit", n, runs);
-    free(x);
-    free(vol);
-    free(v);
-    CHECK(runs == 6);
+        TLOG("%dD: %zu particles, 6 runs of 300 steps: x, v and sigma equal bit for bit", dim, n);
+        free(x);
+        free(vol);
+        free(v);
+    }
+    CHECK(runs == 12);
 }
 
 TEST(kernels_field_checked)

@@ -289,12 +289,13 @@ struct mpm_sim {
      * do it themselves).  mixed: the materials' models differ (dispatch by
      * runs of particles of one model). */
     int general, spin3, f_block, mixed;
-    /* el2_lanes: 2D, one linear-elastic material, the default volume
-     * update, no strain record and no sigma_zz array: the AVX2 kernels'
-     * USF stress pass takes a run from its strain to its forces in
-     * registers (mpm_kernels.c el2_block(); the same bits as the general
-     * pass, which 0 takes) */
-    int el2_lanes;
+    /* el_lanes: 2D or 3D, one linear-elastic material, the default volume
+     * update, no strain record, no spins (3D) and no sigma_zz array (2D):
+     * the AVX2 kernels' USF stress pass takes a run of MPM tents from its
+     * strain to its stress (2D: and its forces) in registers
+     * (mpm_kernels.c el_block(); the same bits as the general pass, which
+     * 0 takes) */
+    int el_lanes;
     mpm_volume_update volmode;
     double plastic_work; /* cumulative sigma : d eps_p V (thread order) */
     /* frictional: a material is DRUCKER_PRAGER or MOHR_COULOMB (the step

@@ -611,9 +611,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if ((needs & MPM_NEED_PLASTIC) &&
         (!(s->P.epsp = stag_alloc(np, &s->stag)) || !(s->P.yld = stag_alloc(np, &s->stag))))
         goto nomem;
-    s->el2_lanes = dim == 2 && !s->general && s->nmat == 1 &&
-                   c->materials[0].model == MPM_MODEL_LINEAR_ELASTIC && !s->P.eps[0] &&
-                   !s->P.sig[2];
+    s->el_lanes = dim > 1 && !s->general && s->nmat == 1 &&
+                  c->materials[0].model == MPM_MODEL_LINEAR_ELASTIC && !s->P.eps[0] &&
+                  (dim == 2 ? !s->P.sig[2] : !s->spin3);
     if (s->volmode == MPM_VOLUME_DET_F && !(s->P.vol0 = stag_alloc(np, &s->stag))) goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
     if (s->P.vol0) memcpy(s->P.vol0, s->P.vol, np * sizeof *s->P.vol0);

@@ -286,7 +286,7 @@ INLINE v4d tl_keep(v4d a, v4d b, unsigned k)
 
 /* 2D USF's stress pass for one run of k particles p .. p + 3 (block slot
  * i, weights t, no phantom corner) of a job whose one material is linear
- * elastic, no strain record and no sigma_zz kept (mpm_sim.el2_lanes): tl_strain()'s
+ * elastic, no strain record and no sigma_zz kept (mpm_sim.el_lanes): tl_strain()'s
  * strain increments, elastic_2d()'s stress update and block_update()'s
  * volume, each lane in their order and roundings (the products kept out
  * of fused multiply-adds, as mpm_model.c, built without them, forms
@@ -319,6 +319,42 @@ INLINE void tl_stress_force2(mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *
     *(v4du *)(P->sig[3] + p) = tl_keep(sxy, sxy0, k);
     *(v4du *)(P->vol + p) = tl_keep(V, V0, k);
     tl_force2_of(s, r, gb, t, V, sxx, syy, sxy);
+}
+
+/* 3D USF's stress pass for one run of k particles p .. p + 3 (weights t,
+ * no phantom corner) of a job with mpm_sim.el_lanes: tl_strain()'s strain
+ * increments, elastic_3d()'s stress update and block_update()'s volume,
+ * each lane in their order and roundings, stored for the first k lanes
+ * only (the forces follow particle by particle, trun_add()). */
+INLINE void tl_stress3(mpm_sim *s, const tlane *t, size_t p, double la, double m2)
+{
+    v4d L[3][3];
+    for (int a = 0; a < 3; a++) {
+        tlcorner c;
+        v4d Y[2][2], Z[2];
+        tl_corners(s, s->g.q[a], t->base, 3, 0, &c);
+        tl_grad(s, &c, t, 3, Y, Z, L[a]);
+    }
+    const double dt = s->dt;
+    v4d e[6] = {L[0][0] * dt,
+                L[1][1] * dt,
+                L[2][2] * dt,
+                0.5 * (L[0][1] + L[1][0]) * dt,
+                0.5 * (L[1][2] + L[2][1]) * dt,
+                0.5 * (L[0][2] + L[2][0]) * dt};
+    for (int c = 0; c < 6; c++) __asm__("" : "+x"(e[c])); /* stored, in the general pass */
+    v4d lt = la * (e[0] + e[1] + e[2]);
+    __asm__("" : "+x"(lt));
+    mpm_particles *P = &s->P;
+    const unsigned k = t->k;
+    for (int c = 0; c < 6; c++) {
+        v4d pc = m2 * e[c];
+        __asm__("" : "+x"(pc)); /* no fused multiply-add */
+        const v4d s0 = *(const v4du *)(P->sig[c] + p);
+        *(v4du *)(P->sig[c] + p) = tl_keep(c < 3 ? s0 + (lt + pc) : s0 + pc, s0, k);
+    }
+    const v4d V0 = *(const v4du *)(P->vol + p);
+    *(v4du *)(P->vol + p) = tl_keep(V0 * (1.0 + (e[0] + (e[1] + e[2]))), V0, k);
 }
 
 /* Eqs. 30-31, x += dt dx and v += dt dv (BL: the blend), for the first
