@@ -193,6 +193,18 @@ INLINE void tl_grad(const mpm_sim *s, const tlcorner *c, const tlane *t, int D, 
     for (int b = 0; b < D; b++) __asm__("" : "+x"(La[b]));
 }
 
+/* The velocity gradient of the four particles, rows a < D, from the
+ * momentum qg over the mass (tl_grad() of each component's corners). */
+INLINE void tl_vgrad(const mpm_sim *s, double *const qg[3], const tlane *t, int D, v4d L[3][3])
+{
+    for (int a = 0; a < D; a++) {
+        tlcorner c;
+        v4d Y[2][2], Z[2];
+        tl_corners(s, qg[a], t->base, D, 0, &c);
+        tl_grad(s, &c, t, D, Y, Z, L[a]);
+    }
+}
+
 /* strain_of(), lane by lane, into deps[.][i .. i + 3]. */
 INLINE void tl_strain_of(const mpm_sim *s, v4d L[3][3], int D, double *const deps[9], size_t i)
 {
@@ -223,12 +235,7 @@ INLINE void tl_strain(const mpm_sim *s, double *const qg[3], const tlane *t, int
                       double *const deps[9], size_t i)
 {
     v4d L[3][3];
-    for (int a = 0; a < D; a++) {
-        tlcorner c;
-        v4d Y[2][2], Z[2];
-        tl_corners(s, qg[a], t->base, D, 0, &c);
-        tl_grad(s, &c, t, D, Y, Z, L[a]);
-    }
+    tl_vgrad(s, qg, t, D, L);
     tl_strain_of(s, L, D, deps, i);
 }
 
@@ -296,13 +303,8 @@ INLINE v4d tl_keep(v4d a, v4d b, unsigned k)
 INLINE void tl_stress_force2(mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *t, size_t p,
                              double la, double m2)
 {
-    v4d L[2][3];
-    for (int a = 0; a < 2; a++) {
-        tlcorner c;
-        v4d Y[2][2], Z[2];
-        tl_corners(s, s->g.q[a], t->base, 2, 0, &c);
-        tl_grad(s, &c, t, 2, Y, Z, L[a]);
-    }
+    v4d L[3][3];
+    tl_vgrad(s, s->g.q, t, 2, L);
     const double dt = s->dt;
     v4d e0 = L[0][0] * dt, e1 = L[1][1] * dt, e3 = 0.5 * (L[0][1] + L[1][0]) * dt;
     __asm__("" : "+x"(e0), "+x"(e1), "+x"(e3)); /* stored, in the general pass */
@@ -329,12 +331,7 @@ INLINE void tl_stress_force2(mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *
 INLINE void tl_stress3(mpm_sim *s, const tlane *t, size_t p, double la, double m2)
 {
     v4d L[3][3];
-    for (int a = 0; a < 3; a++) {
-        tlcorner c;
-        v4d Y[2][2], Z[2];
-        tl_corners(s, s->g.q[a], t->base, 3, 0, &c);
-        tl_grad(s, &c, t, 3, Y, Z, L[a]);
-    }
+    tl_vgrad(s, s->g.q, t, 3, L);
     const double dt = s->dt;
     v4d e[6] = {L[0][0] * dt,
                 L[1][1] * dt,
