@@ -50,6 +50,9 @@ INC        := -Iserver/mpm -Iserver -Iserver/store -Iprotocol -Itools -Ibuild/ge
 ifneq ($(findstring x86_64,$(shell $(CC) -dumpmachine 2>/dev/null)),)
 CSTD    += -DMPM_HAVE_AVX2_KERNELS
 AVX2F   := -mavx2 -mfma -ffp-contract=fast
+# Drucker-Prager's lanes (server/mpm/mpm_plastic_avx2.c): AVX2 without
+# fused multiply-adds, the scalar update's bits
+PLASF   := -mavx2 -ffp-contract=off
 endif
 
 # Builds: release (build/rel, bin/), sanitizers (build/asan), ThreadSanitizer
@@ -119,6 +122,7 @@ $(FUZZ)/%.o: CC := $(FUZZ_CC)
 $(FUZZ)/server/mpm/%.o: FUZZ_O := -O0
 $(FUZZ)/server/mpm/mpm_kernels.o $(FUZZ)/server/mpm/mpm_kernels_avx2.o: FUZZF = -O0 -g
 $(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/server/mpm/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/server/mpm/mpm_plastic_avx2.o): XFLAGS = $(PLASF)
 $(foreach b,$(REL) $(ASAN) $(TSAN),$(b)/tests/ceiling/ceiling_avx2.o): XFLAGS = $(AVX2F)
 -include $(shell find build -name '*.d' 2>/dev/null)
 

@@ -9,6 +9,7 @@
 #define T_H
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 
 #include "mpm_error.h"
@@ -68,6 +69,20 @@ const char *t_tmpdir(void);
             return;                                                                     \
         }                                                                               \
     } while (0)
+
+/* xorshift64 (Marsaglia): a test's reproducible random numbers from the
+ * state *s (never 0): t_urand() in [0, 1), t_srand() in [-1, 1). */
+static inline double t_urand(uint64_t *s)
+{
+    *s ^= *s << 13;
+    *s ^= *s >> 7;
+    *s ^= *s << 17;
+    return (double)(*s >> 11) / 9007199254740992.0;
+}
+static inline double t_srand(uint64_t *s)
+{
+    return 2 * t_urand(s) - 1;
+}
 
 /* An mpm_error as "field: message" (the proto's spelling), in a buffer
  * that lives to the end of the enclosing block: for TLOG and CHECKF. */

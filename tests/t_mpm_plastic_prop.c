@@ -15,14 +15,11 @@
 static uint64_t rng = 0x9e3779b97f4a7c15ull;
 static double urand(void)
 {
-    rng ^= rng << 13;
-    rng ^= rng >> 7;
-    rng ^= rng << 17;
-    return (double)(rng >> 11) / 9007199254740992.0;
+    return t_urand(&rng);
 }
 static double srand1(void)
 {
-    return 2 * urand() - 1;
+    return t_srand(&rng);
 }
 
 static void hooke(const mpm_plastic_params *P, const double e[6], double s[6])

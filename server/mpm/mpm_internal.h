@@ -197,6 +197,9 @@ void mpm_bar_wait(mpm_bar *b);
 struct mpm_sim {
     int dim;
     int avx2; /* the AVX2+FMA kernel families (mpm_case.kernels) */
+    /* Drucker-Prager's cone updates four at a time (mpm_dp_lanes(); the
+     * same bits): kernels not PORTABLE, and the CPU has AVX2 */
+    int dp_lanes;
     mpm_method method;
     mpm_update update;
     int ns;  /* nodes per axis per particle: 2 (MPM; CPDI: per corner), 3 or 4
@@ -555,6 +558,9 @@ typedef struct {
      * per-particle path (rate_gather(), mpm_dp_trial(), rate_put()) that
      * the 2D and 3D blocks write out (t_mpm_frictional_block.c) */
     int general;
+    /* 1: Drucker-Prager's updates that leave the elastic trial go to
+     * mpm_dp_lanes() in queues of one material (mpm_sim.dp_lanes) */
+    int dp_lanes;
 } mpm_model_blk;
 
 struct mpm_model_ops {

@@ -484,12 +484,76 @@ static void frictional_update(mpm_model_blk *b, const mpm_mat_params *mp, size_t
     b->wp += dwp * P->vol[p];
 }
 
+/* Drucker-Prager updates waiting for mpm_dp_lanes(): particles of one
+ * material, in block order, with their rotated stress and increment.  A
+ * queue is run (dp_flush()) when it is full, when the material changes,
+ * before any other update of the block that adds to its sums, and at the
+ * block's end, so the plastic work is summed in the particles' order and
+ * every result has the bits of frictional_update(). */
+typedef struct {
+    const mpm_mat_params *mp;
+    size_t n;
+    size_t p[MPM_DP_LANES_MAX];
+    double sig[6 * MPM_DP_LANES_MAX], de[6 * MPM_DP_LANES_MAX];
+} dp_queue;
+
+/* Runs the queue: the lanes' results stored as frictional_update() stores
+ * its own; a particle the lanes leave goes through frictional_update(). */
+static void dp_flush(mpm_model_blk *b, dp_queue *q)
+{
+    if (!q->n) return;
+    mpm_particles *P = b->P;
+    double epq[MPM_DP_LANES_MAX], dis[MPM_DP_LANES_MAX];
+    int nsub[MPM_DP_LANES_MAX];
+    unsigned char ok[MPM_DP_LANES_MAX];
+    mpm_dp_lanes(q->mp->pl, q->n, q->sig, q->de, epq, dis, nsub, ok);
+    for (size_t k = 0; k < q->n; k++) {
+        size_t p = q->p[k];
+        double *sig = q->sig + 6 * k;
+        const double *de = q->de + 6 * k;
+        if (!ok[k]) {
+            frictional_update(b, q->mp, p, sig, de);
+            continue;
+        }
+        rate_put(b, p, sig, de);
+        P->epsp[p] += epq[k];
+        P->yld[p] = 1.0;
+        if (nsub[k]) {
+            b->nupd++;
+            b->nsub += nsub[k];
+            if (nsub[k] > b->maxsub) b->maxsub = nsub[k];
+        }
+        b->wp += dis[k] * P->vol[p];
+    }
+    q->n = 0;
+}
+
+/* frictional_update() of particle p, or its place in the queue (a
+ * Drucker-Prager particle, where the job has mpm_sim.dp_lanes). */
+static void dp_push(mpm_model_blk *b, dp_queue *q, const mpm_mat_params *mp, size_t p,
+                    double sig[6], const double de[6])
+{
+    if (!b->dp_lanes || mp->pl->kind != MPM_PLASTIC_DRUCKER_PRAGER) {
+        dp_flush(b, q);
+        frictional_update(b, mp, p, sig, de);
+        return;
+    }
+    if (q->n == MPM_DP_LANES_MAX || (q->n && q->mp != mp)) dp_flush(b, q);
+    q->mp = mp;
+    q->p[q->n] = p;
+    memcpy(q->sig + 6 * q->n, sig, 6 * sizeof sig[0]);
+    memcpy(q->de + 6 * q->n, de, 6 * sizeof de[0]);
+    q->n++;
+}
+
 /* rate_block() for the frictional models, with Drucker-Prager's elastic
  * case in the loop: the update's own first test, mpm_dp_trial(), and the
  * trial stress stored when it is admissible. */
 static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
     mpm_particles *P = b->P;
+    dp_queue q;
+    q.n = 0;
     for (size_t i = i0; i < i1; i++) {
         size_t p = b0 + i;
         const mpm_mat_params *mp = &b->mats[P->mat[p]];
@@ -504,8 +568,9 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
                 continue;
             }
         }
-        frictional_update(b, mp, p, sig, de);
+        dp_push(b, &q, mp, p, sig, de);
     }
+    dp_flush(b, &q);
 }
 
 /* frictional_block() in 2D (plane strain, with sigma_zz and the strain
@@ -525,6 +590,8 @@ static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
     const double *e0 = b->deps[0], *e1 = b->deps[1], *e2 = b->deps[2], *e3 = b->deps[3];
     double *x0 = P->sig[0] + b0, *x1 = P->sig[1] + b0, *x2 = P->sig[2] + b0, *x3 = P->sig[3] + b0;
     double *q0 = P->eps[0] + b0, *q1 = P->eps[1] + b0, *q3 = P->eps[3] + b0, *yld = P->yld + b0;
+    dp_queue q;
+    q.n = 0;
     for (size_t i = i0; i < i1; i++) {
         const mpm_mat_params *mp = &b->mats[mat[i]];
         const mpm_plastic_params *pl = mp->pl;
@@ -558,8 +625,9 @@ static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
             }
         }
         double sig[6] = {s0, s1, zz, s3, 0, 0}, de[6] = {d0, d1, 0, d3, 0, 0};
-        frictional_update(b, mp, b0 + i, sig, de);
+        dp_push(b, &q, mp, b0 + i, sig, de);
     }
+    dp_flush(b, &q);
 }
 
 /* frictional_block() in 3D with the strain record: rate_gather(),
@@ -576,6 +644,8 @@ static void frictional_block_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
         x[c] = P->sig[c] + b0;
         q[c] = P->eps[c] + b0;
     }
+    dp_queue dq;
+    dq.n = 0;
     for (size_t i = i0; i < i1; i++) {
         const mpm_mat_params *mp = &b->mats[mat[i]];
         double sig[6], de[6], w[3] = {e[6][i], e[7][i], e[8][i]};
@@ -596,8 +666,9 @@ static void frictional_block_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
                 continue;
             }
         }
-        frictional_update(b, mp, b0 + i, sig, de);
+        dp_push(b, &dq, mp, b0 + i, sig, de);
     }
+    dp_flush(b, &dq);
 }
 
 /* The frictional models' block: frictional_block_2d() or _3d() where they
@@ -651,7 +722,7 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
     double *const *deps = o->deps;
     mpm_particles *P = &s->P;
     if (s->f_block) f_block(s, deps, b0, nb, D);
-    mpm_model_blk b = {s->mats, P, deps, D, 0.0, 0, 0, 0, SIZE_MAX, 0};
+    mpm_model_blk b = {s->mats, P, deps, D, 0.0, 0, 0, 0, SIZE_MAX, 0, s->dp_lanes};
     if (!s->mixed) {
         s->model->block(&b, b0, 0, nb);
     } else { /* runs of particles of one model */

@@ -88,6 +88,7 @@
 #include "mpm_error.h"
 
 #include <math.h>
+#include <stddef.h>
 
 typedef enum { MPM_PLASTIC_DRUCKER_PRAGER = 0, MPM_PLASTIC_MOHR_COULOMB = 1 } mpm_plastic_kind;
 typedef enum { MPM_DP_COMPRESSION = 0, MPM_DP_EXTENSION = 1, MPM_DP_PLANE_STRAIN = 2 } mpm_dp_match;
@@ -172,6 +173,21 @@ static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
     *on_surface = f > -P->ftol * scale;
     return MPM_DP_ELASTIC;
 }
+
+/* Drucker-Prager updates of n <= MPM_DP_LANES_MAX particles whose
+ * elastic trial is not admissible (sig and de: n rows of 6, Voigt as
+ * above), four at a time in the lanes of AVX2 vectors
+ * (mpm_plastic_avx2.c; only where MPM_HAVE_AVX2_KERNELS is defined and the
+ * CPU has AVX2): for each particle i that takes the cone's common path,
+ * ok[i] = 1, sig's row i the updated stress, epq[i] the increment of
+ * eps_p, dis[i] the dissipation and nsub[i] the substeps, each bit for bit
+ * what mpm_plastic_update() gives; ok[i] = 0 for one that takes a rarer
+ * path (the tension region, an unloading start, the normal drift
+ * correction, a divergence), its row of sig unchanged, for
+ * mpm_plastic_update(). */
+#define MPM_DP_LANES_MAX 64
+void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
+                  double *dis, int *nsub, unsigned char *ok);
 
 /* The yield function at sig (the largest of the model's surfaces, in
  * stress units: <= 0 admissible) and the scale its tolerance is relative

@@ -554,6 +554,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->nthreads = c->threads > 1 ? c->threads : 1;
     s->avx2 = c->method != MPM_METHOD_CPDI && c->kernels != MPM_KERNELS_PORTABLE &&
               mpm_kernels_avx2_available();
+    s->dp_lanes = c->kernels != MPM_KERNELS_PORTABLE && mpm_kernels_avx2_available();
     atomic_init(&s->cancel, 0);
     s->nn = 1;
     for (int d = 0; d < 3; d++) {

@@ -1,0 +1,624 @@
+/*
+ * mpm_plastic_avx2.c - Drucker-Prager's cone updates four particles at a
+ * time (mpm_dp_lanes(), mpm_plastic.h).  Sloan's substepping is a long
+ * chain of dependent square roots and divisions per particle, so one
+ * particle leaves the CPU waiting; here each lane of an AVX2 vector carries
+ * its own particle through the same operations, in the same order, as
+ * mpm_plastic.c's scalar update (no fused multiply-adds: this file is
+ * built with -mavx2 -ffp-contract=off), so each particle's result has the
+ * scalar bits.  A lane that finishes takes the next particle (the Pegasus
+ * search and the substeps are loops of different lengths per particle).
+ * The rarer paths (the tension region, an unloading start, the normal
+ * drift correction, a divergence, a cut-off after the substeps) are not
+ * here: such a particle is reported not done, its inputs untouched, for
+ * mpm_plastic_update().  Built only on x86-64 (MPM_HAVE_AVX2_KERNELS) and
+ * called only where the CPU has AVX2.
+ */
+#include "mpm_plastic.h"
+
+#if defined(MPM_HAVE_AVX2_KERNELS) && defined(__AVX2__)
+#include <immintrin.h>
+#include <string.h>
+
+/* mpm_plastic.c's constants (the same values) */
+#define LTOL 1e-6
+#define PEG_MAXIT 200
+#define DRIFT_MAXIT 10
+#define TINY_REL 1e-14
+#define R_MIN 1e-16
+#define DT_MIN 1e-6
+#define SQRT3 1.7320508075688772935
+
+/* A vector of NL lanes: NH AVX2 vectors side by side, so that each
+ * operation below is NH independent instructions (two chains of square
+ * roots and divisions in flight, not one). */
+#define NH 1
+#define NL (4 * NH)
+#define ALL ((1 << NL) - 1)
+typedef struct {
+    __m256d h[NH];
+} V;
+/* every helper inlined: a V passed to a call would go through memory */
+#define VI static inline __attribute__((always_inline))
+
+#define LANEWISE2(name, intr)                                       \
+    VI V name(V a, V b)                                             \
+    {                                                               \
+        V r;                                                        \
+        for (int i = 0; i < NH; i++) r.h[i] = intr(a.h[i], b.h[i]); \
+        return r;                                                   \
+    }
+LANEWISE2(add, _mm256_add_pd)
+LANEWISE2(sub, _mm256_sub_pd)
+LANEWISE2(mul, _mm256_mul_pd)
+LANEWISE2(dvd, _mm256_div_pd)
+LANEWISE2(vand, _mm256_and_pd)
+LANEWISE2(vor, _mm256_or_pd)
+
+VI V vsqrt(V a)
+{
+    V r;
+    for (int i = 0; i < NH; i++) r.h[i] = _mm256_sqrt_pd(a.h[i]);
+    return r;
+}
+VI V k1(double x)
+{
+    V r;
+    for (int i = 0; i < NH; i++) r.h[i] = _mm256_set1_pd(x);
+    return r;
+}
+VI V vabs(V a)
+{
+    V r;
+    for (int i = 0; i < NH; i++) r.h[i] = _mm256_andnot_pd(_mm256_set1_pd(-0.0), a.h[i]);
+    return r;
+}
+/* m ? a : b, lane by lane (m: a comparison's all-ones lanes) */
+VI V sel(V m, V a, V b)
+{
+    V r;
+    for (int i = 0; i < NH; i++) r.h[i] = _mm256_blendv_pd(b.h[i], a.h[i], m.h[i]);
+    return r;
+}
+#define COMPARE(name, pred)                                                        \
+    VI V name(V a, V b)                                                            \
+    {                                                                              \
+        V r;                                                                       \
+        for (int i = 0; i < NH; i++) r.h[i] = _mm256_cmp_pd(a.h[i], b.h[i], pred); \
+        return r;                                                                  \
+    }
+COMPARE(gt, _CMP_GT_OQ)
+COMPARE(lt, _CMP_LT_OQ)
+COMPARE(le, _CMP_LE_OQ)
+COMPARE(ge, _CMP_GE_OQ)
+COMPARE(eq, _CMP_EQ_OQ)
+VI V vnot(V a)
+{
+    V r;
+    for (int i = 0; i < NH; i++)
+        r.h[i] = _mm256_xor_pd(a.h[i], _mm256_castsi256_pd(_mm256_set1_epi64x(-1)));
+    return r;
+}
+/* the lanes' mask bits, lane j at bit j */
+VI int bits(V m)
+{
+    int b = 0;
+    for (int i = 0; i < NH; i++) b |= _mm256_movemask_pd(m.h[i]) << (4 * i);
+    return b;
+}
+
+/* The material's constants as vectors (each the scalar code's product, in
+ * its order). */
+typedef struct {
+    V lam, g2, G, K, eta, etag, xc, ftol, nftol, pt, half, two, three, zero, one;
+    V g2n;   /* 2 G, as dp_aDe() and dp_Db() form it: (2 * G) */
+    V keta;  /* K eta (dp_aDe()) */
+    V kee;   /* K eta etag (dp_aDb()) */
+    V ketag; /* K etag (dp_Db()) */
+    V eq1;   /* 1 / sqrt3 (dp_eq()) */
+    V stol;
+} kc;
+
+static void k_init(kc *k, const mpm_plastic_params *P)
+{
+    k->lam = k1(P->lam);
+    k->g2 = k1(2 * P->G);
+    k->G = k1(P->G);
+    k->K = k1(P->K);
+    k->eta = k1(P->eta);
+    k->etag = k1(P->etag);
+    k->xc = k1(P->xi * P->c);
+    k->ftol = k1(P->ftol);
+    k->nftol = k1(-P->ftol);
+    k->pt = k1(P->pt);
+    k->half = k1(0.5);
+    k->two = k1(2);
+    k->three = k1(3);
+    k->zero = k1(0);
+    k->one = k1(1);
+    k->g2n = k1(2 * P->G);
+    k->keta = k1(P->K * P->eta);
+    k->kee = k1(P->K * P->eta * P->etag);
+    k->ketag = k1(P->K * P->etag);
+    k->eq1 = k1(1 / SQRT3);
+    k->stol = k1(P->tol);
+}
+
+/* a : b (ddot()) */
+VI V vddot(const V a[6], const V b[6])
+{
+    V n = add(add(mul(a[0], b[0]), mul(a[1], b[1])), mul(a[2], b[2]));
+    V s = add(add(mul(a[3], b[3]), mul(a[4], b[4])), mul(a[5], b[5]));
+    return add(n, mul(k1(2), s));
+}
+
+/* dp_inv, a lane each */
+typedef struct {
+    V p, r, inv, d[6];
+} vinv;
+
+/* meanp() */
+VI V vmeanp(const kc *k, const V s[6])
+{
+    return dvd(add(add(s[0], s[1]), s[2]), k->three);
+}
+
+/* sqrt_j2_p() */
+VI V vj2(const kc *k, const V s[6], V p, V d[6])
+{
+    d[0] = sub(s[0], p);
+    d[1] = sub(s[1], p);
+    d[2] = sub(s[2], p);
+    d[3] = s[3];
+    d[4] = s[4];
+    d[5] = s[5];
+    V n = add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2]));
+    V sh = add(add(mul(d[3], d[3]), mul(d[4], d[4])), mul(d[5], d[5]));
+    return vsqrt(mul(k->half, add(n, mul(k->two, sh))));
+}
+
+/* dp_invariants() */
+VI void vinvariants(const kc *k, const V s[6], vinv *v)
+{
+    V p = vmeanp(k, s);
+    V r = vj2(k, s, p, v->d);
+    V scale = add(add(r, vabs(mul(k->eta, p))), k->xc);
+    V on = vand(gt(r, mul(k1(TINY_REL), scale)), gt(r, k->zero));
+    v->p = p;
+    v->r = r;
+    v->inv = sel(on, dvd(k->one, mul(k->two, r)), k->zero);
+}
+
+/* dp_f_inv() and its scale */
+VI V vf_inv(const kc *k, const vinv *v, V *scale)
+{
+    V ep = mul(k->eta, v->p);
+    *scale = add(add(v->r, vabs(ep)), k->xc);
+    return sub(add(v->r, ep), k->xc);
+}
+
+/* dp_f(s + al De) (dp_f_at()) */
+VI V vf_at(const kc *k, const V s[6], const V De[6], V al, V *scale)
+{
+    V x[6], d[6];
+    for (int c = 0; c < 6; c++) x[c] = add(s[c], mul(al, De[c]));
+    V p = vmeanp(k, x), r = vj2(k, x, p, d), ep = mul(k->eta, p);
+    *scale = add(add(r, vabs(ep)), k->xc);
+    return sub(add(r, ep), k->xc);
+}
+
+/* dp_aDe() */
+VI V vaDe(const kc *k, const vinv *v, const V de[6])
+{
+    V a = mul(mul(k->g2n, v->inv), vddot(v->d, de));
+    return add(a, mul(k->keta, add(add(de[0], de[1]), de[2])));
+}
+
+/* dp_aDb() */
+VI V vaDb(const kc *k, const vinv *v)
+{
+    return add(sel(gt(v->inv, k->zero), k->G, k->zero), k->kee);
+}
+
+/* dp_Db() */
+VI void vDb(const kc *k, const vinv *v, V Db[6])
+{
+    V g = mul(k->g2n, v->inv);
+    for (int c = 0; c < 3; c++) Db[c] = add(mul(g, v->d[c]), k->ketag);
+    for (int c = 3; c < 6; c++) Db[c] = add(mul(g, v->d[c]), k->zero);
+}
+
+/* dp_eq() */
+VI V veq(const kc *k, const vinv *v)
+{
+    return sel(gt(v->inv, k->zero), k->eq1, k->zero);
+}
+
+/* dp_sb() */
+VI V vsb(const kc *k, const vinv *v)
+{
+    V x = add(v->r, mul(k->etag, v->p));
+    return sel(gt(x, k->zero), x, k->zero);
+}
+
+/* dp_euler() */
+VI V veuler(const kc *k, const vinv *v, const V de[6], const V De[6], V ds[6])
+{
+    V num = vaDe(k, v, de), den = vaDb(k, v);
+    V dl = sel(vand(gt(num, k->zero), gt(den, k->zero)), dvd(num, den), k->zero);
+    V Db[6];
+    vDb(k, v, Db);
+    for (int c = 0; c < 6; c++) ds[c] = sub(De[c], mul(dl, Db[c]));
+    return dl;
+}
+
+/* hooke() */
+VI void vhooke(const kc *k, const V e[6], V s[6])
+{
+    V lt_ = mul(k->lam, add(add(e[0], e[1]), e[2]));
+    for (int c = 0; c < 3; c++) s[c] = add(lt_, mul(k->g2, e[c]));
+    for (int c = 3; c < 6; c++) s[c] = mul(k->g2, e[c]);
+}
+
+/* ---- per-particle staging between the three passes ---- */
+
+enum { ST_OUT = 0, ST_INSIDE = 1, ST_SURFACE = 2 };
+
+typedef struct {
+    double De[MPM_DP_LANES_MAX][6];
+    double f0[MPM_DP_LANES_MAX], ftr[MPM_DP_LANES_MAX], al[MPM_DP_LANES_MAX];
+    unsigned char kind[MPM_DP_LANES_MAX];
+} stage;
+
+/* lanes of a vector in memory */
+typedef union {
+    V v;
+    double x[NL];
+} lanes;
+
+/* Pass 1, four particles at a time: the trial (mpm_dp_trial()), the
+ * invariants of the start and f there, and the unloading check of a start
+ * on the surface.  Particles that leave the cone's common path are marked
+ * ST_OUT. */
+static void pass_trial(const kc *k, size_t n, const double *sig, const double *de, stage *g)
+{
+    for (size_t i0 = 0; i0 < n; i0 += NL) {
+        lanes s[6], e[6];
+        size_t m = n - i0 < NL ? n - i0 : NL;
+        for (int c = 0; c < 6; c++)
+            for (size_t j = 0; j < NL; j++) {
+                size_t i = i0 + (j < m ? j : 0);
+                s[c].x[j] = sig[6 * i + c];
+                e[c].x[j] = de[6 * i + c];
+            }
+        V S[6], E[6], De[6], tr[6];
+        for (int c = 0; c < 6; c++) {
+            S[c] = s[c].v;
+            E[c] = e[c].v;
+        }
+        /* De and the trial, as mpm_dp_trial() */
+        V etr = add(add(E[0], E[1]), E[2]);
+        for (int c = 0; c < 3; c++) De[c] = add(mul(k->lam, etr), mul(k->g2n, E[c]));
+        for (int c = 3; c < 6; c++) De[c] = mul(k->g2n, E[c]);
+        V fin = k->zero;
+        for (int c = 0; c < 6; c++) {
+            tr[c] = add(S[c], De[c]);
+            fin = add(fin, sub(tr[c], tr[c]));
+        }
+        V finite = eq(fin, k->zero);
+        V p = vmeanp(k, tr), d[3];
+        for (int c = 0; c < 3; c++) d[c] = sub(tr[c], p);
+        V dd = add(add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2])),
+                   mul(k->two, add(add(mul(tr[3], tr[3]), mul(tr[4], tr[4])), mul(tr[5], tr[5]))));
+        V r = vsqrt(mul(k->half, dd));
+        V ep = mul(k->eta, p);
+        V scale = add(add(r, vabs(ep)), k->xc);
+        V f = sub(add(r, ep), k->xc);
+        V tens = gt(p, add(k->pt, mul(k->ftol, add(vabs(k->pt), vabs(p)))));
+        V cone = vand(vand(finite, vnot(tens)), vnot(le(f, mul(k->ftol, scale))));
+        /* the start's invariants and f (dp_update()) */
+        vinv v;
+        vinvariants(k, S, &v);
+        V sc0, f0 = vf_inv(k, &v, &sc0);
+        V inside = lt(f0, mul(k->nftol, sc0));
+        /* a start on the surface: does the increment first unload? */
+        V na =
+            vsqrt(add(mul(mul(v.inv, v.inv), vddot(v.d, v.d)), dvd(mul(k->eta, k->eta), k->three)));
+        V nd = vsqrt(vddot(De, De));
+        V cth = dvd(vaDe(k, &v, E), mul(na, nd));
+        V unload = vand(vand(gt(na, k->zero), gt(nd, k->zero)), lt(cth, k1(-LTOL)));
+        int mc = bits(cone), mi = bits(inside), mu = bits(unload);
+        lanes D[6], F0, FT;
+        for (int c = 0; c < 6; c++) D[c].v = De[c];
+        F0.v = f0;
+        FT.v = f;
+        for (size_t j = 0; j < m; j++) {
+            size_t i = i0 + j;
+            for (int c = 0; c < 6; c++) g->De[i][c] = D[c].x[j];
+            g->f0[i] = F0.x[j];
+            g->ftr[i] = FT.x[j];
+            g->al[i] = 0;
+            if (!(mc >> j & 1))
+                g->kind[i] = ST_OUT;
+            else if (mi >> j & 1)
+                g->kind[i] = ST_INSIDE;
+            else
+                g->kind[i] = (mu >> j & 1) ? ST_OUT : ST_SURFACE;
+        }
+    }
+}
+
+/* Lane j's mask (all ones in lane j), for the lane masks lm[NL]. */
+static void lane_masks(V lm[NL])
+{
+    for (int j = 0; j < NL; j++) {
+        lanes u;
+        for (int l = 0; l < NL; l++) u.x[l] = l == j ? -1.0 : 1.0;
+        lm[j] = lt(u.v, k1(0)); /* all ones where -1 */
+    }
+}
+
+/* x with lane j set to val (a blend in registers: a lane written through
+ * memory would stall the next load of the whole vector) */
+VI V put(V x, int j, double val, const V lm[NL])
+{
+    return sel(lm[j], k1(val), x);
+}
+
+/* lane j of x */
+VI double get(V x, int j)
+{
+    lanes u;
+    u.v = x;
+    return u.x[j];
+}
+
+/* the mask of the lanes whose bits b has */
+VI V mask_of(int b, const V lm[NL])
+{
+    V m = lt(k1(1), k1(0));
+    for (int j = 0; j < NL; j++)
+        if (b >> j & 1) m = vor(m, lm[j]);
+    return m;
+}
+
+/* Pass 2: the elastic fraction of each start inside the cone, by the
+ * Pegasus method on [0, 1] (dp_pegasus()), a lane per particle, a lane
+ * that finishes taking the next. */
+static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g)
+{
+    V lm[NL], S[6], D[6], a0, a1, f0, f1, al;
+    int who[NL], it[NL];
+    size_t next = 0;
+    lane_masks(lm);
+    for (int j = 0; j < NL; j++) who[j] = it[j] = -1;
+    for (int c = 0; c < 6; c++) S[c] = D[c] = k->zero;
+    a0 = a1 = f0 = f1 = al = k->zero;
+    for (;;) {
+        int live = 0;
+        for (int j = 0; j < NL; j++) {
+            while (who[j] < 0 && next < n) {
+                size_t i = next++;
+                if (g->kind[i] != ST_INSIDE) continue;
+                who[j] = (int)i;
+                it[j] = 0;
+                for (int c = 0; c < 6; c++) {
+                    S[c] = put(S[c], j, sig[6 * i + c], lm);
+                    D[c] = put(D[c], j, g->De[i][c], lm);
+                }
+                a0 = put(a0, j, 0, lm);
+                a1 = put(a1, j, 1, lm);
+                al = put(al, j, 1, lm);
+                f0 = put(f0, j, g->f0[i], lm);
+                f1 = put(f1, j, g->ftr[i], lm);
+            }
+            live |= (who[j] >= 0) << j;
+        }
+        if (!live) return;
+        /* one iteration in every lane; a lane that stops keeps al */
+        V stop = eq(f1, f0);
+        V aln = sub(a1, dvd(mul(f1, sub(a1, a0)), sub(f1, f0)));
+        V sc, fn = vf_at(k, S, D, aln, &sc);
+        V conv = le(vabs(fn), mul(k->ftol, sc));
+        V flip = lt(mul(fn, f1), k->zero);
+        al = sel(stop, al, aln);
+        V go = vnot(vor(stop, conv));
+        a0 = sel(vand(go, flip), a1, a0);
+        f0 = sel(go, sel(flip, f1, dvd(mul(f0, f1), add(f1, fn))), f0);
+        a1 = sel(go, aln, a1);
+        f1 = sel(go, fn, f1);
+        int done = ~bits(go);
+        for (int j = 0; j < NL; j++) {
+            if (who[j] < 0) continue;
+            if ((done >> j & 1) || ++it[j] >= PEG_MAXIT) {
+                g->al[who[j]] = get(al, j);
+                who[j] = -1;
+            }
+        }
+    }
+}
+
+/* Pass 3: Sloan's modified Euler substeps with error control and drift
+ * correction (dp_substep(), dp_drift()), a lane per particle, from the
+ * stress s on the surface with invariants v over the strain rest.  Writes
+ * the results of the particles that stay on the common path. */
+static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, double *sig,
+                          const double *de, stage *g, double *epq, double *dis, int *nsub,
+                          unsigned char *ok)
+{
+    V lm[NL], s[6], rest[6], src[6], T, dT, fail, dsum, eqp;
+    vinv v;
+    int nn[NL], acc[NL], who[NL];
+    size_t next = 0;
+    lane_masks(lm);
+    for (int c = 0; c < 6; c++) s[c] = rest[c] = src[c] = v.d[c] = k->zero;
+    v.p = v.r = v.inv = T = dT = fail = dsum = eqp = k->zero;
+    for (int j = 0; j < NL; j++) who[j] = nn[j] = acc[j] = -1;
+    for (;;) {
+        int live = 0, fresh = 0;
+        for (int j = 0; j < NL; j++) {
+            while (who[j] < 0 && next < n) {
+                size_t i = next++;
+                if (g->kind[i] == ST_OUT) continue;
+                who[j] = (int)i;
+                fresh |= 1 << j;
+                double al = g->al[i];
+                for (int c = 0; c < 6; c++) {
+                    double sc = sig[6 * i + c] + al * g->De[i][c];
+                    s[c] = put(s[c], j, sc, lm);
+                    rest[c] = put(rest[c], j, (1 - al) * de[6 * i + c], lm);
+                    /* the invariants of s, or of sig when al is 0 (the
+                     * scalar update keeps those) */
+                    src[c] = put(src[c], j, al != 0 ? sc : sig[6 * i + c], lm);
+                }
+                nn[j] = 0;
+                acc[j] = 0;
+            }
+            live |= (who[j] >= 0) << j;
+        }
+        if (!live) return;
+        if (fresh) {
+            V m = mask_of(fresh, lm);
+            vinv vr;
+            vinvariants(k, src, &vr);
+            v.p = sel(m, vr.p, v.p);
+            v.r = sel(m, vr.r, v.r);
+            v.inv = sel(m, vr.inv, v.inv);
+            for (int c = 0; c < 6; c++) v.d[c] = sel(m, vr.d[c], v.d[c]);
+            T = sel(m, k->zero, T);
+            dT = sel(m, k->one, dT);
+            fail = sel(m, k->zero, fail);
+            dsum = sel(m, k->zero, dsum);
+            eqp = sel(m, k->zero, eqp);
+        }
+        /* n++ >= max_substeps: the scalar update diverges */
+        int quit = 0;
+        for (int j = 0; j < NL; j++)
+            if (who[j] >= 0 && nn[j]++ >= P->max_substeps) quit |= 1 << j;
+        V e[6], De[6], ds1[6], ds2[6], s1[6], sn[6], diff[6];
+        vinv v1;
+        for (int c = 0; c < 6; c++) e[c] = mul(dT, rest[c]);
+        vhooke(k, e, De);
+        V dl1 = veuler(k, &v, e, De, ds1);
+        for (int c = 0; c < 6; c++) s1[c] = add(s[c], ds1[c]);
+        vinvariants(k, s1, &v1);
+        V dl2 = veuler(k, &v1, e, De, ds2);
+        V fin = k->zero;
+        for (int c = 0; c < 6; c++) {
+            sn[c] = add(s[c], mul(k->half, add(ds1[c], ds2[c])));
+            diff[c] = sub(ds2[c], ds1[c]);
+            fin = add(fin, sub(sn[c], sn[c]));
+        }
+        V ref = vsqrt(vddot(sn, sn));
+        ref = sel(lt(ref, k->xc), k->xc, ref);
+        V R = sel(gt(ref, k->zero), dvd(vsqrt(vddot(diff, diff)), mul(k->two, ref)), k->zero);
+        R = sel(lt(R, k1(R_MIN)), k1(R_MIN), R);
+        quit |= ~bits(eq(fin, k->zero)) & ALL;
+        V q0 = mul(k1(0.9), vsqrt(dvd(k->stol, R)));
+        V reject = vand(gt(R, k->stol), gt(dT, k1(DT_MIN)));
+        /* a rejected attempt: a smaller dT */
+        V qr = sel(lt(q0, k1(0.1)), k1(0.1), q0);
+        V dtr = sel(gt(mul(qr, dT), k1(DT_MIN)), mul(qr, dT), k1(DT_MIN));
+        /* an accepted one */
+        V sb0 = vsb(k, &v);
+        V eqa = add(eqp, mul(k->half, add(mul(dl1, veq(k, &v)), mul(dl2, veq(k, &v1)))));
+        vinv va;
+        vinvariants(k, sn, &va);
+        V sa[6];
+        for (int c = 0; c < 6; c++) sa[c] = sn[c];
+        V disa = dsum;
+        /* the drift correction, lanes that still drift */
+        int bad = 0;
+        V drifting = eq(k->one, k->one); /* every lane, until its f is admissible */
+        for (int itd = 0; itd < DRIFT_MAXIT; itd++) {
+            V sc, f = vf_inv(k, &va, &sc);
+            drifting = vand(drifting, vnot(le(f, mul(k->ftol, sc))));
+            if (!(bits(drifting) & ~bits(reject) & live & ~quit)) break;
+            V den = vaDb(k, &va), Db[6], y[6];
+            vDb(k, &va, Db);
+            V fd = dvd(f, den);
+            for (int c = 0; c < 6; c++) y[c] = sub(sa[c], mul(fd, Db[c]));
+            vinv vy;
+            vinvariants(k, y, &vy);
+            V scy, fy = vf_inv(k, &vy, &scy);
+            V consistent = vand(gt(den, k->zero), le(vabs(fy), vabs(f)));
+            bad |= bits(vand(drifting, vnot(consistent)));
+            drifting = vand(drifting, consistent);
+            disa = sel(drifting, add(disa, mul(fd, vsb(k, &vy))), disa);
+            eqa = sel(drifting, add(eqa, mul(fd, veq(k, &va))), eqa);
+            for (int c = 0; c < 6; c++) sa[c] = sel(drifting, y[c], sa[c]);
+            va.p = sel(drifting, vy.p, va.p);
+            va.r = sel(drifting, vy.r, va.r);
+            va.inv = sel(drifting, vy.inv, va.inv);
+            for (int c = 0; c < 6; c++) va.d[c] = sel(drifting, vy.d[c], va.d[c]);
+        }
+        disa = add(disa, mul(k->half, add(mul(dl1, sb0), mul(dl2, vsb(k, &va)))));
+        V qa = sel(gt(q0, k1(1.1)), k1(1.1), q0);
+        qa = sel(lt(qa, k1(0.1)), k1(0.1), qa);
+        qa = sel(vand(gt(fail, k->zero), gt(qa, k->one)), k->one, qa);
+        V Ta = add(T, dT);
+        V fin_a = ge(Ta, k1(1 - 1e-14));
+        V dta = sel(gt(mul(qa, dT), k1(DT_MIN)), mul(qa, dT), k1(DT_MIN));
+        V left = sub(k->one, Ta);
+        dta = sel(gt(dta, left), left, dta);
+        /* commit: rejected lanes take dtr and fail = 1, accepted ones the rest */
+        V ac = vnot(reject);
+        for (int c = 0; c < 6; c++) s[c] = sel(ac, sa[c], s[c]);
+        v.p = sel(ac, va.p, v.p);
+        v.r = sel(ac, va.r, v.r);
+        v.inv = sel(ac, va.inv, v.inv);
+        for (int c = 0; c < 6; c++) v.d[c] = sel(ac, va.d[c], v.d[c]);
+        T = sel(ac, Ta, T);
+        dT = sel(ac, dta, dtr);
+        fail = sel(ac, k->zero, k->one);
+        dsum = sel(ac, disa, dsum);
+        eqp = sel(ac, eqa, eqp);
+        int ma = bits(ac), mf = bits(fin_a), mt = bits(gt(va.p, k->pt));
+        for (int j = 0; j < NL; j++) {
+            if (who[j] < 0) continue;
+            size_t i = (size_t)who[j];
+            if ((quit | (bad & ma)) >> j & 1) {
+                ok[i] = 0;
+                who[j] = -1;
+                continue;
+            }
+            if (!(ma >> j & 1)) continue;
+            acc[j]++;
+            if (!(mf >> j & 1)) continue;
+            /* done: a stress past the cut-off is left to the scalar update */
+            if (mt >> j & 1) {
+                ok[i] = 0;
+            } else {
+                for (int c = 0; c < 6; c++) sig[6 * i + c] = get(s[c], j);
+                epq[i] = get(eqp, j);
+                dis[i] = get(dsum, j);
+                nsub[i] = acc[j];
+                ok[i] = 1;
+            }
+            who[j] = -1;
+        }
+    }
+}
+
+void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
+                  double *dis, int *nsub, unsigned char *ok)
+{
+    kc k;
+    stage g;
+    k_init(&k, P);
+    pass_trial(&k, n, sig, de, &g);
+    for (size_t i = 0; i < n; i++) ok[i] = 0;
+    pass_pegasus(&k, n, sig, &g);
+    pass_substeps(&k, P, n, sig, de, &g, epq, dis, nsub, ok);
+}
+
+#else
+/* no AVX2 in this build: every particle is left to mpm_plastic_update()
+ * (mpm_sim.dp_lanes is 0 then, so this is not called) */
+void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
+                  double *dis, int *nsub, unsigned char *ok)
+{
+    (void)P, (void)sig, (void)de, (void)epq, (void)dis, (void)nsub;
+    for (size_t i = 0; i < n; i++) ok[i] = 0;
+}
+#endif
