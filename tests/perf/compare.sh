@@ -252,7 +252,8 @@ awk -F'\t' -v args="$ARGS" -v tri="$TRI" '
             split(order[i], kk, SUBSEP)
             c = cfg[kk[1] + 1]; sc = kk[2]; sub(/\+apic$/, "", sc)
             m = opt(c, "--method"); u = opt(c, "--update"); x = opt(c, "--transfer")
-            if (m == "") m = "mpm"; if (u == "") u = "usf"; if (x == "") x = "flip"
+            if (m == "") m = sc ~ /^collapse2d/ ? "bspline2" : "mpm"  # each scene default
+            if (u == "") u = "usf"; if (x == "") x = "flip"
             b = ((("before", order[i]) in rate)) ? median(rate["before", order[i]]) : -1
             a = ((("after", order[i]) in rate)) ? median(rate["after", order[i]]) : -1
             bs = show("before", order[i]); as = show("after", order[i])
