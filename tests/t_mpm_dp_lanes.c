@@ -3,12 +3,12 @@
  * (mpm_dp_lanes(), server/mpm/mpm_plastic_avx2.c) against the scalar
  * update (mpm_plastic_update()), bit for bit: on random states that reach
  * every path of the update (starts inside the cone, on it loading and
- * unloading, trials past the tension cut-off, increments of a thousand
- * yield strains, non-finite increments), in batches of every size from 1
- * to MPM_DP_LANES_MAX.  A particle the lanes take must give the scalar
- * stress, eps_p increment, dissipation and substeps; one they leave must
- * keep its input row, and must be one the scalar update takes off the
- * cone's common path or refuses.  Skipped where the CPU has no AVX2.
+ * unloading, trials past the tension cut-off, from a start inside or on
+ * the surface, increments of a thousand yield strains, non-finite
+ * increments), in batches of every size from 1 to MPM_DP_LANES_MAX.  A particle the lanes take must
+ * give the scalar stress, eps_p increment, dissipation and substeps; one they leave must keep its
+ * input row, and must be one the scalar update takes off the cone's common path or refuses. Skipped
+ * where the CPU has no AVX2.
  */
 #include "mpm.h"
 #include "mpm_plastic.h"
@@ -74,7 +74,7 @@ static void one_material(const char *name, const mpm_plastic_params *P, int dim)
         i0 += k;
         m = m == MPM_DP_LANES_MAX ? 1 : m + 1;
     }
-    long taken = 0, left = 0, left_plastic = 0, elastic = 0, bad = 0, maxsub = 0;
+    long taken = 0, left = 0, left_plastic = 0, elastic = 0, bad = 0, maxsub = 0, cutoff = 0;
     for (size_t i = 0; i < N && !bad; i++) {
         double s[6], d = -1;
         memcpy(s, s0 + 6 * i, sizeof s);
@@ -91,6 +91,9 @@ static void one_material(const char *name, const mpm_plastic_params *P, int dim)
             continue;
         }
         taken++;
+        double De[6], tr[6], ftr;
+        int on = 0;
+        cutoff += mpm_dp_trial(P, s0 + 6 * i, de + 6 * i, De, tr, &ftr, &on) == MPM_DP_TENSION;
         double e2 = 0.25 + epq[i];
         if (rc || memcmp(s, sig + 6 * i, sizeof s) || memcmp(&d, dis + i, sizeof d) ||
             memcmp(&e2, &st.eps_p, sizeof e2) || st.substeps != nsub[i] || !st.yielded) {
@@ -101,14 +104,16 @@ static void one_material(const char *name, const mpm_plastic_params *P, int dim)
         }
         if (nsub[i] > maxsub) maxsub = nsub[i];
     }
-    TLOG("%s, %dD: %d particles, %ld taken by the lanes (at most %ld substeps), %ld left: %ld "
-         "plastic, %ld elastic, %ld refused",
-         name, dim, N, taken, maxsub, left, left_plastic, elastic, left - left_plastic - elastic);
+    TLOG("%s, %dD: %d particles, %ld taken by the lanes (%ld past the cut-off; at most %ld "
+         "substeps), %ld left: %ld plastic, %ld elastic, %ld refused",
+         name, dim, N, taken, cutoff, maxsub, left, left_plastic, elastic,
+         left - left_plastic - elastic);
     free(sig), free(s0), free(de), free(epq), free(dis), free(nsub), free(ok);
     CHECKF(!bad, "%s: %ld particles differ from the scalar update", name, bad);
     /* every path was reached: the lanes' and the scalar's */
     CHECKF(taken > N / 10, "%s: the lanes took only %ld particles", name, taken);
     CHECKF(maxsub > 3, "%s: no update of more than %ld substeps", name, maxsub);
+    CHECKF(cutoff > N / 100, "%s: only %ld particles past the cut-off taken", name, cutoff);
     CHECKF(left_plastic > N / 100, "%s: only %ld plastic particles left to the scalar update", name,
            left_plastic);
     CHECKF(left - left_plastic - elastic > 0, "%s: no refused update", name);

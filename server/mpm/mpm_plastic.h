@@ -182,9 +182,9 @@ static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
  * ok[i] = 1, sig's row i the updated stress, epq[i] the increment of
  * eps_p, dis[i] the dissipation and nsub[i] the substeps, each bit for bit
  * what mpm_plastic_update() gives; ok[i] = 0 for one that takes a rarer
- * path (the tension region, an unloading start, the normal drift
- * correction, a divergence), its row of sig unchanged, for
- * mpm_plastic_update(). */
+ * path (an unloading start, the normal drift correction, a divergence, a
+ * cut-off met after the substeps) or whose trial is elastic, its row of
+ * sig unchanged, for mpm_plastic_update(). */
 #define MPM_DP_LANES_MAX 64
 void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
                   double *dis, int *nsub, unsigned char *ok);

@@ -1,6 +1,6 @@
 /*
- * mpm_plastic_avx2.c - Drucker-Prager's cone updates four particles at a
- * time (mpm_dp_lanes(), mpm_plastic.h).  Sloan's substepping is a long
+ * mpm_plastic_avx2.c - Drucker-Prager's plastic updates four particles at
+ * a time (mpm_dp_lanes(), mpm_plastic.h).  Sloan's substepping is a long
  * chain of dependent square roots and divisions per particle, so one
  * particle leaves the CPU waiting; here each lane of an AVX2 vector carries
  * its own particle through the same operations, in the same order, as
@@ -8,11 +8,13 @@
  * built with -mavx2 -ffp-contract=off), so each particle's result has the
  * scalar bits.  A lane that finishes takes the next particle (the Pegasus
  * search and the substeps are loops of different lengths per particle).
- * The rarer paths (the tension region, an unloading start, the normal
- * drift correction, a divergence, a cut-off after the substeps) are not
- * here: such a particle is reported not done, its inputs untouched, for
- * mpm_plastic_update().  Built only on x86-64 (MPM_HAVE_AVX2_KERNELS) and
- * called only where the CPU has AVX2.
+ * The trial past the tension cut-off takes its closed form here too
+ * (after the Pegasus search for its first yield point).  The rarer paths
+ * (an unloading start, the normal drift correction, a divergence, a
+ * cut-off met after the substeps) are not here: such a particle is
+ * reported not done, its inputs untouched, for mpm_plastic_update().
+ * Built only on x86-64 (MPM_HAVE_AVX2_KERNELS) and called only where the
+ * CPU has AVX2.
  */
 #include "mpm_plastic.h"
 
@@ -28,6 +30,7 @@
 #define R_MIN 1e-16
 #define DT_MIN 1e-6
 #define SQRT3 1.7320508075688772935
+#define FY_TOL 1e-6
 
 /* A vector of NL lanes: NH AVX2 vectors side by side, so that each
  * operation below is NH independent instructions (two chains of square
@@ -117,6 +120,12 @@ typedef struct {
     V ketag; /* K etag (dp_Db()) */
     V eq1;   /* 1 / sqrt3 (dp_eq()) */
     V stol;
+    V fytol; /* first_yield()'s tolerance, max(ftol, FY_TOL) */
+    V rt;    /* the cone's radius at the cut-off, xi c - eta pt, at least 0 (dp_tension()) */
+    V gg;    /* 2 G (compliance()) */
+    V kk;    /* 3 K (compliance()) */
+    V twothirds;
+    int pt_finite; /* the cut-off is a surface of its own (yield_any()) */
 } kc;
 
 static void k_init(kc *k, const mpm_plastic_params *P)
@@ -142,6 +151,13 @@ static void k_init(kc *k, const mpm_plastic_params *P)
     k->ketag = k1(P->K * P->etag);
     k->eq1 = k1(1 / SQRT3);
     k->stol = k1(P->tol);
+    k->fytol = k1(P->ftol > FY_TOL ? P->ftol : FY_TOL);
+    double rt = P->xi * P->c - P->eta * P->pt;
+    k->rt = k1(rt < 0 ? 0 : rt);
+    k->gg = k1(2 * P->G);
+    k->kk = k1(3 * P->K);
+    k->twothirds = k1(2.0 / 3.0);
+    k->pt_finite = isfinite(P->pt) != 0;
 }
 
 /* a : b (ddot()) */
@@ -207,6 +223,38 @@ VI V vf_at(const kc *k, const V s[6], const V De[6], V al, V *scale)
     return sub(add(r, ep), k->xc);
 }
 
+/* yield_fast(): the cone's f, and where the cut-off is finite the larger
+ * of it and p - pt (the larger scale too) */
+VI V vyf(const kc *k, const V s[6], V *scale)
+{
+    V d[6], p = vmeanp(k, s), r = vj2(k, s, p, d), ep = mul(k->eta, p);
+    V sc = add(add(r, vabs(ep)), k->xc), f = sub(add(r, ep), k->xc);
+    if (k->pt_finite) {
+        V pm = vmeanp(k, s), ft = sub(pm, k->pt), sct = add(vabs(pm), vabs(k->pt));
+        f = sel(gt(ft, f), ft, f);
+        sc = sel(gt(sct, sc), sct, sc);
+    }
+    *scale = sc;
+    return f;
+}
+
+/* yield_fast() at s + al De */
+VI V vyf_at(const kc *k, const V s[6], const V De[6], V al, V *scale)
+{
+    V x[6];
+    for (int c = 0; c < 6; c++) x[c] = add(s[c], mul(al, De[c]));
+    return vyf(k, x, scale);
+}
+
+/* fmax(0, x) as glibc's x86-64 fmax() gives it for a number: 0 > x ? 0 : x
+ * (so -0 stays -0) */
+VI V vmax0(V x)
+{
+    V r;
+    for (int i = 0; i < NH; i++) r.h[i] = _mm256_max_pd(_mm256_setzero_pd(), x.h[i]);
+    return r;
+}
+
 /* dp_aDe() */
 VI V vaDe(const kc *k, const vinv *v, const V de[6])
 {
@@ -262,7 +310,12 @@ VI void vhooke(const kc *k, const V e[6], V s[6])
 
 /* ---- per-particle staging between the three passes ---- */
 
-enum { ST_OUT = 0, ST_INSIDE = 1, ST_SURFACE = 2 };
+/* what a particle takes: ST_OUT the scalar update; ST_INSIDE the Pegasus
+ * search from inside the cone, then the substeps; ST_SURFACE the substeps
+ * from the surface; ST_TENSION the cut-off's closed form after the first
+ * yield point's search (first_yield()); ST_TENSION0 that form with the
+ * start as the first yield point */
+enum { ST_OUT = 0, ST_INSIDE = 1, ST_SURFACE = 2, ST_TENSION = 3, ST_TENSION0 = 4 };
 
 typedef struct {
     double De[MPM_DP_LANES_MAX][6];
@@ -328,6 +381,18 @@ static void pass_trial(const kc *k, size_t n, const double *sig, const double *d
         V cth = dvd(vaDe(k, &v, E), mul(na, nd));
         V unload = vand(vand(gt(na, k->zero), gt(nd, k->zero)), lt(cth, k1(-LTOL)));
         int mc = bits(cone), mi = bits(inside), mu = bits(unload);
+        /* past the cut-off: first_yield()'s first tests */
+        V tfin = vand(finite, tens);
+        int mt = bits(tfin), mt0 = 0;
+        lanes FY0, FY1;
+        FY0.v = FY1.v = k->zero;
+        if (mt) {
+            V sct0, sct1, fy0 = vyf(k, S, &sct0), fy1 = vyf(k, tr, &sct1);
+            /* f0 >= -tol sc, or !(f1 > 0): the start is the first yield point */
+            mt0 = bits(vor(ge(fy0, mul(sub(k->zero, k->fytol), sct0)), vnot(gt(fy1, k->zero))));
+            FY0.v = fy0;
+            FY1.v = fy1;
+        }
         lanes D[6], F0, FT;
         for (int c = 0; c < 6; c++) D[c].v = De[c];
         F0.v = f0;
@@ -338,7 +403,11 @@ static void pass_trial(const kc *k, size_t n, const double *sig, const double *d
             g->f0[i] = F0.x[j];
             g->ftr[i] = FT.x[j];
             g->al[i] = 0;
-            if (!(mc >> j & 1))
+            if (mt >> j & 1) {
+                g->kind[i] = (mt0 >> j & 1) ? ST_TENSION0 : ST_TENSION;
+                g->f0[i] = FY0.x[j];
+                g->ftr[i] = FY1.x[j];
+            } else if (!(mc >> j & 1))
                 g->kind[i] = ST_OUT;
             else if (mi >> j & 1)
                 g->kind[i] = ST_INSIDE;
@@ -383,10 +452,13 @@ VI V mask_of(int b, const V lm[NL])
 }
 
 /* Pass 2: the elastic fraction of each start inside the cone, by the
- * Pegasus method on [0, 1] (dp_pegasus()), a lane per particle, a lane
- * that finishes taking the next. */
-static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g)
+ * Pegasus method on [0, 1] (dp_pegasus(); kind ST_INSIDE), or the first
+ * yield point on a trial past the cut-off (first_yield(); kind
+ * ST_TENSION: yield_fast() and its tolerance), a lane per particle, a
+ * lane that finishes taking the next. */
+static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g, int kind)
 {
+    const V tol = kind == ST_TENSION ? k->fytol : k->ftol;
     V lm[NL], S[6], D[6], a0, a1, f0, f1, al;
     int who[NL], it[NL];
     size_t next = 0;
@@ -399,7 +471,7 @@ static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g)
         for (int j = 0; j < NL; j++) {
             while (who[j] < 0 && next < n) {
                 size_t i = next++;
-                if (g->kind[i] != ST_INSIDE) continue;
+                if (g->kind[i] != kind) continue;
                 who[j] = (int)i;
                 it[j] = 0;
                 for (int c = 0; c < 6; c++) {
@@ -418,8 +490,8 @@ static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g)
         /* one iteration in every lane; a lane that stops keeps al */
         V stop = eq(f1, f0);
         V aln = sub(a1, dvd(mul(f1, sub(a1, a0)), sub(f1, f0)));
-        V sc, fn = vf_at(k, S, D, aln, &sc);
-        V conv = le(vabs(fn), mul(k->ftol, sc));
+        V sc, fn = kind == ST_TENSION ? vyf_at(k, S, D, aln, &sc) : vf_at(k, S, D, aln, &sc);
+        V conv = le(vabs(fn), mul(tol, sc));
         V flip = lt(mul(fn, f1), k->zero);
         al = sel(stop, al, aln);
         V go = vnot(vor(stop, conv));
@@ -459,7 +531,7 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         for (int j = 0; j < NL; j++) {
             while (who[j] < 0 && next < n) {
                 size_t i = next++;
-                if (g->kind[i] == ST_OUT) continue;
+                if (g->kind[i] != ST_INSIDE && g->kind[i] != ST_SURFACE) continue;
                 who[j] = (int)i;
                 fresh |= 1 << j;
                 double al = g->al[i];
@@ -600,6 +672,62 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
     }
 }
 
+/* Pass 4: the cut-off's closed form (dp_tension(), dp_update()) of the
+ * particles whose trial is past it, four at a time: the trial's deviator
+ * kept, scaled to the cone's radius at the cut-off when outside it, p =
+ * pt; the plastic strain by the compliance, its dissipation by the
+ * trapezoidal rule from the first yield point sa. */
+static void pass_tension(const kc *k, size_t n, double *sig, const stage *g, double *epq,
+                         double *dis, int *nsub, unsigned char *ok)
+{
+    size_t idx[MPM_DP_LANES_MAX], m = 0;
+    for (size_t i = 0; i < n; i++)
+        if (g->kind[i] == ST_TENSION || g->kind[i] == ST_TENSION0) idx[m++] = i;
+    for (size_t q0 = 0; q0 < m; q0 += NL) {
+        size_t mq = m - q0 < NL ? m - q0 : NL;
+        lanes s0[6], De[6], al, same;
+        for (size_t j = 0; j < NL; j++) {
+            size_t i = idx[q0 + (j < mq ? j : 0)];
+            for (int c = 0; c < 6; c++) {
+                s0[c].x[j] = sig[6 * i + c];
+                De[c].x[j] = g->De[i][c];
+            }
+            al.x[j] = g->al[i];
+            same.x[j] = g->kind[i] == ST_TENSION0 ? 1.0 : 0.0;
+        }
+        V S[6], D[6], sa[6], tr[6], d[6], y[6], dd[6], ep[6], e2[6];
+        V keep = gt(same.v, k->zero);
+        for (int c = 0; c < 6; c++) {
+            S[c] = s0[c].v;
+            D[c] = De[c].v;
+            sa[c] = sel(keep, S[c], add(S[c], mul(al.v, D[c])));
+            tr[c] = add(S[c], D[c]);
+        }
+        V p = vmeanp(k, tr), r = vj2(k, tr, p, d);
+        V beta = sel(gt(r, k->rt), dvd(k->rt, r), k->one);
+        for (int c = 0; c < 6; c++) y[c] = add(mul(beta, d[c]), c < 3 ? k->pt : k->zero);
+        for (int c = 0; c < 6; c++) dd[c] = sub(tr[c], y[c]);
+        /* compliance() */
+        V pd = vmeanp(k, dd), pk = dvd(pd, k->kk);
+        for (int c = 0; c < 3; c++) ep[c] = add(dvd(sub(dd[c], pd), k->gg), pk);
+        for (int c = 3; c < 6; c++) ep[c] = dvd(dd[c], k->gg);
+        /* trap_dis(), eqv_dev(), each added to 0 as dp_update() adds them */
+        V ds = vddot(sa, ep), dy = vddot(y, ep);
+        V me = vmeanp(k, ep);
+        for (int c = 0; c < 6; c++) e2[c] = sub(ep[c], c < 3 ? me : k->zero);
+        V dsum = add(k->zero, mul(k->half, add(vmax0(ds), vmax0(dy))));
+        V esum = add(k->zero, vsqrt(mul(k->twothirds, vddot(e2, e2))));
+        for (size_t j = 0; j < mq; j++) {
+            size_t i = idx[q0 + j];
+            for (int c = 0; c < 6; c++) sig[6 * i + c] = get(y[c], (int)j);
+            epq[i] = get(esum, (int)j);
+            dis[i] = get(dsum, (int)j);
+            nsub[i] = 1;
+            ok[i] = 1;
+        }
+    }
+}
+
 void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
                   double *dis, int *nsub, unsigned char *ok)
 {
@@ -608,8 +736,10 @@ void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const doub
     k_init(&k, P);
     pass_trial(&k, n, sig, de, &g);
     for (size_t i = 0; i < n; i++) ok[i] = 0;
-    pass_pegasus(&k, n, sig, &g);
+    pass_pegasus(&k, n, sig, &g, ST_INSIDE);
+    pass_pegasus(&k, n, sig, &g, ST_TENSION);
     pass_substeps(&k, P, n, sig, de, &g, epq, dis, nsub, ok);
+    pass_tension(&k, n, sig, &g, epq, dis, nsub, ok);
 }
 
 #else
