@@ -5,10 +5,11 @@
  * every path of the update (starts inside the cone, on it loading and
  * unloading, trials past the tension cut-off, from a start inside or on
  * the surface, increments of a thousand yield strains, non-finite
- * increments), in batches of every size from 1 to MPM_DP_LANES_MAX.  A particle the lanes take must
- * give the scalar stress, eps_p increment, dissipation and substeps; one they leave must keep its
- * input row, and must be one the scalar update takes off the cone's common path or refuses. Skipped
- * where the CPU has no AVX2.
+ * increments), in batches of every size from 1 to MPM_DP_LANES_MAX.  A
+ * particle the lanes take must give the scalar stress, eps_p increment,
+ * dissipation and substeps; one they leave must keep its input row.
+ * Every path must be reached, the lanes' and the scalar update's.
+ * Skipped where the CPU has no AVX2.
  */
 #include "mpm.h"
 #include "mpm_plastic.h"

@@ -197,8 +197,8 @@ void mpm_bar_wait(mpm_bar *b);
 struct mpm_sim {
     int dim;
     int avx2; /* the AVX2+FMA kernel families (mpm_case.kernels) */
-    /* Drucker-Prager's cone updates four at a time (mpm_dp_lanes(); the
-     * same bits): kernels not PORTABLE, and the CPU has AVX2 */
+    /* Drucker-Prager's plastic updates four at a time (mpm_dp_lanes();
+     * the same bits): kernels not PORTABLE, and the CPU has AVX2 */
     int dp_lanes;
     mpm_method method;
     mpm_update update;

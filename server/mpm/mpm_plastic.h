@@ -178,9 +178,9 @@ static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
  * elastic trial is not admissible (sig and de: n rows of 6, Voigt as
  * above), four at a time in the lanes of AVX2 vectors
  * (mpm_plastic_avx2.c; only where MPM_HAVE_AVX2_KERNELS is defined and the
- * CPU has AVX2): for each particle i that takes the cone's common path,
- * ok[i] = 1, sig's row i the updated stress, epq[i] the increment of
- * eps_p, dis[i] the dissipation and nsub[i] the substeps, each bit for bit
+ * CPU has AVX2): for each particle i that takes the common paths (the
+ * cone's substeps, the tension cut-off's closed form), ok[i] = 1, sig's row i the updated stress,
+ * epq[i] the increment of eps_p, dis[i] the dissipation and nsub[i] the substeps, each bit for bit
  * what mpm_plastic_update() gives; ok[i] = 0 for one that takes a rarer
  * path (an unloading start, the normal drift correction, a divergence, a
  * cut-off met after the substeps) or whose trial is elastic, its row of

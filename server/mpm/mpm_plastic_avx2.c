@@ -17,20 +17,11 @@
  * CPU has AVX2.
  */
 #include "mpm_plastic.h"
+#include "mpm_plastic_tol.h"
 
 #if defined(MPM_HAVE_AVX2_KERNELS) && defined(__AVX2__)
 #include <immintrin.h>
 #include <string.h>
-
-/* mpm_plastic.c's constants (the same values) */
-#define LTOL 1e-6
-#define PEG_MAXIT 200
-#define DRIFT_MAXIT 10
-#define TINY_REL 1e-14
-#define R_MIN 1e-16
-#define DT_MIN 1e-6
-#define SQRT3 1.7320508075688772935
-#define FY_TOL 1e-6
 
 /* A vector of NL lanes: NH AVX2 vectors side by side, so that each
  * operation below is NH independent instructions (two chains of square
@@ -114,7 +105,6 @@ VI int bits(V m)
  * its order). */
 typedef struct {
     V lam, g2, G, K, eta, etag, xc, ftol, nftol, pt, half, two, three, zero, one;
-    V g2n;   /* 2 G, as dp_aDe() and dp_Db() form it: (2 * G) */
     V keta;  /* K eta (dp_aDe()) */
     V kee;   /* K eta etag (dp_aDb()) */
     V ketag; /* K etag (dp_Db()) */
@@ -122,7 +112,6 @@ typedef struct {
     V stol;
     V fytol; /* first_yield()'s tolerance, max(ftol, FY_TOL) */
     V rt;    /* the cone's radius at the cut-off, xi c - eta pt, at least 0 (dp_tension()) */
-    V gg;    /* 2 G (compliance()) */
     V kk;    /* 3 K (compliance()) */
     V twothirds;
     int pt_finite; /* the cut-off is a surface of its own (yield_any()) */
@@ -145,7 +134,6 @@ static void k_init(kc *k, const mpm_plastic_params *P)
     k->three = k1(3);
     k->zero = k1(0);
     k->one = k1(1);
-    k->g2n = k1(2 * P->G);
     k->keta = k1(P->K * P->eta);
     k->kee = k1(P->K * P->eta * P->etag);
     k->ketag = k1(P->K * P->etag);
@@ -154,7 +142,6 @@ static void k_init(kc *k, const mpm_plastic_params *P)
     k->fytol = k1(P->ftol > FY_TOL ? P->ftol : FY_TOL);
     double rt = P->xi * P->c - P->eta * P->pt;
     k->rt = k1(rt < 0 ? 0 : rt);
-    k->gg = k1(2 * P->G);
     k->kk = k1(3 * P->K);
     k->twothirds = k1(2.0 / 3.0);
     k->pt_finite = isfinite(P->pt) != 0;
@@ -213,24 +200,14 @@ VI V vf_inv(const kc *k, const vinv *v, V *scale)
     return sub(add(v->r, ep), k->xc);
 }
 
-/* dp_f(s + al De) (dp_f_at()) */
-VI V vf_at(const kc *k, const V s[6], const V De[6], V al, V *scale)
-{
-    V x[6], d[6];
-    for (int c = 0; c < 6; c++) x[c] = add(s[c], mul(al, De[c]));
-    V p = vmeanp(k, x), r = vj2(k, x, p, d), ep = mul(k->eta, p);
-    *scale = add(add(r, vabs(ep)), k->xc);
-    return sub(add(r, ep), k->xc);
-}
-
-/* yield_fast(): the cone's f, and where the cut-off is finite the larger
- * of it and p - pt (the larger scale too) */
-VI V vyf(const kc *k, const V s[6], V *scale)
+/* dp_f() at s, and with cut (yield_fast()) where the cut-off is finite
+ * the larger of it and p - pt (the larger scale too) */
+VI V vf(const kc *k, const V s[6], int cut, V *scale)
 {
     V d[6], p = vmeanp(k, s), r = vj2(k, s, p, d), ep = mul(k->eta, p);
     V sc = add(add(r, vabs(ep)), k->xc), f = sub(add(r, ep), k->xc);
-    if (k->pt_finite) {
-        V pm = vmeanp(k, s), ft = sub(pm, k->pt), sct = add(vabs(pm), vabs(k->pt));
+    if (cut && k->pt_finite) {
+        V ft = sub(p, k->pt), sct = add(vabs(p), vabs(k->pt));
         f = sel(gt(ft, f), ft, f);
         sc = sel(gt(sct, sc), sct, sc);
     }
@@ -238,12 +215,12 @@ VI V vyf(const kc *k, const V s[6], V *scale)
     return f;
 }
 
-/* yield_fast() at s + al De */
-VI V vyf_at(const kc *k, const V s[6], const V De[6], V al, V *scale)
+/* vf() at s + al De (dp_f_at()) */
+VI V vf_at(const kc *k, const V s[6], const V De[6], V al, int cut, V *scale)
 {
     V x[6];
     for (int c = 0; c < 6; c++) x[c] = add(s[c], mul(al, De[c]));
-    return vyf(k, x, scale);
+    return vf(k, x, cut, scale);
 }
 
 /* fmax(0, x) as glibc's x86-64 fmax() gives it for a number: 0 > x ? 0 : x
@@ -258,7 +235,7 @@ VI V vmax0(V x)
 /* dp_aDe() */
 VI V vaDe(const kc *k, const vinv *v, const V de[6])
 {
-    V a = mul(mul(k->g2n, v->inv), vddot(v->d, de));
+    V a = mul(mul(k->g2, v->inv), vddot(v->d, de));
     return add(a, mul(k->keta, add(add(de[0], de[1]), de[2])));
 }
 
@@ -271,7 +248,7 @@ VI V vaDb(const kc *k, const vinv *v)
 /* dp_Db() */
 VI void vDb(const kc *k, const vinv *v, V Db[6])
 {
-    V g = mul(k->g2n, v->inv);
+    V g = mul(k->g2, v->inv);
     for (int c = 0; c < 3; c++) Db[c] = add(mul(g, v->d[c]), k->ketag);
     for (int c = 3; c < 6; c++) Db[c] = add(mul(g, v->d[c]), k->zero);
 }
@@ -351,8 +328,8 @@ static void pass_trial(const kc *k, size_t n, const double *sig, const double *d
         }
         /* De and the trial, as mpm_dp_trial() */
         V etr = add(add(E[0], E[1]), E[2]);
-        for (int c = 0; c < 3; c++) De[c] = add(mul(k->lam, etr), mul(k->g2n, E[c]));
-        for (int c = 3; c < 6; c++) De[c] = mul(k->g2n, E[c]);
+        for (int c = 0; c < 3; c++) De[c] = add(mul(k->lam, etr), mul(k->g2, E[c]));
+        for (int c = 3; c < 6; c++) De[c] = mul(k->g2, E[c]);
         V fin = k->zero;
         for (int c = 0; c < 6; c++) {
             tr[c] = add(S[c], De[c]);
@@ -387,7 +364,7 @@ static void pass_trial(const kc *k, size_t n, const double *sig, const double *d
         lanes FY0, FY1;
         FY0.v = FY1.v = k->zero;
         if (mt) {
-            V sct0, sct1, fy0 = vyf(k, S, &sct0), fy1 = vyf(k, tr, &sct1);
+            V sct0, sct1, fy0 = vf(k, S, 1, &sct0), fy1 = vf(k, tr, 1, &sct1);
             /* f0 >= -tol sc, or !(f1 > 0): the start is the first yield point */
             mt0 = bits(vor(ge(fy0, mul(sub(k->zero, k->fytol), sct0)), vnot(gt(fy1, k->zero))));
             FY0.v = fy0;
@@ -490,7 +467,7 @@ static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g, int
         /* one iteration in every lane; a lane that stops keeps al */
         V stop = eq(f1, f0);
         V aln = sub(a1, dvd(mul(f1, sub(a1, a0)), sub(f1, f0)));
-        V sc, fn = kind == ST_TENSION ? vyf_at(k, S, D, aln, &sc) : vf_at(k, S, D, aln, &sc);
+        V sc, fn = vf_at(k, S, D, aln, kind == ST_TENSION, &sc);
         V conv = le(vabs(fn), mul(tol, sc));
         V flip = lt(mul(fn, f1), k->zero);
         al = sel(stop, al, aln);
@@ -709,8 +686,8 @@ static void pass_tension(const kc *k, size_t n, double *sig, const stage *g, dou
         for (int c = 0; c < 6; c++) dd[c] = sub(tr[c], y[c]);
         /* compliance() */
         V pd = vmeanp(k, dd), pk = dvd(pd, k->kk);
-        for (int c = 0; c < 3; c++) ep[c] = add(dvd(sub(dd[c], pd), k->gg), pk);
-        for (int c = 3; c < 6; c++) ep[c] = dvd(dd[c], k->gg);
+        for (int c = 0; c < 3; c++) ep[c] = add(dvd(sub(dd[c], pd), k->g2), pk);
+        for (int c = 3; c < 6; c++) ep[c] = dvd(dd[c], k->g2);
         /* trap_dis(), eqv_dev(), each added to 0 as dp_update() adds them */
         V ds = vddot(sa, ep), dy = vddot(y, ep);
         V me = vmeanp(k, ep);
