@@ -582,16 +582,17 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
  * taken once, with the same operations in the same order (the zero terms
  * kept where they could turn a -0 into +0), so with the same bits.  A
  * particle that is not elastic, or not Drucker-Prager, goes to
- * frictional_update() with sig and de as rate_gather() fills them. */
-static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+ * frictional_update() (or the queue qp) with sig and de as rate_gather()
+ * fills them.  frictional_block_2d() is this loop with a queue of its own;
+ * mpm_dp_trial2d_lanes() (frictional_lanes_2d()) its elastic case four at
+ * a time, with the same bits. */
+static void frictional_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1, dp_queue *qp)
 {
     mpm_particles *P = b->P;
     const uint16_t *mat = P->mat + b0;
     const double *e0 = b->deps[0], *e1 = b->deps[1], *e2 = b->deps[2], *e3 = b->deps[3];
     double *x0 = P->sig[0] + b0, *x1 = P->sig[1] + b0, *x2 = P->sig[2] + b0, *x3 = P->sig[3] + b0;
     double *q0 = P->eps[0] + b0, *q1 = P->eps[1] + b0, *q3 = P->eps[3] + b0, *yld = P->yld + b0;
-    dp_queue q;
-    q.n = 0;
     for (size_t i = i0; i < i1; i++) {
         const mpm_mat_params *mp = &b->mats[mat[i]];
         const mpm_plastic_params *pl = mp->pl;
@@ -625,7 +626,41 @@ static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
             }
         }
         double sig[6] = {s0, s1, zz, s3, 0, 0}, de[6] = {d0, d1, 0, d3, 0, 0};
-        dp_push(b, &q, mp, b0 + i, sig, de);
+        dp_push(b, qp, mp, b0 + i, sig, de);
+    }
+}
+
+static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    dp_queue q;
+    q.n = 0;
+    frictional_2d(b, b0, i0, i1, &q);
+    dp_flush(b, &q);
+}
+
+/* frictional_block_2d() for a block of one Drucker-Prager material where
+ * the job has mpm_sim.dp_lanes: the elastic trials four at a time
+ * (mpm_dp_trial2d_lanes(), 64 particles to a call), then the particles it
+ * leaves, in order, through frictional_block_2d()'s own loop (each a
+ * block of one: the rotation from its unchanged stress, the queue). */
+static void frictional_lanes_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    mpm_particles *P = b->P;
+    const mpm_plastic_params *pl = b->mats[P->mat[b0 + i0]].pl;
+    const double *const *e = (const double *const *)b->deps;
+    dp_queue q;
+    q.n = 0;
+    for (size_t c0 = i0; c0 < i1; c0 += 64) {
+        size_t m = i1 - c0 < 64 ? i1 - c0 : 64, p0 = b0 + c0;
+        const double *ec[4] = {e[0] + c0, e[1] + c0, e[2] + c0, e[3] + c0};
+        double *xc[4] = {P->sig[0] + p0, P->sig[1] + p0, P->sig[2] + p0, P->sig[3] + p0};
+        double *qc[3] = {P->eps[0] + p0, P->eps[1] + p0, P->eps[3] + p0};
+        uint64_t left = mpm_dp_trial2d_lanes(pl, m, ec, xc, qc, P->yld + p0);
+        while (left) {
+            size_t i = c0 + (size_t)__builtin_ctzll(left);
+            left &= left - 1;
+            frictional_2d(b, b0, i, i + 1, &q);
+        }
     }
     dp_flush(b, &q);
 }
@@ -680,6 +715,10 @@ static void frictional_any(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
     for (int c = 0; c < MPM_NCOMP(b->dim); c++) rec &= P->sig[c] && (P->eps[c] || c == 2);
     if (b->general)
         frictional_block(b, b0, i0, i1);
+    else if (b->dim == 2 && rec && !P->eps[2] && b->dp_lanes && i1 > i0 &&
+             b->mats[P->mat[b0 + i0]].pl->kind == MPM_PLASTIC_DRUCKER_PRAGER &&
+             one_material(P->mat + b0 + i0, i1 - i0))
+        frictional_lanes_2d(b, b0, i0, i1);
     else if (b->dim == 2 && rec && !P->eps[2])
         frictional_block_2d(b, b0, i0, i1);
     else if (b->dim == 3 && rec && P->eps[2])

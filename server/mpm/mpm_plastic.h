@@ -89,6 +89,7 @@
 
 #include <math.h>
 #include <stddef.h>
+#include <stdint.h>
 
 typedef enum { MPM_PLASTIC_DRUCKER_PRAGER = 0, MPM_PLASTIC_MOHR_COULOMB = 1 } mpm_plastic_kind;
 typedef enum { MPM_DP_COMPRESSION = 0, MPM_DP_EXTENSION = 1, MPM_DP_PLANE_STRAIN = 2 } mpm_dp_match;
@@ -188,6 +189,20 @@ static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
 #define MPM_DP_LANES_MAX 64
 void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
                   double *dis, int *nsub, unsigned char *ok);
+
+/* Drucker-Prager's elastic trial of n <= 64 plane-strain particles of one
+ * material (mpm_model.c's 2D frictional block), four at a time in AVX2
+ * lanes with the scalar loop's operations in its order (so its bits): e
+ * the increments d_xx, d_yy, the spin w and d_xy; x the stresses xx, yy,
+ * zz, xy (read, Jaumann-rotated, and for an admissible trial replaced by
+ * it); q the strain record xx, yy, xy (the increment added where the trial
+ * is admissible); yld the yield flag (1 where the admissible trial is on
+ * the surface within ftol, else 0).  Returns the mask (bit i: particle i)
+ * of the particles whose trial is not admissible (past the cut-off,
+ * outside the cone or not finite): their x, q and yld are left as they
+ * were, for the caller's plastic update. */
+uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
+                              double *const x[4], double *const q[3], double *yld);
 
 /* The yield function at sig (the largest of the model's surfaces, in
  * stress units: <= 0 admissible) and the scale its tolerance is relative

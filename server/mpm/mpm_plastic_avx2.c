@@ -93,6 +93,16 @@ VI V vnot(V a)
         r.h[i] = _mm256_xor_pd(a.h[i], _mm256_castsi256_pd(_mm256_set1_epi64x(-1)));
     return r;
 }
+/* lane j = r[j][c]: built in registers from the rows r (a vector stored
+ * a double at a time and loaded whole would wait on store forwarding) */
+VI V vrows(const double *const r[NL], int c)
+{
+    V v;
+    for (int i = 0; i < NH; i++)
+        v.h[i] = _mm256_set_pd(r[4 * i + 3][c], r[4 * i + 2][c], r[4 * i + 1][c], r[4 * i][c]);
+    return v;
+}
+
 /* the lanes' mask bits, lane j at bit j */
 VI int bits(V m)
 {
@@ -313,18 +323,17 @@ typedef union {
 static void pass_trial(const kc *k, size_t n, const double *sig, const double *de, stage *g)
 {
     for (size_t i0 = 0; i0 < n; i0 += NL) {
-        lanes s[6], e[6];
         size_t m = n - i0 < NL ? n - i0 : NL;
-        for (int c = 0; c < 6; c++)
-            for (size_t j = 0; j < NL; j++) {
-                size_t i = i0 + (j < m ? j : 0);
-                s[c].x[j] = sig[6 * i + c];
-                e[c].x[j] = de[6 * i + c];
-            }
+        const double *rs[NL], *re[NL];
+        for (size_t j = 0; j < NL; j++) {
+            size_t i = i0 + (j < m ? j : 0);
+            rs[j] = sig + 6 * i;
+            re[j] = de + 6 * i;
+        }
         V S[6], E[6], De[6], tr[6];
         for (int c = 0; c < 6; c++) {
-            S[c] = s[c].v;
-            E[c] = e[c].v;
+            S[c] = vrows(rs, c);
+            E[c] = vrows(re, c);
         }
         /* De and the trial, as mpm_dp_trial() */
         V etr = add(add(E[0], E[1]), E[2]);
@@ -662,22 +671,23 @@ static void pass_tension(const kc *k, size_t n, double *sig, const stage *g, dou
         if (g->kind[i] == ST_TENSION || g->kind[i] == ST_TENSION0) idx[m++] = i;
     for (size_t q0 = 0; q0 < m; q0 += NL) {
         size_t mq = m - q0 < NL ? m - q0 : NL;
-        lanes s0[6], De[6], al, same;
+        const double *rs[NL], *rd[NL], *ra[NL];
+        double same[NL];
         for (size_t j = 0; j < NL; j++) {
             size_t i = idx[q0 + (j < mq ? j : 0)];
-            for (int c = 0; c < 6; c++) {
-                s0[c].x[j] = sig[6 * i + c];
-                De[c].x[j] = g->De[i][c];
-            }
-            al.x[j] = g->al[i];
-            same.x[j] = g->kind[i] == ST_TENSION0 ? 1.0 : 0.0;
+            rs[j] = sig + 6 * i;
+            rd[j] = g->De[i];
+            ra[j] = &g->al[i];
+            same[j] = g->kind[i] == ST_TENSION0 ? 1.0 : 0.0;
         }
+        const double *rm[NL];
+        for (size_t j = 0; j < NL; j++) rm[j] = &same[j];
         V S[6], D[6], sa[6], tr[6], d[6], y[6], dd[6], ep[6], e2[6];
-        V keep = gt(same.v, k->zero);
+        V keep = gt(vrows(rm, 0), k->zero), al = vrows(ra, 0);
         for (int c = 0; c < 6; c++) {
-            S[c] = s0[c].v;
-            D[c] = De[c].v;
-            sa[c] = sel(keep, S[c], add(S[c], mul(al.v, D[c])));
+            S[c] = vrows(rs, c);
+            D[c] = vrows(rd, c);
+            sa[c] = sel(keep, S[c], add(S[c], mul(al, D[c])));
             tr[c] = add(S[c], D[c]);
         }
         V p = vmeanp(k, tr), r = vj2(k, tr, p, d);
@@ -719,6 +729,92 @@ void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const doub
     pass_tension(&k, n, sig, &g, epq, dis, nsub, ok);
 }
 
+/* n (1..4) lanes of p: a whole load, or a masked one past the end */
+VI __m256d ld4(const double *p, size_t n)
+{
+    if (n >= 4) return _mm256_loadu_pd(p);
+    __m256i m = _mm256_cmpgt_epi64(_mm256_set1_epi64x((long long)n), _mm256_set_epi64x(3, 2, 1, 0));
+    return _mm256_maskload_pd(p, m);
+}
+
+VI void st4(double *p, size_t n, __m256d v)
+{
+    if (n >= 4) {
+        _mm256_storeu_pd(p, v);
+        return;
+    }
+    __m256i m = _mm256_cmpgt_epi64(_mm256_set1_epi64x((long long)n), _mm256_set_epi64x(3, 2, 1, 0));
+    _mm256_maskstore_pd(p, m, v);
+}
+
+uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
+                              double *const x[4], double *const q[3], double *yld)
+{
+    const __m256d two = _mm256_set1_pd(2.0), zero = _mm256_set1_pd(0.0);
+    const __m256d g2 = _mm256_set1_pd(2 * P->G), lam = _mm256_set1_pd(P->lam);
+    const __m256d three = _mm256_set1_pd(3), half = _mm256_set1_pd(0.5);
+    const __m256d eta = _mm256_set1_pd(P->eta), xc = _mm256_set1_pd(P->xi * P->c);
+    const __m256d ftol = _mm256_set1_pd(P->ftol), nftol = _mm256_set1_pd(-P->ftol);
+    const __m256d pt = _mm256_set1_pd(P->pt), apt = _mm256_set1_pd(fabs(P->pt));
+    const __m256d sgn = _mm256_set1_pd(-0.0), one = _mm256_set1_pd(1.0);
+    uint64_t left = 0;
+    for (size_t i = 0; i < n; i += 4) {
+        size_t m = n - i;
+        __m256d d0 = ld4(e[0] + i, m), d1 = ld4(e[1] + i, m), w = ld4(e[2] + i, m),
+                d3 = ld4(e[3] + i, m);
+        __m256d xx = ld4(x[0] + i, m), yy = ld4(x[1] + i, m), zz = ld4(x[2] + i, m),
+                xy = ld4(x[3] + i, m);
+        /* the Jaumann rotation: xx + 2.0 * w * xy is xx + ((2.0 * w) * xy) */
+        __m256d w2 = _mm256_mul_pd(two, w);
+        __m256d s0 = _mm256_add_pd(xx, _mm256_mul_pd(w2, xy));
+        __m256d s1 = _mm256_sub_pd(yy, _mm256_mul_pd(w2, xy));
+        __m256d s3 = _mm256_add_pd(xy, _mm256_mul_pd(w, _mm256_sub_pd(yy, xx)));
+        /* the trial */
+        __m256d let = _mm256_mul_pd(lam, _mm256_add_pd(_mm256_add_pd(d0, d1), zero));
+        __m256d t0 = _mm256_add_pd(s0, _mm256_add_pd(let, _mm256_mul_pd(g2, d0)));
+        __m256d t1 = _mm256_add_pd(s1, _mm256_add_pd(let, _mm256_mul_pd(g2, d1)));
+        __m256d t2 = _mm256_add_pd(zz, _mm256_add_pd(let, _mm256_mul_pd(g2, zero)));
+        __m256d t3 = _mm256_add_pd(s3, _mm256_mul_pd(g2, d3));
+        __m256d fin =
+            _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_sub_pd(t0, t0), _mm256_sub_pd(t1, t1)),
+                                        _mm256_sub_pd(t2, t2)),
+                          _mm256_sub_pd(t3, t3));
+        __m256d pm = _mm256_div_pd(_mm256_add_pd(_mm256_add_pd(t0, t1), t2), three);
+        __m256d a0 = _mm256_sub_pd(t0, pm), a1 = _mm256_sub_pd(t1, pm), a2 = _mm256_sub_pd(t2, pm);
+        __m256d dd = _mm256_add_pd(
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a0, a0), _mm256_mul_pd(a1, a1)),
+                          _mm256_mul_pd(a2, a2)),
+            _mm256_mul_pd(two, _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(t3, t3), zero), zero)));
+        __m256d r = _mm256_sqrt_pd(_mm256_mul_pd(half, dd));
+        __m256d ep = _mm256_mul_pd(eta, pm);
+        __m256d scale = _mm256_add_pd(_mm256_add_pd(r, _mm256_andnot_pd(sgn, ep)), xc);
+        __m256d f = _mm256_sub_pd(_mm256_add_pd(r, ep), xc);
+        __m256d tens = _mm256_cmp_pd(
+            pm,
+            _mm256_add_pd(pt, _mm256_mul_pd(ftol, _mm256_add_pd(apt, _mm256_andnot_pd(sgn, pm)))),
+            _CMP_GT_OQ);
+        __m256d el = _mm256_andnot_pd(
+            tens, _mm256_and_pd(_mm256_cmp_pd(fin, zero, _CMP_EQ_OQ),
+                                _mm256_cmp_pd(f, _mm256_mul_pd(ftol, scale), _CMP_LE_OQ)));
+        int me = _mm256_movemask_pd(el) & ((1 << (m < 4 ? m : 4)) - 1);
+        left |= (uint64_t)(~me & ((1 << (m < 4 ? m : 4)) - 1)) << i;
+        if (!me) continue;
+        /* the elastic lanes' stores; the others keep their values */
+        st4(x[0] + i, m, _mm256_blendv_pd(xx, t0, el));
+        st4(x[1] + i, m, _mm256_blendv_pd(yy, t1, el));
+        st4(x[2] + i, m, _mm256_blendv_pd(zz, t2, el));
+        st4(x[3] + i, m, _mm256_blendv_pd(xy, t3, el));
+        __m256d q0 = ld4(q[0] + i, m), q1 = ld4(q[1] + i, m), q3 = ld4(q[2] + i, m);
+        st4(q[0] + i, m, _mm256_blendv_pd(q0, _mm256_add_pd(q0, d0), el));
+        st4(q[1] + i, m, _mm256_blendv_pd(q1, _mm256_add_pd(q1, d1), el));
+        st4(q[2] + i, m, _mm256_blendv_pd(q3, _mm256_add_pd(q3, d3), el));
+        __m256d on = _mm256_and_pd(
+            one, _mm256_cmp_pd(f, _mm256_mul_pd(nftol, scale), _CMP_GT_OQ)); /* 1.0 or +0 */
+        st4(yld + i, m, _mm256_blendv_pd(ld4(yld + i, m), on, el));
+    }
+    return left;
+}
+
 #else
 /* no AVX2 in this build: every particle is left to mpm_plastic_update()
  * (mpm_sim.dp_lanes is 0 then, so this is not called) */
@@ -727,5 +823,12 @@ void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const doub
 {
     (void)P, (void)sig, (void)de, (void)epq, (void)dis, (void)nsub;
     for (size_t i = 0; i < n; i++) ok[i] = 0;
+}
+
+uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
+                              double *const x[4], double *const q[3], double *yld)
+{
+    (void)P, (void)e, (void)x, (void)q, (void)yld;
+    return n >= 64 ? ~(uint64_t)0 : ((uint64_t)1 << n) - 1;
 }
 #endif
