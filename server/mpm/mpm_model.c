@@ -586,6 +586,15 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
  * fills them.  frictional_block_2d() is this loop with a queue of its own;
  * mpm_dp_trial2d_lanes() (frictional_lanes_2d()) its elastic case four at
  * a time, with the same bits. */
+/* the Jaumann rotation (mpm_jaumann(), dim 2) of xx, yy, xy by the spin w */
+static inline void jaumann_2d(double xx, double yy, double xy, double w, double *s0, double *s1,
+                              double *s3)
+{
+    *s0 = xx + 2.0 * w * xy;
+    *s1 = yy - 2.0 * w * xy;
+    *s3 = xy + w * (yy - xx);
+}
+
 static void frictional_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1, dp_queue *qp)
 {
     mpm_particles *P = b->P;
@@ -598,8 +607,8 @@ static void frictional_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1, dp_
         const mpm_plastic_params *pl = mp->pl;
         double d0 = e0[i], d1 = e1[i], w = e2[i], d3 = e3[i];
         double xx = x0[i], yy = x1[i], zz = x2[i], xy = x3[i];
-        /* the Jaumann rotation (mpm_jaumann(), dim 2) */
-        double s0 = xx + 2.0 * w * xy, s1 = yy - 2.0 * w * xy, s3 = xy + w * (yy - xx);
+        double s0, s1, s3;
+        jaumann_2d(xx, yy, xy, w, &s0, &s1, &s3);
         if (pl->kind == MPM_PLASTIC_DRUCKER_PRAGER) {
             /* the trial (mpm_dp_trial()) */
             double g2 = 2 * pl->G, let = pl->lam * (d0 + d1 + 0.0);
@@ -641,12 +650,13 @@ static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
 /* frictional_block_2d() for a block of one Drucker-Prager material where
  * the job has mpm_sim.dp_lanes: the elastic trials four at a time
  * (mpm_dp_trial2d_lanes(), 64 particles to a call), then the particles it
- * leaves, in order, through frictional_block_2d()'s own loop (each a
- * block of one: the rotation from its unchanged stress, the queue). */
+ * leaves, in order, to the queue (the rotation from their unchanged
+ * stress, as frictional_2d() pushes them). */
 static void frictional_lanes_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
     mpm_particles *P = b->P;
-    const mpm_plastic_params *pl = b->mats[P->mat[b0 + i0]].pl;
+    const mpm_mat_params *mp = &b->mats[P->mat[b0 + i0]];
+    const mpm_plastic_params *pl = mp->pl;
     const double *const *e = (const double *const *)b->deps;
     dp_queue q;
     q.n = 0;
@@ -657,9 +667,12 @@ static void frictional_lanes_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
         double *qc[3] = {P->eps[0] + p0, P->eps[1] + p0, P->eps[3] + p0};
         uint64_t left = mpm_dp_trial2d_lanes(pl, m, ec, xc, qc, P->yld + p0);
         while (left) {
-            size_t i = c0 + (size_t)__builtin_ctzll(left);
+            size_t k = (size_t)__builtin_ctzll(left), p = p0 + k;
             left &= left - 1;
-            frictional_2d(b, b0, i, i + 1, &q);
+            double sig[6] = {0, 0, xc[2][k], 0, 0, 0},
+                   de[6] = {ec[0][k], ec[1][k], 0, ec[3][k], 0, 0};
+            jaumann_2d(xc[0][k], xc[1][k], xc[3][k], ec[2][k], &sig[0], &sig[1], &sig[3]);
+            dp_push(b, &q, mp, p, sig, de);
         }
     }
     dp_flush(b, &q);
