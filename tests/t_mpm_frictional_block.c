@@ -203,7 +203,7 @@ TEST(frictional_block_equals_general_path)
 /* The same with Drucker-Prager's updates queued for mpm_dp_lanes() (the
  * queues flushed at Mohr-Coulomb particles and at changes of material),
  * where this CPU has AVX2; and blocks of one Drucker-Prager material, whose
- * 2D elastic trials run four at a time (mpm_dp_trial2d_lanes()). */
+ * elastic trials run four at a time (mpm_dp_trial2d_lanes(), _3d()). */
 TEST(frictional_block_lanes_same_bits)
 {
     if (!mpm_kernels_avx2_available()) {
@@ -213,8 +213,6 @@ TEST(frictional_block_lanes_same_bits)
     one_dim(2, 1, -1);
     if (t_failed()) return;
     one_dim(3, 1, -1);
-    /* blocks of one Drucker-Prager material: 2D's trials in lanes */
-    for (int m = 0; m < 2 && !t_failed(); m++) one_dim(2, 1, m);
-    if (t_failed()) return;
-    one_dim(3, 1, 0);
+    /* blocks of one Drucker-Prager material: the trials in lanes too */
+    for (int m = 0; m < 4 && !t_failed(); m++) one_dim(2 + m / 2, 1, m % 2);
 }

@@ -719,23 +719,58 @@ static void frictional_block_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
     dp_flush(b, &dq);
 }
 
+/* frictional_block_3d() for a block of one Drucker-Prager material where
+ * the job has mpm_sim.dp_lanes, as frictional_lanes_2d() (the trials by
+ * mpm_dp_trial3d_lanes()). */
+static void frictional_lanes_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
+{
+    mpm_particles *P = b->P;
+    const mpm_mat_params *mp = &b->mats[P->mat[b0 + i0]];
+    dp_queue q;
+    q.n = 0;
+    for (size_t c0 = i0; c0 < i1; c0 += 64) {
+        size_t m = i1 - c0 < 64 ? i1 - c0 : 64, p0 = b0 + c0;
+        const double *ec[9];
+        double *xc[6], *qc[6];
+        for (int c = 0; c < 9; c++) ec[c] = b->deps[c] + c0;
+        for (int c = 0; c < 6; c++) {
+            xc[c] = P->sig[c] + p0;
+            qc[c] = P->eps[c] + p0;
+        }
+        uint64_t left = mpm_dp_trial3d_lanes(mp->pl, m, ec, xc, qc, P->yld + p0);
+        while (left) {
+            size_t k = (size_t)__builtin_ctzll(left);
+            left &= left - 1;
+            double sig[6], de[6], w[3] = {ec[6][k], ec[7][k], ec[8][k]};
+            for (int c = 0; c < 6; c++) {
+                sig[c] = xc[c][k];
+                de[c] = ec[c][k];
+            }
+            jaumann_3d(sig, w);
+            dp_push(b, &q, mp, p0 + k, sig, de);
+        }
+    }
+    dp_flush(b, &q);
+}
+
 /* The frictional models' block: frictional_block_2d() or _3d() where they
- * apply (the strain record kept, as the plastic models keep it). */
+ * apply (the strain record kept, as the plastic models keep it), their
+ * lanes (frictional_lanes_2d(), _3d()) for a block of one Drucker-Prager
+ * material where the job has mpm_sim.dp_lanes. */
 static void frictional_any(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
     const mpm_particles *P = b->P;
     int rec = 1;
     for (int c = 0; c < MPM_NCOMP(b->dim); c++) rec &= P->sig[c] && (P->eps[c] || c == 2);
+    int lanes = !b->general && b->dp_lanes && i1 > i0 &&
+                b->mats[P->mat[b0 + i0]].pl->kind == MPM_PLASTIC_DRUCKER_PRAGER &&
+                one_material(P->mat + b0 + i0, i1 - i0);
     if (b->general)
         frictional_block(b, b0, i0, i1);
-    else if (b->dim == 2 && rec && !P->eps[2] && b->dp_lanes && i1 > i0 &&
-             b->mats[P->mat[b0 + i0]].pl->kind == MPM_PLASTIC_DRUCKER_PRAGER &&
-             one_material(P->mat + b0 + i0, i1 - i0))
-        frictional_lanes_2d(b, b0, i0, i1);
     else if (b->dim == 2 && rec && !P->eps[2])
-        frictional_block_2d(b, b0, i0, i1);
+        (lanes ? frictional_lanes_2d : frictional_block_2d)(b, b0, i0, i1);
     else if (b->dim == 3 && rec && P->eps[2])
-        frictional_block_3d(b, b0, i0, i1);
+        (lanes ? frictional_lanes_3d : frictional_block_3d)(b, b0, i0, i1);
     else
         frictional_block(b, b0, i0, i1);
 }

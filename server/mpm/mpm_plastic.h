@@ -204,6 +204,12 @@ void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const doub
 uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
                               double *const x[4], double *const q[3], double *yld);
 
+/* The same in 3D (the 3D frictional block): e the increments xx, yy, zz,
+ * xy, yz, xz and the spins w_xy, w_yz, w_xz; x the six stresses; q the six
+ * strain-record components. */
+uint64_t mpm_dp_trial3d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[9],
+                              double *const x[6], double *const q[6], double *yld);
+
 /* The yield function at sig (the largest of the model's surfaces, in
  * stress units: <= 0 admissible) and the scale its tolerance is relative
  * to (*scale may be NULL): admissible within ftol means

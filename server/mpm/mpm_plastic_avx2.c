@@ -747,16 +747,76 @@ VI void st4(double *p, size_t n, __m256d v)
     _mm256_maskstore_pd(p, m, v);
 }
 
+/* The trial's constants (mpm_dp_trial()'s products, as it forms them). */
+typedef struct {
+    __m256d two, zero, g2, lam, three, half, eta, xc, ftol, nftol, pt, apt, sgn, one;
+} tk;
+
+static void tk_init(tk *k, const mpm_plastic_params *P)
+{
+    k->two = _mm256_set1_pd(2.0);
+    k->zero = _mm256_set1_pd(0.0);
+    k->g2 = _mm256_set1_pd(2 * P->G);
+    k->lam = _mm256_set1_pd(P->lam);
+    k->three = _mm256_set1_pd(3);
+    k->half = _mm256_set1_pd(0.5);
+    k->eta = _mm256_set1_pd(P->eta);
+    k->xc = _mm256_set1_pd(P->xi * P->c);
+    k->ftol = _mm256_set1_pd(P->ftol);
+    k->nftol = _mm256_set1_pd(-P->ftol);
+    k->pt = _mm256_set1_pd(P->pt);
+    k->apt = _mm256_set1_pd(fabs(P->pt));
+    k->sgn = _mm256_set1_pd(-0.0);
+    k->one = _mm256_set1_pd(1.0);
+}
+
+/* mpm_dp_trial() from the rotated stress r and the increment d, four
+ * particles: the trial t, and the lanes where it is admissible (all ones);
+ * *on 1.0 where such a trial is on the surface within ftol, else +0.  In
+ * 2D r[4], r[5], d[2], d[4] and d[5] are +0, which gives the written-out
+ * 2D loop's operations (its + 0.0 terms). */
+VI __m256d trial4(const tk *k, const __m256d r[6], const __m256d d[6], __m256d t[6], __m256d *on)
+{
+    __m256d let = _mm256_mul_pd(k->lam, _mm256_add_pd(_mm256_add_pd(d[0], d[1]), d[2]));
+    __m256d fin = k->zero;
+    for (int c = 0; c < 6; c++) {
+        __m256d De =
+            c < 3 ? _mm256_add_pd(let, _mm256_mul_pd(k->g2, d[c])) : _mm256_mul_pd(k->g2, d[c]);
+        t[c] = _mm256_add_pd(r[c], De);
+        fin = _mm256_add_pd(fin, _mm256_sub_pd(t[c], t[c])); /* NaN unless all finite */
+    }
+    __m256d pm = _mm256_div_pd(_mm256_add_pd(_mm256_add_pd(t[0], t[1]), t[2]), k->three);
+    __m256d a0 = _mm256_sub_pd(t[0], pm), a1 = _mm256_sub_pd(t[1], pm),
+            a2 = _mm256_sub_pd(t[2], pm);
+    __m256d n = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a0, a0), _mm256_mul_pd(a1, a1)),
+                              _mm256_mul_pd(a2, a2));
+    __m256d sh = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(t[3], t[3]), _mm256_mul_pd(t[4], t[4])),
+                               _mm256_mul_pd(t[5], t[5]));
+    __m256d rr =
+        _mm256_sqrt_pd(_mm256_mul_pd(k->half, _mm256_add_pd(n, _mm256_mul_pd(k->two, sh))));
+    __m256d ep = _mm256_mul_pd(k->eta, pm);
+    __m256d scale = _mm256_add_pd(_mm256_add_pd(rr, _mm256_andnot_pd(k->sgn, ep)), k->xc);
+    __m256d f = _mm256_sub_pd(_mm256_add_pd(rr, ep), k->xc);
+    __m256d lim = _mm256_add_pd(
+        k->pt, _mm256_mul_pd(k->ftol, _mm256_add_pd(k->apt, _mm256_andnot_pd(k->sgn, pm))));
+    __m256d tens = _mm256_cmp_pd(pm, lim, _CMP_GT_OQ);
+    *on = _mm256_and_pd(k->one, _mm256_cmp_pd(f, _mm256_mul_pd(k->nftol, scale), _CMP_GT_OQ));
+    return _mm256_andnot_pd(
+        tens, _mm256_and_pd(_mm256_cmp_pd(fin, k->zero, _CMP_EQ_OQ),
+                            _mm256_cmp_pd(f, _mm256_mul_pd(k->ftol, scale), _CMP_LE_OQ)));
+}
+
+/* the bits of the mask el's first m (1..4) lanes */
+VI unsigned lanes_of(__m256d el, size_t m)
+{
+    return (unsigned)_mm256_movemask_pd(el) & ((1u << (m < 4 ? m : 4)) - 1);
+}
+
 uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
                               double *const x[4], double *const q[3], double *yld)
 {
-    const __m256d two = _mm256_set1_pd(2.0), zero = _mm256_set1_pd(0.0);
-    const __m256d g2 = _mm256_set1_pd(2 * P->G), lam = _mm256_set1_pd(P->lam);
-    const __m256d three = _mm256_set1_pd(3), half = _mm256_set1_pd(0.5);
-    const __m256d eta = _mm256_set1_pd(P->eta), xc = _mm256_set1_pd(P->xi * P->c);
-    const __m256d ftol = _mm256_set1_pd(P->ftol), nftol = _mm256_set1_pd(-P->ftol);
-    const __m256d pt = _mm256_set1_pd(P->pt), apt = _mm256_set1_pd(fabs(P->pt));
-    const __m256d sgn = _mm256_set1_pd(-0.0), one = _mm256_set1_pd(1.0);
+    tk k;
+    tk_init(&k, P);
     uint64_t left = 0;
     for (size_t i = 0; i < n; i += 4) {
         size_t m = n - i;
@@ -765,51 +825,72 @@ uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const doubl
         __m256d xx = ld4(x[0] + i, m), yy = ld4(x[1] + i, m), zz = ld4(x[2] + i, m),
                 xy = ld4(x[3] + i, m);
         /* the Jaumann rotation: xx + 2.0 * w * xy is xx + ((2.0 * w) * xy) */
-        __m256d w2 = _mm256_mul_pd(two, w);
-        __m256d s0 = _mm256_add_pd(xx, _mm256_mul_pd(w2, xy));
-        __m256d s1 = _mm256_sub_pd(yy, _mm256_mul_pd(w2, xy));
-        __m256d s3 = _mm256_add_pd(xy, _mm256_mul_pd(w, _mm256_sub_pd(yy, xx)));
-        /* the trial */
-        __m256d let = _mm256_mul_pd(lam, _mm256_add_pd(_mm256_add_pd(d0, d1), zero));
-        __m256d t0 = _mm256_add_pd(s0, _mm256_add_pd(let, _mm256_mul_pd(g2, d0)));
-        __m256d t1 = _mm256_add_pd(s1, _mm256_add_pd(let, _mm256_mul_pd(g2, d1)));
-        __m256d t2 = _mm256_add_pd(zz, _mm256_add_pd(let, _mm256_mul_pd(g2, zero)));
-        __m256d t3 = _mm256_add_pd(s3, _mm256_mul_pd(g2, d3));
-        __m256d fin =
-            _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_sub_pd(t0, t0), _mm256_sub_pd(t1, t1)),
-                                        _mm256_sub_pd(t2, t2)),
-                          _mm256_sub_pd(t3, t3));
-        __m256d pm = _mm256_div_pd(_mm256_add_pd(_mm256_add_pd(t0, t1), t2), three);
-        __m256d a0 = _mm256_sub_pd(t0, pm), a1 = _mm256_sub_pd(t1, pm), a2 = _mm256_sub_pd(t2, pm);
-        __m256d dd = _mm256_add_pd(
-            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a0, a0), _mm256_mul_pd(a1, a1)),
-                          _mm256_mul_pd(a2, a2)),
-            _mm256_mul_pd(two, _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(t3, t3), zero), zero)));
-        __m256d r = _mm256_sqrt_pd(_mm256_mul_pd(half, dd));
-        __m256d ep = _mm256_mul_pd(eta, pm);
-        __m256d scale = _mm256_add_pd(_mm256_add_pd(r, _mm256_andnot_pd(sgn, ep)), xc);
-        __m256d f = _mm256_sub_pd(_mm256_add_pd(r, ep), xc);
-        __m256d tens = _mm256_cmp_pd(
-            pm,
-            _mm256_add_pd(pt, _mm256_mul_pd(ftol, _mm256_add_pd(apt, _mm256_andnot_pd(sgn, pm)))),
-            _CMP_GT_OQ);
-        __m256d el = _mm256_andnot_pd(
-            tens, _mm256_and_pd(_mm256_cmp_pd(fin, zero, _CMP_EQ_OQ),
-                                _mm256_cmp_pd(f, _mm256_mul_pd(ftol, scale), _CMP_LE_OQ)));
-        int me = _mm256_movemask_pd(el) & ((1 << (m < 4 ? m : 4)) - 1);
-        left |= (uint64_t)(~me & ((1 << (m < 4 ? m : 4)) - 1)) << i;
+        __m256d w2 = _mm256_mul_pd(k.two, w);
+        __m256d r[6] = {_mm256_add_pd(xx, _mm256_mul_pd(w2, xy)),
+                        _mm256_sub_pd(yy, _mm256_mul_pd(w2, xy)),
+                        zz,
+                        _mm256_add_pd(xy, _mm256_mul_pd(w, _mm256_sub_pd(yy, xx))),
+                        k.zero,
+                        k.zero};
+        __m256d d[6] = {d0, d1, k.zero, d3, k.zero, k.zero}, t[6], on;
+        __m256d el = trial4(&k, r, d, t, &on);
+        unsigned all = lanes_of(_mm256_cmp_pd(k.zero, k.zero, _CMP_EQ_OQ), m), me = lanes_of(el, m);
+        left |= (uint64_t)(all & ~me) << i;
         if (!me) continue;
         /* the elastic lanes' stores; the others keep their values */
-        st4(x[0] + i, m, _mm256_blendv_pd(xx, t0, el));
-        st4(x[1] + i, m, _mm256_blendv_pd(yy, t1, el));
-        st4(x[2] + i, m, _mm256_blendv_pd(zz, t2, el));
-        st4(x[3] + i, m, _mm256_blendv_pd(xy, t3, el));
+        st4(x[0] + i, m, _mm256_blendv_pd(xx, t[0], el));
+        st4(x[1] + i, m, _mm256_blendv_pd(yy, t[1], el));
+        st4(x[2] + i, m, _mm256_blendv_pd(zz, t[2], el));
+        st4(x[3] + i, m, _mm256_blendv_pd(xy, t[3], el));
         __m256d q0 = ld4(q[0] + i, m), q1 = ld4(q[1] + i, m), q3 = ld4(q[2] + i, m);
         st4(q[0] + i, m, _mm256_blendv_pd(q0, _mm256_add_pd(q0, d0), el));
         st4(q[1] + i, m, _mm256_blendv_pd(q1, _mm256_add_pd(q1, d1), el));
         st4(q[2] + i, m, _mm256_blendv_pd(q3, _mm256_add_pd(q3, d3), el));
-        __m256d on = _mm256_and_pd(
-            one, _mm256_cmp_pd(f, _mm256_mul_pd(nftol, scale), _CMP_GT_OQ)); /* 1.0 or +0 */
+        st4(yld + i, m, _mm256_blendv_pd(ld4(yld + i, m), on, el));
+    }
+    return left;
+}
+
+uint64_t mpm_dp_trial3d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[9],
+                              double *const x[6], double *const q[6], double *yld)
+{
+    /* the Voigt slot of S[a][b] (jaumann_3d()'s matrix), and the entries
+     * of R it stores, in Voigt order */
+    static const int vo[3][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}};
+    static const int ra[6] = {0, 1, 2, 0, 1, 0}, rb[6] = {0, 1, 2, 1, 2, 2};
+    tk k;
+    tk_init(&k, P);
+    uint64_t left = 0;
+    for (size_t i = 0; i < n; i += 4) {
+        size_t m = n - i;
+        __m256d d[6], s[6], t[6], r[6], W[3][3], on;
+        for (int c = 0; c < 6; c++) {
+            d[c] = ld4(e[c] + i, m);
+            s[c] = ld4(x[c] + i, m);
+        }
+        __m256d w0 = ld4(e[6] + i, m), w1 = ld4(e[7] + i, m), w2 = ld4(e[8] + i, m);
+        W[0][0] = k.zero, W[0][1] = w0, W[0][2] = w2;
+        W[1][0] = _mm256_xor_pd(k.sgn, w0), W[1][1] = k.zero, W[1][2] = w1;
+        W[2][0] = _mm256_xor_pd(k.sgn, w2), W[2][1] = _mm256_xor_pd(k.sgn, w1), W[2][2] = k.zero;
+        /* the Jaumann rotation (jaumann_3d()): R = S + (W S - S W), each
+         * entry's sum from 0 over k in order, the zero products kept */
+        for (int c = 0; c < 6; c++) {
+            int a = ra[c], b = rb[c];
+            __m256d acc = k.zero;
+            for (int j = 0; j < 3; j++)
+                acc = _mm256_add_pd(acc, _mm256_sub_pd(_mm256_mul_pd(W[a][j], s[vo[j][b]]),
+                                                       _mm256_mul_pd(s[vo[a][j]], W[j][b])));
+            r[c] = _mm256_add_pd(s[vo[a][b]], acc);
+        }
+        __m256d el = trial4(&k, r, d, t, &on);
+        unsigned all = lanes_of(_mm256_cmp_pd(k.zero, k.zero, _CMP_EQ_OQ), m), me = lanes_of(el, m);
+        left |= (uint64_t)(all & ~me) << i;
+        if (!me) continue;
+        for (int c = 0; c < 6; c++) {
+            st4(x[c] + i, m, _mm256_blendv_pd(s[c], t[c], el));
+            __m256d qc = ld4(q[c] + i, m);
+            st4(q[c] + i, m, _mm256_blendv_pd(qc, _mm256_add_pd(qc, d[c]), el));
+        }
         st4(yld + i, m, _mm256_blendv_pd(ld4(yld + i, m), on, el));
     }
     return left;
@@ -827,6 +908,13 @@ void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const doub
 
 uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
                               double *const x[4], double *const q[3], double *yld)
+{
+    (void)P, (void)e, (void)x, (void)q, (void)yld;
+    return n >= 64 ? ~(uint64_t)0 : ((uint64_t)1 << n) - 1;
+}
+
+uint64_t mpm_dp_trial3d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[9],
+                              double *const x[6], double *const q[6], double *yld)
 {
     (void)P, (void)e, (void)x, (void)q, (void)yld;
     return n >= 64 ? ~(uint64_t)0 : ((uint64_t)1 << n) - 1;
