@@ -573,6 +573,15 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
     dp_flush(b, &q);
 }
 
+/* the Jaumann rotation (mpm_jaumann(), dim 2) of xx, yy, xy by the spin w */
+static inline void jaumann_2d(double xx, double yy, double xy, double w, double *s0, double *s1,
+                              double *s3)
+{
+    *s0 = xx + 2.0 * w * xy;
+    *s1 = yy - 2.0 * w * xy;
+    *s3 = xy + w * (yy - xx);
+}
+
 /* frictional_block() in 2D (plane strain, with sigma_zz and the strain
  * record, as the plastic models keep them).  A granular flow's particles
  * are mostly elastic at a step, and for them rate_gather(),
@@ -586,15 +595,6 @@ static void frictional_block(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
  * fills them.  frictional_block_2d() is this loop with a queue of its own;
  * mpm_dp_trial2d_lanes() (frictional_lanes_2d()) its elastic case four at
  * a time, with the same bits. */
-/* the Jaumann rotation (mpm_jaumann(), dim 2) of xx, yy, xy by the spin w */
-static inline void jaumann_2d(double xx, double yy, double xy, double w, double *s0, double *s1,
-                              double *s3)
-{
-    *s0 = xx + 2.0 * w * xy;
-    *s1 = yy - 2.0 * w * xy;
-    *s3 = xy + w * (yy - xx);
-}
-
 static void frictional_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1, dp_queue *qp)
 {
     mpm_particles *P = b->P;
@@ -649,7 +649,7 @@ static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
 
 /* frictional_block_2d() for a block of one Drucker-Prager material where
  * the job has mpm_sim.dp_lanes: the elastic trials four at a time
- * (mpm_dp_trial2d_lanes(), 64 particles to a call), then the particles it
+ * (mpm_dp_trial2d_lanes(), MPM_DP_TRIAL_LANES_MAX particles to a call), then the particles it
  * leaves, in order, to the queue (the rotation from their unchanged
  * stress, as frictional_2d() pushes them). */
 static void frictional_lanes_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
@@ -660,8 +660,9 @@ static void frictional_lanes_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
     const double *const *e = (const double *const *)b->deps;
     dp_queue q;
     q.n = 0;
-    for (size_t c0 = i0; c0 < i1; c0 += 64) {
-        size_t m = i1 - c0 < 64 ? i1 - c0 : 64, p0 = b0 + c0;
+    for (size_t c0 = i0; c0 < i1; c0 += MPM_DP_TRIAL_LANES_MAX) {
+        size_t m = i1 - c0 < MPM_DP_TRIAL_LANES_MAX ? i1 - c0 : MPM_DP_TRIAL_LANES_MAX,
+               p0 = b0 + c0;
         const double *ec[4] = {e[0] + c0, e[1] + c0, e[2] + c0, e[3] + c0};
         double *xc[4] = {P->sig[0] + p0, P->sig[1] + p0, P->sig[2] + p0, P->sig[3] + p0};
         double *qc[3] = {P->eps[0] + p0, P->eps[1] + p0, P->eps[3] + p0};
@@ -728,8 +729,9 @@ static void frictional_lanes_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
     const mpm_mat_params *mp = &b->mats[P->mat[b0 + i0]];
     dp_queue q;
     q.n = 0;
-    for (size_t c0 = i0; c0 < i1; c0 += 64) {
-        size_t m = i1 - c0 < 64 ? i1 - c0 : 64, p0 = b0 + c0;
+    for (size_t c0 = i0; c0 < i1; c0 += MPM_DP_TRIAL_LANES_MAX) {
+        size_t m = i1 - c0 < MPM_DP_TRIAL_LANES_MAX ? i1 - c0 : MPM_DP_TRIAL_LANES_MAX,
+               p0 = b0 + c0;
         const double *ec[9];
         double *xc[6], *qc[6];
         for (int c = 0; c < 9; c++) ec[c] = b->deps[c] + c0;

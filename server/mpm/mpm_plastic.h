@@ -190,7 +190,8 @@ static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
 void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
                   double *dis, int *nsub, unsigned char *ok);
 
-/* Drucker-Prager's elastic trial of n <= 64 plane-strain particles of one
+/* Drucker-Prager's elastic trial of n <= MPM_DP_TRIAL_LANES_MAX (64: a bit
+ * of the result each) plane-strain particles of one
  * material (mpm_model.c's 2D frictional block), four at a time in AVX2
  * lanes with the scalar loop's operations in its order (so its bits): e
  * the increments d_xx, d_yy, the spin w and d_xy; x the stresses xx, yy,
@@ -200,7 +201,10 @@ void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const doub
  * the surface within ftol, else 0).  Returns the mask (bit i: particle i)
  * of the particles whose trial is not admissible (past the cut-off,
  * outside the cone or not finite): their x, q and yld are left as they
- * were, for the caller's plastic update. */
+ * were, for the caller's plastic update.  Called only where the CPU has
+ * AVX2 (mpm_sim.dp_lanes); a build without the AVX2 kernels leaves every
+ * particle. */
+#define MPM_DP_TRIAL_LANES_MAX 64
 uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
                               double *const x[4], double *const q[3], double *yld);
 
