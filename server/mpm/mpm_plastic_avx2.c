@@ -295,6 +295,38 @@ VI void vhooke(const kc *k, const V e[6], V s[6])
     for (int c = 3; c < 6; c++) s[c] = mul(k->g2, e[c]);
 }
 
+/* mpm_dp_trial()'s first test, a lane each: from the stress s and the
+ * increment e, De = D e, the trial tr = s + De, f(tr) and its scale, and
+ * the masks of the finite trials, of those past the cut-off and of those
+ * within the cone (f <= ftol scale).  The queue's first pass and the
+ * blocks' elastic trials (mpm_dp_trial2d_lanes(), _3d()) both take it. */
+typedef struct {
+    V f, scale, finite, tens, adm;
+} vtr;
+
+VI void vtrial(const kc *k, const V s[6], const V e[6], V De[6], V tr[6], vtr *t)
+{
+    V etr = add(add(e[0], e[1]), e[2]);
+    for (int c = 0; c < 3; c++) De[c] = add(mul(k->lam, etr), mul(k->g2, e[c]));
+    for (int c = 3; c < 6; c++) De[c] = mul(k->g2, e[c]);
+    V fin = k->zero;
+    for (int c = 0; c < 6; c++) {
+        tr[c] = add(s[c], De[c]);
+        fin = add(fin, sub(tr[c], tr[c])); /* NaN unless all six are finite */
+    }
+    V p = vmeanp(k, tr), d[3];
+    for (int c = 0; c < 3; c++) d[c] = sub(tr[c], p);
+    V dd = add(add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2])),
+               mul(k->two, add(add(mul(tr[3], tr[3]), mul(tr[4], tr[4])), mul(tr[5], tr[5]))));
+    V r = vsqrt(mul(k->half, dd));
+    V ep = mul(k->eta, p);
+    t->scale = add(add(r, vabs(ep)), k->xc);
+    t->f = sub(add(r, ep), k->xc);
+    t->finite = eq(fin, k->zero);
+    t->tens = gt(p, add(k->pt, mul(k->ftol, add(vabs(k->pt), vabs(p)))));
+    t->adm = le(t->f, mul(k->ftol, t->scale));
+}
+
 /* ---- per-particle staging between the three passes ---- */
 
 /* what a particle takes: ST_OUT the scalar update; ST_INSIDE the Pegasus
@@ -336,25 +368,10 @@ static void pass_trial(const kc *k, size_t n, const double *sig, const double *d
             E[c] = vrows(re, c);
         }
         /* De and the trial, as mpm_dp_trial() */
-        V etr = add(add(E[0], E[1]), E[2]);
-        for (int c = 0; c < 3; c++) De[c] = add(mul(k->lam, etr), mul(k->g2, E[c]));
-        for (int c = 3; c < 6; c++) De[c] = mul(k->g2, E[c]);
-        V fin = k->zero;
-        for (int c = 0; c < 6; c++) {
-            tr[c] = add(S[c], De[c]);
-            fin = add(fin, sub(tr[c], tr[c]));
-        }
-        V finite = eq(fin, k->zero);
-        V p = vmeanp(k, tr), d[3];
-        for (int c = 0; c < 3; c++) d[c] = sub(tr[c], p);
-        V dd = add(add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2])),
-                   mul(k->two, add(add(mul(tr[3], tr[3]), mul(tr[4], tr[4])), mul(tr[5], tr[5]))));
-        V r = vsqrt(mul(k->half, dd));
-        V ep = mul(k->eta, p);
-        V scale = add(add(r, vabs(ep)), k->xc);
-        V f = sub(add(r, ep), k->xc);
-        V tens = gt(p, add(k->pt, mul(k->ftol, add(vabs(k->pt), vabs(p)))));
-        V cone = vand(vand(finite, vnot(tens)), vnot(le(f, mul(k->ftol, scale))));
+        vtr t;
+        vtrial(k, S, E, De, tr, &t);
+        V finite = t.finite, tens = t.tens, f = t.f;
+        V cone = vand(vand(finite, vnot(tens)), vnot(t.adm));
         /* the start's invariants and f (dp_update()) */
         vinv v;
         vinvariants(k, S, &v);
@@ -729,124 +746,88 @@ void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const doub
     pass_tension(&k, n, sig, &g, epq, dis, nsub, ok);
 }
 
-/* n (1..4) lanes of p: a whole load, or a masked one past the end */
-VI __m256d ld4(const double *p, size_t n)
+/* n (1..NL) lanes of p: whole loads, or masked ones past the end */
+VI V vld(const double *p, size_t n)
 {
-    if (n >= 4) return _mm256_loadu_pd(p);
-    __m256i m = _mm256_cmpgt_epi64(_mm256_set1_epi64x((long long)n), _mm256_set_epi64x(3, 2, 1, 0));
-    return _mm256_maskload_pd(p, m);
-}
-
-VI void st4(double *p, size_t n, __m256d v)
-{
-    if (n >= 4) {
-        _mm256_storeu_pd(p, v);
-        return;
+    V v;
+    for (int i = 0; i < NH; i++) {
+        long long r = (long long)n - 4 * i;
+        __m256i m = _mm256_cmpgt_epi64(_mm256_set1_epi64x(r), _mm256_set_epi64x(3, 2, 1, 0));
+        v.h[i] = r >= 4 ? _mm256_loadu_pd(p + 4 * i) : _mm256_maskload_pd(p + 4 * i, m);
     }
-    __m256i m = _mm256_cmpgt_epi64(_mm256_set1_epi64x((long long)n), _mm256_set_epi64x(3, 2, 1, 0));
-    _mm256_maskstore_pd(p, m, v);
+    return v;
 }
 
-/* The trial's constants (mpm_dp_trial()'s products, as it forms them). */
-typedef struct {
-    __m256d two, zero, g2, lam, three, half, eta, xc, ftol, nftol, pt, apt, sgn, one;
-} tk;
-
-static void tk_init(tk *k, const mpm_plastic_params *P)
+VI void vst(double *p, size_t n, V v)
 {
-    k->two = _mm256_set1_pd(2.0);
-    k->zero = _mm256_set1_pd(0.0);
-    k->g2 = _mm256_set1_pd(2 * P->G);
-    k->lam = _mm256_set1_pd(P->lam);
-    k->three = _mm256_set1_pd(3);
-    k->half = _mm256_set1_pd(0.5);
-    k->eta = _mm256_set1_pd(P->eta);
-    k->xc = _mm256_set1_pd(P->xi * P->c);
-    k->ftol = _mm256_set1_pd(P->ftol);
-    k->nftol = _mm256_set1_pd(-P->ftol);
-    k->pt = _mm256_set1_pd(P->pt);
-    k->apt = _mm256_set1_pd(fabs(P->pt));
-    k->sgn = _mm256_set1_pd(-0.0);
-    k->one = _mm256_set1_pd(1.0);
+    for (int i = 0; i < NH; i++) {
+        long long r = (long long)n - 4 * i;
+        __m256i m = _mm256_cmpgt_epi64(_mm256_set1_epi64x(r), _mm256_set_epi64x(3, 2, 1, 0));
+        if (r >= 4)
+            _mm256_storeu_pd(p + 4 * i, v.h[i]);
+        else
+            _mm256_maskstore_pd(p + 4 * i, m, v.h[i]);
+    }
 }
 
-/* mpm_dp_trial() from the rotated stress r and the increment d, four
- * particles: the trial t, and the lanes where it is admissible (all ones);
- * *on 1.0 where such a trial is on the surface within ftol, else +0.  In
- * 2D r[4], r[5], d[2], d[4] and d[5] are +0, which gives the written-out
- * 2D loop's operations (its + 0.0 terms). */
-VI __m256d trial4(const tk *k, const __m256d r[6], const __m256d d[6], __m256d t[6], __m256d *on)
+VI V vneg(V a)
 {
-    __m256d let = _mm256_mul_pd(k->lam, _mm256_add_pd(_mm256_add_pd(d[0], d[1]), d[2]));
-    __m256d fin = k->zero;
+    V r;
+    for (int i = 0; i < NH; i++) r.h[i] = _mm256_xor_pd(_mm256_set1_pd(-0.0), a.h[i]);
+    return r;
+}
+
+/* A group of m (1..NL) particles' elastic trials from their rotated stress
+ * r and increment d (vtrial()), stored where admissible: x the stresses (s
+ * as loaded), q the strain record (its components' pointers; NULL where
+ * the increment is 0), yld the flag.  Returns the bits of the particles
+ * left. */
+VI unsigned trial_group(const kc *k, size_t m, const V r[6], const V d[6], const V s[6],
+                        double *const x[6], double *const q[6], double *yld)
+{
+    V De[6], t[6];
+    vtr v;
+    vtrial(k, r, d, De, t, &v);
+    V el = vand(vand(v.finite, vnot(v.tens)), v.adm);
+    unsigned all = (1u << (m < NL ? m : NL)) - 1, me = (unsigned)bits(el) & all;
+    if (!me) return all;
     for (int c = 0; c < 6; c++) {
-        __m256d De =
-            c < 3 ? _mm256_add_pd(let, _mm256_mul_pd(k->g2, d[c])) : _mm256_mul_pd(k->g2, d[c]);
-        t[c] = _mm256_add_pd(r[c], De);
-        fin = _mm256_add_pd(fin, _mm256_sub_pd(t[c], t[c])); /* NaN unless all finite */
+        if (x[c]) vst(x[c], m, sel(el, t[c], s[c]));
+        if (q[c]) {
+            V qc = vld(q[c], m);
+            vst(q[c], m, sel(el, add(qc, d[c]), qc));
+        }
     }
-    __m256d pm = _mm256_div_pd(_mm256_add_pd(_mm256_add_pd(t[0], t[1]), t[2]), k->three);
-    __m256d a0 = _mm256_sub_pd(t[0], pm), a1 = _mm256_sub_pd(t[1], pm),
-            a2 = _mm256_sub_pd(t[2], pm);
-    __m256d n = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a0, a0), _mm256_mul_pd(a1, a1)),
-                              _mm256_mul_pd(a2, a2));
-    __m256d sh = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(t[3], t[3]), _mm256_mul_pd(t[4], t[4])),
-                               _mm256_mul_pd(t[5], t[5]));
-    __m256d rr =
-        _mm256_sqrt_pd(_mm256_mul_pd(k->half, _mm256_add_pd(n, _mm256_mul_pd(k->two, sh))));
-    __m256d ep = _mm256_mul_pd(k->eta, pm);
-    __m256d scale = _mm256_add_pd(_mm256_add_pd(rr, _mm256_andnot_pd(k->sgn, ep)), k->xc);
-    __m256d f = _mm256_sub_pd(_mm256_add_pd(rr, ep), k->xc);
-    __m256d lim = _mm256_add_pd(
-        k->pt, _mm256_mul_pd(k->ftol, _mm256_add_pd(k->apt, _mm256_andnot_pd(k->sgn, pm))));
-    __m256d tens = _mm256_cmp_pd(pm, lim, _CMP_GT_OQ);
-    *on = _mm256_and_pd(k->one, _mm256_cmp_pd(f, _mm256_mul_pd(k->nftol, scale), _CMP_GT_OQ));
-    return _mm256_andnot_pd(
-        tens, _mm256_and_pd(_mm256_cmp_pd(fin, k->zero, _CMP_EQ_OQ),
-                            _mm256_cmp_pd(f, _mm256_mul_pd(k->ftol, scale), _CMP_LE_OQ)));
-}
-
-/* the bits of the mask el's first m (1..4) lanes */
-VI unsigned lanes_of(__m256d el, size_t m)
-{
-    return (unsigned)_mm256_movemask_pd(el) & ((1u << (m < 4 ? m : 4)) - 1);
+    V on = vand(k->one, gt(v.f, mul(k->nftol, v.scale))); /* 1.0 or +0 */
+    vst(yld, m, sel(el, on, vld(yld, m)));
+    return all & ~me;
 }
 
 uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],
                               double *const x[4], double *const q[3], double *yld)
 {
-    tk k;
-    tk_init(&k, P);
+    kc k;
+    k_init(&k, P);
     uint64_t left = 0;
-    for (size_t i = 0; i < n; i += 4) {
+    for (size_t i = 0; i < n; i += NL) {
         size_t m = n - i;
-        __m256d d0 = ld4(e[0] + i, m), d1 = ld4(e[1] + i, m), w = ld4(e[2] + i, m),
-                d3 = ld4(e[3] + i, m);
-        __m256d xx = ld4(x[0] + i, m), yy = ld4(x[1] + i, m), zz = ld4(x[2] + i, m),
-                xy = ld4(x[3] + i, m);
-        /* the Jaumann rotation: xx + 2.0 * w * xy is xx + ((2.0 * w) * xy) */
-        __m256d w2 = _mm256_mul_pd(k.two, w);
-        __m256d r[6] = {_mm256_add_pd(xx, _mm256_mul_pd(w2, xy)),
-                        _mm256_sub_pd(yy, _mm256_mul_pd(w2, xy)),
-                        zz,
-                        _mm256_add_pd(xy, _mm256_mul_pd(w, _mm256_sub_pd(yy, xx))),
-                        k.zero,
-                        k.zero};
-        __m256d d[6] = {d0, d1, k.zero, d3, k.zero, k.zero}, t[6], on;
-        __m256d el = trial4(&k, r, d, t, &on);
-        unsigned all = lanes_of(_mm256_cmp_pd(k.zero, k.zero, _CMP_EQ_OQ), m), me = lanes_of(el, m);
-        left |= (uint64_t)(all & ~me) << i;
-        if (!me) continue;
-        /* the elastic lanes' stores; the others keep their values */
-        st4(x[0] + i, m, _mm256_blendv_pd(xx, t[0], el));
-        st4(x[1] + i, m, _mm256_blendv_pd(yy, t[1], el));
-        st4(x[2] + i, m, _mm256_blendv_pd(zz, t[2], el));
-        st4(x[3] + i, m, _mm256_blendv_pd(xy, t[3], el));
-        __m256d q0 = ld4(q[0] + i, m), q1 = ld4(q[1] + i, m), q3 = ld4(q[2] + i, m);
-        st4(q[0] + i, m, _mm256_blendv_pd(q0, _mm256_add_pd(q0, d0), el));
-        st4(q[1] + i, m, _mm256_blendv_pd(q1, _mm256_add_pd(q1, d1), el));
-        st4(q[2] + i, m, _mm256_blendv_pd(q3, _mm256_add_pd(q3, d3), el));
-        st4(yld + i, m, _mm256_blendv_pd(ld4(yld + i, m), on, el));
+        V d0 = vld(e[0] + i, m), d1 = vld(e[1] + i, m), w = vld(e[2] + i, m), d3 = vld(e[3] + i, m);
+        V xx = vld(x[0] + i, m), yy = vld(x[1] + i, m), zz = vld(x[2] + i, m),
+          xy = vld(x[3] + i, m);
+        /* the Jaumann rotation (jaumann_2d()): xx + 2.0 * w * xy is
+         * xx + ((2.0 * w) * xy); the zero components of 2D's plane strain
+         * as zero lanes give the written-out 2D loop's + 0.0 terms */
+        V w2 = mul(k.two, w);
+        V r[6] = {add(xx, mul(w2, xy)),
+                  sub(yy, mul(w2, xy)),
+                  zz,
+                  add(xy, mul(w, sub(yy, xx))),
+                  k.zero,
+                  k.zero};
+        V d[6] = {d0, d1, k.zero, d3, k.zero, k.zero}, s[6] = {xx, yy, zz, xy, k.zero, k.zero};
+        double *xi[6] = {x[0] + i, x[1] + i, x[2] + i, x[3] + i, NULL, NULL};
+        double *qi[6] = {q[0] + i, q[1] + i, NULL, q[2] + i, NULL, NULL};
+        left |= (uint64_t)trial_group(&k, m, r, d, s, xi, qi, yld + i) << i;
     }
     return left;
 }
@@ -858,40 +839,33 @@ uint64_t mpm_dp_trial3d_lanes(const mpm_plastic_params *P, size_t n, const doubl
      * of R it stores, in Voigt order */
     static const int vo[3][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}};
     static const int ra[6] = {0, 1, 2, 0, 1, 0}, rb[6] = {0, 1, 2, 1, 2, 2};
-    tk k;
-    tk_init(&k, P);
+    kc k;
+    k_init(&k, P);
     uint64_t left = 0;
-    for (size_t i = 0; i < n; i += 4) {
+    for (size_t i = 0; i < n; i += NL) {
         size_t m = n - i;
-        __m256d d[6], s[6], t[6], r[6], W[3][3], on;
+        V d[6], s[6], r[6], W[3][3];
+        double *xi[6], *qi[6];
         for (int c = 0; c < 6; c++) {
-            d[c] = ld4(e[c] + i, m);
-            s[c] = ld4(x[c] + i, m);
+            d[c] = vld(e[c] + i, m);
+            s[c] = vld(x[c] + i, m);
+            xi[c] = x[c] + i;
+            qi[c] = q[c] + i;
         }
-        __m256d w0 = ld4(e[6] + i, m), w1 = ld4(e[7] + i, m), w2 = ld4(e[8] + i, m);
+        V w0 = vld(e[6] + i, m), w1 = vld(e[7] + i, m), w2 = vld(e[8] + i, m);
         W[0][0] = k.zero, W[0][1] = w0, W[0][2] = w2;
-        W[1][0] = _mm256_xor_pd(k.sgn, w0), W[1][1] = k.zero, W[1][2] = w1;
-        W[2][0] = _mm256_xor_pd(k.sgn, w2), W[2][1] = _mm256_xor_pd(k.sgn, w1), W[2][2] = k.zero;
+        W[1][0] = vneg(w0), W[1][1] = k.zero, W[1][2] = w1;
+        W[2][0] = vneg(w2), W[2][1] = vneg(w1), W[2][2] = k.zero;
         /* the Jaumann rotation (jaumann_3d()): R = S + (W S - S W), each
          * entry's sum from 0 over k in order, the zero products kept */
         for (int c = 0; c < 6; c++) {
             int a = ra[c], b = rb[c];
-            __m256d acc = k.zero;
+            V acc = k.zero;
             for (int j = 0; j < 3; j++)
-                acc = _mm256_add_pd(acc, _mm256_sub_pd(_mm256_mul_pd(W[a][j], s[vo[j][b]]),
-                                                       _mm256_mul_pd(s[vo[a][j]], W[j][b])));
-            r[c] = _mm256_add_pd(s[vo[a][b]], acc);
+                acc = add(acc, sub(mul(W[a][j], s[vo[j][b]]), mul(s[vo[a][j]], W[j][b])));
+            r[c] = add(s[vo[a][b]], acc);
         }
-        __m256d el = trial4(&k, r, d, t, &on);
-        unsigned all = lanes_of(_mm256_cmp_pd(k.zero, k.zero, _CMP_EQ_OQ), m), me = lanes_of(el, m);
-        left |= (uint64_t)(all & ~me) << i;
-        if (!me) continue;
-        for (int c = 0; c < 6; c++) {
-            st4(x[c] + i, m, _mm256_blendv_pd(s[c], t[c], el));
-            __m256d qc = ld4(q[c] + i, m);
-            st4(q[c] + i, m, _mm256_blendv_pd(qc, _mm256_add_pd(qc, d[c]), el));
-        }
-        st4(yld + i, m, _mm256_blendv_pd(ld4(yld + i, m), on, el));
+        left |= (uint64_t)trial_group(&k, m, r, d, s, xi, qi, yld + i) << i;
     }
     return left;
 }
