@@ -507,6 +507,13 @@ static void dp_flush(mpm_model_blk *b, dp_queue *q)
     int nsub[MPM_DP_LANES_MAX];
     unsigned char ok[MPM_DP_LANES_MAX];
     mpm_dp_lanes(q->mp->pl, q->n, q->sig, q->de, epq, dis, nsub, ok);
+    /* rate_put() on the arrays' pointers taken once */
+    const int nc = MPM_NCOMP(b->dim);
+    double *xs[6], *xe[6];
+    for (int c = 0; c < nc; c++) {
+        xs[c] = P->sig[c];
+        xe[c] = P->eps[c];
+    }
     for (size_t k = 0; k < q->n; k++) {
         size_t p = q->p[k];
         double *sig = q->sig + 6 * k;
@@ -515,7 +522,10 @@ static void dp_flush(mpm_model_blk *b, dp_queue *q)
             frictional_update(b, q->mp, p, sig, de);
             continue;
         }
-        rate_put(b, p, sig, de);
+        for (int c = 0; c < nc; c++) {
+            xs[c][p] = sig[c];
+            if (xe[c]) xe[c][p] += de[c];
+        }
         P->epsp[p] += epq[k];
         P->yld[p] = 1.0;
         if (nsub[k]) {
@@ -528,6 +538,17 @@ static void dp_flush(mpm_model_blk *b, dp_queue *q)
     q->n = 0;
 }
 
+/* The queue's next slot, for particle p of the Drucker-Prager material mp
+ * (the queue run first when it is full or holds another material); the
+ * caller fills the slot's rotated stress and increment. */
+static size_t dp_slot(mpm_model_blk *b, dp_queue *q, const mpm_mat_params *mp, size_t p)
+{
+    if (q->n == MPM_DP_LANES_MAX || (q->n && q->mp != mp)) dp_flush(b, q);
+    q->mp = mp;
+    q->p[q->n] = p;
+    return q->n++;
+}
+
 /* frictional_update() of particle p, or its place in the queue (a
  * Drucker-Prager particle, where the job has mpm_sim.dp_lanes). */
 static void dp_push(mpm_model_blk *b, dp_queue *q, const mpm_mat_params *mp, size_t p,
@@ -538,12 +559,9 @@ static void dp_push(mpm_model_blk *b, dp_queue *q, const mpm_mat_params *mp, siz
         frictional_update(b, mp, p, sig, de);
         return;
     }
-    if (q->n == MPM_DP_LANES_MAX || (q->n && q->mp != mp)) dp_flush(b, q);
-    q->mp = mp;
-    q->p[q->n] = p;
-    memcpy(q->sig + 6 * q->n, sig, 6 * sizeof sig[0]);
-    memcpy(q->de + 6 * q->n, de, 6 * sizeof de[0]);
-    q->n++;
+    size_t j = dp_slot(b, q, mp, p);
+    memcpy(q->sig + 6 * j, sig, 6 * sizeof sig[0]);
+    memcpy(q->de + 6 * j, de, 6 * sizeof de[0]);
 }
 
 /* rate_block() for the frictional models, with Drucker-Prager's elastic
@@ -668,12 +686,18 @@ static void frictional_lanes_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
         double *qc[3] = {P->eps[0] + p0, P->eps[1] + p0, P->eps[3] + p0};
         uint64_t left = mpm_dp_trial2d_lanes(pl, m, ec, xc, qc, P->yld + p0);
         while (left) {
-            size_t k = (size_t)__builtin_ctzll(left), p = p0 + k;
+            size_t k = (size_t)__builtin_ctzll(left), j = dp_slot(b, &q, mp, p0 + k);
             left &= left - 1;
-            double sig[6] = {0, 0, xc[2][k], 0, 0, 0},
-                   de[6] = {ec[0][k], ec[1][k], 0, ec[3][k], 0, 0};
+            /* written in the slot, a double at a time (a row built on the
+             * stack and copied whole would wait on store forwarding) */
+            double *sig = q.sig + 6 * j, *de = q.de + 6 * j;
             jaumann_2d(xc[0][k], xc[1][k], xc[3][k], ec[2][k], &sig[0], &sig[1], &sig[3]);
-            dp_push(b, &q, mp, p, sig, de);
+            sig[2] = xc[2][k];
+            sig[4] = sig[5] = 0;
+            de[0] = ec[0][k];
+            de[1] = ec[1][k];
+            de[3] = ec[3][k];
+            de[2] = de[4] = de[5] = 0;
         }
     }
     dp_flush(b, &q);
@@ -741,15 +765,14 @@ static void frictional_lanes_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
         }
         uint64_t left = mpm_dp_trial3d_lanes(mp->pl, m, ec, xc, qc, P->yld + p0);
         while (left) {
-            size_t k = (size_t)__builtin_ctzll(left);
+            size_t k = (size_t)__builtin_ctzll(left), j = dp_slot(b, &q, mp, p0 + k);
             left &= left - 1;
-            double sig[6], de[6], w[3] = {ec[6][k], ec[7][k], ec[8][k]};
+            double *sig = q.sig + 6 * j, *de = q.de + 6 * j, w[3] = {ec[6][k], ec[7][k], ec[8][k]};
             for (int c = 0; c < 6; c++) {
                 sig[c] = xc[c][k];
                 de[c] = ec[c][k];
             }
             jaumann_3d(sig, w);
-            dp_push(b, &q, mp, p0 + k, sig, de);
         }
     }
     dp_flush(b, &q);
