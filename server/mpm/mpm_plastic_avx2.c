@@ -524,33 +524,39 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
     V lm[NL], s[6], rest[6], src[6], T, dT, fail, dsum, eqp;
     vinv v;
     int nn[NL], acc[NL], who[NL];
-    size_t next = 0;
+    /* the particles this pass takes, in order (no branch per particle) */
+    size_t idx[MPM_DP_LANES_MAX], nt = 0, next = 0;
+    for (size_t i = 0; i < n; i++) {
+        idx[nt] = i;
+        nt += g->kind[i] == ST_INSIDE || g->kind[i] == ST_SURFACE;
+    }
     lane_masks(lm);
     for (int c = 0; c < 6; c++) s[c] = rest[c] = src[c] = v.d[c] = k->zero;
     v.p = v.r = v.inv = T = dT = fail = dsum = eqp = k->zero;
     for (int j = 0; j < NL; j++) who[j] = nn[j] = acc[j] = -1;
+    /* live: the lanes that carry a particle (bit j: lane j); the lanes'
+     * bookkeeping walks mask bits, not a test per lane */
+    int live = 0;
     for (;;) {
-        int live = 0, fresh = 0;
-        for (int j = 0; j < NL; j++) {
-            while (who[j] < 0 && next < n) {
-                size_t i = next++;
-                if (g->kind[i] != ST_INSIDE && g->kind[i] != ST_SURFACE) continue;
-                who[j] = (int)i;
-                fresh |= 1 << j;
-                double al = g->al[i];
-                for (int c = 0; c < 6; c++) {
-                    double sc = sig[6 * i + c] + al * g->De[i][c];
-                    s[c] = put(s[c], j, sc, lm);
-                    rest[c] = put(rest[c], j, (1 - al) * de[6 * i + c], lm);
-                    /* the invariants of s, or of sig when al is 0 (the
-                     * scalar update keeps those) */
-                    src[c] = put(src[c], j, al != 0 ? sc : sig[6 * i + c], lm);
-                }
-                nn[j] = 0;
-                acc[j] = 0;
+        int fresh = 0;
+        for (int idle = ~live & ALL; idle && next < nt; idle &= idle - 1) {
+            int j = __builtin_ctz((unsigned)idle);
+            size_t i = idx[next++];
+            who[j] = (int)i;
+            fresh |= 1 << j;
+            double al = g->al[i];
+            for (int c = 0; c < 6; c++) {
+                double sc = sig[6 * i + c] + al * g->De[i][c];
+                s[c] = put(s[c], j, sc, lm);
+                rest[c] = put(rest[c], j, (1 - al) * de[6 * i + c], lm);
+                /* the invariants of s, or of sig when al is 0 (the
+                 * scalar update keeps those) */
+                src[c] = put(src[c], j, al != 0 ? sc : sig[6 * i + c], lm);
             }
-            live |= (who[j] >= 0) << j;
+            nn[j] = 0;
+            acc[j] = 0;
         }
+        live |= fresh;
         if (!live) return;
         if (fresh) {
             V m = mask_of(fresh, lm);
@@ -568,8 +574,8 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         }
         /* n++ >= max_substeps: the scalar update diverges */
         int quit = 0;
-        for (int j = 0; j < NL; j++)
-            if (who[j] >= 0 && nn[j]++ >= P->max_substeps) quit |= 1 << j;
+        for (int j = 0; j < NL; j++) quit |= (nn[j]++ >= P->max_substeps) << j;
+        quit &= live;
         V e[6], De[6], ds1[6], ds2[6], s1[6], sn[6], diff[6];
         vinv v1;
         for (int c = 0; c < 6; c++) e[c] = mul(dT, rest[c]);
@@ -649,29 +655,26 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         dsum = sel(ac, disa, dsum);
         eqp = sel(ac, eqa, eqp);
         int ma = bits(ac), mf = bits(fin_a), mt = bits(gt(va.p, k->pt));
-        for (int j = 0; j < NL; j++) {
-            if (who[j] < 0) continue;
+        /* quit, or bad and accepted: left to the scalar update */
+        int gone = (quit | (bad & ma)) & live, took = ma & live & ~gone;
+        for (int j = 0; j < NL; j++) acc[j] += took >> j & 1;
+        for (int b = gone; b; b &= b - 1) ok[who[__builtin_ctz((unsigned)b)]] = 0;
+        /* done: a stress past the cut-off is left to the scalar update */
+        int done = took & mf;
+        for (int b = done; b; b &= b - 1) {
+            int j = __builtin_ctz((unsigned)b);
             size_t i = (size_t)who[j];
-            if ((quit | (bad & ma)) >> j & 1) {
-                ok[i] = 0;
-                who[j] = -1;
-                continue;
-            }
-            if (!(ma >> j & 1)) continue;
-            acc[j]++;
-            if (!(mf >> j & 1)) continue;
-            /* done: a stress past the cut-off is left to the scalar update */
             if (mt >> j & 1) {
                 ok[i] = 0;
-            } else {
-                for (int c = 0; c < 6; c++) sig[6 * i + c] = get(s[c], j);
-                epq[i] = get(eqp, j);
-                dis[i] = get(dsum, j);
-                nsub[i] = acc[j];
-                ok[i] = 1;
+                continue;
             }
-            who[j] = -1;
+            for (int c = 0; c < 6; c++) sig[6 * i + c] = get(s[c], j);
+            epq[i] = get(eqp, j);
+            dis[i] = get(dsum, j);
+            nsub[i] = acc[j];
+            ok[i] = 1;
         }
+        live &= ~(gone | done);
     }
 }
 
