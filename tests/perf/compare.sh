@@ -32,8 +32,9 @@
 #                      GIMP / B-spline 12, 3D MPM 16, 3D others 5 for 10^6)
 #   COMPARE_STEPS      fixed steps for every configuration instead
 #   COMPARE_ARGS       the configurations, ';'-separated bin/mpmbench
-#                      arguments (without --particles / --csv; --steps
-#                      given there wins over the rule above), e.g.
+#                      arguments (without --csv; --steps given there wins
+#                      over the rule above, --particles over
+#                      COMPARE_PARTICLES), e.g.
 #                      "--scene disks2d --method mpm --threads 2"
 #   COMPARE_QUICK=1    a short sanity run: disks2d and cube3d MPM USF on 2
 #                      threads, 50000 particles, 5 steps, 2 rounds
@@ -100,6 +101,13 @@ ref_can() {
     return 0
 }
 
+# particles for a configuration: its own --particles, else COMPARE_PARTICLES
+particles_for() {
+    local own
+    own=$(awk '{ for (i = 1; i < NF; i++) if ($i == "--particles") print $(i + 1) }' <<<"$1")
+    echo "${own:-$PARTICLES}"
+}
+
 # steps for a configuration (the issue #5 target speeds, as bin/mpmbench)
 steps_for() {
     local own
@@ -119,7 +127,7 @@ steps_for() {
     else
         rate=$([ $dim = 3 ] && echo 3 || echo 12)
     fi
-    awk -v r="$rate" -v s="$RUN_S" -v n="$PARTICLES" \
+    awk -v r="$rate" -v s="$RUN_S" -v n="$(particles_for "$1")" \
         'BEGIN { k = r * 1e6 * s / n; k = (k == int(k)) ? k : int(k) + 1; if (k < 5) k = 5; print k }'
 }
 
@@ -183,12 +191,13 @@ for ((r = 1; r <= ROUNDS; r++)); do
     for ((k = 0; k < NC; k++)); do
         c=${CFGS[k]}
         s=$(steps_for "$c")
-        echo "  round $r/$ROUNDS, $((k + 1))/$NC: $c (steps $s) [$(($(date +%s) - T0)) s]" >&2
-        c=$(awk '{ for (i = 1; i <= NF; i++) if ($i == "--steps") i++; else printf "%s ", $i }' <<<"$c")
+        n=$(particles_for "$c")
+        echo "  round $r/$ROUNDS, $((k + 1))/$NC: $c (steps $s, particles $n) [$(($(date +%s) - T0)) s]" >&2
+        c=$(awk '{ for (i = 1; i <= NF; i++) if ($i == "--steps" || $i == "--particles") i++; else printf "%s ", $i }' <<<"$c")
         if ref_can "$c"; then
-            run_one before "$k" "$BEFORE" $c --particles "$PARTICLES" --steps "$s"
+            run_one before "$k" "$BEFORE" $c --particles "$n" --steps "$s"
         fi
-        run_one after "$k" "$AFTER" $c --particles "$PARTICLES" --steps "$s"
+        run_one after "$k" "$AFTER" $c --particles "$n" --steps "$s"
     done
 done
 
