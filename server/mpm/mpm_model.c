@@ -507,13 +507,6 @@ static void dp_flush(mpm_model_blk *b, dp_queue *q)
     int nsub[MPM_DP_LANES_MAX];
     unsigned char ok[MPM_DP_LANES_MAX];
     mpm_dp_lanes(q->mp->pl, q->n, q->sig, q->de, epq, dis, nsub, ok);
-    /* rate_put() on the arrays' pointers taken once */
-    const int nc = MPM_NCOMP(b->dim);
-    double *xs[6], *xe[6];
-    for (int c = 0; c < nc; c++) {
-        xs[c] = P->sig[c];
-        xe[c] = P->eps[c];
-    }
     for (size_t k = 0; k < q->n; k++) {
         size_t p = q->p[k];
         double *sig = q->sig + 6 * k;
@@ -522,10 +515,7 @@ static void dp_flush(mpm_model_blk *b, dp_queue *q)
             frictional_update(b, q->mp, p, sig, de);
             continue;
         }
-        for (int c = 0; c < nc; c++) {
-            xs[c][p] = sig[c];
-            if (xe[c]) xe[c][p] += de[c];
-        }
+        rate_put(b, p, sig, de);
         P->epsp[p] += epq[k];
         P->yld[p] = 1.0;
         if (nsub[k]) {
