@@ -506,7 +506,7 @@ static void dp_flush(mpm_model_blk *b, dp_queue *q)
     double epq[MPM_DP_LANES_MAX], dis[MPM_DP_LANES_MAX];
     int nsub[MPM_DP_LANES_MAX];
     unsigned char ok[MPM_DP_LANES_MAX];
-    mpm_dp_lanes(q->mp->pl, q->n, q->sig, q->de, epq, dis, nsub, ok);
+    mpm_dp_lanes(q->mp->pl, b->dim == 3 ? 6 : 4, q->n, q->sig, q->de, epq, dis, nsub, ok);
     for (size_t k = 0; k < q->n; k++) {
         size_t p = q->p[k];
         double *sig = q->sig + 6 * k;

@@ -177,7 +177,9 @@ static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
 
 /* Drucker-Prager updates of n <= MPM_DP_LANES_MAX particles whose
  * elastic trial is not admissible (sig and de: n rows of 6, Voigt as
- * above), four at a time in the lanes of AVX2 vectors
+ * above; nc 6, or 4 where every row's components 4 and 5, yz and xz, are
+ * zero, as in 1D and 2D: those are then neither read nor written), four
+ * at a time in the lanes of AVX2 vectors
  * (mpm_plastic_avx2.c; only where MPM_HAVE_AVX2_KERNELS is defined and the
  * CPU has AVX2): for each particle i that takes the common paths (the
  * cone's substeps, the tension cut-off's closed form), ok[i] = 1, sig's row i the updated stress,
@@ -187,8 +189,8 @@ static inline int mpm_dp_trial(const mpm_plastic_params *P, const double sig[6],
  * cut-off met after the substeps) or whose trial is elastic, its row of
  * sig unchanged, for mpm_plastic_update(). */
 #define MPM_DP_LANES_MAX 64
-void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
-                  double *dis, int *nsub, unsigned char *ok);
+void mpm_dp_lanes(const mpm_plastic_params *P, int nc, size_t n, double *sig, const double *de,
+                  double *epq, double *dis, int *nsub, unsigned char *ok);
 
 /* Drucker-Prager's elastic trial of n <= MPM_DP_TRIAL_LANES_MAX (64: a bit
  * of the result each) plane-strain particles of one

@@ -13,6 +13,11 @@
  * (an unloading start, the normal drift correction, a divergence, a
  * cut-off met after the substeps) are not here: such a particle is
  * reported not done, its inputs untouched, for mpm_plastic_update().
+ * The passes are built twice (dp_lanes6(), dp_lanes4()): for rows of six
+ * components, and for rows whose yz and xz are zero (1D, 2D plane
+ * strain), which stay zero through every pass and are left out; the two
+ * zero terms they add to a sum change it only where it is a zero, from
+ * -0 to +0, and nothing downstream tells those apart (vddot()).
  * Built only on x86-64 (MPM_HAVE_AVX2_KERNELS) and called only where the
  * CPU has AVX2.
  */
@@ -157,11 +162,16 @@ static void k_init(kc *k, const mpm_plastic_params *P)
     k->pt_finite = isfinite(P->pt) != 0;
 }
 
-/* a : b (ddot()) */
-VI V vddot(const V a[6], const V b[6])
+/* a : b (ddot()).  With nc = 4 (rows whose components 4 and 5 are
+ * zero: 1D, 2D) the two zero products are left out: they change the sum
+ * only where it is a zero, from -0 to +0, and no caller tells those apart
+ * (the multiplier's num > 0 and the unloading's cos < -LTOL; the rest are
+ * sums of squares, and the cut-off's dissipation adds its terms to +0). */
+VI V vddot(const V a[6], const V b[6], const int nc)
 {
     V n = add(add(mul(a[0], b[0]), mul(a[1], b[1])), mul(a[2], b[2]));
-    V s = add(add(mul(a[3], b[3]), mul(a[4], b[4])), mul(a[5], b[5]));
+    V s = mul(a[3], b[3]);
+    if (nc == 6) s = add(add(s, mul(a[4], b[4])), mul(a[5], b[5]));
     return add(n, mul(k1(2), s));
 }
 
@@ -176,25 +186,25 @@ VI V vmeanp(const kc *k, const V s[6])
     return dvd(add(add(s[0], s[1]), s[2]), k->three);
 }
 
-/* sqrt_j2_p() */
-VI V vj2(const kc *k, const V s[6], V p, V d[6])
+/* sqrt_j2_p() (nc = 4: the zero components' squares, +0, left out of a
+ * sum that starts with a square) */
+VI V vj2(const kc *k, const V s[6], V p, V d[6], const int nc)
 {
     d[0] = sub(s[0], p);
     d[1] = sub(s[1], p);
     d[2] = sub(s[2], p);
-    d[3] = s[3];
-    d[4] = s[4];
-    d[5] = s[5];
+    for (int c = 3; c < nc; c++) d[c] = s[c];
     V n = add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2]));
-    V sh = add(add(mul(d[3], d[3]), mul(d[4], d[4])), mul(d[5], d[5]));
+    V sh = mul(d[3], d[3]);
+    if (nc == 6) sh = add(add(sh, mul(d[4], d[4])), mul(d[5], d[5]));
     return vsqrt(mul(k->half, add(n, mul(k->two, sh))));
 }
 
 /* dp_invariants() */
-VI void vinvariants(const kc *k, const V s[6], vinv *v)
+VI void vinvariants(const kc *k, const V s[6], vinv *v, const int nc)
 {
     V p = vmeanp(k, s);
-    V r = vj2(k, s, p, v->d);
+    V r = vj2(k, s, p, v->d, nc);
     V scale = add(add(r, vabs(mul(k->eta, p))), k->xc);
     V on = vand(gt(r, mul(k1(TINY_REL), scale)), gt(r, k->zero));
     v->p = p;
@@ -212,9 +222,9 @@ VI V vf_inv(const kc *k, const vinv *v, V *scale)
 
 /* dp_f() at s, and with cut (yield_fast()) where the cut-off is finite
  * the larger of it and p - pt (the larger scale too) */
-VI V vf(const kc *k, const V s[6], int cut, V *scale)
+VI V vf(const kc *k, const V s[6], int cut, V *scale, const int nc)
 {
-    V d[6], p = vmeanp(k, s), r = vj2(k, s, p, d), ep = mul(k->eta, p);
+    V d[6], p = vmeanp(k, s), r = vj2(k, s, p, d, nc), ep = mul(k->eta, p);
     V sc = add(add(r, vabs(ep)), k->xc), f = sub(add(r, ep), k->xc);
     if (cut && k->pt_finite) {
         V ft = sub(p, k->pt), sct = add(vabs(p), vabs(k->pt));
@@ -226,11 +236,11 @@ VI V vf(const kc *k, const V s[6], int cut, V *scale)
 }
 
 /* vf() at s + al De (dp_f_at()) */
-VI V vf_at(const kc *k, const V s[6], const V De[6], V al, int cut, V *scale)
+VI V vf_at(const kc *k, const V s[6], const V De[6], V al, int cut, V *scale, const int nc)
 {
     V x[6];
-    for (int c = 0; c < 6; c++) x[c] = add(s[c], mul(al, De[c]));
-    return vf(k, x, cut, scale);
+    for (int c = 0; c < nc; c++) x[c] = add(s[c], mul(al, De[c]));
+    return vf(k, x, cut, scale, nc);
 }
 
 /* fmax(0, x) as glibc's x86-64 fmax() gives it for a number: 0 > x ? 0 : x
@@ -243,9 +253,9 @@ VI V vmax0(V x)
 }
 
 /* dp_aDe() */
-VI V vaDe(const kc *k, const vinv *v, const V de[6])
+VI V vaDe(const kc *k, const vinv *v, const V de[6], const int nc)
 {
-    V a = mul(mul(k->g2, v->inv), vddot(v->d, de));
+    V a = mul(mul(k->g2, v->inv), vddot(v->d, de, nc));
     return add(a, mul(k->keta, add(add(de[0], de[1]), de[2])));
 }
 
@@ -256,11 +266,11 @@ VI V vaDb(const kc *k, const vinv *v)
 }
 
 /* dp_Db() */
-VI void vDb(const kc *k, const vinv *v, V Db[6])
+VI void vDb(const kc *k, const vinv *v, V Db[6], const int nc)
 {
     V g = mul(k->g2, v->inv);
     for (int c = 0; c < 3; c++) Db[c] = add(mul(g, v->d[c]), k->ketag);
-    for (int c = 3; c < 6; c++) Db[c] = add(mul(g, v->d[c]), k->zero);
+    for (int c = 3; c < nc; c++) Db[c] = add(mul(g, v->d[c]), k->zero);
 }
 
 /* dp_eq() */
@@ -277,22 +287,22 @@ VI V vsb(const kc *k, const vinv *v)
 }
 
 /* dp_euler() */
-VI V veuler(const kc *k, const vinv *v, const V de[6], const V De[6], V ds[6])
+VI V veuler(const kc *k, const vinv *v, const V de[6], const V De[6], V ds[6], const int nc)
 {
-    V num = vaDe(k, v, de), den = vaDb(k, v);
+    V num = vaDe(k, v, de, nc), den = vaDb(k, v);
     V dl = sel(vand(gt(num, k->zero), gt(den, k->zero)), dvd(num, den), k->zero);
     V Db[6];
-    vDb(k, v, Db);
-    for (int c = 0; c < 6; c++) ds[c] = sub(De[c], mul(dl, Db[c]));
+    vDb(k, v, Db, nc);
+    for (int c = 0; c < nc; c++) ds[c] = sub(De[c], mul(dl, Db[c]));
     return dl;
 }
 
 /* hooke() */
-VI void vhooke(const kc *k, const V e[6], V s[6])
+VI void vhooke(const kc *k, const V e[6], V s[6], const int nc)
 {
     V lt_ = mul(k->lam, add(add(e[0], e[1]), e[2]));
     for (int c = 0; c < 3; c++) s[c] = add(lt_, mul(k->g2, e[c]));
-    for (int c = 3; c < 6; c++) s[c] = mul(k->g2, e[c]);
+    for (int c = 3; c < nc; c++) s[c] = mul(k->g2, e[c]);
 }
 
 /* mpm_dp_trial()'s first test, a lane each: from the stress s and the
@@ -304,20 +314,21 @@ typedef struct {
     V f, scale, finite, tens, adm;
 } vtr;
 
-VI void vtrial(const kc *k, const V s[6], const V e[6], V De[6], V tr[6], vtr *t)
+VI void vtrial(const kc *k, const V s[6], const V e[6], V De[6], V tr[6], vtr *t, const int nc)
 {
     V etr = add(add(e[0], e[1]), e[2]);
     for (int c = 0; c < 3; c++) De[c] = add(mul(k->lam, etr), mul(k->g2, e[c]));
-    for (int c = 3; c < 6; c++) De[c] = mul(k->g2, e[c]);
+    for (int c = 3; c < nc; c++) De[c] = mul(k->g2, e[c]);
     V fin = k->zero;
-    for (int c = 0; c < 6; c++) {
+    for (int c = 0; c < nc; c++) {
         tr[c] = add(s[c], De[c]);
-        fin = add(fin, sub(tr[c], tr[c])); /* NaN unless all six are finite */
+        fin = add(fin, sub(tr[c], tr[c])); /* NaN unless all are finite */
     }
     V p = vmeanp(k, tr), d[3];
     for (int c = 0; c < 3; c++) d[c] = sub(tr[c], p);
-    V dd = add(add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2])),
-               mul(k->two, add(add(mul(tr[3], tr[3]), mul(tr[4], tr[4])), mul(tr[5], tr[5]))));
+    V sh = mul(tr[3], tr[3]);
+    if (nc == 6) sh = add(add(sh, mul(tr[4], tr[4])), mul(tr[5], tr[5]));
+    V dd = add(add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2])), mul(k->two, sh));
     V r = vsqrt(mul(k->half, dd));
     V ep = mul(k->eta, p);
     t->scale = add(add(r, vabs(ep)), k->xc);
@@ -352,7 +363,8 @@ typedef union {
  * invariants of the start and f there, and the unloading check of a start
  * on the surface.  Particles that leave the cone's common path are marked
  * ST_OUT. */
-static void pass_trial(const kc *k, size_t n, const double *sig, const double *de, stage *g)
+VI void pass_trial(const kc *k, const int nc, size_t n, const double *sig, const double *de,
+                   stage *g)
 {
     for (size_t i0 = 0; i0 < n; i0 += NL) {
         size_t m = n - i0 < NL ? n - i0 : NL;
@@ -363,25 +375,25 @@ static void pass_trial(const kc *k, size_t n, const double *sig, const double *d
             re[j] = de + 6 * i;
         }
         V S[6], E[6], De[6], tr[6];
-        for (int c = 0; c < 6; c++) {
+        for (int c = 0; c < nc; c++) {
             S[c] = vrows(rs, c);
             E[c] = vrows(re, c);
         }
         /* De and the trial, as mpm_dp_trial() */
         vtr t;
-        vtrial(k, S, E, De, tr, &t);
+        vtrial(k, S, E, De, tr, &t, nc);
         V finite = t.finite, tens = t.tens, f = t.f;
         V cone = vand(vand(finite, vnot(tens)), vnot(t.adm));
         /* the start's invariants and f (dp_update()) */
         vinv v;
-        vinvariants(k, S, &v);
+        vinvariants(k, S, &v, nc);
         V sc0, f0 = vf_inv(k, &v, &sc0);
         V inside = lt(f0, mul(k->nftol, sc0));
         /* a start on the surface: does the increment first unload? */
-        V na =
-            vsqrt(add(mul(mul(v.inv, v.inv), vddot(v.d, v.d)), dvd(mul(k->eta, k->eta), k->three)));
-        V nd = vsqrt(vddot(De, De));
-        V cth = dvd(vaDe(k, &v, E), mul(na, nd));
+        V na = vsqrt(
+            add(mul(mul(v.inv, v.inv), vddot(v.d, v.d, nc)), dvd(mul(k->eta, k->eta), k->three)));
+        V nd = vsqrt(vddot(De, De, nc));
+        V cth = dvd(vaDe(k, &v, E, nc), mul(na, nd));
         V unload = vand(vand(gt(na, k->zero), gt(nd, k->zero)), lt(cth, k1(-LTOL)));
         int mc = bits(cone), mi = bits(inside), mu = bits(unload);
         /* past the cut-off: first_yield()'s first tests */
@@ -390,19 +402,19 @@ static void pass_trial(const kc *k, size_t n, const double *sig, const double *d
         lanes FY0, FY1;
         FY0.v = FY1.v = k->zero;
         if (mt) {
-            V sct0, sct1, fy0 = vf(k, S, 1, &sct0), fy1 = vf(k, tr, 1, &sct1);
+            V sct0, sct1, fy0 = vf(k, S, 1, &sct0, nc), fy1 = vf(k, tr, 1, &sct1, nc);
             /* f0 >= -tol sc, or !(f1 > 0): the start is the first yield point */
             mt0 = bits(vor(ge(fy0, mul(sub(k->zero, k->fytol), sct0)), vnot(gt(fy1, k->zero))));
             FY0.v = fy0;
             FY1.v = fy1;
         }
         lanes D[6], F0, FT;
-        for (int c = 0; c < 6; c++) D[c].v = De[c];
+        for (int c = 0; c < nc; c++) D[c].v = De[c];
         F0.v = f0;
         FT.v = f;
         for (size_t j = 0; j < m; j++) {
             size_t i = i0 + j;
-            for (int c = 0; c < 6; c++) g->De[i][c] = D[c].x[j];
+            for (int c = 0; c < nc; c++) g->De[i][c] = D[c].x[j];
             g->f0[i] = F0.x[j];
             g->ftr[i] = FT.x[j];
             g->al[i] = 0;
@@ -459,7 +471,7 @@ VI V mask_of(int b, const V lm[NL])
  * yield point on a trial past the cut-off (first_yield(); kind
  * ST_TENSION: yield_fast() and its tolerance), a lane per particle, a
  * lane that finishes taking the next. */
-static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g, int kind)
+VI void pass_pegasus(const kc *k, const int nc, size_t n, const double *sig, stage *g, int kind)
 {
     const V tol = kind == ST_TENSION ? k->fytol : k->ftol;
     V lm[NL], S[6], D[6], a0, a1, f0, f1, al;
@@ -467,7 +479,7 @@ static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g, int
     size_t next = 0;
     lane_masks(lm);
     for (int j = 0; j < NL; j++) who[j] = it[j] = -1;
-    for (int c = 0; c < 6; c++) S[c] = D[c] = k->zero;
+    for (int c = 0; c < nc; c++) S[c] = D[c] = k->zero;
     a0 = a1 = f0 = f1 = al = k->zero;
     for (;;) {
         int live = 0;
@@ -477,7 +489,7 @@ static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g, int
                 if (g->kind[i] != kind) continue;
                 who[j] = (int)i;
                 it[j] = 0;
-                for (int c = 0; c < 6; c++) {
+                for (int c = 0; c < nc; c++) {
                     S[c] = put(S[c], j, sig[6 * i + c], lm);
                     D[c] = put(D[c], j, g->De[i][c], lm);
                 }
@@ -493,7 +505,7 @@ static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g, int
         /* one iteration in every lane; a lane that stops keeps al */
         V stop = eq(f1, f0);
         V aln = sub(a1, dvd(mul(f1, sub(a1, a0)), sub(f1, f0)));
-        V sc, fn = vf_at(k, S, D, aln, kind == ST_TENSION, &sc);
+        V sc, fn = vf_at(k, S, D, aln, kind == ST_TENSION, &sc, nc);
         V conv = le(vabs(fn), mul(tol, sc));
         V flip = lt(mul(fn, f1), k->zero);
         al = sel(stop, al, aln);
@@ -517,9 +529,9 @@ static void pass_pegasus(const kc *k, size_t n, const double *sig, stage *g, int
  * correction (dp_substep(), dp_drift()), a lane per particle, from the
  * stress s on the surface with invariants v over the strain rest.  Writes
  * the results of the particles that stay on the common path. */
-static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, double *sig,
-                          const double *de, stage *g, double *epq, double *dis, int *nsub,
-                          unsigned char *ok)
+VI void pass_substeps(const kc *k, const int nc, const mpm_plastic_params *P, size_t n, double *sig,
+                      const double *de, stage *g, double *epq, double *dis, int *nsub,
+                      unsigned char *ok)
 {
     V lm[NL], s[6], rest[6], src[6], T, dT, fail, dsum, eqp;
     vinv v;
@@ -531,7 +543,7 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         nt += g->kind[i] == ST_INSIDE || g->kind[i] == ST_SURFACE;
     }
     lane_masks(lm);
-    for (int c = 0; c < 6; c++) s[c] = rest[c] = src[c] = v.d[c] = k->zero;
+    for (int c = 0; c < nc; c++) s[c] = rest[c] = src[c] = v.d[c] = k->zero;
     v.p = v.r = v.inv = T = dT = fail = dsum = eqp = k->zero;
     for (int j = 0; j < NL; j++) who[j] = nn[j] = acc[j] = -1;
     /* live: the lanes that carry a particle (bit j: lane j); the lanes'
@@ -545,7 +557,7 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
             who[j] = (int)i;
             fresh |= 1 << j;
             double al = g->al[i];
-            for (int c = 0; c < 6; c++) {
+            for (int c = 0; c < nc; c++) {
                 double sc = sig[6 * i + c] + al * g->De[i][c];
                 s[c] = put(s[c], j, sc, lm);
                 rest[c] = put(rest[c], j, (1 - al) * de[6 * i + c], lm);
@@ -561,11 +573,11 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         if (fresh) {
             V m = mask_of(fresh, lm);
             vinv vr;
-            vinvariants(k, src, &vr);
+            vinvariants(k, src, &vr, nc);
             v.p = sel(m, vr.p, v.p);
             v.r = sel(m, vr.r, v.r);
             v.inv = sel(m, vr.inv, v.inv);
-            for (int c = 0; c < 6; c++) v.d[c] = sel(m, vr.d[c], v.d[c]);
+            for (int c = 0; c < nc; c++) v.d[c] = sel(m, vr.d[c], v.d[c]);
             T = sel(m, k->zero, T);
             dT = sel(m, k->one, dT);
             fail = sel(m, k->zero, fail);
@@ -578,21 +590,21 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         quit &= live;
         V e[6], De[6], ds1[6], ds2[6], s1[6], sn[6], diff[6];
         vinv v1;
-        for (int c = 0; c < 6; c++) e[c] = mul(dT, rest[c]);
-        vhooke(k, e, De);
-        V dl1 = veuler(k, &v, e, De, ds1);
-        for (int c = 0; c < 6; c++) s1[c] = add(s[c], ds1[c]);
-        vinvariants(k, s1, &v1);
-        V dl2 = veuler(k, &v1, e, De, ds2);
+        for (int c = 0; c < nc; c++) e[c] = mul(dT, rest[c]);
+        vhooke(k, e, De, nc);
+        V dl1 = veuler(k, &v, e, De, ds1, nc);
+        for (int c = 0; c < nc; c++) s1[c] = add(s[c], ds1[c]);
+        vinvariants(k, s1, &v1, nc);
+        V dl2 = veuler(k, &v1, e, De, ds2, nc);
         V fin = k->zero;
-        for (int c = 0; c < 6; c++) {
+        for (int c = 0; c < nc; c++) {
             sn[c] = add(s[c], mul(k->half, add(ds1[c], ds2[c])));
             diff[c] = sub(ds2[c], ds1[c]);
             fin = add(fin, sub(sn[c], sn[c]));
         }
-        V ref = vsqrt(vddot(sn, sn));
+        V ref = vsqrt(vddot(sn, sn, nc));
         ref = sel(lt(ref, k->xc), k->xc, ref);
-        V R = sel(gt(ref, k->zero), dvd(vsqrt(vddot(diff, diff)), mul(k->two, ref)), k->zero);
+        V R = sel(gt(ref, k->zero), dvd(vsqrt(vddot(diff, diff, nc)), mul(k->two, ref)), k->zero);
         R = sel(lt(R, k1(R_MIN)), k1(R_MIN), R);
         quit |= ~bits(eq(fin, k->zero)) & ALL;
         V q0 = mul(k1(0.9), vsqrt(dvd(k->stol, R)));
@@ -604,9 +616,9 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         V sb0 = vsb(k, &v);
         V eqa = add(eqp, mul(k->half, add(mul(dl1, veq(k, &v)), mul(dl2, veq(k, &v1)))));
         vinv va;
-        vinvariants(k, sn, &va);
+        vinvariants(k, sn, &va, nc);
         V sa[6];
-        for (int c = 0; c < 6; c++) sa[c] = sn[c];
+        for (int c = 0; c < nc; c++) sa[c] = sn[c];
         V disa = dsum;
         /* the drift correction, lanes that still drift */
         int bad = 0;
@@ -616,22 +628,22 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
             drifting = vand(drifting, vnot(le(f, mul(k->ftol, sc))));
             if (!(bits(drifting) & ~bits(reject) & live & ~quit)) break;
             V den = vaDb(k, &va), Db[6], y[6];
-            vDb(k, &va, Db);
+            vDb(k, &va, Db, nc);
             V fd = dvd(f, den);
-            for (int c = 0; c < 6; c++) y[c] = sub(sa[c], mul(fd, Db[c]));
+            for (int c = 0; c < nc; c++) y[c] = sub(sa[c], mul(fd, Db[c]));
             vinv vy;
-            vinvariants(k, y, &vy);
+            vinvariants(k, y, &vy, nc);
             V scy, fy = vf_inv(k, &vy, &scy);
             V consistent = vand(gt(den, k->zero), le(vabs(fy), vabs(f)));
             bad |= bits(vand(drifting, vnot(consistent)));
             drifting = vand(drifting, consistent);
             disa = sel(drifting, add(disa, mul(fd, vsb(k, &vy))), disa);
             eqa = sel(drifting, add(eqa, mul(fd, veq(k, &va))), eqa);
-            for (int c = 0; c < 6; c++) sa[c] = sel(drifting, y[c], sa[c]);
+            for (int c = 0; c < nc; c++) sa[c] = sel(drifting, y[c], sa[c]);
             va.p = sel(drifting, vy.p, va.p);
             va.r = sel(drifting, vy.r, va.r);
             va.inv = sel(drifting, vy.inv, va.inv);
-            for (int c = 0; c < 6; c++) va.d[c] = sel(drifting, vy.d[c], va.d[c]);
+            for (int c = 0; c < nc; c++) va.d[c] = sel(drifting, vy.d[c], va.d[c]);
         }
         disa = add(disa, mul(k->half, add(mul(dl1, sb0), mul(dl2, vsb(k, &va)))));
         V qa = sel(gt(q0, k1(1.1)), k1(1.1), q0);
@@ -644,11 +656,11 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
         dta = sel(gt(dta, left), left, dta);
         /* commit: rejected lanes take dtr and fail = 1, accepted ones the rest */
         V ac = vnot(reject);
-        for (int c = 0; c < 6; c++) s[c] = sel(ac, sa[c], s[c]);
+        for (int c = 0; c < nc; c++) s[c] = sel(ac, sa[c], s[c]);
         v.p = sel(ac, va.p, v.p);
         v.r = sel(ac, va.r, v.r);
         v.inv = sel(ac, va.inv, v.inv);
-        for (int c = 0; c < 6; c++) v.d[c] = sel(ac, va.d[c], v.d[c]);
+        for (int c = 0; c < nc; c++) v.d[c] = sel(ac, va.d[c], v.d[c]);
         T = sel(ac, Ta, T);
         dT = sel(ac, dta, dtr);
         fail = sel(ac, k->zero, k->one);
@@ -668,7 +680,7 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
                 ok[i] = 0;
                 continue;
             }
-            for (int c = 0; c < 6; c++) sig[6 * i + c] = get(s[c], j);
+            for (int c = 0; c < nc; c++) sig[6 * i + c] = get(s[c], j);
             epq[i] = get(eqp, j);
             dis[i] = get(dsum, j);
             nsub[i] = acc[j];
@@ -683,8 +695,8 @@ static void pass_substeps(const kc *k, const mpm_plastic_params *P, size_t n, do
  * kept, scaled to the cone's radius at the cut-off when outside it, p =
  * pt; the plastic strain by the compliance, its dissipation by the
  * trapezoidal rule from the first yield point sa. */
-static void pass_tension(const kc *k, size_t n, double *sig, const stage *g, double *epq,
-                         double *dis, int *nsub, unsigned char *ok)
+VI void pass_tension(const kc *k, const int nc, size_t n, double *sig, const stage *g, double *epq,
+                     double *dis, int *nsub, unsigned char *ok)
 {
     size_t idx[MPM_DP_LANES_MAX], m = 0;
     for (size_t i = 0; i < n; i++)
@@ -704,29 +716,29 @@ static void pass_tension(const kc *k, size_t n, double *sig, const stage *g, dou
         for (size_t j = 0; j < NL; j++) rm[j] = &same[j];
         V S[6], D[6], sa[6], tr[6], d[6], y[6], dd[6], ep[6], e2[6];
         V keep = gt(vrows(rm, 0), k->zero), al = vrows(ra, 0);
-        for (int c = 0; c < 6; c++) {
+        for (int c = 0; c < nc; c++) {
             S[c] = vrows(rs, c);
             D[c] = vrows(rd, c);
             sa[c] = sel(keep, S[c], add(S[c], mul(al, D[c])));
             tr[c] = add(S[c], D[c]);
         }
-        V p = vmeanp(k, tr), r = vj2(k, tr, p, d);
+        V p = vmeanp(k, tr), r = vj2(k, tr, p, d, nc);
         V beta = sel(gt(r, k->rt), dvd(k->rt, r), k->one);
-        for (int c = 0; c < 6; c++) y[c] = add(mul(beta, d[c]), c < 3 ? k->pt : k->zero);
-        for (int c = 0; c < 6; c++) dd[c] = sub(tr[c], y[c]);
+        for (int c = 0; c < nc; c++) y[c] = add(mul(beta, d[c]), c < 3 ? k->pt : k->zero);
+        for (int c = 0; c < nc; c++) dd[c] = sub(tr[c], y[c]);
         /* compliance() */
         V pd = vmeanp(k, dd), pk = dvd(pd, k->kk);
         for (int c = 0; c < 3; c++) ep[c] = add(dvd(sub(dd[c], pd), k->g2), pk);
-        for (int c = 3; c < 6; c++) ep[c] = dvd(dd[c], k->g2);
+        for (int c = 3; c < nc; c++) ep[c] = dvd(dd[c], k->g2);
         /* trap_dis(), eqv_dev(), each added to 0 as dp_update() adds them */
-        V ds = vddot(sa, ep), dy = vddot(y, ep);
+        V ds = vddot(sa, ep, nc), dy = vddot(y, ep, nc);
         V me = vmeanp(k, ep);
-        for (int c = 0; c < 6; c++) e2[c] = sub(ep[c], c < 3 ? me : k->zero);
+        for (int c = 0; c < nc; c++) e2[c] = sub(ep[c], c < 3 ? me : k->zero);
         V dsum = add(k->zero, mul(k->half, add(vmax0(ds), vmax0(dy))));
-        V esum = add(k->zero, vsqrt(mul(k->twothirds, vddot(e2, e2))));
+        V esum = add(k->zero, vsqrt(mul(k->twothirds, vddot(e2, e2, nc))));
         for (size_t j = 0; j < mq; j++) {
             size_t i = idx[q0 + j];
-            for (int c = 0; c < 6; c++) sig[6 * i + c] = get(y[c], (int)j);
+            for (int c = 0; c < nc; c++) sig[6 * i + c] = get(y[c], (int)j);
             epq[i] = get(esum, (int)j);
             dis[i] = get(dsum, (int)j);
             nsub[i] = 1;
@@ -735,18 +747,38 @@ static void pass_tension(const kc *k, size_t n, double *sig, const stage *g, dou
     }
 }
 
-void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
-                  double *dis, int *nsub, unsigned char *ok)
+/* the four passes on rows of nc components */
+VI void dp_lanes(const mpm_plastic_params *P, const int nc, size_t n, double *sig, const double *de,
+                 double *epq, double *dis, int *nsub, unsigned char *ok)
 {
     kc k;
     stage g;
     k_init(&k, P);
-    pass_trial(&k, n, sig, de, &g);
+    pass_trial(&k, nc, n, sig, de, &g);
     for (size_t i = 0; i < n; i++) ok[i] = 0;
-    pass_pegasus(&k, n, sig, &g, ST_INSIDE);
-    pass_pegasus(&k, n, sig, &g, ST_TENSION);
-    pass_substeps(&k, P, n, sig, de, &g, epq, dis, nsub, ok);
-    pass_tension(&k, n, sig, &g, epq, dis, nsub, ok);
+    pass_pegasus(&k, nc, n, sig, &g, ST_INSIDE);
+    pass_pegasus(&k, nc, n, sig, &g, ST_TENSION);
+    pass_substeps(&k, nc, P, n, sig, de, &g, epq, dis, nsub, ok);
+    pass_tension(&k, nc, n, sig, &g, epq, dis, nsub, ok);
+}
+
+/* dp_lanes() built for each row width */
+static void dp_lanes6(const mpm_plastic_params *P, size_t n, double *sig, const double *de,
+                      double *epq, double *dis, int *nsub, unsigned char *ok)
+{
+    dp_lanes(P, 6, n, sig, de, epq, dis, nsub, ok);
+}
+
+static void dp_lanes4(const mpm_plastic_params *P, size_t n, double *sig, const double *de,
+                      double *epq, double *dis, int *nsub, unsigned char *ok)
+{
+    dp_lanes(P, 4, n, sig, de, epq, dis, nsub, ok);
+}
+
+void mpm_dp_lanes(const mpm_plastic_params *P, int nc, size_t n, double *sig, const double *de,
+                  double *epq, double *dis, int *nsub, unsigned char *ok)
+{
+    (nc == 4 ? dp_lanes4 : dp_lanes6)(P, n, sig, de, epq, dis, nsub, ok);
 }
 
 /* n (1..NL) lanes of p: whole loads, or masked ones past the end */
@@ -785,16 +817,16 @@ VI V vneg(V a)
  * as loaded), q the strain record (its components' pointers; NULL where
  * the increment is 0), yld the flag.  Returns the bits of the particles
  * left. */
-VI unsigned trial_group(const kc *k, size_t m, const V r[6], const V d[6], const V s[6],
-                        double *const x[6], double *const q[6], double *yld)
+VI unsigned trial_group(const kc *k, const int nc, size_t m, const V r[6], const V d[6],
+                        const V s[6], double *const x[6], double *const q[6], double *yld)
 {
     V De[6], t[6];
     vtr v;
-    vtrial(k, r, d, De, t, &v);
+    vtrial(k, r, d, De, t, &v, nc);
     V el = vand(vand(v.finite, vnot(v.tens)), v.adm);
     unsigned all = (1u << (m < NL ? m : NL)) - 1, me = (unsigned)bits(el) & all;
     if (!me) return all;
-    for (int c = 0; c < 6; c++) {
+    for (int c = 0; c < nc; c++) {
         if (x[c]) vst(x[c], m, sel(el, t[c], s[c]));
         if (q[c]) {
             V qc = vld(q[c], m);
@@ -818,8 +850,9 @@ uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const doubl
         V xx = vld(x[0] + i, m), yy = vld(x[1] + i, m), zz = vld(x[2] + i, m),
           xy = vld(x[3] + i, m);
         /* the Jaumann rotation (jaumann_2d()): xx + 2.0 * w * xy is
-         * xx + ((2.0 * w) * xy); the zero components of 2D's plane strain
-         * as zero lanes give the written-out 2D loop's + 0.0 terms */
+         * xx + ((2.0 * w) * xy); de_zz as a zero lane gives the
+         * written-out 2D loop's + 0.0 terms, and yz and xz, zero, are left
+         * out (nc = 4) */
         V w2 = mul(k.two, w);
         V r[6] = {add(xx, mul(w2, xy)),
                   sub(yy, mul(w2, xy)),
@@ -830,7 +863,7 @@ uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const doubl
         V d[6] = {d0, d1, k.zero, d3, k.zero, k.zero}, s[6] = {xx, yy, zz, xy, k.zero, k.zero};
         double *xi[6] = {x[0] + i, x[1] + i, x[2] + i, x[3] + i, NULL, NULL};
         double *qi[6] = {q[0] + i, q[1] + i, NULL, q[2] + i, NULL, NULL};
-        left |= (uint64_t)trial_group(&k, m, r, d, s, xi, qi, yld + i) << i;
+        left |= (uint64_t)trial_group(&k, 4, m, r, d, s, xi, qi, yld + i) << i;
     }
     return left;
 }
@@ -868,7 +901,7 @@ uint64_t mpm_dp_trial3d_lanes(const mpm_plastic_params *P, size_t n, const doubl
                 acc = add(acc, sub(mul(W[a][j], s[vo[j][b]]), mul(s[vo[a][j]], W[j][b])));
             r[c] = add(s[vo[a][b]], acc);
         }
-        left |= (uint64_t)trial_group(&k, m, r, d, s, xi, qi, yld + i) << i;
+        left |= (uint64_t)trial_group(&k, 6, m, r, d, s, xi, qi, yld + i) << i;
     }
     return left;
 }
@@ -876,10 +909,10 @@ uint64_t mpm_dp_trial3d_lanes(const mpm_plastic_params *P, size_t n, const doubl
 #else
 /* no AVX2 in this build: every particle is left to mpm_plastic_update()
  * (mpm_sim.dp_lanes is 0 then, so this is not called) */
-void mpm_dp_lanes(const mpm_plastic_params *P, size_t n, double *sig, const double *de, double *epq,
-                  double *dis, int *nsub, unsigned char *ok)
+void mpm_dp_lanes(const mpm_plastic_params *P, int nc, size_t n, double *sig, const double *de,
+                  double *epq, double *dis, int *nsub, unsigned char *ok)
 {
-    (void)P, (void)sig, (void)de, (void)epq, (void)dis, (void)nsub;
+    (void)P, (void)nc, (void)sig, (void)de, (void)epq, (void)dis, (void)nsub;
     for (size_t i = 0; i < n; i++) ok[i] = 0;
 }
 
