@@ -2,8 +2,9 @@
  * inproc.c - the driver of `make bench-inproc REF=<commit>` (inproc.sh):
  * one configuration of the bench's scenes built twice in one process, on
  * REF's solver and on this tree's (side.c), and run in alternation: after
- * a warm-up run of each, `rounds` rounds of `steps` steps, REF first in
- * the even rounds and this tree first in the odd ones.  Both simulations
+ * `skip` untimed steps of each (the collapse column's flowing phase) and a
+ * warm-up run of each, `rounds` rounds of `steps` steps, REF first in the
+ * even rounds and this tree first in the odd ones.  Both simulations
  * stay resident, on the same CPUs, caches and memory, so a drift of the
  * machine over seconds falls on both sides of a round alike, which
  * processes run one after the other (make bench-compare) cannot promise.
@@ -40,13 +41,17 @@
 
 static const char *usage_text =
     "usage: inproc [options]   (run by make bench-inproc REF=<commit>; see tests/perf/inproc/inproc.sh)\n"
-    "  --scene S       disks2d (default), cube3d, bar1d, sparse2d-4096, sparse2d-tight\n"
+    "  --scene S       disks2d (default), cube3d, bar1d, sparse2d-4096, sparse2d-tight,\n"
+    "                  collapse2d-dp, collapse2d-el (the granular column: Drucker-Prager, or\n"
+    "                  linear elasticity with the same start)\n"
     "  --method M      mpm (default), gimp, bspline2, bspline3, ...\n"
     "  --update U      usf (default), usl, musl\n"
     "  --transfer T    flip (default) or apic\n"
     "  --threads N     worker threads of both simulations (default 2)\n"
     "  --particles N   aimed particles (default: the scene's, 10^6)\n"
     "  --steps K       steps per round and side (default 10)\n"
+    "  --skip K        steps each side runs untimed before its warm-up (default 0; e.g. 300\n"
+    "                  for the collapse2d column once it flows)\n"
     "  --rounds R      rounds per process (default 7, 3 to 200)\n"
     "  --procs P       processes, one after the other (default 3, 1 to 16)\n"
     "  --header        print the table's header line first\n"
@@ -114,9 +119,9 @@ static double triad(const pbi_cfg *q)
     return pb_triad_measure(q->threads, &t) ? 0.0 : t.gbs;
 }
 
-/* One process's work: both sides built, a warm-up of each, the rounds,
- * with the triad before and after them. */
-static void measure(const pbi_cfg *q, long steps, long rounds, proc_out *o)
+/* One process's work: both sides built, skip untimed steps of each, a
+ * warm-up of each, the rounds, with the triad before and after them. */
+static void measure(const pbi_cfg *q, long skip, long steps, long rounds, proc_out *o)
 {
     double t0 = triad(q);
     char err[512] = "";
@@ -137,7 +142,12 @@ static void measure(const pbi_cfg *q, long steps, long rounds, proc_out *o)
     }
     o->np = pbi_new_particles(n);
     o->npr = pbi_ref_particles(r);
-    if (timed(pbi_ref_run, r, steps) < 0 || timed(pbi_new_run, n, steps) < 0) {
+    if (skip && (pbi_ref_run(r, skip) || pbi_new_run(n, skip))) {
+        fprintf(stderr, "inproc: the %ld skipped steps stopped short (steps: REF %ld, new %ld)\n",
+                skip, pbi_ref_steps(r), pbi_new_steps(n));
+        o->rc = 1;
+    }
+    if (!o->rc && (timed(pbi_ref_run, r, steps) < 0 || timed(pbi_new_run, n, steps) < 0)) {
         fprintf(stderr, "inproc: the warm-up run of %ld steps stopped short (diverged?)\n", steps);
         o->rc = 1;
     }
@@ -170,7 +180,7 @@ static void measure(const pbi_cfg *q, long steps, long rounds, proc_out *o)
  * (pb_write_all() / pb_read_all(), from the bench's scenes.c that this
  * tree's side includes): each process maps both simulations afresh.
  * 0, or the exit code to give. */
-static int one_process(const pbi_cfg *q, long steps, long rounds, proc_out *o)
+static int one_process(const pbi_cfg *q, long skip, long steps, long rounds, proc_out *o)
 {
     int fd[2];
     memset(o, 0, sizeof *o);
@@ -188,7 +198,7 @@ static int one_process(const pbi_cfg *q, long steps, long rounds, proc_out *o)
     }
     if (pid == 0) {
         close(fd[0]);
-        measure(q, steps, rounds, o);
+        measure(q, skip, steps, rounds, o);
         _exit(pb_write_all(fd[1], o, sizeof *o) ? 1 : 0);
     }
     close(fd[1]);
@@ -214,7 +224,7 @@ static int one_process(const pbi_cfg *q, long steps, long rounds, proc_out *o)
 int main(int argc, char **argv)
 {
     pbi_cfg q = {"disks2d", "mpm", "usf", 0, 2, 0};
-    long steps = 10, rounds = 7, procs = 3, threads = 2, particles = 0;
+    long steps = 10, rounds = 7, procs = 3, threads = 2, particles = 0, skip = 0;
     int header = 0, csv = 0, only = 0;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -251,6 +261,9 @@ int main(int argc, char **argv)
         } else if (!strcmp(a, "--steps")) {
             if (parse_long(a, v, 1, 1000000, &steps)) return 2;
             i++;
+        } else if (!strcmp(a, "--skip")) {
+            if (parse_long(a, v, 0, 1000000, &skip)) return 2;
+            i++;
         } else if (!strcmp(a, "--rounds")) {
             if (parse_long(a, v, 3, MAX_ROUNDS, &rounds)) return 2;
             i++;
@@ -282,7 +295,7 @@ int main(int argc, char **argv)
     size_t np = 0;
     int done = 0;
     for (long pi = 0; pi < procs; pi++) {
-        int rc = one_process(&q, steps, rounds, &po);
+        int rc = one_process(&q, skip, steps, rounds, &po);
         if (rc) return rc;
         if (po.done < 3) {
             fprintf(stderr, "inproc: process %ld kept %d rounds: too few for a median\n", pi + 1,

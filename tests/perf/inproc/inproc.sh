@@ -30,8 +30,12 @@
 #    a build's speed for its whole life: inproc.c), a warm-up of each and
 #    INPROC_ROUNDS rounds; a row of the rounds of all of them.
 #
-# Scenes: those of the bench's build() (disks2d, cube3d, bar1d, sparse2d-*);
-# the collapse2d pair is built elsewhere in each tree and is not offered.
+# Scenes: those of the bench's build() (disks2d, cube3d, bar1d, sparse2d-*)
+# and the collapse2d pair, one scene each (collapse2d-dp, collapse2d-el;
+# not in the default configurations), where a configuration's --skip K
+# runs each side K steps untimed first: e.g.
+#   INPROC_ARGS="--scene collapse2d-dp --method mpm --threads 1 --skip 300"
+# times the flowing column's Drucker-Prager steps from step 300 on.
 #
 # Environment:
 #   INPROC_ROUNDS     rounds per process (default 7)
@@ -41,8 +45,9 @@
 #                     issue #5 target speeds (default 0.5): steps =
 #                     ceil(target x 10^6 x RUN_S / particles), at least 2
 #   INPROC_ARGS       ';'-separated configurations, driver arguments
-#                     (--scene --method --update --transfer --threads, and
-#                     --steps / --rounds to override the above for one)
+#                     (--scene --method --update --transfer --threads
+#                     --skip, and --steps / --rounds to override the above
+#                     for one)
 set -euo pipefail
 
 REF=${1:-}
@@ -56,7 +61,7 @@ cd "$ROOT"
 source tests/perf/reftree.sh
 
 # 2 steps a run of cube3d MPM USL, 16 in a process of 7 rounds, stay short
-# of its step 47; the collapse2d pair is not offered (see above)
+# of its step 47; the collapse2d pair only on request (see above)
 DEFAULT_ARGS=$(default_configs 2)
 ARGS=${INPROC_ARGS:-$DEFAULT_ARGS}
 ROUNDS=${INPROC_ROUNDS:-7}
@@ -110,6 +115,13 @@ if [ "$REF" = --self-check ]; then
     # scene,method,update,transfer,threads,particles,steps,rounds,... : 6 rounds of 2 processes
     awk -F, '$1 == "disks2d" && $6 > 3000 && $8 == 6 && $11 > 0 { ok = 1 } END { exit !ok }' <<<"$row" || {
         echo "bench-inproc --self-check: FAILED (no row of 6 rounds)" >&2
+        exit 1
+    }
+    # the collapse (its own case builder) after skipped steps: 3 rounds of 1 process
+    row=$("$B/inproc" --scene collapse2d-dp --particles 4000 --skip 5 --steps 2 --rounds 3 --procs 1 --threads 1 --csv)
+    echo "bench-inproc --self-check: $row" >&2
+    awk -F, '$1 == "collapse2d-dp" && $6 > 3000 && $8 == 3 && $11 > 0 { ok = 1 } END { exit !ok }' <<<"$row" || {
+        echo "bench-inproc --self-check: FAILED (no collapse2d-dp row of 3 rounds)" >&2
         exit 1
     }
     echo "bench-inproc --self-check: ok" >&2

@@ -11,7 +11,10 @@
  *
  * The side adapts to the solver APIs the project has had: mpm_sim_new()
  * with an error buffer (before mpm_error.h) or with an mpm_error, and a
- * case with or without a transfer (APIC) field.
+ * case with or without a transfer (APIC) field.  The collapse2d pair
+ * (collapse2d-dp, collapse2d-el) is built as the tree's bench builds it
+ * (scenes.c's work_collapse(): tools/mpm_collapse.h, a = 2, 2 x 2
+ * particles per cell), where the tree has it.
  */
 #ifndef PBI_SIDE
 #define PBI_SIDE new
@@ -32,7 +35,46 @@
 typedef struct {
     mpm_paper t;
     mpm_sim *sim;
+#ifdef MPM_COLLAPSE_H
+    mpm_collapse_case cc;
+    int collapse; /* cc holds the case (not t) */
+#endif
 } pbi_side;
+
+#ifdef MPM_COLLAPSE_H
+/* The collapse2d pair's case for c, as work_collapse() builds it: the
+ * cells across the column for about the aimed particles (4 a cells^2). */
+static int pbi_collapse(const pb_cfg *c, pbi_side *h, char *err, size_t n)
+{
+    long np = c->particles ? c->particles : pb_scene_default_particles(c->scene);
+    mpm_collapse_cfg cfg = {.a = 2,
+                            .cells = (int)lround(sqrt((double)np / 8.0)),
+                            .method = c->method,
+                            .model = c->scene == PB_COLLAPSE_DP ? MPM_MODEL_DRUCKER_PRAGER
+                                                                : MPM_MODEL_LINEAR_ELASTIC,
+                            .threads = c->threads};
+    if (cfg.cells < 4) cfg.cells = 4;
+    if (mpm_collapse_setup(&cfg, &h->cc)) {
+        snprintf(err, n, "out of memory for %ld particles", np);
+        return -1;
+    }
+    h->cc.c.update = c->update;
+    h->collapse = 1;
+    return 0;
+}
+#endif
+
+/* Frees the side's case (the paper's scenes or the collapse). */
+static void pbi_free_case(pbi_side *h)
+{
+#ifdef MPM_COLLAPSE_H
+    if (h->collapse) {
+        mpm_collapse_free(&h->cc);
+        return;
+    }
+#endif
+    mpm_paper_free(&h->t);
+}
 
 /* The enum value whose bench name is `name` (any case), or -1. */
 static int pbi_method_of(const char *name)
@@ -88,22 +130,32 @@ void *PBI(open)(const pbi_cfg *q, int *lacks, char *err, size_t n)
         snprintf(err, n, "out of memory");
         return NULL;
     }
+#ifdef MPM_COLLAPSE_H
+    int col = c.scene == PB_COLLAPSE_DP || c.scene == PB_COLLAPSE_EL;
+    if (col ? pbi_collapse(&c, h, err, n) : build(&c, &h->t, err, n)) {
+        free(h);
+        return NULL;
+    }
+    mpm_case *cs = col ? &h->cc.c : &h->t.c;
+#else
     if (build(&c, &h->t, err, n)) {
         free(h);
         return NULL;
     }
+    mpm_case *cs = &h->t.c;
+#endif
 #ifdef MPM_ERROR_H
     mpm_error me;
-    h->sim = mpm_sim_new(&h->t.c, NULL, &me);
+    h->sim = mpm_sim_new(cs, NULL, &me);
     if (!h->sim) {
         char buf[MPM_ERROR_MSG_MAX + 200];
         snprintf(err, n, "mpm_sim_new: %s", mpm_error_text(&me, MPM_FIELD_PROTO, buf, sizeof buf));
     }
 #else
-    h->sim = mpm_sim_new(&h->t.c, err, n);
+    h->sim = mpm_sim_new(cs, err, n);
 #endif
     if (!h->sim) {
-        mpm_paper_free(&h->t);
+        pbi_free_case(h);
         free(h);
         return NULL;
     }
@@ -133,7 +185,7 @@ void PBI(close)(void **h)
     if (!h || !*h) return;
     pbi_side *s = *h;
     mpm_sim_destroy(&s->sim);
-    mpm_paper_free(&s->t);
+    pbi_free_case(s);
     free(s);
     *h = NULL;
 }

@@ -10,7 +10,8 @@
 
 /* One configuration, by the bench's own names (bin/mpmbench --help). */
 typedef struct {
-    const char *scene;  /* disks2d, cube3d, bar1d, sparse2d-4096, sparse2d-tight */
+    const char *scene;  /* disks2d, cube3d, bar1d, sparse2d-4096, sparse2d-tight,
+                           collapse2d-dp, collapse2d-el */
     const char *method; /* mpm, gimp, bspline2, ... (any case) */
     const char *update; /* usf, usl, musl */
     int apic;           /* 1: the APIC transfer (trees that have it) */
