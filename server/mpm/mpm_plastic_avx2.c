@@ -25,6 +25,7 @@
 #include "mpm_plastic_tol.h"
 
 #if defined(MPM_HAVE_AVX2_KERNELS) && defined(__AVX2__)
+#include <assert.h>
 #include <immintrin.h>
 #include <string.h>
 
@@ -778,6 +779,7 @@ static void dp_lanes4(const mpm_plastic_params *P, size_t n, double *sig, const 
 void mpm_dp_lanes(const mpm_plastic_params *P, int nc, size_t n, double *sig, const double *de,
                   double *epq, double *dis, int *nsub, unsigned char *ok)
 {
+    assert(nc == 4 || nc == 6);
     (nc == 4 ? dp_lanes4 : dp_lanes6)(P, n, sig, de, epq, dis, nsub, ok);
 }
 

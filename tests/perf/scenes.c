@@ -377,12 +377,16 @@ static int timed_runs(mpm_sim *sim, const pb_cfg *c, pb_row *r)
     return 0;
 }
 
-/* The collapse scenes (tools/mpm_collapse.h): a = 2, 2 x 2 particles per
- * cell, cells across the column for about the aimed particle count
- * (4 a cells^2 particles), Drucker-Prager (plane-strain match, phi 30) or
- * linear elasticity with the same geostatic start, base friction mu =
- * tan 30 and the x_lo roller in both. */
-static int work_collapse(const pb_cfg *c, pb_row *r)
+/* The collapse scenes' case (tools/mpm_collapse.h) for c, in *cc: a =
+ * 2, 2 x 2 particles per cell, cells across the column for about the
+ * aimed particle count (4 a cells^2 particles), Drucker-Prager
+ * (plane-strain match, phi 30) or linear elasticity with the same
+ * geostatic start, base friction mu = tan 30 and the x_lo roller in both.
+ * Also bench-inproc's side.c (which includes this file) builds the pair
+ * with it where the tree defines PB_COLLAPSE_CASE.  Returns 0, or -1 with
+ * err filled (out of memory). */
+#define PB_COLLAPSE_CASE 1
+static int collapse_case(const pb_cfg *c, mpm_collapse_case *cc, char *err, size_t n)
 {
     long np = c->particles ? c->particles : pb_scene_default_particles(c->scene);
     mpm_collapse_cfg cfg = {.a = 2,
@@ -392,16 +396,23 @@ static int work_collapse(const pb_cfg *c, pb_row *r)
                                                                 : MPM_MODEL_LINEAR_ELASTIC,
                             .threads = c->threads};
     if (cfg.cells < 4) cfg.cells = 4;
-    mpm_collapse_case cc;
-    double t0 = pb_now();
-    if (mpm_collapse_setup(&cfg, &cc)) {
-        snprintf(r->msg, sizeof r->msg, "out of memory for %ld particles", np);
+    if (mpm_collapse_setup(&cfg, cc)) {
+        snprintf(err, n, "out of memory for %ld particles", np);
         return -1;
     }
-    cc.c.update = c->update;
-    cc.c.pic_fraction = c->pic;
-    cc.c.transfer = c->transfer;
-    cc.c.kernels = kernels_isa;
+    cc->c.update = c->update;
+    cc->c.pic_fraction = c->pic;
+    cc->c.transfer = c->transfer;
+    cc->c.kernels = kernels_isa;
+    return 0;
+}
+
+/* The collapse scenes' row: collapse_case(), then the timed runs. */
+static int work_collapse(const pb_cfg *c, pb_row *r)
+{
+    mpm_collapse_case cc;
+    double t0 = pb_now();
+    if (collapse_case(c, &cc, r->msg, sizeof r->msg)) return -1;
     mpm_error me;
     mpm_sim *sim = mpm_sim_new(&cc.c, NULL, &me);
     if (!sim) {

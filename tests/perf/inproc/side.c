@@ -12,9 +12,9 @@
  * The side adapts to the solver APIs the project has had: mpm_sim_new()
  * with an error buffer (before mpm_error.h) or with an mpm_error, and a
  * case with or without a transfer (APIC) field.  The collapse2d pair
- * (collapse2d-dp, collapse2d-el) is built as the tree's bench builds it
- * (scenes.c's work_collapse(): tools/mpm_collapse.h, a = 2, 2 x 2
- * particles per cell), where the tree has it.
+ * (collapse2d-dp, collapse2d-el) is built by the tree's own
+ * collapse_case() (scenes.c, PB_COLLAPSE_CASE), or, in a tree from before
+ * it that has the pair, by the rule its work_collapse() kept inline.
  */
 #ifndef PBI_SIDE
 #define PBI_SIDE new
@@ -41,10 +41,13 @@ typedef struct {
 #endif
 } pbi_side;
 
-#ifdef MPM_COLLAPSE_H
-/* The collapse2d pair's case for c, as work_collapse() builds it: the
- * cells across the column for about the aimed particles (4 a cells^2). */
-static int pbi_collapse(const pb_cfg *c, pbi_side *h, char *err, size_t n)
+#if defined(MPM_COLLAPSE_H) && !defined(PB_COLLAPSE_CASE)
+/* A tree whose scenes.c builds the collapse pair inside its
+ * work_collapse() (before PB_COLLAPSE_CASE): the case as those trees
+ * build it, a rule unchanged from the scene's first commit (feee44e) to
+ * them.  A tree with PB_COLLAPSE_CASE builds it with its own
+ * collapse_case(). */
+static int collapse_case(const pb_cfg *c, mpm_collapse_case *cc, char *err, size_t n)
 {
     long np = c->particles ? c->particles : pb_scene_default_particles(c->scene);
     mpm_collapse_cfg cfg = {.a = 2,
@@ -54,12 +57,11 @@ static int pbi_collapse(const pb_cfg *c, pbi_side *h, char *err, size_t n)
                                                                 : MPM_MODEL_LINEAR_ELASTIC,
                             .threads = c->threads};
     if (cfg.cells < 4) cfg.cells = 4;
-    if (mpm_collapse_setup(&cfg, &h->cc)) {
+    if (mpm_collapse_setup(&cfg, cc)) {
         snprintf(err, n, "out of memory for %ld particles", np);
         return -1;
     }
-    h->cc.c.update = c->update;
-    h->collapse = 1;
+    cc->c.update = c->update;
     return 0;
 }
 #endif
@@ -132,10 +134,11 @@ void *PBI(open)(const pbi_cfg *q, int *lacks, char *err, size_t n)
     }
 #ifdef MPM_COLLAPSE_H
     int col = c.scene == PB_COLLAPSE_DP || c.scene == PB_COLLAPSE_EL;
-    if (col ? pbi_collapse(&c, h, err, n) : build(&c, &h->t, err, n)) {
+    if (col ? collapse_case(&c, &h->cc, err, n) : build(&c, &h->t, err, n)) {
         free(h);
         return NULL;
     }
+    h->collapse = col;
     mpm_case *cs = col ? &h->cc.c : &h->t.c;
 #else
     if (build(&c, &h->t, err, n)) {
