@@ -12,7 +12,6 @@
  */
 #include "perf.h"
 
-#include <assert.h>
 #include <errno.h>
 #include <limits.h>
 #include <signal.h>
@@ -809,33 +808,27 @@ static void preamble(void)
 
 /* Pairs of 1- and 2-thread rows behind --all's 1 -> 2 threads verdict. */
 #define PB_SCALING_PAIRS 3
+_Static_assert(PB_SCALING_PAIRS <= PB_MAX_RUNS, "pb_median() takes at most PB_MAX_RUNS");
 
-/* A pair's 2-thread speed over its 1-thread speed (0 when the latter is 0). */
-static double scaling_ratio(const pb_row *one, const pb_row *two)
+/* The speed of row a over that of row b (0 when b's is 0). */
+static double speed_ratio(const pb_row *a, const pb_row *b)
 {
-    return one->mpsteps > 0 ? two->mpsteps / one->mpsteps : 0;
+    return b->mpsteps > 0 ? a->mpsteps / b->mpsteps : 0;
 }
 
-/* The median of n (1..PB_SCALING_PAIRS) values, which it sorts in a copy. */
-static double median_of(const double *v, int n)
+/* "a, b, c": the n ratios with the given decimals, for a verdict line. */
+static void list_ratios(char *out, size_t len, const double *r, int n, int decimals)
 {
-    double w[PB_SCALING_PAIRS];
-    assert(n >= 1 && n <= PB_SCALING_PAIRS);
-    memcpy(w, v, (size_t)n * sizeof *w);
-    for (int i = 1; i < n; i++)
-        for (int j = i; j > 0 && w[j] < w[j - 1]; j--) {
-            double t = w[j];
-            w[j] = w[j - 1];
-            w[j - 1] = t;
-        }
-    return n % 2 ? w[n / 2] : 0.5 * (w[n / 2 - 1] + w[n / 2]);
+    out[0] = '\0';
+    for (int k = 0, at = 0; k < n && at < (int)len - 12; k++)
+        at += snprintf(out + at, len - (size_t)at, "%s%.*f", k ? ", " : "", decimals, r[k]);
 }
 
 /* One pair of disks2d rows for the lean comparison: the normal build (this
  * process) and bin/mpmbench-lean with the same steps, the lean one first
- * when lean_first.  The first normal row fixes c->steps for the pairs after
- * it.  *q = lean / normal speed.  Returns 0, 1 when the lean binary is not
- * there, -1 when a row failed (reported). */
+ * when lean_first (which needs c->steps set: the first pair, normal first,
+ * fixes them from its normal row).  *q = lean / normal speed.  Returns 0,
+ * 1 when the lean binary is not there, -1 when a row failed (reported). */
 static int lean_pair(pb_cfg *c, int lean_first, double *q)
 {
     pb_row nr = {0}, lr = {0};
@@ -844,11 +837,6 @@ static int lean_pair(pb_cfg *c, int lean_first, double *q)
             if (measure(c, &nr)) return -1;
             if (!c->steps) c->steps = nr.steps;
             continue;
-        }
-        if (!c->steps) { /* lean first with no steps yet: a normal row sets them */
-            pb_row probe;
-            if (measure(c, &probe)) return -1;
-            c->steps = probe.steps;
         }
         pb_progress("disks2d-lean %s USF, 1 thread", pb_method_name(c->method));
         int rc = run_lean(c, c->steps, &lr);
@@ -859,7 +847,7 @@ static int lean_pair(pb_cfg *c, int lean_first, double *q)
         }
         show_row(&lr);
     }
-    *q = nr.mpsteps > 0 ? lr.mpsteps / nr.mpsteps : 0;
+    *q = speed_ratio(&lr, &nr);
     return 0;
 }
 
@@ -894,7 +882,7 @@ static int run_all(const opts *o)
     for (int s = 0; s < 3; s++)
         for (int m = 0; m < 2; m++) {
             if (!ok[s][m][0] || !ok[s][m][1]) continue;
-            ratio[s][m][npairs[s][m]++] = scaling_ratio(&rows[s][m][0], &rows[s][m][1]);
+            ratio[s][m][npairs[s][m]++] = speed_ratio(&rows[s][m][1], &rows[s][m][0]);
         }
     pb_note("1 -> 2 threads: %d more pairs of rows of each scene and method, alternated",
             PB_SCALING_PAIRS - 1);
@@ -910,16 +898,16 @@ static int run_all(const opts *o)
                                 rows[s][m][t].steps, t + 1,      0.0,     MPM_TRANSFER_FLIP};
                     pok &= measure(&c, &pr[t]) == 0;
                 }
-                if (pok) ratio[s][m][npairs[s][m]++] = scaling_ratio(&pr[0], &pr[1]);
+                failures += !pok;
+                if (pok) ratio[s][m][npairs[s][m]++] = speed_ratio(&pr[1], &pr[0]);
             }
     for (int s = 0; s < 3; s++)
         for (int m = 0; m < 2; m++) {
             int n = npairs[s][m];
             if (!n) continue;
-            double *r = ratio[s][m], q = median_of(r, n);
-            char each[96] = "";
-            for (int k = 0, at = 0; k < n && at < (int)sizeof each - 12; k++)
-                at += snprintf(each + at, sizeof each - (size_t)at, "%s%.2f", k ? ", " : "", r[k]);
+            double q = pb_median(ratio[s][m], n);
+            char each[96];
+            list_ratios(each, sizeof each, ratio[s][m], n, 2);
             pb_result("%s %s: 1 -> 2 threads %.2fx (median of %d alternated pairs: %s; target >= "
                       "1.7x): %s",
                       pb_scene_name(scenes[s]), pb_method_name(methods[m]), q, n, each,
@@ -986,7 +974,7 @@ static int run_all(const opts *o)
         int n = 0, rc = 0;
         for (int k = 0; k < PB_SCALING_PAIRS; k++) {
             rc = lean_pair(&c, k % 2, &q[n]);
-            if (rc == 1) break;
+            if (rc == 1 || (rc && !c.steps)) break; /* no lean binary; no steps to pair */
             if (rc)
                 failures++;
             else
@@ -998,12 +986,11 @@ static int run_all(const opts *o)
             break;
         }
         if (!n) continue;
-        char each[96] = "";
-        for (int k = 0, at = 0; k < n && at < (int)sizeof each - 12; k++)
-            at += snprintf(each + at, sizeof each - (size_t)at, "%s%.3f", k ? ", " : "", q[k]);
+        char each[96];
+        list_ratios(each, sizeof each, q, n, 3);
         pb_result("disks2d %s, 1 thread: lean / normal = %.3f (median of %d alternated pairs: "
                   "%s; a feature unused should cost nothing: ~1.0)",
-                  pb_method_name(methods[m]), median_of(q, n), n, each);
+                  pb_method_name(methods[m]), pb_median(q, n), n, each);
     }
     pb_note("%s", "");
 
