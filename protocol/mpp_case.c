@@ -726,6 +726,8 @@ int mpp_case_from_pb(const Mpmd__Case *pb, size_t max_particles, mpp_case **out,
         mc->c.max_particles = max;
         rc = mpm_case_check(&mc->c, &mc->info, err);
     }
+    /* only the combinations the tests show right (docs/accuracy.md) */
+    if (!rc) rc = mpm_case_verified(&mc->c, &mc->info, err);
     if (rc) {
         mpp_case_destroy(&mc);
         return rc;

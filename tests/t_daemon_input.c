@@ -114,6 +114,12 @@ DTEST(daemon_bad_input)
     CHECK(bad_case(&d, "\"spacing\": [0.1, 0.1]", "\"spacing\": [0.1, 0.1, 0.1]", "INVALID_CASE",
                    "grid.spacing"));
     CHECK(bad_case(&d, "\"dim\": 2", "\"dim\": 4", "INVALID_CASE", "grid.dim"));
+    /* the verification policy (mpm_verified.c): refused at submit */
+    CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1, \"method\": \"MPM\", \"update\": \"USL\"",
+                   "INVALID_CASE", "update"));
+    CHECK(bad_case(&d, "\"endTime\": 1",
+                   "\"endTime\": 1, \"method\": \"BSPLINE3\", \"boundary\": {\"xLo\": 1}",
+                   "INVALID_CASE", "method"));
     /* too many steps: endTime / dt far beyond any integer is refused, not
      * wrapped into a negative count that passes the limit */
     CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1e300, \"dt\": 0.001", "TOO_LARGE",

@@ -131,9 +131,23 @@ DTEST(daemon_method_defaults)
     CHECKF(o.status == 0 && job_of(o.out) == 1, "submit --watch: exit %d, %s%s", o.status, o.out,
            o.err);
     td_out_free(&o);
-    /* and one that names MPM with USL */
+    /* one that names a combination the verification policy refuses (MPM
+     * with USL: mpm_verified.c): the daemon refuses it at submit, naming
+     * the field and an alternative, and records nothing */
+    c = block2d(40, 10, "refused");
+    CHECK(c);
+    json_object_set_new(c, "update", json_string("USL"));
+    CHECK(write_case(c, dir, "refused.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 60, &o, "submit", path, NULL) == 0);
+    TLOG("MPM with USL: exit %d, %s", o.status, o.err);
+    CHECKF(o.status != 0 && strstr(o.err, "update: method MPM with update USL is refused") &&
+               strstr(o.err, "; use MUSL"),
+           "submit: exit %d, %s%s", o.status, o.out, o.err);
+    td_out_free(&o);
+    /* and one that names GIMP with USL */
     c = block2d(40, 10, "explicit");
     CHECK(c);
+    json_object_set_new(c, "method", json_string("GIMP"));
     json_object_set_new(c, "update", json_string("USL"));
     CHECK(write_case(c, dir, "explicit.json", path, sizeof path) == 0);
     CHECK(td_ctl(&d, 60, &o, "submit", path, "--watch", NULL) == 0);
@@ -143,7 +157,7 @@ DTEST(daemon_method_defaults)
 
     /* decoded replies: RunInfo.method / update, from the run record */
     {
-        static const char *const want[3][2] = {{"", ""}, {"BSPLINE2", "MUSL"}, {"MPM", "USL"}};
+        static const char *const want[3][2] = {{"", ""}, {"BSPLINE2", "MUSL"}, {"GIMP", "USL"}};
         for (unsigned long long id = 1; id <= 2; id++) {
             mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = id, .with_case = 1};
             json_t *reply = NULL, *run, *cs;
@@ -165,7 +179,7 @@ DTEST(daemon_method_defaults)
     CHECK(td_ctl(&d, 30, &o, "runs", NULL) == 0);
     CHECKF(o.status == 0 && strstr(o.out, "METHOD   UPDATE TRANSFER") &&
                strstr(o.out, "FINISHED    BSPLINE2 MUSL   FLIP") &&
-               strstr(o.out, "FINISHED    MPM      USL    FLIP"),
+               strstr(o.out, "FINISHED    GIMP     USL    FLIP"),
            "runs: %s", o.out);
     TLOG("runs:\n%s", o.out);
     td_out_free(&o);
@@ -177,7 +191,7 @@ DTEST(daemon_method_defaults)
                *r1 = nl == 2 ? parse_line(lines[1]) : NULL;
         free(lines);
         int ok = r1 && r2 && !strcmp(jstr(r1, "method"), "BSPLINE2") &&
-                 !strcmp(jstr(r1, "update"), "MUSL") && !strcmp(jstr(r2, "method"), "MPM") &&
+                 !strcmp(jstr(r1, "update"), "MUSL") && !strcmp(jstr(r2, "method"), "GIMP") &&
                  !strcmp(jstr(r2, "update"), "USL");
         json_decref(r1);
         json_decref(r2);
@@ -190,7 +204,7 @@ DTEST(daemon_method_defaults)
     td_out_free(&o);
     r = show_json(&d, 2);
     CHECK(r);
-    CHECKF(!strcmp(jstr(r, "method"), "MPM") && !strcmp(jstr(r, "update"), "USL"),
+    CHECKF(!strcmp(jstr(r, "method"), "GIMP") && !strcmp(jstr(r, "update"), "USL"),
            "show 2 --json: %s, %s", jstr(r, "method"), jstr(r, "update"));
     json_decref(r);
     /* show --case gives a case that loads as BSPLINE2 + MUSL */

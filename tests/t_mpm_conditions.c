@@ -70,7 +70,7 @@ static int slide(mpm_method m, mpm_update up, double theta_deg, double mu, doubl
     mpm_case c = {0};
     c.grid.dim = 2;
     c.grid.h[0] = c.grid.h[1] = 0.1;
-    c.grid.nodes[0] = 31;
+    c.grid.nodes[0] = 81; /* 8 m: 1.5 s of sliding at up to 4 m/s^2 */
     c.grid.nodes[1] = 8;
     c.method = m;
     c.update = up;
@@ -148,41 +148,105 @@ static const char *mname(mpm_method m)
                                       : "CPDI";
 }
 
-/* Sliding: theta 30 deg, mu 0.2: a = 10 (0.5 - 0.2 cos 30) = 3.2679 m/s^2,
- * fitted over t in [0.1, 0.5] s.  Tolerance on a: 1 % for MPM and GIMP
- * (measured <= 0.2 %), 4 % for the B-splines (measured: USL 2e-5,
- * MUSL 0.9 % (BSPLINE2) and 1.7 % (BSPLINE3), USF 1.8 % and 3.2 %: more
- * friction than Coulomb's, because with USF and MUSL some face control
- * points pull instead of pressing (30-80 N of the 866 N normal weight)
- * and the pressing ones carry that tension too; docs/solver.md); the energy balance K + S + P +
- * W_friction - E0 within 1 % of the potential energy released (measured <= 0.35 %).  mu = 0.3 on
- * this elastic block is not run: from t ~ 0.2 s a vibration grows there
- * (the same onset time for every method, h and dt; docs/solver.md). */
-TEST(mpm_cond_sliding_block)
+/* Sliding, over a long run: 1.5 s, in which the block slides 2.2-4.2 m
+ * (22-42 cells).  The acceleration fitted over t in [0.3, 1.5] s against
+ * g (sin theta - mu cos theta), for each method a friction face accepts
+ * (GIMP, BSPLINE2, CPDI) with MUSL and USL (MPM and USF are refused:
+ * mpm_cond_refusals): within 1e-3 (measured <= 5.8e-5 with MUSL, <=
+ * 3.1e-4 with USL), 2e-3 for CPDI USL at mu 0.2 (measured 1.5e-3); the
+ * energy balance K + S + P + W_friction - E0 within 1 % of
+ * the potential energy released (measured <= 1.3e-3).  Before MUSL's
+ * remap took the face nodes' post-friction momentum, the default method's
+ * block slowed from 0.1 s on and moved at 0.37 m/s at 1.5 s where 4.9 m/s
+ * is exact.  On finer grids an elastic block's sliding turns unstable
+ * (docs/accuracy.md, "Friction faces"): these rows are at h = H / 2. */
+TEST(mpm_cond_sliding_long)
 {
-    double th = 30, mu = 0.2, g = 10;
-    double a_ex = g * (sin(th * M_PI / 180) - mu * cos(th * M_PI / 180));
-    mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_BSPLINE3};
-    mpm_update us[] = {MPM_MUSL, MPM_USF, MPM_USL};
-    for (int i = 0; i < 4; i++)
-        for (int u = 0; u < 3; u++) {
-            /* MPM tents with USL blow up on this block even without
-             * friction (cell crossing; C = 0.25 too): not run */
-            if (ms[i] == MPM_METHOD_MPM && us[u] == MPM_USL) continue;
+    typedef struct {
+        mpm_method m;
+        double th, mu, tol;
+    } row;
+    static const row rows[] = {
+        {MPM_METHOD_BSPLINE2, 25, 0.15, 1e-3}, {MPM_METHOD_BSPLINE2, 25, 0.25, 1e-3},
+        {MPM_METHOD_BSPLINE2, 30, 0.25, 1e-3}, {MPM_METHOD_BSPLINE2, 30, 0.4, 1e-3},
+        {MPM_METHOD_BSPLINE2, 35, 0.4, 1e-3},  {MPM_METHOD_GIMP, 25, 0.15, 1e-3},
+        {MPM_METHOD_GIMP, 30, 0.15, 1e-3},     {MPM_METHOD_GIMP, 30, 0.2, 1e-3},
+        {MPM_METHOD_CPDI, 25, 0.15, 1e-3},     {MPM_METHOD_CPDI, 30, 0.15, 1e-3},
+        {MPM_METHOD_CPDI, 30, 0.2, 2e-3},
+    };
+    double g = 10;
+    mpm_update us[] = {MPM_MUSL, MPM_USL};
+    for (size_t k = 0; k < sizeof rows / sizeof rows[0]; k++)
+        for (int u = 0; u < 2; u++) {
+            const row *w = &rows[k];
+            double a_ex = g * (sin(w->th * M_PI / 180) - w->mu * cos(w->th * M_PI / 180));
             slide_res r;
-            CHECK(slide(ms[i], us[u], th, mu, 0.5, 0.1, 1, &r) == 0);
-            TLOG("%-8s %s: a = %.6f (exact %.6f, rel err %.2e), friction work %.4g J, "
-                 "balance error %.2e of the released %.4g J",
-                 mname(ms[i]),
-                 u == 0   ? "MUSL"
-                 : u == 1 ? "USF "
-                          : "USL ",
-                 r.a, a_ex, fabs(r.a - a_ex) / a_ex, r.wf, r.e_err, r.e_drop);
-            int bsp = ms[i] == MPM_METHOD_BSPLINE2 || ms[i] == MPM_METHOD_BSPLINE3;
-            CHECK_NEAR(r.a, a_ex, (bsp ? 0.04 : 0.01) * a_ex);
+            CHECK(slide(w->m, us[u], w->th, w->mu, 1.5, 0.3, 1, &r) == 0);
+            TLOG("%-8s %s theta %.0f mu %.2f: a = %.5f (exact %.5f, rel err %.2e), balance "
+                 "error %.2e of the released %.4g J",
+                 mname(w->m), u == 0 ? "MUSL" : "USL ", w->th, w->mu, r.a, a_ex,
+                 fabs(r.a - a_ex) / a_ex, r.e_err, r.e_drop);
+            CHECK_NEAR(r.a, a_ex, w->tol * a_ex);
             CHECK_LT(r.e_err, 0.01);
             CHECK(r.wf > 0);
         }
+}
+
+/* The combinations a friction face refuses at submit (mpm_case_verified()),
+ * each naming its field: USF (the block, dropped on the face, slowed to
+ * 1.2 m/s at 1.5 s where 4.3 m/s is exact), MPM's tents (it diverged at
+ * 0.16 s), BSPLINE3 (a face condition); the others pass. */
+TEST(mpm_cond_refusals)
+{
+    mpm_material_desc mat = block_mat;
+    mpm_body_desc b = {0};
+    b.shape = MPM_SHAPE_BOX;
+    b.lo[0] = 0.3;
+    b.hi[0] = 0.8;
+    b.hi[1] = 0.2;
+    b.ppc = 2;
+    mpm_friction_desc fr = {2, 0.2};
+    mpm_case c = {0};
+    c.grid.dim = 2;
+    c.grid.h[0] = c.grid.h[1] = 0.1;
+    c.grid.nodes[0] = 31;
+    c.grid.nodes[1] = 8;
+    c.gravity[0] = 5;
+    c.gravity[1] = -8.66;
+    c.n_materials = 1;
+    c.materials = &mat;
+    c.n_bodies = 1;
+    c.bodies = &b;
+    c.bc.n_friction = 1;
+    c.bc.friction = &fr;
+    static const struct {
+        mpm_method m;
+        mpm_update u;
+        const char *field; /* NULL: accepted */
+    } rows[] = {
+        {MPM_METHOD_BSPLINE2, MPM_MUSL, NULL},     {MPM_METHOD_BSPLINE2, MPM_USL, NULL},
+        {MPM_METHOD_GIMP, MPM_MUSL, NULL},         {MPM_METHOD_CPDI, MPM_USL, NULL},
+        {MPM_METHOD_BSPLINE2, MPM_USF, "update"},  {MPM_METHOD_GIMP, MPM_USF, "update"},
+        {MPM_METHOD_MPM, MPM_MUSL, "method"},      {MPM_METHOD_MPM, MPM_USL, "method"},
+        {MPM_METHOD_BSPLINE3, MPM_MUSL, "method"},
+    };
+    for (size_t i = 0; i < sizeof rows / sizeof rows[0]; i++) {
+        c.method = rows[i].m;
+        c.update = rows[i].u;
+        mpm_case_info info;
+        mpm_error err;
+        CHECK(mpm_case_check(&c, &info, &err) == 0);
+        int rc = mpm_case_verified(&c, &info, &err);
+        const char *txt = TERR(&err);
+        TLOG("%-8s %d: %s", mname(rows[i].m), (int)rows[i].u, rc ? txt : "(accepted)");
+        if (!rows[i].field) {
+            CHECK(rc == 0);
+            continue;
+        }
+        CHECK(rc == MPM_EINVAL);
+        CHECK(strncmp(txt, rows[i].field, strlen(rows[i].field)) == 0);
+        CHECK(strstr(txt, "; use ") != NULL); /* names an alternative */
+    }
 }
 
 /* 3D: the same block, 0.5 deep in z, on y_lo with mu = 0.2, gravity's
@@ -273,8 +337,8 @@ TEST(mpm_cond_sliding_block_3d)
  * by up to ~2e-4) in 0.5 s, where sliding freely it would move 0.22 m. */
 TEST(mpm_cond_block_sticks)
 {
-    mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_BSPLINE3};
-    for (int i = 0; i < 4; i++) {
+    mpm_method ms[] = {MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_CPDI};
+    for (int i = 0; i < 3; i++) {
         slide_res r;
         CHECK(slide(ms[i], MPM_MUSL, 10, 0.3, 0.5, 0.1, 1, &r) == 0);
         TLOG("%-8s MUSL: displacement %.3e m, fitted a = %.3e, friction work %.3e J", mname(ms[i]),
@@ -552,6 +616,7 @@ TEST(mpm_cond_errors)
     c.grid.h[0] = c.grid.h[1] = 0.1;
     c.grid.nodes[0] = c.grid.nodes[1] = 11;
     c.method = MPM_METHOD_GIMP;
+    c.update = MPM_MUSL;
     c.n_materials = 1;
     c.materials = &mat;
     c.n_bodies = 1;

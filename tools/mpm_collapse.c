@@ -107,7 +107,7 @@ int mpm_collapse_setup(const mpm_collapse_cfg *cfg, mpm_collapse_case *cc)
     c->grid.nodes[0] = nx;
     c->grid.nodes[1] = ny;
     c->method = cfg->method;
-    c->update = MPM_USF;
+    c->update = MPM_MUSL; /* a friction face refuses USF (mpm_cond_refusals) */
     c->gravity[1] = -COLLAPSE_G;
     c->n_materials = 1;
     c->materials = &cc->mat;

@@ -424,7 +424,12 @@ typedef struct {
     int dim;
     double vmax; /* largest initial particle speed */
     double cmax; /* largest p-wave speed of the materials */
+    /* the first particle within MPM_EDGE_CELLS cells of a grid end (-1:
+     * none) and the axis along which it is: BSPLINE3's clamped spans */
+    long edge_particle;
+    int edge_axis;
 } mpm_case_info;
+#define MPM_EDGE_CELLS 2.0
 
 /* Validates every field of a case and counts its particles, in one pass
  * over them, allocating nothing.  Returns 0 and fills *info (info may be
@@ -432,6 +437,14 @@ typedef struct {
  * without allow_unstable_dt) / MPM_ETOOBIG (more particles than
  * max_particles; the counting stops there) with err naming the field. */
 int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err);
+
+/* The verification policy (server/mpm/mpm_verified.c; docs/accuracy.md,
+ * "Verification matrix"): 0 when a checked case (info from
+ * mpm_case_check()) uses only combinations that the tests show right, else
+ * MPM_EINVAL with err naming the field, the combination, why, and an
+ * alternative.  Called at submit (protocol/mpp_case.c); the solver itself
+ * runs any valid case, so its own tests reach every path. */
+int mpm_case_verified(const mpm_case *c, const mpm_case_info *info, mpm_error *err);
 
 /* Creates a simulation from a case.  checked NULL: the case is checked
  * first (mpm_case_check()).  checked not NULL: the case passed

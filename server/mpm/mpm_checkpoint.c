@@ -21,7 +21,7 @@
  * are kept sorted by cell: mass, half-widths, material and creation index
  * move with them and are saved too), then the load slots (their particles,
  * forces, and the tractions' shares once mpm_sim_set_particle_forces() was
- * called) and the friction nodes' stick flags.
+ * called) and the friction nodes' states (free, stuck, sliding).
  *
  * What is not saved is rebuilt by mpm_sim_new() from the case (the grid,
  * the fixed and prescribed nodes, the tractions' shares and time

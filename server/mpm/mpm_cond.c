@@ -19,8 +19,12 @@
  * mu N dt, and else slides with f_t reduced by mu N q_t* / |q_t*|.  A node
  * that does not press is free tangentially.  The friction force df does
  * -df . (q^n + q^{n+1}) / (2 m) dt of work: friction_work, the energy it
- * dissipates.  MUSL's remap zeroes q2's tangential components at the nodes
- * that stuck.  A friction face's nodes may carry prescribed tangential
+ * dissipates.  MUSL's remap q2 takes, at every node that pressed, the
+ * tangential momentum friction left on the grid (q^{n+1}_t, 0 where it
+ * stuck): the remap of the particles' velocities knows nothing of the
+ * face, and straining and moving the body with it let an elastic block's
+ * sliding feed a growing vibration that stopped it (mpm_cond_sliding_long
+ * guards it).  A friction face's nodes may carry prescribed tangential
  * directions (a driven edge on a frictional base): those nodes have no
  * friction.
  *
@@ -412,12 +416,15 @@ void mpm_cond_bc1q2(const mpm_sim *s, size_t first, size_t last)
         for (int d = 0; d < s->dim; d++)
             if (s->pres_mask[i] & (1u << d)) s->g.q2[d][n] = s->g.m[n] * v1[d];
     }
+    /* a node that pressed keeps the tangential momentum friction gave it
+     * (q holds v^{n+1} when the family gathers velocities) */
     for (size_t i = lower(s->fric_node, s->nfric, first); i < s->nfric && s->fric_node[i] <= last;
          i++) {
-        if (!s->fric_stick[i]) continue;
+        if (s->fric_stick[i] == MPM_FRIC_FREE) continue;
+        size_t n = s->fric_node[i];
         int a = s->fric_face[i] / 2;
         for (int d = 0; d < s->dim; d++)
-            if (d != a) s->g.q2[d][s->fric_node[i]] = 0.0;
+            if (d != a) s->g.q2[d][n] = s->gvel ? s->g.q[d][n] * s->g.m[n] : s->g.q[d][n];
     }
 }
 
@@ -429,7 +436,7 @@ void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last)
         size_t n = s->fric_node[i];
         int a = s->fric_face[i] / 2, hi = s->fric_face[i] % 2;
         double minv = s->minv[n], fn = s->g.f[a][n];
-        s->fric_stick[i] = 0;
+        s->fric_stick[i] = MPM_FRIC_FREE;
         /* phantom, or not pressing on the face (the roller zeroes f_n) */
         if (minv == 0 || !(hi ? fn > 0 : fn < 0)) continue;
         double N = fabs(fn), qt[3] = {0, 0, 0}, q2 = 0;
@@ -448,7 +455,7 @@ void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last)
             wf -= (fnew - f) * dt * (q + 0.5 * fnew * dt) * minv;
             s->g.f[d][n] = fnew;
         }
-        s->fric_stick[i] = (unsigned char)stick;
+        s->fric_stick[i] = stick ? MPM_FRIC_STICK : MPM_FRIC_SLIDE;
     }
     for (size_t i = lower(s->pres_node, s->npres, first); i < s->npres && s->pres_node[i] <= last;
          i++) {

@@ -262,7 +262,8 @@ struct mpm_sim {
      * mask, source), the sources' directions' values, time functions and
      * the velocities at t^n and t^{n+1} of the running step (3 per
      * source).  Friction: nfric entries sorted by node (node, face, mu),
-     * and whether the node stuck in this step (MUSL's remap reads it). */
+     * and the node's state in this step (MPM_FRIC_*: MUSL's remap reads
+     * it). */
     int has_cond;
     size_t npres, npsrc;
     size_t *pres_node;
@@ -935,11 +936,15 @@ void mpm_cond_free(mpm_sim *s);
 void mpm_cond_begin_step(mpm_sim *s);
 /* After a step (serial): the per-thread work sums into the totals. */
 void mpm_cond_end_step(mpm_sim *s);
+/* A friction node's state in the running step (mpm_sim.fric_stick): it did
+ * not press on its face, it pressed and stuck, it pressed and slid. */
+enum { MPM_FRIC_FREE = 0, MPM_FRIC_STICK = 1, MPM_FRIC_SLIDE = 2 };
 /* Node passes over the flat nodes first..last: BC1 (q = m v(t^n)), BC1 on
- * MUSL's q2 (q2 = m v(t^{n+1}); stuck friction nodes' tangential q2 = 0),
- * and BC2 (friction on the free rate of momentum, then f = m (v(t^{n+1}) -
- * v(t^n)) / dt), summing the work into tout[tid]; each before the fixed
- * DOFs' zeroing of the same field. */
+ * MUSL's q2 (q2 = m v(t^{n+1});
+ * a pressing friction node's tangential q2 = its q^{n+1}), and BC2
+ * (friction on the free rate of momentum, then f = m (v(t^{n+1}) - v(t^n))
+ * / dt), summing the work into tout[tid]; each before the fixed DOFs'
+ * zeroing of the same field. */
 void mpm_cond_bc1(const mpm_sim *s, size_t first, size_t last);
 void mpm_cond_bc1q2(const mpm_sim *s, size_t first, size_t last);
 void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last);
