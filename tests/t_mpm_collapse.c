@@ -70,12 +70,14 @@ TEST(collapse_reference)
 
 /* proto/examples/collapse2d.json (a = 2, d0 = 0.1 m, 8 cells across,
  * BSPLINE2, DP; a box body, so it starts stress-free rather than
- * geostatic) through the codec, run to its end time: the run-out against
- * Lube's a = 2 (the transition between the fits: 2.40 to 3.02, their mean
- * 2.71) within 30 %, the height at the back wall within 30 % of 2^0.4, and
- * the energy balance with the plastic and friction work within 2 % of the
- * released potential energy. */
-TEST(collapse_example)
+ * geostatic) through the codec, its cohesion set to c (< 0: the file's),
+ * run to its end time: the run-out against Lube's a = 2 (the transition
+ * between the fits: 2.40 to 3.02, their mean 2.71) within 30 %, the
+ * height at the back wall within 30 % of 2^0.4, and the energy balance
+ * with the plastic and friction work within 2 % of the released potential
+ * energy. */
+static void run_example(double c)
+
 {
     size_t len = 0;
     mpp_case *mc = NULL;
@@ -90,6 +92,7 @@ TEST(collapse_example)
     int rc = t_errtext(mpp_case_load(text, len, 0, &mc, &e), &e, err);
     free(text);
     CHECKF(rc == 0, "%s", err);
+    if (c >= 0) ((mpm_material_desc *)mc->c.materials)[0].cohesion = c;
     mpm_sim *s = mpm_sim_new(&mc->c, NULL, &e);
     double tend = mc->end_time, h = mc->c.grid.h[0];
     mpp_case_destroy(&mc);
@@ -119,12 +122,31 @@ TEST(collapse_example)
     double d0 = 0.1, runout = (front - d0) / d0, hh = height / d0,
            drop = e0.potential - e1.potential;
     double ref = mpm_collapse_ref_runout(2, NULL), href = mpm_collapse_ref_height(2);
-    TLOG("collapse2d: run-out %.3f (ref %.3f, %+.1f %%), height %.3f (ref %.3f, %+.1f %%), K at "
-         "the end %.2e of the released %.3g J/m, balance %.2e",
-         runout, ref, 100 * (runout / ref - 1), hh, href, 100 * (hh / href - 1), e1.kinetic / drop,
-         drop, emax / drop);
+    TLOG(
+        "collapse2d, cohesion %g Pa: run-out %.3f (ref %.3f, %+.1f %%), height %.3f (ref %.3f, %+.1f %%), K at "
+        "the end %.2e of the released %.3g J/m, balance %.2e",
+        c < 0 ? 10 : c, runout, ref, 100 * (runout / ref - 1), hh, href, 100 * (hh / href - 1),
+        e1.kinetic / drop, drop, emax / drop);
     CHECK_NEAR(runout, ref, 0.3 * ref);
     CHECK_NEAR(hh, href, 0.3 * href);
     CHECK_LT(emax / drop, 0.02);
     CHECK_LT(e1.kinetic, 0.01 * drop);
+}
+
+TEST(collapse_example)
+{
+    run_example(-1);
+}
+
+/* The same column of cohesionless sand (c = 0) and of c = 2 Pa: Sloan's
+ * substepping could not resolve the free surface's increments near the
+ * apex, and the run stopped at 0.011 s (c = 0) and 0.19 s (c = 2) with
+ * "substepping exhausted"; the update now falls back on backward Euler's
+ * return there (plastic_dp_near_apex), and the run meets the example's
+ * tolerances (measured: run-out +17.4 % and +23.0 %, balances 2.4e-3 and
+ * 2.3e-3). */
+TEST(collapse_cohesionless)
+{
+    run_example(0);
+    run_example(2);
 }

@@ -532,3 +532,36 @@ TEST(plastic_dp_cutoff_corner)
     CHECK(fabs(align - 1) <= 1e-12);
     CHECK(st.yielded && dis > 0);
 }
+
+/* Near the apex: cohesionless and slightly cohesive sand (c 0 and 1 Pa,
+ * phi 30, psi 0, plane-strain match, cut-off at the apex) at a stress of
+ * about 1 Pa, given a strain increment of 2e-3 (the granular collapse's
+ * free surface, where the increment is thousands of yield strains).
+ * Sloan's substepping cannot resolve it within max_substeps (the flow
+ * direction turns within a substep: the error estimate stalls at 0.5 Pa,
+ * measured), and the collapse stopped with "substepping exhausted"; the
+ * update now ends on backward Euler's return: it succeeds, ends on or
+ * inside the cone (f <= ftol scale) at or below the cut-off, and
+ * dissipates >= 0. */
+TEST(plastic_dp_near_apex)
+{
+    static const double c[2] = {0, 1};
+    for (int k = 0; k < 2; k++) {
+        mpm_plastic_params P;
+        CHECK(tp_params(&P, MPM_PLASTIC_DRUCKER_PRAGER, MPM_DP_PLANE_STRAIN, 30, 0, c[k], 0) == 0);
+        double sig[6] = {0.151056, -1.73317, -0.855162, 0.854192, 0, 0};
+        double de[6] = {0.001969, -0.00196999, 0, 0.00201988, 0, 0}, dis = -1;
+        mpm_plastic_state st = {0};
+        int rc = mpm_plastic_update(&P, sig, de, &st, &dis);
+        double p = (sig[0] + sig[1] + sig[2]) / 3, d[3] = {sig[0] - p, sig[1] - p, sig[2] - p};
+        double r = sqrt(0.5 * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + sig[3] * sig[3]);
+        double f = r + P.eta * p - P.xi * P.c;
+        TLOG("c = %g: rc %d, substeps %d, p %.4g, sqrt(J2) %.4g, f %.3g, dissipation %.4g", c[k],
+             rc, st.substeps, p, r, f, dis);
+        CHECK(rc == 0);
+        CHECK(st.substeps == P.max_substeps + 1); /* the fallback ran */
+        CHECK(f <= 1e-8 * (r + P.eta * fabs(p) + P.xi * P.c) + 1e-12);
+        CHECK(p <= P.pt + 1e-12);
+        CHECK(dis >= 0);
+    }
+}

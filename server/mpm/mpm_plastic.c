@@ -356,14 +356,16 @@ static void dp_tension(const mpm_plastic_params *P, double s[6], const double sa
 /* The modified Euler scheme with local error control (Sloan 2001) over
  * the strain de from s (on the surface; v its invariants, updated with
  * it); |sig| in the relative error is floored at xi c, so that a state
- * near a cohesive apex does not force tiny substeps. */
+ * near a cohesive apex does not force tiny substeps.  Returns 1 when
+ * max_substeps did not reach the end (dp_update() then falls back on
+ * dp_implicit()). */
 static int dp_substep(const mpm_plastic_params *P, double s[6], dp_inv *v, const double de[6],
                       int *nacc, double *dis, double *epq)
 {
     double T = 0, dT = 1, stol = P->tol;
     int fail = 0, n = 0, acc = 0;
     while (T < 1) {
-        if (n++ >= P->max_substeps) return MPM_EDIVERGED;
+        if (n++ >= P->max_substeps) return 1; /* exhausted: dp_update falls back */
         double e[6], De[6], ds1[6], s1[6], ds2[6], sn[6], diff[6];
         dp_inv v1;
         for (int i = 0; i < 6; i++) e[i] = dT * de[i];
@@ -411,6 +413,37 @@ static int dp_substep(const mpm_plastic_params *P, double s[6], dp_inv *v, const
     return 0;
 }
 
+/* Backward Euler's return from the trial stress tr (the elastic predictor
+ * sig + De), for an increment that Sloan's substepping could not resolve
+ * within max_substeps: a stress near the apex (cohesionless sand at the
+ * free surface) with a strain increment of hundreds of yield strains,
+ * where the flow direction turns within a substep and the error estimate
+ * stops shrinking with it.  For f = sqrt(J2) + eta p - xi c and g =
+ * sqrt(J2) + etag p, perfectly plastic: dgamma = f(tr) / (G + K eta etag),
+ * sqrt(J2) = r_tr - G dgamma, p = p_tr - K etag dgamma; when that overshoots
+ * the axis, the apex p = xi c / eta with a zero deviator (de Souza Neto,
+ * Peric & Owen 2008, 8.3).  One closed form, unconditionally stable; the
+ * dissipation as the other closed forms' (trap_dis) (plastic_dp_near_apex). */
+static void dp_implicit(const mpm_plastic_params *P, const double sig[6], const double De[6],
+                        const double tr[6], double s[6], double *dis, double *epq)
+{
+    double d[6], p = meanp(tr), r = sqrt_j2_p(tr, p, d);
+    double f = r + P->eta * p - P->xi * P->c;
+    double dg = f > 0 ? f / (P->G + P->K * P->eta * P->etag) : 0;
+    double rn = r - P->G * dg, pn = p - P->K * P->etag * dg;
+    if (!(rn > 0)) {
+        rn = 0;
+        pn = P->eta > 0 ? P->xi * P->c / P->eta : pn;
+    }
+    double beta = r > 0 ? rn / r : 0, sa[6], dd[6], ep[6];
+    for (int i = 0; i < 6; i++) s[i] = beta * d[i] + (i < 3 ? pn : 0);
+    first_yield(P, sig, De, sa);
+    for (int i = 0; i < 6; i++) dd[i] = tr[i] - s[i];
+    compliance(P, dd, ep);
+    *dis += trap_dis(sa, s, ep);
+    *epq += eqv_dev(ep);
+}
+
 static int dp_update(const mpm_plastic_params *P, double sig[6], const double deps[6],
                      mpm_plastic_state *st, double *dissip)
 {
@@ -450,7 +483,14 @@ static int dp_update(const mpm_plastic_params *P, double sig[6], const double de
         }
         if (al != 0) dp_invariants(P, s, &v);
         int rc = dp_substep(P, s, &v, rest, &nsub, &dis, &epq);
-        if (rc) return rc;
+        if (rc == 1) {
+            dis = epq = 0;
+            dp_implicit(P, sig, De, tr, s, &dis, &epq);
+            dp_invariants(P, s, &v);
+            nsub = P->max_substeps + 1;
+        } else if (rc) {
+            return rc;
+        }
         if (v.p > P->pt) {
             double sa[6];
             memcpy(sa, s, sizeof sa);

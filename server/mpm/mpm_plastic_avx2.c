@@ -585,7 +585,7 @@ VI void pass_substeps(const kc *k, const int nc, const mpm_plastic_params *P, si
             dsum = sel(m, k->zero, dsum);
             eqp = sel(m, k->zero, eqp);
         }
-        /* n++ >= max_substeps: the scalar update diverges */
+        /* n++ >= max_substeps: left to the scalar update (its implicit return) */
         int quit = 0;
         for (int j = 0; j < NL; j++) quit |= (nn[j]++ >= P->max_substeps) << j;
         quit &= live;
