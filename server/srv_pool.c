@@ -813,8 +813,13 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         p->lost[i].wall_s = wall;
         pthread_mutex_unlock(&p->mu);
     }
+    /* and the solver's own warnings (mpm_sim_warnings()), after it */
+    char swarn[600], allwarn[sizeof warn + sizeof swarn + 2];
+    int sw = mpm_sim_warnings(sim, swarn, sizeof swarn);
+    snprintf(allwarn, sizeof allwarn, "%s%s%s", over ? warn : "", over && warn[0] && sw ? "; " : "",
+             sw ? swarn : "");
     finish(&c, status, why[0] ? why : NULL, mpm_sim_steps(sim), mpm_sim_time(sim), wall, n, &last,
-           &balance, over && warn[0] ? warn : NULL);
+           &balance, allwarn[0] ? allwarn : NULL);
     /* only an interrupted run may be resumed: any other end drops its
      * checkpoint (a run that never took one touches nothing) */
     if (status != MPP_STATUS_INTERRUPTED && ck_step >= 0) {

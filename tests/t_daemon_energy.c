@@ -104,6 +104,45 @@ DTEST(daemon_energy_budget_warning_and_failed)
  * (`energy --json`): the same values, sample for sample, growing damping
  * work, and a balance error that stays within 1 % (the bar under viscous
  * damping, tests/t_energy.c). */
+/* The solver's warnings reach the run record: the example's pushed bar
+ * (proto/examples/pushed_bar1d.json) driven ten times faster, so that its
+ * face moves 0.5 cells by the end (mpm_sim_warnings(): more than 0.05),
+ * finishes with the warning in show's JSON and text. */
+DTEST(daemon_solver_warning_recorded)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--workers", "1", "--solver-threads", "1", NULL};
+    char dir[300], path[400];
+    td_daemon d;
+    td_out o;
+    snprintf(dir, sizeof dir, "%s/d", tmp);
+    if (td_start(&d, dir, extra)) return;
+    json_error_t je;
+    json_t *c = json_load_file("proto/examples/pushed_bar1d.json", 0, &je);
+    CHECKF(c, "%s", je.text);
+    json_t *pr = json_array_get(json_object_get(c, "prescribed"), 0);
+    CHECK(pr && !json_object_set_new(pr, "velocity", json_pack("[f]", 0.01)));
+    CHECK(write_case(c, dir, "fast.json", path, sizeof path) == 0);
+    CHECK(td_ctl(&d, 120, &o, "submit", path, "--watch", NULL) == 0);
+    CHECKF(o.status == 0, "submit --watch: exit %d, stderr: %s", o.status, o.err);
+    CHECKF(strstr(o.out, "  warning: prescribed[0] moved face x_lo 0.498 cells"), "watch: %s", o.out);
+    td_out_free(&o);
+    json_t *r = show_json(&d, 1);
+    CHECK(r);
+    const char *w = jstr(r, "warning");
+    TLOG("pushed bar at 10 x v0: status %s, warning \"%s\"", jstr(r, "status"), w ? w : "");
+    CHECK(!strcmp(jstr(r, "status"), "FINISHED"));
+    CHECK(w && strstr(w, "prescribed[0] moved face x_lo 0.498 cells") != NULL);
+    json_decref(r);
+    CHECK(td_ctl(&d, 30, &o, "show", "1", NULL) == 0 && o.status == 0);
+    CHECKF(strstr(o.out, "  warning     prescribed[0] moved face"), "show: %s", o.out);
+    td_out_free(&o);
+    /* the example itself moves its face 0.05 cells: no warning */
+    CHECK(td_ctl(&d, 120, &o, "submit", "proto/examples/pushed_bar1d.json", "--watch", NULL) == 0);
+    CHECKF(o.status == 0 && !strstr(o.out, "warning:"), "example: exit %d, %s", o.status, o.out);
+    td_out_free(&o);
+}
+
 DTEST(daemon_energy_stream_carries_damping)
 {
     const char *tmp = t_tmpdir();

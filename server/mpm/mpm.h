@@ -480,6 +480,14 @@ int mpm_sim_check(mpm_sim *sim);
  * loss.  Cheap: no pass over the particles. */
 int mpm_sim_budget(const mpm_sim *sim, double *final, double *worst, char *msg, size_t n);
 
+/* The solver's warnings about the run so far, for a result it cannot
+ * vouch for (docs/accuracy.md): a prescribed face that has moved more than
+ * MPM_FACE_TRAVEL_MAX cells along its normal (the body has left the grid
+ * face it acts at).  Returns 1 with the text in msg (n bytes; may be NULL),
+ * or 0.  Whoever runs the job records it with the run (as the budget's). */
+#define MPM_FACE_TRAVEL_MAX 0.05
+int mpm_sim_warnings(const mpm_sim *sim, char *msg, size_t n);
+
 /* Asks a running mpm_sim_run() to stop before its next step.  Safe to call
  * from any thread. */
 void mpm_sim_cancel(mpm_sim *sim);

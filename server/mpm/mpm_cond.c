@@ -299,12 +299,16 @@ int mpm_cond_build(mpm_sim *s, const mpm_case *c)
         if (!(s->pres_node = malloc(np * sizeof *s->pres_node)) || !(s->pres_mask = malloc(np)) ||
             !(s->pres_src = malloc(np * sizeof *s->pres_src)) || !(s->pres_val = mpm_dalloc(k3)) ||
             !(s->pres_v0 = mpm_dalloc(k3)) || !(s->pres_v1 = mpm_dalloc(k3)) ||
-            !(s->pres_tf = calloc(c->n_prescribed, sizeof *s->pres_tf)))
+            !(s->pres_tf = calloc(c->n_prescribed, sizeof *s->pres_tf)) ||
+            !(s->pres_face = malloc(c->n_prescribed * sizeof *s->pres_face)) ||
+            !(s->pres_fmask = malloc(c->n_prescribed)))
             goto out;
         size_t w = 0;
         for (size_t k = 0; k < c->n_prescribed; k++) {
             w += pres_entries(s, &c->prescribed[k], (uint32_t)k, e + w);
             for (int d = 0; d < s->dim; d++) s->pres_val[3 * k + d] = c->prescribed[k].value[d];
+            s->pres_face[k] = c->prescribed[k].face;
+            s->pres_fmask[k] = (unsigned char)c->prescribed[k].mask;
             if (mpm_timefn_copy_make(&s->pres_tf[k], c->prescribed[k].time_function)) goto out;
         }
         qsort(e, np, sizeof *e, ent_cmp);
@@ -352,6 +356,8 @@ void mpm_cond_free(mpm_sim *s)
     free(s->pres_v1);
     for (size_t k = 0; s->pres_tf && k < s->npsrc; k++) mpm_timefn_copy_free(&s->pres_tf[k]);
     free(s->pres_tf);
+    free(s->pres_face);
+    free(s->pres_fmask);
     free(s->fric_node);
     free(s->fric_face);
     free(s->fric_stick);
@@ -471,4 +477,44 @@ void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last)
     }
     s->tout[tid].wpres += wp;
     s->tout[tid].wfric += wf;
+}
+
+/* ---- warnings ---- */
+
+/* The largest |travel| of prescribed face k along its normal over [0, t]:
+ * value * the integral of its time function, by the midpoint rule on 4096
+ * pieces (the functions are piecewise linear: exact to 1e-7 of the
+ * travel), so that no state is kept (checkpoints stay as they are). */
+static double face_travel(const mpm_sim *s, size_t k, double t)
+{
+    int a = s->pres_face[k] / 2;
+    double v = s->pres_val[3 * k + a], x = 0, big = 0, dt = t / 4096;
+    if (v == 0 || !(t > 0)) return 0;
+    for (int i = 0; i < 4096; i++) {
+        x += v * mpm_timefn_copy_eval(&s->pres_tf[k], (i + 0.5) * dt) * dt;
+        if (fabs(x) > big) big = fabs(x);
+    }
+    return big;
+}
+
+int mpm_sim_warnings(const mpm_sim *s, char *msg, size_t n)
+{
+    if (msg && n) msg[0] = 0;
+    for (size_t k = 0; k < s->npsrc; k++) {
+        int f = s->pres_face[k];
+        if (f < 0 || !(s->pres_fmask[k] & (1u << (f / 2)))) continue;
+        double h = s->h[f / 2], tr = face_travel(s, k, s->t);
+        if (!(tr > MPM_FACE_TRAVEL_MAX * h)) continue;
+        if (msg && n)
+            snprintf(msg, n,
+                     "prescribed[%zu] moved face %s %.3g cells along its normal by t = %.6g: a "
+                     "prescribed face acts at the grid's face, not at the body's boundary once "
+                     "the body has left it, and beyond %g of a cell the stress next to it is off "
+                     "by more than 5 %% (docs/accuracy.md, \"Prescribed faces\"); keep a face's "
+                     "normal travel below that, prescribe tangential velocities only, or load "
+                     "the body with a traction",
+                     k, face_name[f], tr / h, s->t, MPM_FACE_TRAVEL_MAX);
+        return 1;
+    }
+    return 0;
 }

@@ -271,6 +271,8 @@ struct mpm_sim {
     uint32_t *pres_src;
     double *pres_val, *pres_v0, *pres_v1;
     mpm_timefn_copy *pres_tf;
+    int *pres_face;            /* per source: its face, or -1 (a node set) */
+    unsigned char *pres_fmask; /* per source: its direction mask */
     size_t nfric;
     size_t *fric_node;
     unsigned char *fric_face, *fric_stick;
