@@ -125,7 +125,8 @@ DTEST(daemon_solver_warning_recorded)
     CHECK(write_case(c, dir, "fast.json", path, sizeof path) == 0);
     CHECK(td_ctl(&d, 120, &o, "submit", path, "--watch", NULL) == 0);
     CHECKF(o.status == 0, "submit --watch: exit %d, stderr: %s", o.status, o.err);
-    CHECKF(strstr(o.out, "  warning: prescribed[0] moved face x_lo 0.498 cells"), "watch: %s", o.out);
+    CHECKF(strstr(o.out, "  warning: prescribed[0] moved face x_lo 0.498 cells"), "watch: %s",
+           o.out);
     td_out_free(&o);
     json_t *r = show_json(&d, 1);
     CHECK(r);
