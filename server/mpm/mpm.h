@@ -481,11 +481,14 @@ int mpm_sim_check(mpm_sim *sim);
 int mpm_sim_budget(const mpm_sim *sim, double *final, double *worst, char *msg, size_t n);
 
 /* The solver's warnings about the run so far, for a result it cannot
- * vouch for (docs/accuracy.md): a prescribed face that has moved more than
- * MPM_FACE_TRAVEL_MAX cells along its normal (the body has left the grid
- * face it acts at).  Returns 1 with the text in msg (n bytes; may be NULL),
- * or 0.  Whoever runs the job records it with the run (as the budget's). */
+ * vouch for (docs/accuracy.md): an elastic body on a friction face outside
+ * BSPLINE2 with mu <= MPM_FRICTION_ELASTIC_MU, a prescribed face that has
+ * moved more than MPM_FACE_TRAVEL_MAX cells along its normal (the body has
+ * left the grid face it acts at).  Returns 1 with the text in msg (n
+ * bytes; may be NULL), or 0.  Whoever runs the job records it with the run
+ * (as the budget's). */
 #define MPM_FACE_TRAVEL_MAX 0.05
+#define MPM_FRICTION_ELASTIC_MU 0.15
 int mpm_sim_warnings(const mpm_sim *sim, char *msg, size_t n);
 
 /* Asks a running mpm_sim_run() to stop before its next step.  Safe to call
