@@ -77,8 +77,11 @@ static int patch(mpm_method m, mpm_update u, mpm_transfer tr, int n, double t_en
         return -1;
     }
     while (!rc && mpm_sim_time(s) < t_end) rc = mpm_sim_step(s);
-    double *sig = malloc(sizeof(double) * (size_t)np * 8), *x = sig + 6 * np;
-    if (!sig) rc = -1;
+    double *sig = malloc(sizeof(double) * (size_t)np * 8), *x = NULL;
+    if (!sig)
+        rc = -1;
+    else
+        x = sig + 6 * np;
     if (!rc) {
         mpm_snapshot sn = {.x = x, .stress = sig};
         mpm_sim_snapshot(s, &sn);
