@@ -792,7 +792,9 @@ static int finish_step(mpm_sim *s)
         } else {
             s->failed = mpm_fail(&s->err, MPM_ELEFTGRID, NULL,
                                  "particle %zu left the grid at step %ld, time %.9g: position "
-                                 "(%s), %c outside [%g, %g)",
+                                 "(%s), %c outside [%g, %g) (a body pulled apart sheds particles "
+                                 "so: which methods carry tension to large stretch is in "
+                                 "docs/accuracy.md, \"Large stretch\")",
                                  (size_t)s->P.id[bad], step, t, pos, "xyz"[axis], s -> lo[axis],
                                  s -> hi[axis]);
         }
