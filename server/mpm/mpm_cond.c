@@ -483,8 +483,8 @@ void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last)
 
 /* The largest |travel| of prescribed face k along its normal over [0, t]:
  * value * the integral of its time function, by the midpoint rule on 4096
- * pieces (the functions are piecewise linear: exact to 1e-7 of the
- * travel), so that no state is kept (checkpoints stay as they are). */
+ * pieces (the functions are piecewise linear), so that no state is kept
+ * and checkpoints stay as they are (mpm_cond_face_travel_warning). */
 static double face_travel(const mpm_sim *s, size_t k, double t)
 {
     int a = s->pres_face[k] / 2;
@@ -500,7 +500,7 @@ static double face_travel(const mpm_sim *s, size_t k, double t)
 /* An elastic body on a friction face outside the verified envelope:
  * BSPLINE2 with mu <= MPM_FRICTION_ELASTIC_MU (docs/accuracy.md, "Friction
  * faces"); a sliding elastic body may feed a friction-driven vibration
- * there on fine grids (mpm_cond_sliding_long, mpm_cond_warnings). */
+ * there on fine grids (mpm_cond_friction_fine_grids). */
 static int friction_elastic(const mpm_sim *s, char *msg, size_t n)
 {
     double mu = 0;

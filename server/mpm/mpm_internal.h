@@ -942,11 +942,10 @@ void mpm_cond_end_step(mpm_sim *s);
  * not press on its face, it pressed and stuck, it pressed and slid. */
 enum { MPM_FRIC_FREE = 0, MPM_FRIC_STICK = 1, MPM_FRIC_SLIDE = 2 };
 /* Node passes over the flat nodes first..last: BC1 (q = m v(t^n)), BC1 on
- * MUSL's q2 (q2 = m v(t^{n+1});
- * a pressing friction node's tangential q2 = its q^{n+1}), and BC2
- * (friction on the free rate of momentum, then f = m (v(t^{n+1}) - v(t^n))
- * / dt), summing the work into tout[tid]; each before the fixed DOFs'
- * zeroing of the same field. */
+ * MUSL's q2 (q2 = m v(t^{n+1}); a pressing friction node's tangential q2 =
+ * its q^{n+1}), and BC2 (friction on the free rate of momentum, then f = m
+ * (v(t^{n+1}) - v(t^n)) / dt), summing the work into tout[tid]; each
+ * before the fixed DOFs' zeroing of the same field. */
 void mpm_cond_bc1(const mpm_sim *s, size_t first, size_t last);
 void mpm_cond_bc1q2(const mpm_sim *s, size_t first, size_t last);
 void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last);

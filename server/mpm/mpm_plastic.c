@@ -416,7 +416,7 @@ static int dp_substep(const mpm_plastic_params *P, double s[6], dp_inv *v, const
 /* Backward Euler's return from the trial stress tr (the elastic predictor
  * sig + De), for an increment that Sloan's substepping could not resolve
  * within max_substeps: a stress near the apex (cohesionless sand at the
- * free surface) with a strain increment of hundreds of yield strains,
+ * free surface) with a strain increment of many yield strains,
  * where the flow direction turns within a substep and the error estimate
  * stops shrinking with it.  For f = sqrt(J2) + eta p - xi c and g =
  * sqrt(J2) + etag p, perfectly plastic: dgamma = f(tr) / (G + K eta etag),

@@ -26,8 +26,8 @@ typedef struct {
 static const char *const face_names[6] = {"x_lo", "x_hi", "y_lo", "y_hi", "z_lo", "z_hi"};
 
 /* USF with a friction face: USF strains the body with the velocities the
- * particles bring, before friction acts on the grid; the sliding block
- * slowed to 1.2 m/s where 4.3 m/s is exact (mpm_cond_refusals) */
+ * particles bring, before friction acts on the grid, and a sliding block
+ * slows to a stop (mpm_cond_refusals) */
 static int usf_friction(const mpm_case *c, const mpm_case_info *info, char *what, size_t n)
 {
     (void)info;
@@ -37,8 +37,8 @@ static int usf_friction(const mpm_case *c, const mpm_case_info *info, char *what
     return 1;
 }
 
-/* MPM's tents with a friction face: the sliding block dropped on the face
- * diverged at 0.16 s with MUSL and USL (mpm_cond_refusals) */
+/* MPM's tents with a friction face: a block dropped on the face and
+ * sliding diverges with MUSL and USL (mpm_cond_refusals) */
 static int tents_friction(const mpm_case *c, const mpm_case_info *info, char *what, size_t n)
 {
     (void)info;
@@ -48,9 +48,10 @@ static int tents_friction(const mpm_case *c, const mpm_case_info *info, char *wh
     return 1;
 }
 
-/* MPM's tents with USL: a free block translating rigidly at 1 m/s across
- * cells diverged at 0.11 s (verified_rigid_translation); USL's stress from
- * the updated grid velocity meets the tents' kinks as particles cross */
+/* MPM's tents with USL: a free block translating rigidly across cells
+ * diverges (verified_rigid_translation): USL strains with the updated grid
+ * velocity, whose error at a node that a particle has just reached grows
+ * as the inverse of that node's small mass fraction */
 static int tents_usl(const mpm_case *c, const mpm_case_info *info, char *what, size_t n)
 {
     (void)info;
@@ -61,10 +62,10 @@ static int tents_usl(const mpm_case *c, const mpm_case_info *info, char *what, s
 
 /* BSPLINE3 where its clamped spans matter: a condition on a grid face, or
  * a particle within 2 cells of a grid end.  There the particles' sums of
- * the cubic basis' gradients miss the exact integrals (sum_p V_p dN_1/dx =
- * -0.094 of the end function's at 2 points per cell, where it is 0), so a
- * uniform stress between rollers moves and loses 10-27 % of itself
- * (bspline3_patch_refused) */
+ * the cubic basis' gradients miss the exact integrals (the gradients are
+ * quadratic, which points at sub-cell centres do not integrate, and the
+ * clamped spans lack the uniform spans' cancellation over the lattice), so
+ * a uniform stress between rollers moves (bspline3_patch_refused) */
 static int bspline3_edge(const mpm_case *c, const mpm_case_info *info, char *what, size_t n)
 {
     if (c->method != MPM_METHOD_BSPLINE3) return 0;
