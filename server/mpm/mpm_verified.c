@@ -25,15 +25,20 @@ typedef struct {
 
 static const char *const face_names[6] = {"x_lo", "x_hi", "y_lo", "y_hi", "z_lo", "z_hi"};
 
+/* The first friction face's name, or NULL without one. */
+static const char *friction_face(const mpm_case *c)
+{
+    return c->bc.n_friction ? face_names[c->bc.friction[0].face] : NULL;
+}
+
 /* USF with a friction face: USF strains the body with the velocities the
  * particles bring, before friction acts on the grid, and a sliding block
  * slows to a stop (mpm_cond_refusals) */
 static int usf_friction(const mpm_case *c, const mpm_case_info *info, char *what, size_t n)
 {
     (void)info;
-    if (!c->bc.n_friction || c->update != MPM_USF) return 0;
-    snprintf(what, n, "USF with a friction face (boundary.friction, face %s)",
-             face_names[c->bc.friction[0].face]);
+    if (!friction_face(c) || c->update != MPM_USF) return 0;
+    snprintf(what, n, "USF with a friction face (boundary.friction, face %s)", friction_face(c));
     return 1;
 }
 
@@ -42,9 +47,9 @@ static int usf_friction(const mpm_case *c, const mpm_case_info *info, char *what
 static int tents_friction(const mpm_case *c, const mpm_case_info *info, char *what, size_t n)
 {
     (void)info;
-    if (!c->bc.n_friction || c->method != MPM_METHOD_MPM) return 0;
+    if (!friction_face(c) || c->method != MPM_METHOD_MPM) return 0;
     snprintf(what, n, "method MPM with a friction face (boundary.friction, face %s)",
-             face_names[c->bc.friction[0].face]);
+             friction_face(c));
     return 1;
 }
 
