@@ -118,7 +118,8 @@ DTEST(daemon_bad_input)
     CHECK(bad_case(&d, "\"endTime\": 1", "\"endTime\": 1, \"method\": \"MPM\", \"update\": \"USL\"",
                    "INVALID_CASE", "update"));
     CHECK(bad_case(&d, "\"endTime\": 1",
-                   "\"endTime\": 1, \"method\": \"BSPLINE3\", \"boundary\": {\"xLo\": 1}",
+                   "\"endTime\": 1, \"method\": \"BSPLINE3\", \"boundary\": {\"friction\": "
+                   "[{\"face\": \"Y_LO\", \"mu\": 0.2}]}",
                    "INVALID_CASE", "method"));
     /* too many steps: endTime / dt far beyond any integer is refused, not
      * wrapped into a negative count that passes the limit */

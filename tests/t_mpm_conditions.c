@@ -244,7 +244,7 @@ TEST(mpm_cond_friction_fine_grids)
 /* The combinations a friction face refuses at submit (mpm_case_verified()),
  * each naming its field: USF (the block, dropped on the face, slowed to
  * 1.2 m/s at 1.5 s where 4.3 m/s is exact), MPM's tents (it diverged at
- * 0.16 s), BSPLINE3 (a face condition); the others pass. */
+ * 0.16 s), BSPLINE3 (not in the sliding tests); the others pass. */
 TEST(mpm_cond_refusals)
 {
     mpm_material_desc mat = block_mat;
@@ -504,9 +504,9 @@ TEST(mpm_cond_prescribed_bar)
 {
     double v0 = 1e-3;
     mpm_timefn ramp = {MPM_TF_RAMP, 1.0, 0.0, 0.004, 0, NULL, NULL};
-    mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2};
+    mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_BSPLINE3};
     mpm_update us[] = {MPM_MUSL, MPM_USF, MPM_USL};
-    for (int i = 0; i < 3; i++)
+    for (int i = 0; i < 4; i++)
         for (int u = 0; u < 3; u++) {
             bar_res r;
             CHECK(bar_push(ms[i], us[u], v0, &ramp, 0.5, 1, &r) == 0);
@@ -675,9 +675,10 @@ TEST(mpm_cond_ramped_traction)
                              .youngs_modulus = 1.0,
                              .poisson_ratio = 0.0,
                              .density = 1.0};
-    mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_CPDI};
+    mpm_method ms[] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_METHOD_BSPLINE2, MPM_METHOD_BSPLINE3,
+                       MPM_METHOD_CPDI};
     mpm_update us[] = {MPM_MUSL, MPM_USL, MPM_USF};
-    for (int i = 0; i < 12; i++) {
+    for (int i = 0; i < 15; i++) {
         if (ms[i / 3] == MPM_METHOD_MPM && us[i % 3] == MPM_USL) continue; /* refused */
         mpm_body_desc b = {0};
         b.shape = MPM_SHAPE_BOX;

@@ -48,11 +48,11 @@ static const mpm_method inv_methods[5] = {MPM_METHOD_MPM, MPM_METHOD_GIMP, MPM_M
                                           MPM_METHOD_BSPLINE3, MPM_METHOD_CPDI};
 static const char *const inv_mname[5] = {"MPM ", "GMPM", "BSP2", "BSP3", "CPDI"};
 
-/* grid "nodes" per axis of a grid of n nodes: B-spline control points are
- * n + p - 1 */
+/* grid "nodes" per axis of a grid of n nodes: BSPLINE2's control points
+ * are n + 1, BSPLINE3's natural nodes n */
 static int grid_points(mpm_method m, int n)
 {
-    return m == MPM_METHOD_BSPLINE2 ? n + 1 : m == MPM_METHOD_BSPLINE3 ? n + 2 : n;
+    return m == MPM_METHOD_BSPLINE2 ? n + 1 : n;
 }
 
 static size_t real_nodes(const mpm_sim *s, int ijk[][3], int dim, int n)

@@ -424,12 +424,7 @@ typedef struct {
     int dim;
     double vmax; /* largest initial particle speed */
     double cmax; /* largest p-wave speed of the materials */
-    /* the first particle within MPM_EDGE_CELLS cells of a grid end (-1:
-     * none) and the axis along which it is: BSPLINE3's clamped spans */
-    long edge_particle;
-    int edge_axis;
 } mpm_case_info;
-#define MPM_EDGE_CELLS 2.0
 
 /* Validates every field of a case and counts its particles, in one pass
  * over them, allocating nothing.  Returns 0 and fills *info (info may be

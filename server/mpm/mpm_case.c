@@ -31,8 +31,6 @@ typedef struct {
     size_t limit; /* the count may not exceed it (filling: P->n) */
     double vmax;
     size_t *load_count; /* per traction: particles inside its region */
-    long edge;          /* the first particle within MPM_EDGE_CELLS of a grid end, or -1 */
-    int edge_axis;      /* and the axis along which it is */
 } gen_ctx;
 
 /* "bodies[%zu]..." into a field path buffer */
@@ -97,14 +95,6 @@ static void emit(gen_ctx *g, const mpm_body_desc *b, const double *x, double vol
     double v2 = 0;
     for (int d = 0; d < dim; d++) v2 += v[d] * v[d];
     if (sqrt(v2) > g->vmax) g->vmax = sqrt(v2);
-    for (int d = 0; d < dim && g->edge < 0; d++) {
-        const mpm_grid_desc *gr = &g->c->grid;
-        double r = (x[d] - gr->origin[d]) / gr->h[d];
-        if (r < MPM_EDGE_CELLS || r > gr->nodes[d] - 1 - MPM_EDGE_CELLS) {
-            g->edge = (long)g->n;
-            g->edge_axis = d;
-        }
-    }
     if (g->load_count)
         for (size_t t = 0; t < g->c->n_tractions; t++)
             if (in_region(&g->c->tractions[t], dim, x)) g->load_count[t]++;
@@ -335,6 +325,10 @@ static int check_grid(const mpm_case *c, mpm_error *err)
         if (gr->nodes[d] < 2)
             return mpm_fail(err, MPM_EINVAL, PATH("grid.nodes[%d]", d), "must be >= 2 (got %d)",
                             gr->nodes[d]);
+        /* the natural end basis needs 4 nodes per axis (mpm_bspline.c) */
+        if (c->method == MPM_METHOD_BSPLINE3 && gr->nodes[d] < 4)
+            return mpm_fail(err, MPM_EINVAL, PATH("grid.nodes[%d]", d),
+                            "must be >= 4 with method BSPLINE3 (got %d)", gr->nodes[d]);
         nn *= gr->nodes[d] + 2.0;
     }
     if (nn > (double)MPM_MAX_NODES)
@@ -554,7 +548,7 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
         memset(counts, 0, sizeof counts);
         lc = counts;
     }
-    gen_ctx g = {c, NULL, NULL, 0, particle_limit(c), 0, lc, -1, 0};
+    gen_ctx g = {c, NULL, NULL, 0, particle_limit(c), 0, lc};
     if ((rc = run_gen(&g, err))) return rc;
     for (size_t t = 0; t < c->n_tractions; t++)
         if (counts[t] == 0)
@@ -581,8 +575,6 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
         info->dim = dim;
         info->vmax = g.vmax;
         info->cmax = cmax;
-        info->edge_particle = g.edge;
-        info->edge_axis = g.edge_axis;
     }
     mpm_error_clear(err);
     return 0;
@@ -591,7 +583,7 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
 int mpm_case_fill(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats, double *vmax,
                   mpm_error *err)
 {
-    gen_ctx g = {c, P, mats, 0, P->n, 0, NULL, -1, 0};
+    gen_ctx g = {c, P, mats, 0, P->n, 0, NULL};
     int rc = run_gen(&g, err);
     if (!rc && g.n != P->n) rc = too_many(&g, c->n_bodies - 1, err);
     if (vmax) *vmax = g.vmax;

@@ -22,10 +22,12 @@
  * so that the 4 nodes per axis of Eq. 22 never index outside the arrays: a
  * particle in real cell c touches real nodes c-1 .. c+2 (padded c+1 ..
  * c+4), and its centre may be anywhere from the first ghost cell below the
- * grid to the first above it (c = -1 .. nodes-1).  B-splines of degree p
- * have no ghost layers: the grid's "nodes" along an axis of n cells are the
- * n + p control points of the open knot vector, and a particle in cell c
- * touches control points c .. c + p.  CPDI pads one layer: centres stay in
+ * grid to the first above it (c = -1 .. nodes-1).  B-splines have no
+ * ghost layers: the grid's "nodes" along an axis of n cells are BSPLINE2's
+ * n + 2 control points of the open knot vector (a particle in cell c
+ * touches c .. c + 2) or BSPLINE3's n + 1 natural nodes at the grid points
+ * (cell c touches c - 1 .. c + 2, clamped to the grid; mpm_bspline.c).
+ * CPDI pads one layer: centres stay in
  * the real grid, the corners of their domains within one cell of it
  * (mpm_cpdi.c).  Nothing here is allocated inside a time step.
  */
@@ -110,18 +112,28 @@ typedef struct {
 } mpm_gridbuf;
 
 /* One axis of a B-spline grid: n cells (knot spans) of the open knot vector
- * t_k = clamp(k - p, 0, n), k = 0 .. n + 2p (cell units), and the
- * polynomial coefficients of the p + 1 functions on the clamped spans next
- * to the ends: span c < p - 1 in lo[c], span c > n - p in
- * hi[c - (n - p + 1)]; C[k][i] is the coefficient of f^i of function
- * c + k, f = r - c.  Interior spans are the uniform B-splines. */
+ * t_k = clamp(k - p, 0, n), k = 0 .. n + 2p (cell units).  Span c's p + 1
+ * functions belong to nodes start .. start + p, with start = c - off on
+ * the interior (uniform) spans; the spans next to the ends have their own
+ * start (lo_start, hi_start) and the polynomial coefficients of their
+ * functions: span c < p - 1 in lo[c], span c > n - p in hi[c - (n - p +
+ * 1)]; C[k][i] is the coefficient of f^i of node start + k, f = r - c.
+ *
+ * BSPLINE2 (p = 2): the n + 2 control points themselves (off 0).
+ * BSPLINE3 (p = 3): the natural end basis, n + 1 nodes at the grid points
+ * (off 1): control points 1 and n + 1 are tied to their neighbours by
+ * s''(end) = 0 (c_1 = (2 c_0 + c_2) / 3, c_{n+1} = (c_n + 2 c_{n+2}) / 3),
+ * so that every function's second derivative vanishes at the grid's ends;
+ * mpm_bspline.c says why. */
 #define MPM_BS_EDGE 2 /* clamped spans per end, at most (p - 1, p <= 3) */
 typedef struct {
-    int p, n;
+    int p, n, off;
+    int lo_start[MPM_BS_EDGE], hi_start[MPM_BS_EDGE];
     double lo[MPM_BS_EDGE][4][4], hi[MPM_BS_EDGE][4][4];
 } mpm_bspline_axis;
 
-/* Fills ax for degree p (2 or 3) and n >= 1 cells. */
+/* Fills ax for degree p (2 or 3) and n cells: n >= 1 for p = 2, n >= 3 for
+ * p = 3 (mpm_case_check() refuses fewer). */
 void mpm_bspline_axis_init(mpm_bspline_axis *ax, int p, int n);
 /* The coefficients C[k][i] (f^i of function c + k, k = 0 .. p) of the
  * B-splines of degree p on span c of n cells, by Cox-de Boor on the open
@@ -747,13 +759,13 @@ static inline size_t mpm_node_index(const mpm_sim *s, const int ijk[3])
     return n;
 }
 
-/* Position along axis d of padded node i: x0 + i h for MPM and GMPM; for
- * B-splines the Greville abscissa of control point i, x0 + h (t_{i+1} +
- * ... + t_{i+p}) / p, with which the B-splines reproduce linear functions
- * exactly (sum_i N_i(x) xi_i = x). */
+/* Position along axis d of padded node i: x0 + i h for MPM, GMPM and
+ * BSPLINE3's natural end basis; for BSPLINE2 the Greville abscissa of
+ * control point i, x0 + h (t_{i+1} + ... + t_{i+p}) / p, with which the
+ * B-splines reproduce linear functions exactly (sum_i N_i(x) xi_i = x). */
 static inline double mpm_node_coord_calc(const mpm_sim *s, int axis, int padded_index)
 {
-    if (!s->bsp) return s->x0[axis] + padded_index * s->h[axis];
+    if (s->bsp != 2) return s->x0[axis] + padded_index * s->h[axis];
     int p = s->bsp, n = s->bs[axis].n;
     double sum = 0;
     for (int k = padded_index + 1; k <= padded_index + p; k++) {

@@ -115,8 +115,9 @@ INLINE void boxc_init(const mpm_sim *s, boxc *b)
  * new one).  The cell is clamped to the padded grid as in cell_of(); the
  * support's first and last nodes (n0 - 1 .. n0 + 2 at most) are clamped
  * when the run is flushed.  Within a run the rows of the support change
- * only with 3-node uGIMP.  B-splines (BS): nodes c .. c + NS - 1, the
- * cell clamped to the last one as in bs_axis(). */
+ * only with 3-node uGIMP.  B-splines (BS): the callers pass the cell c,
+ * clamped to the last one as in bs_axis(), and the support is bs_first()
+ * .. + NS - 1. */
 INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c[3],
                      const int n0[3], int D, int NS, int BS);
 
@@ -135,8 +136,11 @@ INLINE void box_add(const mpm_sim *s, const boxc *b, mpm_thread_out *o, rowrun *
 
 /* box_add() from the cell c and the support's first nodes n0. */
 INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c[3],
-                     const int n0[3], int D, int NS, int BS)
+                     const int nc[3], int D, int NS, int BS)
 {
+    int n0[3] = {nc[0], nc[1], nc[2]};
+    if (BS)
+        for (int d = 0; d < D; d++) n0[d] = bs_first(&s->bs[d], nc[d]);
     if (c[1] != a->cy || (D > 2 && c[2] != a->cz)) {
         run_flush(s, o, a, D);
         a->cy = c[1];

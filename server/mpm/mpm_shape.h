@@ -165,28 +165,37 @@ INLINE int axis(double r, double inv_h, double lp, int NS, double *w, double *g)
         }                                                 \
     } while (0)
 
+/* The first node of span c's support (bs_axis() returns the same). */
+INLINE int bs_first(const mpm_bspline_axis *ax, int c)
+{
+    int f = c - ax->off, hi = ax->n - 1 - 2 * ax->off;
+    return f < 0 ? 0 : f > hi ? hi : f;
+}
+
 /* B-spline weights of one axis for r = (x - x0)/h in [0, n] (r = n, a
  * rounding at the top face, is taken in the last cell); returns the first
- * control point, c.  Interior spans: the uniform B-splines in closed form;
- * the p - 1 clamped spans at each end (rare, and contiguous once the
- * particles are sorted by cell, so the branch predicts well): Horner on the
- * coefficients made at creation (mpm_bspline.c). */
+ * node, c - off on the interior spans (mpm_bspline_axis).  Interior spans:
+ * the uniform B-splines in closed form; the p - 1 spans at each end (rare,
+ * and contiguous once the particles are sorted by cell, so the branch
+ * predicts well): Horner on the coefficients made at creation
+ * (mpm_bspline.c). */
 INLINE int bs_axis(const mpm_bspline_axis *ax, double r, double inv_h, int NS, double *w, double *g)
 {
     int n = ax->n, c = (int)r;
     c = c < n - 1 ? c : n - 1;
     double f = r - c;
     if (__builtin_expect((c < NS - 2) | (c > n - NS + 1), 0)) {
-        const double(*C)[4] = c < NS - 2 ? ax->lo[c] : ax->hi[c - (n - NS + 2)];
+        int lo = c < NS - 2, e = lo ? c : c - (n - NS + 2);
+        const double(*C)[4] = lo ? ax->lo[e] : ax->hi[e];
         UNROLL
         for (int k = 0; k < NS; k++) {
             w[k] = ((C[k][3] * f + C[k][2]) * f + C[k][1]) * f + C[k][0];
             g[k] = ((3.0 * C[k][3] * f + 2.0 * C[k][2]) * f + C[k][1]) * inv_h;
         }
-        return c;
+        return lo ? ax->lo_start[e] : ax->hi_start[e];
     }
     BS_INTERIOR(double, f, inv_h, NS, w, g);
-    return c;
+    return c - ax->off;
 }
 
 /* Per-axis weights of one particle: w[d][k], g[d][k] belong to node
@@ -307,6 +316,7 @@ typedef struct {
     double st_f[3];   /* the same as doubles: a base (< 2^53 nodes) is
                        * summed exactly in a vector and converted once */
     unsigned span[3]; /* interior first cells c - (NS - 2) run 0 .. span */
+    double boff;      /* B-splines: -sum_d off stride[d] (mpm_bspline_axis) */
 } wgeo;
 
 /* Four four-lane vectors v[k] (lane j: particle j) stored transposed:
@@ -332,7 +342,7 @@ INLINE void tr4_store(const v4d v[4], double *o0, double *o1, double *o2, double
  * with an interior span on every axis (weights_block()). */
 INLINE int bs_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, int NS, pw *W)
 {
-    v4d fr[3], bd = {0, 0, 0, 0}; /* the bases, exact in doubles */
+    v4d fr[3], bd = {G->boff, G->boff, G->boff, G->boff}; /* the bases, exact in doubles */
     v4u out = {0, 0, 0, 0};
     for (int d = 0; d < D; d++) {
         const double *x = s->P.x[d] + p;
@@ -390,6 +400,7 @@ INLINE void tent_block4(const mpm_sim *s, const wgeo *G, size_t p, int D, pw *W)
 INLINE int wgeo_init(const mpm_sim *s, int D, int NS, int BS, wgeo *G)
 {
     int inner = 1;
+    G->boff = 0;
     for (int d = 0; d < D; d++) {
         G->x0[d] = s->x0[d];
         G->ih[d] = s->inv_h[d];
@@ -399,6 +410,7 @@ INLINE int wgeo_init(const mpm_sim *s, int D, int NS, int BS, wgeo *G)
             int span = s->bs[d].n - 2 * NS + 3;
             inner &= span >= 0;
             G->span[d] = (unsigned)span;
+            G->boff -= (double)s->bs[d].off * G->st_f[d];
         }
     }
     return inner;

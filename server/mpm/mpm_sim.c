@@ -558,8 +558,9 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     atomic_init(&s->cancel, 0);
     s->nn = 1;
     for (int d = 0; d < 3; d++) {
-        /* B-splines: n cells, n + p control points (no ghost layers) */
-        s->nreal[d] = d < dim ? c->grid.nodes[d] + (s->bsp ? s->bsp - 1 : 0) : 1;
+        /* B-splines: n cells, n + 2 control points (BSPLINE2) or the
+         * n + 1 nodes of the natural end basis (BSPLINE3); no ghost layers */
+        s->nreal[d] = d < dim ? c->grid.nodes[d] + (s->bsp == 2 ? 1 : 0) : 1;
         s->np[d] = d < dim ? s->nreal[d] + 2 * s->pad : 1;
         s->stride[d] = s->nn;
         s->nn *= (size_t)s->np[d];
