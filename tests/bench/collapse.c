@@ -5,14 +5,62 @@
  * GIMP under Drucker-Prager (plane-strain match), and BSPLINE2 under
  * Mohr-Coulomb, each run to rest; the run-out and the final height against
  * Lube et al. 2005's fits, the energy balance with the plastic and friction
- * work.  A table on the terminal and DIR/collapse.csv.  Not part of the
- * error/time sweeps: the answer is an experiment's, not a convergent one.
+ * work.  A table on the terminal and DIR/collapse.csv.  Then (not
+ * quick) the causes: BSPLINE2 DP at a <= 2 on 8, 16 and 32 cells, with
+ * the base as it is, a rough base (mu 5), phi 35 and 3 x 3 particles per
+ * cell, one change at a time (docs/accuracy.md, "What sets the run-out").
+ * Not part of the error/time sweeps: the answer is an experiment's, not a
+ * convergent one.
  */
 #include "bench.h"
 #include "mpm_collapse.h"
 
 #include <math.h>
 #include <stdio.h>
+
+/* The causes' table: one change at a time from the scene's BSPLINE2 DP
+ * row; returns the number of runs that failed. */
+static int collapse_causes(void)
+{
+    static const double as[] = {0.5, 1, 2};
+    static const int cells[] = {8, 16, 32};
+    static const struct {
+        const char *name;
+        double mu, phi;
+        int ppc;
+    } vars[] = {
+        {"as set", 0, 0, 0}, {"rough base", 5, 0, 0}, {"phi 35", 0, 35, 0}, {"ppc 3", 0, 0, 3}};
+    int failed = 0;
+    printf("\nWhat sets the run-out: BSPLINE2 DP, one change at a time (run-out error vs Lube's "
+           "fit at 8 / 16 / 32 cells across d0)\n");
+    printf("%-4s %-11s %8s %8s %8s\n", "a", "change", "8", "16", "32");
+    for (size_t ia = 0; ia < sizeof as / sizeof as[0]; ia++)
+        for (size_t iv = 0; iv < sizeof vars / sizeof vars[0]; iv++) {
+            printf("%-4g %-11s", as[ia], vars[iv].name);
+            for (size_t ic = 0; ic < sizeof cells / sizeof cells[0]; ic++) {
+                mpm_collapse_cfg cfg = {.a = as[ia],
+                                        .cells = cells[ic],
+                                        .ppc = vars[iv].ppc,
+                                        .method = MPM_METHOD_BSPLINE2,
+                                        .model = MPM_MODEL_DRUCKER_PRAGER,
+                                        .phi = vars[iv].phi,
+                                        .mu = vars[iv].mu,
+                                        .threads = 1};
+                mpm_collapse_res r;
+                mpm_error err = {0};
+                if (mpm_collapse_run(&cfg, &r, &err)) {
+                    printf(" %8s", "failed");
+                    failed++;
+                } else {
+                    printf(" %+7.1f%%",
+                           100 * (r.runout / mpm_collapse_ref_runout(cfg.a, NULL) - 1));
+                }
+                fflush(stdout);
+            }
+            printf("\n");
+        }
+    return failed;
+}
 
 int bench_collapse(int quick, const char *out)
 {
@@ -82,5 +130,6 @@ int bench_collapse(int quick, const char *out)
         fclose(f);
         printf("wrote %s\n", path);
     }
+    if (!quick) failed += collapse_causes();
     return failed ? -1 : 0;
 }
