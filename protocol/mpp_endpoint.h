@@ -10,9 +10,25 @@
 #include <stddef.h>
 
 /* 1 if ep binds or connects only on this machine: ipc://, inproc://, or
- * tcp:// with a loopback host (127.x.y.z, localhost, ip6-localhost, ::1 or
- * [::1]); else 0 (a wildcard such as tcp://\*:5555 binds every interface). */
+ * tcp:// whose host (after a source address "SRC;", if any) is a loopback
+ * literal (127.x.y.z in dotted-quad decimal, ::1 or [::1]) or localhost or
+ * ip6-localhost; else 0 (a wildcard such as tcp://\*:5555 binds every
+ * interface; an interface name such as lo or eth0, a DNS name or another
+ * spelling of a number may mean any address). */
 int mpp_endpoint_is_local(const char *ep);
+
+/* What a bind on ep needs (mpmd's fail-closed rule, the same for both
+ * sockets and for flags, environment and config file). */
+enum {
+    MPP_BIND_INVALID = -1, /* never bound: why says (an unknown transport, one without
+                            * ZMTP such as pgm:// or udp://, a source address, a bad port) */
+    MPP_BIND_LOCAL = 0,    /* provably this machine only: mpp_endpoint_is_local() */
+    MPP_BIND_REMOTE = 1    /* maybe reachable from elsewhere: CURVE needed; why says why */
+};
+
+/* The class of a bind on ep, with the reason of a MPP_BIND_INVALID or
+ * MPP_BIND_REMOTE in why (n bytes, may be NULL). */
+int mpp_endpoint_bind_class(const char *ep, char *why, size_t n);
 
 /* 1 if ep is tcp:// with a wildcard host (*, [*], 0.0.0.0, ::, [::]). */
 int mpp_endpoint_is_wildcard(const char *ep);

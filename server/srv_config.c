@@ -87,6 +87,7 @@ static void defaults(srv_config *c)
 {
     memset(c, 0, sizeof *c);
     snprintf(c->endpoint, sizeof c->endpoint, "tcp://127.0.0.1:5555");
+    snprintf(c->endpoint_from, sizeof c->endpoint_from, "the default");
     snprintf(c->db, sizeof c->db, "mpmd.db");
     c->workers = 2;
     c->solver_threads = 1;
@@ -118,6 +119,10 @@ static int set(srv_config *c, const setting *s, const char *val, const char *src
             return -1;
         }
         memcpy(p, val, strlen(val) + 1);
+        if (s->off == offsetof(srv_config, endpoint))
+            snprintf(c->endpoint_from, sizeof c->endpoint_from, "%s", src);
+        else if (s->off == offsetof(srv_config, stream_endpoint))
+            snprintf(c->stream_endpoint_from, sizeof c->stream_endpoint_from, "%s", src);
         return 0;
     }
     if (s->type == T_FLAG) {
@@ -221,6 +226,37 @@ static void usage(void)
            "the key lists.\n");
 }
 
+/* The bind rule (mpp_endpoint_bind_class) for --endpoint (stream 0) or
+ * --stream-endpoint (1): anything not provably loopback needs CURVE; the
+ * message names the endpoint, where it was set and the fix.
+ * srv_socket_open() checks it again at the bind (daemon_bind_* tests). */
+static int bind_rule(const srv_config *c, int stream, char *err, size_t errlen)
+{
+    const char *ep = stream ? c->stream_endpoint : c->endpoint;
+    const char *from = stream ? c->stream_endpoint_from : c->endpoint_from;
+    const char *flag = stream ? "--stream-endpoint" : "--endpoint";
+    char why[400];
+    int k = mpp_endpoint_bind_class(ep, why, sizeof why);
+    if (k == MPP_BIND_INVALID) {
+        snprintf(err, errlen,
+                 "%s %s (set by %s): refusing to bind it: %s; use tcp://127.0.0.1:PORT or "
+                 "ipc://PATH (other tcp addresses with --curve-secret and --authorized-keys)",
+                 flag, ep, from, why);
+        return -1;
+    }
+    if (k == MPP_BIND_REMOTE && !c->curve_secret[0] && !c->insecure_remote) {
+        snprintf(err, errlen,
+                 "%s %s (set by %s): refusing to bind a non-loopback address without "
+                 "authentication: %s; give --curve-secret FILE and --authorized-keys PATH "
+                 "(README: Security), use tcp://127.0.0.1:PORT or ipc://PATH, or, on a "
+                 "trusted network only, --insecure-allow-remote-without-auth%s",
+                 flag, ep, from, why,
+                 c->allow_remote ? " (--allow-remote no longer binds without authentication)" : "");
+        return -1;
+    }
+    return 0;
+}
+
 int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errlen)
 {
     defaults(c);
@@ -268,28 +304,20 @@ int srv_config_load(srv_config *c, int argc, char **argv, char *err, size_t errl
         }
         if (set(c, s, argv[++i], a, err, errlen)) return -1;
     }
-    if (!c->stream_endpoint[0] &&
-        mpp_stream_endpoint_derive(c->endpoint, c->stream_endpoint, sizeof c->stream_endpoint)) {
-        snprintf(err, errlen,
-                 "--endpoint %s: cannot derive the stream endpoint (tcp://HOST:PORT "
-                 "or ipc://PATH); give --stream-endpoint",
-                 c->endpoint);
-        return -1;
-    }
-    const char *eps[2] = {c->endpoint, c->stream_endpoint};
-    for (int i = 0; i < 2; i++)
-        if (!mpp_endpoint_is_local(eps[i]) && !c->curve_secret[0] && !c->insecure_remote) {
+    if (bind_rule(c, 0, err, errlen)) return -1;
+    if (!c->stream_endpoint[0]) {
+        if (mpp_stream_endpoint_derive(c->endpoint, c->stream_endpoint,
+                                       sizeof c->stream_endpoint)) {
             snprintf(err, errlen,
-                     "%s %s: refusing to bind a non-loopback address without authentication; "
-                     "give --curve-secret FILE and --authorized-keys PATH (README: Security), "
-                     "use tcp://127.0.0.1:PORT or ipc://, or, on a trusted network only, "
-                     "--insecure-allow-remote-without-auth%s",
-                     i ? "--stream-endpoint" : "--endpoint", eps[i],
-                     c->allow_remote ? " (--allow-remote no longer binds without "
-                                       "authentication)"
-                                     : "");
+                     "--endpoint %s: cannot derive the stream endpoint (tcp://HOST:PORT "
+                     "or ipc://PATH); give --stream-endpoint",
+                     c->endpoint);
             return -1;
         }
+        snprintf(c->stream_endpoint_from, sizeof c->stream_endpoint_from,
+                 "derivation from --endpoint, set by %.100s", c->endpoint_from);
+    }
+    if (bind_rule(c, 1, err, errlen)) return -1;
     if (!strcmp(c->endpoint, c->stream_endpoint)) {
         snprintf(err, errlen, "--stream-endpoint: must differ from --endpoint (%s)", c->endpoint);
         return -1;

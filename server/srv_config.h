@@ -15,6 +15,8 @@
 typedef struct {
     char endpoint[256];             /* control socket (ROUTER) */
     char stream_endpoint[256];      /* job streams (XPUB); "" = derived */
+    char endpoint_from[160];        /* where each was set (a flag, a variable, FILE:LINE), */
+    char stream_endpoint_from[160]; /* for the messages of the bind rule */
     char db[1024];                  /* SQLite file */
     int workers;                    /* jobs run at once */
     int solver_threads;             /* threads per job (a case may ask for fewer) */

@@ -1,6 +1,7 @@
 /*
  * srv_socket.c - opening and binding the daemon's sockets: the fail-closed
- * check for non-loopback binds without CURVE, host aliases libzmq cannot
+ * check for non-loopback binds without CURVE (mpp_endpoint_bind_class(),
+ * and no interface named like the loopback literal), host aliases libzmq cannot
  * bind (localhost, ip6-localhost), refusing an ipc:// endpoint a live
  * process owns, the socket options (linger, IPv6, ROUTER_MANDATORY, HWMs,
  * CURVE through srv_auth, ZMQ_MAXMSGSIZE on the request socket) and the
@@ -12,6 +13,7 @@
 #include "srv_log.h"
 
 #include <errno.h>
+#include <net/if.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
@@ -35,6 +37,21 @@ static int ipc_in_use(const char *path)
     int live = connect(fd, (struct sockaddr *)&a, sizeof a) == 0;
     close(fd);
     return live;
+}
+
+/* 1 if the host of tcp endpoint ep is also the name of a network
+ * interface: libzmq looks a bind host up as an interface name first (an
+ * interface named "127.0.0.1" would take the bind to its own address). */
+static int nic_named(const char *ep)
+{
+    char host[IF_NAMESIZE + 1];
+    if (strncmp(ep, "tcp://", 6)) return 0;
+    const char *h = ep + 6, *colon = strrchr(h, ':');
+    size_t len = colon ? (size_t)(colon - h) : strlen(h);
+    if (len >= sizeof host) return 0; /* longer than any interface name */
+    memcpy(host, h, len);
+    host[len] = 0;
+    return if_nametoindex(host) != 0;
 }
 
 /* The endpoint libzmq binds for ep: tcp://localhost:P becomes
@@ -66,13 +83,26 @@ int srv_socket_open(void *zctx, int type, const char *ep, const srv_config *cfg,
                     void **out, char *err, size_t errlen)
 {
     *out = NULL;
-    if (!mpp_endpoint_is_local(ep) && !srv_auth_curve(auth)) {
+    char why[400];
+    int cls = mpp_endpoint_bind_class(ep, why, sizeof why);
+    if (cls == MPP_BIND_INVALID) {
+        snprintf(err, errlen, "refusing to bind %s: %s", ep, why);
+        return -1;
+    }
+    if (cls == MPP_BIND_LOCAL && nic_named(ep)) {
+        snprintf(err, errlen,
+                 "refusing to bind %s: a network interface has that name, and libzmq would "
+                 "bind the interface's address",
+                 ep);
+        return -1;
+    }
+    if (cls != MPP_BIND_LOCAL && !srv_auth_curve(auth)) {
         if (!cfg->insecure_remote) {
             snprintf(err, errlen,
-                     "refusing to bind %s: not loopback, ipc:// or inproc://, and no CURVE "
-                     "(give --curve-secret and --authorized-keys, or "
+                     "refusing to bind %s: not loopback, ipc:// or inproc:// (%s), and no "
+                     "CURVE (give --curve-secret and --authorized-keys, or "
                      "--insecure-allow-remote-without-auth on a trusted network)",
-                     ep);
+                     ep, why);
             return -1;
         }
         srv_warn(0,
