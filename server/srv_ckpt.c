@@ -13,6 +13,8 @@
  */
 #include "srv_ckpt.h"
 
+#include "srv_log.h"
+
 #include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
@@ -80,6 +82,11 @@ int srv_ckpt_init(const char *db, char *err, size_t errlen)
                  strerror(errno));
         return -1;
     }
+    /* owner-only, also when an older mpmd made it (daemon_perms_files) */
+    struct stat sb;
+    if (lstat(dir, &sb) == 0 && S_ISDIR(sb.st_mode) && sb.st_uid == geteuid() &&
+        (sb.st_mode & 077) && chmod(dir, 0700) != 0)
+        srv_warn(0, "cannot make %s owner-only: %s", dir, strerror(errno));
     DIR *d = opendir(dir);
     if (!d) {
         snprintf(err, errlen, "cannot open the checkpoint directory %s: %s", dir, strerror(errno));

@@ -102,8 +102,8 @@ typedef struct {
 
 struct store {
     char *path;
-    char *lock_path; /* realpath(path).lock: the holder's pid, for messages */
-    int lock_fd;     /* the database file itself, flock()ed */
+    char *lock_path; /* realpath(path).lock: flock()ed, the holder's pid in it */
+    int lock_fd;     /* the lock file */
     int notify_fd;   /* eventfd, written after each commit */
 
     /* options */

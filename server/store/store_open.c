@@ -5,12 +5,13 @@
  * share: the calling thread's error, logging, the on-disk names of the
  * enums and the SQLite helpers (store_internal.h).
  *
- * Open.  store_open: flock() on the database file itself (non-blocking;
- * one daemon per database: the lock goes with the file's inode, so a
- * symlink or a hard link to it, or another spelling of its path, finds it
- * held), the holder's pid written, best effort, into <realpath>.lock for
- * the message a second daemon prints; then WAL, busy_timeout, foreign keys, schema migrations (the
- * table of steps `migrations[]`, the pending ones applied in order in one
+ * Open.  store_open: the database file made owner-only and refused with
+ * a second name (a hard link), then flock() on <realpath>.lock, a file of
+ * its own that only mpmd's user can open (non-blocking; one daemon per
+ * database: a symlink or another spelling of the path finds it held; no
+ * other user can lock it to block a start), the holder's pid written into
+ * it for the message a second daemon prints; then WAL, busy_timeout, foreign keys, schema
+ * migrations (the table of steps `migrations[]`, the pending ones applied in order in one
  * transaction, the version recorded in PRAGMA user_version), crash
  * recovery (runs left 'running' or 'queued' become 'interrupted'; queued
  * ones too, because the daemon's job queue lives in memory and nothing would
@@ -36,6 +37,7 @@
 #include <string.h>
 #include <sys/eventfd.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -422,28 +424,80 @@ int store_integrity_check(const char *path, int *ok, char *report, size_t len)
 /* ---------------------------------------------------------------------- */
 /* Lock file: one daemon per database */
 
-/* The pid in a lock file, or 0. */
-static long lock_pid(const char *lock_path)
+/* The pid in a lock file (read through fd), or 0. */
+static long lock_pid(int fd)
 {
     char buf[32] = {0};
-    int fd = open(lock_path, O_RDONLY | O_CLOEXEC);
-    if (fd < 0) return 0;
     ssize_t n = pread(fd, buf, sizeof buf - 1, 0);
-    close(fd);
     char *end = NULL;
     long pid = n > 0 ? strtol(buf, &end, 10) : 0;
     return end != buf && pid > 0 ? pid : 0;
 }
 
-/* Locks the database file (created empty if absent: SQLite takes an empty
- * file for a new database).  flock() and SQLite's fcntl() locks do not
- * interact on Linux; the descriptor stays open until every connection is
- * closed (closing a descriptor of the file drops the process's fcntl
- * locks on it, so it must not close while SQLite holds any). */
+/* Makes an existing file of the store owner-only (0600) when this user
+ * owns it; logs what it changed. */
+static void owner_only(store *s, const char *path)
+{
+    struct stat sb;
+    if (lstat(path, &sb) || !S_ISREG(sb.st_mode) || sb.st_uid != geteuid() || !(sb.st_mode & 077))
+        return;
+    if (chmod(path, 0600) == 0)
+        sti_log(s, "%s was mode %04o: now 0600 (owner only)", path, (unsigned)(sb.st_mode & 07777));
+    else
+        sti_log(s, "cannot make %s owner-only: %s", path, strerror(errno));
+}
+
+/* Checks the database file (created empty, mode 0600, if absent: SQLite
+ * takes an empty file for a new database): a regular file with one name
+ * (SQLite finds its -wal and -shm by the name it is opened with, so a
+ * second name, a hard link, would be a second database on the same
+ * pages), made owner-only with its -wal, -shm and -journal when this user
+ * owns them (SQLite gives the files it creates the database's mode). */
+static int db_file_check(store *s)
+{
+    int fd = open(s->path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+    if (fd < 0) return sti_fail(MPM_EIO, "cannot open database %s: %s", s->path, strerror(errno));
+    struct stat sb;
+    int rc = fstat(fd, &sb);
+    close(fd); /* before SQLite opens it: closing drops fcntl locks */
+    if (rc) return sti_fail(MPM_EIO, "cannot stat database %s: %s", s->path, strerror(errno));
+    if (!S_ISREG(sb.st_mode)) return sti_fail(MPM_EIO, "database %s is not a file", s->path);
+    if (sb.st_nlink > 1)
+        return sti_fail(MPM_EIO,
+                        "database %s has %lu names (hard links): SQLite keeps its -wal and -shm "
+                        "by name, so each name would be another database on the same pages; "
+                        "keep one name (a copy, not a link, for a backup)",
+                        s->path, (unsigned long)sb.st_nlink);
+    static const char *const suffix[] = {"", "-wal", "-shm", "-journal"};
+    for (size_t k = 0; k < sizeof suffix / sizeof suffix[0]; k++) {
+        size_t n = strlen(s->path);
+        char *p = malloc(n + 9);
+        if (!p) return sti_fail(MPM_ENOMEM, "out of memory");
+        memcpy(p, s->path, n);
+        memcpy(p + n, suffix[k], strlen(suffix[k]) + 1);
+        owner_only(s, p);
+        free(p);
+    }
+    return 0;
+}
+
+/* One daemon per database: an exclusive flock() on <realpath>.lock, a file
+ * of mpmd's user, mode 0600, that no other user can open, so none can take
+ * a lock on it to block a start (the database file itself is never locked:
+ * any reader of it could).  A symlink or another spelling of the path
+ * finds the same lock file (realpath); a hard link is refused by
+ * db_file_check().  The lock file is checked: a regular file (O_NOFOLLOW),
+ * this user's, one name, mode 0600 from its creation on: one that others
+ * could open (0644, made by an older mpmd) may be open in another user's
+ * process, to be locked at will, so it is replaced (unlinked and made
+ * anew), never locked; a lock counts only once the path still names the
+ * locked file (another start may have replaced it meanwhile).
+ * Guarded by store_lock_one_daemon, store_lock_not_blocked_by_readers and
+ * daemon_perms_*. */
 static int lock_acquire(store *s)
 {
-    int fd = open(s->path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-    if (fd < 0) return sti_fail(MPM_EIO, "cannot open database %s: %s", s->path, strerror(errno));
+    int r = db_file_check(s);
+    if (r) return r;
     char *real = realpath(s->path, NULL);
     if (real) {
         size_t n = strlen(real);
@@ -456,30 +510,66 @@ static int lock_acquire(store *s)
         }
         free(real);
     }
-    if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
-        int e = errno;
-        close(fd);
-        if (e == EWOULDBLOCK) {
-            long pid = lock_pid(s->lock_path);
+    for (int attempt = 0; attempt < 5; attempt++) {
+        int fd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0600);
+        if (fd < 0)
+            return sti_fail(MPM_EIO, "cannot open the lock file %s: %s", s->lock_path,
+                            strerror(errno));
+        struct stat sb, now;
+        if (fstat(fd, &sb) || !S_ISREG(sb.st_mode) || sb.st_uid != geteuid() || sb.st_nlink != 1) {
+            close(fd);
+            return sti_fail(MPM_EIO,
+                            "the lock file %s is not a file of its own of this user (uid %u): "
+                            "remove it, and keep the database in a directory only mpmd's user "
+                            "can write",
+                            s->lock_path, (unsigned)geteuid());
+        }
+        if (sb.st_mode & 077) {
+            /* others could open it (an older mpmd made it 0644), and may
+             * still hold it open to lock it: never used, replaced */
+            int same =
+                stat(s->lock_path, &now) == 0 && now.st_dev == sb.st_dev && now.st_ino == sb.st_ino;
+            close(fd);
+            if (same && unlink(s->lock_path) != 0 && errno != ENOENT)
+                return sti_fail(MPM_EIO, "cannot replace the lock file %s (mode %04o): %s",
+                                s->lock_path, (unsigned)(sb.st_mode & 07777), strerror(errno));
+            if (same)
+                sti_log(s, "%s was mode %04o: replaced by an owner-only one", s->lock_path,
+                        (unsigned)(sb.st_mode & 07777));
+            continue;
+        }
+        if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
+            int e = errno;
+            if (e != EWOULDBLOCK) {
+                close(fd);
+                return sti_fail(MPM_EIO, "cannot lock %s: %s", s->lock_path, strerror(e));
+            }
+            long pid = lock_pid(fd);
+            close(fd);
             if (pid > 0)
                 return sti_fail(MPM_ELOCKED, "database %s is in use by another mpmd (pid %ld)",
                                 s->path, pid);
             return sti_fail(MPM_ELOCKED, "database %s is in use by another mpmd (pid unknown)",
                             s->path);
         }
-        return sti_fail(MPM_EIO, "cannot lock %s: %s", s->path, strerror(e));
+        /* locked; the path must still name this file (another start may
+         * have replaced it meanwhile) */
+        if (stat(s->lock_path, &now) != 0 || now.st_dev != sb.st_dev || now.st_ino != sb.st_ino) {
+            close(fd);
+            continue;
+        }
+        s->lock_fd = fd;
+        /* the pid, for the message of a second daemon: nothing depends on
+         * it, so a full disk does not stop the start */
+        char pid[32];
+        int n = snprintf(pid, sizeof pid, "%ld\n", (long)getpid());
+        if (ftruncate(fd, 0) != 0 || pwrite(fd, pid, (size_t)n, 0) != n)
+            sti_log(s, "cannot write the pid into %s: %s (the lock holds regardless)", s->lock_path,
+                    strerror(errno));
+        return 0;
     }
-    s->lock_fd = fd;
-    /* the pid, for the message of a second daemon: nothing depends on it,
-     * so a full disk or a read-only directory does not stop the start */
-    char pid[32];
-    int n = snprintf(pid, sizeof pid, "%ld\n", (long)getpid());
-    int pfd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-    if (pfd < 0 || ftruncate(pfd, 0) != 0 || pwrite(pfd, pid, (size_t)n, 0) != n)
-        sti_log(s, "cannot write the pid into %s: %s (the lock holds regardless)", s->lock_path,
-                strerror(errno));
-    if (pfd >= 0) close(pfd);
-    return 0;
+    return sti_fail(MPM_ELOCKED, "cannot take the lock file %s: it keeps being replaced",
+                    s->lock_path);
 }
 
 static void lock_release(store *s)
@@ -487,7 +577,7 @@ static void lock_release(store *s)
     if (s->lock_fd < 0) return;
     /* empty the pid before the lock goes; the file stays (unlinking a lock
      * file races with a process that has just opened it) */
-    if (truncate(s->lock_path, 0) != 0 && errno != ENOENT)
+    if (ftruncate(s->lock_fd, 0) != 0)
         sti_log(s, "cannot truncate %s: %s", s->lock_path, strerror(errno));
     close(s->lock_fd); /* releases the flock */
     s->lock_fd = -1;
