@@ -8,6 +8,14 @@
  * files.  The settings are the key's own quotas (srv_auth_quota): the
  * tokens after the key that start with "max-"; the first other token
  * begins the comment.
+ *
+ * Revocation.  A key removed at SIGHUP loses its open connections too:
+ * libzmq has no handle on one connection of a bound socket, but each
+ * message says which descriptor it came in on (ZMQ_SRCFD), so the daemon
+ * notes the descriptor and key of every request and stream subscription
+ * (srv_auth_note_peer) and the reload shuts down those of removed keys
+ * (close_revoked); each request's key is also checked against the current
+ * lists (srv_auth_key_ok).  Guarded by daemon_revoke_open_connections.
  */
 #include "srv_auth.h"
 
@@ -19,6 +27,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <zmq.h>
 
@@ -43,8 +52,22 @@ static const struct {
 } settings[3] = {
     {"max-jobs", 1e6}, {"max-particles", (double)MPM_MAX_PARTICLES}, {"max-disk-mb", 1e12}};
 
+/* A connection that sent a request or a subscription: its descriptor's
+ * socket (device and inode: a descriptor closed and reused for another
+ * socket has another) and the key it authenticated with ("" = none). */
+typedef struct {
+    dev_t dev;
+    ino_t ino;
+    char key[SRV_KEY_Z85_SIZE];
+} peer;
+/* Descriptors above this are not noted (the daemon's RLIMIT_NOFILE is
+ * lower); the table grows to the highest descriptor seen. */
+#define PEER_FD_MAX (1 << 20)
+
 struct srv_auth {
     int curve;
+    peer *peers; /* indexed by descriptor; main thread only */
+    size_t npeers;
     char secret[SRV_KEY_Z85_SIZE], public_[SRV_KEY_Z85_SIZE];
     char authorized_path[1024], admin_path[1024];
     pthread_mutex_t mu;
@@ -329,6 +352,65 @@ const char *srv_auth_server_public(const srv_auth *a)
     return a && a->curve ? a->public_ : "";
 }
 
+int srv_auth_key_ok(srv_auth *a, const char *key)
+{
+    if (!a || !a->curve) return 1;
+    if (!key) return 0;
+    pthread_mutex_lock(&a->mu);
+    int ok = list_has(&a->allowed, key) || list_has(&a->admins, key);
+    pthread_mutex_unlock(&a->mu);
+    return ok;
+}
+
+void srv_auth_note_peer(srv_auth *a, zmq_msg_t *m, const char *key)
+{
+    if (!a || !a->curve || !key || strlen(key) != SRV_KEY_Z85_LEN) return;
+    int fd = zmq_msg_get(m, ZMQ_SRCFD);
+    struct stat sb;
+    if (fd < 0 || fd >= PEER_FD_MAX || fstat(fd, &sb) != 0) return;
+    if ((size_t)fd >= a->npeers) {
+        size_t n = a->npeers ? a->npeers : 64;
+        while (n <= (size_t)fd) n *= 2;
+        peer *p = realloc(a->peers, n * sizeof *p);
+        if (!p) {
+            srv_warn(0, "out of memory noting a connection: a revoked key keeps it until it "
+                        "leaves (its requests are refused)");
+            return;
+        }
+        memset(p + a->npeers, 0, (n - a->npeers) * sizeof *p);
+        a->peers = p;
+        a->npeers = n;
+    }
+    peer *e = &a->peers[fd];
+    e->dev = sb.st_dev;
+    e->ino = sb.st_ino;
+    memcpy(e->key, key, SRV_KEY_Z85_SIZE);
+}
+
+/* Closes the connections of keys no longer listed (after a reload): the
+ * noted descriptors whose socket is still the one noted are shut down
+ * (shutdown(2)): libzmq sees the connection end, drops what it queued for
+ * it and, on the stream socket, its subscriptions; the client's reconnect
+ * meets the ZAP handler, which refuses the key.  A descriptor closed and
+ * reused for another socket since has another inode and is left alone.
+ * Returns the connections closed. */
+static size_t close_revoked(srv_auth *a)
+{
+    size_t closed = 0;
+    for (size_t fd = 0; fd < a->npeers; fd++) {
+        peer *e = &a->peers[fd];
+        struct stat sb;
+        if (!e->key[0] || list_has(&a->allowed, e->key) || list_has(&a->admins, e->key)) continue;
+        if (fstat((int)fd, &sb) == 0 && sb.st_dev == e->dev && sb.st_ino == e->ino &&
+            S_ISSOCK(sb.st_mode) && shutdown((int)fd, SHUT_RDWR) == 0) {
+            srv_log(0, "SIGHUP: closed a connection of the revoked key %s", e->key);
+            closed++;
+        }
+        memset(e, 0, sizeof *e);
+    }
+    return closed;
+}
+
 void srv_auth_reload(srv_auth *a)
 {
     if (!a || !a->curve) return;
@@ -352,9 +434,12 @@ void srv_auth_reload(srv_auth *a)
     free(a->admins.z);
     a->allowed = al;
     a->admins = ad;
+    size_t closed = del ? close_revoked(a) : 0;
     pthread_mutex_unlock(&a->mu);
-    srv_log(0, "SIGHUP: keys re-read: %zu added, %zu removed; %zu authorized, %zu admin", add, del,
-            al.n, ad.n);
+    srv_log(0,
+            "SIGHUP: keys re-read: %zu added, %zu removed; %zu authorized, %zu admin; %zu "
+            "connection(s) of removed keys closed",
+            add, del, al.n, ad.n, closed);
 }
 
 void srv_auth_quota(srv_auth *a, const srv_config *cfg, const char *owner, srv_quota *q)
@@ -498,6 +583,7 @@ void srv_auth_destroy(srv_auth **pa)
     if (a->started) pthread_join(a->thread, NULL);
     free(a->allowed.z);
     free(a->admins.z);
+    free(a->peers);
     pthread_mutex_destroy(&a->mu);
     memset(a->secret, 0, sizeof a->secret);
     free(a);

@@ -16,6 +16,7 @@
 #define SRV_AUTH_H
 
 #include <stddef.h>
+#include <zmq.h>
 
 #include "srv_config.h"
 
@@ -55,8 +56,18 @@ int srv_auth_start(srv_auth *a, void *zctx, char *err, size_t errlen);
  * is off). */
 int srv_auth_secure(srv_auth *a, void *sock, char *err, size_t errlen);
 
-/* Re-reads the key lists and logs the keys added and removed. */
+/* Re-reads the key lists and logs the keys added and removed; the
+ * connections of removed keys noted by srv_auth_note_peer() are closed.
+ * Main thread only. */
 void srv_auth_reload(srv_auth *a);
+
+/* 1 if key (Z85) is in the current lists, or CURVE is off; else 0: a
+ * request or subscription of a key removed at the last SIGHUP. */
+int srv_auth_key_ok(srv_auth *a, const char *key);
+
+/* Notes the connection message m came in on (ZMQ_SRCFD) as key's, so that
+ * a reload that removes key closes it (CURVE only; main thread only). */
+void srv_auth_note_peer(srv_auth *a, zmq_msg_t *m, const char *key);
 
 /* A client's quotas (0: no limit). */
 typedef struct {

@@ -514,10 +514,12 @@ static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t jo
     }
     if (who[0] && strcmp(who, owner) && !srv_auth_is_admin(d->auth, owner)) {
         srv_warn(job, "cancel by %s refused: the job is %s's", owner, who);
+        /* with --private-runs the owner's key is not told to another key
+         * (daemon_names_forbidden_no_key) */
         srv_reply_error(d, id, MPM_EFORBIDDEN, "job_id",
                         "job %llu was submitted by %s: only its owner or an admin key "
                         "(--admin-keys) may cancel it",
-                        (unsigned long long)job, who);
+                        (unsigned long long)job, d->cfg->private_runs ? "another key" : who);
         return 1;
     }
     int rc = srv_pool_cancel(d->pool, job, &msg, &len);
@@ -796,7 +798,18 @@ static void on_router(daemon_t *d)
         const char *uid = zmq_msg_gets(&part[2], "User-Id");
         char owner[OWNER_SIZE];
         snprintf(owner, sizeof owner, "%s", uid && *uid ? uid : SRV_OWNER_LOCAL);
-        handle_request(d, &part[0], owner, zmq_msg_data(&part[2]), zmq_msg_size(&part[2]));
+        /* a key removed at SIGHUP: its connection is closed then, and any
+         * request that still comes is refused (srv_auth.h) */
+        if (uid && *uid) srv_auth_note_peer(d->auth, &part[2], uid);
+        if (uid && *uid && !srv_auth_key_ok(d->auth, uid)) {
+            d->requests++;
+            srv_debug(0, "request of the revoked key %s refused", uid);
+            srv_reply_error(d, &part[0], MPM_EFORBIDDEN, "",
+                            "this client's key is no longer authorized (removed from the "
+                            "server's key lists)");
+        } else {
+            handle_request(d, &part[0], owner, zmq_msg_data(&part[2]), zmq_msg_size(&part[2]));
+        }
     } else if (nparts >= 1) {
         d->bad_requests++;
         size_t total = (size_t)nparts + extra;
@@ -839,7 +852,9 @@ static int apply_subscription(daemon_t *d, zmq_msg_t *m, const char *b, size_t n
                               uint64_t job)
 {
     const char *uid = zmq_msg_gets(m, "User-Id");
-    if (!uid || !*uid) return 0; /* a leaving subscriber's: nothing to apply */
+    if (!uid || !*uid) return 0;         /* a leaving subscriber's: nothing to apply */
+    srv_auth_note_peer(d->auth, m, uid); /* closed if its key is revoked */
+    if (!srv_auth_key_ok(d->auth, uid)) return 0;
     if (b[0] == 0) {
         if (zmq_setsockopt(d->xpub, ZMQ_UNSUBSCRIBE, b + 1, n - 1))
             srv_warn(0, "stream: ZMQ_UNSUBSCRIBE: %s", zmq_strerror(errno));
