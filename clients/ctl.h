@@ -25,6 +25,7 @@
 
 #include "mpp_endpoint.h"
 #include "mpp_msg.h"
+#include "mpp_text.h"
 
 /* Return codes (negative). */
 enum {
@@ -172,13 +173,13 @@ typedef struct {
 void ctl_energy_out_init(ctl_energy_out *o, ctl_out fmt, int dim, FILE *f);
 int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s);
 
-/* s with the bytes a terminal would act on shown escaped: C0 controls and
- * DEL as \n, \r, \t or \xHH, the UTF-8 C1 controls (U+0080..U+009F, an
- * 8-bit CSI among them) as \u00HH; into buf (n bytes, cut short when
- * full); returns buf.  For every server-supplied text printed as text. */
+/* s escaped by mpp_text_escape (a backslash, control characters,
+ * bidirectional controls, line separators, bytes that are not UTF-8) into
+ * buf (n bytes, cut short when full); returns buf.  For every
+ * server-supplied text printed as text. */
 const char *ctl_esc(const char *s, char *buf, size_t n);
 /* Room ctl_esc needs for a text of n bytes, for a buffer of the caller. */
-#define CTL_ESC_LEN(n) (6 * (n) + 1)
+#define CTL_ESC_LEN(n) MPP_TEXT_ESC_LEN(n)
 /* The server's cap on runs per listing (ListRuns.limit). */
 #define CTL_LIST_MAX 10000u
 

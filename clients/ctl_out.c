@@ -107,39 +107,7 @@ int ctl_energy_out_row(ctl_energy_out *o, const mpm_energy_sample *s)
 
 const char *ctl_esc(const char *s, char *buf, size_t n)
 {
-    static const char hex[] = "0123456789abcdef";
-    size_t k = 0;
-    if (!n) return buf;
-    for (const unsigned char *p = (const unsigned char *)(s ? s : ""); *p; p++) {
-        char e[8];
-        size_t el = 0;
-        unsigned c = *p;
-        if (c == 0xc2 && p[1] >= 0x80 && p[1] <= 0x9f) { /* a C1 control in UTF-8 */
-            c = *++p;
-            memcpy(e, "\\u00", 4);
-            e[4] = hex[c >> 4];
-            e[5] = hex[c & 15];
-            el = 6;
-        } else if (c < 0x20 || c == 0x7f) {
-            e[0] = '\\';
-            if (c == '\n' || c == '\r' || c == '\t') {
-                e[1] = c == '\n' ? 'n' : c == '\r' ? 'r' : 't';
-                el = 2;
-            } else {
-                e[1] = 'x';
-                e[2] = hex[c >> 4];
-                e[3] = hex[c & 15];
-                el = 4;
-            }
-        } else {
-            e[0] = (char)c;
-            el = 1;
-        }
-        if (k + el >= n) break;
-        memcpy(buf + k, e, el);
-        k += el;
-    }
-    buf[k] = 0;
+    mpp_text_escape(s, buf, n);
     return buf;
 }
 

@@ -7,6 +7,7 @@
  */
 #include "mpp_internal.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -169,6 +170,72 @@ size_t mpp_unpack_budget(size_t len)
                : MPP_UNPACK_INFLATE * len + MPP_UNPACK_FLOOR;
 }
 
+/* A varint at p[*i] (len bytes in all) into *v; 0, or -1 when cut short. */
+static int get_varint(const uint8_t *p, size_t len, size_t *i, uint64_t *v)
+{
+    *v = 0;
+    for (int sh = 0; sh < 64; sh += 7) {
+        if (*i >= len) return -1;
+        uint8_t b = p[(*i)++];
+        *v |= (uint64_t)(b & 0x7f) << sh;
+        if (!(b & 0x80)) return 0;
+    }
+    return -1;
+}
+
+/* Messages nested deeper than this are not looked into for NULs (the
+ * schema nests a few levels; protobuf-c has decoded them already). */
+#define NUL_WALK_DEPTH 32
+
+/* Whether a string field of message d (its wire bytes p, len), or of a
+ * message inside it, holds a NUL byte: protobuf-c gives strings as C
+ * strings, so "a\0b" would arrive as "a", silently cut.  Walks the wire
+ * form after protobuf-c has accepted it.  0, or MPM_ESYNTAX (bytes this
+ * decoder cannot represent) naming the field: its path from the message, or from the Case for a field inside a
+ * case (the case checks' spelling: "name").  Guarded by
+ * daemon_names_nul_refused. */
+static int strings_without_nul(const ProtobufCMessageDescriptor *d, const uint8_t *p, size_t len,
+                               int depth, const char *path, mpm_error *err)
+{
+    size_t i = 0;
+    while (i < len) {
+        uint64_t key, v;
+        if (get_varint(p, len, &i, &key)) return 0;
+        switch (key & 7) {
+        case 0:
+            if (get_varint(p, len, &i, &v)) return 0;
+            break;
+        case 1: i += 8; break;
+        case 5: i += 4; break;
+        case 2: {
+            if (get_varint(p, len, &i, &v) || v > len - i) return 0;
+            const ProtobufCFieldDescriptor *f =
+                key >> 3 <= UINT32_MAX
+                    ? protobuf_c_message_descriptor_get_field(d, (unsigned)(key >> 3))
+                    : NULL;
+            char sub[MPM_PATH_MAX * MPM_PATH_NAME_MAX];
+            if (f && (f->type == PROTOBUF_C_TYPE_STRING || f->type == PROTOBUF_C_TYPE_MESSAGE))
+                snprintf(sub, sizeof sub, "%s%s%s", path, *path ? "." : "", f->name);
+            const uint8_t *z = f && f->type == PROTOBUF_C_TYPE_STRING ? memchr(p + i, 0, v) : NULL;
+            if (z)
+                return mpm_fail(err, MPM_ESYNTAX, sub,
+                                "contains a NUL character (\\u0000) at byte %zu: not allowed",
+                                (size_t)(z - (p + i)));
+            if (f && f->type == PROTOBUF_C_TYPE_MESSAGE && depth < NUL_WALK_DEPTH) {
+                const ProtobufCMessageDescriptor *sd = f->descriptor;
+                int rc = strings_without_nul(sd, p + i, (size_t)v, depth + 1,
+                                             sd == &mpmd__case__descriptor ? "" : sub, err);
+                if (rc) return rc;
+            }
+            i += (size_t)v;
+            break;
+        }
+        default: return 0; /* groups: protobuf-c refuses them */
+        }
+    }
+    return 0;
+}
+
 int mpp_unpack(const ProtobufCMessageDescriptor *d, const void *buf, size_t len, size_t max,
                ProtobufCMessage **out, mpm_error *err)
 {
@@ -188,7 +255,12 @@ int mpp_unpack(const ProtobufCMessageDescriptor *d, const void *buf, size_t len,
                         d->name, len, b.budget, MPP_UNPACK_INFLATE, MPP_UNPACK_FLOOR);
     if (!*out)
         return mpm_fail(err, MPM_ESYNTAX, NULL, "not a valid %s message (%zu bytes)", d->name, len);
-    return 0;
+    int rc = strings_without_nul(d, buf, len, 0, "", err);
+    if (rc) {
+        protobuf_c_message_free_unpacked(*out, &a);
+        *out = NULL;
+    }
+    return rc;
 }
 
 static const ProtobufCMessageDescriptor *kind_desc(mpp_msg_kind kind)

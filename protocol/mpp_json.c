@@ -545,6 +545,12 @@ static int parse_field(jctx *c, const ProtobufCMessageDescriptor *d,
  * filled, so a failure inside leaves a freeable message behind. */
 static int parse_value(jctx *c, const ProtobufCFieldDescriptor *f, json_t *v, void *dst)
 {
+    /* the text is read with JSON_ALLOW_NUL so that a \u0000 is refused
+     * here, naming the field, not cut short as a C string would be
+     * (daemon_names_nul_refused) */
+    if (json_is_string(v) && strlen(json_string_value(v)) != json_string_length(v))
+        return fail(c, MPM_EINVAL, "contains a NUL character (\\u0000) at byte %zu: not allowed",
+                    strlen(json_string_value(v)));
     switch (f->type) {
     case PROTOBUF_C_TYPE_MESSAGE: {
         const ProtobufCMessageDescriptor *sd = f->descriptor;
@@ -773,7 +779,7 @@ int mpp_json_to_pb(const ProtobufCMessageDescriptor *desc, const char *text, siz
     int rc;
     ctx_init(&c, err);
     *out = NULL;
-    root = json_loadb(text, len, JSON_REJECT_DUPLICATES, &je);
+    root = json_loadb(text, len, JSON_REJECT_DUPLICATES | JSON_ALLOW_NUL, &je);
     if (!root) {
         if (json_error_code(&je) == json_error_out_of_memory) return fail_nomem(&c);
         return fail(&c, MPM_ESYNTAX, "invalid JSON at line %d, column %d: %s", je.line, je.column,

@@ -5,6 +5,8 @@
  */
 #include "srv_log.h"
 
+#include "mpp_text.h"
+
 #include <stdarg.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -17,40 +19,6 @@ static atomic_int verbose;
 void srv_log_set_verbose(int v)
 {
     atomic_store(&verbose, v);
-}
-
-/* Copies src into dst (n bytes) with control bytes (< 0x20, 0x7f)
- * escaped: \n, \r, \t, \\ and \xHH, and the UTF-8 C1 controls as \u00HH;
- * returns the length written. */
-static size_t escape(char *dst, size_t n, const char *src)
-{
-    static const char hex[] = "0123456789abcdef";
-    size_t k = 0;
-    for (const unsigned char *p = (const unsigned char *)src; *p && k + 7 < n; p++) {
-        unsigned char c = *p;
-        if (c == 0xc2 && p[1] >= 0x80 && p[1] <= 0x9f) { /* a UTF-8 C1 control (8-bit CSI) */
-            c = *++p;
-            memcpy(dst + k, "\\u00", 4);
-            k += 4;
-            dst[k++] = hex[c >> 4];
-            dst[k++] = hex[c & 15];
-            continue;
-        }
-        if (c >= 0x20 && c != 0x7f && c != '\\') {
-            dst[k++] = (char)c;
-            continue;
-        }
-        dst[k++] = '\\';
-        if (c == '\\' || c == '\n' || c == '\r' || c == '\t') {
-            dst[k++] = c == '\n' ? 'n' : c == '\r' ? 'r' : c == '\t' ? 't' : '\\';
-        } else {
-            dst[k++] = 'x';
-            dst[k++] = hex[c >> 4];
-            dst[k++] = hex[c & 15];
-        }
-    }
-    dst[k] = 0;
-    return k;
 }
 
 static void emit(const char *level, uint64_t job, const char *fmt, va_list ap)
@@ -66,7 +34,7 @@ static void emit(const char *level, uint64_t job, const char *fmt, va_list ap)
     if (job && n < (int)sizeof line)
         n += snprintf(line + n, sizeof line - (size_t)n, "job %llu: ", (unsigned long long)job);
     vsnprintf(msg, sizeof msg, fmt, ap);
-    if (n < (int)sizeof line) n += (int)escape(line + n, sizeof line - (size_t)n, msg);
+    if (n < (int)sizeof line) n += (int)mpp_text_escape(msg, line + n, sizeof line - (size_t)n);
     if (n >= (int)sizeof line - 1) n = (int)sizeof line - 2;
     line[n++] = '\n';
     ssize_t w = write(STDERR_FILENO, line, (size_t)n);

@@ -9,9 +9,10 @@
 #include <stdint.h>
 
 /* Logs a line; job 0 means "no job".  Debug lines show only when verbose.
- * srv_error is for what stops the daemon (a failed start).  Control bytes
- * in the message (a newline or an ESC in a case name, say) are written
- * escaped (\n, \x1b), so a line can never be forged or split. */
+ * srv_error is for what stops the daemon (a failed start).  The message
+ * is written escaped by mpp_text_escape (a newline or an ESC in a case
+ * name as \n, \x1b; a backslash as \\; U+202E as \u202e), so a line can
+ * never be forged, split or reordered on screen. */
 void srv_log(uint64_t job, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 void srv_warn(uint64_t job, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 void srv_error(uint64_t job, const char *fmt, ...) __attribute__((format(printf, 2, 3)));

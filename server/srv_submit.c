@@ -249,7 +249,7 @@ void srv_do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
         srv_reply_error(d, id, MPM_EFORBIDDEN, "run_id",
                         "run %llu was submitted by %s: only its owner or an admin key "
                         "(--admin-keys) may resume it",
-                        run, who);
+                        run, d->cfg->private_runs ? "another key" : who);
     } else if (r.status != MPP_STATUS_INTERRUPTED) {
         srv_reply_error(d, id, MPM_ECONFLICT, "run_id",
                         "run %llu is %s: only an INTERRUPTED run can be resumed", run,
