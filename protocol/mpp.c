@@ -191,9 +191,8 @@ static int get_varint(const uint8_t *p, size_t len, size_t *i, uint64_t *v)
  * message inside it, holds a NUL byte: protobuf-c gives strings as C
  * strings, so "a\0b" would arrive as "a", silently cut.  Walks the wire
  * form after protobuf-c has accepted it.  0, or MPM_ESYNTAX (bytes this
- * decoder cannot represent) naming the field: its path from the message, or from the Case for a field inside a
- * case (the case checks' spelling: "name").  Guarded by
- * daemon_names_nul_refused. */
+ * decoder cannot represent) naming the field: its path from the message, or from the Case for a
+ * field inside a case (the case checks' spelling: "name").  Guarded by daemon_names_nul_refused. */
 static int strings_without_nul(const ProtobufCMessageDescriptor *d, const uint8_t *p, size_t len,
                                int depth, const char *path, mpm_error *err)
 {
