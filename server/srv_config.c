@@ -45,8 +45,16 @@ static const setting settings[] = {
     {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30,
      "largest request accepted (default 67108864)"},
     {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20,
-     "MB of snapshots a job's stream may hold for slow watchers; more are dropped, "
-     "0 = no bound (default 64)"},
+     "MB of stream messages queued for one watcher (one connection), across all its jobs; "
+     "a watcher further behind misses messages until it catches up, 0 = no bound (default 64)"},
+    {"stream-total-mb", NULL, T_INT, F(stream_total_mb), 0, 1 << 20,
+     "MB of snapshot messages queued for all watchers together; past it snapshots are not "
+     "streamed, 0 = no bound (default 256)"},
+    {"stream-max-subscriptions", NULL, T_INT, F(stream_max_subscriptions), 1, 1000000,
+     "stream subscriptions held for all watchers (a 21-byte job topic each); past it the "
+     "stream socket drops every connection and watchers reconnect (default 4096)"},
+    {"stream-subscribe-ahead", NULL, T_INT, F(stream_subscribe_ahead), 0, 1000000,
+     "job ids past the newest that a watcher may subscribe to before they exist (default 16)"},
     {"curve-secret", "MPMD_CURVE_SECRET", T_STR, F(curve_secret), 0, 0,
      "the server's CURVE secret key file (mode 0600; mpmctl keygen): CURVE on both sockets"},
     {"authorized-keys", NULL, T_STR, F(authorized_keys), 0, 0,
@@ -98,6 +106,9 @@ static void defaults(srv_config *c)
     c->checkpoint_every_s = 300;
     c->max_request_bytes = 64LL << 20;
     c->stream_buffer_mb = 64;
+    c->stream_total_mb = 256;
+    c->stream_max_subscriptions = 4096;
+    c->stream_subscribe_ahead = 16;
     c->job_max_disk_mb = 4096;
 }
 

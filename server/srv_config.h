@@ -26,7 +26,10 @@ typedef struct {
     double max_wall_s;              /* per job, 0 = none */
     double checkpoint_every_s;      /* checkpoint interval of a case without one, 0 = none */
     long long max_request_bytes;    /* largest request accepted */
-    int stream_buffer_mb;           /* snapshot bytes queued for watchers, per job (0: no bound) */
+    int stream_buffer_mb;           /* MB queued for one watcher, all its jobs (0: no bound) */
+    int stream_total_mb;            /* MB of snapshots queued for all watchers (0: no bound) */
+    int stream_max_subscriptions;   /* subscriptions held for all watchers */
+    int stream_subscribe_ahead;     /* job ids past the newest a watcher may subscribe to */
     int allow_remote;               /* deprecated: non-loopback binds need CURVE now */
     int insecure_remote;            /* --insecure-allow-remote-without-auth */
     char curve_secret[1024];        /* server secret key file ("": no CURVE) */

@@ -43,6 +43,7 @@
 #include "srv_log.h"
 #include "srv_pool.h"
 #include "srv_socket.h"
+#include "srv_stream.h"
 #include "store.h"
 
 #include <errno.h>
@@ -300,7 +301,6 @@ static void publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
 static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
 static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq);
 static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
-static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n);
 static int cancel_job(daemon_t *d, zmq_msg_t *id, const char *owner, uint64_t job);
 static void do_other(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq);
 
@@ -318,7 +318,7 @@ static int read_denied(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_reques
     if (!d->cfg->private_runs || rq->kind == MPP_REQ_LIST_RUNS || rq->kind == MPP_REQ_CANCEL)
         return 0;
     char who[OWNER_SIZE];
-    if (job_owner(d, rq->id, who, sizeof who) || !strcmp(who, owner) ||
+    if (srv_job_owner(d, rq->id, who, sizeof who) || !strcmp(who, owner) ||
         srv_auth_is_admin(d->auth, owner))
         return 0;
     srv_log(rq->id, "read by %s refused: the run is %s's (--private-runs)", owner, who);
@@ -826,9 +826,7 @@ static void on_router(daemon_t *d)
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
 }
 
-/* Who submitted a job (live: the pool's; else the store's): 0 with it in
- * who, or -1 if there is no such job. */
-static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n)
+int srv_job_owner(daemon_t *d, uint64_t job, char *who, size_t n)
 {
     srv_job_info ji;
     if (srv_pool_info(d->pool, job, &ji) == 0) {
@@ -836,106 +834,6 @@ static int job_owner(daemon_t *d, uint64_t job, char *who, size_t n)
         return 0;
     }
     return store_run_owner(d->st, (int64_t)job, who, n) ? -1 : 0;
-}
-
-/* Under CURVE (ZMQ_XPUB_MANUAL) a subscription takes effect only when the
- * daemon applies it: when it names one job's full topic and its sender
- * (the "User-Id" the ZAP handler gave the connection) is the job's owner
- * or an admin key.  A prefix, the empty subscription (everything) or
- * another key's job is not applied: that subscriber receives nothing.
- * Returns 1 when applied (b[0] == 1), else 0.  An unsubscription is
- * applied for the key that sent it; the ones libzmq makes when a
- * subscriber leaves carry no key and concern its pipe only.  (Those come
- * for refused subscriptions too, so a job once watched under CURVE stays
- * watched: its snapshots are packed until it ends.) */
-static int apply_subscription(daemon_t *d, zmq_msg_t *m, const char *b, size_t n, int is_job,
-                              uint64_t job)
-{
-    const char *uid = zmq_msg_gets(m, "User-Id");
-    if (!uid || !*uid) return 0;         /* a leaving subscriber's: nothing to apply */
-    srv_auth_note_peer(d->auth, m, uid); /* closed if its key is revoked */
-    if (!srv_auth_key_ok(d->auth, uid)) return 0;
-    if (b[0] == 0) {
-        if (zmq_setsockopt(d->xpub, ZMQ_UNSUBSCRIBE, b + 1, n - 1))
-            srv_warn(0, "stream: ZMQ_UNSUBSCRIBE: %s", zmq_strerror(errno));
-        return 0;
-    }
-    char who[OWNER_SIZE];
-    if (b[0] != 1) return 0;
-    if (!is_job) {
-        srv_log(0,
-                "stream subscription to a %zu-byte prefix by %s not applied: only one job's "
-                "topic can be watched",
-                n - 1, uid);
-        return 0;
-    }
-    if (job_owner(d, job, who, sizeof who)) {
-        srv_log(job, "stream subscription by %s not applied: no such job", uid);
-        return 0;
-    }
-    if (strcmp(who, uid) && !srv_auth_is_admin(d->auth, uid)) {
-        srv_warn(job, "stream subscription by %s refused: the job is %s's", uid, who);
-        return 0;
-    }
-    if (zmq_setsockopt(d->xpub, ZMQ_SUBSCRIBE, b + 1, n - 1)) {
-        srv_warn(job, "stream: ZMQ_SUBSCRIBE: %s", zmq_strerror(errno));
-        return 0;
-    }
-    return 1;
-}
-
-/* Subscription changes on the stream socket: byte 1 = subscribe, 0 = leave. */
-static void on_xpub(daemon_t *d)
-{
-    int manual = srv_auth_curve(d->auth);
-    for (;;) {
-        zmq_msg_t m;
-        zmq_msg_init(&m);
-        if (zmq_msg_recv(&m, d->xpub, ZMQ_DONTWAIT) < 0) {
-            zmq_msg_close(&m);
-            break;
-        }
-        const char *b = zmq_msg_data(&m);
-        size_t n = zmq_msg_size(&m);
-        uint64_t job = 0;
-        int is_job = n == SRV_TOPIC_LEN + 1 && srv_topic_parse(b + 1, SRV_TOPIC_LEN, &job) == 0;
-        if (manual) {
-            if (n >= 1 && apply_subscription(d, &m, b, n, is_job, job)) {
-                srv_debug(job, "stream watched");
-                srv_pool_watch(d->pool, job, 1);
-            }
-        } else if (is_job && (b[0] == 0 || b[0] == 1)) {
-            srv_debug(job, "stream %s", b[0] ? "watched" : "no longer watched");
-            srv_pool_watch(d->pool, job, b[0]);
-            size_t i = 0;
-            while (i < d->nwatched && d->watched[i] != job) i++;
-            if (b[0] && i == d->nwatched && d->nwatched < WATCHED_MAX)
-                d->watched[d->nwatched++] = job;
-            else if (!b[0] && i < d->nwatched)
-                d->watched[i] = d->watched[--d->nwatched];
-        }
-        zmq_msg_close(&m);
-    }
-}
-
-/* Forwards the workers' stream messages to the XPUB: at most budget
- * frames, or (budget 0) until none is left. */
-static void on_pull(daemon_t *d, long budget)
-{
-    for (long k = 0; !budget || k < budget; k++) {
-        zmq_msg_t m;
-        zmq_msg_init(&m);
-        if (zmq_msg_recv(&m, d->pull, ZMQ_DONTWAIT) < 0) {
-            zmq_msg_close(&m);
-            if (errno != EAGAIN) srv_warn(0, "stream relay: %s", zmq_strerror(errno));
-            return;
-        }
-        int more = zmq_msg_more(&m);
-        /* an XPUB drops for subscribers at their high-water mark: a slow
-         * watcher never slows anyone */
-        if (zmq_msg_send(&m, d->xpub, (more ? ZMQ_SNDMORE : 0) | ZMQ_DONTWAIT) < 0)
-            zmq_msg_close(&m);
-    }
 }
 
 /* Closes a socket after giving what it still holds to send (the last stream
@@ -967,13 +865,13 @@ static void stop_jobs(daemon_t *d)
             srv_warn(0, "zmq_poll while stopping: %s", zmq_strerror(errno));
             break;
         }
-        if (n > 0 && (items[1].revents & ZMQ_POLLIN)) on_pull(d, 10000);
+        if (n > 0 && (items[1].revents & ZMQ_POLLIN)) srv_stream_relay(d, 10000);
         if (n > 0 && (items[2].revents & ZMQ_POLLIN)) store_notify_drain(d->st);
         if (n > 0 && (items[0].revents & ZMQ_POLLIN)) on_router(d);
         if (d->pending) serve_pending(d);
     }
     srv_pool_destroy(&d->pool);
-    on_pull(d, 0);
+    srv_stream_relay(d, 0);
     drain_pending(d);
 }
 
@@ -1043,6 +941,11 @@ int srv_daemon_run(const srv_config *cfg)
         srv_error(0, "%s", err);
         goto out;
     }
+    d.stream = srv_stream_new(cfg);
+    if (!d.stream) {
+        srv_error(0, "out of memory for the stream's subscriptions");
+        goto out;
+    }
     d.pool = srv_pool_new(d.zctx, cfg, d.st, EVENTS_EP, err, sizeof err);
     if (!d.pool) {
         srv_error(0, "%s", err);
@@ -1072,8 +975,8 @@ int srv_daemon_run(const srv_config *cfg)
             break;
         }
         if (items[3].revents & ZMQ_POLLIN) store_notify_drain(d.st);
-        if (items[2].revents & ZMQ_POLLIN) on_pull(&d, 10000);
-        if (items[1].revents & ZMQ_POLLIN) on_xpub(&d);
+        if (items[2].revents & ZMQ_POLLIN) srv_stream_relay(&d, 10000);
+        if (items[1].revents & ZMQ_POLLIN) srv_stream_on_xpub(&d);
         if (items[0].revents & ZMQ_POLLIN) on_router(&d);
         if (d.pending) serve_pending(&d);
     }
@@ -1092,6 +995,7 @@ out:
         }
     }
     srv_auth_destroy(&d.auth); /* its thread ended with the context */
+    srv_stream_destroy(&d.stream);
     store_close(&d.st);
     srv_budget_destroy(&d.budget); /* after the workers: they charge it */
     srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,

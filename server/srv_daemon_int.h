@@ -22,12 +22,6 @@
 /* Size of an owner string: a Z85 key or SRV_OWNER_LOCAL, with its NUL. */
 #define OWNER_SIZE 48
 
-/* Job topics remembered as subscribed (so that a job submitted after its
- * watcher subscribed is streamed in full); more are not remembered (the
- * XPUB passes on only the first subscription of a topic and its last
- * unsubscription, so one entry per topic). */
-#define WATCHED_MAX 4096
-
 typedef struct {
     const srv_config *cfg;
     void *zctx, *router, *xpub, *pull;
@@ -39,8 +33,7 @@ typedef struct {
     uint64_t requests, bad_requests;
     struct pending *pending, **pending_tail; /* reads waiting for a commit */
     size_t npending;
-    uint64_t watched[WATCHED_MAX]; /* job topics somebody subscribes to */
-    size_t nwatched;
+    struct srv_stream *stream; /* the stream's subscriptions */
 } daemon_t;
 
 /* 1 once a signal asked the daemon to stop or it is shutting down: no new
@@ -65,6 +58,15 @@ void srv_reply_after_commit(daemon_t *d, zmq_msg_t *id, const char *owner, int64
                             uint8_t *buf, size_t len);
 /* Unix time now, in seconds. */
 double srv_wall_now(void);
+
+/* Who submitted a job (live: the pool's; else the store's): 0 with it in
+ * who, or -1 if there is no such job. */
+int srv_job_owner(daemon_t *d, uint64_t job, char *who, size_t n);
+/* The stream socket's subscription messages (at most a budget of them a
+ * call) and the relay of the workers' stream messages to it (budget
+ * frames, 0: until none is left): srv_stream.c. */
+void srv_stream_on_xpub(daemon_t *d);
+void srv_stream_relay(daemon_t *d, long budget);
 
 /* Submit: checks the case, the limits, the quotas and the disk budgets,
  * records the run and queues its job; answers SubmitOk or an Error. */

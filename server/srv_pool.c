@@ -303,10 +303,15 @@ void __tsan_release(void *addr);
 #define TSAN_RELEASE(p) ((void)(p))
 #endif
 
+/* Bytes of snapshot messages zmq holds, every job's (queued for some
+ * watcher, or on their way to the stream socket). */
+static atomic_size_t stream_held;
+
 static void snapmsg_zmq_free(void *data, void *hint)
 {
     (void)data;
     TSAN_ACQUIRE(hint);
+    atomic_fetch_sub(&stream_held, ((snapmsg *)hint)->cap);
     snapmsg_unref(hint);
 }
 
@@ -342,20 +347,22 @@ static void snapbuf_free(snapbuf *b)
     memset(b, 0, sizeof *b);
 }
 
-/* The stream's memory bound.  A message buffer that zmq still holds is
- * queued for some watcher (the XPUB keeps a message until the last
- * subscriber's connection has written it to the kernel); a watcher that
- * stalls keeps every later one.  The bytes so held are counted here, per
- * job, and a snapshot that would take them above --stream-buffer-mb is not
- * streamed (its seq is used: watchers see the gap; the record, if asked
- * for, is stored as always).  One message may always be in flight, so a
- * snapshot larger than the budget still reaches a watcher that keeps up.
- * Buffers zmq has let go of are reused (the solver faults in no fresh
- * pages), and those beyond the one kept are freed.  Returns the slot to
- * pack into (its buffer at least need bytes), or -1 to drop. */
+/* The stream's memory bound across jobs.  A message buffer that zmq still
+ * holds is queued for some watcher (the XPUB keeps a message until the last
+ * subscriber's connection has written it to the kernel).  What one watcher
+ * can hold is bounded on the main thread (srv_stream_relay(): about
+ * --stream-buffer-mb per connection); the bytes all watchers hold together
+ * are counted here (stream_held), and a snapshot that would take them
+ * above --stream-total-mb is not streamed (its seq is used: watchers see
+ * the gap; the record, if asked for, is stored as always).  One message of
+ * each job may always be in flight, so a snapshot larger than the budget
+ * still reaches a watcher that keeps up.  Buffers zmq has let go of are
+ * reused (the solver faults in no fresh pages), and those beyond the one
+ * kept are freed.  Returns the slot to pack into (its buffer at least need
+ * bytes), or -1 to drop.  (daemon_subs_stalled_watcher_many_jobs) */
 static int snap_slot(ctx *c, snapbuf *b, size_t need)
 {
-    size_t held = 0, budget = (size_t)c->p->cfg->stream_buffer_mb << 20;
+    size_t held = 0, budget = (size_t)c->p->cfg->stream_total_mb << 20;
     int reuse = -1, empty = -1;
     for (int i = 0; i < SNAP_SLOTS; i++) {
         snapmsg *m = b->msg[i];
@@ -372,7 +379,7 @@ static int snap_slot(ctx *c, snapbuf *b, size_t need)
             if (empty < 0) empty = i;
         }
     }
-    if (budget && held && held + need > budget) return -1;
+    if (budget && held && atomic_load(&stream_held) + need > budget) return -1;
     if (reuse >= 0) return reuse;
     if (empty < 0) return -1;
     snapmsg *m = malloc(sizeof *m + need);
@@ -396,10 +403,10 @@ static int snapshot_slot(ctx *c, snapbuf *b, const mpp_snapshot *s, uint64_t seq
     int slot = snap_slot(c, b, need);
     if (slot < 0 && !b->dropped++)
         srv_log(c->j->id,
-                "snapshot at step %lld not streamed: %zu bytes of snapshots are still "
-                "queued for a slow watcher (--stream-buffer-mb %d); later ones are dropped "
-                "likewise while it lags",
-                (long long)s->step, need, c->p->cfg->stream_buffer_mb);
+                "snapshot at step %lld (%zu bytes) not streamed: %zu bytes of snapshots are "
+                "still queued for slow watchers (--stream-total-mb %d); later ones are dropped "
+                "likewise while they lag",
+                (long long)s->step, need, atomic_load(&stream_held), c->p->cfg->stream_total_mb);
     return slot;
 }
 
@@ -416,8 +423,10 @@ static void publish_snapshot(ctx *c, snapbuf *b, const mpp_snapshot *s, uint64_t
     }
     zmq_msg_t msg;
     atomic_fetch_add(&m->refs, 1); /* zmq's, dropped by snapmsg_zmq_free */
+    atomic_fetch_add(&stream_held, m->cap);
     TSAN_RELEASE(m);
     if (zmq_msg_init_data(&msg, m->data, len, snapmsg_zmq_free, m)) {
+        atomic_fetch_sub(&stream_held, m->cap);
         atomic_fetch_sub(&m->refs, 1);
         srv_warn(j->id, "stream send: %s", zmq_strerror(errno));
         return;
@@ -830,8 +839,8 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     }
     free(ckb.buf);
     if (sb.dropped)
-        srv_log(j->id, "%llu snapshot(s) not streamed: a watcher lagged (--stream-buffer-mb %d)",
-                (unsigned long long)sb.dropped, cfg->stream_buffer_mb);
+        srv_log(j->id, "%llu snapshot(s) not streamed: watchers lagged (--stream-total-mb %d)",
+                (unsigned long long)sb.dropped, cfg->stream_total_mb);
     snapbuf_free(&sb);
     free(c.pe); /* empty: finish() handed everything on */
     mpm_sim_destroy(&sim);

@@ -4,13 +4,14 @@
  * and no interface named like the loopback literal), host aliases libzmq cannot
  * bind (localhost, ip6-localhost), refusing an ipc:// endpoint a live
  * process owns, the socket options (linger, IPv6, ROUTER_MANDATORY, HWMs,
- * CURVE through srv_auth, ZMQ_MAXMSGSIZE on the request socket) and the
- * bind itself.
+ * CURVE through srv_auth, ZMQ_MAXMSGSIZE on both sockets, ZMQ_XPUB_MANUAL)
+ * and the bind itself.
  */
 #include "srv_socket.h"
 
 #include "mpp_endpoint.h"
 #include "srv_log.h"
+#include "srv_stream.h"
 
 #include <errno.h>
 #include <net/if.h>
@@ -125,7 +126,7 @@ int srv_socket_open(void *zctx, int type, const char *ep, const srv_config *cfg,
         return -1;
     }
     void *s = zmq_socket(zctx, type);
-    int zero = 0, one = 1, hwm = 10000;
+    int zero = 0, one = 1, hwm = SRV_STREAM_HWM;
     if (!s) {
         snprintf(err, errlen, "zmq_socket: %s", zmq_strerror(errno));
         return -1;
@@ -134,10 +135,13 @@ int srv_socket_open(void *zctx, int type, const char *ep, const srv_config *cfg,
         (ipv6 && zmq_setsockopt(s, ZMQ_IPV6, &one, sizeof one)) ||
         (type == ZMQ_ROUTER && zmq_setsockopt(s, ZMQ_ROUTER_MANDATORY, &one, sizeof one)) ||
         (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_SNDHWM, &hwm, sizeof hwm)) ||
-        /* under CURVE the daemon applies each subscription itself, only
-         * for the job's owner or an admin (srv_daemon.c on_xpub()) */
-        (type == ZMQ_XPUB && srv_auth_curve(auth) &&
-         zmq_setsockopt(s, ZMQ_XPUB_MANUAL, &one, sizeof one)) ||
+        /* the daemon applies each subscription itself, only for one job's
+         * topic (under CURVE: the job's owner or an admin), and a peer's
+         * message larger than a subscription and the handshake needs
+         * drops its connection unread (srv_stream.c) */
+        (type == ZMQ_XPUB && zmq_setsockopt(s, ZMQ_XPUB_MANUAL, &one, sizeof one)) ||
+        (type == ZMQ_XPUB &&
+         zmq_setsockopt(s, ZMQ_MAXMSGSIZE, &(int64_t){SRV_STREAM_MAX_MSG}, sizeof(int64_t))) ||
         (type == ZMQ_PULL && zmq_setsockopt(s, ZMQ_RCVHWM, &hwm, sizeof hwm))) {
         snprintf(err, errlen, "setting options on %s: %s", ep, zmq_strerror(errno));
         zmq_close(s);

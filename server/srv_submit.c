@@ -8,6 +8,7 @@
 #include "srv_ckpt.h"
 #include "srv_daemon_int.h"
 #include "srv_log.h"
+#include "srv_stream.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -180,8 +181,7 @@ void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
     snprintf(namebuf, sizeof namebuf, "%s", name);
     /* a watcher may have subscribed before the job existed: it is watched
      * from its first step */
-    int watched = 0;
-    for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == (uint64_t)run;
+    int watched = srv_stream_watched(d->stream, (uint64_t)run);
     rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes, watched,
                          owner);
     if (rc) {
@@ -272,8 +272,7 @@ void srv_do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
             n == 1 && es[0].seq == (uint64_t)(ck.rec.energy_seq - 1))
             last = es[0];
         free(es);
-        int watched = 0;
-        for (size_t i = 0; i < d->nwatched; i++) watched |= d->watched[i] == run;
+        int watched = srv_stream_watched(d->stream, run);
         size_t np = sc->info.particles, nodes = sc->info.nodes;
         store_checkpoint rec = ck.rec;
         if ((rc = store_run_resume(d->st, (int64_t)run, &rec))) {

@@ -233,6 +233,8 @@ void store_notify_drain(store *s);
 /* Reserves a new run id: max(id) + 1 over the runs on disk at open, then
  * increasing; never reused within a database. */
 int64_t store_new_run_id(store *s);
+/* The id store_new_run_id() would give next (none reserved). */
+int64_t store_next_run_id(store *s);
 
 /* Enqueues a new run row.  run->id <= 0 allocates an id.  Every field but
  * energy (unset) is stored as given; the id used is written to *id_out if

@@ -718,6 +718,14 @@ int64_t store_new_run_id(store *s)
     return id;
 }
 
+int64_t store_next_run_id(store *s)
+{
+    pthread_mutex_lock(&s->mu);
+    int64_t id = s->next_id;
+    pthread_mutex_unlock(&s->mu);
+    return id;
+}
+
 int store_run_insert(store *s, const store_run *run, int64_t *id_out)
 {
     if (!s || !run) return sti_fail(MPM_EINVAL, "store_run_insert: NULL argument");

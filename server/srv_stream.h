@@ -1,0 +1,33 @@
+/*
+ * srv_stream.h - the stream socket's subscriptions and relay (srv_stream.c):
+ * which subscriptions the daemon applies, how many it lets the peers hold,
+ * and how much it queues for one watcher.  Main thread only.
+ */
+#ifndef SRV_STREAM_H
+#define SRV_STREAM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "srv_config.h"
+
+/* The largest message a stream peer may send (ZMQ_MAXMSGSIZE on the XPUB):
+ * a subscription is a 21-byte job topic plus its 1-byte flag, but the
+ * handshake comes through the same limit (CURVE's INITIATE command is
+ * about 300 bytes).  libzmq drops the connection of a peer whose message
+ * is larger as soon as its size is read. */
+#define SRV_STREAM_MAX_MSG 512
+/* The stream socket's high-water mark per connection, in messages. */
+#define SRV_STREAM_HWM 10000
+
+typedef struct srv_stream srv_stream;
+
+/* The stream's bookkeeping for cfg (its limits); NULL when out of memory. */
+srv_stream *srv_stream_new(const srv_config *cfg);
+void srv_stream_destroy(srv_stream **p);
+
+/* 1 if somebody's subscription to job is applied (a job submitted after
+ * its watcher subscribed is watched from its first step). */
+int srv_stream_watched(const srv_stream *s, uint64_t job);
+
+#endif
