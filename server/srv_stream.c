@@ -19,6 +19,7 @@
 #include "srv_log.h"
 
 #include <errno.h>
+#include <malloc.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -33,6 +34,9 @@
 /* How long a reset of the socket waits for libzmq to report the
  * connections it dropped (their subscriptions, without a key). */
 #define RESET_DRAIN_MS 50
+/* Subscriptions' worth the peers give up before the allocator is asked to
+ * return free pages to the system. */
+#define TRIM_UNITS 1024
 
 /* A job somebody subscribed to: the subscriptions applied, and those
  * refused (libzmq reports the end of both alike when a peer leaves). */
@@ -51,6 +55,7 @@ struct srv_stream {
     int logged;          /* refusals logged in that second */
     unsigned long quiet; /* refusals not logged since */
     uint64_t resets;
+    uint64_t freed; /* units given up by peers since the last trim */
 };
 
 static double mono_s(void)
@@ -330,13 +335,22 @@ void srv_stream_on_xpub(daemon_t *d)
         } else if (n >= 1 && b[0] == 0) {
             uint64_t u = units(n - 1);
             s->raw = s->raw > u ? s->raw - u : 0;
+            s->freed += u;
             unsubscribe(d, b, is_job, job, type != NULL);
         }
         zmq_msg_close(&m);
         if (s->raw > (uint64_t)d->cfg->stream_max_subscriptions) {
             reset(d);
+            s->freed = TRIM_UNITS;
             break;
         }
+    }
+    /* libzmq frees a leaving peer's trie node by node, and the allocator
+     * keeps the small blocks: give the pages back
+     * (daemon_subs_flood's memory after the client left) */
+    if (s->freed >= TRIM_UNITS) {
+        s->freed = 0;
+        malloc_trim(0);
     }
 }
 
