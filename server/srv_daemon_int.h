@@ -3,7 +3,7 @@
  * state (daemon_t, owned by srv_daemon.c's event loop, used on the main
  * thread only), the reply helpers, and the request handlers that live
  * outside srv_daemon.c (srv_submit.c: Submit and Resume).  Not an API:
- * nothing outside server/srv_daemon*.c and srv_submit.c includes it.
+ * nothing outside server/srv_daemon*.c, srv_submit.c and srv_stream.c includes it.
  */
 #ifndef SRV_DAEMON_INT_H
 #define SRV_DAEMON_INT_H
