@@ -29,11 +29,13 @@
 #include <string.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <zmq.h>
 
 #define ZAP_EP "inproc://zeromq.zap.01"
 #define ZAP_DOMAIN "mpmd"
-#define KEYS_MAX 100000 /* keys per list */
+#define GATE_DOMAIN "mpmd-requests" /* the request socket's, with a gate */
+#define KEYS_MAX 100000             /* keys per list */
 
 /* A listed key and its quota settings (-1: not set). */
 typedef struct {
@@ -75,6 +77,7 @@ struct srv_auth {
     void *zap;               /* the handler's REP (its thread's after start) */
     pthread_t thread;
     int started;
+    srv_auth_gate gate; /* the connection cap (srv_auth_set_gate); admit NULL: none */
 };
 
 static int is_z85_key(const char *s, size_t n)
@@ -470,6 +473,13 @@ int srv_auth_is_admin(srv_auth *a, const char *owner)
 
 /* ---- the ZAP handler ---- */
 
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
 static int send_str(void *s, const char *str, int more)
 {
     return zmq_send(s, str, strlen(str), more ? ZMQ_SNDMORE : 0) < 0 ? -1 : 0;
@@ -481,15 +491,42 @@ static void zap_answer(srv_auth *a, zmq_msg_t *f, int n)
 {
     char z[SRV_KEY_Z85_SIZE] = "";
     const char *status = "400", *text = "unknown key";
-    int ok = 0;
-    if (n >= 7 && zmq_msg_size(&f[5]) == 5 && !memcmp(zmq_msg_data(&f[5]), "CURVE", 5) &&
-        zmq_msg_size(&f[6]) == 32 && zmq_z85_encode(z, zmq_msg_data(&f[6]), 32)) {
+    int ok = 0, open = 0;
+    if (n >= 6 && !a->curve && zmq_msg_size(&f[5]) == 4 &&
+        !memcmp(zmq_msg_data(&f[5]), "NULL", 4)) {
+        ok = 1; /* no CURVE: only the gate decides */
+        status = "200", text = "OK";
+    } else if (n >= 7 && zmq_msg_size(&f[5]) == 5 && !memcmp(zmq_msg_data(&f[5]), "CURVE", 5) &&
+               zmq_msg_size(&f[6]) == 32 && zmq_z85_encode(z, zmq_msg_data(&f[6]), 32)) {
         pthread_mutex_lock(&a->mu);
         ok = list_has(&a->allowed, z) || list_has(&a->admins, z);
         pthread_mutex_unlock(&a->mu);
         if (ok) status = "200", text = "OK";
     } else {
         text = "CURVE only";
+    }
+    int gated = n >= 3 && zmq_msg_size(&f[2]) == strlen(GATE_DOMAIN) &&
+                !memcmp(zmq_msg_data(&f[2]), GATE_DOMAIN, strlen(GATE_DOMAIN));
+    if (ok && gated && a->gate.admit &&
+        (a->gate.drain(a->gate.arg), !a->gate.admit(a->gate.arg, &open))) {
+        /* past --max-connections: libzmq closes the connection (guarded
+         * by daemon_conns_cap_holds); logged once a second at most */
+        static double last;
+        static unsigned long skipped;
+        double now = now_s();
+        ok = 0;
+        status = "300", text = "too many connections";
+        if (now - last >= 1.0) {
+            srv_warn(0,
+                     "connection refused: %d connections open (limit %d, --max-connections; "
+                     "%lu more refused in the last second)",
+                     open, a->gate.max, skipped);
+            last = now;
+            skipped = 0;
+        } else {
+            skipped++;
+        }
+        goto reply;
     }
     char addr[64] = "?";
     if (n >= 4) {
@@ -498,10 +535,11 @@ static void zap_answer(srv_auth *a, zmq_msg_t *f, int n)
         addr[k] = 0;
     }
     if (ok)
-        srv_debug(0, "ZAP: key %s from %s accepted", z, addr);
+        srv_debug(0, "ZAP: key %s from %s accepted", z[0] ? z : "(none)", addr);
     else
         srv_warn(0, "ZAP: refused %s from %s: %s", z[0] ? z : "a client", addr,
                  z[0] ? "key not in --authorized-keys or --admin-keys" : text);
+reply:
     if (n < 2) return;
     if (send_str(a->zap, "1.0", 1) ||
         zmq_send(a->zap, zmq_msg_data(&f[1]), zmq_msg_size(&f[1]), ZMQ_SNDMORE) < 0 ||
@@ -514,6 +552,16 @@ static void *zap_thread(void *arg)
 {
     srv_auth *a = arg;
     for (;;) {
+        if (a->gate.side) {
+            /* the gate's events as they come, so that they never pile up */
+            zmq_pollitem_t it[2] = {{a->zap, 0, ZMQ_POLLIN, 0}, {a->gate.side, 0, ZMQ_POLLIN, 0}};
+            if (zmq_poll(it, 2, -1) < 0) {
+                if (errno == EINTR) continue;
+                break;
+            }
+            if ((it[1].revents & ZMQ_POLLIN) && a->gate.drain(a->gate.arg)) break;
+            if (!(it[0].revents & ZMQ_POLLIN)) continue;
+        }
         zmq_msg_t f[8];
         int n = 0, more = 1, term = 0;
         while (more) {
@@ -538,12 +586,23 @@ static void *zap_thread(void *arg)
     int zero = 0;
     zmq_setsockopt(a->zap, ZMQ_LINGER, &zero, sizeof zero);
     zmq_close(a->zap);
+    if (a->gate.side) zmq_close(a->gate.side);
     return NULL;
+}
+
+void srv_auth_set_gate(srv_auth *a, const srv_auth_gate *g)
+{
+    a->gate = *g;
+}
+
+int srv_auth_zap_domain(void *sock)
+{
+    return zmq_setsockopt(sock, ZMQ_ZAP_DOMAIN, GATE_DOMAIN, strlen(GATE_DOMAIN));
 }
 
 int srv_auth_start(srv_auth *a, void *zctx, char *err, size_t errlen)
 {
-    if (!a->curve) return 0;
+    if (!a->curve && !a->gate.admit) return 0;
     a->zap = zmq_socket(zctx, ZMQ_REP);
     if (!a->zap || zmq_bind(a->zap, ZAP_EP)) {
         snprintf(err, errlen, "ZAP handler: %s", zmq_strerror(errno));

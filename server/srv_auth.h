@@ -48,8 +48,30 @@ int srv_auth_curve(const srv_auth *a);
 /* The server's public key (Z85), "" when CURVE is off. */
 const char *srv_auth_server_public(const srv_auth *a);
 
-/* Binds the ZAP handler in zctx and starts its thread (CURVE only; a
- * no-op otherwise).  Call before binding the sockets it guards. */
+/* A check of every handshake besides the key's (the connection cap,
+ * srv_conns.h), run on the handler's thread: when `side` is readable, and
+ * before each answer, drain(arg) reads its events (-1: the context is
+ * ending); admit(arg, &open) returns 1 to let the connection in, 0 to
+ * refuse it (open: the connections counted, max: the cap, for the log).
+ * The handler's thread closes `side` when it ends.  Set before
+ * srv_auth_start(); with a gate the handler runs without CURVE too, for
+ * sockets in the ZAP domain (srv_auth_zap_domain()). */
+typedef struct {
+    int (*admit)(void *arg, int *open);
+    int (*drain)(void *arg);
+    void *arg, *side;
+    int max;
+} srv_auth_gate;
+void srv_auth_set_gate(srv_auth *a, const srv_auth_gate *g);
+
+/* Puts sock (the request socket) in the gate's ZAP domain: its
+ * handshakes, NULL ones too, go to the handler and through the gate
+ * (the stream socket's do not); call after srv_auth_secure().  0 or -1
+ * (errno). */
+int srv_auth_zap_domain(void *sock);
+
+/* Binds the ZAP handler in zctx and starts its thread (with CURVE or a
+ * gate; a no-op otherwise).  Call before binding the sockets it guards. */
 int srv_auth_start(srv_auth *a, void *zctx, char *err, size_t errlen);
 
 /* Makes sock a CURVE server in the "mpmd" ZAP domain (a no-op when CURVE

@@ -43,7 +43,22 @@ static const setting settings[] = {
      "wall seconds between checkpoints of a run whose case sets none (files in <db>.ckpt/, "
      "for mpmctl resume), 0 = none (default 300)"},
     {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30,
-     "largest request accepted (default 67108864)"},
+     "largest request accepted (default 8388608); each request connection may hold two "
+     "while they arrive"},
+    {"connection-reply-buffer-mb", NULL, T_INT, F(connection_reply_buffer_mb), 1, 1 << 20,
+     "MiB of replies one connection may leave unread; a reply past it is answered UNAVAILABLE "
+     "(one larger reply may go alone) (default 16)"},
+    {"reply-buffer-mb", NULL, T_INT, F(reply_buffer_mb), 1, 1 << 20,
+     "MiB of unread replies over all connections; past it replies are answered UNAVAILABLE "
+     "(default 256)"},
+    {"page-max-bytes", NULL, T_LL, F(page_max_bytes), 4096, 1 << 30,
+     "largest energy page or runs listing in bytes; the rest comes in the next page "
+     "(default 1048576)"},
+    {"max-connections", NULL, T_INT, F(max_connections), 0, 1000000,
+     "request connections at once; more are refused at the handshake, 0 = no cap "
+     "(default 256)"},
+    {"handshake-timeout-s", NULL, T_INT, F(handshake_timeout_s), 1, 3600,
+     "seconds a new connection has to finish its handshake before it is closed (default 10)"},
     {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20,
      "MB of stream messages queued for one watcher (one connection), across all its jobs; "
      "a watcher further behind misses messages until it catches up, 0 = no bound (default 64)"},
@@ -104,7 +119,12 @@ static void defaults(srv_config *c)
     c->max_steps = 100000000;
     c->max_wall_s = 0;
     c->checkpoint_every_s = 300;
-    c->max_request_bytes = 64LL << 20;
+    c->max_request_bytes = 8LL << 20;
+    c->connection_reply_buffer_mb = 16;
+    c->reply_buffer_mb = 256;
+    c->page_max_bytes = 1LL << 20;
+    c->max_connections = 256;
+    c->handshake_timeout_s = 10;
     c->stream_buffer_mb = 64;
     c->stream_total_mb = 256;
     c->stream_max_subscriptions = 4096;

@@ -30,6 +30,11 @@ typedef struct {
     int stream_total_mb;            /* MB of snapshots queued for all watchers (0: no bound) */
     int stream_max_subscriptions;   /* subscriptions held for all watchers */
     int stream_subscribe_ahead;     /* job ids past the newest a watcher may subscribe to */
+    int connection_reply_buffer_mb; /* MiB of unread replies per connection */
+    int reply_buffer_mb;            /* MiB of unread replies, all connections */
+    long long page_max_bytes;       /* largest energy page or runs listing */
+    int max_connections;            /* request connections at once, 0 = no cap */
+    int handshake_timeout_s;        /* a connection's handshake, seconds */
     int allow_remote;               /* deprecated: non-loopback binds need CURVE now */
     int insecure_remote;            /* --insecure-allow-remote-without-auth */
     char curve_secret[1024];        /* server secret key file ("": no CURVE) */

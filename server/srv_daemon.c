@@ -40,19 +40,23 @@
 #include "mpp_msg.h"
 #include "srv_auth.h"
 #include "srv_budget.h"
+#include "srv_conns.h"
 #include "srv_log.h"
+#include "srv_outq.h"
 #include "srv_pool.h"
 #include "srv_socket.h"
 #include "srv_stream.h"
 #include "store.h"
 
 #include <errno.h>
+#include <malloc.h>
 #include <math.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
 #include <zmq.h>
@@ -60,6 +64,7 @@
 #define EVENTS_EP "inproc://mpmd-events"
 #define ENERGY_PAGE_DEFAULT 10000u
 #define ENERGY_PAGE_MAX 100000u
+#define ENERGY_SAMPLE_MIN 40u /* wire bytes of the smallest energy sample, at least */
 #define LIST_DEFAULT 100u
 #define LIST_MAX 10000u /* a RunInfo costs a few store reads on the main thread */
 /* How long the last stream messages and replies may take to leave at
@@ -67,6 +72,29 @@
 #define SHUTDOWN_LINGER_MS 1000
 
 static volatile sig_atomic_t stop_signal, hup_signal;
+
+/* After a large request or reply, glibc keeps the freed blocks (libzmq
+ * frees them on its own thread, some time later, and glibc's mmap
+ * threshold rises with the sizes it has seen): the main loop hands them
+ * back with malloc_trim(0) once a second for TRIM_WINDOW_S after the last
+ * one.  Guarded by the "after they left" checks of t_daemon_replies.c. */
+#define TRIM_BIG ((size_t)256 << 10)
+#define TRIM_WINDOW_S 30.0
+static double trim_until, trim_last;
+
+static void trim_note(size_t bytes)
+{
+    if (bytes >= TRIM_BIG) trim_until = srv_wall_now() + TRIM_WINDOW_S;
+}
+
+static void trim_tick(void)
+{
+    double now = srv_wall_now();
+    if (now < trim_until && now - trim_last >= 1.0) {
+        malloc_trim(0);
+        trim_last = now;
+    }
+}
 
 static void on_signal(int sig)
 {
@@ -113,17 +141,61 @@ double srv_wall_now(void)
 
 /* ---- replies ---- */
 
+/* A short error reply may pass a full reply queue by this much, so that a
+ * client that reads at last learns why its big replies were not sent. */
+#define REPLY_SLACK 65536
+
+/* Logs a reply refused for a full queue: the first, then one line a second
+ * with the count (a client that never reads could fill the log). */
+static void log_refused(int conn, size_t len, size_t queued, int limit_mb, const char *setting)
+{
+    static double last;
+    static unsigned long skipped;
+    double now = srv_wall_now();
+    if (now - last < 1.0) {
+        skipped++;
+        return;
+    }
+    srv_warn(0,
+             "reply of %zu bytes not sent: %zu bytes of replies %s are unread (limit %d MiB, "
+             "%s; %lu more refused in the last second)",
+             len, queued, conn ? "to that connection" : "in all", limit_mb, setting, skipped);
+    last = now;
+    skipped = 0;
+}
+
 void srv_send_reply(daemon_t *d, zmq_msg_t *id, uint8_t *buf, size_t len)
 {
     if (!buf) {
         srv_warn(0, "out of memory encoding a reply");
         return;
     }
-    if (zmq_send(d->router, zmq_msg_data(id), zmq_msg_size(id), ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
-        zmq_send(d->router, "", 0, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
-        zmq_send(d->router, buf, len, ZMQ_DONTWAIT) < 0)
+    size_t queued = 0;
+    trim_note(len);
+    int rc =
+        srv_outq_send(d->outq, d->router, zmq_msg_data(id), zmq_msg_size(id), buf, len, 0, &queued);
+    if (rc == SRV_OUTQ_SENT) return;
+    if (rc == SRV_OUTQ_ERROR) {
         srv_warn(0, "reply not sent: %s", zmq_strerror(errno));
-    free(buf);
+        return;
+    }
+    /* the queue is full: the reply is dropped and, in its place, a short
+     * error names the limit (guarded by daemon_replies_unread_bounded) */
+    int conn = rc == SRV_OUTQ_CONN_FULL;
+    int mb = conn ? d->cfg->connection_reply_buffer_mb : d->cfg->reply_buffer_mb;
+    const char *setting = conn ? "--connection-reply-buffer-mb" : "--reply-buffer-mb";
+    log_refused(conn, len, queued, mb, setting);
+    mpm_error e;
+    mpm_fail(&e, MPM_EUNAVAIL, "",
+             "reply of %zu bytes not sent: %zu bytes of replies %s are still unread (limit %d "
+             "MiB, %s); read them, then ask again",
+             len, queued, conn ? "to this connection" : "to all clients", mb, setting);
+    uint8_t *eb = NULL;
+    size_t el = 0;
+    if (mpp_reply_error_from(&e, &eb, &el) || !eb) return;
+    if (srv_outq_send(d->outq, d->router, zmq_msg_data(id), zmq_msg_size(id), eb, el, REPLY_SLACK,
+                      NULL) == SRV_OUTQ_ERROR)
+        srv_debug(0, "error reply not sent: %s", zmq_strerror(errno));
 }
 
 /* Answers with the Error reply of an mpm_error (wire code, camelCase
@@ -549,6 +621,10 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
 {
     size_t limit = rq->limit ? rq->limit : ENERGY_PAGE_DEFAULT;
     if (limit > ENERGY_PAGE_MAX) limit = ENERGY_PAGE_MAX;
+    /* a sample takes more than ENERGY_SAMPLE_MIN bytes on the wire: no
+     * more are read than a page of --page-max-bytes can carry */
+    if (limit > (size_t)d->cfg->page_max_bytes / ENERGY_SAMPLE_MIN)
+        limit = (size_t)d->cfg->page_max_bytes / ENERGY_SAMPLE_MIN;
     store_run r;
     int rc = store_run_get(d->st, (int64_t)rq->id, &r);
     if (rc == MPM_ENOTFOUND) {
@@ -571,7 +647,18 @@ static void do_energy(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     for (size_t i = 0; i < n; i++) es[i].dim = dim;
     uint8_t *buf = NULL;
     size_t len = 0;
-    if (mpp_reply_energy(rq->id, es, n, more, &buf, &len))
+    int rc2 = mpp_reply_energy(rq->id, es, n, more, &buf, &len);
+    /* cut at --page-max-bytes: fewer samples, more = 1 (guarded by
+     * daemon_replies_pages_by_bytes) */
+    while (!rc2 && len > (size_t)d->cfg->page_max_bytes && n > 1) {
+        size_t k = (size_t)((double)n * (double)d->cfg->page_max_bytes / (double)len * 0.95);
+        n = k < 1 ? 1 : k < n ? k : n - 1;
+        more = 1;
+        free(buf);
+        buf = NULL;
+        rc2 = mpp_reply_energy(rq->id, es, n, more, &buf, &len);
+    }
+    if (rc2)
         srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu energy samples", n);
     else
         srv_send_reply(d, id, buf, len);
@@ -699,7 +786,18 @@ static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *
         for (size_t i = 0; i < ns; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
         uint8_t *buf = NULL;
         size_t len = 0;
-        if (mpp_reply_runs_page(ri, ns, next, &buf, &len))
+        int rc = mpp_reply_runs_page(ri, ns, next, &buf, &len);
+        /* cut at --page-max-bytes, the cursor after the last one sent
+         * (guarded by daemon_replies_pages_by_bytes) */
+        while (!rc && len > (size_t)d->cfg->page_max_bytes && ns > 1) {
+            size_t k = (size_t)((double)ns * (double)d->cfg->page_max_bytes / (double)len * 0.95);
+            ns = k < 1 ? 1 : k < ns ? k : ns - 1;
+            next = (uint64_t)runs[ns - 1].id;
+            free(buf);
+            buf = NULL;
+            rc = mpp_reply_runs_page(ri, ns, next, &buf, &len);
+        }
+        if (rc)
             srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot encode %zu runs", ns);
         else
             srv_send_reply(d, id, buf, len);
@@ -747,6 +845,7 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const char *owner, const 
 {
     mpp_request rq;
     d->requests++;
+    trim_note(size);
     if (size > (size_t)d->cfg->max_request_bytes) {
         d->bad_requests++;
         srv_warn(0, "request of %zu bytes refused (limit %lld)", size, d->cfg->max_request_bytes);
@@ -875,6 +974,23 @@ static void stop_jobs(daemon_t *d)
     drain_pending(d);
 }
 
+/* Raises the soft limit on descriptors to the hard one: every connection,
+ * accepted before any check, takes one (systemd's default soft limit is
+ * 1024; deploy/mpmd.service raises the hard one). */
+static void raise_nofile(void)
+{
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < rl.rlim_max) {
+        rlim_t was = rl.rlim_cur;
+        rl.rlim_cur = rl.rlim_max;
+        if (setrlimit(RLIMIT_NOFILE, &rl))
+            srv_warn(0, "cannot raise the descriptor limit from %llu: %s", (unsigned long long)was,
+                     strerror(errno));
+    }
+    if (getrlimit(RLIMIT_NOFILE, &rl) == 0)
+        srv_debug(0, "descriptor limit %llu", (unsigned long long)rl.rlim_cur);
+}
+
 int srv_daemon_run(const srv_config *cfg)
 {
     daemon_t d = {0};
@@ -894,6 +1010,7 @@ int srv_daemon_run(const srv_config *cfg)
     /* over a file-size limit (RLIMIT_FSIZE) a write fails with EFBIG, as on
      * a full disk, instead of killing the daemon */
     signal(SIGXFSZ, SIG_IGN);
+    raise_nofile();
 
     if (srv_auth_new(cfg, &d.auth, err, sizeof err)) {
         srv_error(0, "%s", err);
@@ -932,9 +1049,31 @@ int srv_daemon_run(const srv_config *cfg)
     }
     srv_config inproc = *cfg;
     inproc.insecure_remote = 0;
-    if (srv_auth_start(d.auth, d.zctx, err, sizeof err) ||
-        srv_socket_open(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, d.auth, &d.router, err,
+    d.outq = srv_outq_new((size_t)cfg->connection_reply_buffer_mb << 20,
+                          (size_t)cfg->reply_buffer_mb << 20);
+    if (!d.outq) {
+        srv_error(0, "out of memory");
+        goto out;
+    }
+    if (cfg->max_connections) {
+        d.conns = srv_conns_new(d.zctx, cfg->max_connections, err, sizeof err);
+        if (!d.conns) {
+            srv_error(0, "%s", err);
+            goto out;
+        }
+        srv_auth_gate g = {srv_conns_admit, srv_conns_drain, d.conns, srv_conns_socket(d.conns),
+                           cfg->max_connections};
+        srv_auth_set_gate(d.auth, &g);
+    }
+    if (srv_auth_start(d.auth, d.zctx, err, sizeof err)) {
+        /* the handler's thread did not take the monitor's socket */
+        if (d.conns) zmq_close(srv_conns_socket(d.conns));
+        srv_error(0, "%s", err);
+        goto out;
+    }
+    if (srv_socket_open(d.zctx, ZMQ_ROUTER, cfg->endpoint, cfg, d.auth, &d.router, err,
                         sizeof err) ||
+        (d.conns && srv_conns_watch(d.conns, d.router, err, sizeof err)) ||
         srv_socket_open(d.zctx, ZMQ_XPUB, cfg->stream_endpoint, cfg, d.auth, &d.xpub, err,
                         sizeof err) ||
         srv_socket_open(d.zctx, ZMQ_PULL, EVENTS_EP, &inproc, NULL, &d.pull, err, sizeof err)) {
@@ -979,6 +1118,7 @@ int srv_daemon_run(const srv_config *cfg)
         if (items[1].revents & ZMQ_POLLIN) srv_stream_on_xpub(&d);
         if (items[0].revents & ZMQ_POLLIN) on_router(&d);
         if (d.pending) serve_pending(&d);
+        trim_tick();
     }
     srv_log(0, "%s: shutting down",
             stop_signal == SIGINT    ? "SIGINT"
@@ -996,6 +1136,8 @@ out:
     }
     srv_auth_destroy(&d.auth); /* its thread ended with the context */
     srv_stream_destroy(&d.stream);
+    srv_conns_destroy(&d.conns);
+    srv_outq_destroy(&d.outq); /* libzmq has freed every reply */
     store_close(&d.st);
     srv_budget_destroy(&d.budget); /* after the workers: they charge it */
     srv_log(0, "stopped (%llu requests, %llu malformed)", (unsigned long long)d.requests,

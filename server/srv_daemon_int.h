@@ -28,8 +28,10 @@ typedef struct {
     store *st;
     srv_pool *pool;
     srv_auth *auth;
-    srv_budget *budget; /* the disk budgets */
-    int stopping;       /* shutting down: no new jobs */
+    srv_budget *budget;      /* the disk budgets */
+    struct srv_outq *outq;   /* unread replies' bytes (srv_outq.h) */
+    struct srv_conns *conns; /* request connections counted (srv_conns.h) */
+    int stopping;            /* shutting down: no new jobs */
     uint64_t requests, bad_requests;
     struct pending *pending, **pending_tail; /* reads waiting for a commit */
     size_t npending;

@@ -158,8 +158,23 @@ int srv_socket_open(void *zctx, int type, const char *ep, const srv_config *cfg,
          * margin lets a request slightly over the limit get a TOO_LARGE
          * reply instead (the frame sizes a client can be told about). */
         int64_t cap = (int64_t)cfg->max_request_bytes + SRV_REQUEST_MARGIN;
-        if (zmq_setsockopt(s, ZMQ_MAXMSGSIZE, &cap, sizeof cap)) {
-            snprintf(err, errlen, "ZMQ_MAXMSGSIZE: %s", zmq_strerror(errno));
+        /* Each connection's pipe holds two requests the daemon has not
+         * read yet (with one, libzmq 4.3 loses CURVE connections:
+         * daemon_replies_curve_pipelined), and its engine one more while
+         * it arrives: at most three per connection (the bound
+         * --max-connections x 3 x --max-request-bytes, docs/manual.md).
+         * An unauthenticated handshake holds its descriptor
+         * --handshake-timeout-s at most.  With a connection cap its
+         * handshakes (NULL ones too) go to the ZAP handler in a domain of
+         * their own, and the handler refuses those past the cap
+         * (srv_conns.h).  Guarded by
+         * daemon_replies_large_requests_bounded, daemon_conns_cap_holds. */
+        int rcvhwm = 2, ivl = cfg->handshake_timeout_s * 1000;
+        if (zmq_setsockopt(s, ZMQ_MAXMSGSIZE, &cap, sizeof cap) ||
+            zmq_setsockopt(s, ZMQ_RCVHWM, &rcvhwm, sizeof rcvhwm) ||
+            zmq_setsockopt(s, ZMQ_HANDSHAKE_IVL, &ivl, sizeof ivl) ||
+            (cfg->max_connections && srv_auth_zap_domain(s))) {
+            snprintf(err, errlen, "request socket options: %s", zmq_strerror(errno));
             zmq_close(s);
             return -1;
         }
