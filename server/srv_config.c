@@ -54,9 +54,11 @@ static const setting settings[] = {
     {"page-max-bytes", NULL, T_LL, F(page_max_bytes), 4096, 1 << 30,
      "largest energy page or runs listing in bytes; the rest comes in the next page "
      "(default 1048576)"},
+    {"page-max-ms", NULL, T_INT, F(page_max_ms), 1, 60000,
+     "milliseconds a runs listing is made for; the rest comes in the next page (default 20)"},
     {"max-connections", NULL, T_INT, F(max_connections), 0, 1000000,
      "request connections at once; more are refused at the handshake, 0 = no cap "
-     "(default 256)"},
+     "(default 64)"},
     {"handshake-timeout-s", NULL, T_INT, F(handshake_timeout_s), 1, 3600,
      "seconds a new connection has to finish its handshake before it is closed (default 10)"},
     {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20,
@@ -123,7 +125,8 @@ static void defaults(srv_config *c)
     c->connection_reply_buffer_mb = 16;
     c->reply_buffer_mb = 256;
     c->page_max_bytes = 1LL << 20;
-    c->max_connections = 256;
+    c->page_max_ms = 20;
+    c->max_connections = 64;
     c->handshake_timeout_s = 10;
     c->stream_buffer_mb = 64;
     c->stream_total_mb = 256;

@@ -33,6 +33,7 @@ typedef struct {
     int connection_reply_buffer_mb; /* MiB of unread replies per connection */
     int reply_buffer_mb;            /* MiB of unread replies, all connections */
     long long page_max_bytes;       /* largest energy page or runs listing */
+    int page_max_ms;                /* longest a runs listing is made for */
     int max_connections;            /* request connections at once, 0 = no cap */
     int handshake_timeout_s;        /* a connection's handshake, seconds */
     int allow_remote;               /* deprecated: non-loopback binds need CURVE now */

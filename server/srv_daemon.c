@@ -131,6 +131,10 @@ typedef struct pending {
 /* Reads waiting at once, at most; more get UNAVAILABLE (a store that cannot
  * keep up is not hidden behind an ever longer queue). */
 #define PENDING_MAX 4096
+/* Heavy reads run for this long per turn of the loop, and requests read
+ * per turn at most (a cheap one is answered as it is read). */
+#define HEAVY_SLICE_S 0.005
+#define ROUTER_BATCH 64
 
 double srv_wall_now(void)
 {
@@ -382,6 +386,15 @@ static int is_read(mpp_req_kind k)
            k == MPP_REQ_LIST_RUNS || k == MPP_REQ_GET_ENERGY || k == MPP_REQ_GET_SNAPSHOT;
 }
 
+/* Reads that cost the loop many store reads or bytes: they always wait in
+ * the queue, where serve_pending() runs them HEAVY_SLICE_S at a time, and
+ * the loop reads new requests (a Ping is answered at once) in between.
+ * Guarded by daemon_replies_listings_keep_loop. */
+static int is_heavy(mpp_req_kind k)
+{
+    return k == MPP_REQ_LIST_RUNS || k == MPP_REQ_GET_ENERGY || k == MPP_REQ_GET_SNAPSHOT;
+}
+
 /* With --private-runs, a read of one run by a key that neither owns it nor
  * is an admin's is answered FORBIDDEN (1); else 0.  (A run that does not
  * exist gets its NOT_FOUND from the read itself.) */
@@ -506,16 +519,21 @@ static void dispatch(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request 
 {
     int begun = 0;
     uint64_t ticket = 0;
-    if (peer_waits(d, id, NULL) || !run_request(d, id, owner, rq, &begun, &ticket))
+    if (peer_waits(d, id, NULL) || is_heavy(rq->kind) ||
+        !run_request(d, id, owner, rq, &begun, &ticket))
         enqueue(d, id, owner, rq, begun, ticket);
 }
 
 /* Carries on the waiting requests whose writes are committed, in arrival
- * order per client. */
-static void serve_pending(daemon_t *d)
+ * order per client.  sliced: after HEAVY_SLICE_S of heavy reads the rest
+ * wait for the next turn of the loop (returns 1 when some are left that
+ * could go now), so that new requests are read in between. */
+static int serve_pending(daemon_t *d, int sliced)
 {
     pending **pp = &d->pending;
     d->pending_tail = &d->pending;
+    double t0 = sliced ? srv_wall_now() : 0;
+    int spent = 0, left = 0;
     while (*pp) {
         pending *p = *pp;
         int done = 0;
@@ -526,9 +544,13 @@ static void serve_pending(daemon_t *d)
                 p->reply = NULL;
                 done = 1;
             }
+        } else if (spent && is_heavy(p->rq.kind)) {
+            left = 1;
         } else {
+            int heavy = is_heavy(p->rq.kind);
             done = !peer_waits(d, &p->id, p) &&
                    run_request(d, &p->id, p->owner, &p->rq, &p->begun, &p->ticket);
+            if (done && heavy && sliced && srv_wall_now() - t0 >= HEAVY_SLICE_S) spent = 1;
         }
         if (done) {
             *pp = p->next;
@@ -541,6 +563,7 @@ static void serve_pending(daemon_t *d)
         d->pending_tail = &p->next;
         pp = &p->next;
     }
+    return left;
 }
 
 /* Answers every waiting request after a last flush (shutdown). */
@@ -548,7 +571,7 @@ static void drain_pending(daemon_t *d)
 {
     if (!d->pending) return;
     store_flush(d->st);
-    serve_pending(d);
+    serve_pending(d, 0);
     /* what still waits (a store that lost its writes): answered, freed */
     while (d->pending) {
         pending *p = d->pending;
@@ -783,7 +806,16 @@ static void do_list(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *
             ns = n - 1;
             next = (uint64_t)runs[ns - 1].id;
         }
-        for (size_t i = 0; i < ns; i++) run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
+        /* a RunInfo costs a few store reads: the page ends after
+         * --page-max-ms of them, the cursor after the last one made */
+        double t0 = srv_wall_now();
+        for (size_t i = 0; i < ns; i++) {
+            run_info(d, &runs[i], &ri[i], &es[i], &xs[i]);
+            if (i + 1 < ns && srv_wall_now() - t0 > 1e-3 * d->cfg->page_max_ms) {
+                ns = i + 1;
+                next = (uint64_t)runs[i].id;
+            }
+        }
         uint8_t *buf = NULL;
         size_t len = 0;
         int rc = mpp_reply_runs_page(ri, ns, next, &buf, &len);
@@ -869,8 +901,9 @@ static void handle_request(daemon_t *d, zmq_msg_t *id, const char *owner, const 
     mpp_request_clear(&rq);
 }
 
-/* Reads one multipart message from the ROUTER and answers it. */
-static void on_router(daemon_t *d)
+/* Reads one multipart message from the ROUTER and answers it (or queues
+ * it); 0 when none was waiting. */
+static int on_router(daemon_t *d)
 {
     zmq_msg_t part[4];
     int nparts = 0, more = 1;
@@ -923,6 +956,7 @@ static void on_router(daemon_t *d)
                             total - 2);
     }
     for (int i = 0; i < nparts; i++) zmq_msg_close(&part[i]);
+    return nparts > 0;
 }
 
 int srv_job_owner(daemon_t *d, uint64_t job, char *who, size_t n)
@@ -967,7 +1001,7 @@ static void stop_jobs(daemon_t *d)
         if (n > 0 && (items[1].revents & ZMQ_POLLIN)) srv_stream_relay(d, 10000);
         if (n > 0 && (items[2].revents & ZMQ_POLLIN)) store_notify_drain(d->st);
         if (n > 0 && (items[0].revents & ZMQ_POLLIN)) on_router(d);
-        if (d->pending) serve_pending(d);
+        if (d->pending) serve_pending(d, 0);
     }
     srv_pool_destroy(&d->pool);
     srv_stream_relay(d, 0);
@@ -1097,12 +1131,13 @@ int srv_daemon_run(const srv_config *cfg)
             MPP_VERSION, cfg->endpoint, cfg->stream_endpoint, cfg->db, cfg->workers, cfg->queue_max,
             cfg->portable_kernels || !mpm_kernels_avx2_available() ? "portable" : "avx2-fma",
             srv_auth_curve(d.auth) ? "CURVE" : "no authentication");
+    int busy = 0; /* heavy reads left for the next turn */
     while (!stop_signal) {
         zmq_pollitem_t items[] = {{d.router, 0, ZMQ_POLLIN, 0},
                                   {d.xpub, 0, ZMQ_POLLIN, 0},
                                   {d.pull, 0, ZMQ_POLLIN, 0},
                                   {NULL, store_notify_fd(d.st), ZMQ_POLLIN, 0}};
-        int n = zmq_poll(items, 4, 250);
+        int n = zmq_poll(items, 4, busy ? 0 : 250);
         int perr = errno; /* the reload's file calls may change errno */
         if (hup_signal) {
             hup_signal = 0;
@@ -1116,8 +1151,10 @@ int srv_daemon_run(const srv_config *cfg)
         if (items[3].revents & ZMQ_POLLIN) store_notify_drain(d.st);
         if (items[2].revents & ZMQ_POLLIN) srv_stream_relay(&d, 10000);
         if (items[1].revents & ZMQ_POLLIN) srv_stream_on_xpub(&d);
-        if (items[0].revents & ZMQ_POLLIN) on_router(&d);
-        if (d.pending) serve_pending(&d);
+        if (items[0].revents & ZMQ_POLLIN)
+            for (int k = 0; k < ROUTER_BATCH && on_router(&d); k++) {
+            }
+        busy = d.pending ? serve_pending(&d, 1) : 0;
         trim_tick();
     }
     srv_log(0, "%s: shutting down",

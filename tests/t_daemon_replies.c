@@ -695,3 +695,147 @@ out:
     if (s) zmq_close(s);
     if (ctx) zmq_ctx_term(ctx);
 }
+
+/* ---- listings --------------------------------------------------------------------- */
+
+/* Submits n short runs (raw Submits of td_good2d cut to a few steps);
+ * 0, or -1 after failing the test. */
+static int many_runs(const td_daemon *d, int n)
+{
+    char *json = td_patch("\"endTime\": 1", "\"endTime\": 0.01");
+    uint8_t *cb = NULL;
+    size_t cl = 0;
+    char err[ERRLEN];
+    if (!json ||
+        td_msg_json_to_bytes(MPP_MSG_CASE, json, strlen(json), &cb, &cl, err, sizeof err)) {
+        t_fail(__FILE__, __LINE__, "the case: %s", json ? err : "out of memory");
+        free(json);
+        return -1;
+    }
+    free(json);
+    int rc = 0;
+    for (int i = 0; i < n && !rc; i++) {
+        json_t *r = NULL;
+        mpp_request rq = {.kind = MPP_REQ_SUBMIT, .case_bytes = cb, .case_len = cl};
+        if (td_request(d->ep, &rq, 20, &r) || !json_object_get(r, "submitOk")) {
+            char *t = r ? json_dumps(r, 0) : NULL;
+            t_fail(__FILE__, __LINE__, "submit %d: %s", i, t ? t : "no reply");
+            free(t);
+            rc = -1;
+        }
+        json_decref(r);
+    }
+    free(cb);
+    return rc;
+}
+
+/* Energy pages and listings are cut at --page-max-bytes (the reply says
+ * there is more), and mpmctl, which follows the cursors, still gets every
+ * sample and every run. */
+DTEST(daemon_replies_pages_by_bytes)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--page-max-bytes", "8192", "--queue-max", "1000", NULL};
+    char dir[300];
+    td_daemon d;
+    td_out o;
+    snprintf(dir, sizeof dir, "%s/pages", tmp);
+    if (td_start(&d, dir, extra) || energy_run(&d, 2000) || many_runs(&d, 60)) return;
+    char got[64];
+    CHECK(td_wait_status(&d, 61, "FINISHED", 60, got, sizeof got) == 0);
+    /* one page of energies: at most 8192 bytes on the wire, more = 1 */
+    mpp_request rq = {.kind = MPP_REQ_GET_ENERGY, .id = 1, .limit = 100000};
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    CHECK(mpp_request_encode(&rq, &buf, &len) == 0);
+    free(buf);
+    json_t *r = NULL;
+    CHECK(td_request(d.ep, &rq, 20, &r) == 0);
+    json_t *e = json_object_get(r, "energy");
+    size_t ns = json_array_size(json_object_get(e, "samples"));
+    int more = json_is_true(json_object_get(e, "more"));
+    json_decref(r);
+    CHECKF(ns > 10 && ns < 2000 && more, "a page of %zu samples (more %d)", ns, more);
+    CHECK(td_ctl(&d, 60, &o, "energy", "1", NULL) == 0 && o.status == 0);
+    size_t rows = count_lines(o.out);
+    td_out_free(&o);
+    CHECKF(rows == 2001, "mpmctl energy printed %zu lines for 2000 samples", rows);
+    /* a listing of 1000 runs: cut, with a cursor */
+    mpp_request lr = {.kind = MPP_REQ_LIST_RUNS, .limit = 1000};
+    CHECK(td_request(d.ep, &lr, 20, &r) == 0);
+    json_t *runs = json_object_get(r, "runs");
+    size_t nr = json_array_size(json_object_get(runs, "runs"));
+    int cursor = json_object_get(runs, "nextBeforeRunId") != NULL;
+    json_decref(r);
+    CHECKF(nr > 1 && nr < 61 && cursor, "a listing of %zu runs (cursor %d)", nr, cursor);
+    CHECK(td_ctl(&d, 60, &o, "runs", "--all", "--json", NULL) == 0 && o.status == 0);
+    size_t lines = count_lines(o.out);
+    td_out_free(&o);
+    CHECKF(lines == 61, "mpmctl runs --all printed %zu runs of 61", lines);
+}
+
+/* Many large listings at once (every connection asks for 10000 runs, again
+ * and again): the connected pinger is answered within the bound. */
+static void listings(const char *name, int nruns, int conns, int each)
+{
+    const char *tmp = t_tmpdir();
+    const char *extra[] = {"--queue-max", "100000", NULL};
+    char dir[300];
+    td_daemon d;
+    pinger p;
+    snprintf(dir, sizeof dir, "%s/%s", tmp, name);
+    if (td_start(&d, dir, extra) || many_runs(&d, nruns)) return;
+    char got[64];
+    CHECK(td_wait_status(&d, (unsigned long long)nruns, "FINISHED", 120, got, sizeof got) == 0);
+    void *ctx = zmq_ctx_new(), **s = calloc((size_t)conns, sizeof *s);
+    if (!ctx || !s || pinger_start(&p, &d)) {
+        free(s);
+        if (ctx) zmq_ctx_term(ctx);
+        return;
+    }
+    mpp_request lr = {.kind = MPP_REQ_LIST_RUNS, .limit = 10000};
+    double t0 = td_now();
+    for (int i = 0; i < conns; i++) {
+        s[i] = deaf_dealer(ctx, d.ep);
+        for (int k = 0; s[i] && k < each; k++) send_request(s[i], &lr);
+    }
+    /* until every listing is answered (read, so that none waits) */
+    int answered = 0;
+    while (answered < conns * each && td_now() - t0 < 120) {
+        for (int i = 0; i < conns; i++) {
+            zmq_pollitem_t it = {s[i], 0, ZMQ_POLLIN, 0};
+            while (s[i] && zmq_poll(&it, 1, 0) == 1) {
+                zmq_msg_t part[2];
+                int np = td_recv_parts(s[i], part, 2);
+                for (int k = 0; k < np; k++) zmq_msg_close(&part[k]);
+                answered++;
+            }
+        }
+        td_msleep(5);
+    }
+    double took = td_now() - t0;
+    pinger_stop(&p);
+    for (int i = 0; i < conns; i++)
+        if (s[i]) zmq_close(s[i]);
+    free(s);
+    zmq_ctx_term(ctx);
+    TLOG("%d connections x %d ListRuns of 10000 over %d runs: answered %d in %.2f s; ping max "
+         "%.3f s over %d pings (%d lost)",
+         conns, each, nruns, answered, took, p.max_s, p.pings, p.lost);
+    printf("reliability: listings (%d x %d ListRuns of 10000 over %d runs): ping max %.2f s\n",
+           conns, each, nruns, p.max_s);
+    CHECKF(answered == conns * each, "%d of %d listings answered", answered, conns * each);
+    CHECKF(p.lost == 0 && p.max_s < PING_BOUND_S, "ping max %.3f s, %d lost (bound %.1f s)",
+           p.max_s, p.lost, PING_BOUND_S);
+}
+
+DTEST(daemon_replies_listings_keep_loop)
+{
+    listings("lists", 300, 20, 2);
+}
+
+DTEST(rel_replies_listings)
+{
+    int full = t_stress_full();
+    listings("rel_lists", full ? 1289 : 300, 20, full ? 5 : 2);
+}
