@@ -347,9 +347,9 @@ DTEST(rel_hostile)
         h.pings++;
     }
 
-    /* requests above --max-request-bytes (64 MiB): just above, a TOO_LARGE
+    /* requests above --max-request-bytes (8 MiB): just above, a TOO_LARGE
      * answer; beyond the margin, the connection dropped unread */
-    size_t lim = (size_t)64 << 20;
+    size_t lim = (size_t)8 << 20;
     size_t sizes[] = {lim + 1, lim + 4096, lim + 65536 + 1, lim * 2};
     int nsizes = full ? 4 : 3;
     for (int i = 0; i < nsizes; i++) {

@@ -21,7 +21,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
  * particle limit well below the daemon's so that a fuzzed box of many
  * particles costs little to count (the count stops at the limit whatever
  * it is; a lower one keeps the executions fast, not the code different). */
-#define FUZZ_MAX_REQUEST ((size_t)64 << 20)
+#define FUZZ_MAX_REQUEST ((size_t)8 << 20)
 #define FUZZ_MAX_PARTICLES ((size_t)200000)
 
 /* A failed decode or check must say what failed: a code among the MPM_E*
