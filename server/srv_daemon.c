@@ -1166,6 +1166,10 @@ out:
     if (d.pool) stop_jobs(&d); /* the pool exists only with all three sockets */
     close_socket(&d.pull, 0, "inproc");
     close_socket(&d.xpub, SHUTDOWN_LINGER_MS, "stream");
+    /* the monitor stops before its socket closes: libzmq 4.3 leaks an
+     * event it fails to send to a monitor that is going away */
+    if (d.conns && d.router && zmq_socket_monitor(d.router, NULL, 0))
+        srv_warn(0, "stopping the connection monitor: %s", zmq_strerror(errno));
     close_socket(&d.router, SHUTDOWN_LINGER_MS, "request");
     if (d.zctx) {
         while (zmq_ctx_term(d.zctx) && errno == EINTR) {
