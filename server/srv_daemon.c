@@ -13,6 +13,12 @@
  * is answered, through the store's own read connections, once they are
  * committed; until then it waits in a queue, and so does any later request
  * of the same client, so that each client gets its replies in order.
+ * Listings, energy pages and snapshots always take that queue and run a
+ * few milliseconds per turn of the loop, which reads up to ROUTER_BATCH
+ * requests a turn, so that a cheap request is never stuck behind them.
+ * Replies go to libzmq without a copy, their unread bytes bounded per
+ * connection and in total (srv_outq.h); connections are capped at the
+ * handshake (srv_conns.h).
  *
  * Frames on the ROUTER: [identity][empty][Request], answered with
  * [identity][empty][Reply] (a DEALER client sends [empty][Request]; a REQ
