@@ -140,11 +140,6 @@ int srv_conns_admit(void *arg, int *open)
     return !c->max || n <= c->max;
 }
 
-int srv_conns_open(srv_conns *c)
-{
-    return atomic_load(&c->open);
-}
-
 void srv_conns_destroy(srv_conns **pc)
 {
     srv_conns *c = *pc;

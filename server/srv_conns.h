@@ -43,9 +43,6 @@ int srv_conns_drain(void *c);
  * only, after srv_conns_drain(). */
 int srv_conns_admit(void *c, int *open);
 
-/* Connections open as last counted (any thread). */
-int srv_conns_open(srv_conns *c);
-
 /* Frees c (after zmq_ctx_term: its socket was closed by the ZAP thread,
  * or here when that thread never started); nulls the pointer. */
 void srv_conns_destroy(srv_conns **c);

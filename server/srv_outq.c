@@ -90,11 +90,6 @@ void srv_outq_destroy(srv_outq **pq)
     *pq = NULL;
 }
 
-size_t srv_outq_total(const srv_outq *q)
-{
-    return atomic_load(&((srv_outq *)q)->total);
-}
-
 /* The connection of routing id (added, after dropping the idle ones, when
  * absent); NULL when out of memory. */
 static conn *find(srv_outq *q, const void *id, size_t idlen)

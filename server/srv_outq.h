@@ -45,7 +45,4 @@ void srv_outq_destroy(srv_outq **q);
 int srv_outq_send(srv_outq *q, void *router, const void *id, size_t idlen, uint8_t *buf, size_t len,
                   size_t slack, size_t *queued);
 
-/* Bytes queued in total (tests, logs). */
-size_t srv_outq_total(const srv_outq *q);
-
 #endif
