@@ -49,13 +49,13 @@ static int reset_hwm(pid_t pid)
 }
 
 /* A client connected before the attack that pings every 20 ms and keeps
- * the slowest answer. */
+ * the slowest answer (max_s, pings, lost: read after pinger_stop()). */
 typedef struct {
     char ep[320];
     atomic_int stop;
-    double max_s; /* slowest reply (a lost one counts as its 10 s wait) */
+    atomic_int state; /* 0 starting, 1 its first ping answered, -1 failed */
+    double max_s;     /* slowest reply (a lost one counts as its 10 s wait) */
     int pings, lost;
-    int ready; /* connected and answered once before the attack */
     pthread_t th;
 } pinger;
 
@@ -70,26 +70,23 @@ static void *pinger_main(void *arg)
     if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, p->ep) ||
         mpp_request_encode(&rq, &buf, &len))
         goto out;
-    for (int first = 1; !atomic_load(&p->stop) || first; first = 0) {
+    for (int first = 1; first || !atomic_load(&p->stop); first = 0) {
         double t0 = td_now();
         if (zmq_send(s, "", 0, ZMQ_SNDMORE) < 0 || zmq_send(s, buf, len, 0) < 0) break;
         zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
         int pr = zmq_poll(&it, 1, 10000);
-        if (pr < 0 && errno == EINTR) continue;
         double dt = td_now() - t0;
         if (pr == 1) {
             zmq_msg_t part[3];
             int n = td_recv_parts(s, part, 3);
             for (int i = 0; i < n; i++) zmq_msg_close(&part[i]);
-        } else {
-            p->lost++;
         }
         if (first) {
-            p->ready = pr == 1;
-            if (!p->ready) break;
-            atomic_store(&p->stop, 0);
+            if (pr != 1) break;
+            atomic_store(&p->state, 1);
         } else {
             p->pings++;
+            p->lost += pr != 1;
             if (dt > p->max_s) p->max_s = dt;
         }
         if (pr != 1) {
@@ -103,6 +100,7 @@ static void *pinger_main(void *arg)
         td_msleep(20);
     }
 out:
+    if (atomic_load(&p->state) == 0) atomic_store(&p->state, -1);
     free(buf);
     if (s) zmq_close(s);
     if (ctx) zmq_ctx_term(ctx);
@@ -115,17 +113,14 @@ static int pinger_start(pinger *p, const td_daemon *d)
 {
     memset(p, 0, sizeof *p);
     snprintf(p->ep, sizeof p->ep, "%s", d->ep);
-    atomic_init(&p->stop, 1); /* the first ping clears it */
+    atomic_init(&p->stop, 0);
+    atomic_init(&p->state, 0);
     if (pthread_create(&p->th, NULL, pinger_main, p)) {
         t_fail(__FILE__, __LINE__, "cannot start the pinger thread");
         return -1;
     }
-    for (double t0 = td_now(); td_now() - t0 < 15 && !p->ready;) {
-        if (atomic_load(&p->stop) == 0) break;
-        td_msleep(10);
-    }
-    td_msleep(50);
-    if (!p->ready) {
+    for (double t0 = td_now(); td_now() - t0 < 15 && atomic_load(&p->state) == 0;) td_msleep(10);
+    if (atomic_load(&p->state) != 1) {
         atomic_store(&p->stop, 1);
         pthread_join(p->th, NULL);
         t_fail(__FILE__, __LINE__, "the pinger got no first answer");
