@@ -165,6 +165,8 @@ typedef struct {
     store_log_fn log;    /* log lines (default: stderr); called from
                             any thread, so it must be thread-safe */
     void *log_ud;
+    long long reserve_bytes; /* the disk reserve "<db>.reserve" (default
+                                1 MiB; < 0: none): see store_writable */
 } store_options;
 
 typedef struct {
@@ -194,7 +196,11 @@ const mpm_error *store_error(void);
  * (error STORE_INTERRUPTED_RUNNING / STORE_INTERRUPTED_QUEUED, finished_at
  * left unset since the time of the stop is unknown, steps and the final
  * energies taken from the run's last energy sample when it has one), loads
- * the next run id and starts the writer thread.  opt may be NULL.  On
+ * the next run id and starts the writer thread.  opt may be NULL.
+ * A full disk does not stop the open: the disk reserve is released for
+ * SQLite's index of the WAL, and a crash recovery (or a kept run end,
+ * store_writable) that cannot be written is retried by the writer every
+ * second, the reads meanwhile showing those runs as it will write them.  On
  * failure returns a negative code and sets *out to NULL; store_error()
  * says why, e.g. "database X is in use by another mpmd (pid N)" with
  * MPM_ELOCKED. */
@@ -228,6 +234,30 @@ int store_ticket_done(store *s, uint64_t ticket);
 int store_notify_fd(store *s);
 void store_notify_drain(store *s);
 
+/* ---- a full disk ---- */
+
+/* The enqueue number of the calling thread's last write (store_run_insert,
+ * store_run_resume, ...): for store_write_result. */
+uint64_t store_last_write(void);
+
+/* The outcome of write seq (store_last_write()): 1 while it is pending, 0
+ * once committed; MPM_EIO when it was lost (its transaction rolled back:
+ * disk full, I/O error), MPM_ECONFLICT when it was refused alone (an
+ * insert or a resume that failed: a duplicate id, a resume of a run no
+ * longer interrupted), why (len bytes, may be NULL) saying why; MPM_ESTATE
+ * when it failed
+ * longer ago than the store remembers (64 failures), which a caller
+ * takes as lost.  Never blocks. */
+int store_write_result(store *s, uint64_t seq, char *why, size_t len);
+
+/* 0 when the store takes new work: its last transaction committed, no
+ * crash recovery or run end waits for space, and its disk reserve is in
+ * place (opt.reserve_bytes free on the disk when it was made).  Else
+ * MPM_EIO with the reason in why (len bytes, may be NULL), e.g. "the disk
+ * is full (database or disk is full); ...".  The writer re-checks every
+ * second (a probe write while nothing else is pending). */
+int store_writable(store *s, char *why, size_t len);
+
 /* ---- writes (asynchronous: enqueue a copy and return) ---- */
 
 /* Reserves a new run id: max(id) + 1 over the runs on disk at open, then
@@ -251,7 +281,11 @@ int store_run_set_status(store *s, int64_t id, mpp_status status, double at, con
 /* Records progress: steps done, wall seconds so far, particle-steps/s. */
 int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s, double psteps_per_s);
 
-/* Ends a run: terminal status, end time, final counters, energies, error. */
+/* Ends a run: terminal status, end time, final counters, energies, error.
+ * An end whose transaction is lost (a full disk) is kept, in memory and in
+ * the side file "<db>.ends" (64 preallocated slots), and written when
+ * space returns, at the latest by the next store_open (before its crash
+ * recovery); reads show it meanwhile. */
 int store_run_finish(store *s, int64_t id, const store_run_end *end);
 
 /* Records a run's last checkpoint (ck), or that it has none (ck NULL), in
@@ -314,8 +348,9 @@ int store_run_extras(store *s, int64_t run_id, store_run_extra *out);
 void store_run_extra_clear(store_run_extra *x);
 
 /* Bytes the committed records of one owner's runs take (schema 7): their
- * snapshots' data, plus STORE_ENERGY_ROW_BYTES per energy sample; into
- * *bytes.  0 or a negative code. */
+ * snapshots' data, plus STORE_ENERGY_ROW_BYTES per energy sample, plus the
+ * size of each run's recorded checkpoint file; into *bytes.  0 or a
+ * negative code. */
 #define STORE_ENERGY_ROW_BYTES 168 /* 21 columns of 8 bytes */
 int store_owner_bytes(store *s, const char *owner, int64_t *bytes);
 

@@ -10,6 +10,8 @@
  *   store_writer.c  the write queue, the writer thread, commit tracking
  *                   (flush, tickets, the notify fd)
  *   store_read.c    the pool of read connections and every read
+ *   store_ends.c    the side file of run ends a full disk kept out of
+ *                   the database, and the disk reserve
  *
  * Internal functions are prefixed sti_.
  */
@@ -28,6 +30,11 @@
 #define DEFAULT_BUSY_MS 5000
 #define READER_POOL_MAX 8 /* idle read connections kept */
 #define BEGIN_RETRIES 3
+#define DEFAULT_RESERVE ((long long)1 << 20)
+#define UPKEEP_S 1.0   /* retry interval of the upkeep while it has work */
+#define FAIL_RING 64   /* failed acknowledged writes remembered (seq ranges) */
+#define DEFER_MAX 1024 /* run ends kept in memory while the disk is full */
+#define ENDS_SLOTS 64  /* ... and in the side file's preallocated slots */
 
 /* ---- queue entries (store_writer.c) ---- */
 
@@ -93,6 +100,25 @@ enum {
     WS_COUNT
 };
 
+/* Writes that failed (a transaction lost whole, or an insert / resume
+ * refused), as a range of enqueue numbers with the reason: the outcome of
+ * an acknowledged write (store_write_result). */
+typedef struct {
+    uint64_t lo, hi;
+    int lost; /* 1: a transaction lost whole; 0: one write refused */
+    char why[200];
+} fail_range;
+
+/* A run's end (OP_RUN_FINISH) whose transaction was lost: applied again
+ * by the upkeep, shown by the reads meanwhile; slot: its slot in the side
+ * file, -1 when only in memory.  error / warning point into the texts. */
+typedef struct {
+    int64_t run_id;
+    store_run_end end;
+    char error[296], warning[104];
+    int slot;
+} deferred_end;
+
 /* The last enqueue number of a run's writes (commit tracking); seq 0 marks
  * an empty slot. */
 typedef struct {
@@ -139,6 +165,29 @@ struct store {
     uint64_t snapshots_dropped;
     char last_werr[512];
     int64_t rec_running, rec_queued;
+    /* full-disk state (store_ends.c, the upkeep in store_writer.c), under
+     * mu: the last transaction was lost (degraded, why), crash recovery
+     * still to do for the runs with ids below recover_below, the run ends
+     * kept (defer, ndefer, the side file ends_fd and its used slots), the
+     * failed acknowledged writes (fails, a ring; fail_horizon: the highest
+     * seq of a range it forgot), the disk reserve */
+    int degraded;
+    char degraded_why[256];
+    int recovery_pending;
+    int64_t recover_below;
+    deferred_end *defer;
+    size_t ndefer;
+    int ends_fd;
+    int ends_slots;     /* slots the side file has room for */
+    uint64_t ends_used; /* bit i: slot i holds an end */
+    char *ends_path, *reserve_path;
+    long long reserve_bytes; /* 0: no reserve */
+    int reserve_ok;          /* the reserve file is in place */
+    double reserve_next;     /* monotonic time of the next attempt */
+    fail_range fails[FAIL_RING];
+    unsigned nfails; /* ranges recorded so far (ring index = n % FAIL_RING) */
+    uint64_t fail_horizon;
+    uint64_t upkeep_logged; /* the log line of the last failed upkeep, hashed */
     /* per-run last enqueue numbers (open addressing, rebuilt without the
      * committed entries when half full) */
     run_seq *rmap;
@@ -199,6 +248,37 @@ int sti_writer_prepare(store *s);
 void *sti_writer_main(void *arg);
 /* Finalizes the statements, frees the queue and the run map. */
 void sti_writer_free(store *s);
+/* The upkeep, on the writer connection (at open, then by the writer
+ * thread): in one transaction, the kept run ends and the pending crash
+ * recovery (or, with neither, a probe write), then the disk reserve put
+ * back.  0 when the transaction committed. */
+int sti_upkeep(store *s);
+
+/* ---- crash recovery (store_open.c) ---- */
+
+/* Marks the runs below s->recover_below left 'running' or 'queued'
+ * 'interrupted', inside the writer's open transaction. */
+int sti_recover_rows(store *s);
+
+/* ---- run ends kept off a full disk, the reserve (store_ends.c) ---- */
+
+/* Opens (creating and preallocating) the side file "<db>.ends" and loads
+ * the ends it holds into s->defer; a failure is logged, not fatal. */
+void sti_ends_open(store *s);
+void sti_ends_close(store *s);
+/* Keeps the end of a run whose transaction was lost (writer thread). */
+void sti_ends_keep(store *s, int64_t run_id, const store_run_end *end);
+/* Forgets the first n kept ends (applied and committed; writer thread). */
+void sti_ends_drop(store *s, size_t n);
+/* Shows a kept end or a pending recovery in a run read back. */
+void sti_ends_overlay(store *s, store_run *r);
+/* The disk reserve "<db>.reserve": 1 when it is in place (allocated
+ * whole), else 0; sets s->reserve_ok. */
+int sti_reserve_exists(store *s);
+/* Puts it in place: 0, or -1 (no room: nothing stays allocated). */
+int sti_reserve_make(store *s);
+/* Releases it (its space is then free for the store's writes). */
+void sti_reserve_release(store *s, const char *why);
 
 /* ---- readers (store_read.c) ---- */
 

@@ -700,12 +700,14 @@ static int recover_status(store *s, const char *from, const char *error, int64_t
             "step") ", steps),"
                     " (kinetic, strain, potential, external_work, total) ="
                     " " LAST_SAMPLE(
-                        "kinetic, strain, potential, external_work, total") " WHERE status = ?2";
+                        "kinetic, strain, potential, external_work, total") " WHERE status = ?2"
+                                                                            " AND id < ?3";
 #undef LAST_SAMPLE
     int rc = sqlite3_prepare_v2(s->wdb, sql, -1, &st, NULL);
     if (rc != SQLITE_OK) return sti_sql_fail(s->wdb, rc, "crash recovery");
     rc = sqlite3_bind_text(st, 1, error, -1, SQLITE_STATIC);
     if (rc == SQLITE_OK) rc = sqlite3_bind_text(st, 2, from, -1, SQLITE_STATIC);
+    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 3, s->recover_below);
     if (rc == SQLITE_OK) rc = sqlite3_step(st);
     int r = rc == SQLITE_DONE ? 0 : sti_sql_fail(s->wdb, rc, "crash recovery");
     *count = sqlite3_changes(s->wdb);
@@ -714,20 +716,30 @@ static int recover_status(store *s, const char *from, const char *error, int64_t
     return r;
 }
 
-static int recover(store *s)
+/* Crash recovery runs in the upkeep's transaction (sti_upkeep), at open
+ * and, when the disk is full then, retried by the writer until it
+ * commits; only the runs an earlier daemon left (ids below recover_below)
+ * are concerned.  Guarded by daemon_disk_restart_full. */
+int sti_recover_rows(store *s)
 {
-    int r = sti_exec(s->wdb, "BEGIN IMMEDIATE", "crash recovery");
-    if (r) return r;
-    if ((r = recover_status(s, "running", STORE_INTERRUPTED_RUNNING, &s->rec_running)) ||
-        (r = recover_status(s, "queued", STORE_INTERRUPTED_QUEUED, &s->rec_queued)) ||
-        (r = sti_exec(s->wdb, "COMMIT", "crash recovery")))
-        return rollback_keep(s, r, "failed recovery");
-    if (s->rec_running || s->rec_queued)
-        sti_log(s,
-                "%s: marked %" PRId64 " running and %" PRId64
-                " queued runs of a previous daemon 'interrupted'",
-                s->path, s->rec_running, s->rec_queued);
+    int64_t running = 0, queued = 0;
+    int r;
+    if ((r = recover_status(s, "running", STORE_INTERRUPTED_RUNNING, &running)) ||
+        (r = recover_status(s, "queued", STORE_INTERRUPTED_QUEUED, &queued)))
+        return r;
+    pthread_mutex_lock(&s->mu);
+    s->rec_running = running;
+    s->rec_queued = queued;
+    pthread_mutex_unlock(&s->mu);
     return 0;
+}
+
+/* 1 when an open failed for lack of room (SQLite's FULL, or an I/O error
+ * sizing the WAL index or writing). */
+static int no_room(store *s)
+{
+    int rc = s->wdb ? sqlite3_extended_errcode(s->wdb) : SQLITE_OK;
+    return (rc & 0xff) == SQLITE_FULL || (rc & 0xff) == SQLITE_IOERR;
 }
 
 /* ---------------------------------------------------------------------- */
@@ -740,6 +752,7 @@ static void destroy(store *s)
     sti_writer_free(s);
     if (s->wdb) sti_close_db(s, s->wdb); /* last connection: checkpoints, drops the WAL */
     s->wdb = NULL;
+    sti_ends_close(s);
     lock_release(s);
     if (s->notify_fd >= 0) close(s->notify_fd);
     if (s->sync_ready) {
@@ -750,6 +763,8 @@ static void destroy(store *s)
     }
     free(s->path);
     free(s->lock_path);
+    free(s->ends_path);
+    free(s->reserve_path);
     free(s);
 }
 
@@ -795,6 +810,8 @@ static store *store_alloc(const char *path, const store_options *opt)
     if (!s) return NULL;
     s->lock_fd = -1;
     s->notify_fd = -1;
+    s->ends_fd = -1;
+    s->reserve_bytes = DEFAULT_RESERVE;
     s->log = default_log;
     s->batch_s = DEFAULT_BATCH_MS / 1000;
     s->batch_ops = DEFAULT_BATCH_OPS;
@@ -805,6 +822,7 @@ static store *store_alloc(const char *path, const store_options *opt)
         if (opt->batch_ops > 0) s->batch_ops = opt->batch_ops;
         if (opt->queue_cap > 0) s->cap = opt->queue_cap;
         if (opt->busy_timeout_ms > 0) s->busy_ms = opt->busy_timeout_ms;
+        if (opt->reserve_bytes) s->reserve_bytes = opt->reserve_bytes > 0 ? opt->reserve_bytes : 0;
         if (opt->log) {
             s->log = opt->log;
             s->log_ud = opt->log_ud;
@@ -813,15 +831,23 @@ static store *store_alloc(const char *path, const store_options *opt)
     size_t plen = strlen(path);
     s->path = malloc(plen + 1);
     s->lock_path = malloc(plen + sizeof ".lock");
-    if (!s->path || !s->lock_path) {
+    s->ends_path = malloc(plen + sizeof ".ends");
+    s->reserve_path = malloc(plen + sizeof ".reserve");
+    if (!s->path || !s->lock_path || !s->ends_path || !s->reserve_path) {
         free(s->path);
         free(s->lock_path);
+        free(s->ends_path);
+        free(s->reserve_path);
         free(s);
         return NULL;
     }
     memcpy(s->path, path, plen + 1);
     memcpy(s->lock_path, path, plen);
     memcpy(s->lock_path + plen, ".lock", sizeof ".lock");
+    memcpy(s->ends_path, path, plen);
+    memcpy(s->ends_path + plen, ".ends", sizeof ".ends");
+    memcpy(s->reserve_path, path, plen);
+    memcpy(s->reserve_path + plen, ".reserve", sizeof ".reserve");
     return s;
 }
 
@@ -835,14 +861,27 @@ int store_open(const char *path, const store_options *opt, store **out)
     store *s = store_alloc(path, opt);
     if (!s) return sti_fail(MPM_ENOMEM, "out of memory opening %s", path);
 
-    if ((r = init_sync(s)) || (r = lock_acquire(s)) || (r = open_writer(s)) || (r = migrate(s)) ||
-        (r = recover(s)) || (r = open_notify(s)))
-        goto fail;
+    if ((r = init_sync(s)) || (r = lock_acquire(s)) || (r = open_notify(s))) goto fail;
+    if ((r = open_writer(s)) || (r = migrate(s))) {
+        /* a full disk: the reserve's room for SQLite's WAL index, once */
+        if (!no_room(s) || !sti_reserve_exists(s)) goto fail;
+        sti_reserve_release(s, store_error()->message);
+        if (s->wdb) sti_close_db(s, s->wdb);
+        s->wdb = NULL;
+        if ((r = open_writer(s)) || (r = migrate(s))) goto fail;
+    }
     int64_t next = 1;
     if ((r = sti_query1(s->wdb, "SELECT COALESCE(MAX(id), 0) + 1 FROM runs", &next, NULL, 0)))
         goto fail;
     s->next_id = next;
+    s->recover_below = next;
     if ((r = sti_writer_prepare(s))) goto fail;
+    /* the run ends a full disk kept, then crash recovery: written now, or
+     * by the writer once there is room (reads show them meanwhile) */
+    sti_ends_open(s);
+    s->recovery_pending = 1;
+    if (!s->reserve_ok && s->reserve_bytes > 0 && !sti_reserve_exists(s)) sti_reserve_make(s);
+    sti_upkeep(s);
     int e = pthread_create(&s->writer, NULL, sti_writer_main, s);
     if (e) {
         r = sti_fail(MPM_ENOMEM, "cannot start the store writer thread: %s", strerror(e));

@@ -239,8 +239,8 @@ int store_run_get(store *s, int64_t id, store_run *out)
     }
     rc = sqlite3_bind_int64(st, 1, id);
     if (rc == SQLITE_OK) rc = sqlite3_step(st);
-    if (rc == SQLITE_ROW)
-        r = read_run_row(db, st, out, 1);
+    if (rc == SQLITE_ROW && !(r = read_run_row(db, st, out, 1)))
+        sti_ends_overlay(s, out); /* an end or a recovery still to write */
     else if (rc == SQLITE_DONE)
         r = sti_fail(MPM_ENOTFOUND, "no run %" PRId64, id);
     else
@@ -324,7 +324,7 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t
             capn = nc;
         }
         if ((r = read_run_row(db, st, &v[cnt], f->with_case))) goto out;
-        cnt++;
+        sti_ends_overlay(s, &v[cnt++]);
     }
     if (rc != SQLITE_DONE) r = sti_sql_fail(db, rc, "listing runs");
 out:
@@ -521,7 +521,8 @@ int store_owner_bytes(store *s, const char *owner, int64_t *bytes)
         db,
         "SELECT (SELECT coalesce(sum(length(data)), 0) FROM snapshots WHERE run_id IN"
         " (SELECT id FROM runs WHERE owner = ?1)) + ?2 * (SELECT count(*) FROM energy"
-        " WHERE run_id IN (SELECT id FROM runs WHERE owner = ?1))",
+        " WHERE run_id IN (SELECT id FROM runs WHERE owner = ?1))"
+        " + (SELECT coalesce(sum(checkpoint_bytes), 0) FROM runs WHERE owner = ?1)",
         -1, &st, NULL);
     if (rc == SQLITE_OK) rc = sqlite3_bind_text(st, 1, owner, -1, SQLITE_STATIC);
     if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 2, STORE_ENERGY_ROW_BYTES);
@@ -550,7 +551,8 @@ int store_owner_totals(store *s, store_owner_total **rows, size_t *n)
      * size from its record header) and sample count, summed per owner */
     int rc = sqlite3_prepare_v2(
         db,
-        "SELECT r.owner, coalesce(sum(s.b), 0) + ?1 * coalesce(sum(e.c), 0) FROM runs r"
+        "SELECT r.owner, coalesce(sum(s.b), 0) + ?1 * coalesce(sum(e.c), 0)"
+        " + coalesce(sum(r.checkpoint_bytes), 0) FROM runs r"
         " LEFT JOIN (SELECT run_id, sum(length(data)) AS b FROM snapshots GROUP BY run_id) s"
         " ON s.run_id = r.id"
         " LEFT JOIN (SELECT run_id, count(*) AS c FROM energy GROUP BY run_id) e"

@@ -50,6 +50,21 @@
  * (store_get_stats) and reported once by the next store_flush() as
  * MPM_EIO.
  *
+ * A full disk.  The writes a client is told about (a run's insert, a
+ * resume) have an outcome: a lost transaction, or such a write refused,
+ * is remembered as a range of enqueue numbers (s->fails, a ring of 64),
+ * which store_write_result() looks up once the write is done, so the
+ * daemon replies with the job id only after its row is committed.  A lost
+ * transaction also marks the store degraded (store_writable() refuses new
+ * work), releases the disk reserve (store_ends.c) and keeps every run end
+ * in it (the end of a run the disk stopped: FAILED with the reason), in
+ * memory and in a preallocated slot of the side file.  The upkeep
+ * (sti_upkeep) then writes, in one transaction, the kept ends and a crash
+ * recovery the open could not write, or a probe when there is neither; it
+ * runs right after a loss and every UPKEEP_S while it has work, and puts
+ * the reserve back once a transaction commits.  Guarded by the
+ * daemon_disk_* tests (tests/t_daemon_disk.c).
+ *
  * Memory cap.  s->qbytes counts the bytes of ops not yet committed.  Above
  * queue_cap (64 MiB): snapshots (the bulky items) are dropped with a log
  * line and MPM_EFULL; every other op - energy samples, run inserts and
@@ -200,6 +215,54 @@ __attribute__((format(printf, 4, 5))) static void write_error_(store *s, int los
 }
 #define write_error(s, nops, ...) write_error_(s, 0, nops, __VA_ARGS__)
 #define write_loss(s, nops, ...) write_error_(s, 1, nops, __VA_ARGS__)
+
+/* Remembers that the writes lo..hi failed (under s->mu): merged into the
+ * last range when it continues it for the same reason. */
+static void fail_record_locked(store *s, uint64_t lo, uint64_t hi, int lost, const char *why)
+{
+    if (s->nfails) {
+        fail_range *last = &s->fails[(s->nfails - 1) % FAIL_RING];
+        if (last->hi + 1 == lo && last->lost == lost && !strcmp(last->why, why)) {
+            last->hi = hi;
+            return;
+        }
+    }
+    fail_range *f = &s->fails[s->nfails % FAIL_RING];
+    if (s->nfails >= FAIL_RING && f->hi > s->fail_horizon) s->fail_horizon = f->hi;
+    f->lo = lo;
+    f->hi = hi;
+    f->lost = lost;
+    snprintf(f->why, sizeof f->why, "%s", why);
+    s->nfails++;
+}
+
+/* A transaction lost whole (BEGIN, a statement or COMMIT failed, SQLite's
+ * code rc): every write of the batch failed; the store is degraded, the
+ * disk reserve goes (its room is for the upkeep), and the run ends in the
+ * batch are kept (see the header). */
+static void batch_lost(store *s, op *batch, int rc, const char *what)
+{
+    char why[200];
+    snprintf(why, sizeof why, "%s (%s)", sqlite3_errstr(rc), what);
+    uint64_t hi = batch->seq;
+    for (op *o = batch; o; o = o->next) {
+        hi = o->seq;
+        if (o->kind == OP_RUN_FINISH) sti_ends_keep(s, o->run_id, &o->u.fin);
+    }
+    pthread_mutex_lock(&s->mu);
+    fail_record_locked(s, batch->seq, hi, 1, why);
+    s->degraded = 1;
+    snprintf(s->degraded_why, sizeof s->degraded_why, "%s", why);
+    pthread_mutex_unlock(&s->mu);
+    sti_reserve_release(s, why);
+}
+
+static _Thread_local uint64_t tl_last_seq;
+
+uint64_t store_last_write(void)
+{
+    return tl_last_seq;
+}
 
 /* Why an update of run id matched no row: "no run N" or "run N already
  * ended (status)". */
@@ -426,6 +489,15 @@ static int apply_op(store *s, op *o)
     return 0;
 }
 
+/* Makes the notify fd readable (an eventfd never blocks a write of 1 short
+ * of 2^64 - 1 pending, so EAGAIN cannot happen in practice). */
+static void notify(store *s)
+{
+    uint64_t one = 1;
+    ssize_t w = write(s->notify_fd, &one, sizeof one);
+    (void)w;
+}
+
 static int ws_simple(store *s, int which)
 {
     int rc = ws_run(s->ws[which], SQLITE_OK);
@@ -447,6 +519,7 @@ static void apply_batch(store *s, op *batch, size_t n)
             continue;
         }
         write_loss(s, n, "BEGIN: %s; %zu writes lost", sqlite3_errmsg(s->wdb), n);
+        batch_lost(s, batch, rc, "BEGIN");
         return;
     }
     for (op *o = batch; o; o = o->next) {
@@ -454,9 +527,18 @@ static void apply_batch(store *s, op *batch, size_t n)
         failed++;
         if (sqlite3_get_autocommit(s->wdb)) {
             /* SQLite rolled the whole transaction back (disk full, I/O) */
+            rc = sqlite3_errcode(s->wdb);
             write_loss(s, n - failed, "transaction rolled back (%s); %zu more writes lost",
                        sqlite3_errmsg(s->wdb), (size_t)(n - failed));
+            batch_lost(s, batch, rc, "a write");
             return;
+        }
+        if (o->kind == OP_RUN_INSERT || o->kind == OP_RUN_RESUME) {
+            /* refused alone (a duplicate id, a resume of a run no longer
+             * interrupted): its client is told */
+            pthread_mutex_lock(&s->mu);
+            fail_record_locked(s, o->seq, o->seq, 0, s->last_werr);
+            pthread_mutex_unlock(&s->mu);
         }
     }
     rc = ws_simple(s, WS_COMMIT);
@@ -465,29 +547,148 @@ static void apply_batch(store *s, op *batch, size_t n)
                    (size_t)(n - failed));
         if (!sqlite3_get_autocommit(s->wdb) && ws_simple(s, WS_ROLLBACK) != SQLITE_OK)
             sti_log(s, "ROLLBACK: %s", sqlite3_errmsg(s->wdb));
+        batch_lost(s, batch, rc, "COMMIT");
         return;
     }
     pthread_mutex_lock(&s->mu);
     s->transactions++;
     s->ops_committed += n - failed;
+    s->degraded = 0;
     pthread_mutex_unlock(&s->mu);
 }
 
-/* Makes the notify fd readable (an eventfd never blocks a write of 1 short
- * of 2^64 - 1 pending, so EAGAIN cannot happen in practice). */
-static void notify(store *s)
+/* ---------------------------------------------------------------------- */
+/* The upkeep (see the header) */
+
+/* 1 when the upkeep has work (under s->mu). */
+static int upkeep_due_locked(const store *s)
 {
-    uint64_t one = 1;
-    ssize_t w = write(s->notify_fd, &one, sizeof one);
-    (void)w;
+    return s->degraded || s->recovery_pending || s->ndefer ||
+           (s->reserve_bytes > 0 && !s->reserve_ok);
+}
+
+/* Logs a failed upkeep once per distinct reason (not every second). */
+static void upkeep_log(store *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void upkeep_log(store *s, const char *fmt, ...)
+{
+    char buf[512];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    uint64_t h = 0xcbf29ce484222325ULL;
+    for (const char *p = buf; *p; p++) h = (h ^ (unsigned char)*p) * 0x100000001b3ULL;
+    if (h == s->upkeep_logged) return;
+    s->upkeep_logged = h;
+    sti_log(s, "%s", buf);
+}
+
+int sti_upkeep(store *s)
+{
+    pthread_mutex_lock(&s->mu);
+    int recover = s->recovery_pending, degraded = s->degraded;
+    size_t nd = s->ndefer;
+    pthread_mutex_unlock(&s->mu);
+    if (recover || degraded || nd) {
+        int64_t run0 = s->rec_running, queued0 = s->rec_queued;
+        int rc = ws_simple(s, WS_BEGIN), r = 0;
+        const char *what = "BEGIN";
+        /* the kept ends first: a run the disk stopped ends FAILED with its
+         * reason, not 'interrupted' by the recovery */
+        for (size_t i = 0; rc == SQLITE_OK && i < nd; i++) {
+            op o;
+            memset(&o, 0, sizeof o);
+            o.kind = OP_RUN_FINISH;
+            o.run_id = s->defer[i].run_id;
+            o.u.fin = s->defer[i].end;
+            o.u.fin.error = s->defer[i].end.error ? s->defer[i].error : NULL;
+            o.u.fin.warning = s->defer[i].end.warning ? s->defer[i].warning : NULL;
+            /* a run that ended meanwhile or has no row: logged, skipped */
+            if (apply_op(s, &o) && sqlite3_get_autocommit(s->wdb)) {
+                rc = sqlite3_errcode(s->wdb);
+                what = "a kept run end";
+            }
+        }
+        if (rc == SQLITE_OK && recover && (r = sti_recover_rows(s))) {
+            rc = sqlite3_errcode(s->wdb);
+            what = "crash recovery";
+        }
+        if (rc == SQLITE_OK && !recover && !nd) {
+            /* a probe: one page written */
+            char sql[64];
+            snprintf(sql, sizeof sql, "PRAGMA user_version = %d", STORE_SCHEMA_VERSION);
+            if (sti_exec(s->wdb, sql, "probe")) {
+                rc = sqlite3_errcode(s->wdb);
+                what = "a probe write";
+            }
+        }
+        if (rc == SQLITE_OK) {
+            rc = ws_simple(s, WS_COMMIT);
+            what = "COMMIT";
+        }
+        if (rc != SQLITE_OK) {
+            if (!sqlite3_get_autocommit(s->wdb) && ws_simple(s, WS_ROLLBACK) != SQLITE_OK)
+                sti_log(s, "ROLLBACK: %s", sqlite3_errmsg(s->wdb));
+            s->rec_running = run0;
+            s->rec_queued = queued0;
+            char why[200];
+            snprintf(why, sizeof why, "%s (%s)", sqlite3_errstr(rc ? rc : SQLITE_ERROR), what);
+            pthread_mutex_lock(&s->mu);
+            s->degraded = 1;
+            snprintf(s->degraded_why, sizeof s->degraded_why, "%s", why);
+            pthread_mutex_unlock(&s->mu);
+            upkeep_log(s,
+                       "cannot write yet: %s;%s%s retried every %g s while the store refuses new "
+                       "runs",
+                       why, nd ? " run ends kept," : "", recover ? " crash recovery pending," : "",
+                       UPKEEP_S);
+            return MPM_EIO;
+        }
+        sti_ends_drop(s, nd);
+        pthread_mutex_lock(&s->mu);
+        s->degraded = 0;
+        s->recovery_pending = 0;
+        s->transactions++;
+        pthread_mutex_unlock(&s->mu);
+        s->upkeep_logged = 0;
+        if (nd) sti_log(s, "recorded %zu run end(s) kept while the store could not write", nd);
+        if (recover && (s->rec_running || s->rec_queued))
+            sti_log(s,
+                    "%s: marked %" PRId64 " running and %" PRId64
+                    " queued runs of a previous daemon 'interrupted'",
+                    s->path, s->rec_running, s->rec_queued);
+        else if (degraded && !nd && !recover)
+            sti_log(s, "the store writes again");
+        notify(s);
+    }
+    double now = sti_mono_now();
+    if (s->reserve_bytes > 0 && !s->reserve_ok && now >= s->reserve_next) {
+        if (sti_reserve_make(s)) s->reserve_next = now + UPKEEP_S;
+    }
+    return 0;
 }
 
 void *sti_writer_main(void *arg)
 {
     store *s = arg;
+    double upkeep_at = 0; /* monotonic time of the next upkeep */
     pthread_mutex_lock(&s->mu);
     for (;;) {
-        while (!s->head && !s->stopping) pthread_cond_wait(&s->cv_work, &s->mu);
+        while (!s->head && !s->stopping) {
+            if (!upkeep_due_locked(s)) {
+                pthread_cond_wait(&s->cv_work, &s->mu);
+                continue;
+            }
+            if (sti_mono_now() < upkeep_at) {
+                struct timespec ud = to_timespec(upkeep_at);
+                pthread_cond_timedwait(&s->cv_work, &s->mu, &ud);
+                continue;
+            }
+            pthread_mutex_unlock(&s->mu);
+            sti_upkeep(s);
+            upkeep_at = sti_mono_now() + UPKEEP_S;
+            pthread_mutex_lock(&s->mu);
+        }
         if (!s->head) break; /* stopping, queue drained */
         /* batching window: until the oldest op is batch_s old */
         struct timespec dl = to_timespec(s->head->t_enq + s->batch_s);
@@ -508,7 +709,18 @@ void *sti_writer_main(void *arg)
         uint64_t last_seq = last->seq;
         pthread_mutex_unlock(&s->mu);
 
+        uint64_t lost = s->batches_lost;
         apply_batch(s, batch, n);
+        /* right after a loss (the reserve's room is free now), and after a
+         * commit while ends or a recovery wait (the disk has room again) */
+        pthread_mutex_lock(&s->mu);
+        int due =
+            (s->batches_lost != lost || s->ndefer || s->recovery_pending) && upkeep_due_locked(s);
+        pthread_mutex_unlock(&s->mu);
+        if (due && (s->batches_lost != lost || sti_mono_now() >= upkeep_at)) {
+            sti_upkeep(s);
+            upkeep_at = sti_mono_now() + UPKEEP_S;
+        }
         while (batch) {
             op *next = batch->next;
             free(batch);
@@ -681,6 +893,7 @@ static int submit(store *s, op *o, int droppable)
         return r;
     }
     o->seq = ++s->enq_seq;
+    tl_last_seq = o->seq;
     o->t_enq = sti_mono_now();
     o->next = NULL;
     rmap_set(s, o->run_id, o->seq);
@@ -932,6 +1145,56 @@ int store_ticket_done(store *s, uint64_t ticket)
     int done = s->done_seq >= ticket;
     pthread_mutex_unlock(&s->mu);
     return done;
+}
+
+int store_write_result(store *s, uint64_t seq, char *why, size_t len)
+{
+    if (why && len) why[0] = 0;
+    if (!s) return sti_fail(MPM_EINVAL, "store_write_result: NULL store");
+    int rc = 0;
+    pthread_mutex_lock(&s->mu);
+    if (seq > s->done_seq) {
+        rc = 1;
+    } else {
+        unsigned n = s->nfails < FAIL_RING ? s->nfails : FAIL_RING;
+        for (unsigned i = 0; i < n && !rc; i++) {
+            const fail_range *f = &s->fails[i];
+            if (seq >= f->lo && seq <= f->hi) {
+                rc = f->lost ? MPM_EIO : MPM_ECONFLICT;
+                if (why && len) snprintf(why, len, "%s", f->why);
+            }
+        }
+        if (!rc && seq <= s->fail_horizon) {
+            rc = MPM_ESTATE;
+            if (why && len)
+                snprintf(why, len, "the outcome of write %" PRIu64 " is no longer known", seq);
+        }
+    }
+    pthread_mutex_unlock(&s->mu);
+    return rc;
+}
+
+int store_writable(store *s, char *why, size_t len)
+{
+    if (why && len) why[0] = 0;
+    if (!s) return sti_fail(MPM_EINVAL, "store_writable: NULL store");
+    char b[400] = "";
+    pthread_mutex_lock(&s->mu);
+    if (s->recovery_pending)
+        snprintf(b, sizeof b,
+                 "crash recovery of the runs an earlier mpmd left cannot be written (%s)",
+                 s->degraded_why);
+    else if (s->degraded)
+        snprintf(b, sizeof b, "its last transaction was lost (%s)", s->degraded_why);
+    else if (s->ndefer)
+        snprintf(b, sizeof b, "%zu run end(s) wait for room on the disk", s->ndefer);
+    else if (s->reserve_bytes > 0 && !s->reserve_ok)
+        snprintf(b, sizeof b, "less than its reserve of %lld KiB is free on the disk",
+                 s->reserve_bytes / 1024);
+    pthread_mutex_unlock(&s->mu);
+    if (!b[0]) return 0;
+    if (why && len) snprintf(why, len, "the run store cannot take new work: %s", b);
+    return sti_fail(MPM_EIO, "the run store cannot take new work: %s", b);
 }
 
 int store_notify_fd(store *s)
