@@ -129,9 +129,9 @@ typedef struct pending {
     mpp_request rq;         /* the decoded request (a read: owns nothing big) */
     int begun;              /* its action is done and its ticket taken */
     uint64_t ticket;        /* store_ticket() when it began */
-    uint8_t *reply;         /* a reply made, waiting for ticket's commit
-                             * (srv_reply_after_commit()), or NULL */
-    size_t reply_len;
+    srv_write_fn fn;        /* a Submit or Resume waiting for its write */
+    void *fn_arg;           /* (srv_after_write()), or NULL */
+    uint64_t seq;           /* ... the write's number */
     struct pending *next;
 } pending;
 /* Reads waiting at once, at most; more get UNAVAILABLE (a store that cannot
@@ -141,6 +141,8 @@ typedef struct pending {
  * per turn at most (a cheap one is answered as it is read). */
 #define HEAVY_SLICE_S 0.005
 #define ROUTER_BATCH 64
+/* The waiting request serve_pending() is carrying on (main thread only). */
+static struct pending *serving;
 
 double srv_wall_now(void)
 {
@@ -502,20 +504,41 @@ static pending *enqueue(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_reque
     return NULL;
 }
 
-void srv_reply_after_commit(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run,
-                            uint8_t *buf, size_t len)
+void srv_after_write(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run, uint64_t seq,
+                     srv_write_fn fn, void *arg)
 {
-    uint64_t ticket = store_ticket(d->st, run);
+    char why[256];
+    (void)store_ticket(d->st, run); /* the writer skips its batching window */
+    int rc = store_write_result(d->st, seq, why, sizeof why);
     pending *p = NULL;
-    if (buf && !store_ticket_done(d->st, ticket) && (p = enqueue(d, id, owner, NULL, 1, ticket))) {
-        p->reply = buf;
-        p->reply_len = len;
+    if (rc == 1 && serving && same_peer(&serving->id, id)) {
+        /* a queued Submit carried on by serve_pending(): it waits in its
+         * own place, before its client's later requests */
+        serving->fn = fn;
+        serving->fn_arg = arg;
+        serving->seq = seq;
         return;
     }
-    /* committed already, or no room to wait: the commit first, then the
-     * reply (a blocking flush; only when PENDING_MAX requests wait) */
-    if (buf && !store_ticket_done(d->st, ticket)) store_flush(d->st);
-    srv_send_reply(d, id, buf, len);
+    if (rc == 1 && (p = enqueue(d, id, owner, NULL, 1, 0))) {
+        p->fn = fn;
+        p->fn_arg = arg;
+        p->seq = seq;
+        return;
+    }
+    /* done already, or no room to wait: the commit first (a blocking
+     * flush; only when PENDING_MAX requests wait), then the answer */
+    if (rc == 1) {
+        store_flush(d->st);
+        rc = store_write_result(d->st, seq, why, sizeof why);
+    }
+    fn(d, id, owner, rc == 1 ? MPM_EIO : rc, why, arg);
+}
+
+int srv_writes_waiting(const daemon_t *d, const char *owner)
+{
+    int n = 0;
+    for (const pending *q = d->pending; q; q = q->next) n += q->fn && !strcmp(q->owner, owner);
+    return n;
 }
 
 /* Runs a decoded request, in arrival order per client: behind a waiting
@@ -536,37 +559,43 @@ static void dispatch(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request 
  * could go now), so that new requests are read in between. */
 static int serve_pending(daemon_t *d, int sliced)
 {
+    /* d->pending_tail stays the list's tail throughout: a request carried
+     * on here may queue another (srv_after_write) */
     pending **pp = &d->pending;
-    d->pending_tail = &d->pending;
     double t0 = sliced ? srv_wall_now() : 0;
     int spent = 0, left = 0;
     while (*pp) {
         pending *p = *pp;
         int done = 0;
-        if (p->reply) {
-            /* a reply that waited for its write's commit */
-            if (store_ticket_done(d->st, p->ticket)) {
-                srv_send_reply(d, &p->id, p->reply, p->reply_len);
-                p->reply = NULL;
+        if (p->fn) {
+            /* a Submit or Resume that waited for its write */
+            char why[256];
+            int rc = store_write_result(d->st, p->seq, why, sizeof why);
+            if (rc != 1) {
+                srv_write_fn fn = p->fn;
+                p->fn = NULL;
+                fn(d, &p->id, p->owner, rc, why, p->fn_arg);
                 done = 1;
             }
         } else if (spent && is_heavy(p->rq.kind)) {
             left = 1;
-        } else {
+        } else if (!peer_waits(d, &p->id, p)) {
             int heavy = is_heavy(p->rq.kind);
-            done = !peer_waits(d, &p->id, p) &&
-                   run_request(d, &p->id, p->owner, &p->rq, &p->begun, &p->ticket);
+            serving = p;
+            done = run_request(d, &p->id, p->owner, &p->rq, &p->begun, &p->ticket);
+            serving = NULL;
+            done = done && !p->fn; /* a Submit now waiting for its write, in place */
             if (done && heavy && sliced && srv_wall_now() - t0 >= HEAVY_SLICE_S) spent = 1;
         }
         if (done) {
             *pp = p->next;
+            if (d->pending_tail == &p->next) d->pending_tail = pp;
             zmq_msg_close(&p->id);
             mpp_request_clear(&p->rq);
             free(p);
             d->npending--;
             continue;
         }
-        d->pending_tail = &p->next;
         pp = &p->next;
     }
     return left;
@@ -582,8 +611,8 @@ static void drain_pending(daemon_t *d)
     while (d->pending) {
         pending *p = d->pending;
         d->pending = p->next;
-        if (p->reply)
-            srv_send_reply(d, &p->id, p->reply, p->reply_len);
+        if (p->fn)
+            p->fn(d, &p->id, p->owner, MPM_EUNAVAIL, "mpmd is shutting down", p->fn_arg);
         else
             srv_reply_error(d, &p->id, MPM_EUNAVAIL, "", "mpmd is shutting down");
         zmq_msg_close(&p->id);
@@ -1059,6 +1088,7 @@ int srv_daemon_run(const srv_config *cfg)
     }
     store_options so = {0};
     so.log = srv_log_store;
+    so.reserve_bytes = cfg->disk_reserve_mb > 0 ? (long long)cfg->disk_reserve_mb << 20 : -1;
     if (store_open(cfg->db, &so, &d.st)) {
         srv_error(0, "%s", store_error()->message);
         srv_auth_destroy(&d.auth);

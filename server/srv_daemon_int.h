@@ -52,12 +52,22 @@ void srv_reply_mpm_error(daemon_t *d, zmq_msg_t *id, const mpm_error *e);
  * spelling ("" or NULL: none), the message without the field. */
 void srv_reply_error(daemon_t *d, zmq_msg_t *id, int code, const char *field, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
-/* Sends a reply (buf, len; taken over) once the store has committed every
- * write run's record had enqueued (store_ticket()): so that a client told
- * "accepted" finds its run recorded, whatever happens to the daemon after
- * the reply.  Later requests of the same client wait behind it. */
-void srv_reply_after_commit(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run,
-                            uint8_t *buf, size_t len);
+/* What a Submit or a Resume does once the write that records it is done:
+ * rc 0 when it is committed, else store_write_result()'s code (MPM_EIO:
+ * its transaction was lost, e.g. the disk is full; MPM_ECONFLICT: refused;
+ * MPM_EUNAVAIL: the daemon stops first) with why; it answers the client
+ * and frees arg. */
+typedef void (*srv_write_fn)(daemon_t *d, zmq_msg_t *id, const char *owner, int rc, const char *why,
+                             void *arg);
+/* Calls fn(arg) once the store is done with write seq (store_last_write()
+ * after the write of run `run`): at once if it is, else from the event
+ * loop, later requests of the same client waiting behind it.  So a client
+ * is told "accepted" only once its run's record is committed, and told
+ * why not when the commit failed. */
+void srv_after_write(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run, uint64_t seq,
+                     srv_write_fn fn, void *arg);
+/* Submits of owner waiting for their commit (counted in its job quota). */
+int srv_writes_waiting(const daemon_t *d, const char *owner);
 /* Unix time now, in seconds. */
 double srv_wall_now(void);
 

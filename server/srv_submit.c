@@ -4,6 +4,15 @@
  * budgets, then the run recorded and its job queued) and Resume (an
  * INTERRUPTED run continued from its checkpoint file, with the same
  * quotas).  Runs on the daemon's main thread, like every request handler.
+ *
+ * Durable before acknowledged.  Both write the run's record, then wait
+ * (srv_after_write) until the store has committed that write; only then is
+ * the job queued and the client told its id.  A write the store lost (a
+ * full disk) or refused gets an error naming the cause, and no job runs.
+ * While the store cannot take new work (store_writable: a lost
+ * transaction, a crash recovery or a run end waiting for room, its disk
+ * reserve spent) both are refused at once; reads go on.  Guarded by
+ * daemon_disk_submit_full and daemon_disk_restart_full.
  */
 #include "srv_ckpt.h"
 #include "srv_daemon_int.h"
@@ -35,7 +44,7 @@ static int quota_refused(daemon_t *d, zmq_msg_t *id, const char *owner, size_t n
         return 1;
     }
     if (q->max_jobs > 0) {
-        int live = srv_pool_owner_jobs(d->pool, owner);
+        int live = srv_pool_owner_jobs(d->pool, owner) + srv_writes_waiting(d, owner);
         if (live >= q->max_jobs) {
             srv_reply_error(d, id, MPM_EFULL, "",
                             "%s has %d queued or running jobs, this server's per-client quota "
@@ -79,12 +88,106 @@ static int resume_refused(daemon_t *d, zmq_msg_t *id, const char *owner, const s
     return 0;
 }
 
+/* Replies UNAVAILABLE and returns 1 while the store takes no new work
+ * (store_writable: the disk is full), else 0. */
+static int store_refuses(daemon_t *d, zmq_msg_t *id, const char *what)
+{
+    char why[512];
+    if (!store_writable(d->st, why, sizeof why)) return 0;
+    srv_reply_error(d, id, MPM_EUNAVAIL, "",
+                    "%s refused: %s; this server takes no new runs until there is room on the "
+                    "disk of %s (reads are served)",
+                    what, why, d->cfg->db);
+    return 1;
+}
+
+/* A submission recorded, waiting for its record's commit (submit_done). */
+typedef struct {
+    mpp_case *sc;
+    int64_t run;
+    double submitted_at;
+    size_t particles, nodes;
+    int dim; /* for the log line */
+    mpm_method method;
+    mpm_update update;
+    mpm_transfer transfer;
+    char name[128];
+} submit_wait;
+
+static void submit_wait_free(submit_wait *w)
+{
+    mpp_case_destroy(&w->sc);
+    free(w);
+}
+
+/* The client is told what became of its run's record: committed, the job
+ * is queued and its id sent; else an error naming the cause, no job. */
+static void submit_done(daemon_t *d, zmq_msg_t *id, const char *owner, int rc, const char *why,
+                        void *arg)
+{
+    submit_wait *w = arg;
+    int64_t run = w->run;
+    if (rc) {
+        srv_warn((uint64_t)run, "submission of %s not accepted: its record was not committed (%s)",
+                 owner, why);
+        /* a record that may exist after all (the store forgot the outcome)
+         * must not stay queued without a job */
+        if (rc == MPM_ESTATE) {
+            store_run_end end = {0};
+            end.status = MPP_STATUS_FAILED;
+            end.error = "not started: its record's commit could not be confirmed";
+            store_run_finish(d->st, run, &end);
+        }
+        srv_reply_error(d, id, rc == MPM_ECONFLICT ? MPM_ECONFLICT : MPM_EUNAVAIL, "",
+                        "the run could not be recorded (%s): no job was queued%s", why,
+                        rc == MPM_EUNAVAIL ? ""
+                                           : "; retry when there is room on the disk of this "
+                                             "server's run store");
+        submit_wait_free(w);
+        return;
+    }
+    /* a watcher may have subscribed before the job existed: it is watched
+     * from its first step */
+    int watched = srv_stream_watched(d->stream, (uint64_t)run);
+    rc = d->pool ? srv_pool_submit(d->pool, (uint64_t)run, &w->sc, w->submitted_at, w->particles,
+                                   w->nodes, watched, owner)
+                 : MPM_EUNAVAIL;
+    if (rc) {
+        store_run_end end = {0};
+        end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
+        end.error = rc == MPM_EFULL      ? "job queue full"
+                    : rc == MPM_EUNAVAIL ? STORE_INTERRUPTED_QUEUED
+                                         : "out of memory";
+        store_run_finish(d->st, run, &end);
+        srv_reply_error(d, id, rc, "", "%s", end.error);
+        submit_wait_free(w);
+        return;
+    }
+    srv_log((uint64_t)run, "queued '%s' of %s: %ldD %s %s %s, %zu particles", w->name, owner,
+            (long)w->dim,
+            w->method == MPM_METHOD_GIMP       ? "GMPM"
+            : w->method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
+            : w->method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
+            : w->method == MPM_METHOD_CPDI     ? "CPDI"
+                                               : "MPM",
+            w->update == MPM_MUSL  ? "musl"
+            : w->update == MPM_USL ? "usl"
+                                   : "usf",
+            w->transfer == MPM_TRANSFER_APIC ? "APIC" : "FLIP", w->particles);
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
+    srv_send_reply(d, id, buf, len);
+    submit_wait_free(w);
+}
+
 void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     if (srv_daemon_stopping(d)) {
         srv_reply_error(d, id, MPM_EUNAVAIL, "", "mpmd is shutting down");
         return;
     }
+    if (store_refuses(d, id, "submission")) return;
     mpp_case *sc = NULL;
     mpm_error cerr;
     /* checked and counted once, under this server's --max-particles */
@@ -153,6 +256,13 @@ void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
         return;
     }
     size_t nodes = sc->info.nodes;
+    submit_wait *w = calloc(1, sizeof *w);
+    if (!w) {
+        srv_reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
+        free(pb);
+        mpp_case_destroy(&sc);
+        return;
+    }
     store_run r = {0};
     r.name = sc->name;
     r.case_pb = pb;
@@ -169,49 +279,79 @@ void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
     r.owner = owner;
     int64_t run = 0;
     rc = store_run_insert(d->st, &r, &run);
+    uint64_t seq = store_last_write();
     free(pb);
     if (rc) {
         srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot record the run: %s",
                         store_error()->message);
         mpp_case_destroy(&sc);
+        free(w);
         return;
     }
-    const char *name = sc->name && sc->name[0] ? sc->name : "(unnamed)";
-    char namebuf[128];
-    snprintf(namebuf, sizeof namebuf, "%s", name);
-    /* a watcher may have subscribed before the job existed: it is watched
-     * from its first step */
-    int watched = srv_stream_watched(d->stream, (uint64_t)run);
-    rc = srv_pool_submit(d->pool, (uint64_t)run, &sc, r.submitted_at, nparticles, nodes, watched,
-                         owner);
-    if (rc) {
-        store_run_end end = {0};
-        end.status = rc == MPM_EUNAVAIL ? MPP_STATUS_INTERRUPTED : MPP_STATUS_FAILED;
-        end.error = rc == MPM_EFULL      ? "job queue full"
-                    : rc == MPM_EUNAVAIL ? STORE_INTERRUPTED_QUEUED
-                                         : "out of memory";
-        store_run_finish(d->st, run, &end);
-        srv_reply_error(d, id, rc, "", "%s", end.error);
-        mpp_case_destroy(&sc);
-        return;
-    }
-    srv_log((uint64_t)run, "queued '%s' of %s: %ldD %s %s %s, %zu particles", namebuf, owner,
-            (long)r.dim,
-            r.method == MPM_METHOD_GIMP       ? "GMPM"
-            : r.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
-            : r.method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
-            : r.method == MPM_METHOD_CPDI     ? "CPDI"
-                                              : "MPM",
-            r.update == MPM_MUSL  ? "musl"
-            : r.update == MPM_USL ? "usl"
-                                  : "usf",
-            r.transfer == MPM_TRANSFER_APIC ? "APIC" : "FLIP", nparticles);
-    uint8_t *buf = NULL;
-    size_t len = 0;
-    mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);
+    snprintf(w->name, sizeof w->name, "%s", sc->name && sc->name[0] ? sc->name : "(unnamed)");
+    w->sc = sc;
+    w->run = run;
+    w->submitted_at = r.submitted_at;
+    w->particles = nparticles;
+    w->nodes = nodes;
+    w->dim = r.dim;
+    w->method = r.method;
+    w->update = r.update;
+    w->transfer = r.transfer;
     /* "accepted" only once the run's row is on disk: a crash after the
-     * reply cannot lose the job */
-    srv_reply_after_commit(d, id, owner, run, buf, len);
+     * reply cannot lose the job, and a lost commit is not acknowledged */
+    srv_after_write(d, id, owner, run, seq, submit_done, w);
+}
+
+/* A resume recorded, waiting for its commit (resume_done). */
+typedef struct {
+    unsigned long long run;
+    mpp_case *sc;
+    srv_ckpt_file ck;
+    double submitted_at, prior_wall;
+    mpm_energy_sample last; /* step -1: none */
+    char who[OWNER_SIZE];   /* the run's owner */
+} resume_wait;
+
+static void resume_done(daemon_t *d, zmq_msg_t *id, const char *owner, int rc, const char *why,
+                        void *arg)
+{
+    resume_wait *w = arg;
+    unsigned long long run = w->run;
+    store_checkpoint rec = w->ck.rec;
+    if (rc) {
+        srv_warn(run, "resume by %s not accepted: its record was not committed (%s)", owner, why);
+        srv_reply_error(d, id, rc == MPM_ECONFLICT ? MPM_ECONFLICT : MPM_EUNAVAIL,
+                        rc == MPM_ECONFLICT ? "run_id" : "",
+                        "the resume of run %llu could not be recorded (%s): the run stays as it "
+                        "was",
+                        run, why);
+    } else {
+        int watched = srv_stream_watched(d->stream, run);
+        size_t np = w->sc->info.particles, nodes = w->sc->info.nodes;
+        rc = d->pool ? srv_pool_resume(d->pool, run, &w->sc, w->submitted_at, np, nodes, watched,
+                                       w->who, &w->ck, w->prior_wall,
+                                       w->last.step >= 0 ? &w->last : NULL)
+                     : MPM_EUNAVAIL;
+        if (rc) {
+            store_run_end end = {0};
+            end.status = MPP_STATUS_INTERRUPTED;
+            end.steps = rec.step;
+            end.error = rc == MPM_EFULL ? "resume refused: job queue full" : "resume failed";
+            store_run_finish(d->st, (int64_t)run, &end);
+            srv_reply_error(d, id, rc, "", "%s", end.error);
+        } else {
+            srv_log(run, "resumed by %s from its checkpoint at step %lld (t = %g)", owner,
+                    (long long)rec.step, rec.t);
+            uint8_t *buf = NULL;
+            size_t len = 0;
+            mpp_reply_submit_ok(run, run, &buf, &len);
+            srv_send_reply(d, id, buf, len);
+        }
+    }
+    mpp_case_destroy(&w->sc);
+    srv_ckpt_file_clear(&w->ck);
+    free(w);
 }
 
 /* Queues an INTERRUPTED run again to continue from its checkpoint file,
@@ -231,6 +371,7 @@ void srv_do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
                         mpp_status_name(ji.status));
         return;
     }
+    if (store_refuses(d, id, "resume")) return;
     int rc = store_run_get(d->st, (int64_t)run, &r), nf = rc == MPM_ENOTFOUND;
     if (rc) {
         srv_reply_error(d, id, nf ? rc : MPM_EINTERNAL, nf ? "run_id" : "", "%s %llu%s%s",
@@ -272,28 +413,25 @@ void srv_do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
             n == 1 && es[0].seq == (uint64_t)(ck.rec.energy_seq - 1))
             last = es[0];
         free(es);
-        int watched = srv_stream_watched(d->stream, run);
-        size_t np = sc->info.particles, nodes = sc->info.nodes;
-        store_checkpoint rec = ck.rec;
-        if ((rc = store_run_resume(d->st, (int64_t)run, &rec))) {
+        resume_wait *w = calloc(1, sizeof *w);
+        if (!w) {
+            srv_reply_error(d, id, MPM_EINTERNAL, "", "out of memory");
+        } else if ((rc = store_run_resume(d->st, (int64_t)run, &ck.rec))) {
             srv_reply_error(d, id, MPM_EINTERNAL, "", "cannot record the resume: %s",
                             store_error()->message);
-        } else if ((rc = srv_pool_resume(d->pool, run, &sc, r.submitted_at, np, nodes, watched, who,
-                                         &ck, isnan(r.wall_s) ? 0 : r.wall_s,
-                                         last.step >= 0 ? &last : NULL))) {
-            store_run_end end = {0};
-            end.status = MPP_STATUS_INTERRUPTED;
-            end.steps = rec.step;
-            end.error = rc == MPM_EFULL ? "resume refused: job queue full" : "resume failed";
-            store_run_finish(d->st, (int64_t)run, &end);
-            srv_reply_error(d, id, rc, "", "%s", end.error);
+            free(w);
         } else {
-            srv_log(run, "resumed by %s from its checkpoint at step %lld (t = %g)", owner,
-                    (long long)rec.step, rec.t);
-            uint8_t *buf = NULL;
-            size_t len = 0;
-            if (!mpp_reply_submit_ok(run, run, &buf, &len))
-                srv_reply_after_commit(d, id, owner, (int64_t)run, buf, len);
+            uint64_t seq = store_last_write();
+            w->run = run;
+            w->sc = sc;
+            sc = NULL;
+            w->ck = ck;
+            memset(&ck, 0, sizeof ck);
+            w->submitted_at = r.submitted_at;
+            w->prior_wall = isnan(r.wall_s) ? 0 : r.wall_s;
+            w->last = last;
+            snprintf(w->who, sizeof w->who, "%s", who);
+            srv_after_write(d, id, owner, (int64_t)run, seq, resume_done, w);
         }
     }
     mpp_case_destroy(&sc);
