@@ -9,7 +9,10 @@
  * and a worker charges each write before it makes it (srv_budget_charge):
  * a write that would pass a budget is not made, and the job ends FAILED
  * with the reason.  A record counts as in store_owner_bytes(): a
- * snapshot's data bytes, STORE_ENERGY_ROW_BYTES per energy sample.
+ * snapshot's data bytes, STORE_ENERGY_ROW_BYTES per energy sample; and a
+ * run's checkpoint file at its size while it is on disk (the new one
+ * charged before it is written, the one it replaces refunded after the
+ * rename, the last refunded when it is removed: srv_pool.c).
  * Thread-safe (one mutex, taken per write, never per step).
  */
 #ifndef SRV_BUDGET_H

@@ -37,7 +37,7 @@ typedef struct {
     uint64_t sum; /* of the 56 bytes before it and the blob */
 } ck_header;
 
-_Static_assert(sizeof(ck_header) == 64, "the checkpoint header is 64 bytes");
+_Static_assert(sizeof(ck_header) == SRV_CKPT_HEADER, "the checkpoint header is 64 bytes");
 
 static uint64_t mix(uint64_t h, const uint8_t *p, size_t n)
 {

@@ -22,6 +22,9 @@
 #include "mpm.h"
 #include "store.h"
 
+/* Bytes of a checkpoint file before the solver's blob. */
+#define SRV_CKPT_HEADER 64
+
 /* A checkpoint read back: the record of its header and the solver's blob
  * (blob_len bytes inside `buf`, which srv_ckpt_file_clear() frees). */
 typedef struct {

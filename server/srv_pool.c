@@ -171,6 +171,7 @@ typedef struct {
     int64_t recorded;  /* bytes this job has recorded (charged) */
     int over;          /* a disk budget refused a write: the job ends */
     char overwhy[512]; /* why */
+    int64_t ck_bytes;  /* the size of its checkpoint file on disk (charged) */
 } ctx;
 
 /* Charges n bytes the job is about to record (srv_budget.h): 0, or -1
@@ -604,15 +605,31 @@ static int take_checkpoint(ctx *c, mpm_sim *sim, srv_ckpt_buf *b, int64_t *ck_st
      * dies (a failed write shows in store_losses(), which ends the run) */
     flush_samples(c);
     store_flush(c->p->st);
+    /* the disk budgets count the file at its size while it exists, and
+     * the new one beside the old until the rename replaces it (guarded by
+     * daemon_disk_checkpoint_budget) */
+    int64_t need = (int64_t)(mpm_sim_checkpoint_size(sim) + SRV_CKPT_HEADER);
+    if (charge(c, need)) {
+        char why[sizeof c->overwhy + 96];
+        snprintf(why, sizeof why, "checkpoint at step %lld (%lld bytes) not written: %s",
+                 (long long)mpm_sim_steps(sim), (long long)need, c->overwhy);
+        memcpy(c->overwhy, why, sizeof c->overwhy - 1);
+        c->overwhy[sizeof c->overwhy - 1] = 0;
+        srv_warn(j->id, "%s", why);
+        return MPM_ETOOBIG;
+    }
     store_checkpoint rec;
     char err[1600];
     int rc = srv_ckpt_write(c->p->cfg->db, (int64_t)j->id, sim, (int64_t)j->energy_seq, b, &rec,
                             err, sizeof err);
     if (rc) {
+        refund(c, need);
         srv_warn(j->id, "checkpoint at step %lld not saved: %s", (long long)mpm_sim_steps(sim),
                  err);
         return rc;
     }
+    refund(c, c->ck_bytes); /* the previous file is gone */
+    c->ck_bytes = need;
     *ck_step = rec.step;
     if (store_run_checkpoint(c->p->st, (int64_t)j->id, &rec))
         srv_warn(j->id, "checkpoint at step %lld not recorded: %s", (long long)rec.step,
@@ -630,6 +647,10 @@ static int resume_load(ctx *c, mpm_sim *sim)
     mpm_error me;
     if (mpm_sim_checkpoint_load(sim, j->ck.blob, j->ck.blob_len, &me) == 0) {
         j->energy_seq = (uint64_t)j->ck.rec.energy_seq;
+        /* its file is on disk, counted by the owner's and the server's
+         * budgets already: the job's own count takes it too */
+        c->ck_bytes = j->ck.rec.bytes;
+        c->recorded += c->ck_bytes;
         srv_log(j->id, "resumed from its checkpoint at step %lld, t = %g",
                 (long long)j->ck.rec.step, j->ck.rec.t);
         srv_ckpt_file_clear(&j->ck); /* the blob is in sim now */
@@ -646,7 +667,7 @@ static int resume_load(ctx *c, mpm_sim *sim)
 
 static void run_job(srv_pool *p, void *push, srv_job *j)
 {
-    ctx c = {p, push, j, "", NULL, 0, 0, ""};
+    ctx c = {p, push, j, "", NULL, 0, 0, "", 0};
     srv_topic(j->id, c.topic);
     mpp_case *sc = j->sc;
     const srv_config *cfg = p->cfg;
@@ -692,6 +713,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         return;
     }
     double ck_last = mono_now();
+    int ck_tried = 0;
     int snaps_ok = 1, status = MPP_STATUS_FINISHED;
     char why[512] = "", loss[400];
     /* writes the store loses whole (a full disk) end the run: its record
@@ -746,8 +768,11 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             if (watched || sc->record_snapshots)
                 snaps_ok = snapshot(&c, sim, &sb, watched, sc->record_snapshots) == 0;
         }
+        /* at most one checkpoint per --checkpoint-min-s of wall time (the
+         * first whenever the schedule says) */
         if (ck_on &&
             ((ck_steps && k % ck_steps == 0) || (ck_wall > 0 && mono_now() - ck_last >= ck_wall)) &&
+            (!ck_tried || mono_now() - ck_last >= cfg->checkpoint_min_s) &&
             !(sc->has_end_time ? mpm_sim_time(sim) >= sc->end_time - 0.5 * mpm_sim_dt(sim)
                                : k >= (int64_t)sc->steps)) {
             /* (none after the last step: the run ends there.)  The solver
@@ -755,6 +780,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             int rc = take_checkpoint(&c, sim, &ckb, &ck_step);
             if (rc && rc != MPM_EIO) ck_on = 0;
             ck_last = mono_now();
+            ck_tried = 1;
         }
         if ((k & 31) == 0) {
             double w = mono_now() - t0;
@@ -834,6 +860,8 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     if (status != MPP_STATUS_INTERRUPTED && ck_step >= 0) {
         if (srv_ckpt_remove(cfg->db, (int64_t)j->id))
             srv_warn(j->id, "its checkpoint file not removed: %s", strerror(errno));
+        else
+            refund(&c, c.ck_bytes);
         if (store_run_checkpoint(p->st, (int64_t)j->id, NULL))
             srv_warn(j->id, "checkpoint removal not recorded: %s", store_error()->message);
     }
@@ -1103,6 +1131,10 @@ int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len)
         if (j->resume && (srv_ckpt_remove(p->cfg->db, (int64_t)id) ||
                           store_run_checkpoint(p->st, (int64_t)id, NULL)))
             srv_warn(id, "its checkpoint not removed");
+        else if (j->resume && p->budget) {
+            int64_t none = j->ck.rec.bytes; /* its file no longer takes room */
+            srv_budget_refund(p->budget, j->owner, &none, j->ck.rec.bytes);
+        }
         srv_log(id, "cancelled while queued");
         job_free(j);
     }
