@@ -629,11 +629,11 @@ int sti_upkeep(store *s)
         if (rc != SQLITE_OK) {
             if (!sqlite3_get_autocommit(s->wdb) && ws_simple(s, WS_ROLLBACK) != SQLITE_OK)
                 sti_log(s, "ROLLBACK: %s", sqlite3_errmsg(s->wdb));
-            s->rec_running = run0;
-            s->rec_queued = queued0;
             char why[200];
             snprintf(why, sizeof why, "%s (%s)", sqlite3_errstr(rc ? rc : SQLITE_ERROR), what);
             pthread_mutex_lock(&s->mu);
+            s->rec_running = run0; /* rolled back */
+            s->rec_queued = queued0;
             s->degraded = 1;
             snprintf(s->degraded_why, sizeof s->degraded_why, "%s", why);
             pthread_mutex_unlock(&s->mu);
