@@ -228,7 +228,8 @@ void sti_ends_drop(store *s, size_t n)
             cleared = 1;
         s->ends_used &= ~(1ull << slot);
     }
-    memmove(s->defer, s->defer + n, (s->ndefer - n) * sizeof *s->defer);
+    if (n && s->ndefer > n)
+        memmove(s->defer, s->defer + n, (s->ndefer - n) * sizeof *s->defer);
     s->ndefer -= n;
     for (size_t i = 0; i < s->ndefer; i++)
         fix_texts(&s->defer[i], s->defer[i].end.error != NULL, s->defer[i].end.warning != NULL);
