@@ -76,6 +76,16 @@ static long long disk_fill(const char *dir)
     return n;
 }
 
+/* Gives back the last `bytes` of the filler (a nearly full disk). */
+static void disk_slack(const char *dir, long long bytes)
+{
+    char path[400];
+    struct stat st;
+    snprintf(path, sizeof path, "%s/filler", dir);
+    if (stat(path, &st) == 0 && truncate(path, st.st_size > bytes ? st.st_size - bytes : 0))
+        TLOG("truncate %s: %s", path, strerror(errno));
+}
+
 static void disk_free(const char *dir)
 {
     char path[400];
@@ -147,8 +157,8 @@ static int names_disk(const char *msg)
 
 /* ---- submissions on a full disk ----------------------------------------------------- */
 
-/* Submits `tries` jobs onto a full disk (no reserve: each may reach the
- * commit); *acked and *refused count the outcomes, *lost the acknowledged
+/* Submits `tries` jobs onto a nearly full disk (no reserve: each may
+ * reach the commit); *acked and *refused count the outcomes, *lost the acknowledged
  * jobs not found (must be 0).  Fails the test otherwise. */
 static void submit_probe(const char *name, int tries, int *acked, int *refused, int *lost)
 {
@@ -175,8 +185,11 @@ static void submit_probe(const char *name, int tries, int *acked, int *refused, 
         t_fail(__FILE__, __LINE__, "run 1: %s", st);
         goto out;
     }
+    /* nearly full: the first submissions fit, the disk fills under the
+     * next ones and their jobs */
     long long filled = disk_fill(disk);
-    TLOG("disk filled: %lld bytes added", filled);
+    disk_slack(disk, 128 * 1024);
+    TLOG("disk filled: %lld bytes added, 128 KiB left", filled);
     int n_ids = 0;
     for (int i = 0; i < tries && i < 200; i++) {
         if (td_ctl(&d, 30, &o, "submit", path, NULL) || o.status < 0) {

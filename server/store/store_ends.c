@@ -228,8 +228,7 @@ void sti_ends_drop(store *s, size_t n)
             cleared = 1;
         s->ends_used &= ~(1ull << slot);
     }
-    if (n && s->ndefer > n)
-        memmove(s->defer, s->defer + n, (s->ndefer - n) * sizeof *s->defer);
+    if (n && s->ndefer > n) memmove(s->defer, s->defer + n, (s->ndefer - n) * sizeof *s->defer);
     s->ndefer -= n;
     for (size_t i = 0; i < s->ndefer; i++)
         fix_texts(&s->defer[i], s->defer[i].end.error != NULL, s->defer[i].end.warning != NULL);
@@ -294,9 +293,12 @@ int sti_reserve_make(store *s)
 {
     if (s->reserve_bytes <= 0) return 0;
     int fd = open(s->reserve_path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
-    if (fd < 0) return -1;
-    int e = posix_fallocate(fd, 0, (off_t)s->reserve_bytes);
+    int e = fd < 0 ? errno : posix_fallocate(fd, 0, (off_t)s->reserve_bytes);
     if (e) {
+        pthread_mutex_lock(&s->mu);
+        snprintf(s->reserve_why, sizeof s->reserve_why, "%s", strerror(e));
+        pthread_mutex_unlock(&s->mu);
+        if (fd < 0) return -1;
         /* no room: nothing half-allocated stays */
         if (ftruncate(fd, 0)) {
         }

@@ -183,6 +183,7 @@ struct store {
     char *ends_path, *reserve_path;
     long long reserve_bytes; /* 0: no reserve */
     int reserve_ok;          /* the reserve file is in place */
+    char reserve_why[96];    /* why it could not be made */
     double reserve_next;     /* monotonic time of the next attempt */
     fail_range fails[FAIL_RING];
     unsigned nfails; /* ranges recorded so far (ring index = n % FAIL_RING) */

@@ -1189,8 +1189,8 @@ int store_writable(store *s, char *why, size_t len)
     else if (s->ndefer)
         snprintf(b, sizeof b, "%zu run end(s) wait for room on the disk", s->ndefer);
     else if (s->reserve_bytes > 0 && !s->reserve_ok)
-        snprintf(b, sizeof b, "less than its reserve of %lld KiB is free on the disk",
-                 s->reserve_bytes / 1024);
+        snprintf(b, sizeof b, "its disk reserve of %lld KiB cannot be allocated (%s)",
+                 s->reserve_bytes / 1024, s->reserve_why[0] ? s->reserve_why : "released");
     pthread_mutex_unlock(&s->mu);
     if (!b[0]) return 0;
     if (why && len) snprintf(why, len, "the run store cannot take new work: %s", b);
