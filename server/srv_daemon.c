@@ -537,7 +537,8 @@ void srv_after_write(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run,
 int srv_writes_waiting(const daemon_t *d, const char *owner)
 {
     int n = 0;
-    for (const pending *q = d->pending; q; q = q->next) n += q->fn && !strcmp(q->owner, owner);
+    for (const pending *q = d->pending; q; q = q->next)
+        n += q->fn && (!owner || !strcmp(q->owner, owner));
     return n;
 }
 

@@ -66,7 +66,8 @@ typedef void (*srv_write_fn)(daemon_t *d, zmq_msg_t *id, const char *owner, int 
  * why not when the commit failed. */
 void srv_after_write(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run, uint64_t seq,
                      srv_write_fn fn, void *arg);
-/* Submits of owner waiting for their commit (counted in its job quota). */
+/* Submits and resumes of owner (NULL: anyone's) waiting for their commit:
+ * counted in its job quota and against the pool's room. */
 int srv_writes_waiting(const daemon_t *d, const char *owner);
 /* Unix time now, in seconds. */
 double srv_wall_now(void);

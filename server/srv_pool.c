@@ -34,6 +34,7 @@
 #include "srv_log.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -968,14 +969,20 @@ void srv_pool_set_budget(srv_pool *p, srv_budget *b)
 
 int srv_pool_has_room(srv_pool *p)
 {
+    return srv_pool_room(p) > 0;
+}
+
+int srv_pool_room(srv_pool *p)
+{
     pthread_mutex_lock(&p->mu);
     int busy = 0;
     for (int i = 0; i < p->nworkers; i++) busy += p->running[i] != NULL;
     /* a job goes straight to an idle worker, or waits in the queue */
-    int room =
-        !p->stopping && p->nqueued + (size_t)busy < (size_t)p->nworkers + (size_t)p->cfg->queue_max;
+    long room = p->stopping
+                    ? 0
+                    : (long)p->nworkers + (long)p->cfg->queue_max - (long)p->nqueued - (long)busy;
     pthread_mutex_unlock(&p->mu);
-    return room;
+    return room > 0 ? (int)(room > INT_MAX ? INT_MAX : room) : 0;
 }
 
 static srv_job *job_new(uint64_t id, double submitted_at, size_t particles, size_t nodes,

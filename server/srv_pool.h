@@ -78,6 +78,8 @@ int srv_pool_owner_jobs(srv_pool *p, const char *owner);
 
 /* 1 if the queue has room for another job. */
 int srv_pool_has_room(srv_pool *p);
+/* How many more jobs it takes now (idle workers and free queue places). */
+int srv_pool_room(srv_pool *p);
 
 /* State of a queued or running job: 0, or -1 if it is not live. */
 int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out);

@@ -79,7 +79,7 @@ static int resume_refused(daemon_t *d, zmq_msg_t *id, const char *owner, const s
             return 1;
         }
     }
-    if (!srv_pool_has_room(d->pool)) {
+    if (srv_pool_room(d->pool) <= srv_writes_waiting(d, NULL)) {
         srv_reply_error(d, id, MPM_EFULL, "",
                         "the job queue is full (%d running, %d queued at most); retry later",
                         d->cfg->workers, d->cfg->queue_max);
@@ -238,7 +238,7 @@ void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
         mpp_case_destroy(&sc);
         return;
     }
-    if (!srv_pool_has_room(d->pool)) {
+    if (srv_pool_room(d->pool) <= srv_writes_waiting(d, NULL)) {
         srv_reply_error(d, id, MPM_EFULL, "",
                         "the job queue is full (%d running, %d queued at most); retry later",
                         d->cfg->workers, d->cfg->queue_max);
