@@ -42,9 +42,10 @@ static const setting settings[] = {
     {"checkpoint-every-s", NULL, T_DBL, F(checkpoint_every_s), 0, 1e9,
      "wall seconds between checkpoints of a run whose case sets none (files in <db>.ckpt/, "
      "for mpmctl resume), 0 = none (default 300)"},
-    {"checkpoint-min-s", NULL, T_DBL, F(checkpoint_min_s), 0, 1e9,
-     "wall seconds a job's checkpoints are apart at least, whatever its case asks (each one "
-     "rewrites the whole state) (default 1)"},
+    {"checkpoint-share", NULL, T_DBL, F(checkpoint_share), 0.001, 1,
+     "share of a job's wall time its checkpoints may take: one due sooner after the last than "
+     "(1 - share) / share times the last one's duration is skipped, 1 = none skipped "
+     "(default 0.1)"},
     {"disk-reserve-mb", NULL, T_INT, F(disk_reserve_mb), 0, 1024,
      "MiB kept allocated beside the database for its own writes on a full disk; new runs "
      "are refused while it cannot be kept, 0 = none (default 1)"},
@@ -127,7 +128,7 @@ static void defaults(srv_config *c)
     c->max_steps = 100000000;
     c->max_wall_s = 0;
     c->checkpoint_every_s = 300;
-    c->checkpoint_min_s = 1;
+    c->checkpoint_share = 0.1;
     c->disk_reserve_mb = 1;
     c->max_request_bytes = 8LL << 20;
     c->connection_reply_buffer_mb = 16;

@@ -25,7 +25,7 @@ typedef struct {
     long long max_steps;            /* per job */
     double max_wall_s;              /* per job, 0 = none */
     double checkpoint_every_s;      /* checkpoint interval of a case without one, 0 = none */
-    double checkpoint_min_s;        /* wall seconds between two checkpoints of a job, at least */
+    double checkpoint_share;        /* share of a job's wall time its checkpoints may take */
     int disk_reserve_mb;            /* the store's disk reserve (0: none) */
     long long max_request_bytes;    /* largest request accepted */
     int stream_buffer_mb;           /* MB queued for one watcher, all its jobs (0: no bound) */

@@ -713,8 +713,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         mpm_sim_destroy(&sim);
         return;
     }
-    double ck_last = mono_now();
-    int ck_tried = 0;
+    double ck_last = mono_now(), ck_cost = 0; /* the last one's duration */
     int snaps_ok = 1, status = MPP_STATUS_FINISHED;
     char why[512] = "", loss[400];
     /* writes the store loses whole (a full disk) end the run: its record
@@ -769,19 +768,22 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
             if (watched || sc->record_snapshots)
                 snaps_ok = snapshot(&c, sim, &sb, watched, sc->record_snapshots) == 0;
         }
-        /* at most one checkpoint per --checkpoint-min-s of wall time (the
-         * first whenever the schedule says) */
+        /* the checkpoints take at most --checkpoint-share of the job's
+         * wall time: one comes at least (1 - share) / share times the
+         * last one's duration after it, whatever the schedule asks
+         * (guarded by daemon_disk_checkpoint_budget) */
         if (ck_on &&
             ((ck_steps && k % ck_steps == 0) || (ck_wall > 0 && mono_now() - ck_last >= ck_wall)) &&
-            (!ck_tried || mono_now() - ck_last >= cfg->checkpoint_min_s) &&
+            mono_now() - ck_last >= ck_cost * (1 - cfg->checkpoint_share) / cfg->checkpoint_share &&
             !(sc->has_end_time ? mpm_sim_time(sim) >= sc->end_time - 0.5 * mpm_sim_dt(sim)
                                : k >= (int64_t)sc->steps)) {
             /* (none after the last step: the run ends there.)  The solver
              * or memory refusing is for good; a file error may pass */
+            double ck_t0 = mono_now();
             int rc = take_checkpoint(&c, sim, &ckb, &ck_step);
             if (rc && rc != MPM_EIO) ck_on = 0;
             ck_last = mono_now();
-            ck_tried = 1;
+            ck_cost = ck_last - ck_t0;
         }
         if ((k & 31) == 0) {
             double w = mono_now() - t0;
