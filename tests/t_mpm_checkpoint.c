@@ -648,6 +648,38 @@ TEST(ckpt_refuses_other_case)
         TLOG("%-14s refused: %s", v[i].what, err.message);
     }
     free(blob);
+    /* a Drucker-Prager case: each of its own parameters is in the
+     * fingerprint (friction and dilatancy angle, cohesion, tension
+     * cut-off, the substepping's tolerance) */
+    ck_spec dp = ck_small;
+    dp.model = DP;
+    ck_build(&k, &dp);
+    a = mpm_sim_new(&k.c, NULL, &err);
+    CHECKF(a, "%s", err.message);
+    CHECK(ck_run(a, &dp, 5) == 0);
+    blob = ck_save(a, &len);
+    mpm_sim_destroy(&a);
+    CHECK(blob);
+    for (int w = 0; w < 6; w++) {
+        ck_case o;
+        ck_build(&o, &dp);
+        if (w == 1) o.mat.friction_angle = 35;
+        if (w == 2) o.mat.dilatancy_angle = 10;
+        if (w == 3) o.mat.cohesion = 300;
+        if (w == 4) o.mat.tension_cutoff = 10;
+        if (w == 5) o.mat.substep_tolerance = 1e-3;
+        mpm_sim *b = mpm_sim_new(&o.c, NULL, &err);
+        CHECKF(b, "DP variant %d: %s", w, err.message);
+        int rc = mpm_sim_checkpoint_load(b, blob, len, &err);
+        mpm_sim_destroy(&b);
+        if (w == 0) {
+            CHECKF(rc == 0, "DP, the same case: %s", err.message);
+            continue;
+        }
+        CHECKF(rc == MPM_EINVAL && strstr(err.message, "another case of the same layout"),
+               "DP variant %d: code %d %s", w, rc, err.message);
+    }
+    free(blob);
 }
 
 /* Saved with 2 threads, loaded into a 1-thread simulation of the same case:

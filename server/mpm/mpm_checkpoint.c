@@ -282,6 +282,23 @@ static uint64_t fingerprint_of(const mpm_sim *s, const uint64_t L[L_COUNT])
         const mpm_mat_params *m = &s->mats[i];
         double mv[9] = {m->E, m->nu, m->rho, m->lambda, m->mu, m->c, m->K, m->sy0, m->H};
         h = hash_bytes(mv, sizeof mv, h);
+        /* Drucker-Prager's and Mohr-Coulomb's own parameters, field by
+         * field (the struct's padding is not hashed); elastic and J2
+         * materials hash as before (ckpt_refuses_other_case) */
+        const mpm_plastic_params *pl = m->pl;
+        if (pl) {
+            double pv[10] = {pl->phi,
+                             pl->psi,
+                             pl->c,
+                             pl->tension,
+                             pl->tol,
+                             pl->ftol,
+                             (double)pl->max_substeps,
+                             (double)pl->match,
+                             (double)pl->kind,
+                             pl->E};
+            h = hash_bytes(pv, sizeof pv, h);
+        }
     }
     return h;
 }
@@ -506,8 +523,8 @@ static int check_blob(const mpm_sim *s, const unsigned char *b, size_t n, ck_hea
     if (fingerprint_of(s, L) != h->fingerprint)
         return mpm_fail(err, MPM_EINVAL, CK_FIELD,
                         "saved from another case of the same layout: the grid's spacing or "
-                        "origin, the time step, the materials, gravity, the PIC fraction or "
-                        "the damping differ");
+                        "origin, the time step, the materials (their parameters), gravity, "
+                        "the PIC fraction or the damping differ");
     return 0;
 }
 
