@@ -164,16 +164,8 @@ static void submit_done(daemon_t *d, zmq_msg_t *id, const char *owner, int rc, c
         return;
     }
     srv_log((uint64_t)run, "queued '%s' of %s: %ldD %s %s %s, %zu particles", w->name, owner,
-            (long)w->dim,
-            w->method == MPM_METHOD_GIMP       ? "GMPM"
-            : w->method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
-            : w->method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
-            : w->method == MPM_METHOD_CPDI     ? "CPDI"
-                                               : "MPM",
-            w->update == MPM_MUSL  ? "musl"
-            : w->update == MPM_USL ? "usl"
-                                   : "usf",
-            w->transfer == MPM_TRANSFER_APIC ? "APIC" : "FLIP", w->particles);
+            (long)w->dim, mpm_method_name(w->method), mpm_update_name(w->update),
+            mpm_transfer_name(w->transfer), w->particles);
     uint8_t *buf = NULL;
     size_t len = 0;
     mpp_reply_submit_ok((uint64_t)run, (uint64_t)run, &buf, &len);

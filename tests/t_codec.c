@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mpmd.pb-c.h"
 #include "mpp_case.h"
 #include "mpp_endpoint.h"
 #include "mpp_json.h"
@@ -1129,4 +1130,72 @@ TEST(codec_cpdi_example_runs)
     mpm_sim_destroy(&s);
     mpp_case_destroy(&sc);
     CHECK(rc == 0);
+}
+
+/* int-typed views of the name table's functions, for one loop below */
+static const char *names_method(int v)
+{
+    return mpm_method_name((mpm_method)v);
+}
+static const char *keys_method(int v)
+{
+    return mpm_method_key((mpm_method)v);
+}
+static const char *names_update(int v)
+{
+    return mpm_update_name((mpm_update)v);
+}
+static const char *keys_update(int v)
+{
+    return mpm_update_key((mpm_update)v);
+}
+static const char *names_transfer(int v)
+{
+    return mpm_transfer_name((mpm_transfer)v);
+}
+static const char *keys_transfer(int v)
+{
+    return mpm_transfer_key((mpm_transfer)v);
+}
+
+/* The solver's one name table (mpm_names.c) against the schema's enums:
+ * every method, update and transfer has the protocol's name for its value,
+ * its key is that name in lower case, and parsing takes both spellings
+ * back to the value; a value outside the enum is "?" and an unknown name
+ * -1. */
+TEST(codec_names_match_proto)
+{
+    static const struct {
+        const ProtobufCEnumDescriptor *d;
+        const char *(*name)(int), *(*key)(int);
+        int (*parse)(const char *);
+        int n;
+    } t[] = {
+        {&mpmd__case__method__descriptor, names_method, keys_method, mpm_method_parse,
+         MPM_N_METHODS},
+        {&mpmd__case__update__descriptor, names_update, keys_update, mpm_update_parse,
+         MPM_N_UPDATES},
+        {&mpmd__case__transfer__descriptor, names_transfer, keys_transfer, mpm_transfer_parse,
+         MPM_N_TRANSFERS},
+    };
+    for (size_t i = 0; i < sizeof t / sizeof t[0]; i++) {
+        CHECK((int)t[i].d->n_values == t[i].n);
+        for (int v = 0; v < t[i].n; v++) {
+            const ProtobufCEnumValue *ev = protobuf_c_enum_descriptor_get_value(t[i].d, v);
+            CHECK(ev != NULL);
+            if (!ev) continue;
+            CHECKF(!strcmp(ev->name, t[i].name(v)), "%s: %s vs %s", t[i].d->name, ev->name,
+                   t[i].name(v));
+            char low[32];
+            size_t k = 0;
+            for (; ev->name[k] && k + 1 < sizeof low; k++)
+                low[k] = (char)(ev->name[k] >= 'A' && ev->name[k] <= 'Z' ? ev->name[k] + 32
+                                                                         : ev->name[k]);
+            low[k] = 0;
+            CHECK(!strcmp(low, t[i].key(v)));
+            CHECK(t[i].parse(ev->name) == v && t[i].parse(low) == v);
+        }
+        CHECK(!strcmp(t[i].name(t[i].n), "?"));
+        CHECK(t[i].parse("no such name") == -1 && t[i].parse(NULL) == -1);
+    }
 }

@@ -97,17 +97,12 @@ int main(int argc, char **argv)
         }
         if (rc) return 2;
     }
-    mpm_update up;
-    if (!strcmp(update, "usf"))
-        up = MPM_USF;
-    else if (!strcmp(update, "usl"))
-        up = MPM_USL;
-    else if (!strcmp(update, "musl"))
-        up = MPM_MUSL;
-    else {
+    int upi = mpm_update_parse(update);
+    if (upi < 0) {
         fprintf(stderr, "mpmrun: --update: expected usf, usl or musl, got '%s'\n", update);
         return 2;
     }
+    mpm_update up = (mpm_update)upi;
 
     mpm_paper P;
     int kind; /* 0 point, 1 bar, 2 disks */
@@ -137,42 +132,28 @@ int main(int argc, char **argv)
                 cname);
         return 2;
     }
-    if (method) {
-        if (!strcmp(method, "mpm"))
-            P.c.method = MPM_METHOD_MPM;
-        else if (!strcmp(method, "gimp"))
-            P.c.method = MPM_METHOD_GIMP;
-        else if (!strcmp(method, "bspline2"))
-            P.c.method = MPM_METHOD_BSPLINE2;
-        else if (!strcmp(method, "bspline3"))
-            P.c.method = MPM_METHOD_BSPLINE3;
-        else if (!strcmp(method, "cpdi"))
-            P.c.method = MPM_METHOD_CPDI;
-        else {
-            fprintf(stderr,
-                    "mpmrun: --method: expected mpm, gimp, bspline2, bspline3 or cpdi, got '%s'\n",
-                    method);
-            mpm_paper_free(&P);
-            return 2;
-        }
+    int mm = method ? mpm_method_parse(method) : (int)P.c.method;
+    if (mm < 0) {
+        fprintf(stderr,
+                "mpmrun: --method: expected mpm, gimp, bspline2, bspline3 or cpdi, got '%s'\n",
+                method);
+        mpm_paper_free(&P);
+        return 2;
     }
-    if (!strcmp(transfer, "apic"))
-        P.c.transfer = MPM_TRANSFER_APIC;
-    else if (strcmp(transfer, "flip")) {
+    P.c.method = (mpm_method)mm;
+    int tr = mpm_transfer_parse(transfer);
+    if (tr < 0) {
         fprintf(stderr, "mpmrun: --transfer: expected flip or apic, got '%s'\n", transfer);
         mpm_paper_free(&P);
         return 2;
     }
+    P.c.transfer = (mpm_transfer)tr;
     P.c.cfl = cfl;
     P.c.threads = (int)threads;
 
     char err[512];
     mpm_error me;
-    const char *mname = P.c.method == MPM_METHOD_GIMP       ? "GMPM"
-                        : P.c.method == MPM_METHOD_BSPLINE2 ? "B-spline 2"
-                        : P.c.method == MPM_METHOD_BSPLINE3 ? "B-spline 3"
-                        : P.c.method == MPM_METHOD_CPDI     ? "CPDI"
-                                                            : "MPM";
+    const char *mname = mpm_method_name(P.c.method);
     mpm_sim *s = mpm_sim_new(&P.c, NULL, &me);
     mpm_paper_free(&P);
     if (!s) {

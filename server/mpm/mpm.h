@@ -46,6 +46,8 @@ typedef enum {
     MPM_METHOD_CPDI = 4
 } mpm_method;
 typedef enum { MPM_USF = 0, MPM_USL = 1, MPM_MUSL = 2 } mpm_update;
+#define MPM_N_METHODS 5
+#define MPM_N_UPDATES 3
 /* Constitutive models (docs/solver.md, "Material models").  LINEAR_ELASTIC:
  * small-strain incremental elasticity (today's, bit for bit).  NEO_HOOKEAN:
  * compressible hyperelastic, sigma = mu/J (b - I) + lambda ln J / J I from
@@ -86,6 +88,22 @@ typedef enum { MPM_SHAPE_BOX = 0, MPM_SHAPE_SPHERE = 1 } mpm_shape;
  * angular momentum exactly (to round-off) and keeps affine velocity fields
  * without the dissipation of PIC. */
 typedef enum { MPM_TRANSFER_FLIP = 0, MPM_TRANSFER_APIC = 1 } mpm_transfer;
+#define MPM_N_TRANSFERS 2
+
+/* The names of the choices above (mpm_names.c, one table): _name is the
+ * case schema's enum spelling ("BSPLINE2", "MUSL", "APIC"), _key the
+ * lower-case spelling the run store records ("bspline2"); "?" for a value
+ * outside the enum.  _parse takes either, in any case, and returns the
+ * value or -1. */
+const char *mpm_method_name(mpm_method m);
+const char *mpm_method_key(mpm_method m);
+int mpm_method_parse(const char *s);
+const char *mpm_update_name(mpm_update u);
+const char *mpm_update_key(mpm_update u);
+int mpm_update_parse(const char *s);
+const char *mpm_transfer_name(mpm_transfer t);
+const char *mpm_transfer_key(mpm_transfer t);
+int mpm_transfer_parse(const char *s);
 
 /* The particle kernels' instruction set (mpm_case.kernels).  AUTO takes
  * the AVX2+FMA kernels where the CPU has both (x86-64) and the portable

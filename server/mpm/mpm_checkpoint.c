@@ -425,9 +425,6 @@ int mpm_sim_checkpoint_save(const mpm_sim *s, void *buf, size_t n)
  * the arrays by name, counts as numbers. */
 static const char *layout_value(int i, uint64_t v, char *buf, size_t n)
 {
-    static const char *const method[] = {"MPM", "GIMP", "BSPLINE2", "BSPLINE3", "CPDI"};
-    static const char *const update[] = {"USF", "USL", "MUSL"};
-    static const char *const transfer[] = {"FLIP", "APIC"};
     static const char *const volume[] = {"STRAIN_INCREMENT", "DET_F", "CONSTANT"};
     static const char *const damping[] = {"NONE", "LOCAL", "VISCOUS"};
     static const char *const arrays[] = {"half-widths",    "F",        "APIC B",
@@ -435,10 +432,17 @@ static const char *layout_value(int i, uint64_t v, char *buf, size_t n)
                                          "strain",         "stress zz"};
     const char *const *names = NULL;
     size_t nn = 0;
-    switch (i) {
-    case L_METHOD: names = method, nn = 5; break;
-    case L_UPDATE: names = update, nn = 3; break;
-    case L_TRANSFER: names = transfer, nn = 2; break;
+    switch (i) { /* the choices' names from their table (mpm_names.c) */
+    case L_METHOD:
+        if (v < MPM_N_METHODS) return snprintf(buf, n, "%s", mpm_method_name((mpm_method)v)), buf;
+        break;
+    case L_UPDATE:
+        if (v < MPM_N_UPDATES) return snprintf(buf, n, "%s", mpm_update_name((mpm_update)v)), buf;
+        break;
+    case L_TRANSFER:
+        if (v < MPM_N_TRANSFERS)
+            return snprintf(buf, n, "%s", mpm_transfer_name((mpm_transfer)v)), buf;
+        break;
     case L_VOLUME: names = volume, nn = 3; break;
     case L_DAMPING: names = damping, nn = 3; break;
     default: break;

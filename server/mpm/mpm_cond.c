@@ -38,7 +38,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const char *const method_name[5] = {"MPM", "GIMP", "BSPLINE2", "BSPLINE3", "CPDI"};
 static const char *const face_name[6] = {"x_lo", "x_hi", "y_lo", "y_hi", "z_lo", "z_hi"};
 
 /* ---- checking ---- */
@@ -517,7 +516,7 @@ static int friction_elastic(const mpm_sim *s, char *msg, size_t n)
                  "the body, its sliding can feed a friction-driven vibration that adds "
                  "friction (a block's acceleration 4-33 %% low, docs/accuracy.md, \"Friction "
                  "faces\"); compare with a coarser grid",
-                 mu, method_name[s->method], MPM_FRICTION_ELASTIC_MU);
+                 mu, mpm_method_name(s->method), MPM_FRICTION_ELASTIC_MU);
     return 1;
 }
 

@@ -207,11 +207,7 @@ struct store {
 /* status_names[st - MPP_STATUS_MIN] for an mpp_status st. */
 #define STORE_NSTATUS (MPP_STATUS_MAX - MPP_STATUS_MIN + 1)
 extern const char *const sti_status_names[STORE_NSTATUS];
-#define STORE_NMETHOD 5
-extern const char *const sti_method_names[STORE_NMETHOD];
-extern const char *const sti_update_names[3];
-#define STORE_NTRANSFER 2
-extern const char *const sti_transfer_names[STORE_NTRANSFER];
+/* methods, updates and transfers: their keys (mpm_method_key(), ...) */
 int sti_status_ok(mpp_status st);
 int sti_method_ok(mpm_method m);
 int sti_update_ok(mpm_update u);

@@ -249,19 +249,11 @@ const char *store_sqlite_version(void)
 
 const char *const sti_status_names[STORE_NSTATUS] = {"queued", "running",   "finished",
                                                      "failed", "cancelled", "interrupted"};
-const char *const sti_method_names[STORE_NMETHOD] = {"mpm", "gimp", "bspline2", "bspline3", "cpdi"};
-const char *const sti_update_names[3] = {"usf", "usl", "musl"};
-const char *const sti_transfer_names[STORE_NTRANSFER] = {"flip", "apic"};
 
 _Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
                    MPP_STATUS_FINISHED == 3 && MPP_STATUS_FAILED == 4 &&
                    MPP_STATUS_CANCELLED == 5 && MPP_STATUS_INTERRUPTED == MPP_STATUS_MAX,
                "sti_status_names follows mpp_status");
-_Static_assert(MPM_METHOD_MPM == 0 && MPM_METHOD_GIMP == 1 && MPM_METHOD_BSPLINE2 == 2 &&
-                   MPM_METHOD_BSPLINE3 == 3 && MPM_METHOD_CPDI == 4,
-               "sti_method_names");
-_Static_assert(MPM_USF == 0 && MPM_USL == 1 && MPM_MUSL == 2, "sti_update_names");
-_Static_assert(MPM_TRANSFER_FLIP == 0 && MPM_TRANSFER_APIC == 1, "sti_transfer_names");
 
 int sti_status_ok(mpp_status st)
 {
@@ -269,15 +261,15 @@ int sti_status_ok(mpp_status st)
 }
 int sti_method_ok(mpm_method m)
 {
-    return (unsigned)m < STORE_NMETHOD;
+    return (unsigned)m < MPM_N_METHODS;
 }
 int sti_update_ok(mpm_update u)
 {
-    return (unsigned)u < 3;
+    return (unsigned)u < MPM_N_UPDATES;
 }
 int sti_transfer_ok(mpm_transfer t)
 {
-    return (unsigned)t < STORE_NTRANSFER;
+    return (unsigned)t < MPM_N_TRANSFERS;
 }
 
 const char *sti_status_name(mpp_status st)

@@ -164,13 +164,11 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     memset(r, 0, sizeof *r);
     r->id = sqlite3_column_int64(st, 0);
     r->case_len = (size_t)sqlite3_column_int64(st, 2);
-    int m =
-        sti_parse_name((const char *)sqlite3_column_text(st, 3), sti_method_names, STORE_NMETHOD);
-    int u = sti_parse_name((const char *)sqlite3_column_text(st, 4), sti_update_names, 3);
+    int m = mpm_method_parse((const char *)sqlite3_column_text(st, 3));
+    int u = mpm_update_parse((const char *)sqlite3_column_text(st, 4));
     int stt =
         sti_parse_name((const char *)sqlite3_column_text(st, 8), sti_status_names, STORE_NSTATUS);
-    int tr = sti_parse_name((const char *)sqlite3_column_text(st, 22), sti_transfer_names,
-                            STORE_NTRANSFER);
+    int tr = mpm_transfer_parse((const char *)sqlite3_column_text(st, 22));
     if (m < 0 || u < 0 || stt < 0 || tr < 0)
         return sti_fail(MPM_EIO, "run %" PRId64 ": bad method, update, status or transfer value",
                         r->id);

@@ -400,8 +400,8 @@ static int apply_op(store *s, op *o)
         BIND(sqlite3_bind_int64(st, 1, r->id));
         BIND(bind_static(st, 2, r->name));
         BIND(bind_blob(st, 3, r->case_pb, r->case_len));
-        BIND(bind_static(st, 4, sti_method_names[r->method]));
-        BIND(bind_static(st, 5, sti_update_names[r->update]));
+        BIND(bind_static(st, 4, mpm_method_key(r->method)));
+        BIND(bind_static(st, 5, mpm_update_key(r->update)));
         BIND(sqlite3_bind_int(st, 6, r->dim));
         BIND(sqlite3_bind_int64(st, 7, r->particles));
         BIND(sqlite3_bind_int64(st, 8, r->nodes));
@@ -414,7 +414,7 @@ static int apply_op(store *s, op *o)
         BIND(bind_real(st, 15, r->psteps_per_s));
         BIND(bind_text_or_null(st, 16, r->error));
         BIND(bind_static(st, 17, r->server_version));
-        BIND(bind_static(st, 18, sti_transfer_names[r->transfer]));
+        BIND(bind_static(st, 18, mpm_transfer_key(r->transfer)));
         BIND(bind_static(st, 19, r->owner));
         break;
     }
