@@ -20,129 +20,94 @@ typedef struct {
     int type;
     size_t off, size; /* field in srv_config; size for strings */
     double lo, hi;
-    const char *help;
+    const char *def;  /* the default, as it would be written (NULL: none, or 0 / off) */
+    const char *help; /* --help prints "(default DEF)" after it */
 } setting;
 
 #define F(field) offsetof(srv_config, field), sizeof(((srv_config *)0)->field)
 static const setting settings[] = {
-    {"endpoint", "MPMD_ENDPOINT", T_STR, F(endpoint), 0, 0,
-     "control socket (default tcp://127.0.0.1:5555)"},
-    {"stream-endpoint", "MPMD_STREAM_ENDPOINT", T_STR, F(stream_endpoint), 0, 0,
+    {"endpoint", "MPMD_ENDPOINT", T_STR, F(endpoint), 0, 0, "tcp://127.0.0.1:5555",
+     "control socket"},
+    {"stream-endpoint", "MPMD_STREAM_ENDPOINT", T_STR, F(stream_endpoint), 0, 0, NULL,
      "job stream socket (default: tcp port + 1, or ipc path + .stream)"},
-    {"db", "MPMD_DB", T_STR, F(db), 0, 0, "SQLite file of run records (default mpmd.db)"},
-    {"workers", NULL, T_INT, F(workers), 1, 256, "jobs that run at once (default 2)"},
-    {"solver-threads", NULL, T_INT, F(solver_threads), 1, 64, "solver threads per job (default 1)"},
-    {"queue-max", NULL, T_INT, F(queue_max), 0, 1000000,
-     "queued jobs beyond the running ones (default 16)"},
-    {"max-particles", NULL, T_LL, F(max_particles), 1, (double)MPM_MAX_PARTICLES,
-     "particles per job (default 10000000)"},
-    {"max-steps", NULL, T_LL, F(max_steps), 1, 1e15, "steps per job (default 100000000)"},
-    {"max-wall-s", NULL, T_DBL, F(max_wall_s), 0, 1e9,
-     "wall seconds per job, 0 = no limit (default 0)"},
-    {"checkpoint-every-s", NULL, T_DBL, F(checkpoint_every_s), 0, 1e9,
+    {"db", "MPMD_DB", T_STR, F(db), 0, 0, "mpmd.db", "SQLite file of run records"},
+    {"workers", NULL, T_INT, F(workers), 1, 256, "2", "jobs that run at once"},
+    {"solver-threads", NULL, T_INT, F(solver_threads), 1, 64, "1", "solver threads per job"},
+    {"queue-max", NULL, T_INT, F(queue_max), 0, 1000000, "16",
+     "queued jobs beyond the running ones"},
+    {"max-particles", NULL, T_LL, F(max_particles), 1, (double)MPM_MAX_PARTICLES, "10000000",
+     "particles per job"},
+    {"max-steps", NULL, T_LL, F(max_steps), 1, 1e15, "100000000", "steps per job"},
+    {"max-wall-s", NULL, T_DBL, F(max_wall_s), 0, 1e9, "0", "wall seconds per job, 0 = no limit"},
+    {"checkpoint-every-s", NULL, T_DBL, F(checkpoint_every_s), 0, 1e9, "300",
      "wall seconds between checkpoints of a run whose case sets none (files in <db>.ckpt/, "
-     "for mpmctl resume), 0 = none (default 300)"},
-    {"checkpoint-share", NULL, T_DBL, F(checkpoint_share), 0.001, 1,
-     "share of a job's wall time its checkpoints may take: one due sooner after the last than "
-     "(1 - share) / share times the last one's duration is skipped, 1 = none skipped "
-     "(default 0.1)"},
-    {"disk-reserve-mb", NULL, T_INT, F(disk_reserve_mb), 0, 1024,
-     "MiB kept allocated beside the database for its own writes on a full disk; new runs "
-     "are refused while it cannot be kept, 0 = none (default 1)"},
-    {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30,
-     "largest request accepted (default 8388608); each request connection may hold two "
-     "while they arrive"},
-    {"connection-reply-buffer-mb", NULL, T_INT, F(connection_reply_buffer_mb), 1, 1 << 20,
-     "MiB of replies one connection may leave unread; a reply past it is answered UNAVAILABLE "
-     "(one larger reply may go alone) (default 16)"},
-    {"reply-buffer-mb", NULL, T_INT, F(reply_buffer_mb), 1, 1 << 20,
-     "MiB of unread replies over all connections; past it replies are answered UNAVAILABLE "
-     "(default 256)"},
-    {"page-max-bytes", NULL, T_LL, F(page_max_bytes), 4096, 1 << 30,
-     "largest energy page or runs listing in bytes; the rest comes in the next page "
-     "(default 1048576)"},
-    {"page-max-ms", NULL, T_INT, F(page_max_ms), 1, 60000,
-     "milliseconds a runs listing is made for; the rest comes in the next page (default 20)"},
-    {"max-connections", NULL, T_INT, F(max_connections), 0, 1000000,
-     "request connections at once; more are refused at the handshake, 0 = no cap "
-     "(default 64)"},
-    {"handshake-timeout-s", NULL, T_INT, F(handshake_timeout_s), 1, 3600,
-     "seconds a new connection has to finish its handshake before it is closed (default 10)"},
-    {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20,
-     "MB of stream messages queued for one watcher (one connection), across all its jobs; "
-     "a watcher further behind misses messages until it catches up, 0 = no bound (default 64)"},
-    {"stream-total-mb", NULL, T_INT, F(stream_total_mb), 0, 1 << 20,
+     "for mpmctl resume), 0 = none"},
+    {"checkpoint-share", NULL, T_DBL, F(checkpoint_share), 0.001, 1, "0.1",
+     "share of a job's wall time its checkpoints may take: one due sooner after the last "
+     "than (1 - share) / share times the last one's duration is skipped, 1 = none skipped"},
+    {"disk-reserve-mb", NULL, T_INT, F(disk_reserve_mb), 0, 1024, "1",
+     "MiB kept allocated beside the database for its own writes on a full disk; new runs are "
+     "refused while it cannot be kept, 0 = none"},
+    {"max-request-bytes", NULL, T_LL, F(max_request_bytes), 1024, 1 << 30, "8388608",
+     "largest request accepted; each request connection may hold two while they arrive"},
+    {"connection-reply-buffer-mb", NULL, T_INT, F(connection_reply_buffer_mb), 1, 1 << 20, "16",
+     "MiB of replies one connection may leave unread; a reply past it is answered "
+     "UNAVAILABLE (one larger reply may go alone)"},
+    {"reply-buffer-mb", NULL, T_INT, F(reply_buffer_mb), 1, 1 << 20, "256",
+     "MiB of unread replies over all connections; past it replies are answered UNAVAILABLE"},
+    {"page-max-bytes", NULL, T_LL, F(page_max_bytes), 4096, 1 << 30, "1048576",
+     "largest energy page or runs listing in bytes; the rest comes in the next page"},
+    {"page-max-ms", NULL, T_INT, F(page_max_ms), 1, 60000, "20",
+     "milliseconds a runs listing is made for; the rest comes in the next page"},
+    {"max-connections", NULL, T_INT, F(max_connections), 0, 1000000, "64",
+     "request connections at once; more are refused at the handshake, 0 = no cap"},
+    {"handshake-timeout-s", NULL, T_INT, F(handshake_timeout_s), 1, 3600, "10",
+     "seconds a new connection has to finish its handshake before it is closed"},
+    {"stream-buffer-mb", NULL, T_INT, F(stream_buffer_mb), 0, 1 << 20, "64",
+     "MB of stream messages queued for one watcher (one connection), across all its jobs; a "
+     "watcher further behind misses messages until it catches up, 0 = no bound"},
+    {"stream-total-mb", NULL, T_INT, F(stream_total_mb), 0, 1 << 20, "256",
      "MB of snapshot messages queued for all watchers together; past it snapshots are not "
-     "streamed, 0 = no bound (default 256)"},
-    {"stream-max-subscriptions", NULL, T_INT, F(stream_max_subscriptions), 1, 1000000,
+     "streamed, 0 = no bound"},
+    {"stream-max-subscriptions", NULL, T_INT, F(stream_max_subscriptions), 1, 1000000, "4096",
      "stream subscriptions held for all watchers (a 21-byte job topic each); past it the "
-     "stream socket drops every connection and watchers reconnect (default 4096)"},
-    {"stream-subscribe-ahead", NULL, T_INT, F(stream_subscribe_ahead), 0, 1000000,
-     "job ids past the newest that a watcher may subscribe to before they exist (default 16)"},
-    {"curve-secret", "MPMD_CURVE_SECRET", T_STR, F(curve_secret), 0, 0,
+     "stream socket drops every connection and watchers reconnect"},
+    {"stream-subscribe-ahead", NULL, T_INT, F(stream_subscribe_ahead), 0, 1000000, "16",
+     "job ids past the newest that a watcher may subscribe to before they exist"},
+    {"curve-secret", "MPMD_CURVE_SECRET", T_STR, F(curve_secret), 0, 0, NULL,
      "the server's CURVE secret key file (mode 0600; mpmctl keygen): CURVE on both sockets"},
-    {"authorized-keys", NULL, T_STR, F(authorized_keys), 0, 0,
-     "client public keys allowed in (a file of 'KEY [comment]' lines or a directory of "
-     ".pub files; re-read on SIGHUP)"},
-    {"admin-keys", NULL, T_STR, F(admin_keys), 0, 0,
+    {"authorized-keys", NULL, T_STR, F(authorized_keys), 0, 0, NULL,
+     "client public keys allowed in (a file of 'KEY [comment]' lines or a directory of .pub "
+     "files; re-read on SIGHUP)"},
+    {"admin-keys", NULL, T_STR, F(admin_keys), 0, 0, NULL,
      "keys that may also cancel anyone's jobs (same format; re-read on SIGHUP)"},
-    {"client-max-jobs", NULL, T_INT, F(client_max_jobs), 0, 1000000,
-     "queued and running jobs per client key (or local user), 0 = no limit (default 0)"},
-    {"client-max-particles", NULL, T_LL, F(client_max_particles), 0, (double)MPM_MAX_PARTICLES,
-     "particles per job of one client, 0 = only --max-particles (default 0)"},
-    {"client-max-disk-mb", NULL, T_LL, F(client_max_disk_mb), 0, 1e12,
+    {"client-max-jobs", NULL, T_INT, F(client_max_jobs), 0, 1000000, "0",
+     "queued and running jobs per client key (or local user), 0 = no limit"},
+    {"client-max-particles", NULL, T_LL, F(client_max_particles), 0, (double)MPM_MAX_PARTICLES, "0",
+     "particles per job of one client, 0 = only --max-particles"},
+    {"client-max-disk-mb", NULL, T_LL, F(client_max_disk_mb), 0, 1e12, "0",
      "MiB of recorded snapshots and energy samples per client: a submission whose estimate "
-     "would pass it is refused, a job that would pass it ends FAILED, 0 = no limit "
-     "(default 0)"},
-    {"job-max-disk-mb", NULL, T_LL, F(job_max_disk_mb), 0, 1e12,
+     "would pass it is refused, a job that would pass it ends FAILED, 0 = no limit"},
+    {"job-max-disk-mb", NULL, T_LL, F(job_max_disk_mb), 0, 1e12, "4096",
      "MiB of recorded snapshots and energy samples per job (estimated at submit, counted "
-     "while it runs), 0 = no limit (default 4096)"},
-    {"max-disk-mb", NULL, T_LL, F(max_disk_mb), 0, 1e12,
+     "while it runs), 0 = no limit"},
+    {"max-disk-mb", NULL, T_LL, F(max_disk_mb), 0, 1e12, "0",
      "MiB of recorded snapshots and energy samples in the whole database (estimated at "
-     "submit, counted while jobs run), 0 = no limit (default 0)"},
-    {"private-runs", NULL, T_FLAG, F(private_runs), 0, 1,
+     "submit, counted while jobs run), 0 = no limit"},
+    {"private-runs", NULL, T_FLAG, F(private_runs), 0, 1, NULL,
      "a client key may read (show, runs, energy, snapshot, watch) only its own runs; admin "
      "keys read all (default: every authorized key reads every run)"},
-    {"insecure-allow-remote-without-auth", NULL, T_FLAG, F(insecure_remote), 0, 1,
-     "bind non-loopback addresses WITHOUT CURVE: anyone who reaches them may submit, "
-     "cancel and read (trusted networks only)"},
-    {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1,
+    {"insecure-allow-remote-without-auth", NULL, T_FLAG, F(insecure_remote), 0, 1, NULL,
+     "bind non-loopback addresses WITHOUT CURVE: anyone who reaches them may submit, cancel "
+     "and read (trusted networks only)"},
+    {"allow-remote", NULL, T_FLAG, F(allow_remote), 0, 1, NULL,
      "obsolete: a non-loopback bind needs --curve-secret (or the insecure flag above)"},
-    {"portable-kernels", "MPMD_PORTABLE_KERNELS", T_FLAG, F(portable_kernels), 0, 1,
+    {"portable-kernels", "MPMD_PORTABLE_KERNELS", T_FLAG, F(portable_kernels), 0, 1, NULL,
      "run every job on the portable kernels, whose bits are the same on every x86-64 machine "
      "(default: the AVX2+FMA kernels where the CPU has them; they differ in round-off)"},
-    {"verbose", NULL, T_FLAG, F(verbose), 0, 1, "debug log lines"},
+    {"verbose", NULL, T_FLAG, F(verbose), 0, 1, NULL, "debug log lines"},
 };
 #define NSET (sizeof settings / sizeof settings[0])
-
-static void defaults(srv_config *c)
-{
-    memset(c, 0, sizeof *c);
-    snprintf(c->endpoint, sizeof c->endpoint, "tcp://127.0.0.1:5555");
-    snprintf(c->endpoint_from, sizeof c->endpoint_from, "the default");
-    snprintf(c->db, sizeof c->db, "mpmd.db");
-    c->workers = 2;
-    c->solver_threads = 1;
-    c->queue_max = 16;
-    c->max_particles = (long long)MPP_DEFAULT_MAX_PARTICLES;
-    c->max_steps = 100000000;
-    c->max_wall_s = 0;
-    c->checkpoint_every_s = 300;
-    c->checkpoint_share = 0.1;
-    c->disk_reserve_mb = 1;
-    c->max_request_bytes = 8LL << 20;
-    c->connection_reply_buffer_mb = 16;
-    c->reply_buffer_mb = 256;
-    c->page_max_bytes = 1LL << 20;
-    c->page_max_ms = 20;
-    c->max_connections = 64;
-    c->handshake_timeout_s = 10;
-    c->stream_buffer_mb = 64;
-    c->stream_total_mb = 256;
-    c->stream_max_subscriptions = 4096;
-    c->stream_subscribe_ahead = 16;
-    c->job_max_disk_mb = 4096;
-}
 
 static const setting *find(const char *key)
 {
@@ -248,6 +213,19 @@ static int load_file(srv_config *c, const char *path, char *err, size_t errlen)
     return rc;
 }
 
+/* The defaults: every setting's def through set(), so that the table's
+ * column is the one place a default is written (--help prints it). */
+static void defaults(srv_config *c)
+{
+    char err[256];
+    memset(c, 0, sizeof *c);
+    snprintf(c->endpoint_from, sizeof c->endpoint_from, "the default");
+    for (size_t i = 0; i < NSET; i++)
+        if (settings[i].def &&
+            set(c, &settings[i], settings[i].def, "the default", err, sizeof err))
+            abort(); /* a default outside its own limits: config_defaults_from_table */
+}
+
 static void usage(void)
 {
     printf("usage: mpmd [options]\n"
@@ -257,7 +235,9 @@ static void usage(void)
         char flag[64];
         snprintf(flag, sizeof flag, "--%s%s", settings[i].key,
                  settings[i].type == T_FLAG ? "" : " V");
-        printf("  %-24s %s%s%s%s\n", flag, settings[i].help, settings[i].env ? " [env " : "",
+        printf("  %-24s %s%s%s%s%s%s%s\n", flag, settings[i].help,
+               settings[i].def ? " (default " : "", settings[i].def ? settings[i].def : "",
+               settings[i].def ? ")" : "", settings[i].env ? " [env " : "",
                settings[i].env ? settings[i].env : "", settings[i].env ? "]" : "");
     }
     printf("  %-24s %s\n  %-24s %s\n  %-24s %s\n\n", "--config FILE",

@@ -62,26 +62,67 @@ TEST(ctl_man_pages)
         TLOG("%s: no warning from groff -ww%s", pages[p], mandoc ? " nor mandoc -T lint" : "");
     }
 
-    /* every option of `mpmd --help` is in mpmd.1 */
+    /* every option of `mpmd --help` is in mpmd.1, and its default (the
+     * settings table's, which --help prints as "(default X)") is the one
+     * mpmd.1's paragraph and the manual's table give */
     size_t len = 0;
     char *man = td_slurp(pages[0], &len), *help = NULL, **lines = NULL;
+    char *manual = td_slurp("docs/manual.md", &len);
+    CHECK(manual);
     const char *mpmd = td_bin("MPMD_BIN");
     CHECK(man && mpmd);
     snprintf(cmd, sizeof cmd, "%s --help", mpmd);
     CHECK(sh_out(cmd, tmp, "mpmd.help", &help) == 0 && help);
-    size_t nl = td_lines(help, &lines), nopt = 0;
+    size_t nl = td_lines(help, &lines), nopt = 0, ndef = 0;
     for (size_t i = 0; i < nl; i++) {
         char name[64], roff[160];
         if (sscanf(lines[i], " --%63[a-z-]", name) != 1 || strncmp(lines[i], "  --", 4)) continue;
         char dashed[80];
         snprintf(dashed, sizeof dashed, "--%s", name);
         roff_dashes(dashed, roff, sizeof roff);
-        CHECKF(strstr(man, roff), "mpmd.1 does not describe %s (from mpmd --help)", dashed);
+        const char *at = strstr(man, roff);
+        CHECKF(at, "mpmd.1 does not describe %s (from mpmd --help)", dashed);
         nopt++;
+        const char *dp = strstr(lines[i], "(default ");
+        char def[96];
+        if (!at || !manual || !dp || sscanf(dp, "(default %95[^)])", def) != 1) continue;
+        /* mpmd.1: "(default X" within the option's paragraph (.BI or .B
+         * line, up to the next .TP) */
+        char head[200];
+        snprintf(head, sizeof head, "\n.BI %s ", roff);
+        const char *para = strstr(man, head);
+        if (!para) {
+            snprintf(head, sizeof head, "\n.B %s\n", roff);
+            para = strstr(man, head);
+        }
+        CHECKF(para, "mpmd.1 has no paragraph for %s", dashed);
+        if (!para) continue;
+        at = para;
+        const char *end = strstr(at + 1, "\n.TP");
+        char want[128];
+        snprintf(want, sizeof want, "(default %s", def);
+        const char *got = strstr(at, want);
+        CHECKF(got && (!end || got < end), "mpmd.1's %s paragraph does not say \"%s)\"", dashed,
+               want);
+        /* the manual's settings table: "| `--NAME ...` | env | X..." */
+        char row[80];
+        snprintf(row, sizeof row, "| `--%s", name);
+        const char *r = manual;
+        while ((r = strstr(r, row)) && r[strlen(row)] != ' ' && r[strlen(row)] != '`') r++;
+        const char *c = r ? strchr(r + 1, '|') : NULL;
+        c = c ? strchr(c + 1, '|') : NULL;
+        while (c && (*++c == ' ' || *c == '`')) {
+        }
+        CHECKF(c && !strncmp(c, def, strlen(def)),
+               "docs/manual.md's row of %s does not give the default %s", dashed, def);
+        ndef++;
     }
     free(lines);
     free(help);
     free(man);
+    free(manual);
+    TLOG("mpmd --help: %zu defaults, each the same in mpmd.1 and docs/manual.md", ndef);
+    CHECK(ndef >= 25);
     CHECK(nopt >= 20);
 
     /* every command of `mpmctl --help` is in mpmctl.1 */
