@@ -200,16 +200,12 @@ void srv_do_submit(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *r
      * materials' wave speed alone, particles at rest) makes the fewest
      * steps: a case over the limit even so is refused now, any other is
      * stopped at the limit while it runs (FAILED). */
-    double steps = 0, hmin = sc->c.grid.h[0];
-    for (int k = 1; k < sc->c.grid.dim; k++) hmin = fmin(hmin, sc->c.grid.h[k]);
-    double cfl = sc->c.cfl > 0 ? sc->c.cfl : MPM_DEFAULT_CFL; /* no default is larger */
+    double steps = 0;
     int automatic = sc->has_end_time && !(sc->c.dt > 0);
     if (!sc->has_end_time)
         steps = (double)sc->steps;
-    else if (!automatic)
-        steps = ceil(sc->end_time / sc->c.dt - 0.5);
-    else if (sc->info.cmax > 0 && hmin > 0)
-        steps = ceil(sc->end_time * sc->info.cmax / (cfl * hmin) - 0.5);
+    else
+        steps = ceil(sc->end_time / mpm_case_dt_max(&sc->c, &sc->info) - 0.5);
     if (!(steps <= (double)d->cfg->max_steps)) {
         srv_reply_error(d, id, MPM_ETOOBIG, sc->has_end_time ? "end_time" : "steps",
                         "the case asks for %s%.15g steps%s, above this server's limit %lld "

@@ -902,3 +902,29 @@ TEST(inv_rotating_disk_angular_momentum)
     CHECK(e.angular_momentum[0] == 0 && e.angular_momentum[1] == 0 && e.angular_momentum[2] == 0);
     mpm_sim_destroy(&s);
 }
+
+/* The daemon's fewest-steps estimate at submit takes the solver's own
+ * largest step, mpm_case_dt_max(): with particles at rest it is the first
+ * step a simulation takes (the default Courant factor, APIC with MPM's
+ * cap, a case's own cfl), and a fixed dt is itself. */
+TEST(inv_dt_max_is_the_first_step)
+{
+    static const double rest[3] = {0, 0, 0};
+    for (int k = 0; k < 4; k++) {
+        mpm_paper t;
+        block_case(&t, 2, k == 1 ? MPM_METHOD_MPM : MPM_METHOD_GIMP, MPM_MUSL, rest);
+        if (k == 1) t.c.transfer = MPM_TRANSFER_APIC;
+        if (k == 2) t.c.cfl = 0.3;
+        if (k == 3) t.c.dt = 1e-4;
+        mpm_case_info info;
+        mpm_error err;
+        CHECK(mpm_case_check(&t.c, &info, &err) == 0);
+        mpm_sim *s = mpm_sim_new(&t.c, &info, &err);
+        CHECKF(s, "%s", err.message);
+        if (!s) continue;
+        double dmax = mpm_case_dt_max(&t.c, &info), dt = mpm_sim_dt(s);
+        TLOG("case %d: cfl %.2f, dt_max %.6e, first dt %.6e", k, mpm_case_cfl(&t.c), dmax, dt);
+        CHECK(fabs(dmax - dt) <= 1e-15 * dt);
+        mpm_sim_destroy(&s);
+    }
+}

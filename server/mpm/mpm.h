@@ -512,6 +512,13 @@ long mpm_sim_steps(const mpm_sim *sim);
 double mpm_sim_time(const mpm_sim *sim);
 double mpm_sim_dt(const mpm_sim *sim);       /* dt of the next step */
 double mpm_sim_dt_limit(const mpm_sim *sim); /* CFL limit (C = 1) now */
+/* The Courant factor a simulation of case c steps with (its cfl, else the
+ * default, or APIC with MPM's cap). */
+double mpm_case_cfl(const mpm_case *c);
+/* The largest time step a simulation of case c (checked: info) can take:
+ * its fixed dt, or with automatic dt the CFL step of particles at rest,
+ * C min(h) / c_max (the daemon's fewest-steps estimate at submit). */
+double mpm_case_dt_max(const mpm_case *c, const mpm_case_info *info);
 
 /* Per-particle external forces for the following steps: f[p*dim + d] is the
  * force (not per unit mass) on particle p, in the order the particles were

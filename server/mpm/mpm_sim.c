@@ -452,6 +452,22 @@ double mpm_sim_dt_limit(const mpm_sim *s)
     return hmin(s) / (s->cmax + s->vmax);
 }
 
+double mpm_case_cfl(const mpm_case *c)
+{
+    if (c->cfl > 0) return c->cfl;
+    if (c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC)
+        return MPM_APIC_MPM_MAX_CFL; /* its stability limit (mpm.h) */
+    return MPM_DEFAULT_CFL;
+}
+
+double mpm_case_dt_max(const mpm_case *c, const mpm_case_info *info)
+{
+    if (c->dt > 0) return c->dt;
+    double h = c->grid.h[0];
+    for (int d = 1; d < c->grid.dim; d++) h = fmin(h, c->grid.h[d]);
+    return info->cmax > 0 ? mpm_case_cfl(c) * h / info->cmax : HUGE_VAL;
+}
+
 static void next_dt(mpm_sim *s)
 {
     s->dt = s->dt_fixed > 0 ? s->dt_fixed : s->cfl * mpm_sim_dt_limit(s);
@@ -676,9 +692,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     for (size_t p = 0; p < s->P.n; p++) msum += s->P.m[p];
     s->mtol = (c->mass_tol > 0 ? c->mass_tol : MPM_DEFAULT_MASS_TOL) * msum / (double)s->P.n;
     s->dt_fixed = c->dt;
-    s->cfl = c->cfl > 0 ? c->cfl : MPM_DEFAULT_CFL;
-    if (c->cfl <= 0 && c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC)
-        s->cfl = MPM_APIC_MPM_MAX_CFL; /* its stability limit (mpm.h) */
+    s->cfl = mpm_case_cfl(c);
     next_dt(s);
     s->damp = c->damping;
     s->damp_coef = c->damping_coef;
