@@ -8,6 +8,7 @@
  * the energy pass's bits; a PIC fraction with APIC is refused.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
 #include "t.h"

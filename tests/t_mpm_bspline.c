@@ -9,6 +9,7 @@
  * the refusals (node sets, leaving the grid).
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
 #include "t.h"

@@ -11,6 +11,7 @@
  * docs/solver.md.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_timefn.h"
 #include "mpp_case.h"
 #include "t.h"

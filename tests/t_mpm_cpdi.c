@@ -15,6 +15,7 @@
  * bitwise reproducible.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "t.h"
 

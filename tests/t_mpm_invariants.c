@@ -7,6 +7,7 @@
  * dt, case validation messages, thread reproducibility and cancellation.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_paper.h"
 #include "t.h"
 

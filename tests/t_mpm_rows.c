@@ -7,6 +7,7 @@
  * No timings here: bin/mpmbench measures those.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
 #include "t.h"

@@ -5,6 +5,7 @@
  * of Eqs. 17-18.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "t.h"
 
 #include <stdint.h>

@@ -9,6 +9,7 @@
  * fused steps (the default) and the unfused ones are checked.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "t.h"
 

@@ -574,31 +574,6 @@ typedef struct {
 } mpm_plastic_stats;
 void mpm_sim_plastic_stats(const mpm_sim *sim, mpm_plastic_stats *out);
 
-/* The modelled particle-array traffic of one step (mpm_traffic.c): for
- * each particle pass of the configured job's step, the bytes per particle
- * of particle arrays it reads and writes, and their sums.  The model: each
- * particle array a pass touches counts once per pass (8 bytes per double
- * per particle; mat 2, id 4), read when the pass loads its old value,
- * written when the pass stores it (an array both read and written counts
- * twice; one only written, once: STREAM's counting, no write-allocate).
- * Grid arrays, the per-thread scratch, the sort (4-16 steps apart), point
- * loads and the energy sums of mpm_sim_want_energy() steps are not
- * counted.  Fused steps (every method but CPDI): the moving pass also
- * makes the next step's first scatter and reads only what it has not
- * touched yet.  A lower bound on the step's memory traffic, and
- * the figure a bandwidth roof is measured against (bin/mpmbench). */
-#define MPM_TRAFFIC_MAX_PASSES 8
-typedef struct {
-    int npass;
-    struct {
-        const char *name;   /* "p2g_mq", "stress_force", "g2p_xv", ... */
-        double read, write; /* bytes per particle */
-    } pass[MPM_TRAFFIC_MAX_PASSES];
-    double read, write, total; /* per particle-step: the passes' sums */
-} mpm_traffic;
-/* Fills *out for sim's job; returns 0, or MPM_EINVAL (sim or out NULL). */
-int mpm_sim_traffic(const mpm_sim *sim, mpm_traffic *out);
-
 /* Checkpoints (mpm_checkpoint.c): the solver state a case does not
  * determine -- the particles (in their current, sorted order), time, step,
  * dt, the cumulative works and counters, the balance and guard references
@@ -649,38 +624,8 @@ int mpm_sim_has_field(const mpm_sim *sim, mpm_field f);
  * building it (the daemon's estimate of a job's recorded bytes). */
 int mpm_case_has_field(const mpm_case *c, mpm_field f);
 
-/* Grid state after the last step, for tests and diagnostics: node mass and
- * momentum of real node (i, j, k) (unused indices 0): the momentum the step
- * updated (q + f dt), read back as m (q/m) where the step stored velocities
- * (every method but CPDI), 0 at phantom nodes (mass <= M_TOL:
- * no velocity, Fig. 7).  B-splines: the
- * values of control point (i, j, k), i in [0, nodes + p - 1) along an axis
- * of `nodes` grid nodes (degree p); mpm_sim_nodes() counts control points. */
-void mpm_sim_node(const mpm_sim *sim, const int ijk[3], double *mass, double q[MPM_MAX_DIM]);
-
 /* p-wave speed of a material: sqrt(E/rho) in 1D, sqrt((lambda+2mu)/rho)
  * otherwise. */
 double mpm_material_wave_speed(const mpm_material_desc *m, int dim);
-
-/* Shape weights along one axis (exposed for tests).  For a particle at x on
- * an axis whose first node is at x0 with spacing h, fills the nn = 2 (MPM),
- * 4 (GIMP, half-width lp), 3 (BSPLINE2) or 4 (BSPLINE3) weights and
- * gradients of consecutive nodes starting at the reference node (Eq. 21 /
- * 22; B-splines: control points c .. c + p of cell c), and returns that
- * node's index.  nodes: the grid nodes along the axis, which the B-splines'
- * clamped boundary spans need (ignored by MPM and GIMP); x must lie in
- * [x0, x0 + (nodes - 1) h] for B-splines. */
-int mpm_shape_1d(mpm_method method, double x, double x0, double h, double lp, int nodes, double *w,
-                 double *g);
-
-/* CPDI1 weights of one particle (exposed for tests): centre x, deformation
- * gradient F (row-major 3x3, F[3 i + j], the first dim rows and columns
- * used) and initial half-widths lp, on grid g (no ghost layers).  Fills one
- * entry per (corner, node) pair, 4^dim in all (a node shared by corners
- * appears once per corner): real node ijk[k], weight S[k] and gradient
- * G[k]; returns 4^dim, or -1 when a corner lies outside the grid or
- * det F <= 0. */
-int mpm_cpdi_shape(const mpm_grid_desc *g, const double x[3], const double F[9], const double lp[3],
-                   int ijk[64][3], double S[64], double G[64][3]);
 
 #endif

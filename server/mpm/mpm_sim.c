@@ -51,6 +51,7 @@
  * for everything public.  Built with -DMPM_LEAN, gravity, loads and fixed
  * boundaries are compiled out and cases using them are refused.
  */
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 
 #include <limits.h>

@@ -45,6 +45,7 @@
  * vol (32); g2p_xv + next p2g_mq reads x v m (40) and writes x v (32); the
  * sort step's p2g_mq 40 / 16 = 2.5: 156.5 B.
  */
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 
 #include <string.h>

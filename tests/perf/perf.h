@@ -18,6 +18,7 @@
 #include <sys/types.h>
 
 #include "mpm.h"
+#include "mpm_diag.h"
 
 #define PB_CSV_DIR "build/bench"
 #define PB_CSV_PATH PB_CSV_DIR "/throughput.csv"
