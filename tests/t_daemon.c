@@ -471,7 +471,7 @@ DTEST(daemon_concurrency)
     CHECK(td_job_status(&d, 3, st, sizeof st, NULL) == 0);
     CHECKF(!strcmp(st, "RUNNING"), "job 3 is %s while job 4 runs: not two at once", st);
     for (int j = 3; j <= 4; j++) {
-        char id[8];
+        char id[16];
         snprintf(id, sizeof id, "%d", j);
         CHECK(td_ctl(&d, 30, &o, "cancel", id, NULL) == 0 && o.status == 0);
         td_out_free(&o);
