@@ -1,5 +1,5 @@
 /*
- * srv_ckpt.h - checkpoint files of the daemon's runs (issue 12): where they
+ * srv_ckpt.h - checkpoint files of the daemon's runs: where they
  * live, writing one atomically, reading one back verified, removing it.
  *
  * A run's checkpoint is the file "<db>.ckpt/run-<id>.ckpt" beside the

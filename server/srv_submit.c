@@ -344,7 +344,7 @@ static void resume_done(daemon_t *d, zmq_msg_t *id, const char *owner, int rc, c
 
 /* Queues an INTERRUPTED run again to continue from its checkpoint file,
  * read and verified here (a damaged one is refused in the reply), with the
- * stored case; the job keeps the run's id and owner (issue 12). */
+ * stored case; the job keeps the run's id and owner. */
 void srv_do_resume(daemon_t *d, zmq_msg_t *id, const char *owner, mpp_request *rq)
 {
     unsigned long long run = rq->id;

@@ -1,7 +1,6 @@
 /*
- * mpm_collapse.c - the plane-strain granular column collapse (issue 11,
- * validation 5): the case (geometry, material, conditions, the geostatic
- * initial stress), the run to rest with the energy balance, the deposit's
+ * mpm_collapse.c - the plane-strain granular column collapse: the case (geometry, material,
+ * conditions, the geostatic initial stress), the run to rest with the energy balance, the deposit's
  * measures and the experimental reference (mpm_collapse.h).
  */
 #include "mpm_collapse.h"

@@ -1,6 +1,6 @@
 /*
- * mpm_collapse.h - the plane-strain granular column collapse of issue 11
- * (validation 5) as a ready-made run: a column of width d0 and height
+ * mpm_collapse.h - the plane-strain granular column collapse as a
+ * ready-made run: a column of width d0 and height
  * h0 = a d0 against a frictionless back wall (x_lo roller: the symmetry
  * plane of Lube et al. 2005's half-column set-up, where the column stands
  * against the tank's end wall and a gate is lifted), on a rough base

@@ -149,7 +149,7 @@ typedef struct {
 } mpm_material_desc;
 
 /* A time function f(t), scaling a prescribed velocity or a traction
- * (issue 11; docs/solver.md, "Conditions"):
+ * (docs/solver.md, "Conditions"):
  *   CONSTANT  f(t) = value
  *   RAMP      f(t) = value * clamp((t - t0) / (t1 - t0), 0, 1): 0 up to t0,
  *             rising linearly to `value` at t1, `value` after (t0 < t1;
@@ -230,7 +230,7 @@ typedef struct {
     size_t n_points;
     const double *x, *volume, *mass, *v, *stress, *half_length;
 
-    /* Geostatic initial stress (issue 11), added to any given stress at
+    /* Geostatic initial stress, added to any given stress at
      * creation: with gravity along one axis a (the case's gravity must
      * have no other component) and depth = the distance below free_surface
      * (the level of the free surface along a, on the side gravity points
@@ -244,7 +244,7 @@ typedef struct {
     int has_k0;
 } mpm_body_desc;
 
-/* Damping (issue 11), applied to the nodal forces after the loads and BC2,
+/* Damping, applied to the nodal forces after the loads and BC2,
  * before the nodal update (docs/solver.md, "Damping"):
  *   LOCAL   (Cundall) f_d = -alpha |f| sign(v) per component, alpha in
  *           [0, 1), f the unbalanced nodal force and v = q / m the nodal
@@ -381,7 +381,7 @@ typedef struct {
     double angular_momentum[3];
     /* Dissipated and supplied energies, cumulative from the start of the
      * run, each >= 0 except prescribed_work (signed), and 0 in a scene
-     * without the feature (issue 11; filled by the models and conditions
+     * without the feature (filled by the models and conditions
      * that have them):
      *   plastic_work    sum over steps of sigma : d eps_p V (plastic models)
      *   damping_work    energy removed by local or viscous damping

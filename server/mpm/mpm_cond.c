@@ -1,6 +1,6 @@
 /*
  * mpm_cond.c - prescribed velocities and Coulomb friction on grid faces
- * (issue 11's conditions; docs/solver.md, "Conditions").
+ * (docs/solver.md, "Conditions").
  *
  * A prescribed velocity v(t) = value * f(t) on a direction of a node
  * follows the BC1/BC2 logic of a fixed one (Eqs. 27-28) with a non-zero

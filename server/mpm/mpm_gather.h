@@ -18,7 +18,7 @@
  * MPM tents it is +-1/h however small the weight S (a particle on a grid
  * line, exactly or to round-off).  Taking its velocity as 0 breaks
  * sum_n G_n = 0, and a uniform velocity u gives L = -u sum_phantom G ~ u/h
- * (issue #10).  So a phantom node takes, in the gradient only, the velocity
+ * (docs/solver.md, "Phantom nodes").  So a phantom node takes, in the gradient only, the velocity
  * interpolated at the particle from the other nodes, u_p = sum' S q/m /
  * sum' S (sum': non-phantom nodes): L = sum' v G + u_p sum_phantom G, the
  * gradient of the interpolation renormalised over the nodes that have a
@@ -166,10 +166,10 @@ INLINE void gather_tent(const mpm_sim *s, double *const qg[3], const pw *W, int 
  * lanes, loaded at once; lanes NS .. 3 hold whatever the grid has past
  * the row (the grid arrays have MPM_GRID_SLACK doubles past their end for
  * the row that ends one) and no sum reads them: one load and one
- * multiply-add per row and factor (cube3d BSPLINE2 USF and GIMP 1.05x).
+ * multiply-add per row and factor.
  * Portable builds: two pairs, nodes 0-1 and 2-3, the second loaded only
  * as far as NS (four-lane vectors there run as pairs anyway, and their
- * unaligned loads cost 0.78x).  Each lane does the same operations either
+ * unaligned loads cost more).  Each lane does the same operations either
  * way, so the same bits. */
 #if MPM_V4
 typedef struct {
@@ -331,7 +331,7 @@ typedef struct {
  * weights and added the row's scalar times its y and z factors: about
  * 40 % more operations, and sums across the lanes in every row.  Another
  * order of the same sums (so other last bits than before the sixth stop
- * of issue 14; docs/solver.md, "Gathers by rows"). */
+ * (docs/solver.md, "Gathers by rows"). */
 INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
                         double *const deps[9], size_t i, int DS, int DX, double *const qx[3],
                         double dx[3], int DV, double dv[3], int AF, const aoff *R, double Bo[3][3],

@@ -850,7 +850,7 @@ enum {
  * and zeroed rather than added.  A copied node counts 4/3 of an added one:
  * split by nodes alone, thread 1 (whose rows are the copied ones in 2
  * threads) made the copies and thread 0 waited for it; 4/3, 3/2 and 2
- * measured alike (2D and 3D MPM USF, 2 threads, 10^6: 1.03x and 1.05x). */
+ * measured alike (docs/performance.md). */
 #define MPM_W_NODE 3
 #define MPM_W_COPY 1
 

@@ -192,8 +192,7 @@ INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c
 
 /* Scatters by four-lane rows (AVX builds, NS 3 and 4): a row's nodes as
  * lanes, one load, multiply-add and store per row and field where the
- * pairs and the odd node took two of each (cube3d BSPLINE2 USF 1.07x,
- * MUSL 1.16x, GIMP USF 1.09x, APIC 1.04x; disks2d APIC 1.085x).  With
+ * pairs and the odd node took two of each (docs/performance.md).  With
  * NS 3 the fourth lane adds 0 (0 times the row's factors) to the node
  * after the row: in the thread's own buffer, where a sum started from +0
  * is never -0, so x + 0 = x bit for bit; the grid arrays have
@@ -212,9 +211,8 @@ INLINE void box_cell(const mpm_sim *s, mpm_thread_out *o, rowrun *a, const int c
  * run once a layer, forms the products of them that the rows use; the
  * body takes row ky's lane of each with V4_LANE(v, ky).  One vector
  * multiply a layer and a lane broadcast (vpermpd) per row where a scalar
- * multiply and a broadcast were (same bits): disks2d BSPLINE2 MUSL -6 %
- * instructions.  Broadcast loads of A, B, C times the particle's values
- * as lanes (no shuffle, but a multiply per row) ran 0.94-0.98x of this. */
+ * multiply and a broadcast were (same bits; broadcast loads of A, B, C
+ * with a multiply per row were slower: docs/performance.md). */
 #define V4_LANE(v, k)                                           \
     ((k) == 0   ? __builtin_shufflevector((v), (v), 0, 0, 0, 0) \
      : (k) == 1 ? __builtin_shufflevector((v), (v), 1, 1, 1, 1) \
@@ -442,8 +440,8 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_
 
 /* MPM tents gathered four particles at a time (mpm_tlane.h) */
 #define TL(D, NS, BS, AP) (MPM_V4 && (D) > 1 && (NS) == 2 && !(BS) && !(AP))
-/* ... and USF's moving pass by them, in 3D only: cube3d 1.02-1.04x with the
- * arrays in cache, 1.04-1.07x at 10^6 particles; disks2d 0.97x in cache */
+/* ... and USF's moving pass by them, in 3D only (in 2D it was slower:
+ * docs/performance.md) */
 #define TLM(D, NS, BS, AP) (TL(D, NS, BS, AP) && (D) > 2)
 
 /* APIC's scatter weights: MPM tents scatter with the gradients and need
@@ -515,8 +513,7 @@ INLINE void next_scatter(mpm_sim *s, mpm_gridbuf *nx, trun *r, pw *Wb, size_t b0
 {
     if (BS && !AP && (WF || D > 2)) {
         /* B-splines with the force (USL, MUSL) and 3D USF: the block's
-         * weights first, four at a time (1.01x 2D, 1.035x 3D MUSL; 3D USF
-         * 1.02x; 2D USF 0.99x) */
+         * weights first, four at a time */
         weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
         for (size_t p = b0; p < b1; p++) {
             scatter_mq(s, nx, &Wb[p - b0], p, D, NS);
@@ -526,7 +523,7 @@ INLINE void next_scatter(mpm_sim *s, mpm_gridbuf *nx, trun *r, pw *Wb, size_t b0
     }
     if (!BS && !AP && NS > 2 && WF) {
         /* uGIMP with the force (USL, MUSL): the block's weights first, as
-         * B-splines (with USL's block weights, 1.07x 2D and 1.02x 3D) */
+         * B-splines */
         weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
         for (size_t p = b0; p < b1; p++) {
             scatter_mq(s, nx, &Wb[p - b0], p, D, NS);
@@ -662,7 +659,7 @@ INLINE void ap_store(mpm_sim *s, size_t p, int D, const double vpic[3], double B
 /* The second loop over a block of moved particles [b0, b1): the checks,
  * the energy sums (EN) and the supports.  The moving passes update a block
  * first and then run this: two small loops rather than one large one that
- * runs out of registers (1.2x faster for 2D MPM). */
+ * runs out of registers. */
 INLINE void moved_block(mpm_sim *s, mpm_thread_out *o, const boxc *bc, chk *ck, esum *e, rowrun *a,
                         size_t b0, size_t b1, int D, int NS, int BS, int EN, int AP)
 {
@@ -760,9 +757,9 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
      * step's scatter, three small loops rather than one that spills */
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t b1 = p1 - b0 < MPM_BLOCK ? p1 : b0 + MPM_BLOCK;
-        /* the block's weights first: tents and B-splines (1.05-1.09x) and
-         * 2D uGIMP (1.02x; 3D uGIMP 0.99x: taken where they are used);
-         * tents by lanes (AVX builds) take theirs there */
+        /* the block's weights first: tents, B-splines and 2D uGIMP (3D
+         * uGIMP's are taken where they are used: no gain there); tents
+         * by lanes (AVX builds) take theirs there */
         const int BW = !AP && !TLM(D, NS, BS, AP) && (NS == 2 || BS || D < 3);
         if (BW) weights_block(s, b0, b1 - b0, D, NS, BS, Wb);
 #if MPM_V4
@@ -834,8 +831,8 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
 #endif
     for (size_t b0 = p0; b0 < p1; b0 += MPM_BLOCK) {
         size_t nb = p1 - b0 < MPM_BLOCK ? p1 - b0 : MPM_BLOCK;
-        /* the block's weights first (uGIMP too: 1.07x 2D); tents by lanes
-         * (AVX builds) take theirs there */
+        /* the block's weights first (uGIMP too); tents by lanes (AVX
+         * builds) take theirs there */
         const int BW = !AP && !TL(D, NS, BS, AP);
         if (BW) weights_block(s, b0, nb, D, NS, BS, Wb);
 #if MPM_V4

@@ -1,6 +1,6 @@
 /*
  * mpm_plastic.h - stress-point integrators of the two perfectly plastic
- * pressure-dependent models of issue 11: Drucker-Prager (non-associated,
+ * pressure-dependent models: Drucker-Prager (non-associated,
  * with a tension cut-off and the three usual matchings to Mohr-Coulomb) and
  * Mohr-Coulomb (non-associated, tension cut-off, corners and apex).  Pure
  * functions of one material point: the solver calls mpm_plastic_update()

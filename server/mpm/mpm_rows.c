@@ -433,8 +433,7 @@ static void damp_seg(mpm_sim *s, int tid, size_t base, size_t w)
 }
 
 /* 1/m of w nodes into mi, 0 where m <= mtol (phantom nodes); two at a
- * time (the quotient where m is 0 is masked away): the scalar bits, the
- * 2D MPM step 1.01x. */
+ * time (the quotient where m is 0 is masked away): the scalar bits. */
 static void minv_seg(double *restrict mi, const double *restrict m, double mtol, size_t w)
 {
     const v2d one = {1.0, 1.0}, tol = {mtol, mtol};

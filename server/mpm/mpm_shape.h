@@ -100,7 +100,7 @@ INLINE int axis_gimp(double r, double a, double i2a, double i2lp, int NS, double
 #else
     /* two pairs: SSE2 lowered the four-lane form's broadcasts through the
      * stack (two 8-byte stores read back as one 16-byte load, which the
-     * store buffer cannot forward) and ran 3x slower than this */
+     * store buffer cannot forward) and ran far slower than this */
     const v2d nd = {(double)n0, (double)n0}, av = {a, a};
     const v2l mag = {INT64_MAX, INT64_MAX};
     for (int h = 0; h < 4; h += 2) {
@@ -423,7 +423,7 @@ INLINE void weights_block(const mpm_sim *s, size_t b0, size_t nb, int D, int NS,
     int inner = wgeo_init(s, D, NS, BS, &G);
     /* four particles at a time in AVX builds; the portable kernels take
      * the B-spline weights one by one (SSE2 lowers the four-lane form
-     * through the stack: 0.88x) */
+     * through the stack, which was slower) */
     if (BS && MPM_V4)
         for (; inner && i + 3 < nb; i += 4)
             if (!bs_block4(s, &G, b0 + i, D, NS, Wb + i))

@@ -422,8 +422,8 @@ static void ph_step_usl(mpm_sim *s, int tid)
  * particles than the last sort left (runs0, mpm_sort_team()).  Particles that move together
  * cross cell lines together: the disks' lattice, at 2 x 2 per cell and
  * 1/32 of a cell per step, crosses every 16 steps, which left the runs at
- * one particle for half of the steps between fixed sorts (the sorted
- * steps 1.19-1.25x faster for MPM's tents).  CPDI's passes do not count
+ * one particle for half of the steps between fixed sorts (the gain is in
+ * docs/performance.md).  CPDI's passes do not count
  * cells: its sorts stay every MPM_SORT_EVERY steps. */
 static void begin_step(mpm_sim *s)
 {

@@ -20,9 +20,8 @@
  * that they are in order already (then nothing moves: the common case
  * between cell crossings) run on the team; the histogram, the farthest
  * move and the marking of the cycles are serial, and the moves run on the team again, the
- * arrays dealt out to the threads: on 2 threads, 1.8x (disks2d) and 2-5x
- * (cube3d) faster than the serial swaps of every array at once that they
- * replace, 1.04x the whole step; the same on 1 thread.  The order does not
+ * arrays dealt out to the threads (faster than the serial swaps of every
+ * array at once that they replace: docs/performance.md).  The order does not
  * depend on the thread count.
  */
 #include "mpm_internal.h"

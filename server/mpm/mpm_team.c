@@ -70,8 +70,8 @@ void mpm_bar_wait(mpm_bar *b)
         if (!(i & 63)) {
             if (elapsed_ns(&t0) > MPM_BAR_SPIN_NS) break;
             /* let the thread we wait for run if it shares our CPU
-             * (more threads than CPUs: spinning alone made a 2-thread
-             * job beside another 1.7x slower) */
+             * (more threads than CPUs: spinning alone slowed a 2-thread
+             * job beside another) */
             sched_yield();
         }
     }

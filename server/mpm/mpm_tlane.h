@@ -16,8 +16,8 @@
  * by particle), USL's moving pass and, in 3D, USF's moving pass.  The moving passes' lanes read the
  * block's positions and velocities from a copy (tlcopy), since the particle arrays' 32-byte loads
  * overlapped the last group's stores in part.  2D USF's moving pass stays one particle at a time:
- * by lanes it ran 0.82-0.92x with its arrays in cache, and still 0.97x with the copy.  Everything
- * is static and inline.
+ * by lanes it ran slower, with the copy too (docs/performance.md).  Everything is static and
+ * inline.
  */
 #ifndef MPM_TLANE_H
 #define MPM_TLANE_H
@@ -54,7 +54,7 @@ INLINE void tlane_weights(const wgeo *G, double *const x[3], size_t p, int D, si
 /* How many of base[i .. i + 3] (i + 4 <= n) from the first share its cell:
  * k[i], 1 .. 4.  The loops step by these, loaded, rather than by a count
  * each group computes from its own positions, whose chain of latencies
- * the next group's loads would wait on (in-cache runs 0.82-0.87x). */
+ * the next group's loads would wait on. */
 INLINE void tl_counts(const size_t *base, size_t n, unsigned char *k)
 {
     for (size_t i = 0; i + 4 <= n; i++) {
@@ -423,8 +423,7 @@ INLINE void el_one(mpm_sim *s, mpm_thread_out *o, const pw *W, size_t b0, size_t
  * reach the run sums in particle order, as in the general path (every
  * strain, then every stress, then every force): the same bits, in one
  * pass over the block instead of three, the strain increments (and in
- * 2D the stresses) not stored and loaded back (disks2d MPM USF at 10^6:
- * 1.09x on 1 and on 2 threads; 1.03x in cache). */
+ * 2D the stresses) not stored and loaded back. */
 INLINE void el_block(mpm_sim *s, mpm_thread_out *o, mpm_gridbuf *gb, const wgeo *G, trun *r,
                      size_t b0, size_t nb, int D)
 {

@@ -3,7 +3,7 @@
  * (mpm_sim_traffic(), mpm.h): which particle arrays each particle pass of
  * the job's step reads and writes, as bytes per particle, and their sum
  * per particle-step.  bin/mpmbench multiplies it by the measured rate to
- * give the bandwidth a run achieves against a STREAM triad (issue #14).
+ * give the bandwidth a run achieves against a STREAM triad (docs/performance.md).
  *
  * The passes are a table, one static function per update scheme (usf(),
  * usl(), musl()), each pass a pair of field masks (read, written) built
@@ -37,7 +37,7 @@
  *   - several materials with different models: the union of their
  *     arrays (an upper bound).
  * Example, 2D MPM USF linear elastic, unfused and with a strain record
- * and sigma_zz stored (every release before issue #14): p2g_mq reads x v
+ * and sigma_zz stored (the releases before the fused steps): p2g_mq reads x v
  * m (40 B); stress_force reads x mat sig eps vol (16 + 2 + 32 + 24 + 8 =
  * 82) and writes sig eps vol (64); g2p_xv reads and writes x v (32 + 32):
  * 250 B.  Fused, without the strain record and sigma_zz (now):

@@ -14,23 +14,21 @@
  * runs that share one cell, and so its 2^D corners: the run's
  * contributions are summed in registers and added to the grid once per
  * run, not once per particle (each of those adds waits on the store of the
- * one before to the same node): the step 1.02x in 2D, 1.06x in 3D, 1.11x
- * in 1D.  Other sums than the adds particle by particle, so other last
- * bits; the runs depend only on the order of the particles, so the fused
+ * one before to the same node; docs/performance.md).  Other sums than the adds particle by
+ * particle, so other last bits; the runs depend only on the order of the particles, so the fused
  * and unfused scatters agree bit for bit.  3D: a[k][kz], the x pairs of
  * the corner rows ky = 0, 1 (lanes 0-1, 2-3) of plane kz of field k (m,
  * q0..q2, f0..f2), four lanes, so that the run's 14 sums fit the 16 AVX
- * registers (as 28 pairs half of them lived on the stack): 1.02x cube3d
- * MPM USF; 1D and 2D: b[k][ky], the x pair of row ky (as four lanes 2D ran
- * 0.96x).  Each lane does the pair's arithmetic, so the same bits. */
+ * registers (as 28 pairs half of them lived on the stack); 1D and 2D:
+ * b[k][ky], the x pair of row ky (four lanes were slower there).  Each lane does the pair's
+ * arithmetic, so the same bits. */
 typedef struct {
     size_t base; /* the run's cell (its first corner); SIZE_MAX: no run yet */
 #if MPM_V4
     v4d a[7][2]; /* 3D */
 #else
     /* 3D in the portable kernels: a[k][kz][ky], the x pairs (SSE2 lowered
-     * the four-lane sums' broadcasts through the stack: cube3d MPM ran
-     * 2.9x slower than the AVX2 kernels) */
+     * the four-lane sums' broadcasts through the stack) */
     v2d a[7][2][2];
 #endif
     v2d b[7][2]; /* 1D, 2D */

@@ -135,7 +135,7 @@ static const char *const migrations[] = {
      * APIC.) */
     "ALTER TABLE runs ADD COLUMN transfer TEXT NOT NULL DEFAULT 'flip'"
     " CHECK (transfer IN ('flip','apic'));",
-    /* 5 -> 6: the extended energy balance of issue 11 (mpmd.EnergySample
+    /* 5 -> 6: the extended energy balance (mpmd.EnergySample
      * fields 12-16): the four cumulative works and the balance error of
      * each sample, and the run's balance error at its end and budget warning
      * (RunInfo.balance_error, .warning).  Samples written before read the
@@ -149,13 +149,13 @@ static const char *const migrations[] = {
     "ALTER TABLE energy ADD COLUMN balance_error REAL DEFAULT 0;"
     "ALTER TABLE runs ADD COLUMN balance_error REAL;"
     "ALTER TABLE runs ADD COLUMN warning TEXT;",
-    /* 6 -> 7: the run's owner (issue 12, RunInfo.owner): the submitter's
+    /* 6 -> 7: the run's owner (RunInfo.owner): the submitter's
      * CURVE public key (Z85) or "local".  Runs stored before read '' (not
      * recorded); they have all ended (a cancel gets CONFLICT).  The
      * index serves the per-client disk quota (store_owner_bytes). */
     "ALTER TABLE runs ADD COLUMN owner TEXT NOT NULL DEFAULT '';"
     "CREATE INDEX runs_by_owner ON runs(owner, id);",
-    /* 7 -> 8: resumable runs (issue 12, RunInfo.checkpoint_step/_t,
+    /* 7 -> 8: resumable runs (RunInfo.checkpoint_step/_t,
      * .resumes): the run's last checkpoint (its step, simulated time, file
      * size and the seq of the next energy sample; NULL = none) and the
      * number of times it was resumed.  Runs stored before have none and
