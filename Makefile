@@ -4,16 +4,22 @@
 # REF=<commit>` the same bench of another commit against this tree's,
 # interleaved.  docs/architecture.md tells what each folder owns.
 #
-# Layers (each a static library, linked only by what needs it; sources are
-# picked up by wildcard, so a new file joins its layer by being there):
-#   server/mpm/*.c     libmpm   the solver (plain C, libm, pthreads)
-#   protocol/*.c       libmpp   codec, JSON mapping, versions, endpoint rules
-#                               (+ the generated build/gen/*.pb-c.c)
-#   server/store/*.c   libstore the SQLite run store
-#   server/srv_*.c     libsrv   the daemon's modules; server/main.c is mpmd
-#   clients/*.c                 mpmctl
-#   tools/*.c                   the solver's examples (mpm_paper) and mpmrun
-#   tests/                      mpmtest (t_*.c), benches (bench/, perf/)
+# Layers, bottom up (each library a static archive, linked only by what needs
+# it; sources are picked up by wildcard, so a new file joins its layer by
+# being there).  A library's public headers live in its include/ folder; a
+# layer is compiled with the include/ folders of the layers below it and
+# nothing else, so an include that crosses a layer the wrong way, or reaches
+# another library's private header, does not compile:
+#   solver/            libmpm    the solver (plain C, libm, pthreads)
+#   protocol/          libmpp    codec, JSON mapping, versions, endpoint rules
+#                                (+ the generated build/gen/*.pb-c.c)
+#   server/store/      libstore  the SQLite run store
+#   server/daemon/     libsrv    the daemon's modules; server/mpmd/ is mpmd
+#   clients/ctl/       libctl    the client library of mpmctl and mpmweb
+#   clients/mpmctl/              mpmctl;  clients/web/: mpmweb
+#   scenes/            libscenes the paper's cases and the collapse; scenes/mpmrun/
+#   bench/                       the benchmarks (accuracy/, perf/, ceiling/, vtk/)
+#   tests/                       mpmtest: runner.c + tests/<layer>/t_*.c
 # Every object records its header dependencies (-MMD -MP), so an edit
 # rebuilds only what includes it.
 
@@ -29,28 +35,58 @@ SRVLIBS := $(ZMQLIBS) -lsqlite3
 # mpmctl's VTK writer compresses with zlib (zlib1g-dev)
 ZLIBS   := $(shell pkg-config --libs zlib 2>/dev/null || echo -lz)
 
-MPM_SRCS   := $(wildcard server/mpm/*.c)
+MPM_SRCS   := $(wildcard solver/*.c)
 PROTOS     := $(wildcard proto/*.proto)
 GEN_C      := $(patsubst proto/%.proto,build/gen/%.pb-c.c,$(PROTOS))
 GEN_H      := $(GEN_C:.c=.h)
 MPP_SRCS   := $(wildcard protocol/*.c)
 STORE_SRCS := $(wildcard server/store/*.c)
-SRV_SRCS   := $(filter-out server/main.c,$(wildcard server/*.c))
-CLI_SRCS   := $(wildcard clients/*.c)
-TOOL_LIB   := $(filter-out tools/mpmrun.c,$(wildcard tools/*.c))
-TEST_SRCS  := $(wildcard tests/t_*.c) tests/runner.c
-BENCH_SRCS := $(wildcard tests/bench/*.c)
-PERF_SRCS  := $(wildcard tests/perf/*.c)
-# bin/mpmceiling's lean step (tests/ceiling/: also linked into mpmtest) and its program
-CEIL_SRCS  := tests/ceiling/ceiling.c tests/ceiling/ceiling_avx2.c
-INC        := -Iserver/mpm -Iserver -Iserver/store -Iprotocol -Itools -Ibuild/gen -Itests
+SRV_SRCS   := $(wildcard server/daemon/*.c)
+CTL_SRCS   := $(wildcard clients/ctl/*.c)
+CLI_SRCS   := $(wildcard clients/mpmctl/*.c)
+TOOL_LIB   := $(wildcard scenes/*.c)
+TEST_SRCS  := tests/runner.c $(wildcard tests/*/t_*.c)
+BENCH_SRCS := $(wildcard bench/accuracy/*.c)
+PERF_SRCS  := $(wildcard bench/perf/*.c)
+# bin/mpmceiling's lean step (bench/ceiling/: also linked into mpmtest) and its program
+CEIL_SRCS  := bench/ceiling/ceiling.c bench/ceiling/ceiling_avx2.c
 
-# The AVX2+FMA kernels (server/mpm/mpm_kernels_avx2.c, chosen at run time)
+# Include paths, per layer: the public include/ folders of the layers below.
+# A file's own folder is searched first by #include "..." anyway, so a
+# library's private headers need no -I of their own.
+I_MPM    := -Isolver/include
+I_MPP    := $(I_MPM) -Iprotocol/include
+I_STORE  := $(I_MPP) -Iserver/store/include
+I_SRV    := $(I_STORE) -Iserver/daemon
+I_CTL    := $(I_MPP) -Iclients/ctl/include
+I_SCENES := $(I_MPM) -Iscenes/include
+I_BENCH  := $(I_SCENES) $(I_CTL) -Ibench
+# the tests reach every layer's internals
+I_TESTS  := $(I_SRV) $(I_CTL) $(I_SCENES) -Isolver -Iprotocol -Iserver/store -Ibuild/gen \
+            -Itests -Itests/solver -Itests/store -Itests/daemon -Itests/clients -Ibench
+INC      := $(I_TESTS)
+# $(1) a build directory: each layer's objects get that layer's paths
+define layer_inc
+$(1)/solver/%.o: INC = $(I_MPM)
+$(1)/protocol/%.o: INC = $(I_MPP) -Ibuild/gen
+$(1)/gen/%.o: INC = $(I_MPP)
+$(1)/server/store/%.o: INC = $(I_STORE)
+$(1)/server/daemon/%.o: INC = $(I_SRV)
+$(1)/server/mpmd/%.o: INC = $(I_SRV)
+$(1)/clients/ctl/%.o: INC = $(I_CTL)
+$(1)/clients/mpmctl/%.o: INC = $(I_CTL)
+$(1)/clients/web/%.o: INC = $(I_CTL)
+$(1)/scenes/%.o: INC = $(I_SCENES)
+$(1)/bench/%.o: INC = $(I_BENCH)
+$(1)/tests/fuzz/%.o: INC = $(I_MPP)
+endef
+
+# The AVX2+FMA kernels (solver/mpm_kernels_avx2.c, chosen at run time)
 # on x86-64: that file with these flags, every file told that it exists.
 ifneq ($(findstring x86_64,$(shell $(CC) -dumpmachine 2>/dev/null)),)
 CSTD    += -DMPM_HAVE_AVX2_KERNELS
 AVX2F   := -mavx2 -mfma -ffp-contract=fast
-# Drucker-Prager's lanes (server/mpm/mpm_plastic_avx2.c): AVX2 without
+# Drucker-Prager's lanes (solver/mpm_plastic_avx2.c): AVX2 without
 # fused multiply-adds, the scalar update's bits; -O3 fully unrolls the small
 # fixed-count loops over the lanes and a stress's six components (2e6
 # recorded plastic updates: 135 -> 110 ns each, -fpeel-loops alone 118; the
@@ -103,12 +139,15 @@ $(1)/libstore.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(STORE_SRCS))
 	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
 $(1)/libsrv.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(SRV_SRCS))
 	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
-$(1)/libtools.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(TOOL_LIB))
+$(1)/libscenes.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(TOOL_LIB))
 	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
+$(1)/libctl.a: $(1)/.sources $(patsubst %.c,$(1)/%.o,$(CTL_SRCS))
+	rm -f $$@ && $$(AR) rcs $$@ $$(filter %.o,$$^)
+$(call layer_inc,$(1))
 endef
 # A library depends on the list of sources of its build, rewritten only when
 # a file appears or goes, so a deleted source leaves no stale archive member.
-ALL_LIB_SRCS := $(sort $(MPM_SRCS) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) $(TOOL_LIB))
+ALL_LIB_SRCS := $(sort $(MPM_SRCS) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) $(CTL_SRCS) $(TOOL_LIB))
 define srclist
 $(shell mkdir -p $(1); [ "$$(cat $(1)/.sources 2>/dev/null)" = "$(ALL_LIB_SRCS)" ] || echo "$(ALL_LIB_SRCS)" > $(1)/.sources)
 endef
@@ -122,17 +161,17 @@ $(FUZZ)/%.o: CC := $(FUZZ_CC)
 # the fuzzers reach only the solver's case check, and clang takes many
 # minutes on its kernels with the sanitizers: the solver is built at -O0,
 # its kernels (never called by a target) without instrumentation
-$(FUZZ)/server/mpm/%.o: FUZZ_O := -O0
-$(FUZZ)/server/mpm/mpm_kernels.o $(FUZZ)/server/mpm/mpm_kernels_avx2.o: FUZZF = -O0 -g
-$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/server/mpm/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
-$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/server/mpm/mpm_plastic_avx2.o): XFLAGS = $(PLASF)
-$(foreach b,$(REL) $(ASAN) $(TSAN),$(b)/tests/ceiling/ceiling_avx2.o): XFLAGS = $(AVX2F)
+$(FUZZ)/solver/%.o: FUZZ_O := -O0
+$(FUZZ)/solver/mpm_kernels.o $(FUZZ)/solver/mpm_kernels_avx2.o: FUZZF = -O0 -g
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/solver/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/solver/mpm_plastic_avx2.o): XFLAGS = $(PLASF)
+$(foreach b,$(REL) $(ASAN) $(TSAN),$(b)/bench/ceiling/ceiling_avx2.o): XFLAGS = $(AVX2F)
 -include $(shell find build -name '*.d' 2>/dev/null)
 
 # Link lines, per build: $(1) build dir.  Libraries go above what they use.
-mpmd_deps    = $(1)/server/main.o $(1)/libsrv.a $(1)/libstore.a $(1)/libmpp.a $(1)/libmpm.a
-mpmctl_deps  = $(patsubst %.c,$(1)/%.o,$(CLI_SRCS)) $(1)/libmpp.a $(1)/libmpm.a
-mpmtest_deps = $(patsubst %.c,$(1)/%.o,$(TEST_SRCS) $(CEIL_SRCS)) $(1)/libtools.a $(1)/libsrv.a \
+mpmd_deps    = $(1)/server/mpmd/main.o $(1)/libsrv.a $(1)/libstore.a $(1)/libmpp.a $(1)/libmpm.a
+mpmctl_deps  = $(patsubst %.c,$(1)/%.o,$(CLI_SRCS)) $(1)/libctl.a $(1)/libmpp.a $(1)/libmpm.a
+mpmtest_deps = $(patsubst %.c,$(1)/%.o,$(TEST_SRCS) $(CEIL_SRCS)) $(1)/libscenes.a $(1)/libsrv.a \
                $(1)/libstore.a $(1)/libmpp.a $(1)/libmpm.a
 
 # ---- the daemon, the client and the test runner --------------------------------
@@ -145,7 +184,7 @@ bin/mpmctl: $(call mpmctl_deps,$(REL))
 bin/mpmtest: $(call mpmtest_deps,$(REL))
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
-bin/mpmrun: $(REL)/tools/mpmrun.o $(REL)/libtools.a $(REL)/libmpm.a
+bin/mpmrun: $(REL)/scenes/mpmrun/mpmrun.o $(REL)/libscenes.a $(REL)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
@@ -177,7 +216,7 @@ test: deps
 bench-build: deps
 	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmbench-accuracy bin/mpmvtkbench \
 	  bin/mpmceiling
-	@bash tests/perf/inproc/inproc.sh --self-check
+	@bash bench/perf/inproc/inproc.sh --self-check
 	bin/mpmceiling --check
 
 # Release build, no sanitizers: quick local iteration.
@@ -211,7 +250,8 @@ clean:
 # place; format-check (run by .ci/run) changes nothing and fails listing the
 # files that differ.  Generated code (build/) is not ours to format.
 CLANG_FORMAT ?= clang-format
-FMT_SRCS = $(shell find server protocol clients tools tests -name '*.[ch]' | sort)
+SRC_DIRS := solver protocol server clients scenes bench tests
+FMT_SRCS = $(shell find $(SRC_DIRS) -name '*.[ch]' | sort)
 
 format: deps
 	$(CLANG_FORMAT) -i $(FMT_SRCS)
@@ -236,7 +276,7 @@ CPPCHECK ?= cppcheck
 CPPCHECK_FLAGS := --enable=warning,performance,portability --std=c11 --max-configs=12 \
   --error-exitcode=1 --inline-suppr --suppressions-list=tests/cppcheck.supp -q \
   -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE -DPROTOBUF_C_VERSION_NUMBER=1004001 \
-  --cppcheck-build-dir=build/cppcheck -j2 -i server/mpm/mpm_kernels_avx2.c
+  --cppcheck-build-dir=build/cppcheck -j2 -i solver/mpm_kernels_avx2.c
 # (mpm_kernels_avx2.c is mpm_kernels.c again with other flags: both tools
 # read it there)
 # -fanalyzer (gcc only) at -O0, its objects in build/analyze.  Turned off:
@@ -254,9 +294,10 @@ ANALYZER_CC ?= gcc
 ANALYZE := build/analyze
 ANAF := -O0 -g -fanalyzer -Wno-analyzer-use-of-uninitialized-value -Wno-format-truncation
 $(ANALYZE)/tests/%.o: ANAF += -Wno-analyzer-malloc-leak -Wno-analyzer-file-leak
-LINT_SRCS = $(filter-out server/mpm/mpm_kernels_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(wildcard server/*.c) $(CLI_SRCS) \
-            $(wildcard tools/*.c) $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS) $(wildcard tests/perf/inproc/*.c) \
-            $(wildcard tests/ceiling/*.c)
+LINT_SRCS = $(filter-out solver/mpm_kernels_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) \
+            server/mpmd/main.c $(CTL_SRCS) $(CLI_SRCS) $(TOOL_LIB) scenes/mpmrun/mpmrun.c $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS) $(wildcard bench/perf/inproc/*.c) \
+            $(wildcard bench/ceiling/*.c)
+$(eval $(call layer_inc,$(ANALYZE)))
 $(ANALYZE)/%.o: %.c | $(GEN_H)
 	@mkdir -p $(dir $@)
 	$(ANALYZER_CC) $(CSTD) $(WARN) $(ANAF) $(INC) -MMD -MP -c $< -o $@
@@ -265,14 +306,14 @@ $(ANALYZE)/%.o: %.c | $(GEN_H)
 lint: deps | $(GEN_H)
 	@mkdir -p build/cppcheck
 	@rc=0; \
-	echo "$(CPPCHECK) $(CPPCHECK_FLAGS) $(INC) server protocol clients tools tests"; \
-	$(CPPCHECK) $(CPPCHECK_FLAGS) $(INC) server protocol clients tools tests || rc=1; \
+	echo "$(CPPCHECK) $(CPPCHECK_FLAGS) $(INC) $(SRC_DIRS)"; \
+	$(CPPCHECK) $(CPPCHECK_FLAGS) $(INC) $(SRC_DIRS) || rc=1; \
 	$(MAKE) --no-print-directory -k $(patsubst %.c,$(ANALYZE)/%.o,$(LINT_SRCS)) || rc=1; \
 	if [ $$rc != 0 ]; then echo "lint: FAILED (findings above)"; exit 1; fi; \
 	echo "lint: ok (cppcheck, gcc -fanalyzer)"
 
 # ---- the accuracy benchmark and the stability suite -----------------------------
-# make bench-accuracy  runs bin/mpmbench-accuracy (tests/bench/): method, update,
+# make bench-accuracy  runs bin/mpmbench-accuracy (bench/accuracy/): method, update,
 #                      transfer, cells, particles per cell and dt/CFL swept on problems with
 #                      known answers; table on the terminal, build/bench/accuracy.csv,
 #                      and build/bench/accuracy_{time,space,dt}.png when gnuplot is
@@ -282,7 +323,7 @@ lint: deps | $(GEN_H)
 #                      MPM_STRESS=full) and the reliability suite (rel_* at full
 #                      size, make fuzz) on the release build, ending with the
 #                      Reliability table; `make test` runs their quick form.
-bin/mpmbench-accuracy: $(patsubst %.c,$(REL)/%.o,$(BENCH_SRCS)) $(REL)/libtools.a $(REL)/libmpm.a
+bin/mpmbench-accuracy: $(patsubst %.c,$(REL)/%.o,$(BENCH_SRCS)) $(REL)/libscenes.a $(REL)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
@@ -353,25 +394,24 @@ fuzz-seed: fuzz-build
 	done
 
 # ---- the throughput benchmark ----------------------------------------------------
-# make bench  runs bin/mpmbench --all (tests/perf/): disks2d, cube3d and bar1d at
+# make bench  runs bin/mpmbench --all (bench/perf/): disks2d, cube3d and bar1d at
 #             ~10^6 particles and sparse2d, MPM and GIMP, 1 and 2 threads;
 #             disks2d against bin/mpmbench-lean (the same sources on a solver
 #             compiled with -DMPM_LEAN, objects in build/lean); disks2d through a
 #             real bin/mpmd.  Table on the terminal, rows appended to
 #             build/bench/throughput.csv.  One scene: bin/mpmbench --scene NAME.
-bin/mpmbench: $(patsubst %.c,$(REL)/%.o,$(PERF_SRCS)) $(REL)/libtools.a $(REL)/libmpp.a $(REL)/libmpm.a
+bin/mpmbench: $(patsubst %.c,$(REL)/%.o,$(PERF_SRCS)) $(REL)/libscenes.a $(REL)/libmpp.a $(REL)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(LDLIBS)
 # the lean binary has no daemon scene, so it needs only the solver
-bin/mpmbench-lean: $(patsubst %.c,$(LEAN)/%.o,$(PERF_SRCS)) $(LEAN)/libtools.a $(LEAN)/libmpm.a
+bin/mpmbench-lean: $(patsubst %.c,$(LEAN)/%.o,$(PERF_SRCS)) $(LEAN)/libscenes.a $(LEAN)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
 # make bench-vtk  the VTK writer of mpmctl: a synthetic 10^6-particle snapshot
 #                 written as .vtp in each encoding, file sizes and write times
 #                 (BENCH_ARGS: --n N, --dim 3, --all, --skip-ascii; --help).
-bin/mpmvtkbench: $(REL)/tests/vtkbench/mpmvtkbench.o $(REL)/clients/ctl_vtk.o \
-                 $(REL)/clients/ctl_json.o $(REL)/libmpp.a $(REL)/libmpm.a
+bin/mpmvtkbench: $(REL)/bench/vtk/mpmvtkbench.o $(REL)/libctl.a $(REL)/libmpp.a $(REL)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
 
@@ -379,19 +419,19 @@ bench-vtk: deps
 	@$(MAKE) --no-print-directory bin/mpmvtkbench
 	bin/mpmvtkbench $(BENCH_ARGS)
 
-# make bench-ceiling  issue 14's ceiling: bin/mpmceiling (tests/ceiling/: the
+# make bench-ceiling  issue 14's ceiling: bin/mpmceiling (bench/ceiling/: the
 #             disks2d scene's 2D MPM USF step with nothing but its arithmetic,
 #             four lanes where the CPU has AVX2 and FMA) against bin/mpmbench's
 #             disks2d MPM USF on 1 thread, alternated (CEILING_ROUNDS, default 3),
 #             at 10^4 and 10^6 particles, with the triad: what a step of the
 #             solver's design can reach here, and what the solver reaches.
-bin/mpmceiling: $(REL)/tests/ceiling/mpmceiling.o $(patsubst %.c,$(REL)/%.o,$(CEIL_SRCS))
+bin/mpmceiling: $(REL)/bench/ceiling/mpmceiling.o $(patsubst %.c,$(REL)/%.o,$(CEIL_SRCS))
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
 bench-ceiling: deps
 	@$(MAKE) --no-print-directory bin/mpmceiling bin/mpmbench
-	@bash tests/ceiling/ceiling.sh
+	@bash bench/ceiling/ceiling.sh
 
 bench: deps
 	@$(MAKE) --no-print-directory bin/mpmbench bin/mpmbench-lean bin/mpmd
@@ -399,7 +439,7 @@ bench: deps
 	@echo "bench: rows appended to build/bench/throughput.csv"
 
 # make bench-compare REF=<commit>  this tree's bin/mpmbench against REF's, on
-#             the same machine, interleaved (tests/perf/compare.sh): REF is
+#             the same machine, interleaved (bench/perf/compare.sh): REF is
 #             checked out as a git worktree in build/compare/<short-sha> and its
 #             bench built there with its own Makefile; then COMPARE_ROUNDS (3)
 #             rounds of a triad (bin/mpmbench --triad) and every configuration,
@@ -413,10 +453,10 @@ bench: deps
 #             see the script's head.
 bench-compare:
 	@test -n "$(REF)" || { echo "usage: make bench-compare REF=<commit> [COMPARE_QUICK=1]" >&2; exit 2; }
-	@bash tests/perf/compare.sh $(REF)
+	@bash bench/perf/compare.sh $(REF)
 
 # make bench-inproc REF=<commit>  this tree's solver against REF's in one
-#             process, alternated round by round (tests/perf/inproc/): REF's
+#             process, alternated round by round (bench/perf/inproc/): REF's
 #             tree and bench as for bench-compare, REF's solver linked into the
 #             driver with its symbols made local; for each configuration
 #             INPROC_PROCS (3) processes, each with both simulations resident,
@@ -426,11 +466,11 @@ bench-compare:
 #             extremes and the rounds won.  Default: bench-compare's
 #             configurations but collapse2d (~6 min).  INPROC_ARGS,
 #             INPROC_PARTICLES, INPROC_RUN_S: see the script's head.
-INPROC_OBJS := $(REL)/tests/perf/inproc/inproc.o $(REL)/tests/perf/inproc/side.o $(REL)/tests/perf/triad.o
-inproc-objs: $(INPROC_OBJS) $(REL)/libtools.a $(REL)/libmpm.a
+INPROC_OBJS := $(REL)/bench/perf/inproc/inproc.o $(REL)/bench/perf/inproc/side.o $(REL)/bench/perf/triad.o
+inproc-objs: $(INPROC_OBJS) $(REL)/libscenes.a $(REL)/libmpm.a
 bench-inproc:
 	@test -n "$(REF)" || { echo "usage: make bench-inproc REF=<commit>" >&2; exit 2; }
-	@bash tests/perf/inproc/inproc.sh $(REF)
+	@bash bench/perf/inproc/inproc.sh $(REF)
 
 # ---- the demo ----------------------------------------------------------------------
 # make demo: mpmd on loopback with its default database, the paper's fine
@@ -448,9 +488,8 @@ demo: deps
 # find it through MPMWEB_BIN (else beside MPMD_BIN); the web_ tests drive it
 # with headless Chromium.
 WEB_SRCS := $(wildcard clients/web/*.c)
-WEB_CTL  := clients/ctl_conn.c clients/ctl_keys.c clients/ctl_json.c clients/ctl_out.c
 WEBLIBS  := -lmicrohttpd $(ZMQLIBS) $(LDLIBS)
-mpmweb_deps = $(patsubst %.c,$(1)/%.o,$(WEB_SRCS) $(WEB_CTL)) $(1)/libmpp.a $(1)/libmpm.a
+mpmweb_deps = $(patsubst %.c,$(1)/%.o,$(WEB_SRCS)) $(1)/libctl.a $(1)/libmpp.a $(1)/libmpm.a
 LINT_SRCS += $(WEB_SRCS)
 all: bin/mpmweb
 bin/mpmweb: $(call mpmweb_deps,$(REL))

@@ -3,7 +3,7 @@
  * pass over the bytes, decoding UTF-8 only as far as needed to tell the
  * characters to escape (C1 controls, bidirectional controls, line and
  * paragraph separators) and the bytes that begin no valid sequence.
- * Guarded by daemon_names_escape (tests/t_daemon_bind.c), the name tests
+ * Guarded by daemon_names_escape (tests/daemon/t_daemon_bind.c), the name tests
  * there (daemon_names_*) and daemon_case_names.
  */
 #include "mpp_text.h"

@@ -1,7 +1,7 @@
 /*
  * web.h - the parts of mpmweb, the live web monitor, shared between its
  * files.  mpmweb is a client of mpmd (the same connection code, keys and
- * flags as mpmctl: clients/ctl_conn.c, ctl_keys.c) and an HTTP server
+ * flags as mpmctl: clients/ctl/ctl_conn.c, ctl_keys.c) and an HTTP server
  * (Debian's libmicrohttpd, one thread per connection) that serves one page
  * (clients/web/static/) and a small JSON API over it:
  *
@@ -23,7 +23,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../ctl.h"
+#include "ctl.h"
 
 /* Limits. */
 #define WEB_MAX_CONNECTIONS 64   /* HTTP connections at once */

@@ -63,7 +63,7 @@
  * recovery the open could not write, or a probe when there is neither; it
  * runs right after a loss and every UPKEEP_S while it has work, and puts
  * the reserve back once a transaction commits.  Guarded by the
- * daemon_disk_* tests (tests/t_daemon_disk.c).
+ * daemon_disk_* tests (tests/daemon/t_daemon_disk.c).
  *
  * Memory cap.  s->qbytes counts the bytes of ops not yet committed.  Above
  * queue_cap (64 MiB): snapshots (the bulky items) are dropped with a log

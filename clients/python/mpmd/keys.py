@@ -1,4 +1,4 @@
-"""CURVE keys, found as mpmctl finds them (clients/ctl_keys.c).
+"""CURVE keys, found as mpmctl finds them (clients/ctl/ctl_keys.c).
 
 The server's public key and the client's secret key (its public key is
 derived from it) come from, in order:
