@@ -61,7 +61,8 @@ static int vtk_check(const char *manifest, const char *dir, char **out)
     char cmd[1024], path[512];
     size_t len = 0;
     snprintf(path, sizeof path, "%s/vtk_check.out", dir);
-    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/clients/vtk_check.py %s > %s 2>&1", manifest, path);
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/clients/vtk_check.py %s > %s 2>&1", manifest,
+             path);
     int rc = system(cmd);
     *out = td_slurp(path, &len);
     return rc;
