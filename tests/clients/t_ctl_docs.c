@@ -73,7 +73,9 @@ TEST(ctl_man_pages)
     CHECK(man && mpmd);
     snprintf(cmd, sizeof cmd, "%s --help", mpmd);
     CHECK(sh_out(cmd, tmp, "mpmd.help", &help) == 0 && help);
-    size_t nl = td_lines(help, &lines), nopt = 0, ndef = 0;
+    size_t nl = td_lines(help, &lines), nopt = 0, ndef = 0, nconf = 0;
+    char *conf = td_slurp("deploy/mpmd.conf", &len);
+    CHECK(conf);
     for (size_t i = 0; i < nl; i++) {
         char name[64], roff[160];
         if (sscanf(lines[i], " --%63[a-z-]", name) != 1 || strncmp(lines[i], "  --", 4)) continue;
@@ -116,7 +118,34 @@ TEST(ctl_man_pages)
         CHECKF(c && !strncmp(c, def, strlen(def)),
                "docs/manual.md's row of %s does not give the default %s", dashed, def);
         ndef++;
+        /* deploy/mpmd.conf: a setting it gives is the default, but for the
+         * places a site must choose (endpoints, database) */
+        char key[80];
+        snprintf(key, sizeof key, "\n%s = ", name);
+        const char *kv = conf ? strstr(conf, key) : NULL;
+        if (kv && strcmp(name, "endpoint") && strcmp(name, "stream-endpoint") && strcmp(name, "db")) {
+            kv += strlen(key);
+            CHECKF(!strncmp(kv, def, strlen(def)) && (kv[strlen(def)] == '\n'),
+                   "deploy/mpmd.conf gives %s = %.20s, the settings table's default is %s", name, kv,
+                   def);
+            nconf++;
+        }
     }
+    /* every key deploy/mpmd.conf names, given or commented out, is a
+     * setting of mpmd --help */
+    size_t nkeys = 0;
+    for (const char *l = conf; l && *l; l = strchr(l, '\n') ? strchr(l, '\n') + 1 : "") {
+        char key[64], opt[80];
+        const char *k = l[0] == '#' && l[1] == ' ' ? l + 2 : l;
+        if (sscanf(k, "%63[a-z-] = ", key) != 1 || !strstr(k, " = ") || strchr(key, ' ')) continue;
+        if ((size_t)(strstr(k, " = ") - k) != strlen(key)) continue;
+        snprintf(opt, sizeof opt, "  --%s ", key);
+        CHECKF(strstr(help, opt), "deploy/mpmd.conf names %s, which mpmd --help does not know", key);
+        nkeys++;
+    }
+    TLOG("deploy/mpmd.conf: %zu keys, each a setting; %zu given, each the default", nkeys, nconf);
+    CHECK(nkeys >= 15 && nconf >= 10);
+    free(conf);
     free(lines);
     free(help);
     free(man);
