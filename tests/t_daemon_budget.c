@@ -71,8 +71,8 @@ DTEST(daemon_budget_submit)
         td_out o;
         CHECK(td_ctl(&d, 30, &o, "submit", path, NULL) == 0);
         int ok = o.status == 1 && strstr(o.err, "TOO_LARGE") &&
-                 strstr(o.err, "output.snapshotEvery") && strstr(o.err, "9.38 MiB") &&
-                 strstr(o.err, "400 snapshots of 24576 bytes") && strstr(o.err, cases[i].want);
+                 strstr(o.err, "output.snapshotEvery") && strstr(o.err, "9.40 MiB") &&
+                 strstr(o.err, "401 snapshots of 24576 bytes") && strstr(o.err, cases[i].want);
         TLOG("%s %s: exit %d: %.300s", cases[i].flag, cases[i].limit, o.status, o.err);
         td_out_free(&o);
         CHECKF(ok, "the 9.4 MiB case was not refused naming %s", cases[i].flag);
