@@ -28,6 +28,9 @@ ZMQLIBS := -lzmq -lprotobuf-c -ljansson
 SRVLIBS := $(ZMQLIBS) -lsqlite3
 # mpmctl's VTK writer compresses with zlib (zlib1g-dev)
 ZLIBS   := $(shell pkg-config --libs zlib 2>/dev/null || echo -lz)
+# mpmctl's HDF5 export (clients/ctl_h5.c): Debian's serial libhdf5 (libhdf5-dev)
+H5INC   := $(shell pkg-config --cflags hdf5 2>/dev/null || echo -I/usr/include/hdf5/serial)
+H5LIBS  := $(shell pkg-config --libs hdf5 2>/dev/null || echo -lhdf5_serial)
 
 MPM_SRCS   := $(wildcard server/mpm/*.c)
 PROTOS     := $(wildcard proto/*.proto)
@@ -141,7 +144,7 @@ bin/mpmd: $(call mpmd_deps,$(REL))
 	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 bin/mpmctl: $(call mpmctl_deps,$(REL))
 	@mkdir -p bin
-	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
+	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 bin/mpmtest: $(call mpmtest_deps,$(REL))
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
@@ -152,14 +155,14 @@ bin/mpmrun: $(REL)/tools/mpmrun.o $(REL)/libtools.a $(REL)/libmpm.a
 $(ASAN)/mpmd: $(call mpmd_deps,$(ASAN))
 	$(CC) $(SAN) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 $(ASAN)/mpmctl: $(call mpmctl_deps,$(ASAN))
-	$(CC) $(SAN) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
+	$(CC) $(SAN) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 $(ASAN)/mpmtest: $(call mpmtest_deps,$(ASAN))
 	$(CC) $(SAN) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 
 $(TSAN)/mpmd: $(call mpmd_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 $(TSAN)/mpmctl: $(call mpmctl_deps,$(TSAN))
-	$(CC) $(TSANF) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
+	$(CC) $(TSANF) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 $(TSAN)/mpmtest: $(call mpmtest_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 
@@ -257,6 +260,7 @@ $(ANALYZE)/tests/%.o: ANAF += -Wno-analyzer-malloc-leak -Wno-analyzer-file-leak
 LINT_SRCS = $(filter-out server/mpm/mpm_kernels_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(wildcard server/*.c) $(CLI_SRCS) \
             $(wildcard tools/*.c) $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS) $(wildcard tests/perf/inproc/*.c) \
             $(wildcard tests/ceiling/*.c)
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(ANALYZE),$(b)/clients/ctl_h5.o): INC += $(H5INC)
 $(ANALYZE)/%.o: %.c | $(GEN_H)
 	@mkdir -p $(dir $@)
 	$(ANALYZER_CC) $(CSTD) $(WARN) $(ANAF) $(INC) -MMD -MP -c $< -o $@
