@@ -337,7 +337,7 @@ int ctl_h5_finish(ctl_h5 **ph, int ok, const char *xdmf_path, const char *h5name
     if (H5Gclose(h->snaps) < 0 && !rc) rc = h5_fail(h, "H5Gclose", "/snapshots");
     /* the file is complete only once closed (its metadata written) */
     if (H5Fclose(h->file) < 0 && !rc) rc = h5_fail(h, "H5Fclose", "the file");
-    if (!rc && ok) rc = write_xdmf(h, xdmf_path, h5name);
+    if (!rc && ok && xdmf_path && h5name) rc = write_xdmf(h, xdmf_path, h5name);
     if (rc || !ok) {
         remove(h->path);
         if (xdmf_path) remove(xdmf_path);

@@ -212,7 +212,7 @@ DTEST(ctl_export_hdf5)
     CHECK(write_case(c, dir, "c2.json", path[1], sizeof path[1]) == 0);
     for (int r = 0; r < 2; r++) CHECK(run_case(&d, path[r]) == 0);
     for (int r = 0; r < 2; r++) {
-        char ids[8], js[400], h5[400], vt[400];
+        char ids[16], js[400], h5[400], vt[400];
         snprintf(ids, sizeof ids, "%d", r + 1);
         snprintf(js, sizeof js, "%s/js%d", dir, r + 1);
         int ns = snapshots_json(&d, r + 1, js, steps, 64);
