@@ -243,11 +243,13 @@ static void item(FILE *x, const ctl_h5 *h, const char *h5name, const h5_entry *e
     fputs("</DataItem>\n", x);
 }
 
+/* An attribute named as the VTK files name it ("velocity" for the
+ * dataset v, else the dataset's name). */
 static void attribute(FILE *x, const ctl_h5 *h, const char *h5name, const h5_entry *e,
                       const char *name, const char *type, uint64_t cols, int u8)
 {
-    fprintf(x, "        <Attribute Name=\"%s\" AttributeType=\"%s\" Center=\"Node\">\n", name,
-            type);
+    fprintf(x, "        <Attribute Name=\"%s\" AttributeType=\"%s\" Center=\"Node\">\n",
+            strcmp(name, "v") ? name : "velocity", type);
     item(x, h, h5name, e, name, cols, u8);
     fputs("        </Attribute>\n", x);
 }
