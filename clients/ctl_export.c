@@ -125,7 +125,7 @@ int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_export_format fmt,
     json_t *reply = NULL, *run = NULL, *steps;
     char stem[80], *path = NULL, **files = NULL;
     double *times = NULL;
-    size_t ns, rows = 0, plen = strlen(dir) + 160, i;
+    size_t ns = 0, rows = 0, plen = strlen(dir) + 160, i;
     ctl_h5 *h5 = NULL;
     int rc = ctl_call(c, &rq, "run", &reply, &run), tty = isatty(2), width = 1;
     if (rc) goto out;
