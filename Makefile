@@ -34,6 +34,9 @@ ZMQLIBS := -lzmq -lprotobuf-c -ljansson
 SRVLIBS := $(ZMQLIBS) -lsqlite3
 # mpmctl's VTK writer compresses with zlib (zlib1g-dev)
 ZLIBS   := $(shell pkg-config --libs zlib 2>/dev/null || echo -lz)
+# mpmctl's HDF5 export (clients/ctl/ctl_h5.c): Debian's serial libhdf5 (libhdf5-dev)
+H5INC   := $(shell pkg-config --cflags hdf5 2>/dev/null || echo -I/usr/include/hdf5/serial)
+H5LIBS  := $(shell pkg-config --libs hdf5 2>/dev/null || echo -lhdf5_serial)
 
 MPM_SRCS   := $(wildcard solver/*.c)
 PROTOS     := $(wildcard proto/*.proto)
@@ -74,6 +77,7 @@ $(1)/server/store/%.o: INC = $(I_STORE)
 $(1)/server/daemon/%.o: INC = $(I_SRV)
 $(1)/server/mpmd/%.o: INC = $(I_SRV)
 $(1)/clients/ctl/%.o: INC = $(I_CTL)
+$(1)/clients/ctl/ctl_h5.o: INC = $(I_CTL) $(H5INC)
 $(1)/clients/mpmctl/%.o: INC = $(I_CTL)
 $(1)/clients/web/%.o: INC = $(I_CTL)
 $(1)/scenes/%.o: INC = $(I_SCENES)
@@ -180,7 +184,7 @@ bin/mpmd: $(call mpmd_deps,$(REL))
 	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 bin/mpmctl: $(call mpmctl_deps,$(REL))
 	@mkdir -p bin
-	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
+	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 bin/mpmtest: $(call mpmtest_deps,$(REL))
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
@@ -191,14 +195,14 @@ bin/mpmrun: $(REL)/scenes/mpmrun/mpmrun.o $(REL)/libscenes.a $(REL)/libmpm.a
 $(ASAN)/mpmd: $(call mpmd_deps,$(ASAN))
 	$(CC) $(SAN) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 $(ASAN)/mpmctl: $(call mpmctl_deps,$(ASAN))
-	$(CC) $(SAN) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
+	$(CC) $(SAN) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 $(ASAN)/mpmtest: $(call mpmtest_deps,$(ASAN))
 	$(CC) $(SAN) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 
 $(TSAN)/mpmd: $(call mpmd_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 $(TSAN)/mpmctl: $(call mpmctl_deps,$(TSAN))
-	$(CC) $(TSANF) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
+	$(CC) $(TSANF) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 $(TSAN)/mpmtest: $(call mpmtest_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 

@@ -20,6 +20,9 @@ pkgs=(
   libmicrohttpd-dev    # mpmweb, the web monitor's HTTP server
   chromium             # tests: the web monitor's page in a real (headless) browser
   zlib1g-dev           # mpmctl's VTK writer (--compress)
+  libhdf5-dev          # mpmctl export --format hdf5 (Debian's serial libhdf5)
+  python3-h5py         # tests: h5py reads the HDF5 export back
+  python3-venv python3-setuptools python3-wheel  # tests: pip installs clients/python into a venv
   python3-vtk9 python3-numpy  # tests: VTK's own readers read mpmctl's .vtp/.pvd/.vti files
   groff-base           # tests: the man pages render without warnings (groff -ww)
   clang libclang-rt-14-dev llvm  # make fuzz (libFuzzer, run quick by make test); llvm-symbolizer

@@ -14,6 +14,8 @@
 #define SAME(a, b) ((int)(a) == (int)(b))
 _Static_assert(MPP_SCHEMA_VERSION == MPMD__SCHEMA_VERSION__SCHEMA_VERSION,
                "MPP_SCHEMA_VERSION must match proto/mpmd.proto");
+_Static_assert(MPP_SCHEMA_MINOR == MPMD__SCHEMA_MINOR__SCHEMA_MINOR,
+               "MPP_SCHEMA_MINOR must match proto/mpmd.proto");
 _Static_assert(SAME(MPP_STATUS_QUEUED, MPMD__RUN_STATUS__QUEUED) &&
                    SAME(MPP_STATUS_RUNNING, MPMD__RUN_STATUS__RUNNING) &&
                    SAME(MPP_STATUS_FINISHED, MPMD__RUN_STATUS__FINISHED) &&
@@ -389,6 +391,8 @@ void mpp_fill_snapshot(Mpmd__Snapshot *ps, const mpp_snapshot *s)
     ps->v = (double *)s->v;
     ps->n_stress = s->stress ? 6 * s->n : 0;
     ps->stress = (double *)s->stress;
+    ps->n_mean_stress = s->mean_stress ? s->n : 0;
+    ps->mean_stress = (double *)s->mean_stress;
     ps->n_pressure = s->pressure ? s->n : 0;
     ps->pressure = (double *)s->pressure;
     ps->n_volume = s->volume ? s->n : 0;
@@ -399,6 +403,34 @@ void mpp_fill_snapshot(Mpmd__Snapshot *ps, const mpp_snapshot *s)
     ps->deformation_gradient = (double *)s->deformation_gradient;
     ps->n_yielded = s->yielded ? s->n : 0;
     ps->yielded = (protobuf_c_boolean *)s->yielded;
+}
+
+void mpp_snapshot_pressure(const double *mean, size_t n, double *p)
+{
+    /* 0.0 - m, not -m: a zero mean stress gives +0 (no "-0" in outputs);
+     * any other value is negated exactly */
+    for (size_t i = 0; i < n; i++) p[i] = 0.0 - mean[i];
+}
+
+/* One of pressure and mean stress came without the other (a daemon before
+ * schema 1.1 sends only the mean stress): the missing one, derived into an
+ * array hung in the unpacked message, which frees it with the message (the
+ * decoders free what they unpack with protobuf-c's default allocator, the
+ * system's malloc/free, as mpp_unpack's allocator is). */
+static int derive_pressure(Mpmd__Snapshot *ps, mpm_error *err)
+{
+    size_t *nto = ps->n_pressure ? &ps->n_mean_stress : &ps->n_pressure;
+    double **to = ps->n_pressure ? &ps->mean_stress : &ps->pressure;
+    const double *from = ps->n_pressure ? ps->pressure : ps->mean_stress;
+    size_t n = ps->n_pressure ? ps->n_pressure : ps->n_mean_stress;
+    if (!n || *nto) return 0;
+    double *a = malloc(n * sizeof *a);
+    if (!a) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory for %zu pressures", n);
+    mpp_snapshot_pressure(from, n, a);
+    free(*to); /* an empty repeated field may still hold a pointer */
+    *to = a;
+    *nto = n;
+    return 0;
 }
 
 int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
@@ -422,6 +454,7 @@ int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
     } a[] = {{"x", ps->n_x, ps->dim, ps->x, &s->x},
              {"v", ps->n_v, ps->dim, ps->v, &s->v},
              {"stress", ps->n_stress, 6, ps->stress, &s->stress},
+             {"mean_stress", ps->n_mean_stress, 1, ps->mean_stress, &s->mean_stress},
              {"pressure", ps->n_pressure, 1, ps->pressure, &s->pressure},
              {"volume", ps->n_volume, 1, ps->volume, &s->volume},
              {"plastic_strain", ps->n_plastic_strain, 1, ps->plastic_strain, &s->plastic_strain},
@@ -435,6 +468,12 @@ int mpp_take_snapshot(mpp_snapshot *s, const Mpmd__Snapshot *ps, mpm_error *err)
                             "snapshot.%s holds %zu values, not n = %llu times %llu", a[i].name,
                             a[i].have, (unsigned long long)ps->n, (unsigned long long)a[i].width);
         *a[i].dst = a[i].v;
+    }
+    if ((s->pressure != NULL) != (s->mean_stress != NULL)) {
+        int rc = derive_pressure((Mpmd__Snapshot *)(uintptr_t)ps, err);
+        if (rc) return rc;
+        s->pressure = ps->pressure;
+        s->mean_stress = ps->mean_stress;
     }
     if (ps->n_yielded) {
         if (ps->n_yielded != ps->n)

@@ -223,6 +223,8 @@ int mpp_reply_pong(const char *server_version, const char *stream_endpoint, uint
     p.stream_endpoint = (char *)stream_endpoint;
     p.has_schema_version = 1;
     p.schema_version = MPP_SCHEMA_VERSION;
+    p.has_schema_minor = 1;
+    p.schema_minor = MPP_SCHEMA_MINOR;
     r.body_case = MPMD__REPLY__BODY_PONG;
     r.pong = &p;
     return pack_reply(&r, buf, len);
@@ -252,6 +254,8 @@ int mpp_reply_version(const char *server_version, const char *const *names,
     vi.server_version = (char *)server_version;
     vi.has_schema_version = 1;
     vi.schema_version = MPP_SCHEMA_VERSION;
+    vi.has_schema_minor = 1;
+    vi.schema_minor = MPP_SCHEMA_MINOR;
     vi.n_components = n;
     vi.components = ptrs;
     r.body_case = MPMD__REPLY__BODY_VERSION;
@@ -404,11 +408,13 @@ int mpp_reply_decode(const void *buf, size_t len, size_t max, mpp_reply *out, mp
         out->server_version = str(r->pong->server_version);
         out->stream_endpoint = str(r->pong->stream_endpoint);
         out->server_schema = r->pong->schema_version;
+        out->server_minor = r->pong->schema_minor;
         break;
     case MPMD__REPLY__BODY_VERSION:
         out->server_version = str(r->version->server_version);
         out->stream_endpoint = "";
         out->server_schema = r->version->schema_version;
+        out->server_minor = r->version->schema_minor;
         out->n_components = r->version->n_components;
         break;
     default: break;

@@ -1050,10 +1050,10 @@ static void snapshot_slice(const mpm_sim *s, const mpm_snapshot *o, size_t a, si
         mpm_particle_stress(&s->mats[P->mat[p]], P, dim, p, sig);
         if (o->stress)
             for (int c = 0; c < 6; c++) o->stress[q * 6 + c] = sig[c];
-        if (o->pressure) {
+        if (o->mean_stress) {
             double tr = sig[0];
             if (dim > 1) tr += sig[1] + sig[2];
-            o->pressure[q] = tr / 3.0;
+            o->mean_stress[q] = tr / 3.0;
         }
         if (o->volume) o->volume[q] = P->vol[p];
         if (o->plastic_strain && P->epsp) o->plastic_strain[q] = P->epsp[p];

@@ -3,9 +3,11 @@
  * other programs, through the public protocol only (GetRun with its case,
  * GetSnapshot, GetEnergy), as any third-party client would:
  *
- *  - `export ID DIR`: every recorded snapshot as DIR/<name>_<step>.vtp, the
- *    collection DIR/<name>.pvd with the simulation times (ParaView opens the
- *    run as a time series), the energy series as DIR/energy.csv (the very
+ *  - `export ID DIR`: every recorded snapshot as DIR/<name>_<step>.vtp (the
+ *    steps zero-padded to one width), the collection DIR/<name>.pvd with
+ *    the simulation times (ParaView opens the run as a time series), or
+ *    with --format hdf5 all of them in DIR/<name>.h5 with DIR/<name>.xdmf
+ *    (ctl_h5.c), the energy series as DIR/energy.csv (the very
  *    CSV `mpmctl energy --csv` prints, by the same writer) and, with
  *    --grid, the case's background grid as DIR/grid.vti;
  *  - `plot ID -o FILE`: the energy curves drawn by gnuplot, run as a
@@ -27,6 +29,7 @@
 #include <unistd.h>
 
 #include "ctl.h"
+#include "ctl_h5.h"
 
 /* The file name stem of a run: its name made safe, or run<ID>. */
 static void safe_stem(const char *name, uint64_t id, char *out, size_t n)
@@ -115,14 +118,16 @@ static int grid_of(const json_t *run, ctl_vtk_grid *g)
     return 0;
 }
 
-int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int grid)
+int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_export_format fmt, ctl_vtk_enc enc,
+               int grid)
 {
     mpp_request rq = {.kind = MPP_REQ_GET_RUN, .id = id, .with_case = grid};
     json_t *reply = NULL, *run = NULL, *steps;
     char stem[80], *path = NULL, **files = NULL;
     double *times = NULL;
-    size_t ns, rows = 0, plen = strlen(dir) + 160, i;
-    int rc = ctl_call(c, &rq, "run", &reply, &run), tty = isatty(2);
+    size_t ns = 0, rows = 0, plen = strlen(dir) + 160, i;
+    ctl_h5 *h5 = NULL;
+    int rc = ctl_call(c, &rq, "run", &reply, &run), tty = isatty(2), width = 1;
     if (rc) goto out;
     steps = json_object_get(run, "snapshotSteps");
     ns = json_is_array(steps) ? json_array_size(steps) : 0;
@@ -144,6 +149,19 @@ int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int g
         rc = CTL_ESYS;
         goto out;
     }
+    /* the steps' common width: the largest step's digits */
+    for (i = 0; i < ns; i++) {
+        char d[24];
+        int w = snprintf(d, sizeof d, "%lld", (long long)cj_at(run, "snapshotSteps", i, 0));
+        if (w > width) width = w;
+    }
+    if (fmt == CTL_EXPORT_HDF5) {
+        snprintf(path, plen, "%s/%s.h5", dir, stem);
+        if (!(h5 = ctl_h5_new(path, id, width))) {
+            rc = CTL_ESYS;
+            goto out;
+        }
+    }
     for (i = 0; i < ns; i++) {
         mpp_request sq = {.kind = MPP_REQ_GET_SNAPSHOT, .id = id, .has_step = 1};
         mpp_reply sr;
@@ -152,9 +170,11 @@ int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int g
             fprintf(stderr, "\rrun %llu: snapshot %zu of %zu (step %lld)...",
                     (unsigned long long)id, i + 1, ns, (long long)sq.step);
         rc = ctl_call_reply(c, &sq, MPP_REPLY_SNAPSHOT, &sr);
-        if (!rc) {
+        if (!rc && h5) {
+            rc = ctl_h5_add(h5, &sr.snapshot);
+        } else if (!rc) {
             char name[120];
-            snprintf(name, sizeof name, "%s_%lld.vtp", stem, (long long)sr.snapshot.step);
+            snprintf(name, sizeof name, "%s_%0*lld.vtp", stem, width, (long long)sr.snapshot.step);
             files[i] = strdup(name);
             times[i] = sr.snapshot.t;
             snprintf(path, plen, "%s/%s", dir, name);
@@ -172,8 +192,15 @@ int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int g
         }
     }
     if (tty) fputc('\n', stderr);
-    snprintf(path, plen, "%s/%s.pvd", dir, stem);
-    if ((rc = ctl_vtk_write_pvd(path, (const char *const *)files, times, ns))) goto out;
+    if (h5) {
+        char h5name[100];
+        snprintf(h5name, sizeof h5name, "%s.h5", stem);
+        snprintf(path, plen, "%s/%s.xdmf", dir, stem);
+        if ((rc = ctl_h5_finish(&h5, 1, path, h5name))) goto out;
+    } else {
+        snprintf(path, plen, "%s/%s.pvd", dir, stem);
+        if ((rc = ctl_vtk_write_pvd(path, (const char *const *)files, times, ns))) goto out;
+    }
     snprintf(path, plen, "%s/energy.csv", dir);
     if ((rc = export_energy(c, id, path, &rows))) goto out;
     if (grid) {
@@ -181,9 +208,15 @@ int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int g
         snprintf(path, plen, "%s/grid.vti", dir);
         if ((rc = grid_of(run, &g)) || (rc = ctl_vtk_write_vti(path, &g, enc))) goto out;
     }
-    fprintf(stderr, "run %llu: %zu snapshots (%s), %s.pvd, energy.csv%s -> %s\n",
-            (unsigned long long)id, ns, ctl_vtk_enc_name(enc), stem, grid ? ", grid.vti" : "", dir);
+    if (fmt == CTL_EXPORT_HDF5)
+        fprintf(stderr, "run %llu: %zu snapshots, %s.h5, %s.xdmf, energy.csv%s -> %s\n",
+                (unsigned long long)id, ns, stem, stem, grid ? ", grid.vti" : "", dir);
+    else
+        fprintf(stderr, "run %llu: %zu snapshots (%s), %s.pvd, energy.csv%s -> %s\n",
+                (unsigned long long)id, ns, ctl_vtk_enc_name(enc), stem, grid ? ", grid.vti" : "",
+                dir);
 out:
+    if (h5) ctl_h5_finish(&h5, 0, NULL, NULL); /* a failure: removes the .h5 */
     for (i = 0; files && i < ns; i++) free(files[i]);
     free(files);
     free(times);

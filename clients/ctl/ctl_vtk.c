@@ -437,7 +437,7 @@ static int xml_tail(FILE *f, varr *a, size_t n, ctl_vtk_enc enc)
     return 0;
 }
 
-enum { A_POINTS, A_CONN, A_OFFS, A_V, A_STRESS, A_P, A_VOL, A_EP, A_F, A_Y, A_MAX };
+enum { A_POINTS, A_CONN, A_OFFS, A_V, A_STRESS, A_P, A_MEAN, A_VOL, A_EP, A_F, A_Y, A_MAX };
 
 int ctl_vtk_write_vtp(const char *path, const mpp_snapshot *s, ctl_vtk_enc enc)
 {
@@ -467,6 +467,7 @@ int ctl_vtk_write_vtp(const char *path, const mpp_snapshot *s, ctl_vtk_enc enc)
     if (s->v) ADD(A_V, "velocity", VT_F64, 3, dim == 3 ? K_COPY : K_PAD, s->v, dim);
     if (s->stress) ADD(A_STRESS, "stress", VT_F64, 9, K_VOIGT, s->stress, 6);
     if (s->pressure) ADD(A_P, "pressure", VT_F64, 1, K_COPY, s->pressure, 1);
+    if (s->mean_stress) ADD(A_MEAN, "mean_stress", VT_F64, 1, K_COPY, s->mean_stress, 1);
     if (s->volume) ADD(A_VOL, "volume", VT_F64, 1, K_COPY, s->volume, 1);
     if (s->plastic_strain) ADD(A_EP, "plastic_strain", VT_F64, 1, K_COPY, s->plastic_strain, 1);
     if (s->deformation_gradient)
@@ -490,7 +491,7 @@ int ctl_vtk_write_vtp(const char *path, const mpp_snapshot *s, ctl_vtk_enc enc)
     xml_head(f, "PolyData", enc);
     fputs("  <PolyData>\n    <FieldData>\n", f);
     fprintf(f,
-            "      <DataArray type=\"Float64\" Name=\"TIME\" NumberOfTuples=\"1\" "
+            "      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" "
             "format=\"ascii\">%.17g</DataArray>\n",
             cj_norm(s->t));
     fprintf(f,

@@ -105,11 +105,14 @@ static const command commands[] = {
      "STEP as field data), appended raw binary unless --ascii, --base64 or --compress\n"
      "(zlib); anything else CSV with a header (one row per particle); \"-o -\" writes CSV\n"
      "to stdout.\n"},
-    {"export", C_EXPORT, "ID DIR [--grid] [--ascii|--base64|--compress]",
+    {"export", C_EXPORT, "ID DIR [--format vtk|hdf5] [--grid] [--ascii|--base64|--compress]",
      "a run's snapshots for ParaView",
-     "Writes every recorded snapshot as DIR/NAME_STEP.vtp (as `snapshot -o F.vtp`), the\n"
-     "collection DIR/NAME.pvd with the simulation times (paraview DIR/NAME.pvd opens the\n"
-     "run as a time series) and the energy series as DIR/energy.csv (as `energy --csv`);\n"
+     "Writes every recorded snapshot as DIR/NAME_STEP.vtp (as `snapshot -o F.vtp`; STEP\n"
+     "zero-padded to the largest step's width), the collection DIR/NAME.pvd with the\n"
+     "simulation times (paraview DIR/NAME.pvd opens the run as a time series) and the\n"
+     "energy series as DIR/energy.csv (as `energy --csv`).  --format hdf5: the snapshots\n"
+     "in DIR/NAME.h5 (a group /snapshots/STEP per snapshot, one dataset per field) with\n"
+     "DIR/NAME.xdmf (XDMF 3: paraview DIR/NAME.xdmf) instead of .vtp and .pvd.\n"
      "--grid adds the case's background grid as DIR/grid.vti (ImageData).  NAME is the\n"
      "run's name with bytes other than A-Z a-z 0-9 . _ - replaced by _ (\"runID\" when\n"
      "empty).  DIR is created if missing.  The run must have recorded snapshots\n"
@@ -168,6 +171,7 @@ typedef enum {
     O_COMPRESS,
     O_VTK_COMPRESS,
     O_TERMINAL,
+    O_FORMAT,
     O_COUNT
 } opt_id;
 
@@ -201,6 +205,7 @@ static const option options[O_COUNT] = {
     [O_COMPRESS] = {"compress", 0, 0, C_SNAPSHOT | C_EXPORT},
     [O_VTK_COMPRESS] = {"vtk-compress", 0, 0, C_SNAPSHOT | C_EXPORT}, /* = --compress */
     [O_TERMINAL] = {"terminal", 0, 1, C_PLOT},
+    [O_FORMAT] = {"format", 0, 1, C_EXPORT},
 };
 
 typedef struct {
@@ -409,6 +414,11 @@ static int parse_args(int argc, char **argv, cli *a)
     if (a->given[O_VTK_COMPRESS]) a->given[O_COMPRESS] = 1;
     if (a->given[O_ASCII] + a->given[O_BASE64] + a->given[O_COMPRESS] > 1)
         return bad_usage("%s: --ascii, --base64 and --compress exclude each other", a->cmd->name);
+    if (a->given[O_FORMAT] && strcmp(a->val[O_FORMAT], "vtk") && strcmp(a->val[O_FORMAT], "hdf5"))
+        return bad_usage("export: --format: expected vtk or hdf5, got '%s'", a->val[O_FORMAT]);
+    if (a->given[O_FORMAT] && !strcmp(a->val[O_FORMAT], "hdf5") &&
+        (a->given[O_ASCII] || a->given[O_BASE64] || a->given[O_COMPRESS]))
+        return bad_usage("export: --ascii, --base64 and --compress are for --format vtk");
     if (a->cmd->bit == C_SNAPSHOT &&
         (a->given[O_ASCII] || a->given[O_BASE64] || a->given[O_COMPRESS])) {
         size_t pl = strlen(a->val[O_OUT]);
@@ -856,6 +866,7 @@ static int snapshot_csv(FILE *f, const mpp_snapshot *s)
     if (s->stress)
         for (int k = 0; k < 6; k++) fprintf(f, ",%s", voigt[k]);
     if (s->pressure) fputs(",pressure", f);
+    if (s->mean_stress) fputs(",mean_stress", f);
     if (s->volume) fputs(",volume", f);
     if (s->plastic_strain) fputs(",plastic_strain", f);
     if (s->deformation_gradient)
@@ -878,6 +889,7 @@ static int snapshot_csv(FILE *f, const mpp_snapshot *s)
         if (s->stress)
             for (size_t k = 0; k < 6; k++) CELL(s->stress[i * 6 + k]);
         if (s->pressure) CELL(s->pressure[i]);
+        if (s->mean_stress) CELL(s->mean_stress[i]);
         if (s->volume) CELL(s->volume[i]);
         if (s->plastic_strain) CELL(s->plastic_strain[i]);
         if (s->deformation_gradient)
@@ -972,7 +984,9 @@ static int cmd_export(ctl_conn *c, const cli *a)
 {
     uint64_t id;
     if (parse_id(a->pos[0], "export", &id)) return CTL_EXIT_USAGE;
-    return exit_for_rc(ctl_export(c, id, a->pos[1], vtk_enc(a), a->given[O_GRID]));
+    ctl_export_format fmt =
+        a->given[O_FORMAT] && !strcmp(a->val[O_FORMAT], "hdf5") ? CTL_EXPORT_HDF5 : CTL_EXPORT_VTK;
+    return exit_for_rc(ctl_export(c, id, a->pos[1], fmt, vtk_enc(a), a->given[O_GRID]));
 }
 
 static int cmd_plot(ctl_conn *c, const cli *a)

@@ -18,6 +18,9 @@
 #define MPP_VERSION "0.4.0"
 /* SCHEMA_VERSION of proto/mpmd.proto. */
 #define MPP_SCHEMA_VERSION 1
+/* SCHEMA_MINOR of proto/mpmd.proto: additions within the schema version
+ * (1: Snapshot.pressure positive in compression beside .mean_stress). */
+#define MPP_SCHEMA_MINOR 1
 
 /* The particle limit of a case when the caller gives none (mpmd's
  * --max-particles default, mpmctl's local check).  One limit: the codec's

@@ -112,12 +112,26 @@ typedef struct {
     double t;
     size_t n;
     int dim;
-    const double *x, *v, *stress, *pressure, *volume; /* n*dim, n*dim, n*6, n, n */
+    /* n*dim, n*dim, n*6, n, n; mean_stress: (sxx + syy + szz)/3, negative
+     * in compression (Snapshot.mean_stress) */
+    const double *x, *v, *stress, *mean_stress, *volume;
     /* only from runs whose particles carry them: n, n*dim*dim (F,
      * row-major), n (0/1; the int of protobuf-c's bool) */
     const double *plastic_strain, *deformation_gradient;
     const int *yielded;
+    /* n: the pressure -mean_stress, positive in compression
+     * (Snapshot.pressure; mpp_snapshot_pressure() makes it).  Encoders
+     * send each of the two that is non-NULL; decoders give both whenever
+     * either came (the other derived: a daemon before schema 1.1 sent only
+     * the mean stress). */
+    const double *pressure;
 } mpp_snapshot;
+
+/* The pressure of n mean stresses, p[i] = 0.0 - mean[i]: positive in
+ * compression, exactly the negated value (+0 for a stress-free point, never
+ * -0).  The one place of the sign convention; also the reverse (mean from
+ * p).  p and mean may not overlap. */
+void mpp_snapshot_pressure(const double *mean, size_t n, double *p);
 
 /* A run record (RunInfo).  NULL strings/pointers and times <= 0 are left
  * out; other numbers are always sent. */
@@ -240,9 +254,10 @@ typedef struct {
     int more;
     /* SNAPSHOT (arrays point into the message) */
     mpp_snapshot snapshot;
-    /* PONG, VERSION (server_schema: their schema_version) */
+    /* PONG, VERSION (server_schema: their schema_version; server_minor:
+     * their schema_minor, 0 from a daemon older than schema 1.1) */
     const char *server_version, *stream_endpoint;
-    uint32_t server_schema;
+    uint32_t server_schema, server_minor;
     size_t n_components; /* VERSION */
 
     /* owned: the unpacked message and the arrays above */

@@ -117,8 +117,9 @@ void srv_budget_estimate(const mpp_case *sc, double steps, srv_disk_estimate *ou
     if (f & MPP_SNAP_PLASTIC_STRAIN) per += 1;
     if (f & MPP_SNAP_DEFORMATION_GRADIENT) per += dim * dim;
     if (f & MPP_SNAP_YIELDED) per += 1;
+    /* one every snapshot_every steps, the initial state's and the end's */
     if (sc->record_snapshots && sc->snapshot_every)
-        out->snapshots = floor(steps / sc->snapshot_every);
+        out->snapshots = 1 + ceil(steps / sc->snapshot_every);
     out->snapshot_bytes = n * per * (double)sizeof(double);
     /* the first sample, one every energy_every steps, the last */
     out->samples = 2 + (sc->energy_every ? floor(steps / sc->energy_every) : 0);

@@ -776,14 +776,29 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
         return;
     }
     int *yl = arr[7] ? malloc(n * sizeof(int) + 1) : NULL;
-    if (arr[7] && !yl) {
+    double *pr = arr[3] ? malloc(n * sizeof(double) + 1) : NULL; /* the pressure, -mean */
+    if ((arr[7] && !yl) || (arr[3] && !pr)) {
+        free(yl);
+        free(pr);
         srv_reply_error(d, id, MPM_ENOMEM, "", "out of memory for a snapshot of %zu particles", n);
         store_snapshot_clear(&ss);
         return;
     }
     for (size_t i = 0; yl && i < n; i++) yl[i] = arr[7][i] != 0.0;
-    mpp_snapshot s = {ss.step, ss.t,   n,      (int)dim, arr[0], arr[1],
-                      arr[2],  arr[3], arr[4], arr[5],   arr[6], yl};
+    if (pr) mpp_snapshot_pressure(arr[3], n, pr);
+    mpp_snapshot s = {.step = ss.step,
+                      .t = ss.t,
+                      .n = n,
+                      .dim = (int)dim,
+                      .x = arr[0],
+                      .v = arr[1],
+                      .stress = arr[2],
+                      .mean_stress = arr[3],
+                      .volume = arr[4],
+                      .plastic_strain = arr[5],
+                      .deformation_gradient = arr[6],
+                      .yielded = yl,
+                      .pressure = pr};
     uint8_t *buf = NULL;
     size_t len = 0;
     if (mpp_reply_snapshot(&s, &buf, &len))
@@ -791,6 +806,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     else
         srv_send_reply(d, id, buf, len);
     free(yl);
+    free(pr);
     store_snapshot_clear(&ss);
 }
 

@@ -323,7 +323,7 @@ static void snapmsg_zmq_free(void *data, void *hint)
 
 /* Snapshot buffers are allocated on first use, once per job. */
 typedef struct {
-    double *x, *v, *stress, *pressure, *volume, *packed;
+    double *x, *v, *stress, *mean, *pressure, *volume, *packed; /* pressure = -mean */
     double *plastic, *F; /* the model's fields, when the run has them */
     uint8_t *yl;         /* the solver's yield flags, and as the message's ints */
     int *yli;
@@ -338,6 +338,7 @@ static void snapbuf_free(snapbuf *b)
     free(b->x);
     free(b->v);
     free(b->stress);
+    free(b->mean);
     free(b->pressure);
     free(b->volume);
     free(b->plastic);
@@ -471,7 +472,8 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
         if (((f & MPP_SNAP_X) && !(b->x = malloc(n * dim * sizeof(double)))) ||
             ((f & MPP_SNAP_V) && !(b->v = malloc(n * dim * sizeof(double)))) ||
             ((f & MPP_SNAP_STRESS) && !(b->stress = malloc(n * 6 * sizeof(double)))) ||
-            ((f & MPP_SNAP_PRESSURE) && !(b->pressure = malloc(n * sizeof(double)))) ||
+            ((f & MPP_SNAP_PRESSURE) && (!(b->mean = malloc(n * sizeof(double) + 1)) ||
+                                         !(b->pressure = malloc(n * sizeof(double) + 1)))) ||
             ((f & MPP_SNAP_VOLUME) && !(b->volume = malloc(n * sizeof(double)))) ||
             ((f & MPP_SNAP_PLASTIC_STRAIN) && !(b->plastic = malloc(n * sizeof(double)))) ||
             ((f & MPP_SNAP_DEFORMATION_GRADIENT) && !(b->F = malloc(nF * sizeof(double)))) ||
@@ -484,8 +486,19 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
         }
     }
     f = b->fields;
-    mpp_snapshot s = {mpm_sim_steps(sim), mpm_sim_time(sim), n,         dim,        b->x, b->v,
-                      b->stress,          b->pressure,       b->volume, b->plastic, b->F, b->yli};
+    mpp_snapshot s = {.step = mpm_sim_steps(sim),
+                      .t = mpm_sim_time(sim),
+                      .n = n,
+                      .dim = dim,
+                      .x = b->x,
+                      .v = b->v,
+                      .stress = b->stress,
+                      .mean_stress = b->mean,
+                      .volume = b->volume,
+                      .plastic_strain = b->plastic,
+                      .deformation_gradient = b->F,
+                      .yielded = b->yli,
+                      .pressure = b->pressure};
     /* a snapshot the stream's budget refuses is not even gathered unless
      * it is recorded: a stalled watcher costs the job nothing (the size of
      * its message depends on n and the fields only, not on the values) */
@@ -499,18 +512,21 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
     mpm_sim_snapshot(sim, &(mpm_snapshot){.x = b->x,
                                           .v = b->v,
                                           .stress = b->stress,
-                                          .pressure = b->pressure,
+                                          .mean_stress = b->mean,
                                           .volume = b->volume,
                                           .plastic_strain = b->plastic,
                                           .deformation_gradient = b->F,
                                           .yielded = b->yl});
     if (b->yl)
         for (size_t i = 0; i < n; i++) b->yli[i] = b->yl[i];
+    /* the stream carries both; the store keeps the mean stress alone (its
+     * layout of every release), the daemon derives the pressure on reading */
+    if (b->mean) mpp_snapshot_pressure(b->mean, n, b->pressure);
     if (record && b->packed) {
         /* stored layout: the requested arrays back to back, in field-bit
          * order (the yield flags as 0.0 / 1.0) */
         size_t off = 0;
-        const double *arr[7] = {b->x, b->v, b->stress, b->pressure, b->volume, b->plastic, b->F};
+        const double *arr[7] = {b->x, b->v, b->stress, b->mean, b->volume, b->plastic, b->F};
         size_t cnt[7] = {n * dim, n * dim, n * 6, n, n, n, nF};
         for (int i = 0; i < 7; i++)
             if (arr[i]) {
@@ -531,6 +547,17 @@ static int snapshot(ctx *c, mpm_sim *sim, snapbuf *b, int stream, int record)
     }
     if (slot >= 0) publish_snapshot(c, b, &s, seq, slot);
     return 0;
+}
+
+/* A snapshot where the schedule puts one: streamed if someone watches,
+ * recorded if the case asks.  Returns 0 once snapshots failed for good
+ * (out of memory: none after), else 1. */
+static int snapshot_due(ctx *c, mpm_sim *sim, snapbuf *b)
+{
+    int watched = atomic_load_explicit(&c->j->watched, memory_order_relaxed);
+    int record = c->j->sc->record_snapshots;
+    if (!watched && !record) return 1;
+    return snapshot(c, sim, b, watched, record) == 0;
 }
 
 static void progress(ctx *c, mpm_sim *sim, double wall)
@@ -723,9 +750,14 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         last = j->last; /* the step-0 sample and those up to the checkpoint are stored */
     else
         energy_sample(&c, sim, &last);
+    unsigned every = sc->energy_every, severy = sc->snapshot_every;
+    /* a run that takes snapshots has one of its initial state and one of
+     * its end (below), whatever the spacing: the first and last frames of
+     * an export (guarded by ctl_compressed_outputs); taking one reads
+     * the particles only, so the energy series keeps its bits */
+    if (severy && !j->resume) snaps_ok = snapshot_due(&c, sim, &sb);
     progress(&c, sim, j->prior_wall);
     double next_progress = j->prior_wall + 0.2;
-    unsigned every = sc->energy_every, severy = sc->snapshot_every;
     for (;;) {
         int cancel = atomic_load_explicit(&j->cancel, memory_order_relaxed);
         if (cancel) {
@@ -763,11 +795,7 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
         }
         k++;
         if (every && k % every == 0) energy_sample(&c, sim, &last);
-        if (severy && snaps_ok && k % severy == 0) {
-            int watched = atomic_load_explicit(&j->watched, memory_order_relaxed);
-            if (watched || sc->record_snapshots)
-                snaps_ok = snapshot(&c, sim, &sb, watched, sc->record_snapshots) == 0;
-        }
+        if (severy && snaps_ok && k % severy == 0) snaps_ok = snapshot_due(&c, sim, &sb);
         /* the checkpoints take at most --checkpoint-share of the job's
          * wall time: one comes at least (1 - share) / share times the
          * last one's duration after it, whatever the schedule asks
@@ -824,6 +852,12 @@ static void run_job(srv_pool *p, void *push, srv_job *j)
     else if (status == MPP_STATUS_FAILED && last.step != mpm_sim_steps(sim)) {
         /* a diverged state has no meaningful energies; keep the last good one */
     }
+    /* the end's snapshot, unless the last step took one (not of a failed
+     * run: its state may be the blow-up; nor of an interrupted one: its
+     * resume goes on from the checkpoint) */
+    if (severy && snaps_ok && mpm_sim_steps(sim) % severy != 0 &&
+        (status == MPP_STATUS_FINISHED || status == MPP_STATUS_CANCELLED))
+        snapshot_due(&c, sim, &sb);
     /* the last samples may pass a disk budget: then the run is not whole */
     flush_samples(&c);
     if (c.over && status == MPP_STATUS_FINISHED) {

@@ -419,7 +419,8 @@ typedef struct {
  * The last three exist only when the run's particles carry them
  * (mpm_sim_has_field()); otherwise they are left untouched. */
 typedef struct {
-    double *x, *v, *stress, *pressure, *volume;
+    double *x, *v, *stress, *volume;
+    double *mean_stress;          /* (sxx + syy + szz) / 3, negative in compression */
     double *plastic_strain;       /* equivalent plastic strain (plastic models) */
     double *deformation_gradient; /* F (NEO_HOOKEAN, DET_F volume, CPDI) */
     uint8_t *yielded;             /* 1: the particle flowed plastically in the last step */

@@ -212,8 +212,9 @@ DTEST(ctl_completion)
         {"mpmctl sn", "snapshot"},
         {"mpmctl ex", "export"},
         {"mpmctl p", "plot ping"},
-        {"mpmctl export 3 --", "--grid --ascii --base64 --compress --endpoint --stream --timeout "
-                               "--keys --help"},
+        {"mpmctl export 3 --",
+         "--format --grid --ascii --base64 --compress --endpoint --stream --timeout "
+         "--keys --help"},
         {"mpmctl runs --status FI", "FINISHED"},
         {"mpmctl --timeout 5 su", "submit"},
         {"mpmctl submit proto/examples/cube", "proto/examples/cube3d.json"},

@@ -8,11 +8,14 @@
  * stopped (SIGTERM) or killed during a watch), then the same client over CURVE (keys made by mpmctl
  * keygen: an authorized key works, an unknown key is refused), then the
  * example clients/python/examples/bar.py: the paper's bar against Eq. 34,
- * its printed error under a stated bound and its PNG checked.  The
+ * its printed error under a stated bound and its PNG checked; and the
+ * package pip installs from clients/python into a virtual environment,
+ * used with that environment's interpreter alone.  The
  * protobuf classes are generated into the test's directory by protoc, the
  * command of `make python`.  A script's output is shown when it fails.
  */
 #define _GNU_SOURCE
+#include "mpp.h"
 #include "t_daemon.h"
 #include "t_daemon_util.h"
 
@@ -112,6 +115,57 @@ DTEST(python_client_api)
         CHECKF(st == (k ? 128 + SIGKILL : 0), "mpmd exited with %d after %s", st,
                k ? "SIGKILL" : "SIGTERM");
     }
+}
+
+/* The package as a user installs it: pip, from clients/python, into a
+ * virtual environment that sees Debian's packages (offline: no index, no
+ * build isolation), from a copy of the tree's parts it needs (the package,
+ * proto/mpmd.proto, protocol/mpp.h) so the checkout gets no build files;
+ * then the script's pip phase with the venv's interpreter and no
+ * PYTHONPATH. */
+DTEST(python_client_pip)
+{
+    const char *tmp = t_tmpdir();
+    char dir[400], venv[500], tree[500], cmd[8192], log[600];
+    td_daemon d;
+    snprintf(dir, sizeof dir, "%s/pip", tmp);
+    mkdir(dir, 0700);
+    snprintf(venv, sizeof venv, "%s/venv", dir);
+    snprintf(tree, sizeof tree, "%s/tree", dir);
+    snprintf(log, sizeof log, "%s/pip.out", dir);
+    snprintf(cmd, sizeof cmd,
+             "mkdir -p %s/clients %s/proto %s/protocol && cp -r clients/python %s/clients/ && "
+             "cp proto/mpmd.proto %s/proto/ && cp protocol/mpp.h %s/protocol/ && " PY
+             " -m venv --system-site-packages %s && "
+             "cd %s && %s/bin/pip install --no-index --no-build-isolation %s/clients/python",
+             tree, tree, tree, tree, tree, tree, venv, dir, venv, tree);
+    char full[8900];
+    snprintf(full, sizeof full, "(%s) > %s 2>&1", cmd, log);
+    int rc = system(full);
+    size_t len = 0;
+    char *out = td_slurp(log, &len);
+    if (rc != 0) show(out);
+    int ok = rc == 0 && out && strstr(out, "Successfully installed mpmd-" MPP_VERSION);
+    free(out);
+    CHECKF(ok,
+           "pip install clients/python into a venv: exit %d (python3-venv, python3-wheel "
+           "and python3-setuptools come with make deps)",
+           rc);
+    if (td_start(&d, dir, NULL)) return;
+    setenv("MPMD_TEST_ENDPOINT", d.ep, 1);
+    setenv("MPMD_TEST_DIR", dir, 1);
+    setenv("MPMD_TEST_VENV", venv, 1);
+    snprintf(log, sizeof log, "%s/phase.out", dir);
+    snprintf(cmd, sizeof cmd,
+             "env -u PYTHONPATH PYTHONDONTWRITEBYTECODE=1 timeout -k 5 %d %s/bin/python "
+             "tests/python/test_client.py pip > %s 2>&1",
+             PY_DEADLINE_S, venv, log);
+    rc = system(cmd);
+    out = td_slurp(log, &len);
+    show(out);
+    ok = rc == 0 && out && strstr(out, "pip: 0 failed");
+    free(out);
+    CHECKF(ok, "tests/python/test_client.py pip: exit %d (output above)", rc);
 }
 
 /* mpmctl keygen --out dir/sub --name name; the public key into pub. */

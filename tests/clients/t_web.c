@@ -22,6 +22,7 @@
 #include <arpa/inet.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <math.h>
 #include <netinet/in.h>
 #include <signal.h>
 #include <stdlib.h>
@@ -687,4 +688,44 @@ WTEST(web_slow_browser)
     TLOG("mpmweb at its stop:%.40s", dropped ? dropped : " (no count)");
     free(e);
     CHECK(td_stop(&d) == 0);
+}
+
+/* The colour field a user picks as "pressure" is positive in compression:
+ * two 1D particles under uniaxial compression (sxx = -3000) read +1000 in
+ * /api/snapshot at step 0 (7 significant digits) and stay within 1 % of
+ * it at the end. */
+WTEST(web_pressure_compressed)
+{
+    td_daemon d;
+    web_t w;
+    char dir[300], path[400], url[64];
+    http_t h;
+    snprintf(dir, sizeof dir, "%s/d", t_tmpdir());
+    CHECK(td_start(&d, dir, NULL) == 0);
+    CHECK(write_case(compressed1d("compressed"), dir, "c.json", path, sizeof path) == 0);
+    EXPECT_CTL(&d, 0, "", "submit", path, "--watch");
+    const char *wargs[] = {"--endpoint", d.ep, "--listen", "127.0.0.1:0", NULL};
+    CHECK(web_start(&w, "webp", wargs) == 0);
+    live_web = w;
+    static const char *const steps[2] = {"0", "5"};
+    for (int k = 0; k < 2; k++) {
+        snprintf(url, sizeof url, "/api/snapshot/1?step=%s", steps[k]);
+        CHECK(http(w.port, "GET", url, "", NULL, &h) == 0);
+        json_error_t je;
+        json_t *s = h.status == 200 ? json_loads(h.body, 0, &je) : NULL;
+        json_t *p = json_object_get(json_object_get(s, "fields"), "pressure");
+        TLOG("GET %s: %d, pressure %s", url, h.status,
+             h.body && strstr(h.body, "\"pressure\"") ? strstr(h.body, "\"pressure\"") : "-");
+        int ok = json_array_size(p) == 2;
+        for (size_t i = 0; ok && i < 2; i++) {
+            double v = json_number_value(json_array_get(p, i));
+            ok = k ? fabs(v - COMPRESSED_PRESSURE) < 1e-2 * COMPRESSED_PRESSURE
+                   : v == COMPRESSED_PRESSURE;
+        }
+        json_decref(s);
+        http_free(&h);
+        CHECKF(ok, "%s: the pressure is not +%g", url, COMPRESSED_PRESSURE);
+    }
+    CHECK(web_stop(&w) == 0);
+    live_web.pid = 0;
 }

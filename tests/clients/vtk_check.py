@@ -8,10 +8,14 @@ Usage: vtk_check.py MANIFEST, one check a line:
   vtp exact|ascii SNAP.json FILE.vtp  vtkXMLPolyDataReader; every field
   pvd exact|ascii FILE.pvd JSONDIR    the collection (xml.etree and
                                       vtkXMLGenericDataObjectReader for each
-                                      DataSet); timestep == TIME == the
-                                      snapshot's t; data == JSONDIR/STEP.json
+                                      DataSet); timestep == TimeValue == the
+                                      snapshot's t; data == JSONDIR/STEP.json;
+                                      the file names sort in step order
   vti exact|ascii FILE.vti CASE.json  vtkXMLImageDataReader: origin, spacing,
                                       dimensions of the case's grid
+  pressure P TOL FILE.vtp             every particle's pressure is P within
+                                      TOL relative (compression positive)
+                                      and mean_stress is -pressure exactly
 Prints one "ok ..." line per check; exit 1 with the first difference.
 "exact": bitwise equal doubles (binary encodings); "ascii": equal to the
 printed 17 digits, which read back exactly too, so also compared with ==.
@@ -79,10 +83,14 @@ def check_polydata(pd, snap, label):
         raise Mismatch("%s: %d points, %d verts, the snapshot has %d particles"
                        % (label, pd.GetNumberOfPoints(), pd.GetNumberOfVerts(), n))
     fd = pd.GetFieldData()
-    t = fd.GetArray("TIME").GetValue(0)
+    t = fd.GetArray("TimeValue").GetValue(0)
     step = fd.GetArray("STEP").GetValue(0)
+    # the reader itself takes TimeValue as the data set's time step
+    if READER_TIMES.get(id(pd)) != (t,):
+        raise Mismatch("%s: the reader's TIME_STEPS %r, TimeValue %r"
+                       % (label, READER_TIMES.get(id(pd)), t))
     if t != float(snap.get("t", 0)) or step != int(snap.get("step", 0)):
-        raise Mismatch("%s: TIME %r STEP %r, snapshot t %r step %r"
+        raise Mismatch("%s: TimeValue %r STEP %r, snapshot t %r step %r"
                        % (label, t, step, snap.get("t"), snap.get("step")))
     count = same(label + " Points", arr(pd.GetPoints().GetData()).ravel(), pad3(snap["x"], n, dim))
     # every vertex is its particle
@@ -95,7 +103,7 @@ def check_polydata(pd, snap, label):
         want["velocity"] = (3, pad3(snap["v"], n, dim))
     if "stress" in snap:
         want["stress"] = (9, voigt9(snap["stress"], n))
-    for key, name in (("pressure", "pressure"), ("volume", "volume"),
+    for key, name in (("pressure", "pressure"), ("meanStress", "mean_stress"), ("volume", "volume"),
                       ("plasticStrain", "plastic_strain")):
         if key in snap:
             want[name] = (1, snap[key])
@@ -120,6 +128,10 @@ def check_polydata(pd, snap, label):
         n, dim, count, plastic, " ".join(sorted(want)))
 
 
+# the TIME_STEPS each reader announced, by its output (id)
+READER_TIMES = {}
+
+
 def read_with(reader_cls, path):
     r = reader_cls()
     r.SetFileName(path)
@@ -128,7 +140,14 @@ def read_with(reader_cls, path):
     r.Update()
     if r.GetErrorCode() or "ERROR" in errs.GetOutput():
         raise Mismatch("%s: the reader failed: %s" % (path, errs.GetOutput().strip()))
-    return r.GetOutput()
+    out = r.GetOutput()
+    ts = r.GetOutputInformation(0).Get(vtk.vtkStreamingDemandDrivenPipeline.TIME_STEPS())
+    READER_TIMES[id(out)] = tuple(ts) if ts is not None else None
+    READER_KEEP.append(r)  # the output's id stays its own while the reader lives
+    return out
+
+
+READER_KEEP = []
 
 
 def check_vtp(snap_path, path):
@@ -154,12 +173,15 @@ def check_pvd(path, jsondir):
         step = int(obj.GetFieldData().GetArray("STEP").GetValue(0))
         snap = json.load(open(os.path.join(jsondir, "%d.json" % step)))
         ts = float(ds.get("timestep"))
-        if ts != float(snap["t"]) or ts != obj.GetFieldData().GetArray("TIME").GetValue(0):
+        if ts != float(snap["t"]) or ts != obj.GetFieldData().GetArray("TimeValue").GetValue(0):
             raise Mismatch("%s: timestep %r of %s, snapshot t %r" % (path, ts, f, snap["t"]))
         check_polydata(obj, snap, ds.get("file"))
         steps.append(step)
     if steps != sorted(steps):
         raise Mismatch("%s: steps out of order %s" % (path, steps))
+    names = [ds.get("file") for ds in sets]
+    if names != sorted(names) or len(set(len(n) for n in names)) != 1:
+        raise Mismatch("%s: file names not zero-padded to one width: %s" % (path, names))
     return "%d datasets, steps %s, times equal the snapshots'" % (len(sets), steps)
 
 
@@ -182,6 +204,17 @@ def check_vti(path, case_path):
     return "grid %s nodes, origin %s, spacing %s" % (dims, origin, spacing)
 
 
+def check_pressure(want, tol, path):
+    pd = read_with(vtk.vtkXMLPolyDataReader, path)
+    p = arr(pd.GetPointData().GetArray("pressure"))
+    m = arr(pd.GetPointData().GetArray("mean_stress"))
+    for i, (pi, mi) in enumerate(zip(p, m)):
+        if not abs(pi - want) <= tol * abs(want) or mi != -pi:
+            raise Mismatch("%s: particle %d: pressure %r, mean_stress %r, want %r and its negative"
+                           % (path, i, pi, mi, want))
+    return "%d particles: pressure %r, mean_stress %r" % (len(p), float(p[0]), float(m[0]))
+
+
 def main():
     ok = True
     for line in open(sys.argv[1]):
@@ -193,11 +226,13 @@ def main():
                 what = check_vtp(w[2], w[3])
             elif w[0] == "pvd":
                 what = check_pvd(w[2], w[3])
+            elif w[0] == "pressure":
+                what = check_pressure(float(w[1]), float(w[2]), w[3])
             elif w[0] == "vti":
                 what = check_vti(w[3], w[2]) if w[2].endswith(".json") else check_vti(w[2], w[3])
             else:
                 raise Mismatch("unknown check %r" % w[0])
-            f = w[2] if w[0] == "pvd" else w[3]
+            f = w[2] if w[0] == "pvd" else w[-1] if w[0] == "pressure" else w[3]
             print("ok %s %s %s: %s" % (w[0], w[1], os.path.basename(f), what))
         except Mismatch as e:
             print("MISMATCH %s: %s" % (" ".join(w), e))

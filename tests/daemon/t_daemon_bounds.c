@@ -165,8 +165,9 @@ DTEST(daemon_watch_before_start_gets_snapshots)
     }
     TLOG("subscribed before the submission: %ld snapshots, %ld energy samples, finished %ld", snaps,
          energies, finished);
-    if (!(finished == 1 && snaps == 4 && energies == 41))
-        t_fail(__FILE__, __LINE__, "want 4 snapshots, 41 samples and the end; got %ld, %ld, %ld",
+    /* steps 0 (the initial state), 10, 20, 30, 40 */
+    if (!(finished == 1 && snaps == 5 && energies == 41))
+        t_fail(__FILE__, __LINE__, "want 5 snapshots, 41 samples and the end; got %ld, %ld, %ld",
                snaps, energies, finished);
 out:
     if (sub) zmq_close(sub);

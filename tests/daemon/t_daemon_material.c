@@ -76,13 +76,14 @@ DTEST(daemon_material_snapshot_fields)
     size_t plastic = 0, bad = 0, nb = 0;
     char head[64] = "";
     if (nl) snprintf(head, sizeof head, "%s", lines[0]);
-    int header = !strcmp(head, "i,x,y,pressure,plastic_strain,yielded");
+    int header = !strcmp(head, "i,x,y,pressure,mean_stress,plastic_strain,yielded");
     for (size_t i = 0; header && i + 1 < nl && i < n; i++) {
         size_t k;
-        double x, y, pr, e;
+        double x, y, pr, mean, e;
         int yl;
-        if (sscanf(lines[i + 1], "%zu,%lf,%lf,%lf,%lf,%d", &k, &x, &y, &pr, &e, &yl) != 6 ||
-            k != i || (yl != 0 && yl != 1)) {
+        if (sscanf(lines[i + 1], "%zu,%lf,%lf,%lf,%lf,%lf,%d", &k, &x, &y, &pr, &mean, &e, &yl) !=
+                7 ||
+            k != i || (yl != 0 && yl != 1) || mean != -pr) {
             bad++;
             continue;
         }

@@ -139,6 +139,21 @@ json_t *block2d(long long steps, int every, const char *name)
     return c;
 }
 
+json_t *compressed1d(const char *name)
+{
+    json_error_t je;
+    json_t *c = json_loads(
+        "{\"grid\": {\"dim\": 1, \"spacing\": [1], \"nodes\": [5]},"
+        " \"method\": \"MPM\", \"dt\": 1e-5, \"steps\": 5,"
+        " \"materials\": [{\"youngsModulus\": 1e6, \"density\": 1}],"
+        " \"bodies\": [{\"points\": {\"x\": [1.5, 2.5], \"volume\": [1, 1],"
+        "   \"stress\": [-3000, 0, 0, 0, 0, 0, -3000, 0, 0, 0, 0, 0]}}],"
+        " \"output\": {\"energyEvery\": 1, \"snapshotEvery\": 2, \"recordSnapshots\": true}}",
+        0, &je);
+    if (c) json_object_set_new(c, "name", json_string(name));
+    return c;
+}
+
 /* Writes case c (consumed) to dir/file; path out. */
 int write_case(json_t *c, const char *dir, const char *file, char *path, size_t n)
 {

@@ -48,6 +48,13 @@ json_t *long_case(int every);
 /* A 2D elastic block drifting in a box: 256 particles. */
 json_t *block2d(long long steps, int every, const char *name);
 
+/* Two 1D particles under uniaxial compression: sxx = -3000 at rest, so
+ * the pressure is 1000 (mean stress -1000) exactly at step 0 and stays
+ * within 1 % of it over the 5 steps (dt 1e-5: measured 998.5 at step 5,
+ * the free ends starting to unload); snapshots every 2 steps, recorded. */
+#define COMPRESSED_PRESSURE 1000.0
+json_t *compressed1d(const char *name);
+
 /* Writes case c (consumed) to dir/file; path out. */
 int write_case(json_t *c, const char *dir, const char *file, char *path, size_t n);
 

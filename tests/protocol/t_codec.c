@@ -958,9 +958,10 @@ TEST(codec_envelopes)
         "{\"schemaVersion\":1,\"snapshot\":{\"step\":\"10\",\"t\":0.01,\"n\":\"2\",\"dim\":2,\"x\":[0.1,0.2,0.3,0.4],"
         "\"pressure\":[-1,1]}}",
         "{\"schemaVersion\":1,\"pong\":{\"serverVersion\":\"0.1\",\"schemaVersion\":1,"
-        "\"streamEndpoint\":\"tcp://127.0.0.1:5556\"}}",
+        "\"streamEndpoint\":\"tcp://127.0.0.1:5556\",\"schemaMinor\":1}}",
         "{\"schemaVersion\":1,\"version\":{\"serverVersion\":\"0.1\",\"schemaVersion\":1,\"components\":[{\"name\":"
-        "\"protobuf-c\",\"version\":\"1.4.1\"},{\"name\":\"jansson\",\"version\":\"2.14\"}]}}",
+        "\"protobuf-c\",\"version\":\"1.4.1\"},{\"name\":\"jansson\",\"version\":\"2.14\"}],"
+        "\"schemaMinor\":1}}",
         "{\"jobId\":\"12\",\"seq\":\"0\",\"progress\":{\"step\":\"5\",\"t\":0.5,\"dt\":0.1,\"stepsTotal\":\"50\",\"wallS\":0.25}}",
         "{\"jobId\":\"12\",\"seq\":\"1\",\"energy\":{\"step\":\"10\",",
         "{\"jobId\":\"12\",\"seq\":\"2\",\"snapshot\":{\"step\":\"10\"",

@@ -255,7 +255,14 @@ static int ck_state_get(const mpm_sim *s, ck_state *r)
     r->yld = calloc(n, 1);
     if (!r->x || !r->v || !r->stress || !r->pressure || !r->volume || !r->epsp || !r->F || !r->yld)
         return MPM_ENOMEM;
-    mpm_snapshot o = {r->x, r->v, r->stress, r->pressure, r->volume, r->epsp, r->F, r->yld};
+    mpm_snapshot o = {.x = r->x,
+                      .v = r->v,
+                      .stress = r->stress,
+                      .volume = r->volume,
+                      .mean_stress = r->pressure,
+                      .plastic_strain = r->epsp,
+                      .deformation_gradient = r->F,
+                      .yielded = r->yld};
     mpm_sim_snapshot(s, &o);
     r->t = mpm_sim_time(s);
     r->dt = mpm_sim_dt(s);

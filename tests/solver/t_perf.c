@@ -738,7 +738,7 @@ TEST(perf_snapshot_on_team_matches_arrays)
         mpm_sim_snapshot(s, &(mpm_snapshot){.x = x,
                                             .v = v,
                                             .stress = sg,
-                                            .pressure = pr,
+                                            .mean_stress = pr,
                                             .volume = vol,
                                             .plastic_strain = ep,
                                             .deformation_gradient = F,

@@ -67,13 +67,22 @@ int ctl_vtk_write_pvd(const char *path, const char *const *files, const double *
 
 /* ---- the commands built on them (ctl_export.c) ------------------------ */
 
+/* What `export` writes the snapshots as. */
+typedef enum {
+    CTL_EXPORT_VTK = 0, /* <name>_<step>.vtp and <name>.pvd (default) */
+    CTL_EXPORT_HDF5 = 1 /* <name>.h5 and <name>.xdmf (ctl_h5.h) */
+} ctl_export_format;
+
 /* `mpmctl export ID DIR`: every recorded snapshot of run id as
- * DIR/<name>_<step>.vtp (enc), DIR/<name>.pvd with their times,
+ * DIR/<name>_<step>.vtp (enc; <step> zero-padded to the width of the
+ * largest, so that the names sort in time order) and DIR/<name>.pvd with
+ * their times, or (CTL_EXPORT_HDF5) DIR/<name>.h5 and DIR/<name>.xdmf;
  * DIR/energy.csv (as `energy --csv`), and with grid DIR/grid.vti; DIR is
  * created if missing.  Progress on stderr when it is a terminal, a summary
  * line at the end.  A run without recorded snapshots is CTL_ECASE with
  * the case fields that record them. */
-int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_vtk_enc enc, int grid);
+int ctl_export(ctl_conn *c, uint64_t id, const char *dir, ctl_export_format fmt, ctl_vtk_enc enc,
+               int grid);
 
 /* `mpmctl plot ID -o FILE`: the energy curves (kinetic, strain, total; the
  * balance error in % in a second panel) drawn by gnuplot into out, with

@@ -29,7 +29,7 @@ _mpmctl()
     ((COMP_CWORD > 0)) && prev=${COMP_WORDS[COMP_CWORD - 1]}
     local commands="submit watch runs show energy snapshot export plot resume cancel ping version keygen"
     local global="--endpoint --stream --timeout --keys --help"
-    local withval="--endpoint --stream --timeout --keys --status --limit --before --step -o --out --name --terminal"
+    local withval="--endpoint --stream --timeout --keys --status --limit --before --step -o --out --name --terminal --format"
     COMPREPLY=()
 
     # the value of an option
@@ -39,6 +39,9 @@ _mpmctl()
         return ;;
     --terminal)
         COMPREPLY=($(compgen -W "pngcairo png svg pdfcairo" -- "$cur"))
+        return ;;
+    --format)
+        COMPREPLY=($(compgen -W "vtk hdf5" -- "$cur"))
         return ;;
     --keys)
         COMPREPLY=($(compgen -d -- "$cur"))
@@ -86,7 +89,7 @@ _mpmctl()
     runs) opts="--status --limit --before --all --json" ;;
     show) opts="--json --case" ;;
     snapshot) opts="--step -o --ascii --base64 --compress" ;;
-    export) opts="--grid --ascii --base64 --compress" ;;
+    export) opts="--format --grid --ascii --base64 --compress" ;;
     plot) opts="-o --terminal" ;;
     cancel | ping | version) opts="--json" ;;
     keygen) opts="--out --name" ;;

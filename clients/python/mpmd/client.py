@@ -21,8 +21,10 @@ Endpoints and keys follow mpmctl's rules: ``endpoint`` (else
 endpoint's port + 1 / ipc path + ``.stream``); CURVE keys as in keys.py.
 """
 
+import json
 import os
 import time
+from typing import Any, Dict, Iterator, List, Optional, Union
 
 import zmq
 from google.protobuf import json_format
@@ -45,6 +47,7 @@ from .results import (
 )
 
 SCHEMA_VERSION = pb.SCHEMA_VERSION
+SCHEMA_MINOR = getattr(pb, "SCHEMA_MINOR", 0)
 DEFAULT_TIMEOUT = 10.0  # seconds, as mpmctl's --timeout
 WATCH_IDLE_S = 1.0  # a watcher that hears nothing this long asks Status
 WATCH_SUB_HWM = 100000  # stream messages buffered before dropping
@@ -54,8 +57,12 @@ _ENDED = ("FINISHED", "FAILED", "CANCELLED", "INTERRUPTED")
 # what the socket monitor saw, worst last
 _MON_NONE, _MON_DROPPED, _MON_HANDSHAKE, _MON_REFUSED = range(4)
 
+# what a job or run may be given as
+JobRef = Union[int, Submitted, Run]
+CaseLike = Union[dict, str, bytes, "os.PathLike[str]", Any]
 
-def _job_id(x, what="job"):
+
+def _job_id(x: Any, what: str = "job") -> int:
     """An id from an int, a Submitted or a Run."""
     try:
         v = int(x.job_id if isinstance(x, Submitted) else x)
@@ -66,28 +73,92 @@ def _job_id(x, what="job"):
     return v
 
 
-def _run_id(x, what="run"):
+def _run_id(x: Any, what: str = "run") -> int:
     if isinstance(x, Submitted):
         return _job_id(x.run_id, what)
     return _job_id(x, what)
 
 
-def topic(job):
+def topic(job: int) -> bytes:
     """The stream topic of a job: 'job:' and its id as 16 hex digits, ':'."""
     return b"job:%016x:" % job
 
 
-def case_message(case):
+def _json_path(path: List[Union[str, int]]) -> str:
+    """["bodies", 0, "ppc"] -> "bodies[0].ppc"."""
+    out = ""
+    for p in path:
+        out += "[%d]" % p if isinstance(p, int) else ("." if out else "") + p
+    return out
+
+
+def _parse_fault(value: Any, desc: Any, path: List[Union[str, int]]) -> Optional[str]:
+    """The path (JSON mapping, lowerCamelCase) of the first field of a
+    case-like dict that does not parse as message type desc, or None when
+    none alone fails.  Protobuf's ParseError names the field only
+    sometimes and never the index of a repeated message, so the dict is
+    walked against the descriptors: an unknown name, a message that is not
+    an object, a value that does not parse on its own."""
+    from google.protobuf.descriptor import FieldDescriptor as FD
+
+    if not isinstance(value, dict):
+        return _json_path(path) if path else ""
+    by_name = {}
+    for f in desc.fields:
+        by_name[f.json_name] = f
+        by_name[f.name] = f
+    for key, v in value.items():
+        f = by_name.get(key)
+        if f is None:
+            return _json_path(path + [key])
+        here = path + [f.json_name]
+        repeated = f.label == FD.LABEL_REPEATED
+        if repeated and not isinstance(v, list):
+            if v is None:
+                continue
+            return _json_path(here)
+        items = list(enumerate(v)) if repeated else [(None, v)]
+        for i, item in items:
+            at = here + [i] if i is not None else here
+            if f.type == FD.TYPE_MESSAGE:
+                if item is None and i is None:
+                    continue
+                bad = _parse_fault(item, f.message_type, at)
+                if bad is not None:
+                    return bad
+            else:
+                # the one value alone, in a message of this type
+                try:
+                    json_format.ParseDict({key: [item] if repeated else item}, _msg_class(desc)())
+                except json_format.ParseError:
+                    return _json_path(at)
+    return None
+
+
+def _msg_class(desc: Any) -> Any:
+    """The generated class of a message descriptor of the schema."""
+    from google.protobuf import message_factory
+
+    if hasattr(message_factory, "GetMessageClass"):  # protobuf >= 4.22
+        return message_factory.GetMessageClass(desc)
+    return message_factory.MessageFactory(desc.file.pool).GetPrototype(desc)
+
+
+def case_message(case: CaseLike) -> Any:
     """A Case message from a dict (the JSON mapping), a path to a JSON case
     file, JSON text, or a Case message (copied).  Fields the schema gives a
     default (method, update) are set explicitly, as mpmctl does, so the
     stored case means the same to every version.  A case that does not
-    parse raises MpmdError INVALID_CASE (the daemon checks the rest)."""
+    parse raises InvalidCaseError (code INVALID_CASE) with the field path
+    of the first value at fault (e.g. ``bodies[1].ppc``; the daemon checks
+    the rest)."""
     msg = pb.Case()
+    parsed: Any = None
     try:
         if isinstance(case, pb.Case):
             msg.CopyFrom(case)
         elif isinstance(case, dict):
+            parsed = case
             json_format.ParseDict(case, msg)
         elif isinstance(case, (str, bytes, os.PathLike)):
             text = case
@@ -100,7 +171,13 @@ def case_message(case):
                         text = f.read()
                 except OSError as e:
                     raise MpmdError(USAGE, "cannot read %s: %s" % (path, e.strerror)) from None
-            json_format.Parse(text, msg)
+            try:
+                parsed = json.loads(text)
+            except ValueError as e:
+                raise MpmdError(
+                    "INVALID_CASE", "the case is not JSON: %s" % e
+                ) from None
+            json_format.ParseDict(parsed, msg)
         else:
             raise MpmdError(
                 USAGE,
@@ -108,7 +185,13 @@ def case_message(case):
                 % type(case).__name__,
             )
     except json_format.ParseError as e:
-        raise MpmdError("INVALID_CASE", "the case does not parse: %s" % e) from None
+        where = _parse_fault(parsed, pb.Case.DESCRIPTOR, []) if parsed is not None else None
+        text = str(e).split("\n")[0]
+        if where:
+            raise MpmdError(
+                "INVALID_CASE", "%s: the case does not parse: %s" % (where, text), where
+            ) from None
+        raise MpmdError("INVALID_CASE", "the case does not parse: %s" % text) from None
     msg.method = msg.method  # an absent field holds the schema's default
     msg.update = msg.update
     return msg
@@ -130,11 +213,19 @@ class Client:
     stream: the stream socket (default $MPMD_STREAM, else as the daemon
         reports it, else derived from endpoint).
 
-    Every method raises MpmdError on failure.  A Client is for one thread
-    at a time; use it as a context manager, or call close().
+    Every method raises MpmdError on failure (a subclass per code:
+    NotFoundError, InvalidCaseError, RequestTimeout, ...).  A Client is for
+    one thread at a time; use it as a context manager (``with Client() as
+    c:``), or call close().
     """
 
-    def __init__(self, endpoint=None, keys=None, timeout=DEFAULT_TIMEOUT, stream=None):
+    def __init__(
+        self,
+        endpoint: Optional[str] = None,
+        keys: Any = None,
+        timeout: float = DEFAULT_TIMEOUT,
+        stream: Optional[str] = None,
+    ) -> None:
         self.endpoint = endpoint or os.environ.get("MPMD_ENDPOINT") or _ep.DEFAULT_ENDPOINT
         self.stream = stream or os.environ.get("MPMD_STREAM") or None
         try:
@@ -154,10 +245,10 @@ class Client:
 
     # ---- connection ----------------------------------------------------------
 
-    def __enter__(self):
+    def __enter__(self) -> "Client":
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: Any) -> None:
         self.close()
 
     def __del__(self):
@@ -166,7 +257,7 @@ class Client:
         except Exception:
             pass
 
-    def close(self):
+    def close(self) -> None:
         """Closes the sockets (pending requests are dropped)."""
         self._close_dealer()
         if getattr(self, "_ctx", None) is not None:
@@ -349,26 +440,30 @@ class Client:
 
     # ---- requests -------------------------------------------------------------
 
-    def ping(self):
-        """Liveness: a dict with server_version, schema_version and
+    def ping(self) -> Dict[str, Any]:
+        """Liveness: a dict with server_version, schema_version,
+        schema_minor (0 from a daemon before schema 1.1) and
         stream_endpoint."""
         p = self._call("pong", ping={})
         return {
             "server_version": p.server_version,
             "schema_version": p.schema_version,
+            "schema_minor": p.schema_minor,
             "stream_endpoint": p.stream_endpoint,
         }
 
-    def version(self):
-        """A dict: server_version, schema_version, components ({name: version})."""
+    def version(self) -> Dict[str, Any]:
+        """A dict: server_version, schema_version, schema_minor, components
+        ({name: version})."""
         v = self._call("version", version={})
         return {
             "server_version": v.server_version,
             "schema_version": v.schema_version,
+            "schema_minor": v.schema_minor,
             "components": {c.name: c.version for c in v.components},
         }
 
-    def submit(self, case):
+    def submit(self, case: CaseLike) -> Submitted:
         """Queues a case: a dict (the JSON mapping, as a case file holds it),
         a path to a JSON case file, or an mpmd Case message.  Returns a
         Submitted (job_id, run_id).  A case the daemon refuses raises
@@ -385,18 +480,18 @@ class Client:
             raise MpmdError(PROTOCOL, "unexpected reply to submit: %s" % which)
         return Submitted(reply.submit_ok.job_id, reply.submit_ok.run_id)
 
-    def status(self, job):
+    def status(self, job: JobRef) -> Run:
         """Where a job stands: its Run."""
         return Run.from_pb(self._call("run", status={"job_id": _job_id(job)}))
 
-    def cancel(self, job):
+    def cancel(self, job: JobRef) -> Run:
         """Stops a queued or running job; returns its Run (a running job is
         still RUNNING until its next step: watch it, or poll status).
         CONFLICT if it already ended, FORBIDDEN unless this client's key
         submitted it or is an admin key."""
         return Run.from_pb(self._call("run", cancel={"job_id": _job_id(job)}))
 
-    def run(self, run_id, with_case=False):
+    def run(self, run_id: JobRef, with_case: bool = False) -> Run:
         """One run record; with_case: Run.case holds the case as a dict."""
         return Run.from_pb(
             self._call(
@@ -404,7 +499,12 @@ class Client:
             )
         )
 
-    def runs(self, status=None, limit=None, before=None):
+    def runs(
+        self,
+        status: Optional[Union[str, int]] = None,
+        limit: Optional[int] = None,
+        before: Optional[JobRef] = None,
+    ) -> RunList:
         """Run records, newest first: a RunList of Run (at most limit, the
         daemon's default 100; at most 10000), only those with status (a name
         such as "FINISHED") and, with before, only runs with a smaller id.
@@ -432,7 +532,7 @@ class Client:
         out.next_before_run_id = lst.next_before_run_id if lst.HasField("next_before_run_id") else None
         return out
 
-    def energy_samples(self, run_id, from_seq=0):
+    def energy_samples(self, run_id: JobRef, from_seq: int = 0) -> List[Any]:
         """The EnergySample messages of a run with seq >= from_seq, paging
         through GetEnergy."""
         rid = _run_id(run_id)
@@ -451,7 +551,7 @@ class Client:
                 )
             frm = page.samples[-1].seq + 1
 
-    def energy(self, run_id):
+    def energy(self, run_id: JobRef) -> Any:
         """A run's whole energy series as a NumPy structured array, one row
         per sample in seq order: seq, step, t, kinetic, strain, potential,
         external_work, total, mass, momentum (n, dim), angular_momentum
@@ -460,16 +560,42 @@ class Client:
         balance_error.  e["t"], e["momentum"][:, 0] / e["mass"], ..."""
         return energy_array(self.energy_samples(run_id))
 
-    def snapshot(self, run_id, step=None):
+    def snapshot(self, run_id: JobRef, step: Optional[int] = None) -> Snapshot:
         """A recorded snapshot (the latest, or the one at step) as a
         Snapshot of NumPy arrays.  NOT_FOUND (field "step") when there is
         none at that step."""
         s = self._call("snapshot", get_snapshot={"run_id": _run_id(run_id), "step": step})
         return Snapshot.from_pb(s)
 
+    def wait(self, job: JobRef, timeout: Optional[float] = None, poll: float = 0.05) -> Run:
+        """Waits for a job to end and returns its finished Run (status
+        FINISHED, FAILED, CANCELLED or INTERRUPTED: a run that failed is
+        returned, not raised).  Asks Status every `poll` seconds at first,
+        then less often (up to 1 s).  timeout: seconds to wait at most
+        (None: for ever); when it passes, RequestTimeout (code TIMEOUT,
+        field "timeout") with the job still running."""
+        jid = _job_id(job)
+        if timeout is not None and not timeout >= 0:
+            raise MpmdError(USAGE, "timeout: expected seconds >= 0, got %r" % (timeout,), "timeout")
+        deadline = None if timeout is None else time.monotonic() + timeout
+        delay = max(0.001, float(poll))
+        while True:
+            run = self.status(jid)
+            if run.ended:
+                return run
+            if deadline is not None and time.monotonic() >= deadline:
+                raise MpmdError(
+                    TIMEOUT,
+                    "job %d is still %s (step %d) after %g s" % (jid, run.status, run.steps, timeout),
+                    "timeout",
+                )
+            left = delay if deadline is None else min(delay, max(0.0, deadline - time.monotonic()))
+            time.sleep(left)
+            delay = min(1.0, delay * 1.5)
+
     # ---- the stream -----------------------------------------------------------
 
-    def stream_endpoint(self):
+    def stream_endpoint(self) -> str:
         """Where the job streams are published, as mpmctl decides it."""
         if self.stream:
             return self.stream
@@ -482,7 +608,7 @@ class Client:
             )
         return ep
 
-    def watch(self, job, snapshots=True):
+    def watch(self, job: JobRef, snapshots: bool = True) -> Iterator[Any]:
         """Follows a job to its end: a generator of events.
 
         Yields Energy (every sample of the run exactly once, in seq order,

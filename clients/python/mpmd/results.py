@@ -9,13 +9,16 @@ the protobuf messages, with the schema's snake_case names.
   energy sample), ``Snapshot`` and ``Finished`` (always the last).
 * ``energy_array(samples)``: a NumPy structured array, one row per sample.
 * ``Snapshot``: particle fields as arrays shaped (n, dim) (x, v), (n, 6)
-  (stress, Voigt xx yy zz xy yz xz), (n,) (pressure, volume,
-  plastic_strain, yielded), (n, dim, dim) (F, row-major); a field the
-  snapshot lacks is ``None``.
+  (stress, Voigt xx yy zz xy yz xz), (n,) (pressure, positive in
+  compression; mean_stress = -pressure; volume, plastic_strain, yielded),
+  (n, dim, dim) (F, row-major); a field the snapshot lacks is ``None``.
+* ``Run`` and ``RunList`` show as tables in a notebook (``_repr_html_``).
 """
 
+import html
+import time as _time
 from dataclasses import dataclass, field
-from typing import Any, List, Optional
+from typing import Any, Iterable, List, Optional
 
 import numpy as np
 
@@ -160,7 +163,9 @@ class Snapshot:
     """Particle fields at one step (Client.snapshot, and a stream event).
 
     x, v: (n, dim); stress: (n, 6) Voigt (xx, yy, zz, xy, yz, xz);
-    pressure, volume, plastic_strain: (n,); F (the deformation gradient):
+    pressure: (n,), -(sxx + syy + szz)/3, positive in compression;
+    mean_stress: (n,), the mean stress, -pressure (negative in
+    compression); volume, plastic_strain: (n,); F (the deformation gradient):
     (n, dim, dim), row-major; yielded: (n,) bool.  A field the snapshot
     does not carry is None.  stream_seq: the StreamMsg.seq of a streamed
     snapshot (None for a stored one)."""
@@ -173,6 +178,7 @@ class Snapshot:
     v: Optional[np.ndarray] = None
     stress: Optional[np.ndarray] = None
     pressure: Optional[np.ndarray] = None
+    mean_stress: Optional[np.ndarray] = None
     volume: Optional[np.ndarray] = None
     plastic_strain: Optional[np.ndarray] = None
     F: Optional[np.ndarray] = None
@@ -180,8 +186,10 @@ class Snapshot:
     stream_seq: Optional[int] = None
 
     @classmethod
-    def from_pb(cls, s, stream_seq=None):
-        """Checks every array against n and dim (a PROTOCOL error otherwise)."""
+    def from_pb(cls, s: Any, stream_seq: Optional[int] = None) -> "Snapshot":
+        """Checks every array against n and dim (a PROTOCOL error otherwise).
+        A daemon before schema 1.1 sends only the mean stress (the field an
+        older schema named pressure): the pressure is then its negative."""
         from .errors import PROTOCOL, MpmdError
 
         n, dim = int(s.n), int(s.dim)
@@ -198,6 +206,13 @@ class Snapshot:
                 )
             return np.array(values, dtype=dtype).reshape(shape)
 
+        p = arr(s.pressure, (n,), "pressure")
+        m = arr(s.mean_stress, (n,), "meanStress")
+        # 0.0 - x as the daemon does it: +0 for a stress-free particle
+        if p is None and m is not None:
+            p = 0.0 - m
+        elif m is None and p is not None:
+            m = 0.0 - p
         return cls(
             step=s.step,
             t=s.t,
@@ -206,7 +221,8 @@ class Snapshot:
             x=arr(s.x, (n, dim), "x"),
             v=arr(s.v, (n, dim), "v"),
             stress=arr(s.stress, (n, 6), "stress"),
-            pressure=arr(s.pressure, (n,), "pressure"),
+            pressure=p,
+            mean_stress=m,
             volume=arr(s.volume, (n,), "volume"),
             plastic_strain=arr(s.plastic_strain, (n,), "plasticStrain"),
             F=arr(s.deformation_gradient, (n, dim, dim), "deformationGradient"),
@@ -305,19 +321,23 @@ class Run:
     case: Optional[dict] = None
     message: Any = field(default=None, repr=False)
 
-    def __int__(self):
+    def __int__(self) -> int:
         return self.run_id
 
-    def __index__(self):
+    def __index__(self) -> int:
         return self.run_id
 
     @property
-    def ended(self):
+    def ended(self) -> bool:
         """True once the run is FINISHED, FAILED, CANCELLED or INTERRUPTED."""
         return self.status in ("FINISHED", "FAILED", "CANCELLED", "INTERRUPTED")
 
+    def _repr_html_(self) -> str:
+        """The run as a small table (Jupyter shows it for a Run value)."""
+        return _runs_table([self])
+
     @classmethod
-    def from_pb(cls, r):
+    def from_pb(cls, r: Any) -> "Run":
         from google.protobuf import json_format
 
         case = None
@@ -358,3 +378,45 @@ class RunList(list):
     limit cut the listing (pass it as before= for the next page)."""
 
     next_before_run_id: Optional[int] = None
+
+    def _repr_html_(self) -> str:
+        """The runs as one table, a row each (Jupyter shows it)."""
+        more = ""
+        if self.next_before_run_id:
+            more = "<p>more: runs(before=%d)</p>" % self.next_before_run_id
+        return _runs_table(self) + more
+
+
+# the columns of a run table: header, and the cell of a Run
+_RUN_COLUMNS = (
+    ("run", lambda r: str(r.run_id)),
+    ("name", lambda r: r.name),
+    ("status", lambda r: r.status + (" (%s)" % r.error if r.error else "")),
+    ("method", lambda r: "/".join(x for x in (r.method, r.update, r.transfer) if x)),
+    ("particles", lambda r: "%d (%dD)" % (r.particles, r.dim)),
+    ("steps", lambda r: "%d / %s" % (r.steps, r.steps_total if r.steps_total is not None else "?")),
+    ("t", lambda r: "%.6g" % r.t),
+    ("wall", lambda r: "%.3g s" % r.wall_s),
+    ("balance error", lambda r: "-" if r.balance_error is None else "%.2e" % r.balance_error),
+    ("snapshots", lambda r: str(len(r.snapshot_steps))),
+    (
+        "submitted",
+        lambda r: _time.strftime("%Y-%m-%d %H:%M:%S", _time.localtime(r.submitted_at))
+        if r.submitted_at
+        else "-",
+    ),
+    ("warning", lambda r: r.warning or ""),
+)
+
+
+def _runs_table(runs: Iterable["Run"]) -> str:
+    """An HTML table of runs, every text escaped."""
+    head = "".join("<th>%s</th>" % html.escape(h) for h, _ in _RUN_COLUMNS)
+    rows = "".join(
+        "<tr>%s</tr>" % "".join("<td>%s</td>" % html.escape(f(r)) for _, f in _RUN_COLUMNS)
+        for r in runs
+    )
+    return '<table class="mpmd-runs"><thead><tr>%s</tr></thead><tbody>%s</tbody></table>' % (
+        head,
+        rows,
+    )

@@ -8,8 +8,11 @@ arrays must equal bit for bit) and, for the CURVE phase, MPMD_TEST_KEYS (a
 directory with the key directories made by mpmctl keygen: a/ authorized,
 u/ unknown, srv/server.pub).  Usage: test_client.py PHASE, PHASE one of
 api, stop, kill (the daemon, MPMD_TEST_PID, is stopped during a watch),
-curve.  Plain asserts; each check prints a line; exit status 0
-only if all passed.
+curve, pip (the package pip installed into a virtual environment:
+MPMD_TEST_VENV; the conveniences: wait, the context manager, the error
+classes, field paths, the notebook display, type hints, and the pressure
+of a compressed particle).  Plain asserts; each check prints a line; exit
+status 0 only if all passed.
 """
 
 import json
@@ -221,6 +224,8 @@ def t_snapshot_equals_mpmctl(c, st):
         assert same(s.v.ravel(), [jnum(x) for x in js["v"]])
         assert same(s.stress.ravel(), [jnum(x) for x in js["stress"]])
         assert same(s.pressure, [jnum(x) for x in js["pressure"]])
+        assert same(s.mean_stress, [jnum(x) for x in js["meanStress"]])
+        assert (s.mean_stress == -s.pressure).all()
         assert same(s.volume, [jnum(x) for x in js["volume"]])
         assert s.F is None and s.plastic_strain is None and s.yielded is None
         log("snapshot(%d, %s): step %d, x %s v %s stress %s, equal to mpmctl snapshot -o .json"
@@ -341,8 +346,10 @@ def t_late_join(c, st):
         snaps = [x for x in events if isinstance(x, mpmd.Snapshot)]
         if not drop:  # snapshots stream while somebody watches
             assert snaps, "no snapshot streamed to a watcher"
-            for s in snaps:
-                assert s.step % 10000 == 0 and s.x.shape == (13, 1) and s.stress.shape == (13, 6), s
+            for k, s in enumerate(snaps):
+                # every 10000 steps, and the end's (the cancel's step) last
+                at = s.step % 10000 == 0 or (k == len(snaps) - 1 and s.step == fin.steps)
+                assert at and s.x.shape == (13, 1) and s.stress.shape == (13, 6), s
                 assert s.stream_seq is not None
         log("late join%s: %d from the history, %d live, seq 0..%d without gap, %d snapshots, %s"
             % (" (every 3rd streamed sample dropped)" if drop else "", hist, live, seqs[-1],
@@ -379,8 +386,12 @@ def t_errors(c, st):
     assert "must be > 0" in e.message and "-1" in e.message, e
     log("bad case: %s" % e)
     assert isinstance(e, Exception) and str(e).startswith("INVALID_CASE: materials[0].youngsModulus")
-    e = expect_error("INVALID_CASE", "", c.submit, {"grid": {"dimension": 2}})
+    e = expect_error("INVALID_CASE", "grid.dimension", c.submit, {"grid": {"dimension": 2}})
     log("unparseable case: %s" % e)
+    bad = bar_dict("py-bad")
+    bad["bodies"].append({"ppc": -1})
+    e = expect_error("INVALID_CASE", "bodies[1].ppc", c.submit, bad)
+    log("unparseable case, a repeated message's field: %s" % e)
     e = expect_error("NOT_FOUND", "runId", c.run, 999999)
     assert "999999" in e.message
     log("unknown run: %s" % e)
@@ -562,6 +573,96 @@ def t_curve(c, st):
     log("key files: mode 0644 refused, 0600 accepted; a directory without server.pub refused")
 
 
+def t_pip_installed(c, st):
+    """The package comes from the virtual environment pip installed it
+    into, with its generated mpmd_pb2, type hints and py.typed."""
+    import inspect
+    import typing
+
+    venv = os.environ["MPMD_TEST_VENV"]
+    assert os.path.realpath(mpmd.__file__).startswith(os.path.realpath(venv)), mpmd.__file__
+    assert os.path.realpath(mpmd.pb.__file__).startswith(os.path.realpath(venv)), mpmd.pb.__file__
+    assert os.path.isfile(os.path.join(os.path.dirname(mpmd.__file__), "py.typed"))
+    assert mpmd.SCHEMA_MINOR >= 1 and c.ping()["schema_minor"] == mpmd.SCHEMA_MINOR
+    hints = typing.get_type_hints(mpmd.Client.wait)
+    assert hints["return"] is mpmd.Run and "timeout" in hints, hints
+    for name, fn in inspect.getmembers(mpmd.Client, inspect.isfunction):
+        if not name.startswith("_"):
+            assert "return" in fn.__annotations__, "Client.%s has no return type" % name
+    log("mpmd %s from %s; Client.wait%s" % (mpmd.__name__, os.path.dirname(mpmd.__file__),
+                                           inspect.signature(mpmd.Client.wait)))
+
+
+def t_error_classes(c, st):
+    """A class per wire code, each an MpmdError with its code and field."""
+    codes = [n for n in mpmd.pb.Error.Code.keys()]
+    for code in codes:
+        cls = mpmd.ERROR_CLASSES[code]
+        e = MpmdError(code, "m", "f")
+        assert type(e) is cls and isinstance(e, MpmdError) and e.code == code and e.field == "f"
+    e = expect_error("NOT_FOUND", "runId", c.run, 999999)
+    assert isinstance(e, mpmd.NotFoundError), type(e)
+    try:
+        c.submit({"grid": {"dim": 1}, "bodies": [{"box": {"lo": [0, "a"]}}]})
+        raise AssertionError("a case that does not parse was accepted")
+    except mpmd.InvalidCaseError as e2:
+        assert e2.field == "bodies[0].box.lo[1]", e2
+        log("parse error: %r" % e2)
+    bad = bar_dict("py-bad")
+    bad["materials"][0]["density"] = -1
+    try:
+        c.submit(bad)
+        raise AssertionError("a bad density was accepted")
+    except mpmd.InvalidCaseError as e3:
+        assert e3.field == "materials[0].density", e3
+    log("%d wire codes, each its class; NotFoundError, InvalidCaseError with fields" % len(codes))
+
+
+def t_wait_context_html(c, st):
+    """wait() returns the finished run; a timeout says so; the context
+    manager closes; a run and a run list render as HTML tables."""
+    with mpmd.Client(EP, timeout=30) as cc:
+        job = cc.submit(bar_dict("py-wait", steps=400, every=100))
+        run = cc.wait(job, timeout=120)
+        assert run.status == "FINISHED" and run.steps == 400 and run.run_id == job.run_id, run
+        slow = cc.submit(bar_dict("py-slow", steps=99000000, every=10000, at_rest=True))
+        t0 = time.monotonic()
+        e = expect_error("TIMEOUT", "timeout", cc.wait, slow, timeout=0.3)
+        assert isinstance(e, mpmd.RequestTimeout) and time.monotonic() - t0 < 10, e
+        cc.cancel(slow)
+        assert cc.wait(slow, timeout=60).status == "CANCELLED"
+        h = run._repr_html_()
+        assert h.startswith("<table") and "py-wait" in h and "FINISHED" in h, h
+        hl = cc.runs(limit=2)._repr_html_()
+        assert hl.count("<tr>") == 3, hl
+        log("wait: %s in %d steps; a 0.3 s wait: %s; HTML %d bytes" % (run.status, run.steps, e,
+                                                                      len(h)))
+    assert cc._ctx is None  # closed by the with block
+    expect_error("USAGE", None, cc.ping)
+
+
+def t_pressure(c, st):
+    """Two particles under uniaxial compression (sxx = -3000): pressure
+    +1000 and mean stress -1000 at step 0, positive to the end."""
+    case = {
+        "name": "py-compressed", "grid": {"dim": 1, "spacing": [1], "nodes": [5]},
+        "method": "MPM", "dt": 1e-5, "steps": 5,
+        "materials": [{"youngsModulus": 1e6, "density": 1}],
+        "bodies": [{"points": {"x": [1.5, 2.5], "volume": [1, 1],
+                               "stress": [-3000, 0, 0, 0, 0, 0, -3000, 0, 0, 0, 0, 0]}}],
+        "output": {"energyEvery": 1, "snapshotEvery": 2, "recordSnapshots": True},
+    }
+    run = c.wait(c.submit(case), timeout=60)
+    assert run.status == "FINISHED" and run.snapshot_steps == [0, 2, 4, 5], run
+    s0 = c.snapshot(run, 0)
+    assert (s0.pressure == 1000.0).all() and (s0.mean_stress == -1000.0).all(), s0
+    s5 = c.snapshot(run)
+    assert s5.step == 5 and (abs(s5.pressure - 1000.0) < 10.0).all(), s5.pressure
+    assert (s5.mean_stress == -s5.pressure).all()
+    log("compressed: step 0 pressure %s mean_stress %s; step 5 pressure %s"
+        % (s0.pressure.tolist(), s0.mean_stress.tolist(), s5.pressure.tolist()))
+
+
 PHASES = {
     "api": [t_submit_watch, t_energy_equals_mpmctl, t_snapshot_equals_mpmctl, t_runs_run_cancel,
             t_2d_arrays_equal_mpmctl,
@@ -569,6 +670,7 @@ PHASES = {
     "stop": [t_stop],
     "kill": [t_kill],
     "curve": [t_curve],
+    "pip": [t_pip_installed, t_error_classes, t_wait_context_html, t_pressure],
 }
 
 
