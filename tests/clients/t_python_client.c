@@ -158,14 +158,14 @@ DTEST(python_client_pip)
     snprintf(log, sizeof log, "%s/phase.out", dir);
     snprintf(cmd, sizeof cmd,
              "env -u PYTHONPATH PYTHONDONTWRITEBYTECODE=1 timeout -k 5 %d %s/bin/python "
-             "tests/python/test_client.py pip > %s 2>&1",
+             "tests/clients/python/test_client.py pip > %s 2>&1",
              PY_DEADLINE_S, venv, log);
     rc = system(cmd);
     out = td_slurp(log, &len);
     show(out);
     ok = rc == 0 && out && strstr(out, "pip: 0 failed");
     free(out);
-    CHECKF(ok, "tests/python/test_client.py pip: exit %d (output above)", rc);
+    CHECKF(ok, "tests/clients/python/test_client.py pip: exit %d (output above)", rc);
 }
 
 /* mpmctl keygen --out dir/sub --name name; the public key into pub. */

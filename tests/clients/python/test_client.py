@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """The Python client (clients/python/mpmd) against a real mpmd.
 
-Run by tests/t_python_client.c, which starts the daemon and passes, in the
+Run by tests/clients/t_python_client.c, which starts the daemon and passes, in the
 environment: MPMD_TEST_ENDPOINT (its control socket), MPMD_TEST_DIR (a
 scratch directory), MPMCTL_BIN (the real mpmctl, whose output the client's
 arrays must equal bit for bit) and, for the CURVE phase, MPMD_TEST_KEYS (a
