@@ -89,6 +89,7 @@ all: bin/mpmd bin/mpmctl bin/mpmtest bin/mpmrun
 DEPS_GROUP ?= test
 deps:
 	@bash deploy/install-deps.sh $(DEPS_GROUP)
+bench bench-build bench-accuracy bench-vtk bench-ceiling: DEPS_GROUP = bench
 
 # ---- generated protobuf code --------------------------------------------------
 build/gen/%.pb-c.c build/gen/%.pb-c.h: proto/%.proto
@@ -443,12 +444,15 @@ bench-inproc:
 	@bash tests/perf/inproc/inproc.sh $(REF)
 
 # ---- the demo ----------------------------------------------------------------------
-# make demo: mpmd on loopback with its default database, the paper's fine
-# bouncing disks submitted and watched live with mpmctl, then stopped.
-# make demo CASE=collapse: the granular column collapse instead.
-CASE ?= disks
+# make demo: installs the demo group only (deploy/install-deps.sh demo),
+# builds mpmd, mpmctl and mpmweb, then deploy/demo.sh: mpmd and the web
+# monitor on loopback with the default database, a granular column collapse
+# (20-30 s, snapshots recorded) watched live, the commands to try next.
+# make demo CASE=disks: the paper's bouncing disks instead.
+CASE ?= collapse
+demo: DEPS_GROUP = demo
 demo: deps
-	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl
+	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl bin/mpmweb
 	bash deploy/demo.sh $(CASE)
 
 # ---- mpmweb, the live web monitor (clients/web/) -----------------------------------
