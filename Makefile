@@ -307,7 +307,7 @@ bench-accuracy: deps
 
 # The reliability part: the rel_* tests (kill -9, load, watchers, disk,
 # hostile input; tests/t_reliab*.c) at full size and `make fuzz`; their
-# "reliability:" lines are gathered into the README's Reliability table
+# "reliability:" lines are gathered into docs/reliability.md's table
 # (tests/reliab_table.sh) at the end.  Every part runs even if one fails.
 STRESS_LOG := build/stress.log
 stress: deps

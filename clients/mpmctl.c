@@ -137,10 +137,11 @@ static const command commands[] = {
     {"version", C_VERSION, "[--json]", "versions of mpmctl and of the server", ""},
     {"keygen", C_KEYGEN, "[--out DIR] [--name NAME]", "make a CURVE keypair",
      "Writes DIR/NAME.key (the secret key, mode 0600) and DIR/NAME.pub (the public\n"
-     "key) as Z85 text; DIR defaults to the current directory (created mode 0700 if\n"
-     "missing), NAME to \"mpmd\".  Never overwrites a key.  Prints the public key.\n"
+     "key) as Z85 text; DIR defaults to the current directory (made with any\n"
+     "missing parents, mode 0700), NAME to \"mpmd\".  Never overwrites a key.\n"
+     "Prints the public key.\n"
      "A client: keygen --out ~/.config/mpmd, then put the server's public key in\n"
-     "~/.config/mpmd/server.pub and give your mpmd.pub to the server's admin (README:\n"
+     "~/.config/mpmd/server.pub and give your mpmd.pub to the server's admin (manual:\n"
      "Security).  A server: keygen --out /etc/mpmd --name server, then mpmd\n"
      "--curve-secret /etc/mpmd/server.key --authorized-keys FILE|DIR.\n"},
 };

@@ -15,7 +15,8 @@
 # Overrides (the test docs_demo runs this script with them): MPMD_BIN,
 # MPMCTL_BIN, MPMWEB_BIN (default bin/...), MPMD_ENDPOINT, MPMD_DB,
 # MPMWEB_LISTEN, DEMO_STEPS (run that many steps instead of to the case's
-# end time), DEMO_PAUSE (seconds to open the page before the run, default 3).
+# end time), DEMO_PAUSE (seconds to open the page before the run, default 3),
+# DEMO_LOGS (the directory of the two logs, default build).
 set -euo pipefail
 choice=${1:-collapse}
 case "$choice" in
@@ -31,14 +32,15 @@ mpmctl=${MPMCTL_BIN:-bin/mpmctl}
 mpmweb=${MPMWEB_BIN:-bin/mpmweb}
 export MPMD_ENDPOINT=${MPMD_ENDPOINT:-tcp://127.0.0.1:5555}
 db=${MPMD_DB:-mpmd.db}
-mkdir -p build
-log=build/demo-mpmd.log
-weblog=build/demo-mpmweb.log
+logs=${DEMO_LOGS:-build}
+mkdir -p build "$logs"
+log=$logs/demo-mpmd.log
+weblog=$logs/demo-mpmweb.log
 if [ -n "${DEMO_STEPS:-}" ]; then
     # a shorter run of the same case: its end time replaced by a step count
     [[ "$DEMO_STEPS" =~ ^[1-9][0-9]*$ ]] || { echo "demo: DEMO_STEPS must be a positive whole number" >&2; exit 2; }
-    sed -E 's/"endTime": *[0-9.eE+-]+/"steps": '"$DEMO_STEPS"'/' "$file" > build/demo-case.json
-    file=build/demo-case.json
+    sed -E 's/"endTime": *[0-9.eE+-]+/"steps": '"$DEMO_STEPS"'/' "$file" > "$logs/demo-case.json"
+    file=$logs/demo-case.json
 fi
 pid=
 webpid=
