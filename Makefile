@@ -79,7 +79,7 @@ FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame
          -fno-sanitize-recover=all
 
 .PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-inproc inproc-objs bench-accuracy bench-vtk bench-ceiling stress \
-        demo clean \
+        demo docs-picture clean \
         format format-check lint fuzz fuzz-quick fuzz-build fuzz-seed
 .SECONDARY: $(GEN_C) $(GEN_H)
 all: bin/mpmd bin/mpmctl bin/mpmtest bin/mpmrun
@@ -454,6 +454,16 @@ demo: DEPS_GROUP = demo
 demo: deps
 	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl bin/mpmweb
 	bash deploy/demo.sh $(CASE)
+
+# make docs-picture: the README's picture, docs/web_monitor.png, taken again:
+# the demo's case run to its end in a database of its own, then the monitor
+# showing its recorded step 3500 (mid-collapse) in headless Chromium.
+docs-picture: deps
+	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl bin/mpmweb
+	rm -rf build/picture.db*
+	MPMD_DB=build/picture.db MPMD_ENDPOINT=$${MPMD_ENDPOINT:-tcp://127.0.0.1:5575} \
+	  MPMWEB_LISTEN=$${MPMWEB_LISTEN:-127.0.0.1:8085} DEMO_PAUSE=0 \
+	  DEMO_PICTURE=docs/web_monitor.png bash deploy/demo.sh collapse < /dev/null
 
 # ---- mpmweb, the live web monitor (clients/web/) -----------------------------------
 # bin/mpmweb: the gateway (clients/web/*.c) with mpmctl's connection, keys and

@@ -16,7 +16,9 @@
 # MPMCTL_BIN, MPMWEB_BIN (default bin/...), MPMD_ENDPOINT, MPMD_DB,
 # MPMWEB_LISTEN, DEMO_STEPS (run that many steps instead of to the case's
 # end time), DEMO_PAUSE (seconds to open the page before the run, default 3),
-# DEMO_LOGS (the directory of the two logs, default build).
+# DEMO_LOGS (the directory of the two logs, default build); DEMO_PICTURE=FILE
+# takes a PNG of the monitor showing the run at step DEMO_PICTURE_STEP (3500)
+# with headless Chromium (make docs-picture).
 set -euo pipefail
 choice=${1:-collapse}
 case "$choice" in
@@ -112,6 +114,18 @@ if [ -n "$webpid" ]; then
                printf 'GET /api/run/%s HTTP/1.0\r\nHost: %s\r\n\r\n' "$id" "$listen" >&3 &&
                head -1 <&3; } 2>/dev/null) || true
     echo "demo: the web monitor's answer for run $id: ${reply%$'\r'}"
+fi
+if [ -n "${DEMO_PICTURE:-}" ] && [ -n "$webpid" ]; then
+    # the README's picture: the recorded run at DEMO_PICTURE_STEP in
+    # headless Chromium (make docs-picture)
+    url="http://$listen/#run=$id&step=${DEMO_PICTURE_STEP:-3500}"
+    prof=$(mktemp -d)
+    chromium --headless=new --no-sandbox --disable-gpu --hide-scrollbars --no-first-run \
+        --user-data-dir="$prof" --window-size=1200,820 --virtual-time-budget=15000 \
+        --screenshot="$DEMO_PICTURE" "$url" > "$logs/demo-chromium.log" 2>&1 ||
+        { echo "demo: chromium could not take $DEMO_PICTURE (its log: $logs/demo-chromium.log)" >&2; exit 1; }
+    rm -rf "$prof"
+    echo "demo: $url -> $DEMO_PICTURE"
 fi
 echo
 echo "demo: next, the tour (README.md, \"A short tour\"), with mpmd running again:"

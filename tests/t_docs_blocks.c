@@ -311,6 +311,50 @@ TEST(docs_blocks_manual)
     CHECK(skipped <= 3);
 }
 
+/* The particles in a screenshot of the monitor: the pixels of the particle
+ * panel (CSS 645..1085 x 257..697 in a 1200 x 820 page) whose colour is
+ * saturated (max - min channel > 60: the colour map's; the page is white
+ * and grey there without particles), counted by Debian's Python after
+ * decoding the PNG (zlib, the row filters).  -1 if it cannot read it. */
+static long long png_particle_pixels(const char *png)
+{
+    static const char script[] =
+        "import sys,zlib,struct\n"
+        "d=open(sys.argv[1],'rb').read()\n"
+        "assert d[:8]==b'\\x89PNG\\r\\n\\x1a\\n'\n"
+        "i=8;idat=b''\n"
+        "while i<len(d):\n"
+        " n,t=struct.unpack('>I4s',d[i:i+8]);c=d[i+8:i+8+n];i+=12+n\n"
+        " if t==b'IHDR':W,H,bd,ct=struct.unpack('>IIBB',c[:10]);assert bd==8 and ct in(2,6)\n"
+        " if t==b'IDAT':idat+=c\n"
+        "bpp=3 if ct==2 else 4;raw=zlib.decompress(idat);s=W*bpp;prev=bytearray(s);p=0;hits=0\n"
+        "for y in range(H):\n"
+        " f=raw[p];line=bytearray(raw[p+1:p+1+s]);p+=1+s\n"
+        " for x in range(s):\n"
+        "  a=line[x-bpp] if x>=bpp else 0;b=prev[x];cc=prev[x-bpp] if x>=bpp else 0\n"
+        "  if f==1:line[x]=(line[x]+a)&255\n"
+        "  elif f==2:line[x]=(line[x]+b)&255\n"
+        "  elif f==3:line[x]=(line[x]+(a+b)//2)&255\n"
+        "  elif f==4:\n"
+        "   q=a+b-cc;pa=abs(q-a);pb=abs(q-b);pc=abs(q-cc)\n"
+        "   line[x]=(line[x]+(a if pa<=pb and pa<=pc else b if pb<=pc else cc))&255\n"
+        " prev=line\n"
+        " if 257*H//820<=y<697*H//820:\n"
+        "  for x in range(645*W//1200,1085*W//1200):\n"
+        "   px=line[x*bpp:x*bpp+3]\n"
+        "   if max(px)-min(px)>60:hits+=1\n"
+        "print(hits)\n";
+    char sp[600], cmd[1400];
+    snprintf(sp, sizeof sp, "%s/png_particles.py", t_tmpdir());
+    if (td_write(sp, script)) return -1;
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 '%s' '%s' 2>&1", sp, png);
+    FILE *f = popen(cmd, "r");
+    long long n = -1;
+    if (!f) return -1;
+    if (fscanf(f, "%lld", &n) != 1) n = -1;
+    return pclose(f) == 0 ? n : -1;
+}
+
 /* An int64 field of a JSON mapping (written as a string) or an int. */
 static long long jint64(const json_t *o, const char *key)
 {
@@ -322,7 +366,7 @@ static long long jint64(const json_t *o, const char *key)
 DTEST(docs_demo)
 {
     const char *tmp = t_tmpdir();
-    char dir[512], db[600], ep[64], web[64], cmd[3000], outp[600];
+    char dir[512], db[600], ep[64], web[64], cmd[3000], outp[600], png[600], pic[700] = "";
     int port = free_ports(6307);
     CHECKF(port, "no free loopback ports");
     snprintf(dir, sizeof dir, "%s/d", tmp);
@@ -331,11 +375,16 @@ DTEST(docs_demo)
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
     snprintf(web, sizeof web, "127.0.0.1:%d", port + 2);
     snprintf(outp, sizeof outp, "%s/demo.out", tmp);
+    /* with Chromium, the demo also takes the monitor's picture of its run,
+     * as make docs-picture does */
+    int chromium = access("/usr/bin/chromium", X_OK) == 0;
+    snprintf(png, sizeof png, "%s/monitor.png", tmp);
+    if (chromium) snprintf(pic, sizeof pic, "DEMO_PICTURE='%s' DEMO_PICTURE_STEP=500 ", png);
     /* the binaries come from the harness's MPMD_BIN, MPMCTL_BIN, MPMWEB_BIN */
     snprintf(cmd, sizeof cmd,
-             "MPMD_ENDPOINT='%s' MPMWEB_LISTEN='%s' MPMD_DB='%s' DEMO_LOGS='%s' DEMO_STEPS=500 "
+             "%sMPMD_ENDPOINT='%s' MPMWEB_LISTEN='%s' MPMD_DB='%s' DEMO_LOGS='%s' DEMO_STEPS=500 "
              "DEMO_PAUSE=0 timeout 300 bash deploy/demo.sh < /dev/null > '%s' 2>&1",
-             ep, web, db, tmp, outp);
+             pic, ep, web, db, tmp, outp);
     double t0 = td_now();
     int st = system(cmd), rc = st == -1 ? -1 : WEXITSTATUS(st);
     size_t len = 0;
@@ -355,6 +404,15 @@ DTEST(docs_demo)
            "%d:\n%s",
            rc, url, finished, answered, next, stopped, sanitizer, out);
     free(out);
+    if (chromium) {
+        long long px = png_particle_pixels(png);
+        TLOG("the monitor's picture of the run at step 500: %lld coloured pixels in the "
+             "particle panel",
+             px);
+        CHECKF(px > 2000, "%s shows no particles (%lld coloured pixels)", png, px);
+    } else {
+        TLOG("SKIPPED the picture: /usr/bin/chromium is not installed (install-deps.sh test)");
+    }
 
     /* the run in the demo's database: the collapse's 8192 particles, its
      * snapshots recorded */
