@@ -23,6 +23,13 @@
 # Every object records its header dependencies (-MMD -MP), so an edit
 # rebuilds only what includes it.
 
+# Parallel by default: as many jobs as CPUs, unless the command line gives -j
+# (which wins over this) or this is a recursive $(MAKE), which shares the
+# top-level make's job slots.
+ifeq ($(MAKELEVEL),0)
+MAKEFLAGS += -j$(shell nproc 2>/dev/null || echo 2)
+endif
+
 CC      ?= cc
 CSTD    := -std=c11 -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
 WARN    := -Wall -Wextra -Werror -Wshadow -Wpointer-arith -Wstrict-prototypes -Wmissing-prototypes
@@ -112,13 +119,17 @@ FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame
          -fno-sanitize-recover=all
 
 .PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-inproc inproc-objs bench-accuracy bench-vtk bench-ceiling stress \
-        demo clean \
+        demo docs-picture clean \
         format format-check lint fuzz fuzz-quick fuzz-build fuzz-seed
 .SECONDARY: $(GEN_C) $(GEN_H)
 all: bin/mpmd bin/mpmctl bin/mpmtest bin/mpmrun
 
+# deploy/install-deps.sh's group: test, unless the goal sets another
+# (demo, bench: below)
+DEPS_GROUP ?= test
 deps:
-	@bash deploy/install-deps.sh
+	@bash deploy/install-deps.sh $(DEPS_GROUP)
+bench bench-build bench-accuracy bench-vtk bench-ceiling: DEPS_GROUP = bench
 
 # ---- generated protobuf code --------------------------------------------------
 build/gen/%.pb-c.c build/gen/%.pb-c.h: proto/%.proto
@@ -211,7 +222,7 @@ $(TSAN)/mpmtest: $(call mpmtest_deps,$(TSAN))
 # quick form (make fuzz-quick).  T=name runs one test.  Tests that
 # need the daemon and the client find them through MPMD_BIN and MPMCTL_BIN.
 test: deps
-	@$(MAKE) --no-print-directory $(ASAN)/mpmtest $(ASAN)/mpmd $(ASAN)/mpmctl
+	@$(MAKE) --no-print-directory $(ASAN)/mpmtest $(ASAN)/mpmd $(ASAN)/mpmctl $(ASAN)/mpmweb
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  MPMD_BIN=$(ASAN)/mpmd MPMCTL_BIN=$(ASAN)/mpmctl $(ASAN)/mpmtest $(T)
 	@if [ -z "$(T)" ]; then $(MAKE) --no-print-directory fuzz-quick; fi
@@ -236,7 +247,7 @@ test-quick: bin/mpmtest bin/mpmd bin/mpmctl
 TSAN_T ?= perf_ inv_thread store_ daemon_ cpdi_two cpdi_active apic_step cond_two material_plastic triaxial_threads ckpt_same_bits_2d ckpt_threads fuse_ team_
 TSAN_ENV = TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(CURDIR)/tests/tsan.supp"
 tsan: deps
-	@$(MAKE) --no-print-directory $(TSAN)/mpmtest $(TSAN)/mpmd $(TSAN)/mpmctl
+	@$(MAKE) --no-print-directory $(TSAN)/mpmtest $(TSAN)/mpmd $(TSAN)/mpmctl $(TSAN)/mpmweb
 	@run=""; \
 	if ! $(TSAN_ENV) $(TSAN)/mpmtest --list >/dev/null 2>&1; then \
 	  run="setarch $$(uname -m) -R"; \
@@ -340,8 +351,8 @@ bench-accuracy: deps
 	else echo "bench-accuracy: gnuplot not found, plots skipped (bash deploy/install-deps.sh bench installs it)"; fi
 
 # The reliability part: the rel_* tests (kill -9, load, watchers, disk,
-# hostile input; tests/t_reliab*.c) at full size and `make fuzz`; their
-# "reliability:" lines are gathered into the README's Reliability table
+# hostile input; tests/daemon/t_reliab_*.c) at full size and `make fuzz`; their
+# "reliability:" lines are gathered into docs/reliability.md's table
 # (tests/reliab_table.sh) at the end.  Every part runs even if one fails.
 STRESS_LOG := build/stress.log
 stress: deps
@@ -477,13 +488,26 @@ bench-inproc:
 	@bash bench/perf/inproc/inproc.sh $(REF)
 
 # ---- the demo ----------------------------------------------------------------------
-# make demo: mpmd on loopback with its default database, the paper's fine
-# bouncing disks submitted and watched live with mpmctl, then stopped.
-# make demo CASE=collapse: the granular column collapse instead.
-CASE ?= disks
+# make demo: installs the demo group only (deploy/install-deps.sh demo),
+# builds mpmd, mpmctl and mpmweb, then deploy/demo.sh: mpmd and the web
+# monitor on loopback with the default database, a granular column collapse
+# (20-30 s, snapshots recorded) watched live, the commands to try next.
+# make demo CASE=disks: the paper's bouncing disks instead.
+CASE ?= collapse
+demo: DEPS_GROUP = demo
 demo: deps
-	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl
+	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl bin/mpmweb
 	bash deploy/demo.sh $(CASE)
+
+# make docs-picture: the README's picture, docs/web_monitor.png, taken again:
+# the demo's case run to its end in a database of its own, then the monitor
+# showing its recorded step 3500 (mid-collapse) in headless Chromium.
+docs-picture: deps
+	@$(MAKE) --no-print-directory bin/mpmd bin/mpmctl bin/mpmweb
+	rm -rf build/picture.db*
+	MPMD_DB=build/picture.db MPMD_ENDPOINT=$${MPMD_ENDPOINT:-tcp://127.0.0.1:5575} \
+	  MPMWEB_LISTEN=$${MPMWEB_LISTEN:-127.0.0.1:8085} DEMO_PAUSE=0 \
+	  DEMO_PICTURE=docs/web_monitor.png bash deploy/demo.sh collapse < /dev/null
 
 # ---- mpmweb, the live web monitor (clients/web/) -----------------------------------
 # bin/mpmweb: the gateway (clients/web/*.c) with mpmctl's connection, keys and
@@ -505,12 +529,9 @@ $(TSAN)/mpmweb: $(call mpmweb_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(WEBLIBS)
 test-quick: bin/mpmweb
 test-quick: export MPMWEB_BIN = bin/mpmweb
-test: $(ASAN)/mpmweb
 test: export MPMWEB_BIN = $(ASAN)/mpmweb
-tsan: $(TSAN)/mpmweb
 tsan: export MPMWEB_BIN = $(TSAN)/mpmweb
 TSAN_T += web_
-demo: bin/mpmweb
 # ---- the Python client (clients/python) -----------------------------------------
 # make python: the protobuf classes of proto/mpmd.proto for the `mpmd` package
 # (clients/python/mpmd), generated by protoc into build/python/mpmd_pb2.py, never
@@ -518,7 +539,7 @@ demo: bin/mpmweb
 #   PYTHONPATH=clients/python:build/python /usr/bin/python3 -c 'import mpmd'
 # make python-install PYTHON_DEST=DIR copies the package, with its mpmd_pb2,
 # into DIR/mpmd (e.g. DIR = ~/.local/lib/python3.11/site-packages).
-# The test (tests/t_python_client.c) generates its own copy with the same command.
+# The test (tests/clients/t_python_client.c) generates its own copy with the same command.
 PY_GEN := build/python/mpmd_pb2.py
 .PHONY: python python-install
 all: python

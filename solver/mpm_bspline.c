@@ -29,8 +29,8 @@
  * 0, c1 = (2 c0 + c2) / 3 (and the mirror at the top), leaves n + 1
  * functions, nonnegative, a partition of unity that reproduces x with the
  * grid points as abscissae, interpolatory at the faces, and with N'' = 0
- * at both ends (t_mpm_bspline.c bspline3_natural_ends,
- * t_mpm_verified.c verified_patch_test).
+ * at both ends (t_bspline.c bspline3_natural_ends,
+ * t_verified.c verified_patch_test).
  */
 #include "mpm_internal.h"
 

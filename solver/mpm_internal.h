@@ -571,7 +571,7 @@ typedef struct {
     size_t bad;
     /* tests: 1 takes every frictional particle through the general
      * per-particle path (rate_gather(), mpm_dp_trial(), rate_put()) that
-     * the 2D and 3D blocks write out (t_mpm_frictional_block.c) */
+     * the 2D and 3D blocks write out (t_frictional_block.c) */
     int general;
     /* 1: Drucker-Prager's updates that leave the elastic trial go to
      * mpm_dp_lanes() in queues of one material (mpm_sim.dp_lanes) */

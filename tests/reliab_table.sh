@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Prints the README's "Reliability" table from the "reliability: PART
+# Prints docs/reliability.md's table from the "reliability: PART
 # key=value ..." lines that the rel_* tests and tests/fuzz/run.sh print,
 # read from the logs given (or stdin): one row per part, in the order
 # fuzz, kill9, load, watchers, disk, fulldisk, hostile (the last line of a part wins).

@@ -123,7 +123,7 @@ static int report_handshake(ctl_conn *c, int what)
         fprintf(stderr,
                 "mpmctl: the handshake with %s failed: the server requires CURVE and this "
                 "client has no key (set MPMD_SERVER_KEY and MPMD_CLIENT_KEY, or --keys DIR; "
-                "README: Security)\n",
+                "docs/manual.md: Security)\n",
                 c->endpoint);
     return CTL_EAUTH;
 }

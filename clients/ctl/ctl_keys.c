@@ -169,6 +169,38 @@ static int write_new(const char *path, mode_t mode, const char *text)
     return 0;
 }
 
+/* mkdir -p: dir and each missing parent, created mode 0700 (a key
+ * directory such as ~/.config/mpmd where ~/.config is missing too; guarded
+ * by docs_blocks_readme, whose security recipe starts from an empty home).
+ * 0, or CTL_ESYS with a message naming the directory. */
+static int make_dirs(const char *dir)
+{
+    char p[1024];
+    size_t n = strlen(dir);
+    if (n >= sizeof p) {
+        fprintf(stderr, "mpmctl: keygen: --out: the path is longer than %zu bytes\n", sizeof p - 1);
+        return CTL_ESYS;
+    }
+    memcpy(p, dir, n + 1);
+    for (size_t i = 1; i <= n; i++) {
+        if (p[i] != '/' && p[i] != 0) continue;
+        if (p[i - 1] == '/') continue; /* "a//b", a trailing '/' */
+        char c = p[i];
+        p[i] = 0;
+        if (mkdir(p, 0700) && errno != EEXIST) {
+            fprintf(stderr, "mpmctl: keygen: cannot create %s: %s\n", p, strerror(errno));
+            return CTL_ESYS;
+        }
+        p[i] = c;
+    }
+    struct stat sb;
+    if (stat(dir, &sb) || !S_ISDIR(sb.st_mode)) {
+        fprintf(stderr, "mpmctl: keygen: %s is not a directory\n", dir);
+        return CTL_ESYS;
+    }
+    return 0;
+}
+
 int ctl_keygen(const char *dir, const char *name)
 {
     char pub[KEY_LEN + 1], sec[KEY_LEN + 1], pp[1200], spth[1200], text[256];
@@ -178,10 +210,7 @@ int ctl_keygen(const char *dir, const char *name)
     }
     if (!dir || !*dir) dir = ".";
     if (!name || !*name) name = "mpmd";
-    if (mkdir(dir, 0700) && errno != EEXIST) {
-        fprintf(stderr, "mpmctl: keygen: cannot create %s: %s\n", dir, strerror(errno));
-        return CTL_ESYS;
-    }
+    if (make_dirs(dir)) return CTL_ESYS;
     if (zmq_curve_keypair(pub, sec)) {
         fprintf(stderr, "mpmctl: keygen: %s\n", zmq_strerror(errno));
         return CTL_ESYS;

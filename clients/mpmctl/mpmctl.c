@@ -54,7 +54,7 @@ typedef struct {
 } command;
 
 static const command commands[] = {
-    {"submit", C_SUBMIT, "CASE.json [--watch] [--csv|--json]", "queue a simulation case",
+    {"submit", C_SUBMIT, "CASE.json [--watch] [--csv|--json|--quiet]", "queue a simulation case",
      "Loads CASE.json (\"-\": standard input) and checks it locally with the daemon's codec:\n"
      "a bad case is reported with the JSON path of the field and nothing is sent.\n"
      "A case without \"method\" / \"update\" runs BSPLINE2 (quadratic B-splines) with MUSL,\n"
@@ -66,7 +66,8 @@ static const command commands[] = {
      "\"transfer\": \"APIC\" selects the affine particle-in-cell transfer (angular momentum\n"
      "kept; \"picFraction\" must then be 0), absent or \"FLIP\" the FLIP update\n"
      "(docs/solver.md; example: proto/examples/disk2d_apic.json).\n"
-     "Prints \"job N\" (--json: the SubmitOk object).  --watch continues as `watch N`\n"
+     "Prints \"job N\" (--json: the SubmitOk object; --quiet: N alone, for a script:\n"
+     "id=$(mpmctl submit case.json --quiet)).  --watch continues as `watch N`\n"
      "(with --csv/--json the job line goes to stderr and stdout carries the series).\n"},
     {"watch", C_WATCH, "ID [--csv|--json]", "live view of a job until it ends",
      "Subscribes to the job's stream, fetches the energy history, then follows the\n"
@@ -122,7 +123,7 @@ static const command commands[] = {
      "second panel.  The format follows FILE's extension (.png, .svg, .pdf) unless\n"
      "--terminal names a gnuplot terminal (e.g. \"pngcairo size 1600,1000\").  Needs\n"
      "gnuplot (Debian: gnuplot-nox).\n"},
-    {"resume", C_RESUME, "ID [--watch] [--csv|--json]",
+    {"resume", C_RESUME, "ID [--watch] [--csv|--json|--quiet]",
      "continue an interrupted run from its checkpoint",
      "A run INTERRUPTED by a crash (kill -9, power loss) or a daemon restart goes on\n"
      "from the last checkpoint mpmd saved of it (Case.checkpoint, or the daemon's\n"
@@ -130,7 +131,7 @@ static const command commands[] = {
      "snapshots recorded after it are computed again, identically with the same\n"
      "solver threads.  Refused (exit 1) for a run that is not INTERRUPTED, has no\n"
      "checkpoint, or whose checkpoint file is damaged (it stays INTERRUPTED).\n"
-     "Prints \"job N\" (N: the run's id; --json: the SubmitOk object).  --watch\n"
+     "Prints \"job N\" (N: the run's id; --json: the SubmitOk object; --quiet: N).  --watch\n"
      "continues as `watch N`, with its exit status.\n"},
     {"cancel", C_CANCEL, "ID [--json]", "stop a queued or running job",
      "Prints the job's status after the request; a running job stops within one step.\n"},
@@ -139,10 +140,11 @@ static const command commands[] = {
     {"version", C_VERSION, "[--json]", "versions of mpmctl and of the server", ""},
     {"keygen", C_KEYGEN, "[--out DIR] [--name NAME]", "make a CURVE keypair",
      "Writes DIR/NAME.key (the secret key, mode 0600) and DIR/NAME.pub (the public\n"
-     "key) as Z85 text; DIR defaults to the current directory (created mode 0700 if\n"
-     "missing), NAME to \"mpmd\".  Never overwrites a key.  Prints the public key.\n"
+     "key) as Z85 text; DIR defaults to the current directory (made with any\n"
+     "missing parents, mode 0700), NAME to \"mpmd\".  Never overwrites a key.\n"
+     "Prints the public key.\n"
      "A client: keygen --out ~/.config/mpmd, then put the server's public key in\n"
-     "~/.config/mpmd/server.pub and give your mpmd.pub to the server's admin (README:\n"
+     "~/.config/mpmd/server.pub and give your mpmd.pub to the server's admin (manual:\n"
      "Security).  A server: keygen --out /etc/mpmd --name server, then mpmd\n"
      "--curve-secret /etc/mpmd/server.key --authorized-keys FILE|DIR.\n"},
 };
@@ -172,6 +174,7 @@ typedef enum {
     O_VTK_COMPRESS,
     O_TERMINAL,
     O_FORMAT,
+    O_QUIET,
     O_COUNT
 } opt_id;
 
@@ -206,6 +209,7 @@ static const option options[O_COUNT] = {
     [O_VTK_COMPRESS] = {"vtk-compress", 0, 0, C_SNAPSHOT | C_EXPORT}, /* = --compress */
     [O_TERMINAL] = {"terminal", 0, 1, C_PLOT},
     [O_FORMAT] = {"format", 0, 1, C_EXPORT},
+    [O_QUIET] = {"quiet", 'q', 0, C_SUBMIT | C_RESUME},
 };
 
 typedef struct {
@@ -368,6 +372,8 @@ static int parse_args(int argc, char **argv, cli *a)
     if (a->given[O_CSV] && a->given[O_JSON])
         return bad_usage("--csv and --json exclude each other");
     a->fmt = a->given[O_CSV] ? CTL_OUT_CSV : a->given[O_JSON] ? CTL_OUT_JSON : CTL_OUT_TEXT;
+    if (a->given[O_QUIET] && (a->given[O_CSV] || a->given[O_JSON] || a->given[O_WATCH]))
+        return bad_usage("%s: --quiet excludes --watch, --csv and --json", a->cmd->name);
     if ((a->cmd->bit & (C_SUBMIT | C_RESUME)) && a->given[O_CSV] && !a->given[O_WATCH])
         return bad_usage("%s: --csv needs --watch", a->cmd->name);
     if (a->given[O_STATUS]) {
@@ -581,6 +587,8 @@ static int submitted(ctl_conn *c, json_t *ok, const cli *a)
         fprintf(stderr, "job %llu\n", (unsigned long long)job);
     } else if (a->fmt == CTL_OUT_JSON) {
         rc = out_json_line(ok);
+    } else if (a->given[O_QUIET]) {
+        printf("%llu\n", (unsigned long long)job);
     } else {
         printf("job %llu\n", (unsigned long long)job);
     }

@@ -1,7 +1,7 @@
 """setup.py - the build step pyproject.toml cannot say: the protobuf module
 mpmd_pb2 is generated from the tree's proto/mpmd.proto by protoc into the
 built package (never kept in the source), and the version is read from
-protocol/mpp.h (MPP_VERSION), the one place it is written.  Outside an
+protocol/include/mpp.h (MPP_VERSION), the one place it is written.  Outside an
 mpmd tree (no ../../proto/mpmd.proto), an mpmd/mpmd_pb2.py already in the
 package directory is used as it is.  Guarded by python_client_pip, which
 installs the package into a virtual environment and uses it.
@@ -19,7 +19,7 @@ from setuptools.command.build_py import build_py
 HERE = os.path.dirname(os.path.abspath(__file__))
 TREE = os.path.normpath(os.path.join(HERE, "..", ".."))
 PROTO_DIR = os.path.join(TREE, "proto")
-MPP_H = os.path.join(TREE, "protocol", "mpp.h")
+MPP_H = os.path.join(TREE, "protocol", "include", "mpp.h")
 
 
 def version():

@@ -388,8 +388,9 @@ static void usage(FILE *f)
             "The live web monitor of mpmd: serves one page over HTTP showing the runs,\n"
             "a running job's progress, energy curves and particles, live, and past runs\n"
             "with a time slider.\n\n"
-            "  --listen ADDR:PORT  where to serve (default 127.0.0.1:8080; [::1]:PORT for\n"
-            "                      IPv6; port 0 picks a free one, printed on start)\n"
+            "  --listen ADDR:PORT  where to serve (default $MPMWEB_LISTEN, else\n"
+            "                      127.0.0.1:8080; [::1]:PORT for IPv6; port 0 picks a free\n"
+            "                      one, printed on start)\n"
             "  --allow-remote      needed to listen on an address that is not loopback:\n"
             "                      the page has no login of its own\n"
             "  --allow-control     lets the page submit and cancel jobs (off: read-only);\n"
@@ -459,7 +460,8 @@ bad:
 
 int main(int argc, char **argv)
 {
-    const char *listen = "127.0.0.1:8080", *keys = NULL, *stat = NULL;
+    const char *listen = getenv("MPMWEB_LISTEN"), *keys = NULL, *stat = NULL;
+    if (!listen || !*listen) listen = "127.0.0.1:8080";
     int allow_remote = 0;
     W.conn.endpoint = getenv("MPMD_ENDPOINT");
     W.conn.stream = getenv("MPMD_STREAM");

@@ -8,7 +8,7 @@
  * (plane-strain match) or Mohr-Coulomb material, run until the deposit is
  * at rest; it measures the run-out and the final height and compares them
  * with the experimental fits of Lube et al. 2005 (Phys. Rev. E 72, 041301).
- * Shared by the test (tests/t_mpm_collapse.c), the accuracy bench
+ * Shared by the test (tests/solver/t_collapse.c), the accuracy bench
  * (bench/accuracy/) and the throughput bench (bench/perf/); docs/accuracy.md,
  * "Granular column collapse".
  */

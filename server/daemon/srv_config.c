@@ -271,7 +271,7 @@ static int bind_rule(const srv_config *c, int stream, char *err, size_t errlen)
         snprintf(err, errlen,
                  "%s %s (set by %s): refusing to bind a non-loopback address without "
                  "authentication: %s; give --curve-secret FILE and --authorized-keys PATH "
-                 "(README: Security), use tcp://127.0.0.1:PORT or ipc://PATH, or, on a "
+                 "(docs/manual.md: Security), use tcp://127.0.0.1:PORT or ipc://PATH, or, on a "
                  "trusted network only, --insecure-allow-remote-without-auth%s",
                  flag, ep, from, why,
                  c->allow_remote ? " (--allow-remote no longer binds without authentication)" : "");

@@ -345,7 +345,7 @@ typedef struct {
  * FLIP's and PIC's transfers smooth away, and with tents a node that only
  * the edge of a particle's support reaches has a tiny mass but the full
  * gradient 1/h: the spinning disk and the disks' impact (tests/
- * t_mpm_apic.c) blow up from C = 0.25 (USL) and 0.3 (USF, MUSL), and run
+ * t_apic.c) blow up from C = 0.25 (USL) and 0.3 (USF, MUSL), and run
  * at 0.2 and below.  uGIMP, whose gradients vanish with the weights, keeps
  * the general limits. */
 #define MPM_APIC_MPM_MAX_CFL 0.2

@@ -120,7 +120,7 @@ DTEST(python_client_api)
 /* The package as a user installs it: pip, from clients/python, into a
  * virtual environment that sees Debian's packages (offline: no index, no
  * build isolation), from a copy of the tree's parts it needs (the package,
- * proto/mpmd.proto, protocol/mpp.h) so the checkout gets no build files;
+ * proto/mpmd.proto, protocol/include/mpp.h) so the checkout gets no build files;
  * then the script's pip phase with the venv's interpreter and no
  * PYTHONPATH. */
 DTEST(python_client_pip)
@@ -135,7 +135,7 @@ DTEST(python_client_pip)
     snprintf(log, sizeof log, "%s/pip.out", dir);
     snprintf(cmd, sizeof cmd,
              "mkdir -p %s/clients %s/proto %s/protocol && cp -r clients/python %s/clients/ && "
-             "cp proto/mpmd.proto %s/proto/ && cp protocol/mpp.h %s/protocol/ && " PY
+             "cp proto/mpmd.proto %s/proto/ && cp protocol/include/mpp.h %s/protocol/ && " PY
              " -m venv --system-site-packages %s && "
              "cd %s && %s/bin/pip install --no-index --no-build-isolation %s/clients/python",
              tree, tree, tree, tree, tree, tree, venv, dir, venv, tree);

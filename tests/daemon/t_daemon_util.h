@@ -126,7 +126,7 @@ int ping_ok(const td_daemon *d);
  * memory. */
 uint8_t *inflated_request(size_t nbodies, size_t *n);
 
-/* A full disk (t_daemon_harden2.c): a daemon in t_tmpdir()/name whose
+/* A full disk (t_daemon_bounds.c): a daemon in t_tmpdir()/name whose
  * file size is limited (RLIMIT_FSIZE) while a job records snapshots: the
  * job ends FAILED with the reason, its watcher is told, the finished run
  * stays intact and a restart finds it so.  Fails the test otherwise. */

@@ -14,7 +14,7 @@
  *    limit, inflated protobuf, random frames): each gets its answer and
  *    the daemon answers a Ping after each; logs and listings carry no raw
  *    control byte.
- * Each prints one "reliability: ..." line for the README's table.
+ * Each prints one "reliability: ..." line for docs/reliability.md's table.
  */
 #define _GNU_SOURCE
 #include "t_daemon.h"

@@ -12,7 +12,7 @@
  *  - rel_load: many clients at once, each its own thread and socket,
  *    submitting small jobs; every request is answered, QUEUE_FULL refusals
  *    are counted and retried, and every accepted job is recorded once.
- * Each prints one "reliability: ..." line for the README's table.
+ * Each prints one "reliability: ..." line for docs/reliability.md's table.
  */
 #include "t_daemon.h"
 #include "t_daemon_util.h"

@@ -6,7 +6,7 @@
 # seconds; new inputs go to build/fuzz/work/T/, never into the kept corpus.
 # A crash, a leak, a timeout, an out-of-memory or any sanitizer report
 # leaves its reproducer in build/fuzz/artifacts/T/ and fails the run.  The
-# last line, "reliability: fuzz ...", feeds the README's Reliability table.
+# last line, "reliability: fuzz ...", feeds docs/reliability.md's table.
 #   run.sh RUNS CAP TARGET...
 set -uo pipefail
 cd "$(dirname "$0")/../.."

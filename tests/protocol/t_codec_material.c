@@ -141,7 +141,7 @@ TEST(codec_material_impact_example_energy)
 
 /* The example triaxial3d_mc (a single-element drained triaxial compression
  * with Mohr-Coulomb, phi 30, psi 10, c 2, confinement 10; the scene of
- * tests/t_mpm_triaxial.c) loads and runs to its end: the deviator
+ * tests/solver/t_triaxial.c) loads and runs to its end: the deviator
  * sigma_lat - sigma_ax (particle means) equals Mohr-Coulomb's failure
  * deviator at the measured lateral stress (1e-6), the work of the
  * prescribed velocity and the tractions equals the change of the stored

@@ -168,7 +168,7 @@ TEST(apic_spinning_disk_conserves_angular_momentum)
                 memset(&pc, 0, sizeof pc);
                 CHECK(spin_run(dim, meth, (mpm_update)u, MPM_TRANSFER_APIC, 0, 1, &ap) == 0);
                 /* FLIP and PIC for comparison: MPM with USL diverges (the
-                 * face-crossing limit of the README), logged as such */
+                 * face-crossing limit in docs/features.md), logged as such */
                 int rf = spin_run(dim, meth, (mpm_update)u, MPM_TRANSFER_FLIP, 0, 1, &fl);
                 int rp = spin_run(dim, meth, (mpm_update)u, MPM_TRANSFER_FLIP, 1, 1, &pc);
                 char fs[64], ps[64];

@@ -442,7 +442,7 @@ static double bar_error(mpm_method m, int ncell, int ppc, double dt, double peri
     return worst;
 }
 
-/* The bar of t_mpm_verify.c (v0 = 0.1, 2 periods), 16 cells of 2 points. */
+/* The bar of t_paper_problems.c (v0 = 0.1, 2 periods), 16 cells of 2 points. */
 TEST(bspline_bar_first_mode)
 {
     const double v0 = 0.1, amp = v0 * 2 / M_PI;

@@ -10,8 +10,8 @@
  * lost or left behind, two threads); a bar hanging under gravity that
  * stretches its top particles over more than a cell, with a stress-noise
  * metric against MPM and GIMP; and the errors.  (The rigid translation
- * with crossing, sigma/E <= 1e-12, is in t_mpm_phantom.c, and the step's
- * in-pass energies in t_mpm_perf.c, both for CPDI too.)  Two threads are
+ * with crossing, sigma/E <= 1e-12, is in t_phantom.c, and the step's
+ * in-pass energies in t_perf.c, both for CPDI too.)  Two threads are
  * bitwise reproducible.
  */
 #include "mpm.h"

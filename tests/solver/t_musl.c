@@ -8,7 +8,7 @@
  * 5 cells) MUSL with pure FLIP breaks down (relative error 0.45-0.46 for
  * GIMP and BSPL2), while USL and MUSL with a PIC blend of 0.05 stay near
  * 3e-3.  If the breakdown check fails, MUSL has changed: update the
- * section of docs/accuracy.md (and README's limitation) with the new
+ * section of docs/accuracy.md (and docs/features.md's limitation) with the new
  * figures rather than the bound.  And BSPLINE3's convergence at a large
  * amplitude, which its natural end basis restored.
  */

@@ -6,7 +6,7 @@
  * per-particle output in creation order, the step on the team agrees
  * across thread counts, the in-pass energies equal the energy pass, and
  * the arrays are staggered within a page.  The active rows and the node
- * passes' split are in t_mpm_rows.c.  No timings here: bin/mpmbench
+ * passes' split are in t_rows.c.  No timings here: bin/mpmbench
  * measures those.
  */
 #include "mpm.h"

@@ -175,7 +175,7 @@ static void lines_case(mpm_case *c, mpm_body_desc *b, mpm_material_desc *mat, do
  * a cell, the nodes ahead get small masses that are not phantom (above
  * M_TOL), and USL's strain from the updated grid velocity (q + f dt)/m
  * multiplies round-off stress by ~(c dt / h)^2 m_p / m: the MPM + USL
- * limitation of t_mpm_invariants.c and docs/accuracy.md, not the phantom
+ * limitation of t_invariants.c and docs/accuracy.md, not the phantom
  * gradient.  Measured: 2D v0 diverges (step 386), 2D v1 2.1e-12, 2D v2
  * 1.7e-11, 3D v2 3.6e-11, the others <= 4.3e-13; with M_TOL = 1e-9 the 2D
  * v0 run holds but reaches 8.4e-12.  Those runs are logged, not asserted. */

@@ -88,7 +88,7 @@ static int run_hash(int scene, mpm_method m, mpm_update up, int set_pic, double 
  * and since the particles are sorted when their runs of one cell fall apart, not only every 16
  * steps (issue 14, sort_after_first() and begin_step(); 5f58abf0610ca067, e9f0c850fc2b56b3 and
  * a78ac5a41cc2c57b before); the bar's particles never leave their order and kept their bits.  The
- * pins are the portable kernels' (the AVX2+FMA kernels round differently: t_mpm_kernels.c). */
+ * pins are the portable kernels' (the AVX2+FMA kernels round differently: t_kernels.c). */
 TEST(picflip_default_is_flip_bitwise)
 {
     static const struct {

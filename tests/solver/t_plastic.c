@@ -9,7 +9,7 @@
  * at failure against the plastic potential; the tension cut-off, the apex
  * and MC's corners; the convergence of Sloan's substepping as its
  * tolerance falls.  The consistency and robustness tests are in
- * t_mpm_plastic_prop.c.  Tension positive throughout, as the solver.
+ * t_plastic_prop.c.  Tension positive throughout, as the solver.
  */
 #include "t_plastic.h"
 

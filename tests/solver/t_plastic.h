@@ -1,6 +1,6 @@
 /*
  * t_plastic.h - what the two test files of the plastic stress-point
- * integrators share (t_mpm_plastic.c, t_mpm_plastic_prop.c): a material's
+ * integrators share (t_plastic.c, t_plastic_prop.c): a material's
  * parameters and the mixed-control driver (axial strain prescribed, the
  * lateral stress held at -p0 by a Newton iteration on the lateral strain).
  */

@@ -5,7 +5,7 @@
  * checkpoint that carries the sort's state), and the two ways of moving
  * the arrays (a sweep through each thread's ring, the permutation's
  * cycles) give the same order.  The sort's other properties (creation
- * order kept, independent of the thread count) are in t_mpm_perf.c.
+ * order kept, independent of the thread count) are in t_perf.c.
  */
 #include "t.h"
 #include "mpm.h"

@@ -274,7 +274,7 @@ TEST(stress_extremes)
     TLOG("automatic dt (C = 0.5), two disks (h = 0.05) unless said; E: max over the run and "
          "end of E/E0 - 1; a finish must keep E <= (1 + tol) E0, tol %g (standard) or %g (harsh: "
          "Mach 3, nu 0.499, 1 ppc, plate, impact); MPM + USL is run in full mode and reported, "
-         "not asserted (README: unstable)",
+         "not asserted (docs/features.md: unstable)",
          TOL_STD, TOL_HARSH);
     double ref_scaled = NAN;
     char first_bad[2048] = "";
@@ -294,7 +294,7 @@ TEST(stress_extremes)
                     free_cases(xs, n);
                     CHECKF(0, "%s: the case did not load: %s", xs[i].name, o.msg);
                 }
-                /* MPM + USL (README: unstable when material enters new
+                /* MPM + USL (docs/features.md: unstable when material enters new
                  * cells) may fail, and its silent blow-ups are reported,
                  * not asserted */
                 int known = m == 0 && u == 1;

@@ -84,7 +84,7 @@ _mpmctl()
 
     local opts
     case $cmd in
-    submit | resume) opts="--watch --csv --json" ;;
+    submit | resume) opts="--watch --csv --json --quiet" ;;
     watch | energy) opts="--csv --json" ;;
     runs) opts="--status --limit --before --all --json" ;;
     show) opts="--json --case" ;;
