@@ -45,7 +45,10 @@ SRV_SRCS   := $(wildcard server/daemon/*.c)
 CTL_SRCS   := $(wildcard clients/ctl/*.c)
 CLI_SRCS   := $(wildcard clients/mpmctl/*.c)
 TOOL_LIB   := $(wildcard scenes/*.c)
-TEST_SRCS  := tests/runner.c $(wildcard tests/*/t_*.c)
+TEST_SRCS  := tests/runner.c tests/t_alloc.c $(wildcard tests/*/t_*.c)
+# mpmtest's allocator calls go through tests/t_alloc.c's wrappers, which a
+# test arms to fail the nth allocation (t_alloc.h); no other program has them
+TEST_WRAP  := -Wl,--wrap=malloc,--wrap=calloc,--wrap=realloc,--wrap=aligned_alloc,--wrap=strdup,--wrap=free
 BENCH_SRCS := $(wildcard bench/accuracy/*.c)
 PERF_SRCS  := $(wildcard bench/perf/*.c)
 # bin/mpmceiling's lean step (bench/ceiling/: also linked into mpmtest) and its program
@@ -183,7 +186,7 @@ bin/mpmctl: $(call mpmctl_deps,$(REL))
 	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
 bin/mpmtest: $(call mpmtest_deps,$(REL))
 	@mkdir -p bin
-	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+	$(CC) $(OPT) -o $@ $^ $(TEST_WRAP) $(SRVLIBS) $(LDLIBS)
 bin/mpmrun: $(REL)/scenes/mpmrun/mpmrun.o $(REL)/libscenes.a $(REL)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
@@ -193,14 +196,14 @@ $(ASAN)/mpmd: $(call mpmd_deps,$(ASAN))
 $(ASAN)/mpmctl: $(call mpmctl_deps,$(ASAN))
 	$(CC) $(SAN) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
 $(ASAN)/mpmtest: $(call mpmtest_deps,$(ASAN))
-	$(CC) $(SAN) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+	$(CC) $(SAN) -o $@ $^ $(TEST_WRAP) $(SRVLIBS) $(LDLIBS)
 
 $(TSAN)/mpmd: $(call mpmd_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 $(TSAN)/mpmctl: $(call mpmctl_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(LDLIBS)
 $(TSAN)/mpmtest: $(call mpmtest_deps,$(TSAN))
-	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+	$(CC) $(TSANF) -o $@ $^ $(TEST_WRAP) $(SRVLIBS) $(LDLIBS)
 
 # ---- tests ----------------------------------------------------------------------
 # make test: every test under ASan+UBSan, then (without T) the fuzz targets'
