@@ -3,8 +3,9 @@
 # those that are missing. Safe to run again: with everything present it does
 # nothing and prints nothing. Called by `make deps` (and so by `make test` and
 # `make demo`); needs root (or sudo) only when something must be installed.
-# `install-deps.sh bench` also installs the benchmark's plotting tool, and
-# `install-deps.sh plot` the same for `mpmctl plot`.
+# `install-deps.sh bench` also installs the benchmark's plotting tool,
+# `install-deps.sh plot` the same for `mpmctl plot`, and
+# `install-deps.sh coverage` gcovr for `make coverage`.
 set -euo pipefail
 
 pkgs=(
@@ -29,6 +30,10 @@ pkgs=(
 # `install-deps.sh plot` the same for `mpmctl plot`.
 if { [ "${1:-}" = bench ] || [ "${1:-}" = plot ]; } && ! command -v gnuplot >/dev/null 2>&1; then
   pkgs+=(gnuplot-nox)
+fi
+# Optional group: `install-deps.sh coverage` adds gcovr (make coverage).
+if [ "${1:-}" = coverage ]; then
+  pkgs+=(gcovr)
 fi
 missing=()
 for p in "${pkgs[@]}"; do
