@@ -31,15 +31,9 @@
 
 static const store_options sa_quiet = {.log = quiet_log};
 
-/* A database holding run 1, RUNNING. */
-static int sa_make_db(const char *path)
+/* A database holding run 1, RUNNING, at path. */
+static int sa_make_template(const char *path)
 {
-    static const char *const suffix[] = {"", "-wal", "-shm", ".ends"};
-    for (size_t k = 0; k < sizeof suffix / sizeof suffix[0]; k++) {
-        char f[4200];
-        snprintf(f, sizeof f, "%s%s", path, suffix[k]);
-        unlink(f);
-    }
     store *s = NULL;
     if (store_open(path, &sa_quiet, &s)) return -1;
     store_run r = sample_run("left running", MPP_STATUS_RUNNING);
@@ -48,6 +42,27 @@ static int sa_make_db(const char *path)
     if (!rc) rc = store_flush(s);
     store_close(&s);
     return rc || id != 1 ? -1 : 0;
+}
+
+/* path made a fresh copy of the template (closed: no -wal or -shm). */
+static int sa_copy(const char *from, const char *path)
+{
+    static const char *const suffix[] = {"", "-wal", "-shm", ".ends"};
+    for (size_t k = 0; k < sizeof suffix / sizeof suffix[0]; k++) {
+        char f[4200];
+        snprintf(f, sizeof f, "%s%s", path, suffix[k]);
+        unlink(f);
+    }
+    FILE *in = fopen(from, "rb"), *out = in ? fopen(path, "wb") : NULL;
+    char buf[8192];
+    size_t n;
+    int rc = in && out ? 0 : -1;
+    while (!rc && (n = fread(buf, 1, sizeof buf, in)) > 0)
+        if (fwrite(buf, 1, n, out) != n) rc = -1;
+    if (in && ferror(in)) rc = -1;
+    if (out && fclose(out)) rc = -1;
+    if (in) fclose(in);
+    return rc;
 }
 
 /* The state of one pass. */
@@ -98,7 +113,7 @@ static int sa_end(sa_pass *p, int rc)
     } while (0)
 
 /* One session with allocation n failing.  0 or -1 (reported). */
-static int sa_session(const char *path, size_t n, size_t *count)
+static int sa_session(const char *tmpl, const char *path, size_t n, size_t *count)
 {
     sa_pass p = {.n = n};
     int rc = 0, ok;
@@ -115,8 +130,8 @@ static int sa_session(const char *path, size_t n, size_t *count)
     memset(&x, 0, sizeof x);
     store_owner_total *tot = NULL;
     size_t ntot = 0;
-    if (sa_make_db(path)) {
-        t_fail(__FILE__, __LINE__, "cannot make %s: %s", path, store_error()->message);
+    if (sa_copy(tmpl, path)) {
+        t_fail(__FILE__, __LINE__, "cannot copy %s to %s", tmpl, path);
         return -1;
     }
 
@@ -222,13 +237,15 @@ out:
 
 TEST(alloc_fail_store)
 {
-    char path[4096];
+    char tmpl[4096], path[4096];
+    snprintf(tmpl, sizeof tmpl, "%s", db_path("template.db"));
     snprintf(path, sizeof path, "%s", db_path("alloc.db"));
+    CHECKF(sa_make_template(tmpl) == 0, "cannot make %s: %s", tmpl, store_error()->message);
     size_t count = 0, c;
-    if (sa_session(path, 0, &count)) return;
+    if (sa_session(tmpl, path, 0, &count)) return;
     CHECKF(count > 10, "only %zu allocations counted", count);
     for (size_t n = 1; n <= count; n++)
-        if (sa_session(path, n, &c)) return;
+        if (sa_session(tmpl, path, n, &c)) return;
     TLOG("a store session: %zu allocations, each failed once: MPM_ENOMEM or a right result, "
          "nothing left",
          count);
