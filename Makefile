@@ -55,7 +55,10 @@ SRV_SRCS   := $(wildcard server/daemon/*.c)
 CTL_SRCS   := $(wildcard clients/ctl/*.c)
 CLI_SRCS   := $(wildcard clients/mpmctl/*.c)
 TOOL_LIB   := $(wildcard scenes/*.c)
-TEST_SRCS  := tests/runner.c $(wildcard tests/*/t_*.c)
+TEST_SRCS  := tests/runner.c tests/t_alloc.c $(wildcard tests/*/t_*.c)
+# mpmtest's allocator calls go through tests/t_alloc.c's wrappers, which a
+# test arms to fail the nth allocation (t_alloc.h); no other program has them
+TEST_WRAP  := -Wl,--wrap=malloc,--wrap=calloc,--wrap=realloc,--wrap=aligned_alloc,--wrap=strdup,--wrap=free
 BENCH_SRCS := $(wildcard bench/accuracy/*.c)
 PERF_SRCS  := $(wildcard bench/perf/*.c)
 # bin/mpmceiling's lean step (bench/ceiling/: also linked into mpmtest) and its program
@@ -99,18 +102,22 @@ CSTD    += -DMPM_HAVE_AVX2_KERNELS
 AVX2F   := -mavx2 -mfma -ffp-contract=fast
 # Drucker-Prager's lanes (solver/mpm_plastic_avx2.c): AVX2 without
 # fused multiply-adds, the scalar update's bits; -O3 fully unrolls the small
-# fixed-count loops over the lanes and a stress's six components (2e6
-# recorded plastic updates: 135 -> 110 ns each, -fpeel-loops alone 118; the
-# same bits)
+# fixed-count loops over the lanes and a stress's six components (the same
+# bits; docs/performance.md)
 PLASF   := -mavx2 -ffp-contract=off -O3
 endif
 
 # Builds: release (build/rel, bin/), sanitizers (build/asan), ThreadSanitizer
-# (build/tsan), and the lean solver for the feature-cost bench (build/lean).
+# (build/tsan), the lean solver for the feature-cost bench (build/lean), and
+# gcov's (build/cov, make coverage).
 REL  := build/rel
 ASAN := build/asan
 TSAN := build/tsan
 LEAN := build/lean
+COV  := build/cov
+# atomic counters: the solver's team, the store's writer and the daemon's
+# workers run the same lines at once
+COVF := -O1 -g --coverage -fprofile-update=atomic
 # libFuzzer (tests/fuzz/): clang's fuzzer + ASan + UBSan, objects in build/fuzz
 FUZZ := build/fuzz
 FUZZ_CC ?= clang
@@ -166,21 +173,21 @@ ALL_LIB_SRCS := $(sort $(MPM_SRCS) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) $(CTL_S
 define srclist
 $(shell mkdir -p $(1); [ "$$(cat $(1)/.sources 2>/dev/null)" = "$(ALL_LIB_SRCS)" ] || echo "$(ALL_LIB_SRCS)" > $(1)/.sources)
 endef
-$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(call srclist,$(b)))
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ) $(COV),$(call srclist,$(b)))
 $(eval $(call build_rules,$(REL),$(OPT)))
 $(eval $(call build_rules,$(ASAN),$(SAN)))
 $(eval $(call build_rules,$(TSAN),$(TSANF)))
 $(eval $(call build_rules,$(LEAN),$(OPT) -DMPM_LEAN))
 $(eval $(call build_rules,$(FUZZ),$$(FUZZF)))
+$(eval $(call build_rules,$(COV),$(COVF)))
 $(FUZZ)/%.o: CC := $(FUZZ_CC)
-# the fuzzers reach only the solver's case check, and clang takes many
-# minutes on its kernels with the sanitizers: the solver is built at -O0,
-# its kernels (never called by a target) without instrumentation
+# the fuzzers reach only the solver's case check: the solver is built at
+# -O0, its kernels (never called by a target) without instrumentation
 $(FUZZ)/solver/%.o: FUZZ_O := -O0
 $(FUZZ)/solver/mpm_kernels.o $(FUZZ)/solver/mpm_kernels_avx2.o: FUZZF = -O0 -g
-$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/solver/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
-$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ),$(b)/solver/mpm_plastic_avx2.o): XFLAGS = $(PLASF)
-$(foreach b,$(REL) $(ASAN) $(TSAN),$(b)/bench/ceiling/ceiling_avx2.o): XFLAGS = $(AVX2F)
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ) $(COV),$(b)/solver/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ) $(COV),$(b)/solver/mpm_plastic_avx2.o): XFLAGS = $(PLASF)
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(COV),$(b)/bench/ceiling/ceiling_avx2.o): XFLAGS = $(AVX2F)
 -include $(shell find build -name '*.d' 2>/dev/null)
 
 # Link lines, per build: $(1) build dir.  Libraries go above what they use.
@@ -198,7 +205,7 @@ bin/mpmctl: $(call mpmctl_deps,$(REL))
 	$(CC) $(OPT) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 bin/mpmtest: $(call mpmtest_deps,$(REL))
 	@mkdir -p bin
-	$(CC) $(OPT) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+	$(CC) $(OPT) -o $@ $^ $(TEST_WRAP) $(SRVLIBS) $(LDLIBS)
 bin/mpmrun: $(REL)/scenes/mpmrun/mpmrun.o $(REL)/libscenes.a $(REL)/libmpm.a
 	@mkdir -p bin
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
@@ -208,14 +215,14 @@ $(ASAN)/mpmd: $(call mpmd_deps,$(ASAN))
 $(ASAN)/mpmctl: $(call mpmctl_deps,$(ASAN))
 	$(CC) $(SAN) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 $(ASAN)/mpmtest: $(call mpmtest_deps,$(ASAN))
-	$(CC) $(SAN) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+	$(CC) $(SAN) -o $@ $^ $(TEST_WRAP) $(SRVLIBS) $(LDLIBS)
 
 $(TSAN)/mpmd: $(call mpmd_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
 $(TSAN)/mpmctl: $(call mpmctl_deps,$(TSAN))
 	$(CC) $(TSANF) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
 $(TSAN)/mpmtest: $(call mpmtest_deps,$(TSAN))
-	$(CC) $(TSANF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+	$(CC) $(TSANF) -o $@ $^ $(TEST_WRAP) $(SRVLIBS) $(LDLIBS)
 
 # ---- tests ----------------------------------------------------------------------
 # make test: every test under ASan+UBSan, then (without T) the fuzz targets'
@@ -298,8 +305,8 @@ CPPCHECK_FLAGS := --enable=warning,performance,portability --std=c11 --max-confi
 #  -Wanalyzer-use-of-uninitialized-value: gcc 12's first version of it cannot
 #    relate a loop bound to the part of an array that was filled (w[d] for
 #    d < D in the solver's kernels, v[d] for d < dim), nor values from libc
-#    (strtod): 120 reports on the current tree, all false; -Wmaybe-uninitialized
-#    and cppcheck's uninitvar check the same.
+#    (strtod), so its reports here are false; -Wmaybe-uninitialized and
+#    cppcheck's uninitvar check the same.
 #  -Wformat-truncation (not an analyzer check): at -O0 it lacks the value
 #    ranges it needs; the optimised builds check it.
 #  in tests/ only, -Wanalyzer-malloc-leak and -file-leak: CHECK() returns from
@@ -434,7 +441,7 @@ bench-vtk: deps
 	@$(MAKE) --no-print-directory bin/mpmvtkbench
 	bin/mpmvtkbench $(BENCH_ARGS)
 
-# make bench-ceiling  issue 14's ceiling: bin/mpmceiling (bench/ceiling/: the
+# make bench-ceiling  the solver's ceiling: bin/mpmceiling (bench/ceiling/: the
 #             disks2d scene's 2D MPM USF step with nothing but its arithmetic,
 #             four lanes where the CPU has AVX2 and FMA) against bin/mpmbench's
 #             disks2d MPM USF on 1 thread, alternated (CEILING_ROUNDS, default 3),
@@ -541,7 +548,7 @@ TSAN_T += web_
 # into DIR/mpmd (e.g. DIR = ~/.local/lib/python3.11/site-packages).
 # The test (tests/clients/t_python_client.c) generates its own copy with the same command.
 PY_GEN := build/python/mpmd_pb2.py
-.PHONY: python python-install
+.PHONY: python python-install coverage
 all: python
 python: $(PY_GEN)
 $(PY_GEN): proto/mpmd.proto
@@ -551,3 +558,30 @@ python-install: $(PY_GEN)
 	@test -n "$(PYTHON_DEST)" || { echo "python-install: give PYTHON_DEST=DIR"; exit 1; }
 	mkdir -p "$(PYTHON_DEST)/mpmd"
 	cp clients/python/mpmd/*.py $(PY_GEN) "$(PYTHON_DEST)/mpmd/"
+
+# ---- coverage: make coverage ---------------------------------------------------------
+# make coverage  the tests (all, or T=...) on gcov's build (gcc --coverage, objects
+#                in build/cov; the mpmd, mpmctl and mpmweb the tests start are
+#                built there too, so the daemon's and the clients' lines count),
+#                then line coverage per library and in total (tests/coverage.py,
+#                over gcovr: `deploy/install-deps.sh coverage`); gcovr's table of
+#                every file in build/cov/coverage.txt.  Counts start from zero
+#                each time.  Not part of make test; the figures are in
+#                docs/architecture.md, "Testing".
+$(COV)/mpmd: $(call mpmd_deps,$(COV))
+	$(CC) $(COVF) -o $@ $^ $(SRVLIBS) $(LDLIBS)
+$(COV)/mpmctl: $(call mpmctl_deps,$(COV))
+	$(CC) $(COVF) -o $@ $^ $(ZMQLIBS) $(ZLIBS) $(H5LIBS) $(LDLIBS)
+$(COV)/mpmtest: $(call mpmtest_deps,$(COV))
+	$(CC) $(COVF) -o $@ $^ $(TEST_WRAP) $(SRVLIBS) $(LDLIBS)
+$(COV)/mpmweb: $(call mpmweb_deps,$(COV))
+	$(CC) $(COVF) -o $@ $^ $(WEBLIBS)
+
+coverage: deps
+	@bash deploy/install-deps.sh coverage
+	@$(MAKE) --no-print-directory $(COV)/mpmtest $(COV)/mpmd $(COV)/mpmctl $(COV)/mpmweb
+	@find $(COV) -name '*.gcda' -delete
+	@rc=0; MPMD_BIN=$(COV)/mpmd MPMCTL_BIN=$(COV)/mpmctl MPMWEB_BIN=$(COV)/mpmweb \
+	  $(COV)/mpmtest $(T) || rc=$$?; \
+	/usr/bin/python3 tests/coverage.py $(COV) || rc=1; \
+	if [ $$rc != 0 ]; then echo "coverage: some tests failed (the figures count what ran)"; exit 1; fi

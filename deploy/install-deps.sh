@@ -12,6 +12,7 @@
 #   bench  demo's packages: the benchmarks build with them and plot with
 #          its gnuplot   (make bench, bench-accuracy, bench-build, ...)
 #   plot   gnuplot alone (mpmctl plot)
+#   coverage  test's packages and gcovr   (make coverage)
 # `install-deps.sh --list GROUP` prints a group's packages and exits.
 set -euo pipefail
 
@@ -48,8 +49,9 @@ group=${1:-test}
 case "$group" in
 demo | bench) pkgs=("${demo[@]}") ;;
 test) pkgs=("${demo[@]}" "${test[@]}") ;;
+coverage) pkgs=("${demo[@]}" "${test[@]}" gcovr) ;;
 plot) pkgs=(gnuplot-nox) ;;
-*) echo "install-deps: unknown group '$group' (demo, test, bench or plot)" >&2; exit 2 ;;
+*) echo "install-deps: unknown group '$group' (demo, test, bench, plot or coverage)" >&2; exit 2 ;;
 esac
 if [ $list = 1 ]; then
   echo "${pkgs[*]}"

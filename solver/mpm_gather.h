@@ -329,8 +329,8 @@ typedef struct {
  * x rows (a few two-lane multiply-adds per row), and the x weights applied
  * once to the sums.  The node-by-node form summed each row with its x
  * weights and added the row's scalar times its y and z factors: about
- * 40 % more operations, and sums across the lanes in every row.  Another
- * order of the same sums (so other last bits than before the sixth stop
+ * 40 % more operations, and sums across the lanes in every row.  The same
+ * sums in another order, so other last bits than the node-by-node form
  * (docs/solver.md, "Gathers by rows"). */
 INLINE void gather_rows(const mpm_sim *s, double *const qg[3], const pw *W, int D, int NS,
                         double *const deps[9], size_t i, int DS, int DX, double *const qx[3],

@@ -18,7 +18,7 @@
  *     2 particles per cell per axis) stand against it at each resolution,
  *     a table of every scheme at ppc 2, C = 0.5 against the fronts (how
  *     much slower than the front at the same error, and its worst problem),
- *     and the defaults' ratio per problem against the 1.5x aim of issue 10,
+ *     and the defaults' ratio per problem against the aim (DEF_AIM, 1.5),
  *   - the spinning disk's angular momentum and kinetic energy changes,
  *   - build/bench/accuracy.gp, a self-contained gnuplot script (data
  *     inline) for three log-log figures: error against wall time, error
@@ -157,10 +157,10 @@ enum { DEPTH_NONE = 0, DEPTH_REDUCED = 1, DEPTH_FULL = 2 };
  * the space sweep, the time sweep); REDUCED: the space sweep at ppc 2 and
  * C = 0.5 only (the orders, the pairs, the front and the defaults table
  * need no more).  The rules aim at `make bench-accuracy` within about 10
- * minutes with every method of issue 10 enabled (MPM and GIMP alone: about
+ * minutes with every method enabled (MPM and GIMP alone: about
  * 3 minutes; a GIMP-cost scheme costs about 32 s in full, 14 s reduced and
  * 4 s on the spinning disk):
- *   - FLIP: MPM and GIMP in full with every update (as before issue 10);
+ *   - FLIP: MPM and GIMP in full with every update;
  *     the new methods in full with MUSL (the defaults' update), reduced
  *     with USL, not with USF (first order in time: at C = 0.5 its space
  *     orders are time-limited);

@@ -30,7 +30,7 @@
  *              chance, a dissipative USL run meeting an energy-gaining
  *              contact);
  *         err2: |E(4) - E0| / E0;  err3: max |p| / (M v0).
- *  spin   a spinning disk (new with issue 10): radius 0.2 at the centre of
+ *  spin   a spinning disk: radius 0.2 at the centre of
  *         the unit square, rigid rotation with a rim speed of 3 % of the
  *         p-wave speed, half a revolution, no boundary touched.  Exact:
  *         angular momentum and kinetic energy are conserved (the disk's
@@ -78,10 +78,9 @@ typedef enum {
 
 /* ---- methods and transfers: one line each ------------------------------
  * The tables bench_methods[] and bench_transfers[] (problems.c) list every
- * shape function and every velocity transfer the benchmark knows.  Rows
- * whose solver feature is not merged yet are there with enabled = 0 and
- * are skipped everywhere; after merging a branch of issue 10, set its
- * switch here to 1 (nothing else to edit):
+ * shape function and every velocity transfer the benchmark knows.  A row
+ * with enabled = 0 is skipped everywhere; the switches below (1 unless
+ * defined otherwise, e.g. -DBENCH_HAVE_CPDI=0) set the families':
  *   BENCH_HAVE_BSPLINE  MPM_METHOD_BSPLINE2 = 2, MPM_METHOD_BSPLINE3 = 3
  *   BENCH_HAVE_CPDI     MPM_METHOD_CPDI = 4
  *   BENCH_HAVE_APIC     mpm_case.transfer (mpm_transfer, MPM_TRANSFER_APIC = 1)

@@ -1,6 +1,6 @@
 /*
- * collapse.c - the accuracy benchmark's granular column collapse (issue 11,
- * validation 5; scenes/include/mpm_collapse.h): the aspect ratios a = 0.5, 1, 2, 4
+ * collapse.c - the accuracy benchmark's granular column collapse
+ * (scenes/include/mpm_collapse.h): the aspect ratios a = 0.5, 1, 2, 4
  * at two cell sizes (8 and 16 cells across the column) with BSPLINE2 and
  * GIMP under Drucker-Prager (plane-strain match), and BSPLINE2 under
  * Mohr-Coulomb, each run to rest; the run-out and the final height against

@@ -3,7 +3,18 @@
  * configuration, runs it with the solver, samples its error against the
  * known answer about a hundred times a run (outside the timed blocks), and
  * times only the stepping.
- *
+ * How it works: the notes after the includes.
+ */
+#include "bench.h"
+#include "mpm_paper.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+/*
  * The manufactured solution.  For u_i = A sin(2 pi X_i) s_i(t) (axis
  * aligned: u_i depends on X_i only), F is diagonal with
  * F_i = 1 + du_i/dX_i and the spin is zero, so the solver's incremental
@@ -24,14 +35,6 @@
  * through bench_force_set() (mpm_sim_set_particle_forces).  u = 0 on every face, where rollers hold
  * the normal velocity; initial u = 0, v_i = A omega sin(2 pi X_i) (+-1), stress 0.
  */
-#include "bench.h"
-#include "mpm_paper.h"
-
-#include <math.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <time.h>
 
 #define SAMPLES 100
 #define BAR_V0 1e-3
@@ -74,7 +77,7 @@ const char *bench_problem_name(bench_problem pb)
 const bench_method_row bench_methods[] = {
     {"MPM", 0, 1, 1, 1},
     {"GIMP", 1, 1, 4, 1},
-    /* ---- issue 10, enabled by the switches in bench.h ---- */
+    /* ---- each family behind its switch in bench.h ---- */
     {"BSPL2", 2, BENCH_HAVE_BSPLINE, 4, 1}, /* MPM_METHOD_BSPLINE2 */
     {"BSPL3", 3, BENCH_HAVE_BSPLINE, 8, 1}, /* MPM_METHOD_BSPLINE3 */
     {"CPDI", 4, BENCH_HAVE_CPDI, 10, 0},    /* MPM_METHOD_CPDI: F per point */

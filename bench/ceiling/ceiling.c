@@ -1,6 +1,6 @@
 /*
- * ceiling.c - the scene and the step of bin/mpmceiling (issue 14's
- * ceiling; the program itself is mpmceiling.c).  The scene is
+ * ceiling.c - the scene and the step of bin/mpmceiling (the program
+ * itself is mpmceiling.c).  The scene is
  * bin/mpmbench's disks2d: the paper's two elastic disks (E = 1, nu = 0.2,
  * rho = 1, radius 0.14, centres (0.25, 0.25) and (0.75, 0.75), 2 x 2
  * particles per cell, |v| = 0.1 towards each other) with a fixed dt =

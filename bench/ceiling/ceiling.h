@@ -1,6 +1,6 @@
 /*
- * ceiling.h - the lean 2D MPM USF step of bin/mpmceiling (issue 14's
- * ceiling, tests/ceiling/): the paper's two disks with nothing but a
+ * ceiling.h - the lean 2D MPM USF step of bin/mpmceiling (tests:
+ * tests/bench/t_ceiling.c): the paper's two disks with nothing but a
  * step's arithmetic, to measure how fast a double-precision step runs on
  * this CPU without the solver's generality.  Not part of mpmd and not a
  * solver: no checks, no energies, no boundary conditions, no materials but

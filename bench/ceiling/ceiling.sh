@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# ceiling.sh - `make bench-ceiling`: issue 14's ceiling on this machine.
+# ceiling.sh - `make bench-ceiling`: the solver's ceiling on this machine.
 # Rounds (CEILING_ROUNDS, default 3) of, at each size (CEILING_SIZES,
 # default "10000 1000000" particles): bin/mpmbench --scene disks2d (MPM USF,
 # 1 thread, the solver) and bin/mpmceiling (the same scene's step with

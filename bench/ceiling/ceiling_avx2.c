@@ -5,9 +5,9 @@
  * corners loaded once and broadcast, and the run's grid sums kept as
  * vectors across consecutive runs of the same cell and summed across the
  * lanes once, when the cell changes.  Lanes past a run add 0 to the sums
- * and store back what they loaded (a blend and a whole-vector store:
- * masked stores, vmaskmovpd, made the step 1.1-1.2x slower on AMD Zen
- * 4).  A moved run whose particles land in different cells is scattered
+ * and store back what they loaded (a blend and a whole-vector store,
+ * not a masked store, vmaskmovpd, which AMD Zen cores take slowly).  A
+ * moved run whose particles land in different cells is scattered
  * lane by lane.  Free of the solver's bit-for-bit constraints (fused
  * multiply-adds anywhere, the lanes summed in a horizontal order): within
  * round-off of ceiling.c's portable kernels,

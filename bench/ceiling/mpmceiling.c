@@ -1,5 +1,5 @@
 /*
- * mpmceiling.c - bin/mpmceiling: issue 14's ceiling.  How fast does a 2D
+ * mpmceiling.c - bin/mpmceiling, the solver's ceiling.  How fast does a 2D
  * MPM USF step in double precision run on this CPU when it does nothing
  * but the step's arithmetic?  It runs the lean step of ceiling.c (the
  * disks2d scene of bin/mpmbench, the solver's fused USF step without its
@@ -65,7 +65,7 @@ static void usage(FILE *f)
         f,
         "usage: mpmceiling [--particles N | --cells N] [--steps S] [--rounds R] [--portable] [--csv]\n"
         "       mpmceiling --check [--particles N]\n"
-        "Issue 14's ceiling: bin/mpmbench's disks2d (2D MPM USF, FLIP, linear elastic) with a\n"
+        "The solver's ceiling: bin/mpmbench's disks2d (2D MPM USF, FLIP, linear elastic) with a\n"
         "step that does nothing but its arithmetic (no checks, energies, boundary conditions or\n"
         "threads): how fast a double-precision step of the solver's design can run on this CPU.\n"
         "Options:\n"

@@ -1,6 +1,6 @@
 /*
  * checkpoint.c - `mpmbench --checkpoint`: the size and the speed of the
- * solver's checkpoints (mpm_checkpoint.c, issue 12).  Three blocks of ~N
+ * solver's checkpoints (mpm_checkpoint.c).  Three blocks of ~N
  * particles (a 2D GIMP linear elastic one, a 2D GIMP Drucker-Prager one,
  * a 3D CPDI linear elastic one) under gravity on a fixed floor (the lean
  * build: drifting, no gravity or walls), each run four steps, then: the

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# compare.sh - `make bench-compare REF=<commit>` (issue #14): the throughput
+# compare.sh - `make bench-compare REF=<commit>`: the throughput
 # of this tree's bin/mpmbench against the bench of another commit, run on
 # the same machine, interleaved, on the same configurations.
 #
@@ -26,8 +26,8 @@
 # Environment:
 #   COMPARE_ROUNDS     rounds (default 3; COMPARE_QUICK: 2)
 #   COMPARE_PARTICLES  particles per configuration (default 1000000)
-#   COMPARE_RUN_S      aimed seconds of one timed run at the issue #5 target
-#                      speeds (default 1.0): steps = ceil(target x 10^6 x
+#   COMPARE_RUN_S      aimed seconds of one timed run at the target speeds
+#                      (pb_target_rate(), bench/perf/scenes.c; default 1.0): steps = ceil(target x 10^6 x
 #                      RUN_S / particles), at least 5 (2D MPM 30 steps, 2D
 #                      GIMP / B-spline 12, 3D MPM 16, 3D others 5 for 10^6)
 #   COMPARE_STEPS      fixed steps for every configuration instead
@@ -108,7 +108,7 @@ particles_for() {
     echo "${own:-$PARTICLES}"
 }
 
-# steps for a configuration (the issue #5 target speeds, as bin/mpmbench)
+# steps for a configuration (the target speeds, as bin/mpmbench)
 steps_for() {
     local own
     own=$(awk '{ for (i = 1; i < NF; i++) if ($i == "--steps") print $(i + 1) }' <<<"$1")

@@ -2,7 +2,13 @@
  * daemon.c - the `daemon` scene of bin/mpmbench: the paper's disks (the
  * disks2d scene's case, written as a JSON case) run through a real mpmd
  * and compared with the same case in-process.
- *
+ * How it works: the notes after the includes.
+ */
+#include "perf.h"
+
+#include <stdio.h>
+
+/*
  * The bench starts bin/mpmd itself (MPMD_BIN, else mpmd next to this
  * program) on ipc://DIR/ctl with a database DIR/mpmd.db, DIR a fresh
  * temporary directory, one worker and --solver-threads T; it talks to it
@@ -37,9 +43,6 @@
  * loop, from before mpm_sim_new) splits it into daemon work around the
  * solver and per-step costs.
  */
-#include "perf.h"
-
-#include <stdio.h>
 
 #ifdef MPM_LEAN
 

@@ -1,5 +1,5 @@
 /*
- * mpmbench.c - bin/mpmbench, the throughput benchmark of issue #5: the
+ * mpmbench.c - bin/mpmbench, the throughput benchmark: the
  * command line, the report (an aligned table on the terminal, or CSV with
  * --csv; every row also appended to build/bench/throughput.csv) and
  * `--all`, which is what `make bench` runs: every in-process scene with MPM
@@ -43,7 +43,7 @@ static const char usage[] =
     "       mpmbench --cpdi-vs-gimp [--particles N] [--steps S] [--update U] [--csv]\n"
     "       mpmbench --checkpoint [--particles N] [--threads T]\n"
     "       mpmbench --triad [--threads T] [--csv]\n"
-    "Throughput of the mpmd solver (issue #5): millions of particle-steps per second,\n"
+    "Throughput of the mpmd solver: millions of particle-steps per second,\n"
     "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
     "Scenes:\n"
     "  disks2d   the paper's two elastic disks, grid refined to ~N particles (2x2 per cell)\n"
@@ -87,14 +87,14 @@ static const char usage[] =
     "                 a 3D CPDI block of ~N particles, against one step\n"
     "  --cpdi-vs-gimp disks2d and cube3d at 1 and 2 threads, GIMP and CPDI interleaved\n"
     "                 (GIMP, CPDI, GIMP, CPDI, the same steps), then CPDI / GIMP throughput\n"
-    "                 (issue #10: >= 0.4) and CPDI's bytes per particle (<= 300 2D, 450 3D)\n"
+    "                 (target >= 0.4) and CPDI's bytes per particle (<= 300 2D, 450 3D)\n"
     "  -h, --help     this text\n"
     "Rows are appended to build/bench/throughput.csv:\n  " PB_CSV_HEADER "\n"
     "bytes_per_particle is the peak RSS of a forked child that builds and runs the one\n"
     "configuration (ru_maxrss from wait4), over the particle count; for daemon rows, the\n"
     "peak RSS of that row's mpmd process.  Environment: MPMD_BIN (default: mpmd next to\n"
     "this program), MPMBENCH_LEAN (default: mpmbench-lean next to it).\n"
-    "The roof (issue #14): before the scenes, a STREAM triad a = b + s c on each thread\n"
+    "The roof: before the scenes, a STREAM triad a = b + s c on each thread\n"
     "count the rows use (the threads first-touch their slices; median of 7 passes, 24 B\n"
     "per element; each array max(4 x last-level cache, 64 MiB), at most a twelfth of\n"
     "the RAM; MPMBENCH_TRIAD_MIB sets MiB per array).  model_bytes_per_pstep is\n"
@@ -1013,8 +1013,8 @@ static int run_all(const opts *o)
 
 /* --bspline: the B-splines against GIMP in the same run, interleaved (GIMP,
  * BSPLINE2, BSPLINE3 for each configuration, two rounds, the better of the
- * two kept), as speed ratios (the issue: quadratic >= 0.9x GIMP, cubic >=
- * 0.5x) and bytes per particle. */
+ * two kept), as speed ratios (targets: quadratic >= 0.9 of GIMP's speed,
+ * cubic >= 0.5) and bytes per particle. */
 static int run_bspline(const opts *o)
 {
     static const pb_scene scenes[] = {PB_DISKS2D, PB_CUBE3D};
@@ -1060,7 +1060,8 @@ static int run_bspline(const opts *o)
  * interleaved (G, C, G, C; CPDI runs the steps GIMP's first row chose, so
  * both cover the same simulated time), then the throughput ratio (the
  * mean of the two CPDI rows over the mean of the two GIMP rows) and CPDI's
- * peak bytes per particle against issue #10's targets. */
+ * peak bytes per particle against their targets (>= 0.4; <= 300 B in 2D,
+ * 450 B in 3D). */
 static int run_cpdi_vs_gimp(const opts *o)
 {
     static const pb_scene scenes[] = {PB_DISKS2D, PB_CUBE3D};

@@ -1,5 +1,5 @@
 /*
- * perf.h - the throughput benchmark bin/mpmbench (issue #5), shared between
+ * perf.h - the throughput benchmark bin/mpmbench, shared between
  * its files: mpmbench.c (command line, the table and CSV rows, `--all` and
  * the ratio lines), scenes.c (the in-process scenes built through the
  * public solver API, and the forked-child measurement that gives each

@@ -108,10 +108,11 @@ const char *pb_update_name(mpm_update u)
 double pb_target_rate(int dim, mpm_method m)
 {
     int g = m != MPM_METHOD_MPM; /* B-splines: GIMP's (step counts only) */
-    if (m == MPM_METHOD_CPDI) return 0.4 * pb_target_rate(dim, MPM_METHOD_GIMP); /* issue #10 */
+    if (m == MPM_METHOD_CPDI)
+        return 0.4 * pb_target_rate(dim, MPM_METHOD_GIMP); /* --cpdi-vs-gimp */
     if (dim == 3) return g ? 3.0 : 16.0;
     if (dim == 2) return g ? 12.0 : 30.0;
-    return g ? 30.0 : 60.0; /* 1D: no target in the issue; for step counts only */
+    return g ? 30.0 : 60.0; /* 1D: no target; for step counts only */
 }
 
 long pb_default_steps(int dim, mpm_method m, size_t particles)

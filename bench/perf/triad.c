@@ -1,5 +1,5 @@
 /*
- * triad.c - the STREAM-style triad of bin/mpmbench (issue #14): the memory
+ * triad.c - the STREAM-style triad of bin/mpmbench: the memory
  * bandwidth roof the rows' modelled particle traffic is set against,
  * measured in the same process run, on the same number of threads, before
  * the scenes.  a[i] = b[i] + s c[i] over three arrays of doubles, each
@@ -8,7 +8,19 @@
  * particle slices do).  One untimed pass, then PB_TRIAD_REPS timed passes
  * between barriers; the median counts 24 bytes per element (read b and c,
  * write a: STREAM's counting, without the write-allocate read of a).
- *
+ * How it works: the notes after the includes.
+ */
+#include "perf.h"
+
+#include <errno.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+/*
  * Array size: each array at least 4x the last-level cache (the largest
  * cache of /sys/devices/system/cpu/cpu0/cache, else sysconf) and at least
  * 64 MiB, capped so that the three fit in a quarter of the physical
@@ -20,15 +32,6 @@
  * 3 x 1920 MiB on this VM from ~12 s to a fraction (and can only make the
  * roof higher, the rows' fraction of it lower: the conservative side).
  */
-#include "perf.h"
-
-#include <errno.h>
-#include <pthread.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <sys/mman.h>
-#include <unistd.h>
 
 #define MIB (1024.0 * 1024.0)
 

@@ -1,7 +1,22 @@
 /*
  * ctl_watch.c - `mpmctl watch`: the live view of a job, and the complete
  * energy series of a job however late the watcher arrives.
- *
+ * How it works: the notes after the includes.
+ */
+#include "ctl.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/ioctl.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <zmq.h>
+
+/*
  * The stream (an XPUB on the daemon) loses what was published before a
  * subscription took effect and may drop messages for a slow reader, so the
  * series is merged from two sources by the sample's own index
@@ -28,18 +43,6 @@
  * sample.  CSV / JSON modes write only the series on stdout (the summary
  * goes to stderr).
  */
-#include "ctl.h"
-
-#include <errno.h>
-#include <math.h>
-#include <stdarg.h>
-#include <stdlib.h>
-#include <string.h>
-#include <sys/ioctl.h>
-#include <time.h>
-#include <unistd.h>
-
-#include <zmq.h>
 
 #define WATCH_IDLE_S 1.0     /* quiet this long: ask Status */
 #define WATCH_REDRAW_S 0.1   /* terminal line at most this often */

@@ -4,7 +4,24 @@
  * serves one page over HTTP with Debian's libmicrohttpd (one thread per
  * connection, at most WEB_MAX_CONNECTIONS).  This file holds the command
  * line, the server, the routing, the static files and the limits:
- *
+ * How it works: the notes after the includes.
+ */
+#include "web.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <limits.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <microhttpd.h>
+
+/*
  *   GET  /, /app.js, /style.css  the page (clients/web/static/, read from
  *                                --static DIR, else ../clients/web/static
  *                                next to the binary, else
@@ -27,20 +44,6 @@
  * Content-Security-Policy that forbids inline script, and bounds URLs,
  * bodies, connections and each browser's event queue.
  */
-#include "web.h"
-
-#include <arpa/inet.h>
-#include <errno.h>
-#include <limits.h>
-#include <netdb.h>
-#include <netinet/in.h>
-#include <signal.h>
-#include <stdlib.h>
-#include <string.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
-#include <microhttpd.h>
 
 volatile sig_atomic_t ctl_interrupted;
 

@@ -1,6 +1,40 @@
 /*
  * srv_daemon.c - the daemon's main thread: sockets, requests, the stream.
- *
+ * It owns every socket it polls (the ROUTER for requests, the XPUB for the
+ * job streams, the inproc PULL of the workers' messages) and the store's
+ * commit fd, and never waits for the disk.  Submissions are handled in
+ * srv_submit.c, which shares srv_daemon_int.h with this file.  How it
+ * works: the notes after the includes.
+ */
+#include "srv_daemon.h"
+#include "srv_daemon_int.h"
+
+#include "mpm.h"
+#include "mpp_msg.h"
+#include "srv_auth.h"
+#include "srv_budget.h"
+#include "srv_conns.h"
+#include "srv_log.h"
+#include "srv_outq.h"
+#include "srv_pool.h"
+#include "srv_socket.h"
+#include "srv_stream.h"
+#include "store.h"
+
+#include <errno.h>
+#include <malloc.h>
+#include <math.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <time.h>
+#include <unistd.h>
+#include <zmq.h>
+
+/*
  * Design.  The main thread owns every socket it polls: a ROUTER for
  * requests (ZMQ_ROUTER_MANDATORY, replies sent with ZMQ_DONTWAIT so a
  * vanished client never blocks it), an XPUB for job streams (its
@@ -39,33 +73,6 @@
  * closes the XPUB and the ROUTER with a linger of SHUTDOWN_LINGER_MS, so
  * the Finished(INTERRUPTED) of every job still reaches its watchers.
  */
-#include "srv_daemon.h"
-#include "srv_daemon_int.h"
-
-#include "mpm.h"
-#include "mpp_msg.h"
-#include "srv_auth.h"
-#include "srv_budget.h"
-#include "srv_conns.h"
-#include "srv_log.h"
-#include "srv_outq.h"
-#include "srv_pool.h"
-#include "srv_socket.h"
-#include "srv_stream.h"
-#include "store.h"
-
-#include <errno.h>
-#include <malloc.h>
-#include <math.h>
-#include <signal.h>
-#include <stdarg.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <sys/resource.h>
-#include <time.h>
-#include <unistd.h>
-#include <zmq.h>
 
 #define EVENTS_EP "inproc://mpmd-events"
 #define ENERGY_PAGE_DEFAULT 10000u

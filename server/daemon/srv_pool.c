@@ -8,7 +8,26 @@
  * figures, and to retire its job.  The per-step loop itself runs without
  * the lock: it reads the job's `cancel` and `watched` flags, which are
  * atomics.
- *
+ * How it works: the notes after the includes.
+ */
+#include "srv_pool.h"
+
+#include "mpm.h"
+#include "srv_budget.h"
+#include "srv_log.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <zmq.h>
+
+/*
  * Each worker owns a PUSH socket connected to the main thread's PULL; it
  * sends with ZMQ_DONTWAIT, so a main thread that falls behind costs the
  * simulation nothing: the message is dropped, its seq number is still used,
@@ -27,22 +46,6 @@
  * a fresh simulation and goes on with the next step, its samples numbered
  * after the checkpoint's, its wall time added to the run's.
  */
-#include "srv_pool.h"
-
-#include "mpm.h"
-#include "srv_budget.h"
-#include "srv_log.h"
-
-#include <errno.h>
-#include <limits.h>
-#include <math.h>
-#include <pthread.h>
-#include <stdatomic.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <time.h>
-#include <zmq.h>
 
 enum { CANCEL_USER = 1, CANCEL_SHUTDOWN = 2 };
 

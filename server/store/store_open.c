@@ -490,16 +490,22 @@ static int lock_acquire(store *s)
 {
     int r = db_file_check(s);
     if (r) return r;
+    errno = 0;
     char *real = realpath(s->path, NULL);
+    if (!real && errno == ENOMEM)
+        return sti_fail(MPM_ENOMEM, "out of memory resolving the path %s", s->path);
     if (real) {
         size_t n = strlen(real);
         char *lp = malloc(n + sizeof ".lock");
-        if (lp) {
-            memcpy(lp, real, n);
-            memcpy(lp + n, ".lock", sizeof ".lock");
-            free(s->lock_path);
-            s->lock_path = lp;
+        if (!lp) {
+            /* not the path's own lock: another spelling would take another */
+            free(real);
+            return sti_fail(MPM_ENOMEM, "out of memory naming the lock file of %s", s->path);
         }
+        memcpy(lp, real, n);
+        memcpy(lp + n, ".lock", sizeof ".lock");
+        free(s->lock_path);
+        s->lock_path = lp;
         free(real);
     }
     for (int attempt = 0; attempt < 5; attempt++) {

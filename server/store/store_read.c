@@ -237,9 +237,11 @@ int store_run_get(store *s, int64_t id, store_run *out)
     }
     rc = sqlite3_bind_int64(st, 1, id);
     if (rc == SQLITE_OK) rc = sqlite3_step(st);
-    if (rc == SQLITE_ROW && !(r = read_run_row(db, st, out, 1)))
-        sti_ends_overlay(s, out); /* an end or a recovery still to write */
-    else if (rc == SQLITE_DONE)
+    if (rc == SQLITE_ROW) {
+        /* a failed copy keeps its own error (alloc_fail_store) */
+        if (!(r = read_run_row(db, st, out, 1)))
+            sti_ends_overlay(s, out); /* an end or a recovery still to write */
+    } else if (rc == SQLITE_DONE)
         r = sti_fail(MPM_ENOTFOUND, "no run %" PRId64, id);
     else
         r = sti_sql_fail(db, rc, "reading a run");

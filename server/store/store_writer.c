@@ -2,7 +2,21 @@
  * store_writer.c - the store's write side (see store.h): the queue every
  * write function appends to, the one writer thread that commits it, and
  * commit tracking (store_flush, tickets, the notify fd).
- *
+ * How it works: the notes after the includes.
+ */
+#include "store_internal.h"
+
+#include <errno.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+/*
  * Writer thread.  One thread owns the write connection.  Every write
  * function (store_run_insert, store_run_set_status, store_run_progress,
  * store_run_finish, store_energy_append, store_snapshot_put) copies its
@@ -77,17 +91,6 @@
  * memory stays near the cap unless the disk stops for good, which the log
  * shows.
  */
-#include "store_internal.h"
-
-#include <errno.h>
-#include <inttypes.h>
-#include <math.h>
-#include <stdarg.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <time.h>
-#include <unistd.h>
 
 #define OP_ALIGN 16
 #define OP_HDR ((sizeof(op) + OP_ALIGN - 1) / OP_ALIGN * OP_ALIGN)

@@ -1,6 +1,6 @@
 /*
- * t_ceiling.c - bin/mpmceiling's lean step (tests/ceiling/) is the
- * solver's step: issue 14's ceiling is only worth quoting if the lean
+ * t_ceiling.c - bin/mpmceiling's lean step (bench/ceiling/) is the
+ * solver's step: the ceiling it measures is only worth quoting if the lean
  * step does the same arithmetic as the solver's fused MPM USF step on the
  * same scene.  ceiling_matches_solver runs the paper's disks at h = 0.025
  * (784 particles) to t = 2.6, half a unit of time into their contact,

@@ -261,7 +261,7 @@ DTEST(daemon_auth_curve)
     td_out_free(&o);
     CHECKF(ok, "the admin's cancel failed");
     CHECK(td_wait_status(&d, job1, "CANCELLED", 20, st, sizeof st) == 0);
-    /* nor resume it (issue 12); its owner is told why it cannot */
+    /* nor resume it; its owner is told why it cannot */
     CTL_AS(&d, dir, "b", &o, "resume", "1");
     snprintf(want, sizeof want, "run %llu was submitted by %s", job1, apub);
     ok = o.status == 1 && strstr(o.err, "FORBIDDEN") && strstr(o.err, want);

@@ -1,6 +1,6 @@
 /*
  * t_daemon_energy.c - integration tests of the extended energy balance
- * (issue 11) through a real mpmd (ipc:// in the test's temporary
+ * through a real mpmd (ipc:// in the test's temporary
  * directory, a real SQLite file) to mpmctl: the energy budget's warning
  * and FAILED on the paper's GIMP MUSL bar that gains energy, the balance
  * error in RunInfo, `runs` and `show`, and the new EnergySample fields

@@ -1,5 +1,5 @@
 /*
- * t_daemon_material.c - issue 11's per-particle snapshot fields through
+ * t_daemon_material.c - the material models' per-particle snapshot fields through
  * the daemon: the example impact2d_j2 (an elastic disk into a von Mises
  * block) run by mpmd with recorded snapshots of X, PLASTIC_STRAIN and
  * YIELDED (and PRESSURE), read back with `mpmctl snapshot` as CSV: the columns are

@@ -1,5 +1,5 @@
 /*
- * t_daemon_resume.c - integration tests of resumable runs (issue 12)
+ * t_daemon_resume.c - integration tests of resumable runs
  * through a real mpmd (ipc:// in the test's temporary directory, a real
  * SQLite file, checkpoint files beside it) and the real mpmctl: a run cut
  * by kill -9, and one by a clean shutdown (SIGTERM), each resumed with
@@ -345,7 +345,7 @@ DTEST(daemon_resume_refused)
     CHECK(td_stop(&d) == 0);
 }
 
-/* mpmd --portable-kernels (issue 14): every job runs on the portable
+/* mpmd --portable-kernels: every job runs on the portable
  * kernels.  The same case (the coarse disks, 4000 steps) through a
  * default daemon and through one with the flag; each run's last energy
  * sample equals, bit for bit, an in-process run of the same case on the

@@ -1,5 +1,5 @@
 /*
- * t_codec_material.c - the schema of issue 11's material models: a JSON
+ * t_codec_material.c - the schema of the material models: a JSON
  * case with a VON_MISES material, volumeUpdate and the new snapshot fields
  * decodes into the solver's case and runs; a missing yield stress and an
  * unknown model are refused naming the field; a snapshot's plastic strain,

@@ -1,6 +1,6 @@
 /*
- * t_checkpoint.c - the solver's checkpoints (mpm_checkpoint.c, issue
- * 12): a run stopped after K steps, saved, its simulation destroyed, a
+ * t_checkpoint.c - the solver's checkpoints (mpm_checkpoint.c): a run
+ * stopped after K steps, saved, its simulation destroyed, a
  * fresh one made from the same case and loaded, then run to step N, ends
  * with the same bits as the run taken straight through (every snapshot
  * field, t, dt, steps, the energy sample with its balance error, the
@@ -778,7 +778,7 @@ TEST(ckpt_failed_run_stays_failed)
     mpm_sim_destroy(&b);
 }
 
-/* ---- fused steps (issue 14) ----
+/* ---- fused steps ----
  *
  * A step's moving pass also scatters the next step's first grid fields
  * (G2P2G), before a step that sorts the particles too (the sort comes

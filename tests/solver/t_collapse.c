@@ -1,6 +1,6 @@
 /*
- * t_collapse.c - the plane-strain granular column collapse of issue 11
- * (validation 5, scenes/include/mpm_collapse.h) in its fast configuration: a = 1,
+ * t_collapse.c - the plane-strain granular column collapse
+ * (scenes/include/mpm_collapse.h) in its fast configuration: a = 1,
  * 8 cells across the column (256 particles), Drucker-Prager (plane-strain
  * match, phi 30, psi 0, c 10 Pa) on a base with mu = tan 30, run to rest.
  * Checked against the experimental fits of Lube et al. 2005 (Phys. Rev. E

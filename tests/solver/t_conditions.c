@@ -1,5 +1,5 @@
 /*
- * t_conditions.c - issue 11's conditions: Coulomb friction on grid
+ * t_conditions.c - the boundary conditions: Coulomb friction on grid
  * faces (the sliding block on an inclined plane: the acceleration g (sin
  * theta - mu cos theta) while sliding, rest below the friction angle, and
  * the energy balance with the friction dissipation), prescribed velocities

@@ -1,6 +1,6 @@
 /*
  * t_energy.c - the extended energy balance, its budget, and damping
- * (issue 11), at the solver's level: the paper's GIMP MUSL bar at half the
+ * at the solver's level: the paper's GIMP MUSL bar at half the
  * CFL limit that gains energy is caught by the budget; a vibrating bar
  * under local and under viscous damping loses its energy while the balance
  * K + S + D_damping stays closed; the case fields are checked.
@@ -51,10 +51,10 @@ static mpm_sim *bar_run(mpm_method m, mpm_update up, int ncell, double frac, lon
     return s;
 }
 
-/* The hole of issue 11: GIMP MUSL, 13 cells of one point, dt = 0.5 x the
- * CFL limit (accepted without allow_unstable_dt), 8000 steps: it runs to
- * the end with the total energy at 1.74 E0 (issue 11; 1.85 E0 with the 10
- * empty cells here), under the divergence guard's 2 E0.  The balance error now says so, and the 5 %
+/* GIMP MUSL, 13 cells of one point, dt half the CFL limit (accepted
+ * without allow_unstable_dt), 8000 steps: it runs to the end with the
+ * total energy at 1.85 E0 (with the 10 empty cells here), under the
+ * divergence guard's 2 E0, so only the energy balance catches it: the 5 %
  * budget is exceeded; the same bar with MPM USF, which keeps its energy, is within it. */
 TEST(energy_bar_budget_catches_gimp_musl_gain)
 {

@@ -1,6 +1,6 @@
 /*
  * t_frictional_block.c - the frictional models' block update
- * (solver/mpm_model.c, issue 14): the 2D and 3D loops that write out
+ * (solver/mpm_model.c): the 2D and 3D loops that write out
  * the Jaumann rotation, Drucker-Prager's elastic trial and the stores give
  * the same bits as the general per-particle path (rate_gather(),
  * mpm_dp_trial(), rate_put(), mpm_model_blk.general), on random states

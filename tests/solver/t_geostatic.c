@@ -1,5 +1,5 @@
 /*
- * t_geostatic.c - the geostatic column of issue 11 (validation item 4): a
+ * t_geostatic.c - the geostatic column (docs/accuracy.md): a
  * 2D column 1 m wide and 10 m tall (rho 1000, E 1e8, nu 0.3, g 10; roller
  * sides, fixed base; h = 0.25 m, 2x2 particles per cell), compared with
  * sigma_v = -rho g depth and sigma_h = K0 sigma_v (K0 = nu / (1 - nu)),

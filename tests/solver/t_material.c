@@ -1,13 +1,12 @@
 /*
- * t_material.c - the material models of issue 11 (solver/
- * mpm_model.c): von Mises (J2) against the closed form of uniaxial strain
- * and uniaxial stress, at the stress point and through the solver; the
+ * t_material.c - the material models (solver/mpm_model.c): von Mises (J2) against the closed form
+ * of uniaxial strain and uniaxial stress, at the stress point and through the solver; the
  * Neo-Hookean Cauchy stress against its closed form and the derivative of
  * its stored energy, and a homogeneous stretch through the solver; the
  * Jaumann rate's objectivity; the volume updates DET_F and CONSTANT; the
  * energy balance with plastic work; the general block update giving
- * linear elasticity's bits; and linear elasticity without a strain record
- * (issue 14).
+ * linear elasticity's bits; and linear elasticity without a strain
+ * record.
  */
 #include "mpm.h"
 #include "mpm_internal.h"
@@ -906,7 +905,7 @@ TEST(material_plastic_work_threads)
     CHECK(w[0] > 0);
 }
 
-/* Issue 14: linear elasticity from a zero stress keeps no strain record and,
+/* Linear elasticity from a zero stress keeps no strain record and,
  * in 2D, no sigma_zz array (mpm_internal.h); the same case with a second,
  * unused VON_MISES material keeps both (the plastic models' record) and
  * takes the general path, which has linear elasticity's bits.  Positions,

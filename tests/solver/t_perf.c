@@ -367,8 +367,8 @@ TEST(perf_sort_order_independent_of_threads)
  * step without the request then falls back to the pass: no stale sums.  The
  * angular momentum (about the origin; the falling box is off it, so it is
  * not zero in 2D and 3D) is the one expression in both (mpm_angmom_add).
- * Every sum is bitwise equal (1e-12 relative was allowed until the in-pass
- * sums took four particles at a time, issue 14: esum_block(), es_lin4()). */
+ * Every sum is bitwise equal: the in-pass sums and the pass take four
+ * particles at a time alike (esum_block(), es_lin4()). */
 static double en_diff(const mpm_energy *a, const mpm_energy *b, int dim)
 {
     double esc = fmax(fabs(a->kinetic) + fabs(a->strain) + fabs(a->potential), 1e-300);
@@ -486,11 +486,10 @@ TEST(perf_step_energies_equal_energy_pass)
 /* The disks through their impact (2D; MPM and GIMP USF, BSPLINE2 MUSL;
  * the portable and the AVX2+FMA kernels; 1 and 2 threads): every energy
  * the step sums in its passes (mpm_sim_want_energy()) equals, bit for bit,
- * what the energy pass sums for the same state.  Before issue 14's
- * four-particle sums (esum_block(), es_lin4()), the AVX2 kernels' in-pass
- * sums missed this in the last bits: the strain energy in 26-32 of 200
- * steps in every one of these cases, and the kinetic energy, momentum and
- * angular momentum in some steps of two of them. */
+ * what the energy pass sums for the same state: both take four particles
+ * at a time (esum_block(), es_lin4()), and a difference in their order of
+ * operations shows here as last-bit differences, in the strain energy
+ * first. */
 TEST(perf_step_energies_bitwise_disks)
 {
     enum { STEPS = 200 };
@@ -543,12 +542,12 @@ TEST(perf_step_energies_bitwise_disks)
          cases, mpm_kernels_avx2_available() ? "AVX2+FMA" : "auto (portable here)", STEPS);
 }
 
-/* The energies as the energy pass summed them before issue 14's ninth
- * stop, one particle at a time with the scalar helpers (mpm_strain_density(),
+/* The energies summed one particle at a time with the scalar helpers (mpm_strain_density(),
  * whose linear-elastic case is mpm_elastic_stored(); mpm_angmom_add()),
- * slice by slice and combined in thread order.  The pass and the in-pass
- * sums now take four particles per vector (es_lin4(), esum_block()), whose
- * lanes keep these helpers' operations: so the same bits. */
+ * slice by slice and combined in thread order: the reference for the pass
+ * and the in-pass sums, which take four particles per vector (es_lin4(),
+ * esum_block()) with lanes that keep these helpers' operations, so the
+ * same bits. */
 static void scalar_energies(const mpm_sim *s, mpm_energy *out)
 {
     const mpm_particles *P = &s->P;
@@ -791,9 +790,9 @@ static void grid_arrays(const mpm_gridbuf *b, const double *a[], size_t *n)
 /* The particle and grid arrays are staggered (mpm_sim.c, stag_alloc()):
  * each starts on a cache line at its own offset within a 4 KiB page, so
  * that element i of the arrays a pass uses side by side neither shares
- * one L1 set nor the low 12 address bits (4K aliasing); malloc() maps
- * large blocks all at one page offset, where the default 2D step ran
- * 1.05-1.11x slower (10^6 particles, 2 threads).  Run here: the paper's
+ * one L1 set nor the low 12 address bits (4K aliasing), as it would at
+ * the one page offset where malloc() maps all large blocks (the
+ * measurements: docs/performance.md).  Run here: the paper's
  * disks, BSPLINE2 MUSL with APIC on 2 threads (31 arrays: x, v, sigma,
  * B_p, m, V; the grid, 1/m, both threads' buffers) and 3D MPM USF on 3
  * threads; 1/m and the grid's mass are zero before the first step (the

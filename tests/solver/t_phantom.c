@@ -1,6 +1,6 @@
 /*
  * t_phantom.c - a uniform velocity stays uniform when particles land on
- * grid lines (issue #10, "phantom-node gradient error").
+ * grid lines (no gradient weight from a phantom node).
  *
  * A particle on a grid line, exactly or to within round-off, gives the node
  * across the line a weight of zero or ~1e-16 but, with linear MPM tents, a

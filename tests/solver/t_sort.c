@@ -1,5 +1,5 @@
 /*
- * t_sort.c - when and how the particles are sorted by cell (issue 14):
+ * t_sort.c - when and how the particles are sorted by cell:
  * the sort follows the particles' runs of one cell (the moving passes'
  * count of cell changes, the same for every thread count, and a
  * checkpoint that carries the sort's state), and the two ways of moving

@@ -1,11 +1,22 @@
 /*
- * t_stress.c - the stability stress suite (issue #4).  Every case ends in
+ * t_stress.c - the stability stress suite.  Every case ends in
  * one of two outcomes, and the test asserts which: a result within
  * tolerance, or a failure the solver (or the daemon) recorded with a clear
  * reason ("diverged at step N", "particle P left the grid at step N", "dt
  * above the CFL limit", a step limit).  None may crash, hang (every run has
  * a step budget) or leave a NaN behind.
- *
+ * How it works: the notes after the includes.
+ */
+#include "t_stress.h"
+#include "mpm.h"
+#include "mpm_paper.h"
+#include "t.h"
+
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/*
  *  stress_cfl_sweep        Courant factor 0.05..1.5 per method (MPM, GIMP,
  *                          BSPLINE2, BSPLINE3) and update on
  *                          the 1D bar (full mode: also 2D and 3D standing
@@ -27,14 +38,6 @@
  * `make stress` sets MPM_STRESS=full for the whole sweep.  Each test prints
  * the figures it measured (TLOG); docs/accuracy.md quotes them.
  */
-#include "t_stress.h"
-#include "mpm.h"
-#include "mpm_paper.h"
-#include "t.h"
-
-#include <stdint.h>
-#include <stdlib.h>
-#include <string.h>
 
 static const char *mname(mpm_method m)
 {
@@ -659,9 +662,8 @@ TEST(stress_cell_crossing)
                 CHECKF(q->rc == 0 || strlen(q->msg) > 10, "failure without a reason");
             }
             /* rigid translation is exact to round-off with every method and
-             * update, as docs/accuracy.md states (measured <= 5.1e-15; GIMP
-             * was 1.4e-13 and MPM + USL unasserted before phantom nodes took
-             * the interpolated velocity in the gradient, issue #10) */
+             * update, as docs/accuracy.md states (measured <= 5.1e-15: phantom
+             * nodes take the interpolated velocity in the gradient) */
             CHECKF(r.rc == 0 && r.cross < 1e-14 && r.other < 1e-14, "%s %s translation: %g %g %s",
                    mname(meth), upd_name(up), r.cross, r.other, r.msg);
             /* GMPM's point: crossing cells adds little noise (measured

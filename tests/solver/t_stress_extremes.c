@@ -4,22 +4,7 @@
  * same rule: every case ends within tolerance or with a failure the solver
  * or the daemon recorded with a clear reason, never a crash, a hang or a
  * NaN.
- *
- *  stress_extremes         E 1e-3..1e9, nu 0.499, density contrast 1e3,
- *                          1..6 ppc, a one-particle-thick plate, impact near
- *                          the wave speed, a body thrown out of the grid;
- *                          automatic dt; cases written as JSON and loaded by
- *                          the daemon's own codec, run in-process with the
- *                          daemon's stop rule.
- *  stress_daemon_extremes  the same cases submitted to a real mpmd (MPMD_BIN)
- *                          over ZeroMQ: each run's status and reason in the
- *                          run records match the in-process outcome, the
- *                          refusal of cfl > 1 comes back as INVALID_CASE,
- *                          and the daemon answers Ping and exits cleanly.
- *
- *
- * `make test` runs the quick form; `make stress` (MPM_STRESS=full) the
- * whole set.
+ * How it works: the notes after the includes.
  */
 #include "mpm.h"
 #include "mpp_msg.h"
@@ -39,6 +24,24 @@
 #include <time.h>
 #include <unistd.h>
 #include <zmq.h>
+
+/*
+ *  stress_extremes         E 1e-3..1e9, nu 0.499, density contrast 1e3,
+ *                          1..6 ppc, a one-particle-thick plate, impact near
+ *                          the wave speed, a body thrown out of the grid;
+ *                          automatic dt; cases written as JSON and loaded by
+ *                          the daemon's own codec, run in-process with the
+ *                          daemon's stop rule.
+ *  stress_daemon_extremes  the same cases submitted to a real mpmd (MPMD_BIN)
+ *                          over ZeroMQ: each run's status and reason in the
+ *                          run records match the in-process outcome, the
+ *                          refusal of cfl > 1 comes back as INVALID_CASE,
+ *                          and the daemon answers Ping and exits cleanly.
+ *
+ *
+ * `make test` runs the quick form; `make stress` (MPM_STRESS=full) the
+ * whole set.
+ */
 
 /* ---- extreme cases, written as JSON ---- */
 

@@ -107,8 +107,7 @@ TEST(traffic_usf_mpm_elastic)
     /* 2D unfused: p2g_mq reads x v m: 2 + 2 + 1 doubles = 40 B;
      * stress_force reads x (16), mat (2), sig (24), vol (8) = 50 and writes
      * sig vol = 32; g2p_xv reads x v (32) and writes them (32):
-     * 40 + 50 + 32 + 64 = 186.  (Before issue #14, with eps and sig_zz:
-     * 250, the issue's "about 250".) */
+     * 40 + 50 + 32 + 64 = 186 (no strain record, sigma_zz derived). */
     mpm_sim *s = job(2, MPM_METHOD_MPM, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
     CHECK(unfused(s, "2D MPM USF elastic, unfused", &t) == 186);
     CHECK(t.npass == 3 && t.pass[0].read == 40 && t.pass[0].write == 0);
@@ -216,8 +215,8 @@ static mpm_sim *box2d(int nodes, int cells)
 /* Fused steps where they pay (mpm_rows.c fuse_pays()): the same body of
  * 1600 particles over 21 rows fuses in a tight grid (rows 256 B apart: 2
  * pages a field, 800 particles needed) and not in a 1024-node-wide grid
- * (every row its own page: 21 pages, 8400 needed), the sparse2d case that
- * ran 13 % slower fused; forced (2), it fuses there too.  Whether a step
+ * (every row its own page: 21 pages, 8400 needed), the sparse2d case,
+ * where fusing does not pay; forced (2), it fuses there too.  Whether a step
  * fuses never changes its results (fuse_same_bits). */
 TEST(fuse_where_it_pays)
 {

@@ -1,6 +1,6 @@
 /*
  * t_triaxial.c - Drucker-Prager and Mohr-Coulomb through the solver
- * (issue 11, validation item 1): a single-element drained triaxial
+ * (docs/accuracy.md): a single-element drained triaxial
  * compression in 3D and a plane-strain biaxial compression in 2D.  One
  * grid cell [0, 1]^dim (MPM tents, MUSL), 2^dim particles at the quarter
  * points, rollers on the low faces, the top face (the high face of the

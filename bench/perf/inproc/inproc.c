@@ -8,22 +8,7 @@
  * stay resident, on the same CPUs, caches and memory, so a drift of the
  * machine over seconds falls on both sides of a round alike, which
  * processes run one after the other (make bench-compare) cannot promise.
- *
- * One process is not enough: on the Zen 4 VM of issue 14, 36facb3 ran
- * disks2d MPM USF at 23-26 M particle-steps/s in most processes and at
- * 31-32 in some, for a process's whole life and sometimes for several in a
- * row, while this tree's stayed within 52-59.  The triad measured beside it
- * does not explain it (25.7 at 43 GB/s, 31.9 at 39).  So the rounds run in
- * `procs` forked children one after the other, each building both
- * simulations afresh; the row pools the rounds of all of them and gives
- * each process's median ratio with the STREAM triad (triad.c) measured
- * before and after its rounds, so that a reader sees the spread.
- *
- * Prints one row: each side's median M particle-steps/s, the median of the
- * rounds' own ratios new / ref, their quartiles and extremes, in how many
- * rounds the new side was faster, and each process's median ratio @ its
- * triad (GB/s, the mean of before and after).  Exits 0; 3 when REF's tree has
- * no such scene, method, update or transfer; 2 on a bad option; 1 otherwise.
+ * How it works: the notes after the includes.
  */
 #include <errno.h>
 #include <stdio.h>
@@ -35,6 +20,23 @@
 
 #include "perf/perf.h" /* the STREAM triad (triad.c) */
 #include "side.h"
+
+/*
+ * One process is not enough: a build can run at one speed for a process's
+ * whole life and at a clearly different one in the next (sometimes for
+ * several processes in a row), with a triad measured beside it that does
+ * not tell the two apart (docs/performance.md).  So the rounds run in
+ * `procs` forked children one after the other, each building both
+ * simulations afresh; the row pools the rounds of all of them and gives
+ * each process's median ratio with the STREAM triad (triad.c) measured
+ * before and after its rounds, so that a reader sees the spread.
+ *
+ * Prints one row: each side's median M particle-steps/s, the median of the
+ * rounds' own ratios new / ref, their quartiles and extremes, in how many
+ * rounds the new side was faster, and each process's median ratio @ its
+ * triad (GB/s, the mean of before and after).  Exits 0; 3 when REF's tree has
+ * no such scene, method, update or transfer; 2 on a bad option; 1 otherwise.
+ */
 
 #define MAX_ROUNDS 200 /* per process */
 #define MAX_PROCS 16

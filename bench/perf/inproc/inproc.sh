@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# inproc.sh - `make bench-inproc REF=<commit>` (issue #14): this tree's
+# inproc.sh - `make bench-inproc REF=<commit>`: this tree's
 # solver against REF's in ONE process, alternated round by round, on the
 # bench's own scenes.  Where make bench-compare runs two benches one after
 # the other (a drift of the machine between them falls on one side),
@@ -42,7 +42,7 @@
 #   INPROC_PROCS      processes per configuration (default 3)
 #   INPROC_PARTICLES  particles (default 1000000)
 #   INPROC_RUN_S      aimed seconds of one side's run in a round at the
-#                     issue #5 target speeds (default 0.5): steps =
+#                     target speeds (default 0.5): steps =
 #                     ceil(target x 10^6 x RUN_S / particles), at least 2
 #   INPROC_ARGS       ';'-separated configurations, driver arguments
 #                     (--scene --method --update --transfer --threads
@@ -133,7 +133,7 @@ if [ "$REF" = --self-check ]; then
     exit 0
 fi
 
-# steps for a configuration (the issue #5 target speeds, as make bench-compare)
+# steps for a configuration (the target speeds, as make bench-compare)
 steps_for() {
     local cs=" $1 " dim=2 rate
     case "$cs" in *" cube3d "*) dim=3 ;; *" bar1d "*) dim=1 ;; esac
