@@ -28,13 +28,14 @@ import sys
 
 # The libraries whose cycles fail the check; extend this one line as a
 # library is cleared.
-CHECKED = ["protocol"]
+CHECKED = ["protocol", "server/store"]
 
 # Every library: its folder (sources in it, public headers in include/).
 LIBS = ["solver", "protocol", "server/store", "server/daemon", "clients/ctl", "scenes"]
 # Where the headers an #include may name live (resolved by basename).
 HEADER_DIRS = ["solver", "protocol", "server", "clients", "scenes", "bench", "build/gen"]
 
+CODE_RE = re.compile(r'/\*.*?\*/|//[^\n]*|"(?:\\.|[^"\\])*"', re.S)
 IDENT_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 INCLUDE_RE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
@@ -76,9 +77,10 @@ def is_public(path):
 
 
 def declared(path, owner):
-    """the modules whose global symbols a header names"""
+    """the modules whose global symbols a header names (outside comments
+    and strings)"""
     with open(path, encoding="utf-8", errors="replace") as fh:
-        idents = set(IDENT_RE.findall(fh.read()))
+        idents = set(IDENT_RE.findall(CODE_RE.sub(" ", fh.read())))
     return {owner[i] for i in idents if i in owner}
 
 
