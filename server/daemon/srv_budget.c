@@ -6,6 +6,8 @@
  */
 #include "srv_budget.h"
 
+#include "srv_grow.h"
+
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -33,13 +35,9 @@ static owner_total *find_locked(srv_budget *b, const char *owner, int add)
     for (size_t i = 0; i < b->n; i++)
         if (!strncmp(b->tab[i].owner, owner, sizeof b->tab[i].owner - 1)) return &b->tab[i];
     if (!add) return NULL;
-    if (b->n == b->cap) {
-        size_t nc = b->cap ? 2 * b->cap : 16;
-        owner_total *t = realloc(b->tab, nc * sizeof *t);
-        if (!t) return NULL;
-        b->tab = t;
-        b->cap = nc;
-    }
+    owner_total *t = srv_grow(b->tab, &b->cap, b->n + 1, sizeof *t, 0);
+    if (!t) return NULL;
+    b->tab = t;
     owner_total *o = &b->tab[b->n++];
     snprintf(o->owner, sizeof o->owner, "%s", owner);
     o->bytes = 0;

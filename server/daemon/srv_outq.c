@@ -11,6 +11,8 @@
  */
 #include "srv_outq.h"
 
+#include "srv_grow.h"
+
 #include <errno.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -104,13 +106,9 @@ static conn *find(srv_outq *q, const void *id, size_t idlen)
             q->c[k++] = q->c[i];
     }
     q->n = k;
-    if (q->n == q->cap) {
-        size_t cap = q->cap ? 2 * q->cap : 16;
-        conn **nc = realloc(q->c, cap * sizeof *nc);
-        if (!nc) return NULL;
-        q->c = nc;
-        q->cap = cap;
-    }
+    conn **nc = srv_grow(q->c, &q->cap, q->n + 1, sizeof *nc, 0);
+    if (!nc) return NULL;
+    q->c = nc;
     conn *c = malloc(sizeof *c);
     if (!c) return NULL;
     atomic_init(&c->bytes, 0);
