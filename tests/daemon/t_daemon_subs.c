@@ -76,57 +76,6 @@ static int start(td_daemon *d, const char *dir, const char *const *extra)
 #endif
 }
 
-static int clear_hwm(pid_t pid)
-{
-    char path[64];
-    snprintf(path, sizeof path, "/proc/%ld/clear_refs", (long)pid);
-    FILE *f = fopen(path, "w");
-    if (!f) return -1;
-    int ok = fputs("5", f) >= 0;
-    return fclose(f) == 0 && ok ? 0 : -1;
-}
-
-/* ---- another client's pings, every 20 ms, on a thread ---- */
-
-typedef struct {
-    const td_daemon *d;
-    atomic_int stop;
-    double worst;
-    long n, lost;
-    pthread_t th;
-} pinger;
-
-static void *pinger_main(void *arg)
-{
-    pinger *p = arg;
-    while (!atomic_load(&p->stop)) {
-        mpp_request rq = {.kind = MPP_REQ_PING};
-        json_t *reply = NULL;
-        double t0 = td_now();
-        int rc = td_request(p->d->ep, &rq, 10, &reply);
-        double dt = td_now() - t0;
-        if (rc || !json_object_get(reply, "pong")) p->lost++;
-        json_decref(reply);
-        if (dt > p->worst) p->worst = dt;
-        p->n++;
-        td_msleep(20);
-    }
-    return NULL;
-}
-
-static int pinger_start(pinger *p, const td_daemon *d)
-{
-    memset(p, 0, sizeof *p);
-    p->d = d;
-    return pthread_create(&p->th, NULL, pinger_main, p) ? -1 : 0;
-}
-
-static void pinger_stop(pinger *p)
-{
-    atomic_store(&p->stop, 1);
-    pthread_join(p->th, NULL);
-}
-
 /* ---- a raw ZMTP 3.0 SUB peer over the daemon's ipc stream endpoint ---- */
 
 /* Reads exactly n bytes (5 s at most); 0 or -1. */
@@ -204,7 +153,7 @@ static int measure(td_daemon *d, int (*run)(td_daemon *, long), long size, attac
     pinger p;
     td_msleep(300);
     f->base_kb = proc_kb(d->pid, "VmRSS:");
-    if (clear_hwm(d->pid)) TLOG("cannot reset VmHWM: the peak is since the start");
+    if (reset_hwm(d->pid)) TLOG("cannot reset VmHWM: the peak is since the start");
     if (pinger_start(&p, d)) return -1;
     int rc = run(d, size);
     td_msleep(500); /* what the daemon still does with what it read */
@@ -212,8 +161,8 @@ static int measure(td_daemon *d, int (*run)(td_daemon *, long), long size, attac
     f->peak_kb = proc_kb(d->pid, "VmHWM:");
     td_msleep(1000);
     f->after_kb = proc_kb(d->pid, "VmRSS:");
-    f->ping_worst = p.worst;
-    f->pings = p.n;
+    f->ping_worst = p.max_s;
+    f->pings = p.pings;
     f->lost = p.lost;
     return rc;
 }

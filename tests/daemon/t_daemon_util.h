@@ -7,7 +7,10 @@
 #define T_DAEMON_UTIL_H
 
 #include <jansson.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stddef.h>
+#include <sys/types.h>
 
 #include "mpp_msg.h"
 #include "t_daemon.h"
@@ -127,5 +130,31 @@ void disk_full_scenario(const char *name);
 
 /* Room for an error text in the daemon tests. */
 #define ERRLEN 1024
+
+/* ---- memory and responsiveness of a daemon under load ---- */
+
+/* Resets the daemon's VmHWM to its current RSS (Linux >= 4.0); 0 or -1. */
+int reset_hwm(pid_t pid);
+/* Waits until the daemon's RSS has not grown for `quiet` seconds (it has
+ * digested what was sent), at most `limit` s. */
+void settle(pid_t pid, double quiet, double limit);
+/* Waits up to limit s for VmRSS to fall to at most kb; returns the last
+ * VmRSS read. */
+long wait_rss_below(pid_t pid, long kb, double limit);
+
+/* A client connected before the attack that pings every 20 ms and keeps
+ * the slowest answer (max_s, pings, lost: read after pinger_stop()). */
+typedef struct {
+    char ep[320];
+    atomic_int stop;
+    atomic_int state; /* 0 starting, 1 its first ping answered, -1 failed */
+    double max_s;     /* slowest reply (a lost one counts as its 10 s wait) */
+    int pings, lost;
+    pthread_t th;
+} pinger;
+/* Starts the pinger and waits for its first answer: 0, or -1 (test
+ * failed, reported). */
+int pinger_start(pinger *p, const td_daemon *d);
+void pinger_stop(pinger *p);
 
 #endif
