@@ -26,6 +26,7 @@
 #include "mpm.h"
 #include "srv_budget.h"
 #include "srv_log.h"
+#include "srv_tsan.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -229,19 +230,6 @@ static void snapmsg_unref(snapmsg *m)
 {
     if (m && atomic_fetch_sub(&m->refs, 1) == 1) free(m);
 }
-
-/* ThreadSanitizer cannot see the hand-over of a message through libzmq's
- * (uninstrumented) lock-free pipes; these annotations tell it that what the
- * worker did before sending happens before zmq's free callback. */
-#if defined(__SANITIZE_THREAD__)
-void __tsan_acquire(void *addr);
-void __tsan_release(void *addr);
-#define TSAN_ACQUIRE(p) __tsan_acquire(p)
-#define TSAN_RELEASE(p) __tsan_release(p)
-#else
-#define TSAN_ACQUIRE(p) ((void)(p))
-#define TSAN_RELEASE(p) ((void)(p))
-#endif
 
 /* Bytes of snapshot messages zmq holds, every job's (queued for some
  * watcher, or on their way to the stream socket). */

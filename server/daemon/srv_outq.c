@@ -12,6 +12,7 @@
 #include "srv_outq.h"
 
 #include "srv_grow.h"
+#include "srv_tsan.h"
 
 #include <errno.h>
 #include <stdatomic.h>
@@ -46,19 +47,6 @@ static void conn_unref(conn *c)
 {
     if (atomic_fetch_sub(&c->refs, 1) == 1) free(c);
 }
-
-/* ThreadSanitizer cannot see the hand-over of a reply through libzmq's
- * (uninstrumented) lock-free pipes: these annotations tell it that what
- * the main thread did before the send happens before the free function. */
-#if defined(__SANITIZE_THREAD__)
-void __tsan_acquire(void *addr);
-void __tsan_release(void *addr);
-#define TSAN_ACQUIRE(p) __tsan_acquire(p)
-#define TSAN_RELEASE(p) __tsan_release(p)
-#else
-#define TSAN_ACQUIRE(p) ((void)(p))
-#define TSAN_RELEASE(p) ((void)(p))
-#endif
 
 /* libzmq's free function, on its I/O thread (or in zmq_msg_close). */
 static void release(void *data, void *hint)
