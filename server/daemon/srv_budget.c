@@ -100,7 +100,7 @@ void srv_budget_estimate(const mpp_case *sc, double steps, srv_disk_estimate *ou
     memset(out, 0, sizeof *out);
     double n = (double)sc->info.particles, dim = sc->c.grid.dim;
     unsigned f = sc->snapshot_fields;
-    /* the fields the run will have (as srv_pool.c's snapshot() keeps) */
+    /* the fields the run will have (as srv_job.c's snapshot() keeps) */
     if (!mpm_case_has_field(&sc->c, MPM_FIELD_PLASTIC_STRAIN))
         f &= ~(unsigned)MPP_SNAP_PLASTIC_STRAIN;
     if (!mpm_case_has_field(&sc->c, MPM_FIELD_DEFORMATION_GRADIENT))

@@ -105,7 +105,7 @@ void srv_after_write(daemon_t *d, zmq_msg_t *id, const char *owner, int64_t run,
     int rc = store_write_result(d->st, seq, why, sizeof why);
     pending *p = NULL;
     if (rc == 1 && serving && same_peer(&serving->id, id)) {
-        /* a queued Submit carried on by serve_pending(): it waits in its
+        /* a queued Submit carried on by srv_pending_serve(): it waits in its
          * own place, before its client's later requests */
         serving->fn = fn;
         serving->fn_arg = arg;

@@ -289,7 +289,7 @@ static void do_snapshot(daemon_t *d, zmq_msg_t *id, mpp_request *rq)
     }
     size_t n = (size_t)ss.n, dim = (size_t)ss.dim, off = 0;
     const double *data = ss.data;
-    /* the stored layout of srv_pool.c: the arrays back to back in
+    /* the stored layout of srv_job.c: the arrays back to back in
      * field-bit order (MPP_SNAP_*), the yield flags as doubles 0/1 */
     const double *arr[8] = {0};
     size_t cnt[8] = {n * dim, n * dim, n * 6, n, n, n, n * dim * dim, n};

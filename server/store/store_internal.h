@@ -168,7 +168,7 @@ struct store {
     uint64_t snapshots_dropped;
     char last_werr[512];
     int64_t rec_running, rec_queued;
-    /* full-disk state (store_ends.c, the upkeep in store_writer.c), under
+    /* full-disk state (store_ends.c, the upkeep in store_upkeep.c), under
      * mu: the last transaction was lost (degraded, why), crash recovery
      * still to do for the runs with ids below recover_below, the run ends
      * kept (defer, ndefer, the side file ends_fd and its used slots), the

@@ -1,7 +1,9 @@
 /*
  * store_writer.c - the store's write side (see store.h): the queue every
  * write function appends to, the one writer thread that commits it, and
- * commit tracking (store_flush, tickets, the notify fd).
+ * commit tracking (store_flush, tickets, the notify fd).  The statements
+ * and transactions the thread runs are store_apply.c's, the upkeep
+ * store_upkeep.c's; this header tells the whole write path.
  *
  * Writer thread.  One thread owns the write connection.  Every write
  * function (store_run_insert, store_run_set_status, store_run_progress,
@@ -59,7 +61,7 @@
  * work), releases the disk reserve (store_ends.c) and keeps every run end
  * in it (the end of a run the disk stopped: FAILED with the reason), in
  * memory and in a preallocated slot of the side file.  The upkeep
- * (sti_upkeep) then writes, in one transaction, the kept ends and a crash
+ * (sti_upkeep, store_upkeep.c) then writes, in one transaction, the kept ends and a crash
  * recovery the open could not write, or a probe when there is neither; it
  * runs right after a loss and every UPKEEP_S while it has work, and puts
  * the reserve back once a transaction commits.  Guarded by the
