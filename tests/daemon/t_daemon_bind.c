@@ -409,7 +409,7 @@ DTEST(daemon_bind_loopback_starts)
         CHECK(td_stop(&d) == 0);
     }
     /* CURVE: tcp://0.0.0.0 is allowed, and is what it says */
-    curve_dir c;
+    curve_dir c = {0};
     char ep[80], lst[512];
     if (curve_dir_make(&c, "lo-curve")) return;
     int port = td_tcp_port(4821);
@@ -432,7 +432,7 @@ DTEST(daemon_bind_loopback_starts)
  * its request connection and its stream. */
 DTEST(daemon_revoke_open_connections)
 {
-    curve_dir c;
+    curve_dir c = {0};
     char ep[80], sep[80], text[200];
     if (curve_dir_make(&c, "revoke")) return;
     const char *spub = c.spub, *apub = c.apub, *asec = c.asec, *bpub = c.bpub, *bsec = c.bsec;
@@ -854,7 +854,7 @@ DTEST(daemon_names_shown_escaped)
  * key. */
 DTEST(daemon_names_forbidden_no_key)
 {
-    curve_dir c;
+    curve_dir c = {0};
     char ep[80];
     if (curve_dir_make(&c, "private")) return;
     const char *spub = c.spub, *apub = c.apub, *asec = c.asec;
