@@ -2,8 +2,8 @@
  * store_sql.c - what every file of the store shares, below them all: the
  * calling thread's error (store_error), logging through the store's sink,
  * the clocks, the on-disk names of the enums, the SQLite helpers (exec, a
- * one-value query, a connection's settings, closing one) and growing an
- * array.  It calls no other file of the store (tests/include_graph.py
+ * one-value query, a connection's settings, closing one); store_sql.h
+ * also grows arrays (sti_grow).  It calls no other file of the store (tests/include_graph.py
  * checks that the store's files form no circle).
  *
  * On disk, status, method, update and transfer are stored as text
@@ -172,17 +172,4 @@ void sti_close_db(store *s, sqlite3 *db)
 {
     int rc = sqlite3_close(db);
     if (rc != SQLITE_OK) sti_log(s, "closing a connection: %s", sqlite3_errstr(rc));
-}
-
-void *sti_grow(void *v, size_t *cap, size_t need, size_t size)
-{
-    if (need <= *cap) return v;
-    size_t nc = *cap ? *cap : 16;
-    while (nc < need) {
-        if (nc > SIZE_MAX / 2 / size) return NULL;
-        nc *= 2;
-    }
-    void *nv = realloc(v, nc * size);
-    if (nv) *cap = nc;
-    return nv;
 }

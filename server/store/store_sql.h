@@ -11,6 +11,7 @@
 #include <sqlite3.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 /* ---- on-disk names ---- */
 
@@ -51,7 +52,19 @@ void sti_close_db(store *s, sqlite3 *db);
 
 /* Room for need elements of size bytes in the array v of *cap: v itself
  * when it has it, else v grown (doubling from 16) with *cap updated, or
- * NULL when out of memory (v unchanged and still the caller's). */
-void *sti_grow(void *v, size_t *cap, size_t need, size_t size);
+ * NULL when out of memory (v unchanged and still the caller's).  Inline,
+ * so that gcc -fanalyzer follows the realloc into the callers. */
+static inline void *sti_grow(void *v, size_t *cap, size_t need, size_t size)
+{
+    if (need <= *cap) return v;
+    size_t nc = *cap ? *cap : 16;
+    while (nc < need) {
+        if (nc > SIZE_MAX / 2 / size) return NULL;
+        nc *= 2;
+    }
+    void *nv = realloc(v, nc * size);
+    if (nv) *cap = nc;
+    return nv;
+}
 
 #endif
