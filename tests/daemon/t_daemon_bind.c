@@ -47,15 +47,6 @@ static int write_file(const char *path, const char *text, mode_t mode)
     return close(fd) == 0 && ok ? 0 : -1;
 }
 
-static int log_has(const td_daemon *d, const char *s)
-{
-    size_t len = 0;
-    char *log = td_slurp(d->log, &len);
-    int r = log && strstr(log, s);
-    free(log);
-    return r;
-}
-
 static unsigned file_mode(const char *path)
 {
     struct stat sb;

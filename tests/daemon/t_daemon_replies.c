@@ -65,30 +65,6 @@ static int send_request(void *s, const mpp_request *rq)
     return rc;
 }
 
-/* Under ASan freed blocks wait in a quarantine (up to 256 MB) before they
- * are reused: the daemons here get 16 MB, so that their RSS measures what
- * they hold, not what they freed. */
-static int start_measured(td_daemon *d, const char *dir, const char *const *extra)
-{
-#if defined(__SANITIZE_ADDRESS__)
-    const char *old = getenv("ASAN_OPTIONS");
-    char *keep = old ? strdup(old) : NULL;
-    char opt[512];
-    snprintf(opt, sizeof opt, "%s%squarantine_size_mb=16", keep ? keep : "",
-             keep && *keep ? ":" : "");
-    setenv("ASAN_OPTIONS", opt, 1);
-    int rc = td_start(d, dir, extra);
-    if (keep)
-        setenv("ASAN_OPTIONS", keep, 1);
-    else
-        unsetenv("ASAN_OPTIONS");
-    free(keep);
-    return rc;
-#else
-    return td_start(d, dir, extra);
-#endif
-}
-
 /* Sanitizers multiply the daemon's own memory (shadow, quarantine): the
  * margins over a bound are wider there. */
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
@@ -173,7 +149,7 @@ static void unread_replies(const char *name, long long samples, int requests)
     pinger p;
     void *ctx = NULL, *s = NULL;
     snprintf(dir, sizeof dir, "%s/%s", tmp, name);
-    if (start_measured(&d, dir, extra) || energy_run(&d, samples)) return;
+    if (td_start_measured(&d, dir, extra) || energy_run(&d, samples)) return;
     /* the reads warmed up: one whole series read the ordinary way */
     td_out o;
     CHECK(td_ctl(&d, 120, &o, "energy", "1", NULL) == 0 && o.status == 0);
@@ -183,7 +159,7 @@ static void unread_replies(const char *name, long long samples, int requests)
            samples);
     long base = proc_kb(d.pid, "VmRSS:");
     CHECK(reset_hwm(d.pid) == 0);
-    if (pinger_start(&p, &d)) return;
+    if (pinger_start(&p, &d, 0)) return;
     ctx = zmq_ctx_new();
     s = ctx ? deaf_dealer(ctx, d.ep) : NULL;
     if (!s) {
@@ -295,14 +271,14 @@ static void large_requests(const char *name, int conns, int each, long long max_
         free(req);
         return;
     }
-    if (start_measured(&d, dir, extra)) {
+    if (td_start_measured(&d, dir, extra)) {
         free(s);
         free(req);
         return;
     }
     long base = proc_kb(d.pid, "VmRSS:");
     int sent = 0;
-    if (reset_hwm(d.pid) || pinger_start(&p, &d)) {
+    if (reset_hwm(d.pid) || pinger_start(&p, &d, 0)) {
         t_fail(__FILE__, __LINE__, "no measure");
         free(s);
         free(req);
@@ -408,7 +384,7 @@ static void conns_cap(const char *name, int idle, int raw, int soft)
         rl = keep;
         rl.rlim_cur = (rlim_t)soft < keep.rlim_cur ? (rlim_t)soft : keep.rlim_cur;
         if (setrlimit(RLIMIT_NOFILE, &rl) == 0) {
-            started = start_measured(&d, dir, extra);
+            started = td_start_measured(&d, dir, extra);
             setrlimit(RLIMIT_NOFILE, &keep);
         }
     }
@@ -425,7 +401,7 @@ static void conns_cap(const char *name, int idle, int raw, int soft)
         free(fds);
         return;
     }
-    if (pinger_start(&p, &d)) {
+    if (pinger_start(&p, &d, 0)) {
         free(s);
         free(fds);
         return;
@@ -661,7 +637,7 @@ static void listings(const char *name, int nruns, int conns, int each)
     char got[64];
     CHECK(td_wait_status(&d, (unsigned long long)nruns, "FINISHED", 120, got, sizeof got) == 0);
     void *ctx = zmq_ctx_new(), **s = calloc((size_t)conns, sizeof *s);
-    if (!ctx || !s || pinger_start(&p, &d)) {
+    if (!ctx || !s || pinger_start(&p, &d, 0)) {
         free(s);
         if (ctx) zmq_ctx_term(ctx);
         return;

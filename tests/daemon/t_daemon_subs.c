@@ -40,7 +40,7 @@
 #endif
 /* What the daemon may keep, above its baseline, a second after a hostile
  * client left (the allocator's free lists; under ASan its 16 MB quarantine
- * as well, see start()). */
+ * as well, see td_start_measured()). */
 #if defined(__SANITIZE_ADDRESS__)
 #define AFTER_MB 64L
 #elif defined(__SANITIZE_THREAD__)
@@ -51,30 +51,6 @@
 /* The worst Ping round trip (a fresh connection each) that the daemon
  * must keep to during an attack. */
 #define PING_BOUND_S 1.0
-
-/* td_start; under ASan the daemon gets a 16 MB quarantine of freed blocks
- * (not 256 MB), so that its memory measures what it holds, not what it
- * freed. */
-static int start(td_daemon *d, const char *dir, const char *const *extra)
-{
-#if defined(__SANITIZE_ADDRESS__)
-    const char *old = getenv("ASAN_OPTIONS");
-    char *keep = old ? strdup(old) : NULL;
-    char opt[512];
-    snprintf(opt, sizeof opt, "%s%squarantine_size_mb=16", keep ? keep : "",
-             keep && *keep ? ":" : "");
-    setenv("ASAN_OPTIONS", opt, 1);
-    int rc = td_start(d, dir, extra);
-    if (keep)
-        setenv("ASAN_OPTIONS", keep, 1);
-    else
-        unsetenv("ASAN_OPTIONS");
-    free(keep);
-    return rc;
-#else
-    return td_start(d, dir, extra);
-#endif
-}
 
 /* ---- a raw ZMTP 3.0 SUB peer over the daemon's ipc stream endpoint ---- */
 
@@ -154,7 +130,7 @@ static int measure(td_daemon *d, int (*run)(td_daemon *, long), long size, attac
     td_msleep(300);
     f->base_kb = proc_kb(d->pid, "VmRSS:");
     if (reset_hwm(d->pid)) TLOG("cannot reset VmHWM: the peak is since the start");
-    if (pinger_start(&p, d)) return -1;
+    if (pinger_start(&p, d, 1)) return -1;
     int rc = run(d, size);
     td_msleep(500); /* what the daemon still does with what it read */
     pinger_stop(&p);
@@ -264,7 +240,7 @@ static void oversized_test(const char *name, long size)
     td_daemon d;
     attack_fig f;
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     CHECK(measure(&d, oversized, size, &f) == 0);
     char what[64];
     snprintf(what, sizeof what, "one %ld MiB subscription", size >> 20);
@@ -294,7 +270,7 @@ static void flood_test(const char *name, long n)
     td_daemon d;
     attack_fig f;
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     double t0 = td_now();
     CHECK(measure(&d, flood, n, &f) == 0);
     double secs = td_now() - t0;
@@ -365,7 +341,7 @@ static void many_jobs_test(const char *name, int jobs, long long steps)
     td_daemon d;
     void *zctx = NULL, *sub = NULL;
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     CHECK(write_case(snap_case(name, steps), dir, "snap.json", path, sizeof path) == 0);
     /* job 1 unwatched: the baseline of a job's own memory */
     double wall;
@@ -452,7 +428,7 @@ static void beside_test(const char *name, long long steps)
     void *zctx = NULL, *stalled = NULL, *reader = NULL;
     long got[2] = {0, 0};
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     /* a snapshot every 4 steps of a slower job: 5.5 MB at a pace a
      * reader on a loaded machine keeps up with */
     json_t *c = snap_case(name, steps * 4);
@@ -509,7 +485,7 @@ DTEST(daemon_subs_ahead)
     char dir[300];
     td_daemon d;
     snprintf(dir, sizeof dir, "%s/ahead", t_tmpdir());
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     void *zctx = zmq_ctx_new();
     CHECK(zctx);
     void *near = subscribe(zctx, &d, 3, 1000), *far = near ? subscribe(zctx, &d, 5, 1000) : NULL;

@@ -475,9 +475,10 @@ static void *pinger_main(void *arg)
             p->lost += pr != 1;
             if (dt > p->max_s) p->max_s = dt;
         }
-        if (pr != 1) {
+        if (pr != 1 || p->fresh) {
             /* a DEALER whose reply never came: start afresh so that a late
-             * reply is not taken for the next one's */
+             * reply is not taken for the next one's (fresh: every ping on
+             * a new connection) */
             zmq_close(s);
             s = zmq_socket(ctx, ZMQ_DEALER);
             if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, p->ep))
@@ -493,9 +494,10 @@ out:
     return NULL;
 }
 
-int pinger_start(pinger *p, const td_daemon *d)
+int pinger_start(pinger *p, const td_daemon *d, int fresh)
 {
     memset(p, 0, sizeof *p);
+    p->fresh = fresh;
     snprintf(p->ep, sizeof p->ep, "%s", d->ep);
     atomic_init(&p->stop, 0);
     atomic_init(&p->state, 0);
@@ -537,4 +539,34 @@ long wait_rss_below(pid_t pid, long kb, double limit)
     for (double t0 = td_now(); now > kb && td_now() - t0 < limit; now = proc_kb(pid, "VmRSS:"))
         td_msleep(100);
     return now;
+}
+
+int log_has(const td_daemon *d, const char *s)
+{
+    size_t len = 0;
+    char *log = td_slurp(d->log, &len);
+    int r = log && strstr(log, s);
+    free(log);
+    return r;
+}
+
+int td_start_measured(td_daemon *d, const char *dir, const char *const *extra)
+{
+#if defined(__SANITIZE_ADDRESS__)
+    const char *old = getenv("ASAN_OPTIONS");
+    char *keep = old ? strdup(old) : NULL;
+    char opt[512];
+    snprintf(opt, sizeof opt, "%s%squarantine_size_mb=16", keep ? keep : "",
+             keep && *keep ? ":" : "");
+    setenv("ASAN_OPTIONS", opt, 1);
+    int rc = td_start(d, dir, extra);
+    if (keep)
+        setenv("ASAN_OPTIONS", keep, 1);
+    else
+        unsetenv("ASAN_OPTIONS");
+    free(keep);
+    return rc;
+#else
+    return td_start(d, dir, extra);
+#endif
 }

@@ -131,7 +131,15 @@ void disk_full_scenario(const char *name);
 /* Room for an error text in the daemon tests. */
 #define ERRLEN 1024
 
+/* 1 if the daemon's log contains s. */
+int log_has(const td_daemon *d, const char *s);
+
 /* ---- memory and responsiveness of a daemon under load ---- */
+
+/* td_start; under ASan freed blocks wait in a quarantine (up to 256 MB)
+ * before they are reused: the daemon gets 16 MB, so that its memory
+ * measures what it holds, not what it freed. */
+int td_start_measured(td_daemon *d, const char *dir, const char *const *extra);
 
 /* Resets the daemon's VmHWM to its current RSS (Linux >= 4.0); 0 or -1. */
 int reset_hwm(pid_t pid);
@@ -150,11 +158,13 @@ typedef struct {
     atomic_int state; /* 0 starting, 1 its first ping answered, -1 failed */
     double max_s;     /* slowest reply (a lost one counts as its 10 s wait) */
     int pings, lost;
+    int fresh; /* each ping on a new connection (the handshake timed too) */
     pthread_t th;
 } pinger;
-/* Starts the pinger and waits for its first answer: 0, or -1 (test
+/* Starts the pinger (fresh: a new connection for each ping, else one kept
+ * open) and waits for its first answer: 0, or -1 (test
  * failed, reported). */
-int pinger_start(pinger *p, const td_daemon *d);
+int pinger_start(pinger *p, const td_daemon *d, int fresh);
 void pinger_stop(pinger *p);
 
 #endif
