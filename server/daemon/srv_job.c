@@ -38,13 +38,6 @@
 #include <time.h>
 #include <zmq.h>
 
-static double wall_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
 static double mono_now(void)
 {
     struct timespec ts;
@@ -599,7 +592,7 @@ void srv_job_run(const srv_job_env *e, void *push, srv_job *j)
     mpp_case *sc = j->sc;
     const srv_config *cfg = e->cfg;
     /* a resumed run's wall time adds up */
-    double start = wall_now(), t0 = mono_now() - j->prior_wall;
+    double start = srv_wall_now(), t0 = mono_now() - j->prior_wall;
     store_run_set_status(e->st, (int64_t)j->id, MPP_STATUS_RUNNING, start, NULL);
     int threads = sc->c.threads > 0 && sc->c.threads < cfg->solver_threads ? sc->c.threads
                                                                            : cfg->solver_threads;
