@@ -125,7 +125,7 @@ FUZZ_O ?= -O1
 FUZZF = $(FUZZ_O) -g -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
          -fno-sanitize-recover=all
 
-.PHONY: all deps test test-quick tsan bench bench-build bench-compare bench-inproc inproc-objs bench-accuracy bench-vtk bench-ceiling stress \
+.PHONY: all deps test layers test-quick tsan bench bench-build bench-compare bench-inproc inproc-objs bench-accuracy bench-vtk bench-ceiling stress \
         demo docs-picture clean \
         format format-check lint fuzz fuzz-quick fuzz-build fuzz-seed
 .SECONDARY: $(GEN_C) $(GEN_H)
@@ -229,10 +229,16 @@ $(TSAN)/mpmtest: $(call mpmtest_deps,$(TSAN))
 # quick form (make fuzz-quick).  T=name runs one test.  Tests that
 # need the daemon and the client find them through MPMD_BIN and MPMCTL_BIN.
 test: deps
-	@$(MAKE) --no-print-directory $(ASAN)/mpmtest $(ASAN)/mpmd $(ASAN)/mpmctl $(ASAN)/mpmweb
+	@$(MAKE) --no-print-directory $(ASAN)/mpmtest $(ASAN)/mpmd $(ASAN)/mpmctl $(ASAN)/mpmweb layers
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  MPMD_BIN=$(ASAN)/mpmd MPMCTL_BIN=$(ASAN)/mpmctl $(ASAN)/mpmtest $(T)
 	@if [ -z "$(T)" ]; then $(MAKE) --no-print-directory fuzz-quick; fi
+
+# make layers (run by make test): each library's graph of its files (calls
+# from the objects' symbols, includes) and its cycles; a cycle fails in the
+# libraries tests/include_graph.py lists in CHECKED.  V=1 prints the graphs.
+layers: $(foreach l,mpm mpp store srv ctl scenes,$(ASAN)/lib$(l).a)
+	/usr/bin/python3 tests/include_graph.py --build $(ASAN) $(if $(V),,--quiet)
 
 # The benchmarks' binaries, built (not run) in CI so that they never rot.
 bench-build: deps

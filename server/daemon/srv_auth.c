@@ -19,6 +19,7 @@
  */
 #include "srv_auth.h"
 
+#include "srv_grow.h"
 #include "srv_log.h"
 
 #include <dirent.h>
@@ -181,13 +182,9 @@ static int cmp_key(const void *a, const void *b)
 
 static int list_add(keylist *l, const char *z, const long long q[3], size_t *cap)
 {
-    if (l->n == *cap) {
-        size_t nc = *cap ? 2 * *cap : 16;
-        void *p = nc > KEYS_MAX ? NULL : realloc(l->z, nc * sizeof *l->z);
-        if (!p) return -1;
-        l->z = p;
-        *cap = nc;
-    }
+    keyent *p = srv_grow(l->z, cap, l->n + 1, sizeof *p, KEYS_MAX);
+    if (!p) return -1;
+    l->z = p;
     keyent *e = &l->z[l->n++];
     memset(e->z, 0, SRV_KEY_Z85_SIZE);
     memcpy(e->z, z, SRV_KEY_Z85_LEN);

@@ -6,6 +6,8 @@
  */
 #include "srv_budget.h"
 
+#include "srv_grow.h"
+
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -33,13 +35,9 @@ static owner_total *find_locked(srv_budget *b, const char *owner, int add)
     for (size_t i = 0; i < b->n; i++)
         if (!strncmp(b->tab[i].owner, owner, sizeof b->tab[i].owner - 1)) return &b->tab[i];
     if (!add) return NULL;
-    if (b->n == b->cap) {
-        size_t nc = b->cap ? 2 * b->cap : 16;
-        owner_total *t = realloc(b->tab, nc * sizeof *t);
-        if (!t) return NULL;
-        b->tab = t;
-        b->cap = nc;
-    }
+    owner_total *t = srv_grow(b->tab, &b->cap, b->n + 1, sizeof *t, 0);
+    if (!t) return NULL;
+    b->tab = t;
     owner_total *o = &b->tab[b->n++];
     snprintf(o->owner, sizeof o->owner, "%s", owner);
     o->bytes = 0;
@@ -102,7 +100,7 @@ void srv_budget_estimate(const mpp_case *sc, double steps, srv_disk_estimate *ou
     memset(out, 0, sizeof *out);
     double n = (double)sc->info.particles, dim = sc->c.grid.dim;
     unsigned f = sc->snapshot_fields;
-    /* the fields the run will have (as srv_pool.c's snapshot() keeps) */
+    /* the fields the run will have (as srv_job.c's snapshot() keeps) */
     if (!mpm_case_has_field(&sc->c, MPM_FIELD_PLASTIC_STRAIN))
         f &= ~(unsigned)MPP_SNAP_PLASTIC_STRAIN;
     if (!mpm_case_has_field(&sc->c, MPM_FIELD_DEFORMATION_GRADIENT))

@@ -12,7 +12,7 @@
  * snapshot's data bytes, STORE_ENERGY_ROW_BYTES per energy sample; and a
  * run's checkpoint file at its size while it is on disk (the new one
  * charged before it is written, the one it replaces refunded after the
- * rename, the last refunded when it is removed: srv_pool.c).
+ * rename, the last refunded when it is removed: srv_job.c).
  * Thread-safe (one mutex, taken per write, never per step).
  */
 #ifndef SRV_BUDGET_H

@@ -83,3 +83,10 @@ void srv_log_store(void *ud, const char *msg)
     else
         srv_log(0, "store: %s", msg);
 }
+
+double srv_wall_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}

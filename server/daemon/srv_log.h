@@ -19,6 +19,9 @@ void srv_error(uint64_t job, const char *fmt, ...) __attribute__((format(printf,
 void srv_debug(uint64_t job, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 void srv_log_set_verbose(int verbose);
 
+/* Unix time now, in seconds. */
+double srv_wall_now(void);
+
 /* A store_log_fn-compatible sink (user data unused). */
 void srv_log_store(void *ud, const char *msg);
 

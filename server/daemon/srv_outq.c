@@ -11,6 +11,9 @@
  */
 #include "srv_outq.h"
 
+#include "srv_grow.h"
+#include "srv_tsan.h"
+
 #include <errno.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -44,19 +47,6 @@ static void conn_unref(conn *c)
 {
     if (atomic_fetch_sub(&c->refs, 1) == 1) free(c);
 }
-
-/* ThreadSanitizer cannot see the hand-over of a reply through libzmq's
- * (uninstrumented) lock-free pipes: these annotations tell it that what
- * the main thread did before the send happens before the free function. */
-#if defined(__SANITIZE_THREAD__)
-void __tsan_acquire(void *addr);
-void __tsan_release(void *addr);
-#define TSAN_ACQUIRE(p) __tsan_acquire(p)
-#define TSAN_RELEASE(p) __tsan_release(p)
-#else
-#define TSAN_ACQUIRE(p) ((void)(p))
-#define TSAN_RELEASE(p) ((void)(p))
-#endif
 
 /* libzmq's free function, on its I/O thread (or in zmq_msg_close). */
 static void release(void *data, void *hint)
@@ -104,13 +94,9 @@ static conn *find(srv_outq *q, const void *id, size_t idlen)
             q->c[k++] = q->c[i];
     }
     q->n = k;
-    if (q->n == q->cap) {
-        size_t cap = q->cap ? 2 * q->cap : 16;
-        conn **nc = realloc(q->c, cap * sizeof *nc);
-        if (!nc) return NULL;
-        q->c = nc;
-        q->cap = cap;
-    }
+    conn **nc = srv_grow(q->c, &q->cap, q->n + 1, sizeof *nc, 0);
+    if (!nc) return NULL;
+    q->c = nc;
     conn *c = malloc(sizeof *c);
     if (!c) return NULL;
     atomic_init(&c->bytes, 0);

@@ -18,14 +18,8 @@
 #include "mpp_msg.h"
 #include "srv_ckpt.h"
 #include "srv_config.h"
+#include "srv_job.h"
 #include "store.h"
-
-/* Length of a stream topic: "job:%016llx:" */
-#define SRV_TOPIC_LEN 21
-/* Writes the topic of a job into buf (SRV_TOPIC_LEN + 1 bytes). */
-void srv_topic(uint64_t job, char *buf);
-/* Parses a topic prefix of exactly SRV_TOPIC_LEN bytes; 0 if it is one. */
-int srv_topic_parse(const char *buf, size_t len, uint64_t *job);
 
 /* What Cancel found. */
 enum { SRV_CANCEL_NONE = 0, SRV_CANCEL_QUEUED = 1, SRV_CANCEL_RUNNING = 2 };
@@ -84,15 +78,15 @@ int srv_pool_room(srv_pool *p);
 /* State of a queued or running job: 0, or -1 if it is not live. */
 int srv_pool_info(srv_pool *p, uint64_t id, srv_job_info *out);
 
+/* Who submitted a job (live: the pool's; else the store's): 0 with it in
+ * who, or -1 if there is no such job. */
+int srv_pool_job_owner(srv_pool *p, store *st, uint64_t job, char *who, size_t n);
+
 /* Cancels a live job.  A queued one is removed and recorded CANCELLED at
  * once, and *msg / *len get its Finished stream message for the caller to
  * publish (free() it); a running one stops before its next step.  Returns
  * SRV_CANCEL_NONE, SRV_CANCEL_QUEUED or SRV_CANCEL_RUNNING. */
 int srv_pool_cancel(srv_pool *p, uint64_t id, uint8_t **msg, size_t *len);
-
-/* The error of a run that ended because the store lost writes (disk full,
- * I/O error); the reason follows it in the log and the Finished message. */
-#define SRV_STORE_LOST "the run store lost writes (disk full or I/O error)"
 
 /* A job that ended FAILED with SRV_STORE_LOST lately (its end may not be
  * in the store: the disk was full): its status, steps, t and wall time in

@@ -14,7 +14,8 @@
  * Guarded by tests/daemon/t_daemon_subs.c.
  */
 #include "srv_stream.h"
-#include "srv_daemon_int.h"
+
+#include "srv_pool.h"
 
 #include "srv_log.h"
 
@@ -200,7 +201,7 @@ static void subscribe(daemon_t *d, const char *b, size_t n, int is_job, uint64_t
     if (e) e->refused++; /* until applied */
     if (srv_auth_curve(d->auth)) {
         char who[OWNER_SIZE];
-        if (srv_job_owner(d, job, who, sizeof who)) {
+        if (srv_pool_job_owner(d->pool, d->st, job, who, sizeof who)) {
             refused(s, job, "stream subscription by %s not applied: no such job", uid);
             return;
         }
@@ -402,4 +403,15 @@ void srv_stream_relay(daemon_t *d, long budget)
                 if (zmq_send(d->xpub, bt, sizeof bt, ZMQ_DONTWAIT) < 0) break;
         }
     }
+}
+
+void srv_stream_publish(void *arg, uint64_t job, uint8_t *msg, size_t len)
+{
+    daemon_t *d = arg;
+    char topic[SRV_TOPIC_LEN + 1];
+    srv_topic(job, topic);
+    if (msg && (zmq_send(d->xpub, topic, SRV_TOPIC_LEN, ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
+                zmq_send(d->xpub, msg, len, ZMQ_DONTWAIT) < 0))
+        srv_warn(job, "stream message not published: %s", zmq_strerror(errno));
+    free(msg);
 }

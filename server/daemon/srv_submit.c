@@ -14,9 +14,12 @@
  * reserve spent) both are refused at once; reads go on.  Guarded by
  * daemon_disk_submit_full and daemon_disk_restart_full.
  */
+#include "srv_submit.h"
+
 #include "srv_ckpt.h"
-#include "srv_daemon_int.h"
 #include "srv_log.h"
+#include "srv_pending.h"
+#include "srv_reply.h"
 #include "srv_stream.h"
 
 #include <math.h>

@@ -22,6 +22,9 @@
 #define _GNU_SOURCE
 #include "store_internal.h"
 
+#include "store_ends.h"
+#include "store_sql.h"
+
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>

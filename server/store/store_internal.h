@@ -1,17 +1,20 @@
 /*
- * store_internal.h - what the store's three files share, private to
- * server/store/: the store struct, the write-queue entry, the SQLite
- * helpers, error and log functions, the on-disk names of the enums.  The
- * only header of mpmd that includes sqlite3.h (and only files in
- * server/store/ include it).
+ * store_internal.h - the store's types, private to server/store/: the
+ * store struct, the write-queue entry, the limits.  It declares no
+ * function: each file's private header declares its own, so that the
+ * files depend on each other one way (tests/include_graph.py checks it).
+ * With store_sql.h, the only headers of mpmd that include sqlite3.h (and
+ * only files in server/store/ include them).  From the bottom up:
  *
- *   store_open.c    open, lock, schema migrations, crash recovery, close;
- *                   errors, logging, the SQLite helpers
- *   store_writer.c  the write queue, the writer thread, commit tracking
- *                   (flush, tickets, the notify fd)
- *   store_read.c    the pool of read connections and every read
+ *   store_sql.c     errors, logging, clocks, on-disk names, SQLite helpers
  *   store_ends.c    the side file of run ends a full disk kept out of
  *                   the database, and the disk reserve
+ *   store_read.c    the pool of read connections and every read
+ *   store_apply.c   the writer's statements and transactions
+ *   store_upkeep.c  the upkeep: kept ends, crash recovery, the reserve
+ *   store_writer.c  the write queue, the writer thread, commit tracking
+ *                   (flush, tickets, the notify fd)
+ *   store_open.c    open, lock, schema migrations, close
  *
  * Internal functions are prefixed sti_.
  */
@@ -165,7 +168,7 @@ struct store {
     uint64_t snapshots_dropped;
     char last_werr[512];
     int64_t rec_running, rec_queued;
-    /* full-disk state (store_ends.c, the upkeep in store_writer.c), under
+    /* full-disk state (store_ends.c, the upkeep in store_upkeep.c), under
      * mu: the last transaction was lost (degraded, why), crash recovery
      * still to do for the runs with ids below recover_below, the run ends
      * kept (defer, ndefer, the side file ends_fd and its used slots), the
@@ -201,85 +204,5 @@ struct store {
     sqlite3 *pool[READER_POOL_MAX];
     int npool;
 };
-
-/* ---- on-disk names (store_open.c) ---- */
-
-/* status_names[st - MPP_STATUS_MIN] for an mpp_status st. */
-#define STORE_NSTATUS (MPP_STATUS_MAX - MPP_STATUS_MIN + 1)
-extern const char *const sti_status_names[STORE_NSTATUS];
-/* methods, updates and transfers: their keys (mpm_method_key(), ...) */
-int sti_status_ok(mpp_status st);
-int sti_method_ok(mpm_method m);
-int sti_update_ok(mpm_update u);
-int sti_transfer_ok(mpm_transfer t);
-const char *sti_status_name(mpp_status st); /* "queued", ...; "?" */
-/* Index of name in names[0..n), or -1. */
-int sti_parse_name(const char *name, const char *const *names, int n);
-
-/* ---- errors, logging, time (store_open.c) ---- */
-
-/* Sets the calling thread's error to code with the message; returns code. */
-int sti_fail(int code, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-/* MPM_EIO with "what: sqlite message" (MPM_ENOMEM for SQLITE_NOMEM). */
-int sti_sql_fail(sqlite3 *db, int rc, const char *what);
-/* The thread's error value, to save and restore around a cleanup. */
-mpm_error *sti_error(void);
-void sti_log(store *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-double sti_mono_now(void);
-
-/* ---- SQLite helpers (store_open.c) ---- */
-
-/* Runs one or more statements with no results. */
-int sti_exec(sqlite3 *db, const char *sql, const char *what);
-/* Runs a query returning one integer (or text into txt if not NULL). */
-int sti_query1(sqlite3 *db, const char *sql, int64_t *v, char *txt, size_t txtlen);
-/* Extended result codes, busy timeout, foreign keys. */
-int sti_conn_setup(sqlite3 *db, int busy_ms);
-void sti_close_db(store *s, sqlite3 *db);
-
-/* ---- writer (store_writer.c) ---- */
-
-/* Prepares the writer's statements on s->wdb. */
-int sti_writer_prepare(store *s);
-/* The writer thread's body (arg: the store). */
-void *sti_writer_main(void *arg);
-/* Finalizes the statements, frees the queue and the run map. */
-void sti_writer_free(store *s);
-/* The upkeep, on the writer connection (at open, then by the writer
- * thread): in one transaction, the kept run ends and the pending crash
- * recovery (or, with neither, a probe write), then the disk reserve put
- * back.  0 when the transaction committed. */
-int sti_upkeep(store *s);
-
-/* ---- crash recovery (store_open.c) ---- */
-
-/* Marks the runs below s->recover_below left 'running' or 'queued'
- * 'interrupted', inside the writer's open transaction. */
-int sti_recover_rows(store *s);
-
-/* ---- run ends kept off a full disk, the reserve (store_ends.c) ---- */
-
-/* Opens (creating and preallocating) the side file "<db>.ends" and loads
- * the ends it holds into s->defer; a failure is logged, not fatal. */
-void sti_ends_open(store *s);
-void sti_ends_close(store *s);
-/* Keeps the end of a run whose transaction was lost (writer thread). */
-void sti_ends_keep(store *s, int64_t run_id, const store_run_end *end);
-/* Forgets the first n kept ends (applied and committed; writer thread). */
-void sti_ends_drop(store *s, size_t n);
-/* Shows a kept end or a pending recovery in a run read back. */
-void sti_ends_overlay(store *s, store_run *r);
-/* The disk reserve "<db>.reserve": 1 when it is in place (allocated
- * whole), else 0; sets s->reserve_ok. */
-int sti_reserve_exists(store *s);
-/* Puts it in place: 0, or -1 (no room: nothing stays allocated). */
-int sti_reserve_make(store *s);
-/* Releases it (its space is then free for the store's writes). */
-void sti_reserve_release(store *s, const char *why);
-
-/* ---- readers (store_read.c) ---- */
-
-/* Closes the idle read connections. */
-void sti_readers_close(store *s);
 
 #endif

@@ -1,9 +1,8 @@
 /*
  * store_open.c - opening and closing the run store (see store.h): the
- * one-daemon lock, the connection settings, the schema migrations, crash
- * recovery and the writer thread's start; also what the store's files
- * share: the calling thread's error, logging, the on-disk names of the
- * enums and the SQLite helpers (store_internal.h).
+ * one-daemon lock, the connection settings, the schema migrations, the
+ * first upkeep (crash recovery: store_upkeep.c) and the writer thread's
+ * start.  What every file of the store shares is in store_sql.c.
  *
  * Open.  store_open: the database file made owner-only and refused with
  * a second name (a hard link), then flock() on <realpath>.lock, a file of
@@ -19,14 +18,16 @@
  * energy sample), the next run id, the commit-notification eventfd and the
  * writer thread (store_writer.c).  Reads use connections of their own
  * (store_read.c).
- *
- * On disk.  Status, method, update and transfer are stored as text
- * ('queued', 'gimp', 'musl', 'apic'), so a database reads the same whatever
- * the C enums' values; the API speaks mpp_status, mpm_method, mpm_update
- * and mpm_transfer.
  */
 #define _GNU_SOURCE
 #include "store_internal.h"
+
+#include "store_apply.h"
+#include "store_ends.h"
+#include "store_read.h"
+#include "store_sql.h"
+#include "store_upkeep.h"
+#include "store_writer.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -170,42 +171,11 @@ static const char *const migrations[] = {
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,
                "one migration step per schema version");
 
-/* ---------------------------------------------------------------------- */
-/* Errors, logging, time */
-
-static _Thread_local mpm_error tl_err;
-
-const mpm_error *store_error(void)
-{
-    return &tl_err;
-}
-mpm_error *sti_error(void)
-{
-    return &tl_err;
-}
-
-int sti_fail(int code, const char *fmt, ...)
-{
-    char msg[MPM_ERROR_MSG_MAX];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
-    va_end(ap);
-    return mpm_fail(&tl_err, code, NULL, "%s", msg);
-}
-
-int sti_sql_fail(sqlite3 *db, int rc, const char *what)
-{
-    const char *msg = db ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
-    if (db && sqlite3_errcode(db) == SQLITE_OK) msg = sqlite3_errstr(rc);
-    return sti_fail((rc & 0xff) == SQLITE_NOMEM ? MPM_ENOMEM : MPM_EIO, "%s: %s", what, msg);
-}
-
 /* Prefixes the thread's error message with "database PATH: ". */
 static int fail_in(const char *path, int code)
 {
     char m[MPM_ERROR_MSG_MAX];
-    snprintf(m, sizeof m, "%s", tl_err.message);
+    snprintf(m, sizeof m, "%s", sti_error()->message);
     return sti_fail(code, "database %s: %s", path, m);
 }
 
@@ -213,128 +183,6 @@ static void default_log(void *ud, const char *msg)
 {
     (void)ud;
     fprintf(stderr, "mpmd store: %s\n", msg);
-}
-
-void sti_log(store *s, const char *fmt, ...)
-{
-    char buf[768];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(buf, sizeof buf, fmt, ap);
-    va_end(ap);
-    s->log(s->log_ud, buf);
-}
-
-double sti_mono_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-double store_time_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-const char *store_sqlite_version(void)
-{
-    return sqlite3_libversion();
-}
-
-/* ---------------------------------------------------------------------- */
-/* On-disk names of the enums */
-
-const char *const sti_status_names[STORE_NSTATUS] = {"queued", "running",   "finished",
-                                                     "failed", "cancelled", "interrupted"};
-
-_Static_assert(MPP_STATUS_QUEUED == MPP_STATUS_MIN && MPP_STATUS_RUNNING == 2 &&
-                   MPP_STATUS_FINISHED == 3 && MPP_STATUS_FAILED == 4 &&
-                   MPP_STATUS_CANCELLED == 5 && MPP_STATUS_INTERRUPTED == MPP_STATUS_MAX,
-               "sti_status_names follows mpp_status");
-
-int sti_status_ok(mpp_status st)
-{
-    return st >= MPP_STATUS_MIN && st <= MPP_STATUS_MAX;
-}
-int sti_method_ok(mpm_method m)
-{
-    return (unsigned)m < MPM_N_METHODS;
-}
-int sti_update_ok(mpm_update u)
-{
-    return (unsigned)u < MPM_N_UPDATES;
-}
-int sti_transfer_ok(mpm_transfer t)
-{
-    return (unsigned)t < MPM_N_TRANSFERS;
-}
-
-const char *sti_status_name(mpp_status st)
-{
-    return sti_status_ok(st) ? sti_status_names[st - MPP_STATUS_MIN] : "?";
-}
-
-int sti_parse_name(const char *name, const char *const *names, int n)
-{
-    for (int i = 0; name && i < n; i++)
-        if (!strcmp(name, names[i])) return i;
-    return -1;
-}
-
-/* ---------------------------------------------------------------------- */
-/* SQLite helpers */
-
-int sti_exec(sqlite3 *db, const char *sql, const char *what)
-{
-    char *msg = NULL;
-    int rc = sqlite3_exec(db, sql, NULL, NULL, &msg);
-    if (rc != SQLITE_OK) {
-        int code = (rc & 0xff) == SQLITE_NOMEM ? MPM_ENOMEM : MPM_EIO;
-        sti_fail(code, "%s: %s", what, msg ? msg : sqlite3_errstr(rc));
-        sqlite3_free(msg);
-        return code;
-    }
-    return 0;
-}
-
-int sti_query1(sqlite3 *db, const char *sql, int64_t *v, char *txt, size_t txtlen)
-{
-    sqlite3_stmt *st = NULL;
-    int rc = sqlite3_prepare_v2(db, sql, -1, &st, NULL);
-    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, sql);
-    rc = sqlite3_step(st);
-    if (rc != SQLITE_ROW) {
-        int r =
-            rc == SQLITE_DONE ? sti_fail(MPM_EIO, "%s: no result", sql) : sti_sql_fail(db, rc, sql);
-        sqlite3_finalize(st); /* returns the step's error, reported above */
-        return r;
-    }
-    if (v) *v = sqlite3_column_int64(st, 0);
-    if (txt) {
-        const unsigned char *t = sqlite3_column_text(st, 0);
-        snprintf(txt, txtlen, "%s", t ? (const char *)t : "");
-    }
-    rc = sqlite3_finalize(st);
-    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, sql);
-    return 0;
-}
-
-int sti_conn_setup(sqlite3 *db, int busy_ms)
-{
-    int rc = sqlite3_extended_result_codes(db, 1);
-    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, "extended result codes");
-    rc = sqlite3_busy_timeout(db, busy_ms);
-    if (rc != SQLITE_OK) return sti_sql_fail(db, rc, "busy_timeout");
-    return sti_exec(db, "PRAGMA foreign_keys = ON", "enabling foreign keys");
-}
-
-void sti_close_db(store *s, sqlite3 *db)
-{
-    int rc = sqlite3_close(db);
-    if (rc != SQLITE_OK) sti_log(s, "closing a connection: %s", sqlite3_errstr(rc));
 }
 
 /* Keeps the first column of each row (the last one wins). */
@@ -617,10 +465,10 @@ static int open_writer(store *s)
 static int rollback_keep(store *s, int r, const char *what)
 {
     if (!sqlite3_get_autocommit(s->wdb)) {
-        mpm_error keep = tl_err;
+        mpm_error keep = *sti_error();
         if (sti_exec(s->wdb, "ROLLBACK", "rollback"))
-            sti_log(s, "rollback after %s: %s", what, tl_err.message);
-        tl_err = keep;
+            sti_log(s, "rollback after %s: %s", what, sti_error()->message);
+        *sti_error() = keep;
     }
     return r;
 }
@@ -678,57 +526,6 @@ static int migrate(store *s)
     else if (uv < STORE_SCHEMA_VERSION)
         sti_log(s, "%s: schema migrated from version %" PRId64 " to %d", s->path, uv,
                 STORE_SCHEMA_VERSION);
-    return 0;
-}
-
-/* Runs `UPDATE ... SET status='interrupted', error=?1 WHERE status=?2`.
- * The steps done and the final energies become those of the run's last
- * stored energy sample: the progress figures in the row lag behind it or
- * run ahead of it by whatever the crash left, while the sample is a
- * consistent state (its step, t and energies belong together, and RunInfo
- * takes t and the last energies from it). */
-static int recover_status(store *s, const char *from, const char *error, int64_t *count)
-{
-    sqlite3_stmt *st = NULL;
-#define LAST_SAMPLE(cols) \
-    "(SELECT " cols " FROM energy WHERE run_id = runs.id ORDER BY seq DESC LIMIT 1)"
-    const char *sql =
-        "UPDATE runs SET status = 'interrupted', error = ?1,"
-        " steps = COALESCE(" LAST_SAMPLE(
-            "step") ", steps),"
-                    " (kinetic, strain, potential, external_work, total) ="
-                    " " LAST_SAMPLE(
-                        "kinetic, strain, potential, external_work, total") " WHERE status = ?2"
-                                                                            " AND id < ?3";
-#undef LAST_SAMPLE
-    int rc = sqlite3_prepare_v2(s->wdb, sql, -1, &st, NULL);
-    if (rc != SQLITE_OK) return sti_sql_fail(s->wdb, rc, "crash recovery");
-    rc = sqlite3_bind_text(st, 1, error, -1, SQLITE_STATIC);
-    if (rc == SQLITE_OK) rc = sqlite3_bind_text(st, 2, from, -1, SQLITE_STATIC);
-    if (rc == SQLITE_OK) rc = sqlite3_bind_int64(st, 3, s->recover_below);
-    if (rc == SQLITE_OK) rc = sqlite3_step(st);
-    int r = rc == SQLITE_DONE ? 0 : sti_sql_fail(s->wdb, rc, "crash recovery");
-    *count = sqlite3_changes(s->wdb);
-    rc = sqlite3_finalize(st);
-    if (!r && rc != SQLITE_OK) r = sti_sql_fail(s->wdb, rc, "crash recovery");
-    return r;
-}
-
-/* Crash recovery runs in the upkeep's transaction (sti_upkeep), at open
- * and, when the disk is full then, retried by the writer until it
- * commits; only the runs an earlier daemon left (ids below recover_below)
- * are concerned.  Guarded by daemon_disk_restart_full. */
-int sti_recover_rows(store *s)
-{
-    int64_t running = 0, queued = 0;
-    int r;
-    if ((r = recover_status(s, "running", STORE_INTERRUPTED_RUNNING, &running)) ||
-        (r = recover_status(s, "queued", STORE_INTERRUPTED_QUEUED, &queued)))
-        return r;
-    pthread_mutex_lock(&s->mu);
-    s->rec_running = running;
-    s->rec_queued = queued;
-    pthread_mutex_unlock(&s->mu);
     return 0;
 }
 
@@ -873,7 +670,7 @@ int store_open(const char *path, const store_options *opt, store **out)
         goto fail;
     s->next_id = next;
     s->recover_below = next;
-    if ((r = sti_writer_prepare(s))) goto fail;
+    if ((r = sti_apply_prepare(s))) goto fail;
     /* the run ends a full disk kept, then crash recovery: written now, or
      * by the writer once there is room (reads show them meanwhile) */
     sti_ends_open(s);

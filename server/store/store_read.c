@@ -12,6 +12,10 @@
  */
 #include "store_internal.h"
 
+#include "store_ends.h"
+#include "store_read.h"
+#include "store_sql.h"
+
 #include <inttypes.h>
 #include <math.h>
 #include <stdio.h>
@@ -313,16 +317,12 @@ int store_run_list(store *s, const store_run_filter *f, store_run **runs, size_t
         goto out;
     }
     while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
-        if (cnt == capn) {
-            size_t nc = capn ? 2 * capn : 16;
-            store_run *nv = realloc(v, nc * sizeof *nv);
-            if (!nv) {
-                r = sti_fail(MPM_ENOMEM, "out of memory listing runs");
-                goto out;
-            }
-            v = nv;
-            capn = nc;
+        store_run *nv = sti_grow(v, &capn, cnt + 1, sizeof *nv);
+        if (!nv) {
+            r = sti_fail(MPM_ENOMEM, "out of memory listing runs");
+            goto out;
         }
+        v = nv;
         if ((r = read_run_row(db, st, &v[cnt], f->with_case))) goto out;
         sti_ends_overlay(s, &v[cnt++]);
     }
@@ -486,16 +486,12 @@ int store_run_extras(store *s, int64_t run_id, store_run_extra *out)
         goto out;
     }
     while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
-        if (out->n_snapshots == cap) {
-            size_t ncap = cap ? 2 * cap : 16;
-            int64_t *nb = realloc(out->snapshot_steps, ncap * sizeof *nb);
-            if (!nb) {
-                r = sti_fail(MPM_ENOMEM, "out of memory listing snapshots");
-                goto out;
-            }
-            out->snapshot_steps = nb;
-            cap = ncap;
+        int64_t *nb = sti_grow(out->snapshot_steps, &cap, out->n_snapshots + 1, sizeof *nb);
+        if (!nb) {
+            r = sti_fail(MPM_ENOMEM, "out of memory listing snapshots");
+            goto out;
         }
+        out->snapshot_steps = nb;
         out->snapshot_steps[out->n_snapshots++] = sqlite3_column_int64(st, 0);
     }
     if (rc != SQLITE_DONE) r = sti_sql_fail(db, rc, "listing snapshots");
@@ -564,16 +560,12 @@ int store_owner_totals(store *s, store_owner_total **rows, size_t *n)
         goto out;
     }
     while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
-        if (cnt == capn) {
-            size_t nc = capn ? 2 * capn : 16;
-            store_owner_total *nv = realloc(v, nc * sizeof *nv);
-            if (!nv) {
-                r = sti_fail(MPM_ENOMEM, "out of memory reading the owners' totals");
-                goto out;
-            }
-            v = nv;
-            capn = nc;
+        store_owner_total *nv = sti_grow(v, &capn, cnt + 1, sizeof *nv);
+        if (!nv) {
+            r = sti_fail(MPM_ENOMEM, "out of memory reading the owners' totals");
+            goto out;
         }
+        v = nv;
         v[cnt].bytes = sqlite3_column_int64(st, 1);
         if ((r = col_strdup(db, st, 0, &v[cnt].owner))) goto out;
         cnt++;

@@ -77,16 +77,6 @@ static int give_server_key(const char *dir, const char *sub, const char *srv_pub
     return write_text(p, line);
 }
 
-/* 1 if the daemon's log contains s. */
-static int log_has(const td_daemon *d, const char *s)
-{
-    size_t len = 0;
-    char *log = td_slurp(d->log, &len);
-    int r = log && strstr(log, s);
-    free(log);
-    return r;
-}
-
 /* mpmctl --keys dir/sub ARGS: the output in o (caller frees). */
 static int ctl_as(const td_daemon *d, const char *dir, const char *sub, td_out *o,
                   const char *const *args)

@@ -47,15 +47,6 @@ static int write_file(const char *path, const char *text, mode_t mode)
     return close(fd) == 0 && ok ? 0 : -1;
 }
 
-static int log_has(const td_daemon *d, const char *s)
-{
-    size_t len = 0;
-    char *log = td_slurp(d->log, &len);
-    int r = log && strstr(log, s);
-    free(log);
-    return r;
-}
-
 static unsigned file_mode(const char *path)
 {
     struct stat sb;
@@ -160,6 +151,62 @@ static json_t *dealer_request(void *s, const mpp_request *rq, double timeout)
     }
     free(buf);
     return reply;
+}
+
+/* A CURVE daemon's directory: dir (made) and dir/keys with the keypairs
+ * of the server, of a and of b (make_keys), the server's secret key file,
+ * and dir/authorized_keys listing a and b. */
+typedef struct {
+    char dir[300], kdir[400], key[500], auth[500];
+    char spub[41], ssec[41], apub[41], asec[41], bpub[41], bsec[41];
+} curve_dir;
+
+static int curve_dir_make(curve_dir *c, const char *name)
+{
+    char text[200];
+    snprintf(c->dir, sizeof c->dir, "%s/%s", t_tmpdir(), name);
+    snprintf(c->kdir, sizeof c->kdir, "%s/keys", c->dir);
+    snprintf(c->key, sizeof c->key, "%s/server.key", c->kdir);
+    snprintf(c->auth, sizeof c->auth, "%s/authorized_keys", c->dir);
+    if ((mkdir(c->dir, 0700) && errno != EEXIST) || (mkdir(c->kdir, 0700) && errno != EEXIST) ||
+        make_keys(c->kdir, "server", c->spub, c->ssec) ||
+        make_keys(c->kdir, "a", c->apub, c->asec) || make_keys(c->kdir, "b", c->bpub, c->bsec)) {
+        t_fail(__FILE__, __LINE__, "cannot make the keys in %s", c->kdir);
+        return -1;
+    }
+    snprintf(text, sizeof text, "%s alice\n%s bob\n", c->apub, c->bpub);
+    if (write_file(c->auth, text, 0600)) {
+        t_fail(__FILE__, __LINE__, "cannot write %s", c->auth);
+        return -1;
+    }
+    return 0;
+}
+
+/* The case that runs until cancelled (long_case, energy every `every`
+ * steps), written to dir and read back as a Case message; NULL after
+ * reporting a failure. */
+static Mpmd__Case *long_case_pb(const char *dir, int every)
+{
+    char cpath[500], err[ERRLEN];
+    size_t clen = 0;
+    Mpmd__Case *pb = NULL;
+    char *ctext = write_case(long_case(every), dir, "long.json", cpath, sizeof cpath) == 0
+                      ? td_slurp(cpath, &clen)
+                      : NULL;
+    if (!ctext || td_case_from_json(ctext, clen, &pb, err, sizeof err))
+        t_fail(__FILE__, __LINE__, "the long case: %s", ctext ? err : "not written");
+    free(ctext);
+    return pb;
+}
+
+/* 1 when a Ping on the open connection s gets its Pong within timeout s. */
+static int dealer_pings(void *s, double timeout)
+{
+    mpp_request ping = {.kind = MPP_REQ_PING};
+    json_t *r = dealer_request(s, &ping, timeout);
+    int pong = json_object_get(r, "pong") != NULL;
+    json_decref(r);
+    return pong;
 }
 
 /* Stream messages that reach s within secs seconds. */
@@ -353,21 +400,15 @@ DTEST(daemon_bind_loopback_starts)
         CHECK(td_stop(&d) == 0);
     }
     /* CURVE: tcp://0.0.0.0 is allowed, and is what it says */
-    char dir[300], kdir[400], key[500], auth[500], ep[80], lst[512];
-    char spub[41], ssec[41], apub[41], asec[41];
-    snprintf(dir, sizeof dir, "%s/lo-curve", tmp);
-    snprintf(kdir, sizeof kdir, "%s/keys", dir);
-    CHECK(mkdir(dir, 0700) == 0 || errno == EEXIST);
-    CHECK(mkdir(kdir, 0700) == 0 || errno == EEXIST);
-    CHECK(make_keys(kdir, "server", spub, ssec) == 0 && make_keys(kdir, "a", apub, asec) == 0);
-    snprintf(key, sizeof key, "%s/server.key", kdir);
-    snprintf(auth, sizeof auth, "%s/a.pub", kdir);
+    curve_dir c = {0};
+    char ep[80], lst[512];
+    if (curve_dir_make(&c, "lo-curve")) return;
     int port = td_tcp_port(4821);
     snprintf(ep, sizeof ep, "tcp://0.0.0.0:%d", port);
-    const char *extra[] = {"--curve-secret", key, "--authorized-keys", auth, NULL};
+    const char *extra[] = {"--curve-secret", c.key, "--authorized-keys", c.auth, NULL};
     td_daemon d;
-    td_set_curve(spub, apub, asec);
-    if (td_start_ep(&d, dir, ep, extra)) return;
+    td_set_curve(c.spub, c.apub, c.asec);
+    if (td_start_ep(&d, c.dir, ep, extra)) return;
     int n = listeners(port, lst, sizeof lst);
     TLOG("with CURVE %s: listening on %s", ep, lst);
     CHECKF(n >= 1 && !all_loopback(lst), "%s with CURVE listens on %s", ep, lst);
@@ -382,39 +423,25 @@ DTEST(daemon_bind_loopback_starts)
  * its request connection and its stream. */
 DTEST(daemon_revoke_open_connections)
 {
-    const char *tmp = t_tmpdir();
-    char dir[300], kdir[400], key[500], auth[500], ep[80], sep[80], text[200], cpath[500];
-    char spub[41], ssec[41], apub[41], asec[41], bpub[41], bsec[41];
-    snprintf(dir, sizeof dir, "%s/revoke", tmp);
-    snprintf(kdir, sizeof kdir, "%s/keys", dir);
-    CHECK(mkdir(dir, 0700) == 0 || errno == EEXIST);
-    CHECK(mkdir(kdir, 0700) == 0 || errno == EEXIST);
-    CHECK(make_keys(kdir, "server", spub, ssec) == 0 && make_keys(kdir, "a", apub, asec) == 0 &&
-          make_keys(kdir, "b", bpub, bsec) == 0);
-    snprintf(key, sizeof key, "%s/server.key", kdir);
-    snprintf(auth, sizeof auth, "%s/authorized_keys", dir);
-    snprintf(text, sizeof text, "%s alice\n%s bob\n", apub, bpub);
-    CHECK(write_file(auth, text, 0600) == 0);
+    curve_dir c = {0};
+    char ep[80], sep[80], text[200];
+    if (curve_dir_make(&c, "revoke")) return;
+    const char *spub = c.spub, *apub = c.apub, *asec = c.asec, *bpub = c.bpub, *bsec = c.bsec;
     int port = td_tcp_port(4831);
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", port);
     snprintf(sep, sizeof sep, "tcp://127.0.0.1:%d", port + 1);
-    const char *extra[] = {"--curve-secret", key, "--authorized-keys", auth, "--verbose", NULL};
+    const char *extra[] = {"--curve-secret", c.key, "--authorized-keys", c.auth, "--verbose", NULL};
     td_daemon d;
     td_set_curve(spub, apub, asec);
-    if (td_start_ep(&d, dir, ep, extra)) return;
+    if (td_start_ep(&d, c.dir, ep, extra)) return;
 
     void *zctx = zmq_ctx_new();
     void *bd = NULL, *bs = NULL, *ad = NULL, *as = NULL;
     json_t *r = NULL;
     CHECK(zctx);
     /* one long job each, energy every 50 steps: a steady stream */
-    Mpmd__Case *pb = NULL;
-    char err[ERRLEN];
-    CHECK(write_case(long_case(50), dir, "long.json", cpath, sizeof cpath) == 0);
-    size_t clen = 0;
-    char *ctext = td_slurp(cpath, &clen);
-    CHECK(ctext && td_case_from_json(ctext, clen, &pb, err, sizeof err) == 0);
-    free(ctext);
+    Mpmd__Case *pb = long_case_pb(c.dir, 50);
+    if (!pb) goto out;
     mpp_request sub = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
     mpp_request ping = {.kind = MPP_REQ_PING};
     bd = curve_socket(zctx, ZMQ_DEALER, ep, spub, bpub, bsec);
@@ -441,10 +468,7 @@ DTEST(daemon_revoke_open_connections)
     CHECK(zmq_setsockopt(bs, ZMQ_SUBSCRIBE, topic, strlen(topic)) == 0);
     CHECK(wait_watched(&d, jobs[0], 10) == 0 && wait_watched(&d, jobs[1], 10) == 0);
     long a0 = count_stream(as, 1.0), b0 = count_stream(bs, 1.0);
-    r = dealer_request(bd, &ping, 10);
-    int b_pong0 = json_object_get(r, "pong") != NULL;
-    json_decref(r);
-    r = NULL;
+    int b_pong0 = dealer_pings(bd, 10);
     TLOG("before the revocation: b's open connection pings %s; in 1 s a's stream %ld, b's %ld "
          "messages",
          b_pong0 ? "ok" : "NOT", a0, b0);
@@ -452,7 +476,7 @@ DTEST(daemon_revoke_open_connections)
 
     /* b removed, SIGHUP */
     snprintf(text, sizeof text, "%s alice\n", apub);
-    CHECK(write_file(auth, text, 0600) == 0);
+    CHECK(write_file(c.auth, text, 0600) == 0);
     double t0 = td_now();
     CHECK(kill(d.pid, SIGHUP) == 0);
     while (!log_has(&d, "SIGHUP: keys re-read") && td_now() < t0 + 10) td_msleep(20);
@@ -471,10 +495,8 @@ DTEST(daemon_revoke_open_connections)
                                                         ? "SubmitOk"
                                                         : td_err_code(r));
     json_decref(r);
-    r = dealer_request(ad, &ping, 10);
-    int a_pong = json_object_get(r, "pong") != NULL;
-    json_decref(r);
     r = NULL;
+    int a_pong = dealer_pings(ad, 10);
     char st[32];
     CHECK(td_job_status(&d, jobs[1], st, sizeof st, NULL) == 0);
     TLOG("after: in 1.5 s b's stream %ld, a's %ld messages; a pings %s; b's job %s; log: %s", b1,
@@ -823,31 +845,18 @@ DTEST(daemon_names_shown_escaped)
  * key. */
 DTEST(daemon_names_forbidden_no_key)
 {
-    const char *tmp = t_tmpdir();
-    char dir[300], kdir[400], key[500], auth[500], ep[80], text[200], cpath[500], err[ERRLEN];
-    char spub[41], ssec[41], apub[41], asec[41], bpub[41], bsec[41];
-    snprintf(dir, sizeof dir, "%s/private", tmp);
-    snprintf(kdir, sizeof kdir, "%s/keys", dir);
-    CHECK(mkdir(dir, 0700) == 0 || errno == EEXIST);
-    CHECK(mkdir(kdir, 0700) == 0 || errno == EEXIST);
-    CHECK(make_keys(kdir, "server", spub, ssec) == 0 && make_keys(kdir, "a", apub, asec) == 0 &&
-          make_keys(kdir, "b", bpub, bsec) == 0);
-    snprintf(key, sizeof key, "%s/server.key", kdir);
-    snprintf(auth, sizeof auth, "%s/authorized_keys", dir);
-    snprintf(text, sizeof text, "%s alice\n%s bob\n", apub, bpub);
-    CHECK(write_file(auth, text, 0600) == 0);
+    curve_dir c = {0};
+    char ep[80];
+    if (curve_dir_make(&c, "private")) return;
+    const char *spub = c.spub, *apub = c.apub, *asec = c.asec;
     snprintf(ep, sizeof ep, "tcp://127.0.0.1:%d", td_tcp_port(4841));
-    const char *extra[] = {"--curve-secret", key, "--authorized-keys", auth,
+    const char *extra[] = {"--curve-secret", c.key, "--authorized-keys", c.auth,
                            "--private-runs", NULL};
     td_daemon d;
     td_set_curve(spub, apub, asec);
-    if (td_start_ep(&d, dir, ep, extra)) return;
-    CHECK(write_case(long_case(100), dir, "long.json", cpath, sizeof cpath) == 0);
-    size_t clen = 0;
-    char *ctext = td_slurp(cpath, &clen);
-    Mpmd__Case *pb = NULL;
-    CHECK(ctext && td_case_from_json(ctext, clen, &pb, err, sizeof err) == 0);
-    free(ctext);
+    if (td_start_ep(&d, c.dir, ep, extra)) return;
+    Mpmd__Case *pb = long_case_pb(c.dir, 100);
+    CHECK(pb);
     mpp_request sub = {.kind = MPP_REQ_SUBMIT, .case_pb = pb};
     json_t *r = NULL;
     CHECK(td_request(d.ep, &sub, 20, &r) == 0 && json_object_get(r, "submitOk"));
@@ -863,7 +872,7 @@ DTEST(daemon_names_forbidden_no_key)
             json_decref(r);
             CHECK(td_wait_status(&d, 1, "CANCELLED", 20, st, sizeof st) == 0);
         }
-        td_set_curve(spub, bpub, bsec);
+        td_set_curve(spub, c.bpub, c.bsec);
         r = NULL;
         CHECK(td_request(d.ep, k ? &res : &can, 20, &r) == 0);
         TLOG("b's %s of a's job: %s: %s", k ? "resume" : "cancel", td_err_code(r), td_err_msg(r));

@@ -31,28 +31,10 @@ DTEST(daemon_stalled_watcher_bounded)
     td_out o;
     void *zctx = NULL, *sub = NULL;
     snprintf(dir, sizeof dir, "%s/stall", tmp);
-#if defined(__SANITIZE_ADDRESS__)
-    /* ASan keeps freed blocks in a quarantine of up to 256 MB, which the
-     * dropped snapshots fill at a pace that depends on the machine's load
-     * (248 MB with no watcher on a loaded machine): the daemon started
-     * here gets a 16 MB quarantine, so that its peak measures what it
-     * holds, not what it freed */
-    const char *asan_old = getenv("ASAN_OPTIONS");
-    char *asan_keep = asan_old ? strdup(asan_old) : NULL;
-    char asan_opt[512];
-    snprintf(asan_opt, sizeof asan_opt, "%s%squarantine_size_mb=16", asan_keep ? asan_keep : "",
-             asan_keep && *asan_keep ? ":" : "");
-    setenv("ASAN_OPTIONS", asan_opt, 1);
-    int started = td_start(&d, dir, extra);
-    if (asan_keep)
-        setenv("ASAN_OPTIONS", asan_keep, 1);
-    else
-        unsetenv("ASAN_OPTIONS");
-    free(asan_keep);
-    if (started) return;
-#else
-    if (td_start(&d, dir, extra)) return;
-#endif
+    /* the dropped snapshots fill ASan's quarantine at a pace that depends
+     * on the machine's load (248 MB with no watcher on a loaded machine):
+     * td_start_measured() keeps it small */
+    if (td_start_measured(&d, dir, extra)) return;
     CHECK(write_case(snap_case("stall", 200), dir, "snap.json", path, sizeof path) == 0);
 
     /* job 1 alone, then job 2 with a watcher that subscribed before it

@@ -37,128 +37,6 @@
 
 /* ---- measuring ------------------------------------------------------------------- */
 
-/* Resets the daemon's VmHWM to its current RSS (Linux >= 4.0); 0 or -1. */
-static int reset_hwm(pid_t pid)
-{
-    char path[64];
-    snprintf(path, sizeof path, "/proc/%ld/clear_refs", (long)pid);
-    FILE *f = fopen(path, "w");
-    if (!f) return -1;
-    int ok = fputs("5", f) >= 0;
-    return fclose(f) == 0 && ok ? 0 : -1;
-}
-
-/* A client connected before the attack that pings every 20 ms and keeps
- * the slowest answer (max_s, pings, lost: read after pinger_stop()). */
-typedef struct {
-    char ep[320];
-    atomic_int stop;
-    atomic_int state; /* 0 starting, 1 its first ping answered, -1 failed */
-    double max_s;     /* slowest reply (a lost one counts as its 10 s wait) */
-    int pings, lost;
-    pthread_t th;
-} pinger;
-
-static void *pinger_main(void *arg)
-{
-    pinger *p = arg;
-    void *ctx = zmq_ctx_new(), *s = ctx ? zmq_socket(ctx, ZMQ_DEALER) : NULL;
-    uint8_t *buf = NULL;
-    size_t len = 0;
-    mpp_request rq = {.kind = MPP_REQ_PING};
-    int zero = 0;
-    if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, p->ep) ||
-        mpp_request_encode(&rq, &buf, &len))
-        goto out;
-    for (int first = 1; first || !atomic_load(&p->stop); first = 0) {
-        double t0 = td_now();
-        if (zmq_send(s, "", 0, ZMQ_SNDMORE) < 0 || zmq_send(s, buf, len, 0) < 0) break;
-        zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
-        int pr = zmq_poll(&it, 1, 10000);
-        double dt = td_now() - t0;
-        if (pr == 1) {
-            zmq_msg_t part[3];
-            int n = td_recv_parts(s, part, 3);
-            for (int i = 0; i < n; i++) zmq_msg_close(&part[i]);
-        }
-        if (first) {
-            if (pr != 1) break;
-            atomic_store(&p->state, 1);
-        } else {
-            p->pings++;
-            p->lost += pr != 1;
-            if (dt > p->max_s) p->max_s = dt;
-        }
-        if (pr != 1) {
-            /* a DEALER whose reply never came: start afresh so that a late
-             * reply is not taken for the next one's */
-            zmq_close(s);
-            s = zmq_socket(ctx, ZMQ_DEALER);
-            if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, p->ep))
-                break;
-        }
-        td_msleep(20);
-    }
-out:
-    if (atomic_load(&p->state) == 0) atomic_store(&p->state, -1);
-    free(buf);
-    if (s) zmq_close(s);
-    if (ctx) zmq_ctx_term(ctx);
-    return NULL;
-}
-
-/* Starts the pinger and waits for its first answer: 0, or -1 (test
- * failed). */
-static int pinger_start(pinger *p, const td_daemon *d)
-{
-    memset(p, 0, sizeof *p);
-    snprintf(p->ep, sizeof p->ep, "%s", d->ep);
-    atomic_init(&p->stop, 0);
-    atomic_init(&p->state, 0);
-    if (pthread_create(&p->th, NULL, pinger_main, p)) {
-        t_fail(__FILE__, __LINE__, "cannot start the pinger thread");
-        return -1;
-    }
-    for (double t0 = td_now(); td_now() - t0 < 15 && atomic_load(&p->state) == 0;) td_msleep(10);
-    if (atomic_load(&p->state) != 1) {
-        atomic_store(&p->stop, 1);
-        pthread_join(p->th, NULL);
-        t_fail(__FILE__, __LINE__, "the pinger got no first answer");
-        return -1;
-    }
-    return 0;
-}
-
-static void pinger_stop(pinger *p)
-{
-    atomic_store(&p->stop, 1);
-    pthread_join(p->th, NULL);
-}
-
-/* Waits until the daemon's RSS has not grown for `quiet` seconds (it has
- * digested what was sent), at most `limit` s. */
-static void settle(pid_t pid, double quiet, double limit)
-{
-    long last = proc_kb(pid, "VmRSS:");
-    double t0 = td_now(), since = t0;
-    while (td_now() - t0 < limit && td_now() - since < quiet) {
-        td_msleep(100);
-        long now = proc_kb(pid, "VmRSS:");
-        if (now > last + 1024) since = td_now();
-        if (now > last) last = now;
-    }
-}
-
-/* Waits up to limit s for VmRSS to fall to at most kb; returns the last
- * VmRSS read. */
-static long wait_rss_below(pid_t pid, long kb, double limit)
-{
-    long now = proc_kb(pid, "VmRSS:");
-    for (double t0 = td_now(); now > kb && td_now() - t0 < limit; now = proc_kb(pid, "VmRSS:"))
-        td_msleep(100);
-    return now;
-}
-
 /* A DEALER that reads nothing: its receive queue holds one message and a
  * small socket buffer, so that what it does not read stays in the
  * daemon. */
@@ -185,30 +63,6 @@ static int send_request(void *s, const mpp_request *rq)
     int rc = zmq_send(s, "", 0, ZMQ_SNDMORE) < 0 || zmq_send(s, buf, len, 0) < 0 ? -1 : 0;
     free(buf);
     return rc;
-}
-
-/* Under ASan freed blocks wait in a quarantine (up to 256 MB) before they
- * are reused: the daemons here get 16 MB, so that their RSS measures what
- * they hold, not what they freed. */
-static int start_measured(td_daemon *d, const char *dir, const char *const *extra)
-{
-#if defined(__SANITIZE_ADDRESS__)
-    const char *old = getenv("ASAN_OPTIONS");
-    char *keep = old ? strdup(old) : NULL;
-    char opt[512];
-    snprintf(opt, sizeof opt, "%s%squarantine_size_mb=16", keep ? keep : "",
-             keep && *keep ? ":" : "");
-    setenv("ASAN_OPTIONS", opt, 1);
-    int rc = td_start(d, dir, extra);
-    if (keep)
-        setenv("ASAN_OPTIONS", keep, 1);
-    else
-        unsetenv("ASAN_OPTIONS");
-    free(keep);
-    return rc;
-#else
-    return td_start(d, dir, extra);
-#endif
 }
 
 /* Sanitizers multiply the daemon's own memory (shadow, quarantine): the
@@ -295,7 +149,7 @@ static void unread_replies(const char *name, long long samples, int requests)
     pinger p;
     void *ctx = NULL, *s = NULL;
     snprintf(dir, sizeof dir, "%s/%s", tmp, name);
-    if (start_measured(&d, dir, extra) || energy_run(&d, samples)) return;
+    if (td_start_measured(&d, dir, extra) || energy_run(&d, samples)) return;
     /* the reads warmed up: one whole series read the ordinary way */
     td_out o;
     CHECK(td_ctl(&d, 120, &o, "energy", "1", NULL) == 0 && o.status == 0);
@@ -305,7 +159,7 @@ static void unread_replies(const char *name, long long samples, int requests)
            samples);
     long base = proc_kb(d.pid, "VmRSS:");
     CHECK(reset_hwm(d.pid) == 0);
-    if (pinger_start(&p, &d)) return;
+    if (pinger_start(&p, &d, 0)) return;
     ctx = zmq_ctx_new();
     s = ctx ? deaf_dealer(ctx, d.ep) : NULL;
     if (!s) {
@@ -417,14 +271,14 @@ static void large_requests(const char *name, int conns, int each, long long max_
         free(req);
         return;
     }
-    if (start_measured(&d, dir, extra)) {
+    if (td_start_measured(&d, dir, extra)) {
         free(s);
         free(req);
         return;
     }
     long base = proc_kb(d.pid, "VmRSS:");
     int sent = 0;
-    if (reset_hwm(d.pid) || pinger_start(&p, &d)) {
+    if (reset_hwm(d.pid) || pinger_start(&p, &d, 0)) {
         t_fail(__FILE__, __LINE__, "no measure");
         free(s);
         free(req);
@@ -530,7 +384,7 @@ static void conns_cap(const char *name, int idle, int raw, int soft)
         rl = keep;
         rl.rlim_cur = (rlim_t)soft < keep.rlim_cur ? (rlim_t)soft : keep.rlim_cur;
         if (setrlimit(RLIMIT_NOFILE, &rl) == 0) {
-            started = start_measured(&d, dir, extra);
+            started = td_start_measured(&d, dir, extra);
             setrlimit(RLIMIT_NOFILE, &keep);
         }
     }
@@ -547,7 +401,7 @@ static void conns_cap(const char *name, int idle, int raw, int soft)
         free(fds);
         return;
     }
-    if (pinger_start(&p, &d)) {
+    if (pinger_start(&p, &d, 0)) {
         free(s);
         free(fds);
         return;
@@ -783,7 +637,7 @@ static void listings(const char *name, int nruns, int conns, int each)
     char got[64];
     CHECK(td_wait_status(&d, (unsigned long long)nruns, "FINISHED", 120, got, sizeof got) == 0);
     void *ctx = zmq_ctx_new(), **s = calloc((size_t)conns, sizeof *s);
-    if (!ctx || !s || pinger_start(&p, &d)) {
+    if (!ctx || !s || pinger_start(&p, &d, 0)) {
         free(s);
         if (ctx) zmq_ctx_term(ctx);
         return;

@@ -40,7 +40,7 @@
 #endif
 /* What the daemon may keep, above its baseline, a second after a hostile
  * client left (the allocator's free lists; under ASan its 16 MB quarantine
- * as well, see start()). */
+ * as well, see td_start_measured()). */
 #if defined(__SANITIZE_ADDRESS__)
 #define AFTER_MB 64L
 #elif defined(__SANITIZE_THREAD__)
@@ -51,81 +51,6 @@
 /* The worst Ping round trip (a fresh connection each) that the daemon
  * must keep to during an attack. */
 #define PING_BOUND_S 1.0
-
-/* td_start; under ASan the daemon gets a 16 MB quarantine of freed blocks
- * (not 256 MB), so that its memory measures what it holds, not what it
- * freed. */
-static int start(td_daemon *d, const char *dir, const char *const *extra)
-{
-#if defined(__SANITIZE_ADDRESS__)
-    const char *old = getenv("ASAN_OPTIONS");
-    char *keep = old ? strdup(old) : NULL;
-    char opt[512];
-    snprintf(opt, sizeof opt, "%s%squarantine_size_mb=16", keep ? keep : "",
-             keep && *keep ? ":" : "");
-    setenv("ASAN_OPTIONS", opt, 1);
-    int rc = td_start(d, dir, extra);
-    if (keep)
-        setenv("ASAN_OPTIONS", keep, 1);
-    else
-        unsetenv("ASAN_OPTIONS");
-    free(keep);
-    return rc;
-#else
-    return td_start(d, dir, extra);
-#endif
-}
-
-static int clear_hwm(pid_t pid)
-{
-    char path[64];
-    snprintf(path, sizeof path, "/proc/%ld/clear_refs", (long)pid);
-    FILE *f = fopen(path, "w");
-    if (!f) return -1;
-    int ok = fputs("5", f) >= 0;
-    return fclose(f) == 0 && ok ? 0 : -1;
-}
-
-/* ---- another client's pings, every 20 ms, on a thread ---- */
-
-typedef struct {
-    const td_daemon *d;
-    atomic_int stop;
-    double worst;
-    long n, lost;
-    pthread_t th;
-} pinger;
-
-static void *pinger_main(void *arg)
-{
-    pinger *p = arg;
-    while (!atomic_load(&p->stop)) {
-        mpp_request rq = {.kind = MPP_REQ_PING};
-        json_t *reply = NULL;
-        double t0 = td_now();
-        int rc = td_request(p->d->ep, &rq, 10, &reply);
-        double dt = td_now() - t0;
-        if (rc || !json_object_get(reply, "pong")) p->lost++;
-        json_decref(reply);
-        if (dt > p->worst) p->worst = dt;
-        p->n++;
-        td_msleep(20);
-    }
-    return NULL;
-}
-
-static int pinger_start(pinger *p, const td_daemon *d)
-{
-    memset(p, 0, sizeof *p);
-    p->d = d;
-    return pthread_create(&p->th, NULL, pinger_main, p) ? -1 : 0;
-}
-
-static void pinger_stop(pinger *p)
-{
-    atomic_store(&p->stop, 1);
-    pthread_join(p->th, NULL);
-}
 
 /* ---- a raw ZMTP 3.0 SUB peer over the daemon's ipc stream endpoint ---- */
 
@@ -204,16 +129,16 @@ static int measure(td_daemon *d, int (*run)(td_daemon *, long), long size, attac
     pinger p;
     td_msleep(300);
     f->base_kb = proc_kb(d->pid, "VmRSS:");
-    if (clear_hwm(d->pid)) TLOG("cannot reset VmHWM: the peak is since the start");
-    if (pinger_start(&p, d)) return -1;
+    if (reset_hwm(d->pid)) TLOG("cannot reset VmHWM: the peak is since the start");
+    if (pinger_start(&p, d, 1)) return -1;
     int rc = run(d, size);
     td_msleep(500); /* what the daemon still does with what it read */
     pinger_stop(&p);
     f->peak_kb = proc_kb(d->pid, "VmHWM:");
     td_msleep(1000);
     f->after_kb = proc_kb(d->pid, "VmRSS:");
-    f->ping_worst = p.worst;
-    f->pings = p.n;
+    f->ping_worst = p.max_s;
+    f->pings = p.pings;
     f->lost = p.lost;
     return rc;
 }
@@ -315,7 +240,7 @@ static void oversized_test(const char *name, long size)
     td_daemon d;
     attack_fig f;
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     CHECK(measure(&d, oversized, size, &f) == 0);
     char what[64];
     snprintf(what, sizeof what, "one %ld MiB subscription", size >> 20);
@@ -345,7 +270,7 @@ static void flood_test(const char *name, long n)
     td_daemon d;
     attack_fig f;
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     double t0 = td_now();
     CHECK(measure(&d, flood, n, &f) == 0);
     double secs = td_now() - t0;
@@ -416,7 +341,7 @@ static void many_jobs_test(const char *name, int jobs, long long steps)
     td_daemon d;
     void *zctx = NULL, *sub = NULL;
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     CHECK(write_case(snap_case(name, steps), dir, "snap.json", path, sizeof path) == 0);
     /* job 1 unwatched: the baseline of a job's own memory */
     double wall;
@@ -503,7 +428,7 @@ static void beside_test(const char *name, long long steps)
     void *zctx = NULL, *stalled = NULL, *reader = NULL;
     long got[2] = {0, 0};
     snprintf(dir, sizeof dir, "%s/%s", t_tmpdir(), name);
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     /* a snapshot every 4 steps of a slower job: 5.5 MB at a pace a
      * reader on a loaded machine keeps up with */
     json_t *c = snap_case(name, steps * 4);
@@ -560,7 +485,7 @@ DTEST(daemon_subs_ahead)
     char dir[300];
     td_daemon d;
     snprintf(dir, sizeof dir, "%s/ahead", t_tmpdir());
-    if (start(&d, dir, extra)) return;
+    if (td_start_measured(&d, dir, extra)) return;
     void *zctx = zmq_ctx_new();
     CHECK(zctx);
     void *near = subscribe(zctx, &d, 3, 1000), *far = near ? subscribe(zctx, &d, 5, 1000) : NULL;

@@ -6,6 +6,8 @@
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -444,4 +446,142 @@ int td_job_peak(const td_daemon *d, unsigned long long job, double *wall, long *
     json_decref(r);
     *hwm = proc_kb(d->pid, "VmHWM:");
     return 0;
+}
+
+/* ---- memory and responsiveness of a daemon under load ---- */
+
+int reset_hwm(pid_t pid)
+{
+    char path[64];
+    snprintf(path, sizeof path, "/proc/%ld/clear_refs", (long)pid);
+    FILE *f = fopen(path, "w");
+    if (!f) return -1;
+    int ok = fputs("5", f) >= 0;
+    return fclose(f) == 0 && ok ? 0 : -1;
+}
+
+static void *pinger_main(void *arg)
+{
+    pinger *p = arg;
+    void *ctx = zmq_ctx_new(), *s = ctx ? zmq_socket(ctx, ZMQ_DEALER) : NULL;
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    mpp_request rq = {.kind = MPP_REQ_PING};
+    int zero = 0;
+    if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, p->ep) ||
+        mpp_request_encode(&rq, &buf, &len))
+        goto out;
+    for (int first = 1; first || !atomic_load(&p->stop); first = 0) {
+        double t0 = td_now();
+        if (zmq_send(s, "", 0, ZMQ_SNDMORE) < 0 || zmq_send(s, buf, len, 0) < 0) break;
+        zmq_pollitem_t it = {s, 0, ZMQ_POLLIN, 0};
+        int pr = zmq_poll(&it, 1, 10000);
+        double dt = td_now() - t0;
+        if (pr == 1) {
+            zmq_msg_t part[3];
+            int n = td_recv_parts(s, part, 3);
+            for (int i = 0; i < n; i++) zmq_msg_close(&part[i]);
+        }
+        if (first) {
+            if (pr != 1) break;
+            atomic_store(&p->state, 1);
+        } else {
+            p->pings++;
+            p->lost += pr != 1;
+            if (dt > p->max_s) p->max_s = dt;
+        }
+        if (pr != 1 || p->fresh) {
+            /* a DEALER whose reply never came: start afresh so that a late
+             * reply is not taken for the next one's (fresh: every ping on
+             * a new connection) */
+            zmq_close(s);
+            s = zmq_socket(ctx, ZMQ_DEALER);
+            if (!s || zmq_setsockopt(s, ZMQ_LINGER, &zero, sizeof zero) || zmq_connect(s, p->ep))
+                break;
+        }
+        td_msleep(20);
+    }
+out:
+    if (atomic_load(&p->state) == 0) atomic_store(&p->state, -1);
+    free(buf);
+    if (s) zmq_close(s);
+    if (ctx) zmq_ctx_term(ctx);
+    return NULL;
+}
+
+int pinger_start(pinger *p, const td_daemon *d, int fresh)
+{
+    memset(p, 0, sizeof *p);
+    p->fresh = fresh;
+    snprintf(p->ep, sizeof p->ep, "%s", d->ep);
+    atomic_init(&p->stop, 0);
+    atomic_init(&p->state, 0);
+    if (pthread_create(&p->th, NULL, pinger_main, p)) {
+        t_fail(__FILE__, __LINE__, "cannot start the pinger thread");
+        return -1;
+    }
+    for (double t0 = td_now(); td_now() - t0 < 15 && atomic_load(&p->state) == 0;) td_msleep(10);
+    if (atomic_load(&p->state) != 1) {
+        atomic_store(&p->stop, 1);
+        pthread_join(p->th, NULL);
+        t_fail(__FILE__, __LINE__, "the pinger got no first answer");
+        return -1;
+    }
+    return 0;
+}
+
+void pinger_stop(pinger *p)
+{
+    atomic_store(&p->stop, 1);
+    pthread_join(p->th, NULL);
+}
+
+void settle(pid_t pid, double quiet, double limit)
+{
+    long last = proc_kb(pid, "VmRSS:");
+    double t0 = td_now(), since = t0;
+    while (td_now() - t0 < limit && td_now() - since < quiet) {
+        td_msleep(100);
+        long now = proc_kb(pid, "VmRSS:");
+        if (now > last + 1024) since = td_now();
+        if (now > last) last = now;
+    }
+}
+
+long wait_rss_below(pid_t pid, long kb, double limit)
+{
+    long now = proc_kb(pid, "VmRSS:");
+    for (double t0 = td_now(); now > kb && td_now() - t0 < limit; now = proc_kb(pid, "VmRSS:"))
+        td_msleep(100);
+    return now;
+}
+
+int log_has(const td_daemon *d, const char *s)
+{
+    size_t len = 0;
+    char *log = td_slurp(d->log, &len);
+    int r = log && strstr(log, s);
+    free(log);
+    return r;
+}
+
+int td_start_measured(td_daemon *d, const char *dir, const char *const *extra)
+{
+#if defined(__SANITIZE_ADDRESS__)
+    const char *old = getenv("ASAN_OPTIONS");
+    char *keep = old ? strdup(old) : NULL;
+    char opt[512];
+    snprintf(opt, sizeof opt, "%s%squarantine_size_mb=16", keep ? keep : "",
+             keep && *keep ? ":" : "");
+    setenv("ASAN_OPTIONS", opt, 1);
+    int rc = td_start(d, dir, extra);
+    if (keep)
+        setenv("ASAN_OPTIONS", keep, 1);
+    else
+        unsetenv("ASAN_OPTIONS");
+    free(keep);
+    return rc;
+#else
+    return td_start(d, dir, extra);
+#endif
 }

@@ -7,7 +7,10 @@
 #define T_DAEMON_UTIL_H
 
 #include <jansson.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stddef.h>
+#include <sys/types.h>
 
 #include "mpp_msg.h"
 #include "t_daemon.h"
@@ -134,5 +137,41 @@ void disk_full_scenario(const char *name);
 
 /* Room for an error text in the daemon tests. */
 #define ERRLEN 1024
+
+/* 1 if the daemon's log contains s. */
+int log_has(const td_daemon *d, const char *s);
+
+/* ---- memory and responsiveness of a daemon under load ---- */
+
+/* td_start; under ASan freed blocks wait in a quarantine (up to 256 MB)
+ * before they are reused: the daemon gets 16 MB, so that its memory
+ * measures what it holds, not what it freed. */
+int td_start_measured(td_daemon *d, const char *dir, const char *const *extra);
+
+/* Resets the daemon's VmHWM to its current RSS (Linux >= 4.0); 0 or -1. */
+int reset_hwm(pid_t pid);
+/* Waits until the daemon's RSS has not grown for `quiet` seconds (it has
+ * digested what was sent), at most `limit` s. */
+void settle(pid_t pid, double quiet, double limit);
+/* Waits up to limit s for VmRSS to fall to at most kb; returns the last
+ * VmRSS read. */
+long wait_rss_below(pid_t pid, long kb, double limit);
+
+/* A client connected before the attack that pings every 20 ms and keeps
+ * the slowest answer (max_s, pings, lost: read after pinger_stop()). */
+typedef struct {
+    char ep[320];
+    atomic_int stop;
+    atomic_int state; /* 0 starting, 1 its first ping answered, -1 failed */
+    double max_s;     /* slowest reply (a lost one counts as its 10 s wait) */
+    int pings, lost;
+    int fresh; /* each ping on a new connection (the handshake timed too) */
+    pthread_t th;
+} pinger;
+/* Starts the pinger (fresh: a new connection for each ping, else one kept
+ * open) and waits for its first answer: 0, or -1 (test
+ * failed, reported). */
+int pinger_start(pinger *p, const td_daemon *d, int fresh);
+void pinger_stop(pinger *p);
 
 #endif

@@ -36,17 +36,6 @@
 
 /* ---- watchers ----------------------------------------------------------------------- */
 
-/* Resets the daemon's VmHWM to its current RSS (Linux >= 4.0); 0 or -1. */
-static int reset_hwm(pid_t pid)
-{
-    char path[64];
-    snprintf(path, sizeof path, "/proc/%ld/clear_refs", (long)pid);
-    FILE *f = fopen(path, "w");
-    if (!f) return -1;
-    int ok = fputs("5", f) >= 0;
-    return fclose(f) == 0 && ok ? 0 : -1;
-}
-
 /* A watcher process: subscribes to job's stream (receiving at most one
  * message into its queue), never reads, and waits to be killed. */
 static pid_t vanishing_watcher(const td_daemon *d, unsigned long long job)

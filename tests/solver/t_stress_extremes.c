@@ -188,7 +188,7 @@ static int extreme_cases(xcase *xs, int max, const char *me, const char *up, int
     return n;
 }
 
-/* Runs a case the way the daemon's worker does (srv_pool.c): stop when
+/* Runs a case the way the daemon's worker does (srv_job.c): stop when
  * t >= end_time - dt/2 (or after `steps`), fail at a step limit. */
 static int run_case(const char *json, xout *o)
 {
