@@ -520,9 +520,10 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
                         c->n_materials);
     double cmax = 0;
     for (size_t i = 0; i < c->n_materials; i++) {
-        mpm_mat_params mp;
-        if ((rc = mpm_model_params(&c->materials[i], dim, i, &mp, err))) return rc;
-        if (mp.c > cmax) cmax = mp.c;
+        /* the one check of a material's parameters: its model's row */
+        if ((rc = mpm_material_check(&c->materials[i], dim, i, err))) return rc;
+        double ci = mpm_material_wave_speed(&c->materials[i], dim);
+        if (ci > cmax) cmax = ci;
     }
     if (c->n_bodies < 1 || !c->bodies)
         return mpm_fail(err, MPM_EINVAL, "bodies", "the case has no body, so no particles");

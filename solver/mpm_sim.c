@@ -164,12 +164,12 @@ static void free_particles(mpm_particles *P)
     memset(P, 0, sizeof *P);
 }
 
-/* What the case's models declare (mpm_model_ops.needs, OR-ed). */
+/* What the case's models need (their rows' needs, OR-ed). */
 static unsigned model_needs(const mpm_case *c)
 {
     unsigned n = 0;
     for (size_t i = 0; i < c->n_materials; i++) {
-        const mpm_model_ops *m = mpm_model_get(c->materials[i].model);
+        const mpm_material_model *m = mpm_material_model_of(c->materials[i].model);
         if (m) n |= m->needs;
     }
     return n;
@@ -598,19 +598,20 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->model = mpm_model_get(c->materials[0].model);
     s->nmat = c->n_materials;
     if (!(s->mats = calloc(s->nmat, sizeof *s->mats))) goto nomem;
+    if (!(s->mdesc = malloc(s->nmat * sizeof *s->mdesc))) goto nomem;
+    memcpy(s->mdesc, c->materials, s->nmat * sizeof *s->mdesc);
     for (size_t i = 0; i < s->nmat; i++) {
-        if (mpm_model_params(&c->materials[i], dim, i, &s->mats[i], err)) goto fail;
+        mpm_model_params(&c->materials[i], dim, &s->mats[i]);
         if (s->mats[i].c > s->cmax) s->cmax = s->mats[i].c;
         if (s->mats[i].ops != s->model) s->mixed = 1;
-        if (c->materials[i].model == MPM_MODEL_DRUCKER_PRAGER ||
-            c->materials[i].model == MPM_MODEL_MOHR_COULOMB)
+        if (mpm_material_model_of(c->materials[i].model)->needs & MPM_NEED_INTEGRATOR)
             s->frictional = 1;
     }
     if (s->frictional) {
         if (!(s->plp = calloc(s->nmat, sizeof *s->plp))) goto nomem;
         for (size_t i = 0; i < s->nmat; i++) {
-            mpm_model_kind k = c->materials[i].model;
-            if (k != MPM_MODEL_DRUCKER_PRAGER && k != MPM_MODEL_MOHR_COULOMB) continue;
+            if (!(mpm_material_model_of(c->materials[i].model)->needs & MPM_NEED_INTEGRATOR))
+                continue;
             if (mpm_model_plastic(&c->materials[i], dim, i, &s->plp[i], err)) goto fail;
             s->mats[i].pl = &s->plp[i];
         }
@@ -753,6 +754,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     stag_free(s->minv);
     for (int d = 0; d < 3; d++) free(s->ncoord[d]);
     free(s->mats);
+    free(s->mdesc);
     free(s->fixed_node);
     free(s->fixed_mask);
     mpm_cond_free(s);
@@ -856,7 +858,8 @@ static int frictional_end_step(mpm_sim *s)
             &s->err, MPM_EDIVERGED, NULL,
             "diverged at step %ld, time %.9g: the %s update of particle %zu (materials[%u]) "
             "failed: %s",
-            s->steps + 1, s->t + s->dt, s->mats[m].ops->name, (size_t)s->P.id[bad], m,
+            s->steps + 1, s->t + s->dt, mpm_material_model_of(s->mdesc[m].model)->name,
+            (size_t)s->P.id[bad], m,
             pl->kind == MPM_PLASTIC_DRUCKER_PRAGER
                 ? "Sloan's substepping exhausted its substeps or met a non-finite stress (a "
                   "strain increment of about a thousand yield strains; reduce dt or raise "

@@ -131,12 +131,8 @@ static void upd(const mpm_sim *s, unsigned *rd, unsigned *wr)
         *rd |= TF_F;
         *wr |= TF_F;
     }
-    unsigned needs = 0;
-    if (s->mixed) {
-        for (size_t i = 0; i < s->nmat; i++) needs |= s->mats[i].ops->needs;
-    } else {
-        needs = s->model->needs;
-    }
+    unsigned needs = 0; /* the materials' models' (one model unless mixed) */
+    for (size_t i = 0; i < s->nmat; i++) needs |= mpm_material_model_of(s->mdesc[i].model)->needs;
     *rd |= TF_MAT | TF_EPS; /* mat: the model's parameters (mixed: its runs) */
     *wr |= TF_SIG | TF_EPS;
     if (needs & MPM_NEED_PLASTIC) /* rate form: sig, the state, the work (V) */
