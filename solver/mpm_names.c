@@ -56,23 +56,24 @@ _Static_assert(MPM_TRANSFER_FLIP == 0 && MPM_TRANSFER_APIC == 1 &&
                    sizeof transfers / sizeof transfers[0] == MPM_N_TRANSFERS,
                "transfers[] follows mpm_transfer");
 
-/* Row v of a table of n rows of `size` bytes that start with a name_row. */
-static const name_row *row_at(const void *t, size_t size, int n, int v)
+/* Row v (0 <= v) of a table of rows of `size` bytes that start with a
+ * name_row. */
+static const name_row *row_at(const void *t, size_t size, int v)
 {
-    return v >= 0 && v < n ? (const name_row *)(const void *)((const char *)t + (size_t)v * size)
-                           : NULL;
+    return (const name_row *)(const void *)((const char *)t + (size_t)v * size);
 }
 
 static const char *pick_rows(const void *t, size_t size, int n, int v, int key)
 {
-    const name_row *r = row_at(t, size, n, v);
-    return !r ? "?" : key ? r->key : r->name;
+    if (v < 0 || v >= n) return "?";
+    const name_row *r = row_at(t, size, v);
+    return key ? r->key : r->name;
 }
 
 static int find_rows(const void *t, size_t size, int n, const char *s)
 {
     for (int i = 0; s && i < n; i++)
-        if (!strcasecmp(s, row_at(t, size, n, i)->name)) return i;
+        if (!strcasecmp(s, row_at(t, size, i)->name)) return i;
     return -1;
 }
 
