@@ -15,6 +15,8 @@
  */
 #include "mpp_internal.h"
 
+#include "mpm_material.h"
+
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -156,10 +158,50 @@ static int conv_grid(const Mpmd__Grid *g, mpp_case *mc, mpm_error *err)
     return 0;
 }
 
+/* Material i: each parameter of the solver's material table
+ * (mpm_material.h) read from the schema's field of the same name (the
+ * Material descriptor's offsets), the table's default when absent, and
+ * "missing" when the model's row requires it: presence is what the
+ * solver cannot see.  The model (the same values as mpm_model_kind,
+ * codec_material_table_matches_proto) and the values go to the solver as
+ * given; mpm_case_check() judges them against the same rows. */
+static int conv_material(const Mpmd__Material *m, size_t i, mpm_material_desc *md, mpm_error *err)
+{
+    char at_[96];
+    md->model = (mpm_model_kind)m->model;
+    const mpm_material_model *row = mpm_material_model_of(md->model);
+    for (int k = 0; k < mpm_material_n_params(); k++) {
+        const mpm_material_param *p = mpm_material_param_at(k);
+        const ProtobufCFieldDescriptor *f =
+            protobuf_c_message_descriptor_get_field_by_name(&mpmd__material__descriptor, p->name);
+        if (!f || f->label != PROTOBUF_C_LABEL_OPTIONAL ||
+            f->type != (p->type == MPM_PARAM_ENUM ? PROTOBUF_C_TYPE_ENUM : PROTOBUF_C_TYPE_DOUBLE))
+            return mpm_fail(err, MPM_EINTERNAL, AT("materials[%zu].%s", i, p->name),
+                            "not an optional %s field of the schema's Material",
+                            p->type == MPM_PARAM_ENUM ? "enum" : "double");
+        const char *at = (const char *)m;
+        protobuf_c_boolean has;
+        memcpy(&has, at + f->quantifier_offset, sizeof has);
+        double v = p->def;
+        if (has && p->type == MPM_PARAM_ENUM) {
+            int e;
+            memcpy(&e, at + f->offset, sizeof e);
+            v = e;
+        } else if (has) {
+            memcpy(&v, at + f->offset, sizeof v);
+        } else if (row && (row->required >> k & 1u)) {
+            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].%s", i, p->name),
+                            "missing (required by %s)", row->name);
+        }
+        mpm_material_set(md, p, v);
+    }
+    return 0;
+}
+
 static int conv_materials(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
 {
     size_t n = pb->n_materials;
-    char at_[96];
+    int rc;
     if (n == 0) return mpm_fail(err, MPM_EINVAL, "materials", "at least one material is required");
     if (n > MPP_CASE_MAX_ITEMS)
         return mpm_fail(err, MPM_ETOOBIG, "materials", "%zu, more than the limit of %u", n,
@@ -168,54 +210,8 @@ static int conv_materials(const Mpmd__Case *pb, mpp_case *mc, mpm_error *err)
     if (!mc->materials) return mpm_fail(err, MPM_ENOMEM, NULL, "out of memory");
     mc->c.materials = mc->materials;
     mc->c.n_materials = n;
-    for (size_t i = 0; i < n; i++) {
-        const Mpmd__Material *m = pb->materials[i];
-        mpm_material_desc *md = &mc->materials[i];
-        switch (m->model) {
-        case MPMD__MATERIAL__MODEL__LINEAR_ELASTIC: md->model = MPM_MODEL_LINEAR_ELASTIC; break;
-        case MPMD__MATERIAL__MODEL__NEO_HOOKEAN: md->model = MPM_MODEL_NEO_HOOKEAN; break;
-        case MPMD__MATERIAL__MODEL__VON_MISES: md->model = MPM_MODEL_VON_MISES; break;
-        case MPMD__MATERIAL__MODEL__DRUCKER_PRAGER: md->model = MPM_MODEL_DRUCKER_PRAGER; break;
-        case MPMD__MATERIAL__MODEL__MOHR_COULOMB: md->model = MPM_MODEL_MOHR_COULOMB; break;
-        default:
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].model", i), "unknown value %d",
-                            (int)m->model);
-        }
-        if (!m->has_youngs_modulus)
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].youngs_modulus", i), "missing");
-        if (!isfinite(m->youngs_modulus) || !(m->youngs_modulus > 0))
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].youngs_modulus", i),
-                            "must be > 0 (got %g)", m->youngs_modulus);
-        if (m->has_poisson_ratio && !(m->poisson_ratio > -1 && m->poisson_ratio < 0.5))
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].poisson_ratio", i),
-                            "must be in (-1, 0.5) (got %g)", m->poisson_ratio);
-        if (!m->has_density)
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].density", i), "missing");
-        if (!isfinite(m->density) || !(m->density > 0))
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].density", i),
-                            "must be > 0 (got %g)", m->density);
-        md->youngs_modulus = m->youngs_modulus;
-        md->poisson_ratio = m->has_poisson_ratio ? m->poisson_ratio : 0;
-        md->density = m->density;
-        if (m->model == MPMD__MATERIAL__MODEL__VON_MISES && !m->has_yield_stress)
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].yield_stress", i),
-                            "missing (required by VON_MISES)");
-        if ((m->model == MPMD__MATERIAL__MODEL__DRUCKER_PRAGER ||
-             m->model == MPMD__MATERIAL__MODEL__MOHR_COULOMB) &&
-            !m->has_friction_angle)
-            return mpm_fail(err, MPM_EINVAL, AT("materials[%zu].friction_angle", i),
-                            "missing (required by DRUCKER_PRAGER and MOHR_COULOMB)");
-        /* the solver validates the values (mpm_model_params) */
-        md->yield_stress = m->has_yield_stress ? m->yield_stress : 0;
-        md->hardening_modulus = m->has_hardening_modulus ? m->hardening_modulus : 0;
-        md->friction_angle = m->has_friction_angle ? m->friction_angle : 0;
-        md->dilatancy_angle = m->has_dilatancy_angle ? m->dilatancy_angle : 0;
-        md->cohesion = m->has_cohesion ? m->cohesion : 0;
-        md->tension_cutoff =
-            m->has_tension_cutoff ? m->tension_cutoff : HUGE_VAL; /* the apex only */
-        md->mc_match = m->has_mc_match ? (mpm_mc_match)m->mc_match : MPM_MC_COMPRESSION;
-        md->substep_tolerance = m->has_substep_tolerance ? m->substep_tolerance : 0;
-    }
+    for (size_t i = 0; i < n; i++)
+        if ((rc = conv_material(pb->materials[i], i, &mc->materials[i], err))) return rc;
     return 0;
 }
 

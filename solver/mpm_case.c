@@ -15,6 +15,7 @@
  * the initial CPDI domain).
  */
 #include "mpm_internal.h"
+#include "mpm_method.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -325,10 +326,11 @@ static int check_grid(const mpm_case *c, mpm_error *err)
         if (gr->nodes[d] < 2)
             return mpm_fail(err, MPM_EINVAL, PATH("grid.nodes[%d]", d), "must be >= 2 (got %d)",
                             gr->nodes[d]);
-        /* the natural end basis needs 4 nodes per axis (mpm_bspline.c) */
-        if (c->method == MPM_METHOD_BSPLINE3 && gr->nodes[d] < 4)
+        const mpm_method_props *mp = mpm_method_props_of(c->method);
+        if (mp && gr->nodes[d] < mp->min_nodes)
             return mpm_fail(err, MPM_EINVAL, PATH("grid.nodes[%d]", d),
-                            "must be >= 4 with method BSPLINE3 (got %d)", gr->nodes[d]);
+                            "must be >= %d with method %s (got %d)", mp->min_nodes,
+                            mpm_method_name(c->method), gr->nodes[d]);
         nn *= gr->nodes[d] + 2.0;
     }
     if (nn > (double)MPM_MAX_NODES)
@@ -358,7 +360,7 @@ static int check_bc(const mpm_case *c, mpm_error *err)
     }
     /* B-spline control points are not grid nodes (only the end ones lie on
      * the grid, on its faces): a node set has no meaning there */
-    if (c->bc.n_nodes && (c->method == MPM_METHOD_BSPLINE2 || c->method == MPM_METHOD_BSPLINE3))
+    if (c->bc.n_nodes && !(mpm_method_props_of(c->method)->flags & MPM_METH_NODE_BC))
         return mpm_fail(
             err, MPM_EINVAL, "boundary.nodes",
             "explicit boundary nodes are not supported with BSPLINE2/BSPLINE3 (B-spline "
@@ -410,19 +412,19 @@ static size_t particle_limit(const mpm_case *c)
 }
 
 /* The largest Courant factor of the case's scheme (mpm.h), and what sets
- * it (NULL: the general limit). */
-static double max_cfl(const mpm_case *c, const char **why)
+ * it in why ("" for the general limit). */
+static double max_cfl(const mpm_case *c, char why[32])
 {
     double f = MPM_MAX_CFL;
-    *why = NULL;
+    why[0] = 0;
     if (c->update == MPM_USL) {
         f = MPM_USL_MAX_CFL;
-        *why = "USL";
+        snprintf(why, 32, "USL");
     }
-    if (c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC &&
-        MPM_APIC_MPM_MAX_CFL < f) {
-        f = MPM_APIC_MPM_MAX_CFL;
-        *why = "APIC with MPM tents";
+    const mpm_method_props *mp = mpm_method_props_of(c->method);
+    if (c->transfer == MPM_TRANSFER_APIC && mp && mp->apic_cfl > 0 && mp->apic_cfl < f) {
+        f = mp->apic_cfl;
+        snprintf(why, 32, "APIC with %s", mpm_method_name(c->method));
     }
     return f;
 }
@@ -433,11 +435,13 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     int rc = check_grid(c, err);
     if (rc) return rc;
     int dim = c->grid.dim;
-    if (c->method != MPM_METHOD_MPM && c->method != MPM_METHOD_GIMP &&
-        c->method != MPM_METHOD_BSPLINE2 && c->method != MPM_METHOD_BSPLINE3 &&
-        c->method != MPM_METHOD_CPDI)
-        return mpm_fail(err, MPM_EINVAL, "method",
-                        "unknown value %d (MPM, GIMP, BSPLINE2, BSPLINE3 or CPDI)", (int)c->method);
+    const mpm_method_props *meth = mpm_method_props_of(c->method);
+    if (!meth) {
+        char names[128] = "";
+        for (int m = 0; m < MPM_N_METHODS; m++)
+            mpm_names_append(names, sizeof names, mpm_method_name((mpm_method)m), m, MPM_N_METHODS);
+        return mpm_fail(err, MPM_EINVAL, "method", "unknown value %d (%s)", (int)c->method, names);
+    }
     if (c->update != MPM_USF && c->update != MPM_USL && c->update != MPM_MUSL)
         return mpm_fail(err, MPM_EINVAL, "update", "unknown value %d (USF, USL or MUSL)",
                         (int)c->update);
@@ -447,13 +451,13 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (!(c->cfl >= 0) || !isfinite(c->cfl))
         return mpm_fail(err, MPM_EINVAL, "cfl", "must be finite and >= 0 (0: default %g) (got %g)",
                         MPM_DEFAULT_CFL, c->cfl);
-    const char *why;
-    double cmaxf = max_cfl(c, &why);
+    char why[32];
+    double cmaxf = max_cfl(c, why);
     if (c->cfl > cmaxf && !c->allow_unstable_dt)
         return mpm_fail(
             err, MPM_ECFL, "cfl",
             "%g is above the stability limit %g%s%s; set allow_unstable_dt to run anyway", c->cfl,
-            cmaxf, why ? " of " : "", why ? why : "");
+            cmaxf, *why ? " of " : "", why);
     if (!(c->mass_tol >= 0) || !isfinite(c->mass_tol))
         return mpm_fail(err, MPM_EINVAL, "mass_tol",
                         "must be finite and >= 0 (0: default %g) (got %g)", MPM_DEFAULT_MASS_TOL,
@@ -464,10 +468,11 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (c->transfer != MPM_TRANSFER_FLIP && c->transfer != MPM_TRANSFER_APIC)
         return mpm_fail(err, MPM_EINVAL, "transfer", "unknown value %d (FLIP or APIC)",
                         (int)c->transfer);
-    if (c->transfer == MPM_TRANSFER_APIC && c->method == MPM_METHOD_CPDI)
+    if (c->transfer == MPM_TRANSFER_APIC && !(meth->flags & MPM_METH_APIC))
         return mpm_fail(err, MPM_EINVAL, "transfer",
-                        "APIC is not implemented for method CPDI (use FLIP, or APIC with GIMP, "
-                        "BSPLINE2 or BSPLINE3)");
+                        "APIC is not implemented for method %s (use FLIP, or APIC with GIMP, "
+                        "BSPLINE2 or BSPLINE3)",
+                        mpm_method_name(c->method));
     if (c->transfer == MPM_TRANSFER_APIC && c->pic_fraction != 0)
         return mpm_fail(err, MPM_EINVAL, "pic_fraction",
                         "must be 0 (or absent) with transfer APIC, itself a PIC transfer whose "
@@ -483,10 +488,11 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
                         c->threads);
     int krc = mpm_kernels_check(c->kernels, err);
     if (krc) return krc;
-    if (c->kernels == MPM_KERNELS_AVX2 && c->method == MPM_METHOD_CPDI)
+    if (c->kernels == MPM_KERNELS_AVX2 && !(meth->flags & MPM_METH_AVX2))
         return mpm_fail(err, MPM_EINVAL, "kernels",
-                        "AVX2 asked for, but CPDI has portable "
-                        "kernels only (use AUTO or PORTABLE)");
+                        "AVX2 asked for, but %s has portable "
+                        "kernels only (use AUTO or PORTABLE)",
+                        mpm_method_name(c->method));
     for (int d = 0; d < dim; d++)
         if (!isfinite(c->gravity[d]))
             return mpm_fail(err, MPM_EINVAL, PATH("gravity[%d]", d), "must be finite");
@@ -514,9 +520,10 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
                         c->n_materials);
     double cmax = 0;
     for (size_t i = 0; i < c->n_materials; i++) {
-        mpm_mat_params mp;
-        if ((rc = mpm_model_params(&c->materials[i], dim, i, &mp, err))) return rc;
-        if (mp.c > cmax) cmax = mp.c;
+        /* the one check of a material's parameters: its model's row */
+        if ((rc = mpm_material_check(&c->materials[i], dim, i, err))) return rc;
+        double ci = mpm_material_wave_speed(&c->materials[i], dim);
+        if (ci > cmax) cmax = ci;
     }
     if (c->n_bodies < 1 || !c->bodies)
         return mpm_fail(err, MPM_EINVAL, "bodies", "the case has no body, so no particles");
@@ -558,14 +565,14 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
     if (c->dt > 0) {
         double hmin = c->grid.h[0];
         for (int d = 1; d < dim; d++) hmin = fmin(hmin, c->grid.h[d]);
-        double f = max_cfl(c, &why);
+        double f = max_cfl(c, why);
         double lim = f * hmin / (cmax + g.vmax);
         if (c->dt > lim && !c->allow_unstable_dt)
             return mpm_fail(err, MPM_ECFL, "dt",
                             "%g is above the CFL limit %g = %g h_min / (c + |v|max) = "
                             "%g x %g / (%g + %g)%s%s%s; set allow_unstable_dt to run anyway",
-                            c->dt, lim, f, f, hmin, cmax, g.vmax, why ? " (" : "", why ? why : "",
-                            why ? ")" : "");
+                            c->dt, lim, f, f, hmin, cmax, g.vmax, *why ? " (" : "", why,
+                            *why ? ")" : "");
     }
     if (info) {
         memset(info, 0, sizeof *info);

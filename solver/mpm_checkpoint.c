@@ -282,23 +282,19 @@ static uint64_t fingerprint_of(const mpm_sim *s, const uint64_t L[L_COUNT])
         const mpm_mat_params *m = &s->mats[i];
         double mv[9] = {m->E, m->nu, m->rho, m->lambda, m->mu, m->c, m->K, m->sy0, m->H};
         h = hash_bytes(mv, sizeof mv, h);
-        /* Drucker-Prager's and Mohr-Coulomb's own parameters, field by
-         * field (the struct's padding is not hashed); elastic and J2
-         * materials hash as before (ckpt_refuses_other_case) */
-        const mpm_plastic_params *pl = m->pl;
-        if (pl) {
-            double pv[10] = {pl->phi,
-                             pl->psi,
-                             pl->c,
-                             pl->tension,
-                             pl->tol,
-                             pl->ftol,
-                             (double)pl->max_substeps,
-                             (double)pl->match,
-                             (double)pl->kind,
-                             pl->E};
-            h = hash_bytes(pv, sizeof pv, h);
-        }
+        /* the model and every parameter its row of the material table
+         * reads, in the table's order (ckpt_fingerprint_every_material
+         * _param); linear elastic materials hash the constants above
+         * alone, as blobs of earlier releases did */
+        const mpm_material_desc *d = &s->mdesc[i];
+        const mpm_material_model *row = mpm_material_model_of(d->model);
+        if (d->model == MPM_MODEL_LINEAR_ELASTIC) continue;
+        double pv[33];
+        int np = 0;
+        pv[np++] = (double)d->model;
+        for (int j = 0; j < mpm_material_n_params(); j++)
+            if (row->params >> j & 1u) pv[np++] = mpm_material_get(d, mpm_material_param_at(j));
+        h = hash_bytes(pv, (size_t)np * sizeof *pv, h);
     }
     return h;
 }

@@ -32,6 +32,7 @@
  * are (mpm_loads.c); a scene without them runs none of this.
  */
 #include "mpm_internal.h"
+#include "mpm_method.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -169,7 +170,7 @@ int mpm_cond_check(const mpm_case *c, mpm_error *err)
                         c->n_prescribed);
     if (c->n_prescribed > 1024)
         return mpm_fail(err, MPM_EINVAL, "prescribed", "at most 1024 (got %zu)", c->n_prescribed);
-    int bsp = c->method == MPM_METHOD_BSPLINE2 || c->method == MPM_METHOD_BSPLINE3;
+    int bsp = mpm_method_props_of(c->method)->bspline != 0;
     for (size_t i = 0; i < c->n_prescribed; i++) {
         const mpm_prescribed_desc *p = &c->prescribed[i];
         if (p->face >= 2 * dim) {

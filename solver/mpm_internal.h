@@ -9,6 +9,7 @@
  *   mpm_energy.c   the energy sums and the divergence guard
  *   mpm_kernels.c  the particle loops (MPM, uGIMP);  mpm_cpdi.c  CPDI1's
  *   mpm_pass.h     the inline pieces those two files' passes share
+ *   mpm_material_table.c  the models' and parameters' rows (mpm_material.h)
  *   mpm_model.c    the constitutive models;  mpm_plastic.c  the
  *                  Drucker-Prager and Mohr-Coulomb stress-point integrators
  *   mpm_timefn.c   time functions;  mpm_cond.c  prescribed velocities and
@@ -35,14 +36,13 @@
 #define MPM_INTERNAL_H
 
 #include "mpm.h"
+#include "mpm_material.h"
 #include "mpm_plastic.h"
 #include "mpm_timefn.h"
 
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
-
-typedef struct mpm_model_ops mpm_model_ops;
 
 /* Stress and strain components stored per dimension: 1D xx; 2D plane strain
  * xx yy zz xy; 3D xx yy zz xy yz xz.  Component c is the Voigt index c.  In
@@ -297,6 +297,7 @@ struct mpm_sim {
     mpm_particles P;
     size_t nmat;
     mpm_mat_params *mats;
+    mpm_material_desc *mdesc; /* the case's materials (their rows, the fingerprint) */
     const mpm_model_ops *model;
     double cmax; /* largest p-wave speed */
     /* general: the block update is mpm_model_block() (a model other than
@@ -531,9 +532,10 @@ int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
  * fused passes (CPDI). */
 int mpm_sim_set_fused(mpm_sim *s, int on);
 
-/* Constitutive model interface.  A model declares the per-particle state it
- * needs (needs: MPM_NEED_*), allocated at creation only when a material of
- * the case uses the model, and provides:
+/* Constitutive model interface.  A model's row of the material table
+ * declares the per-particle state it needs (MPM_NEED_*), allocated at
+ * creation only when a material of the case uses the model; its
+ * operations:
  *   update  (linear elasticity only: the path of every earlier release,
  *           called directly when every material is linear elastic and the
  *           volume update is the default) the strain increments of
@@ -555,8 +557,9 @@ int mpm_sim_set_fused(mpm_sim *s, int on);
  *           (frictional_block(), which also counts the substeps and
  *           reports a failed update) and the same point function for
  *           callers of one point;
- *   energy  the stored (elastic) energy of particle p (not a density). */
-enum { MPM_NEED_F = 1, MPM_NEED_SPIN = 2, MPM_NEED_PLASTIC = 4 };
+ *   energy  the stored (elastic) energy of particle p (not a density).
+ * The model's name and needs are in its row of the material table
+ * (mpm_material.h). */
 
 typedef struct {
     const mpm_mat_params *mats;
@@ -579,8 +582,6 @@ typedef struct {
 } mpm_model_blk;
 
 struct mpm_model_ops {
-    const char *name;
-    unsigned needs;
     void (*update[3])(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
                       double *const deps[6]);
     void (*block)(mpm_model_blk *b, size_t b0, size_t i0, size_t i1);
@@ -613,16 +614,16 @@ int mpm_j2_point(const mpm_mat_params *mp, int dim, double sig[6], const double 
 /* Elastic stored energy density 1/2 sigma : C^-1 : sigma (1D: sigma^2/2E). */
 double mpm_elastic_stored(const mpm_mat_params *mp, const double sig[6], int dim);
 
+/* The model's operations (its row's, mpm_material_table.c), or NULL. */
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
-/* The integrator's parameters of a DRUCKER_PRAGER or MOHR_COULOMB material
- * (angles to radians, mpm_plastic_init()); 0 or MPM_EINVAL naming
- * materials[i]'s field.  The caller has checked d with mpm_model_params(). */
+/* The integrator's parameters of a material whose model needs
+ * MPM_NEED_INTEGRATOR (angles to radians, mpm_plastic_init()); 0 or
+ * MPM_EINVAL naming materials[i]'s field.  The caller has checked d with
+ * mpm_material_check(). */
 int mpm_model_plastic(const mpm_material_desc *d, int dim, size_t i, mpm_plastic_params *pl,
                       mpm_error *err);
-/* Fills derived constants; returns 0 or MPM_EINVAL with err naming
- * materials[i]'s field and the limit. */
-int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,
-                     mpm_error *err);
+/* The derived constants of material d (checked by mpm_material_check()). */
+void mpm_model_params(const mpm_material_desc *d, int dim, mpm_mat_params *out);
 
 static inline double mpm_model_energy(const mpm_sim *s, size_t p)
 {

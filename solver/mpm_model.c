@@ -32,6 +32,7 @@
  * update (J2: rate_block() calling point(); DP, MC: frictional_block()).
  */
 #include "mpm_internal.h"
+#include "mpm_material_ops.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -790,30 +791,20 @@ static void frictional_any(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
         frictional_block(b, b0, i0, i1);
 }
 
-static const mpm_model_ops linear_elastic = {
-    "linear_elastic", 0, {elastic_1d, elastic_2d, elastic_3d}, elastic_block, NULL, elastic_energy};
-static const mpm_model_ops neo_hookean = {"neo_hookean", MPM_NEED_F, {NULL, NULL, NULL},
-                                          nh_block,      NULL,       nh_energy};
-static const mpm_model_ops von_mises = {"von_mises",        MPM_NEED_SPIN | MPM_NEED_PLASTIC,
-                                        {NULL, NULL, NULL}, rate_block,
-                                        mpm_j2_point,       j2_energy};
-static const mpm_model_ops drucker_prager = {"drucker_prager",   MPM_NEED_SPIN | MPM_NEED_PLASTIC,
-                                             {NULL, NULL, NULL}, frictional_any,
-                                             frictional_point,   j2_energy};
-static const mpm_model_ops mohr_coulomb = {"mohr_coulomb",     MPM_NEED_SPIN | MPM_NEED_PLASTIC,
-                                           {NULL, NULL, NULL}, frictional_any,
-                                           frictional_point,   j2_energy};
+/* The models' operations (their rows: mpm_material_table.c). */
+const mpm_model_ops mpm_ops_linear_elastic = {
+    {elastic_1d, elastic_2d, elastic_3d}, elastic_block, NULL, elastic_energy};
+const mpm_model_ops mpm_ops_neo_hookean = {{NULL, NULL, NULL}, nh_block, NULL, nh_energy};
+const mpm_model_ops mpm_ops_von_mises = {{NULL, NULL, NULL}, rate_block, mpm_j2_point, j2_energy};
+const mpm_model_ops mpm_ops_drucker_prager = {
+    {NULL, NULL, NULL}, frictional_any, frictional_point, j2_energy};
+const mpm_model_ops mpm_ops_mohr_coulomb = {
+    {NULL, NULL, NULL}, frictional_any, frictional_point, j2_energy};
 
 const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
 {
-    switch (kind) {
-    case MPM_MODEL_LINEAR_ELASTIC: return &linear_elastic;
-    case MPM_MODEL_NEO_HOOKEAN: return &neo_hookean;
-    case MPM_MODEL_VON_MISES: return &von_mises;
-    case MPM_MODEL_DRUCKER_PRAGER: return &drucker_prager;
-    case MPM_MODEL_MOHR_COULOMB: return &mohr_coulomb;
-    default: return NULL;
-    }
+    const mpm_material_model *m = mpm_material_model_of(kind);
+    return m ? m->ops : NULL;
 }
 
 /* ---- the general block update ---- */
@@ -857,62 +848,9 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
     } /* CONSTANT: never changes */
 }
 
-#define BAD(field, ...)                                       \
-    (snprintf(path, sizeof path, "materials[%zu]." field, i), \
-     mpm_fail(err, MPM_EINVAL, path, __VA_ARGS__))
-
-/* The Drucker-Prager / Mohr-Coulomb parameters. */
-static int check_frictional(const mpm_material_desc *d, size_t i, mpm_error *err)
+void mpm_model_params(const mpm_material_desc *d, int dim, mpm_mat_params *out)
 {
-    char path[64];
-    double phi = d->friction_angle, psi = d->dilatancy_angle;
-    if (!(phi > 0 && phi < 90))
-        return BAD("friction_angle", "must be in (0, 90) degrees (got %g)", phi);
-    if (!(psi >= 0 && psi <= phi))
-        return BAD("dilatancy_angle", "must be in [0, friction_angle = %g] degrees (got %g)", phi,
-                   psi);
-    if (!(d->cohesion >= 0) || !isfinite(d->cohesion))
-        return BAD("cohesion", "must be finite and >= 0 (got %g)", d->cohesion);
-    if (!(d->tension_cutoff >= 0))
-        return BAD("tension_cutoff", "must be >= 0 (got %g)", d->tension_cutoff);
-    if (d->mc_match != MPM_MC_COMPRESSION && d->mc_match != MPM_MC_EXTENSION &&
-        d->mc_match != MPM_MC_PLANE_STRAIN)
-        return BAD("mc_match", "unknown value %d (COMPRESSION, EXTENSION or PLANE_STRAIN)",
-                   (int)d->mc_match);
-    if (!(d->substep_tolerance >= 0 && d->substep_tolerance < 1))
-        return BAD("substep_tolerance", "must be 0 (the default) or in (0, 1) (got %g)",
-                   d->substep_tolerance);
-    return 0;
-}
-
-int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_params *out,
-                     mpm_error *err)
-{
-    char path[64];
-    int rc;
-    if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
-        if ((rc = check_frictional(d, i, err))) return rc;
-        if (dim == 1)
-            return BAD("model",
-                       "%s needs a 2D (plane strain) or 3D grid (1D keeps one stress "
-                       "component, the lateral stresses of uniaxial strain would be lost)",
-                       d->model == MPM_MODEL_DRUCKER_PRAGER ? "DRUCKER_PRAGER" : "MOHR_COULOMB");
-    }
-    if (!mpm_model_get(d->model)) return BAD("model", "unknown model %d", (int)d->model);
-    if (!(d->youngs_modulus > 0) || !isfinite(d->youngs_modulus))
-        return BAD("youngs_modulus", "must be finite and > 0 (got %g)", d->youngs_modulus);
-    if (!(d->density > 0) || !isfinite(d->density))
-        return BAD("density", "must be finite and > 0 (got %g)", d->density);
     double nu = dim == 1 ? 0.0 : d->poisson_ratio;
-    if (dim > 1 && !(nu > -1.0 && nu < 0.5))
-        return BAD("poisson_ratio", "must be in (-1, 0.5) (got %g)", d->poisson_ratio);
-    if (d->model == MPM_MODEL_VON_MISES) {
-        if (!(d->yield_stress > 0) || !isfinite(d->yield_stress))
-            return BAD("yield_stress", "must be finite and > 0 (got %g)", d->yield_stress);
-        if (!(d->hardening_modulus >= 0) || !isfinite(d->hardening_modulus))
-            return BAD("hardening_modulus", "must be finite and >= 0 (got %g)",
-                       d->hardening_modulus);
-    }
     memset(out, 0, sizeof *out);
     out->E = d->youngs_modulus;
     out->nu = nu;
@@ -924,11 +862,6 @@ int mpm_model_params(const mpm_material_desc *d, int dim, size_t i, mpm_mat_para
     out->sy0 = d->yield_stress;
     out->H = d->hardening_modulus;
     out->ops = mpm_model_get(d->model);
-    if (d->model == MPM_MODEL_DRUCKER_PRAGER || d->model == MPM_MODEL_MOHR_COULOMB) {
-        mpm_plastic_params pl; /* checked here; the simulation keeps its own */
-        if ((rc = mpm_model_plastic(d, dim, i, &pl, err))) return rc;
-    }
-    return 0;
 }
 
 int mpm_model_plastic(const mpm_material_desc *d, int dim, size_t i, mpm_plastic_params *pl,

@@ -7,21 +7,41 @@
  * Parsing takes either spelling, in any case.  The rows are indexed by the
  * enums of mpm.h; names_match_proto checks them against the protocol's
  * enum descriptors, so that the wire, the store, the log and the
- * checkpoint's messages say the same.
+ * checkpoint's messages say the same.  A method's row also holds its
+ * properties (mpm_method.h): support, ghost layers, B-spline degree,
+ * fewest nodes, features.
  */
 #include "mpm.h"
 
+#include "mpm_method.h"
+
+#include <stdio.h>
+#include <string.h>
 #include <strings.h>
 
 typedef struct {
     const char *name, *key;
 } name_row;
 
-static const name_row methods[] = {{"MPM", "mpm"},
-                                   {"GIMP", "gimp"},
-                                   {"BSPLINE2", "bspline2"},
-                                   {"BSPLINE3", "bspline3"},
-                                   {"CPDI", "cpdi"}};
+typedef struct {
+    name_row n;
+    mpm_method_props p;
+} method_row;
+
+#define NODAL (MPM_METH_AVX2 | MPM_METH_APIC | MPM_METH_NODE_BC)
+
+/* name, key; support, ghost layers, B-spline degree, fewest nodes, APIC's
+ * Courant factor, flags */
+static const method_row methods[] = {
+    {{"MPM", "mpm"}, {2, 0, 0, 2, MPM_APIC_MPM_MAX_CFL, NODAL}},
+    /* uGIMP: 4 nodes (3 when every particle fits, mpm_sim.c) */
+    {{"GIMP", "gimp"}, {4, 2, 0, 2, 0, NODAL | MPM_METH_HALF_WIDTHS}},
+    {{"BSPLINE2", "bspline2"}, {3, 0, 2, 2, 0, MPM_METH_AVX2 | MPM_METH_APIC}},
+    /* the natural end basis needs 4 nodes per axis (mpm_bspline.c) */
+    {{"BSPLINE3", "bspline3"}, {4, 0, 3, 4, 0, MPM_METH_AVX2 | MPM_METH_APIC}},
+    /* the corners may reach one cell outside the grid */
+    {{"CPDI", "cpdi"},
+     {2, 1, 0, 2, 0, MPM_METH_HALF_WIDTHS | MPM_METH_DOMAIN_F | MPM_METH_NODE_BC}}};
 static const name_row updates[] = {{"USF", "usf"}, {"USL", "usl"}, {"MUSL", "musl"}};
 static const name_row transfers[] = {{"FLIP", "flip"}, {"APIC", "apic"}};
 
@@ -36,17 +56,40 @@ _Static_assert(MPM_TRANSFER_FLIP == 0 && MPM_TRANSFER_APIC == 1 &&
                    sizeof transfers / sizeof transfers[0] == MPM_N_TRANSFERS,
                "transfers[] follows mpm_transfer");
 
-static const char *pick(const name_row *t, int n, int v, int key)
+/* Row v (0 <= v) of a table of rows of `size` bytes that start with a
+ * name_row. */
+static const name_row *row_at(const void *t, size_t size, int v)
 {
-    if (v < 0 || v >= n) return "?";
-    return key ? t[v].key : t[v].name;
+    return (const name_row *)(const void *)((const char *)t + (size_t)v * size);
 }
 
-static int find(const name_row *t, int n, const char *s)
+static const char *pick_rows(const void *t, size_t size, int n, int v, int key)
+{
+    if (v < 0 || v >= n) return "?";
+    const name_row *r = row_at(t, size, v);
+    return key ? r->key : r->name;
+}
+
+static int find_rows(const void *t, size_t size, int n, const char *s)
 {
     for (int i = 0; s && i < n; i++)
-        if (!strcasecmp(s, t[i].name)) return i;
+        if (!strcasecmp(s, row_at(t, size, i)->name)) return i;
     return -1;
+}
+
+#define pick(t, n, v, key) pick_rows(t, sizeof t[0], n, v, key)
+#define find(t, n, s) find_rows(t, sizeof t[0], n, s)
+
+void mpm_names_append(char *list, size_t n, const char *name, int k, int count)
+{
+    size_t used = strlen(list);
+    if (used < n)
+        snprintf(list + used, n - used, "%s%s", k == 0 ? "" : k == count - 1 ? " or " : ", ", name);
+}
+
+const mpm_method_props *mpm_method_props_of(mpm_method m)
+{
+    return (unsigned)m < MPM_N_METHODS ? &methods[m].p : NULL;
 }
 
 const char *mpm_method_name(mpm_method m)

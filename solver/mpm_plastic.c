@@ -199,18 +199,26 @@ static double dp_f_at(const mpm_plastic_params *P, const double s[6], const doub
     return dp_f(P, x, scale);
 }
 
-/* The Pegasus method (Sloan 2001) for f(s + al De) = 0 on
- * [a0, a1] with f0 < 0 < f1. */
-static double dp_pegasus(const mpm_plastic_params *P, const double s[6], const double De[6],
-                         double a0, double a1, double f0, double f1)
+/* A yield function of a stress, with its scale (dp_f(), yield_fast()). */
+typedef double (*yield_fn)(const mpm_plastic_params *P, const double s[6], double *scale);
+
+static double yield_fast(const mpm_plastic_params *P, const double sig[6], double *scale);
+
+/* The Pegasus method (Sloan 2001) for f(s + al De) = 0 on [a0, a1] with
+ * f0 < 0 < f1, until |f| <= tol scale: the elastic fraction of an
+ * increment (dp_f(), ftol) and the first yield point of a closed-form
+ * return (first_yield()).  mpm_plastic_avx2.c's pass_pegasus() runs it a
+ * lane per particle with the same operations. */
+static inline double pegasus(const mpm_plastic_params *P, yield_fn f, double tol, const double s[6],
+                             const double De[6], double a0, double a1, double f0, double f1)
 {
-    double al = a1;
-    for (int it = 0; it < PEG_MAXIT; it++) {
-        if (f1 == f0) break;
+    double al = a1, x[6];
+    for (int it = 0; it < PEG_MAXIT && f1 != f0; it++) {
         double sc;
         al = a1 - f1 * (a1 - a0) / (f1 - f0);
-        double fn = dp_f_at(P, s, De, al, &sc);
-        if (fabs(fn) <= P->ftol * sc) break;
+        for (int i = 0; i < 6; i++) x[i] = s[i] + al * De[i];
+        double fn = f(P, x, &sc);
+        if (fabs(fn) <= tol * sc) break;
         if (fn * f1 < 0) {
             a0 = a1;
             f0 = f1;
@@ -238,7 +246,7 @@ static double dp_unload_alpha(const mpm_plastic_params *P, const double s[6], co
         for (int i = 1; i <= NSUB; i++) {
             double an = a0 + i * da, scn, fn = dp_f_at(P, s, De, an, &scn);
             if (fn > P->ftol * scn) {
-                if (fa < -tola) return dp_pegasus(P, s, De, al, an, fa, fn);
+                if (fa < -tola) return pegasus(P, dp_f, P->ftol, s, De, al, an, fa, fn);
                 a0 = al;
                 a1 = an;
                 found = 1;
@@ -294,35 +302,20 @@ static void dp_drift(const mpm_plastic_params *P, double s[6], dp_inv *v, double
     }
 }
 
-static double yield_fast(const mpm_plastic_params *P, const double sig[6], double *scale);
-
 /* The first point of the elastic trial path s0 + al De on the model's
  * surface (the largest of its surfaces), by the Pegasus method; s0 itself
  * when s0 is on or outside it.  For the closed-form returns' dissipation. */
 static void first_yield(const mpm_plastic_params *P, const double s0[6], const double De[6],
                         double out[6])
 {
-    double sc, f0 = yield_fast(P, s0, &sc), a0 = 0, a1 = 1, al = 1, x[6];
+    double sc, f0 = yield_fast(P, s0, &sc), x[6];
     double tol = P->ftol > FY_TOL ? P->ftol : FY_TOL;
     memcpy(out, s0, 6 * sizeof s0[0]);
     if (f0 >= -tol * sc) return;
     for (int i = 0; i < 6; i++) x[i] = s0[i] + De[i];
     double f1 = yield_fast(P, x, &sc);
     if (!(f1 > 0)) return;
-    for (int it = 0; it < PEG_MAXIT && f1 != f0; it++) {
-        al = a1 - f1 * (a1 - a0) / (f1 - f0);
-        for (int i = 0; i < 6; i++) x[i] = s0[i] + al * De[i];
-        double fn = yield_fast(P, x, &sc);
-        if (fabs(fn) <= tol * sc) break;
-        if (fn * f1 < 0) {
-            a0 = a1;
-            f0 = f1;
-        } else {
-            f0 = f0 * f1 / (f1 + fn);
-        }
-        a1 = al;
-        f1 = fn;
-    }
+    double al = pegasus(P, yield_fast, tol, s0, De, 0, 1, f0, f1);
     for (int i = 0; i < 6; i++) out[i] = s0[i] + al * De[i];
 }
 
@@ -469,7 +462,7 @@ static int dp_update(const mpm_plastic_params *P, double sig[6], const double de
         dp_invariants(P, sig, &v);
         double sc0, f0 = dp_f_inv(P, &v, &sc0), al = 0;
         if (f0 < -P->ftol * sc0) {
-            al = dp_pegasus(P, sig, De, 0, 1, f0, ftr);
+            al = pegasus(P, dp_f, P->ftol, sig, De, 0, 1, f0, ftr);
         } else {
             /* on the surface: does the increment first unload? */
             double na = sqrt(v.inv * v.inv * ddot(v.d, v.d) + P->eta * P->eta / 3), nd = tnorm(De);

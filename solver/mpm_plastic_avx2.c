@@ -468,7 +468,7 @@ VI V mask_of(int b, const V lm[NL])
 }
 
 /* Pass 2: the elastic fraction of each start inside the cone, by the
- * Pegasus method on [0, 1] (dp_pegasus(); kind ST_INSIDE), or the first
+ * Pegasus method on [0, 1] (pegasus() with dp_f(); kind ST_INSIDE), or the first
  * yield point on a trial past the cut-off (first_yield(); kind
  * ST_TENSION: yield_fast() and its tolerance), a lane per particle, a
  * lane that finishes taking the next. */

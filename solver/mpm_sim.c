@@ -53,6 +53,7 @@
  */
 #include "mpm_diag.h"
 #include "mpm_internal.h"
+#include "mpm_method.h"
 
 #include <limits.h>
 #include <math.h>
@@ -163,12 +164,12 @@ static void free_particles(mpm_particles *P)
     memset(P, 0, sizeof *P);
 }
 
-/* What the case's models declare (mpm_model_ops.needs, OR-ed). */
+/* What the case's models need (their rows' needs, OR-ed). */
 static unsigned model_needs(const mpm_case *c)
 {
     unsigned n = 0;
     for (size_t i = 0; i < c->n_materials; i++) {
-        const mpm_model_ops *m = mpm_model_get(c->materials[i].model);
+        const mpm_material_model *m = mpm_material_model_of(c->materials[i].model);
         if (m) n |= m->needs;
     }
     return n;
@@ -176,8 +177,8 @@ static unsigned model_needs(const mpm_case *c)
 
 int mpm_needs_F(const mpm_case *c)
 {
-    return c->method == MPM_METHOD_CPDI || c->volume_update == MPM_VOLUME_DET_F ||
-           (model_needs(c) & MPM_NEED_F);
+    return (mpm_method_props_of(c->method)->flags & MPM_METH_DOMAIN_F) ||
+           c->volume_update == MPM_VOLUME_DET_F || (model_needs(c) & MPM_NEED_F);
 }
 
 /* Whether the particles keep a strain record P.eps (mpm_internal.h): the
@@ -431,7 +432,7 @@ static void begin_step(mpm_sim *s)
     long since = s->steps - s->sort_last;
     s->sort_now = 0;
     if (s->steps == 0) return;
-    if (s->method != MPM_METHOD_CPDI) {
+    if (!(mpm_method_props_of(s->method)->flags & MPM_METH_DOMAIN_F)) {
         size_t r = mpm_sort_cell_changes(s);
         s->sort_now = since >= MPM_SORT_MIN && r > MPM_SORT_SPLIT * s->runs0;
     }
@@ -456,8 +457,9 @@ double mpm_sim_dt_limit(const mpm_sim *s)
 double mpm_case_cfl(const mpm_case *c)
 {
     if (c->cfl > 0) return c->cfl;
-    if (c->method == MPM_METHOD_MPM && c->transfer == MPM_TRANSFER_APIC)
-        return MPM_APIC_MPM_MAX_CFL; /* its stability limit (mpm.h) */
+    const mpm_method_props *mp = mpm_method_props_of(c->method);
+    if (c->transfer == MPM_TRANSFER_APIC && mp && mp->apic_cfl > 0)
+        return mp->apic_cfl; /* its stability limit (mpm.h) */
     return MPM_DEFAULT_CFL;
 }
 
@@ -564,12 +566,12 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     int dim = s->dim = c->grid.dim;
     s->method = c->method;
     s->update = c->update;
-    s->bsp = c->method == MPM_METHOD_BSPLINE2 ? 2 : c->method == MPM_METHOD_BSPLINE3 ? 3 : 0;
-    s->ns = c->method == MPM_METHOD_GIMP ? 4 : s->bsp ? s->bsp + 1 : 2;
-    /* CPDI: the corners may reach one cell outside the grid */
-    s->pad = c->method == MPM_METHOD_GIMP ? 2 : c->method == MPM_METHOD_CPDI ? 1 : 0;
+    const mpm_method_props *mp = mpm_method_props_of(c->method);
+    s->bsp = mp->bspline;
+    s->ns = mp->support;
+    s->pad = mp->ghost;
     s->nthreads = c->threads > 1 ? c->threads : 1;
-    s->avx2 = c->method != MPM_METHOD_CPDI && c->kernels != MPM_KERNELS_PORTABLE &&
+    s->avx2 = (mp->flags & MPM_METH_AVX2) && c->kernels != MPM_KERNELS_PORTABLE &&
               mpm_kernels_avx2_available();
     s->dp_lanes = c->kernels != MPM_KERNELS_PORTABLE && mpm_kernels_avx2_available();
     atomic_init(&s->cancel, 0);
@@ -596,19 +598,20 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->model = mpm_model_get(c->materials[0].model);
     s->nmat = c->n_materials;
     if (!(s->mats = calloc(s->nmat, sizeof *s->mats))) goto nomem;
+    if (!(s->mdesc = malloc(s->nmat * sizeof *s->mdesc))) goto nomem;
+    memcpy(s->mdesc, c->materials, s->nmat * sizeof *s->mdesc);
     for (size_t i = 0; i < s->nmat; i++) {
-        if (mpm_model_params(&c->materials[i], dim, i, &s->mats[i], err)) goto fail;
+        mpm_model_params(&c->materials[i], dim, &s->mats[i]);
         if (s->mats[i].c > s->cmax) s->cmax = s->mats[i].c;
         if (s->mats[i].ops != s->model) s->mixed = 1;
-        if (c->materials[i].model == MPM_MODEL_DRUCKER_PRAGER ||
-            c->materials[i].model == MPM_MODEL_MOHR_COULOMB)
+        if (mpm_material_model_of(c->materials[i].model)->needs & MPM_NEED_INTEGRATOR)
             s->frictional = 1;
     }
     if (s->frictional) {
         if (!(s->plp = calloc(s->nmat, sizeof *s->plp))) goto nomem;
         for (size_t i = 0; i < s->nmat; i++) {
-            mpm_model_kind k = c->materials[i].model;
-            if (k != MPM_MODEL_DRUCKER_PRAGER && k != MPM_MODEL_MOHR_COULOMB) continue;
+            if (!(mpm_material_model_of(c->materials[i].model)->needs & MPM_NEED_INTEGRATOR))
+                continue;
             if (mpm_model_plastic(&c->materials[i], dim, i, &s->plp[i], err)) goto fail;
             s->mats[i].pl = &s->plp[i];
         }
@@ -617,15 +620,13 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     unsigned needs = model_needs(c);
     s->volmode = c->volume_update;
     s->general = s->mixed || !s->model->update[0] || s->volmode != MPM_VOLUME_STRAIN_INCREMENT;
-    s->f_block = mpm_needs_F(c) && c->method != MPM_METHOD_CPDI;
+    s->f_block = mpm_needs_F(c) && !(mp->flags & MPM_METH_DOMAIN_F);
     s->spin3 = dim == 3 && ((needs & MPM_NEED_SPIN) || s->f_block);
 
     int musl = c->update == MPM_MUSL;
     s->transfer = c->transfer;
-    if (alloc_particles(&s->P, np, dim,
-                        c->method == MPM_METHOD_GIMP || c->method == MPM_METHOD_CPDI,
-                        mpm_needs_F(c), c->transfer == MPM_TRANSFER_APIC, needs_strain(c),
-                        needs_szz(c), &s->stag))
+    if (alloc_particles(&s->P, np, dim, (mp->flags & MPM_METH_HALF_WIDTHS) != 0, mpm_needs_F(c),
+                        c->transfer == MPM_TRANSFER_APIC, needs_strain(c), needs_szz(c), &s->stag))
         goto nomem;
     if ((needs & MPM_NEED_PLASTIC) &&
         (!(s->P.epsp = stag_alloc(np, &s->stag)) || !(s->P.yld = stag_alloc(np, &s->stag))))
@@ -639,7 +640,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
     s->k = select_kernels(s);
-    s->gvel = c->method != MPM_METHOD_CPDI;
+    s->gvel = !(mp->flags & MPM_METH_DOMAIN_F);
     if (!(s->sperm = malloc((np ? np : 1) * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
@@ -753,6 +754,7 @@ void mpm_sim_destroy(mpm_sim **sp)
     stag_free(s->minv);
     for (int d = 0; d < 3; d++) free(s->ncoord[d]);
     free(s->mats);
+    free(s->mdesc);
     free(s->fixed_node);
     free(s->fixed_mask);
     mpm_cond_free(s);
@@ -856,7 +858,8 @@ static int frictional_end_step(mpm_sim *s)
             &s->err, MPM_EDIVERGED, NULL,
             "diverged at step %ld, time %.9g: the %s update of particle %zu (materials[%u]) "
             "failed: %s",
-            s->steps + 1, s->t + s->dt, s->mats[m].ops->name, (size_t)s->P.id[bad], m,
+            s->steps + 1, s->t + s->dt, mpm_material_model_of(s->mdesc[m].model)->name,
+            (size_t)s->P.id[bad], m,
             pl->kind == MPM_PLASTIC_DRUCKER_PRAGER
                 ? "Sloan's substepping exhausted its substeps or met a non-finite stress (a "
                   "strain increment of about a thousand yield strains; reduce dt or raise "

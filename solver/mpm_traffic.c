@@ -47,6 +47,7 @@
  */
 #include "mpm_diag.h"
 #include "mpm_internal.h"
+#include "mpm_method.h"
 
 #include <string.h>
 
@@ -113,9 +114,8 @@ static double field_bytes(const mpm_sim *s, unsigned f)
  * F and lp (mpm_kernels.c weights_n0(), mpm_cpdi.c cweights()). */
 static unsigned wts(const mpm_sim *s)
 {
-    if (s->method == MPM_METHOD_CPDI) return TF_X | TF_LP | TF_F;
-    if (s->method == MPM_METHOD_GIMP) return TF_X | TF_LP;
-    return TF_X;
+    unsigned f = mpm_method_props_of(s->method)->flags;
+    return TF_X | (f & MPM_METH_HALF_WIDTHS ? TF_LP : 0) | (f & MPM_METH_DOMAIN_F ? TF_F : 0);
 }
 
 /* The stress update of a block (mpm_pass.h block_update(), mpm_model.c):
@@ -131,12 +131,8 @@ static void upd(const mpm_sim *s, unsigned *rd, unsigned *wr)
         *rd |= TF_F;
         *wr |= TF_F;
     }
-    unsigned needs = 0;
-    if (s->mixed) {
-        for (size_t i = 0; i < s->nmat; i++) needs |= s->mats[i].ops->needs;
-    } else {
-        needs = s->model->needs;
-    }
+    unsigned needs = 0; /* the materials' models' (one model unless mixed) */
+    for (size_t i = 0; i < s->nmat; i++) needs |= mpm_material_model_of(s->mdesc[i].model)->needs;
     *rd |= TF_MAT | TF_EPS; /* mat: the model's parameters (mixed: its runs) */
     *wr |= TF_SIG | TF_EPS;
     if (needs & MPM_NEED_PLASTIC) /* rate form: sig, the state, the work (V) */

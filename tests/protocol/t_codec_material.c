@@ -15,6 +15,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mpm_material.h"
+#include "mpmd.pb-c.h"
 #include "mpp_case.h"
 #include "mpp_msg.h"
 
@@ -52,7 +54,12 @@ TEST(codec_material_case)
     } bad[] = {
         {"\"yieldStress\":0.5,", "", "materials[0].yieldStress: missing"},
         {"\"yieldStress\":0.5,", "\"yieldStress\":-0.5,", "materials[0].yieldStress: must be"},
-        {"\"VON_MISES\"", "\"DRUCKER_PRAGER\"", "materials[0].frictionAngle: missing"},
+        {"\"VON_MISES\"", "\"DRUCKER_PRAGER\"",
+         "materials[0].frictionAngle: missing (required by DRUCKER_PRAGER)"},
+        {"\"VON_MISES\"", "\"MOHR_COULOMB\",\"frictionAngle\":95",
+         "materials[0].frictionAngle: must be in (0, 90) degrees (got 95)"},
+        {"\"VON_MISES\"", "\"DRUCKER_PRAGER\",\"frictionAngle\":30,\"dilatancyAngle\":31",
+         "materials[0].dilatancyAngle: must be in [0, friction_angle = 30] degrees (got 31)"},
         {"\"VON_MISES\"", "\"MOHR_COULOMB\",\"frictionAngle\":30,\"tensionCutoff\":-1",
          "materials[0].tensionCutoff: must be >= 0"},
     };
@@ -69,6 +76,55 @@ TEST(codec_material_case)
         CHECKF(rc == MPM_EINVAL && strstr(err, bad[i].want), "%zu: %d %s", i, rc, err);
         TLOG("%s", err);
     }
+}
+
+/* The solver's material table (mpm_material.h) against the schema, so
+ * that the codec may read each parameter by its name: every field of
+ * Material but `model` is an optional parameter row of the same name and
+ * kind (a double, or an enum whose values the row names in order), with
+ * the schema's default where it declares one; every row is a field; the
+ * Model enum's values name the model rows, value for value, and a value
+ * past them has no row. */
+TEST(codec_material_table_matches_proto)
+{
+    const ProtobufCMessageDescriptor *md = &mpmd__material__descriptor;
+    int n = mpm_material_n_params();
+    CHECKF((int)md->n_fields == n + 1, "Material has %u fields, the table %d parameters",
+           md->n_fields, n);
+    for (unsigned i = 0; i < md->n_fields; i++) {
+        const ProtobufCFieldDescriptor *f = &md->fields[i];
+        if (!strcmp(f->name, "model")) continue;
+        const mpm_material_param *p = NULL;
+        for (int k = 0; k < n; k++)
+            if (!strcmp(mpm_material_param_at(k)->name, f->name)) p = mpm_material_param_at(k);
+        CHECKF(p, "Material.%s has no row in the material table", f->name);
+        if (!p) continue;
+        CHECK(f->label == PROTOBUF_C_LABEL_OPTIONAL);
+        if (p->type == MPM_PARAM_REAL) {
+            CHECKF(f->type == PROTOBUF_C_TYPE_DOUBLE, "%s", f->name);
+            continue;
+        }
+        CHECKF(f->type == PROTOBUF_C_TYPE_ENUM, "%s", f->name);
+        const ProtobufCEnumDescriptor *ed = f->descriptor;
+        CHECKF((int)ed->n_values == p->n_names, "%s: %u values, %d names", f->name, ed->n_values,
+               p->n_names);
+        for (int v = 0; v < p->n_names; v++) {
+            const ProtobufCEnumValue *ev = protobuf_c_enum_descriptor_get_value(ed, v);
+            CHECKF(ev && !strcmp(ev->name, p->names[v]), "%s value %d", f->name, v);
+        }
+        if (f->default_value) CHECK(*(const int *)f->default_value == (int)p->def);
+    }
+    const ProtobufCEnumDescriptor *models = &mpmd__material__model__descriptor;
+    for (unsigned v = 0; v < models->n_values; v++) {
+        const ProtobufCEnumValue *ev = protobuf_c_enum_descriptor_get_value(models, (int)v);
+        const mpm_material_model *row = mpm_material_model_of((mpm_model_kind)v);
+        CHECKF(ev != NULL && row != NULL, "Model value %u: a schema value and a row", v);
+        if (!ev || !row) continue;
+        CHECKF(row->kind == (mpm_model_kind)v && !strcmp(ev->name, row->name),
+               "Model value %u: %s vs %s", v, ev->name, row->name);
+    }
+    CHECK(mpm_material_model_of((mpm_model_kind)models->n_values) == NULL);
+    CHECK(mpm_material_param_at(n) == NULL && mpm_material_param_at(-1) == NULL);
 }
 
 TEST(codec_material_snapshot_fields)

@@ -18,6 +18,7 @@
 #include "t.h"
 #include "mpm.h"
 #include "mpm_internal.h"
+#include "mpm_material.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -655,38 +656,91 @@ TEST(ckpt_refuses_other_case)
         TLOG("%-14s refused: %s", v[i].what, err.message);
     }
     free(blob);
-    /* a Drucker-Prager case: each of its own parameters is in the
-     * fingerprint (friction and dilatancy angle, cohesion, tension
-     * cut-off, the substepping's tolerance) */
-    ck_spec dp = ck_small;
-    dp.model = DP;
-    ck_build(&k, &dp);
-    a = mpm_sim_new(&k.c, NULL, &err);
-    CHECKF(a, "%s", err.message);
-    CHECK(ck_run(a, &dp, 5) == 0);
-    blob = ck_save(a, &len);
-    mpm_sim_destroy(&a);
-    CHECK(blob);
-    for (int w = 0; w < 6; w++) {
-        ck_case o;
-        ck_build(&o, &dp);
-        if (w == 1) o.mat.friction_angle = 35;
-        if (w == 2) o.mat.dilatancy_angle = 10;
-        if (w == 3) o.mat.cohesion = 300;
-        if (w == 4) o.mat.tension_cutoff = 10;
-        if (w == 5) o.mat.substep_tolerance = 1e-3;
-        mpm_sim *b = mpm_sim_new(&o.c, NULL, &err);
-        CHECKF(b, "DP variant %d: %s", w, err.message);
-        int rc = mpm_sim_checkpoint_load(b, blob, len, &err);
-        mpm_sim_destroy(&b);
-        if (w == 0) {
-            CHECKF(rc == 0, "DP, the same case: %s", err.message);
-            continue;
-        }
-        CHECKF(rc == MPM_EINVAL && strstr(err.message, "another case of the same layout"),
-               "DP variant %d: code %d %s", w, rc, err.message);
+}
+
+/* Another value of a parameter p of material d within its bounds (the
+ * material table's check passes), written into d; 0 when none is found. */
+static int ck_other_value(mpm_material_desc *d, const mpm_material_param *p)
+{
+    double v = mpm_material_get(d, p);
+    double cand[] = {v * 1.25, v * 0.8, v + 0.1, v - 0.1, v + 1, 0.25, 1, 0};
+    mpm_error err;
+    for (size_t i = 0; i < sizeof cand / sizeof *cand; i++) {
+        if (cand[i] == v || (p->type == MPM_PARAM_ENUM && cand[i] != floor(cand[i]))) continue;
+        mpm_material_set(d, p, cand[i]);
+        if (mpm_material_check(d, 2, 0, &err) == 0) return 1;
     }
-    free(blob);
+    mpm_material_set(d, p, v);
+    return 0;
+}
+
+/* Every parameter a model's row of the material table reads is in the
+ * checkpoint's fingerprint: for each model, the blob of a 2D case loads
+ * into the same case and is refused, as another case of the same layout,
+ * by the case with one of the model's parameters changed to another
+ * valid value; Mohr-Coulomb with Drucker-Prager's parameters (the same
+ * layout) is refused too. */
+TEST(ckpt_fingerprint_every_material_param)
+{
+    int nparam = 0, nmodel = 0;
+    void *dp_blob = NULL;
+    size_t dp_len = 0;
+    for (int mk = 0; mpm_material_model_of((mpm_model_kind)mk); mk++) {
+        const mpm_material_model *row = mpm_material_model_of((mpm_model_kind)mk);
+        ck_spec sp = ck_small;
+        sp.model = (mpm_model_kind)mk;
+        ck_case k;
+        ck_build(&k, &sp);
+        mpm_error err;
+        mpm_sim *a = mpm_sim_new(&k.c, NULL, &err);
+        CHECKF(a, "%s: %s", row->name, err.message);
+        if (!a) continue;
+        CHECK(ck_run(a, &sp, 3) == 0);
+        size_t len = 0;
+        void *blob = ck_save(a, &len);
+        mpm_sim_destroy(&a);
+        CHECK(blob);
+        if (!blob) continue;
+        mpm_sim *b = mpm_sim_new(&k.c, NULL, &err);
+        CHECK(b && mpm_sim_checkpoint_load(b, blob, len, &err) == 0);
+        mpm_sim_destroy(&b);
+        for (int j = 0; j < mpm_material_n_params(); j++) {
+            if (!(row->params >> j & 1u)) continue;
+            const mpm_material_param *p = mpm_material_param_at(j);
+            ck_case o;
+            ck_build(&o, &sp);
+            CHECKF(ck_other_value(&o.mat, p), "%s.%s: no other valid value", row->name, p->name);
+            b = mpm_sim_new(&o.c, NULL, &err);
+            CHECKF(b, "%s.%s: %s", row->name, p->name, err.message);
+            int rc = b ? mpm_sim_checkpoint_load(b, blob, len, &err) : 0;
+            mpm_sim_destroy(&b);
+            CHECKF(rc == MPM_EINVAL && strstr(err.message, "another case of the same layout"),
+                   "%s.%s = %g: code %d %s", row->name, p->name, mpm_material_get(&o.mat, p), rc,
+                   rc ? err.message : "loaded");
+            nparam++;
+        }
+        nmodel++;
+        if (mk == MPM_MODEL_DRUCKER_PRAGER) {
+            dp_blob = blob;
+            dp_len = len;
+        } else {
+            free(blob);
+        }
+    }
+    ck_spec mc = ck_small;
+    mc.model = MPM_MODEL_MOHR_COULOMB;
+    ck_case o;
+    ck_build(&o, &mc);
+    mpm_error err;
+    mpm_sim *b = mpm_sim_new(&o.c, NULL, &err);
+    int rc = b && dp_blob ? mpm_sim_checkpoint_load(b, dp_blob, dp_len, &err) : 0;
+    mpm_sim_destroy(&b);
+    free(dp_blob);
+    CHECKF(rc == MPM_EINVAL && strstr(err.message, "another case of the same layout"),
+           "a DRUCKER_PRAGER blob into MOHR_COULOMB: code %d", rc);
+    CHECK(nmodel == 5);
+    TLOG("%d parameters of %d models: each one's change refused by the fingerprint", nparam,
+         nmodel);
 }
 
 /* Saved with 2 threads, loaded into a 1-thread simulation of the same case:

@@ -93,8 +93,9 @@ static int materials(int dim, mpm_mat_params mats[3], mpm_plastic_params pl[3])
     d[2].friction_angle = 35, d[2].cohesion = 1e3;
     for (size_t k = 0; k < 3; k++) {
         mpm_error err;
-        if (mpm_model_params(&d[k], dim, k, &mats[k], &err) ||
-            mpm_model_plastic(&d[k], dim, k, &pl[k], &err)) {
+        if (mpm_material_check(&d[k], dim, k, &err) ||
+            (mpm_model_params(&d[k], dim, &mats[k]),
+             mpm_model_plastic(&d[k], dim, k, &pl[k], &err))) {
             fprintf(stderr, "    materials[%zu]: %s\n", k, err.message);
             return -1;
         }

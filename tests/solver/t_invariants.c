@@ -537,8 +537,8 @@ TEST(inv_case_errors_name_the_field)
         const char *expect;
         int what;
     } cases[] = {
-        {"materials[0].youngs_modulus: must be finite and > 0 (got -1)", 0},
-        {"materials[0].density: must be finite and > 0 (got 0)", 1},
+        {"materials[0].youngs_modulus: must be > 0 (got -1)", 0},
+        {"materials[0].density: must be > 0 (got 0)", 1},
         {"materials[0].poisson_ratio: must be in (-1, 0.5) (got 0.5)", 2},
         {"grid.spacing[1]: must be finite and > 0 (got 0)", 3},
         {"grid.nodes[0]: must be >= 2 (got 1)", 4},

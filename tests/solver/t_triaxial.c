@@ -306,8 +306,8 @@ TEST(mpm_triaxial_update_fails)
         int rc = triax_run(&m, 3, 10, 1e-1, 0.02, 1.0, 1, 1, &e, &r);
         TLOG("%s", e.message);
         CHECKF(rc == -1 && e.code == MPM_EDIVERGED &&
-                   strstr(e.message, k ? "mohr_coulomb update of particle "
-                                       : "drucker_prager update of particle ") &&
+                   strstr(e.message, k ? "MOHR_COULOMB update of particle "
+                                       : "DRUCKER_PRAGER update of particle ") &&
                    strstr(e.message, " (materials[0]) failed"),
                "%d %s", rc, e.message);
     }
