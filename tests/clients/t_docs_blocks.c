@@ -106,7 +106,7 @@ static int bin_path(const char *env, char *out)
 }
 
 /* The checkout a document's blocks run in: dir/bin (wrappers of the
- * harness's binaries), dir/proto, dir/home.  0 or -1 (test failed). */
+ * harness's binaries), dir/proto, dir/clients, dir/protocol, dir/home.  0 or -1 (test failed). */
 static int make_checkout(const char *dir)
 {
     char mpmd[PATH_MAX], ctl[PATH_MAX], web[PATH_MAX], root[PATH_MAX], p[PATH_MAX + 64],
@@ -128,10 +128,16 @@ static int make_checkout(const char *dir)
     snprintf(extra, sizeof extra, "--static '%s/clients/web/static' ", root);
     snprintf(p, sizeof p, "%s/bin/mpmweb", dir);
     if (write_wrapper(p, web, extra)) return -1;
-    char target[PATH_MAX + 16];
-    snprintf(target, sizeof target, "%s/proto", root);
-    snprintf(p, sizeof p, "%s/proto", dir);
-    return symlink(target, p);
+    /* the example cases, and what `pip install clients/python` reads (the
+     * package, the schema, the version in mpp.h) */
+    static const char *const linked[] = {"proto", "clients", "protocol"};
+    for (size_t i = 0; i < sizeof linked / sizeof linked[0]; i++) {
+        char target[PATH_MAX + 16];
+        snprintf(target, sizeof target, "%s/%s", root, linked[i]);
+        snprintf(p, sizeof p, "%s/%s", dir, linked[i]);
+        if (symlink(target, p)) return -1;
+    }
+    return 0;
 }
 
 /* Runs one block as dir/blockN.sh in dir, its process group killed at the
