@@ -123,11 +123,12 @@ TEST(ctl_man_pages)
         char key[80];
         snprintf(key, sizeof key, "\n%s = ", name);
         const char *kv = conf ? strstr(conf, key) : NULL;
-        if (kv && strcmp(name, "endpoint") && strcmp(name, "stream-endpoint") && strcmp(name, "db")) {
+        if (kv && strcmp(name, "endpoint") && strcmp(name, "stream-endpoint") &&
+            strcmp(name, "db")) {
             kv += strlen(key);
             CHECKF(!strncmp(kv, def, strlen(def)) && (kv[strlen(def)] == '\n'),
-                   "deploy/mpmd.conf gives %s = %.20s, the settings table's default is %s", name, kv,
-                   def);
+                   "deploy/mpmd.conf gives %s = %.20s, the settings table's default is %s", name,
+                   kv, def);
             nconf++;
         }
     }

@@ -133,12 +133,13 @@ DTEST(python_client_pip)
     snprintf(venv, sizeof venv, "%s/venv", dir);
     snprintf(tree, sizeof tree, "%s/tree", dir);
     snprintf(log, sizeof log, "%s/pip.out", dir);
-    snprintf(cmd, sizeof cmd,
-             "mkdir -p %s/clients %s/proto %s/protocol/include && cp -r clients/python %s/clients/ && "
-             "cp proto/mpmd.proto %s/proto/ && cp protocol/include/mpp.h %s/protocol/include/ && " PY
-             " -m venv --system-site-packages %s && "
-             "cd %s && %s/bin/pip install --no-index --no-build-isolation %s/clients/python",
-             tree, tree, tree, tree, tree, tree, venv, dir, venv, tree);
+    snprintf(
+        cmd, sizeof cmd,
+        "mkdir -p %s/clients %s/proto %s/protocol/include && cp -r clients/python %s/clients/ && "
+        "cp proto/mpmd.proto %s/proto/ && cp protocol/include/mpp.h %s/protocol/include/ && " PY
+        " -m venv --system-site-packages %s && "
+        "cd %s && %s/bin/pip install --no-index --no-build-isolation %s/clients/python",
+        tree, tree, tree, tree, tree, tree, venv, dir, venv, tree);
     char full[8900];
     snprintf(full, sizeof full, "(%s) > %s 2>&1", cmd, log);
     int rc = system(full);
