@@ -15,6 +15,7 @@
  * the initial CPDI domain).
  */
 #include "mpm_internal.h"
+#include "mpm_ref.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -483,6 +484,7 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
                         c->threads);
     int krc = mpm_kernels_check(c->kernels, err);
     if (krc) return krc;
+    if ((krc = mpm_ref_check(c, err))) return krc; /* kernel_family */
     if (c->kernels == MPM_KERNELS_AVX2 && c->method == MPM_METHOD_CPDI)
         return mpm_fail(err, MPM_EINVAL, "kernels",
                         "AVX2 asked for, but CPDI has portable "
