@@ -54,6 +54,9 @@ _Static_assert(SAME(MPM_VOLUME_STRAIN_INCREMENT, MPMD__CASE__VOLUME_UPDATE__STRA
 _Static_assert(SAME(MPM_TRANSFER_FLIP, MPMD__CASE__TRANSFER__FLIP) &&
                    SAME(MPM_TRANSFER_APIC, MPMD__CASE__TRANSFER__APIC),
                "mpm_transfer must match mpmd.Case.Transfer");
+_Static_assert(SAME(MPM_KERNEL_FAMILY_FAST, MPMD__CASE__KERNEL_FAMILY__FAST) &&
+                   SAME(MPM_KERNEL_FAMILY_REFERENCE, MPMD__CASE__KERNEL_FAMILY__REFERENCE),
+               "mpm_kernel_family must match mpmd.Case.KernelFamily");
 _Static_assert(SAME(MPP_STREAM_PROGRESS, MPMD__STREAM_MSG__BODY_PROGRESS) &&
                    SAME(MPP_STREAM_ENERGY, MPMD__STREAM_MSG__BODY_ENERGY) &&
                    SAME(MPP_STREAM_SNAPSHOT, MPMD__STREAM_MSG__BODY_SNAPSHOT) &&

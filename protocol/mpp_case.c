@@ -684,6 +684,8 @@ static int conv_case(const Mpmd__Case *pb, mpp_case *mc, size_t max, mpm_error *
     c->mass_tol = pb->has_mass_tol ? pb->mass_tol : 0;
     c->pic_fraction = pb->has_pic_fraction ? pb->pic_fraction : 0;
     c->transfer = pb->has_transfer ? (mpm_transfer)pb->transfer : MPM_TRANSFER_FLIP;
+    c->kernel_family =
+        pb->has_kernel_family ? (mpm_kernel_family)pb->kernel_family : MPM_KERNEL_FAMILY_FAST;
     c->volume_update =
         pb->has_volume_update ? (mpm_volume_update)pb->volume_update : MPM_VOLUME_STRAIN_INCREMENT;
     c->allow_unstable_dt = pb->has_allow_unstable_dt && pb->allow_unstable_dt;

@@ -16,6 +16,7 @@
  */
 #include "mpm_internal.h"
 #include "mpm_method.h"
+#include "mpm_ref.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -488,6 +489,7 @@ int mpm_case_check(const mpm_case *c, mpm_case_info *info, mpm_error *err)
                         c->threads);
     int krc = mpm_kernels_check(c->kernels, err);
     if (krc) return krc;
+    if ((krc = mpm_ref_check(c, err))) return krc; /* kernel_family */
     if (c->kernels == MPM_KERNELS_AVX2 && !(meth->flags & MPM_METH_AVX2))
         return mpm_fail(err, MPM_EINVAL, "kernels",
                         "AVX2 asked for, but %s has portable "

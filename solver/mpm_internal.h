@@ -208,6 +208,10 @@ void mpm_bar_wait(mpm_bar *b);
 
 struct mpm_sim {
     int dim;
+    /* the REFERENCE kernel family (mpm_case.kernel_family, mpm_ref.c): the
+     * step runs mpm_ref_step() on one thread, and none of the fast-path
+     * switches below is on (mpm_ref_init()) */
+    int ref;
     int avx2; /* the AVX2+FMA kernel families (mpm_case.kernels) */
     /* Drucker-Prager's plastic updates four at a time (mpm_dp_lanes();
      * the same bits): kernels not PORTABLE, and the CPU has AVX2 */

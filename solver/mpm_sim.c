@@ -54,6 +54,7 @@
 #include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_method.h"
+#include "mpm_ref.h"
 
 #include <limits.h>
 #include <math.h>
@@ -655,6 +656,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->p2g_fields = MPM_F_M | MPM_F_Q | (c->update == MPM_USF ? 0 : MPM_F_F);
     s->tshare = c->update == MPM_USF ? MPM_F_F : musl ? MPM_F_Q2 : 0;
     s->fuse = s->k->g2p_xv_nx != NULL;
+    /* dispatch: the REFERENCE family turns the fast-path switches off */
+    if (c->kernel_family == MPM_KERNEL_FAMILY_REFERENCE) mpm_ref_init(s);
     if (s->nthreads > 1 || s->fuse) {
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
         /* thread 0 scatters into the grid, and the fused passes into
@@ -712,7 +715,7 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->bal_last = s->bal_worst = 0;
     s->guard_v2 = s->vmax * s->vmax;
     if (mpm_team_start(s)) goto nomem;
-    init_order(s);
+    if (!s->ref) init_order(s); /* the REFERENCE family never sorts */
     return s;
 
 nomem:
@@ -896,7 +899,12 @@ int mpm_sim_step(mpm_sim *s)
     if (s->gnext) mpm_rows_swap_next(s);
     s->fuse_next = s->fuse && (s->fuse_pays || s->fuse_force);
     s->gvel_now = 0;
-    mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
+    if (s->ref) {           /* dispatch: the REFERENCE family's step (mpm_ref.c) */
+        s->step_energy = 0; /* it sums no energies in its passes */
+        mpm_ref_step(s);
+    } else {
+        mpm_team_run(s, s->update == MPM_USF ? ph_step_usf : ph_step_usl);
+    }
     s->gvel_now = s->gvel;
     s->gnext = s->fuse_next;
     if (s->general) /* the plastic work of the step, in thread order */
@@ -991,7 +999,7 @@ int mpm_sim_dim(const mpm_sim *s)
 }
 const char *mpm_sim_kernels(const mpm_sim *s)
 {
-    return s->avx2 ? "avx2-fma" : "portable";
+    return s->ref ? "reference" : s->avx2 ? "avx2-fma" : "portable";
 }
 const mpm_error *mpm_sim_error(const mpm_sim *s)
 {

@@ -119,6 +119,17 @@ typedef enum {
     MPM_KERNELS_AVX2 = 2
 } mpm_kernels_isa;
 
+/* The kernel family a job runs (mpm_case.kernel_family).  FAST (the
+ * default): the optimised families, chosen by dimension, method, update,
+ * transfer and mpm_case.kernels, on mpm_case.threads threads.  REFERENCE:
+ * the plain scalar family of mpm_ref.c, the step as the papers write it
+ * (node by node, one grid, one thread, no sorting): slower, for checking
+ * the fast families (tests/solver/t_reference.c) and for reading.  It
+ * runs every case the fast families run, on one thread whatever
+ * mpm_case.threads says; its results differ from theirs in round-off
+ * (docs/solver.md, "Reference kernels"). */
+typedef enum { MPM_KERNEL_FAMILY_FAST = 0, MPM_KERNEL_FAMILY_REFERENCE = 1 } mpm_kernel_family;
+
 /* Structured grid: nodes[d] nodes along axis d, spacing h[d], first node at
  * origin[d].  Only the first `dim` entries are used. */
 typedef struct {
@@ -327,10 +338,11 @@ typedef struct {
     double energy_budget;
     int fail_on_budget;
 
-    int threads;             /* solver threads (0 or 1: serial) */
-    mpm_kernels_isa kernels; /* the kernels' instruction set (default AUTO) */
-    size_t max_particles;    /* most particles the case may make (0:
-                              * MPM_MAX_PARTICLES, which also caps it) */
+    int threads;                     /* solver threads (0 or 1: serial) */
+    mpm_kernels_isa kernels;         /* the kernels' instruction set (default AUTO) */
+    mpm_kernel_family kernel_family; /* FAST (default) or REFERENCE */
+    size_t max_particles;            /* most particles the case may make (0:
+                                      * MPM_MAX_PARTICLES, which also caps it) */
 } mpm_case;
 
 #define MPM_DEFAULT_CFL 0.5
@@ -534,7 +546,7 @@ int mpm_sim_set_particle_forces(mpm_sim *sim, const double *f);
 size_t mpm_sim_particles(const mpm_sim *sim);
 size_t mpm_sim_nodes(const mpm_sim *sim); /* real grid nodes */
 int mpm_sim_dim(const mpm_sim *sim);
-/* The kernels the simulation runs: "avx2-fma" or "portable". */
+/* The kernels the simulation runs: "avx2-fma", "portable" or "reference". */
 const char *mpm_sim_kernels(const mpm_sim *sim);
 /* 1 when this build has the AVX2+FMA kernels and this CPU runs them. */
 int mpm_kernels_avx2_available(void);
