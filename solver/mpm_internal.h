@@ -35,6 +35,7 @@
 #define MPM_INTERNAL_H
 
 #include "mpm.h"
+#include "mpm_plan.h"
 #include "mpm_plastic.h"
 #include "mpm_timefn.h"
 
@@ -208,14 +209,13 @@ void mpm_bar_wait(mpm_bar *b);
 
 struct mpm_sim {
     int dim;
-    int avx2; /* the AVX2+FMA kernel families (mpm_case.kernels) */
-    /* Drucker-Prager's plastic updates four at a time (mpm_dp_lanes();
-     * the same bits): kernels not PORTABLE, and the CPU has AVX2 */
-    int dp_lanes;
+    /* the fast paths the job takes, chosen once at creation (mpm_plan.h);
+     * plan.ns: nodes per axis per particle, 2 (MPM; CPDI: per corner), 3
+     * or 4 (GMPM, B-splines) */
+    mpm_plan plan;
+    int avx2_ok; /* the case and the CPU allow AVX2 (mpm_plan_choose()) */
     mpm_method method;
     mpm_update update;
-    int ns;  /* nodes per axis per particle: 2 (MPM; CPDI: per corner), 3 or 4
-              * (GMPM, B-splines) */
     int bsp; /* B-spline degree (2 or 3), 0 otherwise */
 
     /* grid */
@@ -299,21 +299,14 @@ struct mpm_sim {
     mpm_mat_params *mats;
     const mpm_model_ops *model;
     double cmax; /* largest p-wave speed */
-    /* general: the block update is mpm_model_block() (a model other than
-     * linear elasticity, or a volume update other than STRAIN_INCREMENT),
-     * chosen once per job; 0 keeps the linear-elastic path of every earlier
-     * release.  spin3: 3D strain_of() also writes the spins (deps[6..8]).
+    /* (plan.general: the block update is mpm_model_block(), a model other
+     * than linear elasticity or a volume update other than
+     * STRAIN_INCREMENT; 0 keeps the linear-elastic path of every earlier
+     * release.)  spin3: 3D strain_of() also writes the spins (deps[6..8]).
      * f_block: the block update carries F (F <- (I + dt L) F; CPDI's passes
      * do it themselves).  mixed: the materials' models differ (dispatch by
      * runs of particles of one model). */
-    int general, spin3, f_block, mixed;
-    /* el_lanes: 2D or 3D, one linear-elastic material, the default volume
-     * update, no strain record, no spins (3D) and no sigma_zz array (2D):
-     * the AVX2 kernels' USF stress pass takes a run of MPM tents from its
-     * strain to its stress (2D: and its forces) in registers
-     * (mpm_kernels.c el_block(); the same bits as the general pass, which
-     * 0 takes) */
-    int el_lanes;
+    int spin3, f_block, mixed;
     mpm_volume_update volmode;
     double plastic_work; /* cumulative sigma : d eps_p V (thread order) */
     /* frictional: a material is DRUCKER_PRAGER or MOHR_COULOMB (the step
@@ -366,16 +359,17 @@ struct mpm_sim {
      * q2/m (phantom nodes: 0); gvel_now: the grid holds them (set after
      * a step, cleared when one starts; mpm_sim_node() answers momenta) */
     int gvel, gvel_now;
-    /* Fused steps (G2P2G): fuse, the family and update scheme allow it
-     * (every family but CPDI); p2g_fields, the fields the first scatter of a
+    /* Fused steps (G2P2G; plan.fuse: never, where it pays, always; the
+     * families but CPDI's have the passes); p2g_fields, the fields the first scatter of a
      * step writes (MPM_F_M | MPM_F_Q, and MPM_F_F for USL and MUSL), kept
      * all zero in the private buffers tbuf[t] between uses (the reduction
      * zeroes what it has read); fuse_next, the running step's moving pass
      * also scatters the next step's P2G fields into tbuf[t] (never before
      * a step that sorts, nor when fuse_pays, set with the active rows,
      * says the extra buffer's pages would cost more than the pass saves,
-     * unless fuse_force); gnext, it did: the step starts with them */
-    int fuse, p2g_fields, fuse_next, gnext, fuse_pays, fuse_force;
+     * unless plan.fuse is MPM_FUSE_ALWAYS); gnext, it did: the step starts
+     * with them */
+    int p2g_fields, fuse_next, gnext, fuse_pays;
     /* tshare: the field (MPM_F_F in USF, MPM_F_Q2 in MUSL, else 0) that
      * the private buffers tbuf[t], t >= 1, keep in q's storage: a step
      * scatters it in a pass of its own, after the reduction has read and
@@ -413,10 +407,11 @@ struct mpm_sim {
     uint32_t *sperm, *shist;
     size_t *rowoff;
     int sort_now, sort_go;
-    /* sort_ring: entries of each thread's ring (a power of 2); sort_win:
-     * the running sort moves every particle less than that far, so the
-     * arrays move by a sweep through the ring (mpm_sort.c) */
-    size_t sort_ring;
+    /* plan.sort_ring: entries of each thread's ring (a power of 2, at most
+     * sort_cap, the entries allocated); sort_win: the running sort moves
+     * every particle less than that far, so the arrays move by a sweep
+     * through the ring (mpm_sort.c) */
+    size_t sort_cap;
     int sort_win;
     long sort_moved; /* sorts that moved particles (tests read it) */
     long sort_swept; /* of those, the ones that swept (sort_win) */
@@ -520,16 +515,6 @@ size_t mpm_cpdi_scratch(void);
 /* Whether the case reads a deformation gradient per particle (P.F): the
  * one place that decides its allocation (mpm_sim.c). */
 int mpm_needs_F(const mpm_case *c);
-/* Tests and benchmarks: switches a GMPM simulation that has not stepped yet
- * to the ns-node family (3 only if every lp <= h/2).  Returns 0 or
- * MPM_EINVAL. */
-int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
-/* Tests and benchmarks: on 0 the steps no longer fuse the next step's
- * first scatter into their moving pass (a scatter already made is
- * dropped), on 1 they do again where it pays (the default), on 2 always.
- * Returns 0, or MPM_EINVAL to turn fusion on where the family has no
- * fused passes (CPDI). */
-int mpm_sim_set_fused(mpm_sim *s, int on);
 
 /* Constitutive model interface.  A model declares the per-particle state it
  * needs (needs: MPM_NEED_*), allocated at creation only when a material of
@@ -574,7 +559,7 @@ typedef struct {
      * the 2D and 3D blocks write out (t_mpm_frictional_block.c) */
     int general;
     /* 1: Drucker-Prager's updates that leave the elastic trial go to
-     * mpm_dp_lanes() in queues of one material (mpm_sim.dp_lanes) */
+     * mpm_dp_lanes() in queues of one material (mpm_sim.plan.dp_lanes) */
     int dp_lanes;
 } mpm_model_blk;
 
@@ -589,7 +574,7 @@ struct mpm_model_ops {
     double (*energy)(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p);
 };
 
-/* The general block update (mpm_sim.general): F (f_block), the models
+/* The general block update (mpm_sim.plan.general): F (f_block), the models
  * (one call per run of particles of one model), then the volume
  * (volmode); the plastic work into o->wplast.  deps: o->deps. */
 void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb);

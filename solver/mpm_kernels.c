@@ -590,7 +590,7 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         weights_block(s, b0, nb, D, NS, BS, Wb);
         size_t i = 0;
 #if MPM_V4
-        if (TL(D, NS, BS, 0) && !EN && s->el_lanes) {
+        if (TL(D, NS, BS, 0) && !EN && s->plan.el_lanes) {
             el_block(s, o, gb, &G, &r, b0, nb, D);
             continue;
         }

@@ -164,12 +164,12 @@ INLINE void strain_of(const mpm_sim *s, const double L[3][3], double *const deps
 
 /* Constitutive update of a block, then the volume follows the strain
  * (2D: eps_zz = 0, deps[2] is the spin).  Any other model or volume update
- * goes through mpm_model_block(), chosen once per job (s->general, one
+ * goes through mpm_model_block(), chosen once per job (s->plan.general, one
  * test per block). */
 INLINE void block_update(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb, int D)
 {
     double *const *deps = o->deps;
-    if (__builtin_expect(s->general, 0)) {
+    if (__builtin_expect(s->plan.general, 0)) {
         mpm_model_block(s, o, b0, nb);
         return;
     }
@@ -346,7 +346,7 @@ INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, i
 INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
 {
     const mpm_particles *P = &s->P;
-    if (__builtin_expect(s->general, 0)) {
+    if (__builtin_expect(s->plan.general, 0)) {
         for (size_t p = b0; p < b0 + nb; p++) e->es += mpm_model_energy(s, p);
         return;
     }

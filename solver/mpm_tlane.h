@@ -292,7 +292,7 @@ INLINE v4d tl_keep(v4d a, v4d b, unsigned k)
 
 /* 2D USF's stress pass for one run of k particles p .. p + 3 (block slot
  * i, weights t, no phantom corner) of a job whose one material is linear
- * elastic, no strain record and no sigma_zz kept (mpm_sim.el_lanes): tl_strain()'s
+ * elastic, no strain record and no sigma_zz kept (mpm_sim.plan.el_lanes): tl_strain()'s
  * strain increments, elastic_2d()'s stress update and block_update()'s
  * volume, each lane in their order and roundings (the products kept out
  * of fused multiply-adds, as mpm_model.c, built without them, forms
@@ -323,7 +323,7 @@ INLINE void tl_stress_force2(mpm_sim *s, trun *r, mpm_gridbuf *gb, const tlane *
 }
 
 /* 3D USF's stress pass for one run of k particles p .. p + 3 (weights t,
- * no phantom corner) of a job with mpm_sim.el_lanes: tl_strain()'s strain
+ * no phantom corner) of a job with mpm_sim.plan.el_lanes: tl_strain()'s strain
  * increments, elastic_3d()'s stress update and block_update()'s volume,
  * each lane in their order and roundings, stored for the first k lanes
  * only (the forces follow particle by particle, trun_add()). */
@@ -414,7 +414,7 @@ INLINE void el_one(mpm_sim *s, mpm_thread_out *o, const pw *W, size_t b0, size_t
 }
 
 /* USF's stress pass over a block (weights in o->wblk) of a job with
- * mpm_sim.el_lanes (2D and 3D tents): each run of one cell four particles
+ * mpm_sim.plan.el_lanes (2D and 3D tents): each run of one cell four particles
  * at a time from its strain to its stress and volume in registers
  * (tl_stress_force2() in 2D, which takes the forces from them too;
  * tl_stress3() in 3D, whose forces then follow particle by particle); a
