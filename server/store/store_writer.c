@@ -115,6 +115,7 @@ static const char *const writer_sql[WS_COUNT] = {
                       " WHERE id = ?1" NOT_ENDED,
     [WS_UPD_PROGRESS] = "UPDATE runs SET steps = ?2, wall_s = ?3, psteps_per_s = ?4"
                         " WHERE id = ?1" NOT_ENDED,
+    [WS_PLAN] = "UPDATE runs SET plan = ?2 WHERE id = ?1" NOT_ENDED,
     [WS_FINISH] = "UPDATE runs SET status = ?2, finished_at = ?3, steps = ?4,"
                   " wall_s = ?5, psteps_per_s = ?6, kinetic = ?7, strain = ?8,"
                   " potential = ?9, external_work = ?10, total = ?11, error = ?12,"
@@ -426,6 +427,13 @@ static int apply_op(store *s, op *o)
         BIND(bind_static(st, 2, sti_status_name(o->u.st.status)));
         BIND(bind_time(st, 3, o->u.st.at));
         BIND(bind_text_or_null(st, 4, o->u.st.error));
+        break;
+    case OP_RUN_PLAN:
+        st = s->ws[WS_PLAN];
+        what = "record run plan";
+        is_update = 1;
+        BIND(sqlite3_bind_int64(st, 1, id));
+        BIND(bind_static(st, 2, o->u.plan));
         break;
     case OP_RUN_PROGRESS:
         st = s->ws[WS_UPD_PROGRESS];
@@ -974,6 +982,7 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out)
     r->server_version = tail_str(&cur, ver);
     r->owner = tail_str(&cur, owner);
     r->error = tail_str(&cur, run->error);
+    r->plan = NULL; /* recorded when the run starts (store_run_plan) */
     r->case_pb = run->case_len ? tail_put(&cur, run->case_pb, run->case_len) : NULL;
     if (r->submitted_at == 0) r->submitted_at = store_time_now();
 
@@ -1001,6 +1010,16 @@ int store_run_set_status(store *s, int64_t id, mpp_status status, double at, con
     o->u.st.status = status;
     o->u.st.at = at == 0 ? store_time_now() : at;
     o->u.st.error = tail_str(&cur, error);
+    return submit(s, o, 0);
+}
+
+int store_run_plan(store *s, int64_t id, const char *plan)
+{
+    if (!s || !plan) return sti_fail(MPM_EINVAL, "store_run_plan: NULL argument");
+    char *cur;
+    op *o = op_new(OP_RUN_PLAN, id, str_room(plan), &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.plan = tail_str(&cur, plan);
     return submit(s, o, 0);
 }
 
