@@ -32,7 +32,7 @@
  * at both ends (t_mpm_bspline.c bspline3_natural_ends,
  * t_mpm_verified.c verified_patch_test).
  */
-#include "mpm_internal.h"
+#include "mpm_grid.h"
 
 #include <string.h>
 

@@ -4,7 +4,7 @@
  * and the check of mpm_case.kernels.  The families themselves and their
  * selection are in mpm_kernels.c; mpm_sim_new() chooses between them.
  */
-#include "mpm_internal.h"
+#include "mpm_kernels.h"
 
 int mpm_kernels_avx2_available(void)
 {

@@ -31,6 +31,7 @@
  * The rate-form models share the Jaumann rotation, then the model's point
  * update (J2: rate_block() calling point(); DP, MC: frictional_block()).
  */
+#include "mpm_model.h"
 #include "mpm_internal.h"
 
 #include <math.h>

@@ -180,7 +180,7 @@ int mpm_needs_F(const mpm_case *c)
            (model_needs(c) & MPM_NEED_F);
 }
 
-/* Whether the particles keep a strain record P.eps (mpm_internal.h): the
+/* Whether the particles keep a strain record P.eps (mpm_particles.h): the
  * plastic models' total strain (the elastic part follows from the stress,
  * the rest is plastic), and linear elasticity from an initial stress
  * (given or geostatic), where the strain energy 1/2 sigma : eps counts

@@ -281,7 +281,7 @@ TEST(kernels_avx2_matches_portable)
 /* A support whose last row ends the grid arrays.  The AVX2 kernels load
  * and store a row of a 3-node support as four lanes, so the row that ends
  * an array reaches one double past its last node: the grid fields and
- * minv have MPM_GRID_SLACK doubles there (mpm_internal.h).  A box in the
+ * minv have MPM_GRID_SLACK doubles there (mpm_grid.h).  A box in the
  * grid's top corner, moving into it at (1, 1) m/s (2D; 3D (1, 1, 1)):
  * the B-splines' supports reach the last node of the padded grid at once
  * (no padding), GIMP's when the body has moved into the padding (2D: step
