@@ -434,11 +434,11 @@ INLINE void scatter_force(const mpm_sim *s, mpm_gridbuf *gb, const pw *W0, size_
     });
 }
 
-#include "mpm_gather.h" /* the gathers (phantom_grad, gather_tent, gather_rows) */
-#include "mpm_tlane.h"  /* the tents' gathers by lanes (AVX builds) */
-#include "mpm_trun.h"   /* the tents' run scatter (trun) */
+#include "mpm_gather.inc" /* the gathers (phantom_grad, gather_tent, gather_rows) */
+#include "mpm_tlane.inc"  /* the tents' gathers by lanes (AVX builds) */
+#include "mpm_trun.inc"   /* the tents' run scatter (trun) */
 
-/* MPM tents gathered four particles at a time (mpm_tlane.h) */
+/* MPM tents gathered four particles at a time (mpm_tlane.inc) */
 #define TL(D, NS, BS, AP) (MPM_V4 && (D) > 1 && (NS) == 2 && !(BS) && !(AP))
 /* ... and USF's moving pass by them, in 3D only (in 2D it was slower:
  * docs/performance.md) */
@@ -609,8 +609,8 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
                 unsigned k = kk[i];
                 if (__builtin_expect(tl_phantom(s, Wb[i].base, D), 0)) {
                     for (unsigned j = 0; j < k; j++, i++)
-                        gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0,
-                               NULL, NULL, 0);
+                        gather(s, &Wb[i], D, NS,
+                               (gather_req){.strain = 1, .qg = s->g.q, .deps = o->deps, .i = i});
                     continue;
                 }
                 tlane t;
@@ -621,8 +621,8 @@ INLINE void stress_force_t(mpm_sim *s, mpm_gridbuf *gb, mpm_thread_out *o, size_
         }
 #endif
         for (; i < nb; i++)
-            gather(s, s->g.q, &Wb[i], D, NS, o->deps, i, 1, 0, NULL, NULL, 0, NULL, 0, NULL, NULL,
-                   0);
+            gather(s, &Wb[i], D, NS,
+                   (gather_req){.strain = 1, .qg = s->g.q, .deps = o->deps, .i = i});
         block_update(s, o, b0, nb, D);
         if (EN) esum_strain(s, &e, b0, nb, D);
         i = 0;
@@ -782,7 +782,10 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
 #endif
             if (AP) {
                 weights_ap(s, p, D, NS, BS, &W, &R);
-                gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 1);
+                gather(
+                    s, &W, D, NS,
+                    (gather_req){
+                        .pos = 1, .affine = 1, .qx = s->g.q, .dx = dx, .R = &R, .Bo = Bm, .vp = 1});
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
@@ -790,7 +793,8 @@ INLINE void g2p_xv_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, int D,
                     Wp = &Wb[p - b0];
                 else
                     weights(s, p, D, NS, BS, &W);
-                gather(s, NULL, Wp, D, NS, NULL, 0, 0, 1, s->g.q, dx, 1, dv, 0, NULL, NULL, 1);
+                gather(s, Wp, D, NS,
+                       (gather_req){.pos = 1, .qx = s->g.q, .dx = dx, .vel = 1, .dv = dv, .vp = 1});
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
@@ -855,7 +859,18 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
 #endif
             if (AP) {
                 weights_ap(s, p, D, NS, BS, &W, &R);
-                gather(s, s->g.q, &W, D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 1, &R, Bm, 1);
+                gather(s, &W, D, NS,
+                       (gather_req){.strain = 1,
+                                    .qg = s->g.q,
+                                    .deps = o->deps,
+                                    .i = i,
+                                    .pos = 1,
+                                    .affine = 1,
+                                    .qx = s->g.q,
+                                    .dx = dx,
+                                    .R = &R,
+                                    .Bo = Bm,
+                                    .vp = 1});
                 ap_store(s, p, D, dx, Bm);
             } else {
                 const pw *Wp = &W;
@@ -863,7 +878,17 @@ INLINE void g2p_xv_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1,
                     Wp = &Wb[i];
                 else
                     weights(s, p, D, NS, BS, &W);
-                gather(s, s->g.q, Wp, D, NS, o->deps, i, 1, 1, s->g.q, dx, 1, dv, 0, NULL, NULL, 1);
+                gather(s, Wp, D, NS,
+                       (gather_req){.strain = 1,
+                                    .qg = s->g.q,
+                                    .deps = o->deps,
+                                    .i = i,
+                                    .pos = 1,
+                                    .qx = s->g.q,
+                                    .dx = dx,
+                                    .vel = 1,
+                                    .dv = dv,
+                                    .vp = 1});
             }
             for (int d = 0; d < D; d++) {
                 s->P.x[d][p] += dt * dx[d];
@@ -899,7 +924,9 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_gridbuf *q2b, size_t p0, size_t p1, int D, i
             for (size_t i = 0; i < nb; i++) {
                 size_t p = b0 + i;
                 double dv[3], vp[3] = {0, 0, 0};
-                gather(s, NULL, &Wl[i], D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL, 1);
+                gather(
+                    s, &Wl[i], D, NS,
+                    (gather_req){.pos = BL, .qx = s->g.q, .dx = vp, .vel = 1, .dv = dv, .vp = 1});
                 for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
                 if (q2b) scatter_q2(s, q2b->q2, &Wl[i], p, D, NS);
             }
@@ -910,13 +937,16 @@ INLINE void g2p_v_t(mpm_sim *s, mpm_gridbuf *q2b, size_t p0, size_t p1, int D, i
         double dv[3], vp[3] = {0, 0, 0}, Bm[3][3];
         if (AP) {
             weights_ap(s, p, D, NS, BS, &W, &R);
-            gather(s, NULL, &W, D, NS, NULL, 0, 0, 1, s->g.q, vp, 0, NULL, 1, &R, Bm, 1);
+            gather(s, &W, D, NS,
+                   (gather_req){
+                       .pos = 1, .affine = 1, .qx = s->g.q, .dx = vp, .R = &R, .Bo = Bm, .vp = 1});
             ap_store(s, p, D, vp, Bm);
             if (q2b) scatter_affine(s, NULL, q2b->q2, &W, &R, p, D, NS, 0);
             continue;
         }
         weights(s, p, D, NS, BS, &W);
-        gather(s, NULL, &W, D, NS, NULL, 0, 0, BL, s->g.q, vp, 1, dv, 0, NULL, NULL, 1);
+        gather(s, &W, D, NS,
+               (gather_req){.pos = BL, .qx = s->g.q, .dx = vp, .vel = 1, .dv = dv, .vp = 1});
         for (int d = 0; d < D; d++) v_update(&s->P.v[d][p], dt, dv[d], vp[d], BL, al, bl);
         if (q2b) scatter_q2(s, q2b->q2, &W, p, D, NS);
     }
@@ -947,8 +977,15 @@ INLINE void g2p_x_stress_t(mpm_sim *s, mpm_thread_out *o, size_t p0, size_t p1, 
         for (size_t i = 0; i < nb; i++) {
             size_t p = b0 + i;
             double dx[3];
-            gather(s, s->g.q2, &Wb[i], D, NS, o->deps, i, 1, 1, s->g.q, dx, 0, NULL, 0, NULL, NULL,
-                   1);
+            gather(s, &Wb[i], D, NS,
+                   (gather_req){.strain = 1,
+                                .qg = s->g.q2,
+                                .deps = o->deps,
+                                .i = i,
+                                .pos = 1,
+                                .qx = s->g.q,
+                                .dx = dx,
+                                .vp = 1});
             for (int d = 0; d < D; d++) s->P.x[d][p] += dt * dx[d];
         }
         moved_block(s, o, &bc, &ck, &e, &a, b0, b0 + nb, D, NS, BS, EN, AP);

@@ -534,7 +534,7 @@ TEST(kernels_first_bad_particle)
     CHECK(runs == 48);
 }
 
-/* The tents by lanes (mpm_tlane.h): four particles of one cell's run at a
+/* The tents by lanes (mpm_tlane.inc): four particles of one cell's run at a
  * time, the lanes past the run not moved, a cell with a phantom corner
  * and a block's last particles one by one.  Explicit particles put 1 .. 9
  * (2D) or 1 .. 8 (3D) in a cell, so that runs of every length start at
