@@ -51,7 +51,7 @@ void mpm_bspline_span(int p, int n, int c, double C[4][4]);
 
 /* Doubles allocated (zeroed) past the end of every grid field and of
  * minv: the AVX2 kernels load and store a support's row of three nodes as
- * four lanes (gather_rows(), the scatters in mpm_kernels.c), which reads,
+ * four lanes (gather_rows(), the scatters in mpm_kernels.inc), which reads,
  * and adds +0 to, one node past a row that ends the array. */
 #define MPM_GRID_SLACK 4
 

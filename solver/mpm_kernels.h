@@ -118,9 +118,27 @@ struct mpm_kernels {
  * scatters of momentum (with the affine part) and velocity updates (PIC
  * velocity and B_p), every other pass shared; blend is then ignored. */
 const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, int apic);
-/* The same families built for AVX2 and FMA (mpm_kernels_avx2.c): only
+/* The same families built for AVX2 and FMA (the units' AVX2 builds,
+ * selected by mpm_kernels_avx2.c): only
  * where mpm_kernels_avx2_available(). */
 const mpm_kernels *mpm_kernels_select_avx2(int dim, int ns, int bspline, int blend, int apic);
+/* The families one translation unit of the kernels instantiates
+ * (mpm_kernels.inc): fam[bspline][variant][ns - 2], variant 0 FLIP, 1 the
+ * PIC/FLIP blend, 2 APIC; NULL where the unit has none.  The portable
+ * units are mpm_kernels_<unit>.c, their AVX2 builds
+ * mpm_kernels_<unit>_avx2.c. */
+typedef struct {
+    const mpm_kernels *fam[2][3][3];
+} mpm_kernel_unit;
+extern const mpm_kernel_unit mpm_ku_1d, mpm_ku_2d, mpm_ku_2d_bs, mpm_ku_3d, mpm_ku_3d_bs;
+extern const mpm_kernel_unit mpm_ku_1d_avx2, mpm_ku_2d_avx2, mpm_ku_2d_bs_avx2, mpm_ku_3d_avx2,
+    mpm_ku_3d_bs_avx2;
+/* unit u's family (mpm_kernels_select()'s arguments) */
+static inline const mpm_kernels *mpm_kernel_unit_pick(const mpm_kernel_unit *u, int ns, int bspline,
+                                                      int blend, int apic)
+{
+    return u->fam[bspline != 0][apic ? 2 : blend ? 1 : 0][ns - 2];
+}
 /* 1 when that build fuses a * b + c (not in the sanitizer builds, -O1). */
 int mpm_kernels_avx2_fuses(void);
 /* 0 when the case's kernels field is valid on this machine, else

@@ -61,7 +61,7 @@ typedef struct {
 } mpm_particles;
 
 /* x, rounded to a double where it stands.  In the AVX2+FMA build of the
- * kernels (mpm_kernels_avx2.c, -ffp-contract=fast) an empty asm that the
+ * kernels (mpm_kernels_*_avx2.c, -ffp-contract=fast) an empty asm that the
  * compiler must assume reads and rewrites x keeps a product from being
  * fused with the sum it feeds; the energy sums below use it, so that the
  * step's in-pass sums give the bits of the energy pass (built without

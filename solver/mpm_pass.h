@@ -1,6 +1,6 @@
 /*
  * mpm_pass.h - the inline pieces every particle pass shares: the MPM,
- * uGIMP and B-spline families of mpm_kernels.c and the CPDI family of
+ * uGIMP and B-spline families of mpm_kernels.inc and the CPDI family of
  * mpm_cpdi.c.  A particle's cell, the runs that record the supports a pass
  * moves (rowrun) and the thread's box and row extents they merge into,
  * two doubles at once (v2d), the checks of a moved particle (check_xv,
@@ -8,7 +8,7 @@
  * block, the energy sums made in the pass (esum, with the
  * energy pass's arithmetic; AP: APIC's affine angular momentum), the
  * velocity update (FLIP or blended with PIC) and the sort keys.
- * Private to the solver (the particle passes of mpm_kernels.c and
+ * Private to the solver (the particle passes of mpm_kernels.inc and
  * mpm_cpdi.c; mpm_rows.c's node loops take v2d), after mpm_internal.h; everything is static and
  * always inlined, so that each specialised loop (dimension, nodes per axis, ...) compiles as
  * before.

@@ -38,14 +38,14 @@ typedef enum { MPM_VAR_FLIP = 0, MPM_VAR_BLEND = 1, MPM_VAR_APIC = 2 } mpm_varia
 
 typedef struct {
     /* chosen (mpm_sim_plan_override() may set them) */
-    int avx2;      /* kernels=avx2|portable: the AVX2+FMA families (mpm_kernels_avx2.c) */
+    int avx2;      /* kernels=avx2|portable: the AVX2+FMA families (mpm_kernels_*_avx2.c) */
     int ns;        /* ns=2|3|4: nodes per axis of the family (uGIMP: 3 when every
                     * particle's lp <= h/2, else 4; only before the first step) */
     int fuse;      /* fuse=off|auto|always (mpm_fuse_mode; off where the family
                     * has no fused passes: CPDI) */
     int el_lanes;  /* el_lanes=0|1: the AVX2 tents' USF stress pass takes a run
                     * of particles from strain to stress (2D: and forces) in
-                    * registers (mpm_kernels.c el_block(); one linear elastic
+                    * registers (mpm_kernels.inc el_block(); one linear elastic
                     * material, no strain record, no spins, no sigma_zz array) */
     int dp_lanes;  /* dp_lanes=0|1: Drucker-Prager's plastic updates four at a
                     * time (mpm_dp_lanes(); the CPU has AVX2, kernels not PORTABLE) */

@@ -4,7 +4,7 @@
  * own modules (mpm_internal.h lists them): the thread team (mpm_team.c),
  * the active rows and node passes (mpm_rows.c), the sort (mpm_sort.c),
  * boundary conditions and loads (mpm_loads.c), the energies and the
- * divergence guard (mpm_energy.c), the particle loops (mpm_kernels.c).
+ * divergence guard (mpm_energy.c), the particle loops (mpm_kernels.inc, the plan in mpm_plan.c).
  *
  * One step follows Figs. 5-7 of the GMPM paper.  With q the grid momentum
  * and f the rate of momentum (Eq. 13: f = f_ext - f_int):

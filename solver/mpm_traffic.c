@@ -11,7 +11,7 @@
  * read (wts(): x, and lp for uGIMP, F and lp for CPDI), what the stress
  * update reads and writes (upd(): the model's arrays and the volume
  * update's), and the fixed arrays of the scatters and gathers.  When the
- * passes of mpm_kernels.c / mpm_cpdi.c change (fusing G2P with the next
+ * passes of mpm_kernels.inc / mpm_cpdi.c change (fusing G2P with the next
  * P2G, narrower storage), the table here changes with them.  Fused jobs
  * (mpm_sim.plan.fuse, every family but CPDI): the pass that moves the particles
  * also makes the next step's first scatter, which then reads only what
@@ -110,7 +110,7 @@ static double field_bytes(const mpm_sim *s, unsigned f)
 }
 
 /* What the weights of one particle read: x; uGIMP lp; CPDI its domain,
- * F and lp (mpm_kernels.c weights_n0(), mpm_cpdi.c cweights()). */
+ * F and lp (mpm_kernels.inc weights_n0(), mpm_cpdi.c cweights()). */
 static unsigned wts(const mpm_sim *s)
 {
     if (s->method == MPM_METHOD_CPDI) return TF_X | TF_LP | TF_F;
@@ -190,7 +190,7 @@ static int fused(const mpm_sim *s)
 
 /* The next step's first scatter, made by a fused pass (plan.fuse) at the
  * particles' new positions: it reads what its scatter needs (scat) that
- * the pass has not read or written already (mpm_kernels.c p2g_one()). */
+ * the pass has not read or written already (mpm_kernels.inc p2g_one()). */
 static void next_scatter(unsigned scat, unsigned *rd, unsigned wr)
 {
     *rd |= scat & ~(*rd | wr);
