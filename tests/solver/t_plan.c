@@ -79,6 +79,7 @@ TEST(plan_text_round_trip)
             snprintf(kw, sizeof kw, "%s", cs[i].want);
             for (char *tok = strtok(kw, " "); tok; tok = strtok(NULL, " ")) {
                 char *eq = strchr(tok, '=');
+                CHECKF(eq, "case %zu: '%s' in the test's table", i, tok);
                 *eq = '\0';
                 val(text, tok, got, sizeof got);
                 CHECKF(!strcmp(got, eq + 1), "case %zu: %s=%s, want %s", i, tok, got, eq + 1);
