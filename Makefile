@@ -95,8 +95,9 @@ $(1)/bench/%.o: INC = $(I_BENCH)
 $(1)/tests/fuzz/%.o: INC = $(I_MPP)
 endef
 
-# The AVX2+FMA kernels (solver/mpm_kernels_avx2.c, chosen at run time)
-# on x86-64: that file with these flags, every file told that it exists.
+# The AVX2+FMA kernels (solver/mpm_kernels_<unit>_avx2.c and their selection
+# mpm_kernels_avx2.c, chosen at run time) on x86-64: those files with these
+# flags, every file told that they exist.
 ifneq ($(findstring x86_64,$(shell $(CC) -dumpmachine 2>/dev/null)),)
 CSTD    += -DMPM_HAVE_AVX2_KERNELS
 AVX2F   := -mavx2 -mfma -ffp-contract=fast
@@ -184,8 +185,9 @@ $(FUZZ)/%.o: CC := $(FUZZ_CC)
 # the fuzzers reach only the solver's case check: the solver is built at
 # -O0, its kernels (never called by a target) without instrumentation
 $(FUZZ)/solver/%.o: FUZZ_O := -O0
-$(FUZZ)/solver/mpm_kernels.o $(FUZZ)/solver/mpm_kernels_avx2.o: FUZZF = -O0 -g
-$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ) $(COV),$(b)/solver/mpm_kernels_avx2.o): XFLAGS = $(AVX2F)
+$(FUZZ)/solver/mpm_kernels.o $(FUZZ)/solver/mpm_kernels_%.o: FUZZF = -O0 -g
+$(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ) $(COV),$(b)/solver/mpm_kernels_avx2.o \
+  $(b)/solver/mpm_kernels_%_avx2.o): XFLAGS = $(AVX2F)
 $(foreach b,$(REL) $(ASAN) $(TSAN) $(LEAN) $(FUZZ) $(COV),$(b)/solver/mpm_plastic_avx2.o): XFLAGS = $(PLASF)
 $(foreach b,$(REL) $(ASAN) $(TSAN) $(COV),$(b)/bench/ceiling/ceiling_avx2.o): XFLAGS = $(AVX2F)
 -include $(shell find build -name '*.d' 2>/dev/null)
@@ -279,7 +281,7 @@ clean:
 # files that differ.  Generated code (build/) is not ours to format.
 CLANG_FORMAT ?= clang-format
 SRC_DIRS := solver protocol server clients scenes bench tests
-FMT_SRCS = $(shell find $(SRC_DIRS) -name '*.[ch]' | sort)
+FMT_SRCS = $(shell find $(SRC_DIRS) -name '*.[ch]' -o -name '*.inc' | sort)
 
 format: deps
 	$(CLANG_FORMAT) -i $(FMT_SRCS)
@@ -304,9 +306,9 @@ CPPCHECK ?= cppcheck
 CPPCHECK_FLAGS := --enable=warning,performance,portability --std=c11 --max-configs=12 \
   --error-exitcode=1 --inline-suppr --suppressions-list=tests/cppcheck.supp -q \
   -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE -DPROTOBUF_C_VERSION_NUMBER=1004001 \
-  --cppcheck-build-dir=build/cppcheck -j2 -i solver/mpm_kernels_avx2.c
-# (mpm_kernels_avx2.c is mpm_kernels.c again with other flags: both tools
-# read it there)
+  --cppcheck-build-dir=build/cppcheck -j2 $(addprefix -i ,$(wildcard solver/mpm_kernels*_avx2.c))
+# (the AVX2 units are the portable ones again with other flags: both tools
+# read them there)
 # -fanalyzer (gcc only) at -O0, its objects in build/analyze.  Turned off:
 #  -Wanalyzer-use-of-uninitialized-value: gcc 12's first version of it cannot
 #    relate a loop bound to the part of an array that was filled (w[d] for
@@ -322,7 +324,7 @@ ANALYZER_CC ?= gcc
 ANALYZE := build/analyze
 ANAF := -O0 -g -fanalyzer -Wno-analyzer-use-of-uninitialized-value -Wno-format-truncation
 $(ANALYZE)/tests/%.o: ANAF += -Wno-analyzer-malloc-leak -Wno-analyzer-file-leak
-LINT_SRCS = $(filter-out solver/mpm_kernels_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) \
+LINT_SRCS = $(filter-out solver/mpm_kernels%_avx2.c,$(MPM_SRCS)) $(MPP_SRCS) $(STORE_SRCS) $(SRV_SRCS) \
             server/mpmd/main.c $(CTL_SRCS) $(CLI_SRCS) $(TOOL_LIB) scenes/mpmrun/mpmrun.c $(TEST_SRCS) $(BENCH_SRCS) $(PERF_SRCS) $(wildcard bench/perf/inproc/*.c) \
             $(wildcard bench/ceiling/*.c)
 $(eval $(call layer_inc,$(ANALYZE)))

@@ -52,6 +52,7 @@ static int fill_run(Mpmd__RunInfo *pi, Mpmd__EnergySample *es, const mpp_run_inf
     pi->transfer = (Mpmd__Case__Transfer)ri->transfer;
     pi->warning = (char *)ri->warning;
     pi->owner = (char *)ri->owner;
+    pi->plan = (char *)ri->plan;
     pi->has_balance_error = ri->has_balance != 0;
     pi->balance_error = ri->balance_error;
     pi->has_checkpoint_step = pi->has_checkpoint_t = ri->has_checkpoint != 0;
@@ -331,6 +332,7 @@ static void take_run(mpp_run_info *ri, mpm_energy_sample *e, const Mpmd__RunInfo
     ri->transfer = (mpm_transfer)pi->transfer;
     ri->warning = str(pi->warning);
     ri->owner = str(pi->owner);
+    ri->plan = str(pi->plan);
     ri->has_balance = pi->has_balance_error;
     ri->balance_error = pi->balance_error;
     ri->has_checkpoint = pi->has_checkpoint_step;

@@ -8,7 +8,7 @@
  * cell units t_k = clamp(k - p, 0, n), k = 0 .. n + 2p: p + 1 knots at
  * each end, one at every interior node, n + p basis functions (control
  * points), of which a particle in span (cell) c touches c .. c + p.  Span
- * c is uniform (the translated uniform B-splines, which mpm_kernels.c
+ * c is uniform (the translated uniform B-splines, which mpm_kernels.inc
  * evaluates in closed form) when the 2p knots around it are distinct, p -
  * 1 <= c <= n - p; the p - 1 spans at each end are not, and their pieces
  * come from here: Cox-de Boor's recursion carried out on polynomials in
@@ -32,7 +32,7 @@
  * at both ends (t_bspline.c bspline3_natural_ends,
  * t_verified.c verified_patch_test).
  */
-#include "mpm_internal.h"
+#include "mpm_grid.h"
 
 #include <string.h>
 

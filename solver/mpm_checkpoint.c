@@ -237,7 +237,7 @@ static void layout_of(const mpm_sim *s, uint64_t L[L_COUNT])
     L[L_UPDATE] = (uint64_t)s->update;
     L[L_TRANSFER] = (uint64_t)s->transfer;
     L[L_VOLUME] = (uint64_t)s->volmode;
-    L[L_NS] = (uint64_t)s->ns;
+    L[L_NS] = (uint64_t)s->plan.ns;
     for (int d = 0; d < 3; d++) L[L_NPX + d] = (uint64_t)s->np[d];
     L[L_PARTICLES] = P->n;
     L[L_MATERIALS] = s->nmat;
@@ -250,7 +250,7 @@ static void layout_of(const mpm_sim *s, uint64_t L[L_COUNT])
     L[L_FRIC] = s->nfric;
     L[L_TRAC] = s->ntrac;
     L[L_TV] = s->ntv;
-    L[L_GENERAL] = (uint64_t)s->general;
+    L[L_GENERAL] = (uint64_t)s->plan.general;
     L[L_FRICTIONAL] = (uint64_t)s->frictional;
     L[L_DAMPING] = (uint64_t)s->damp;
     L[L_GRAVITY] = (uint64_t)s->has_gravity;

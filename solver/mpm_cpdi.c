@@ -2,7 +2,7 @@
  * mpm_cpdi.c - the particle loops of CPDI1, the convected particle domain
  * interpolation of Sadeghirad, Brannon & Burghardt (2011), specialised by
  * dimension; the same function table (struct mpm_kernels) and contracts as
- * the MPM and uGIMP families of mpm_kernels.c.
+ * the MPM and uGIMP families of mpm_kernels.inc.
  *
  * A particle's domain is the parallelogram (2D), parallelepiped (3D) or
  * segment (1D) spanned about its centre x_p by the vectors r_a = F r_a0,
@@ -27,7 +27,7 @@
  * Per particle, one cw holds each corner's first node, its per-axis tent
  * weights (axis 0's scaled by 2^-D, so that their product is the corner's
  * share of S) and its gradient vector J^-T s_c; every node loop forms
- * S = wx wy wz and G = S g_c from them.  The passes follow mpm_kernels.c:
+ * S = wx wy wz and G = S g_c from them.  The passes follow mpm_kernels.inc:
  * the USF stress pass keeps a block's cw between the strain gather and the
  * force scatter, the energies are summed in-pass with the energy pass's
  * arithmetic, a phantom node (m <= M_TOL) takes in the gradient the
@@ -221,7 +221,7 @@ INLINE double gvel(const mpm_sim *s, double *const qg[3], int a, size_t n, doubl
 }
 
 /* Phantom nodes in the velocity gradient (as phantom_grad() of
- * mpm_kernels.c): a phantom node takes, in the gradient only, the velocity
+ * mpm_gather.inc): a phantom node takes, in the gradient only, the velocity
  * interpolated at the particle from the other nodes, u_p = sum' S v /
  * sum' S, so L += u_p (sum_phantom G)^T.  Runs for the few particles whose
  * support has a phantom node; returns 0 when there is nothing to add. */

@@ -1,22 +1,25 @@
 /*
- * mpm_internal.h - the solver's private data layout and the declarations its
- * own modules share, for them only:
+ * mpm_internal.h - the simulation's private state (struct mpm_sim) and the
+ * declarations of the modules that work on it, for the solver's files
+ * only.  The data of each concern has its own header, included here:
+ *   mpm_particles.h  the particles' arrays;   mpm_grid.h  the grid's
+ *   mpm_model.h      the constitutive models (mpm_model.c, mpm_plastic.h);
+ *                    their rows and parameters: mpm_material.h
+ *                    (mpm_material_table.c)
+ *   mpm_team.h       the thread team (mpm_team.c)
+ *   mpm_kernels.h    the kernel families and their per-thread output
+ *   mpm_plan.h       the plan: the fast-path switches of a job
+ * and the modules declared here:
  *   mpm_sim.c      the public API: creation, the step, results
- *   mpm_team.c     the thread team that runs the passes
  *   mpm_rows.c     the active rows, the scatter targets and the node passes
  *   mpm_sort.c     the particles' sort by cell
  *   mpm_loads.c    essential boundary conditions, tractions, particle forces
+ *   mpm_cond.c     prescribed velocities and Coulomb friction on grid faces
  *   mpm_energy.c   the energy sums and the divergence guard
- *   mpm_kernels.c  the particle loops (MPM, uGIMP);  mpm_cpdi.c  CPDI1's
- *   mpm_pass.h     the inline pieces those two files' passes share
- *   mpm_material_table.c  the models' and parameters' rows (mpm_material.h)
- *   mpm_model.c    the constitutive models;  mpm_plastic.c  the
- *                  Drucker-Prager and Mohr-Coulomb stress-point integrators
- *   mpm_timefn.c   time functions;  mpm_cond.c  prescribed velocities and
- *                  Coulomb friction on grid faces
  *   mpm_case.c     checking a case and generating its particles
- *   mpm_bspline.c  the B-splines' clamped boundary spans, node positions
  *   mpm_checkpoint.c  the solver state as a self-checking blob (save, load)
+ * A file that needs only one concern includes only its header
+ * (mpm_bspline.c mpm_grid.h, mpm_isa.c mpm_kernels.h).
  *
  * Hot data is struct-of-arrays: particle field c of particle p is
  * P.field[c][p].  The grid is padded by two ghost layers per side for GMPM,
@@ -36,190 +39,33 @@
 #define MPM_INTERNAL_H
 
 #include "mpm.h"
+#include "mpm_grid.h"
+#include "mpm_kernels.h"
 #include "mpm_material.h"
+#include "mpm_model.h"
+#include "mpm_particles.h"
+#include "mpm_plan.h"
 #include "mpm_plastic.h"
+#include "mpm_team.h"
 #include "mpm_timefn.h"
 
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 
-/* Stress and strain components stored per dimension: 1D xx; 2D plane strain
- * xx yy zz xy; 3D xx yy zz xy yz xz.  Component c is the Voigt index c.  In
- * 2D plane strain eps_zz is identically zero and nothing reads it, so
- * P.eps[2] is not allocated (NULL); sigma_zz is kept for the pressure. */
-#define MPM_NCOMP(dim) ((dim) == 1 ? 1 : (dim) == 2 ? 4 : 6)
-
-/* Particle block size for the constitutive update (scratch per thread). */
-#define MPM_BLOCK 64
-
-typedef struct {
-    size_t n;
-    double *x[3], *v[3]; /* position, velocity (dim arrays) */
-    double *m, *vol;     /* mass, current volume */
-    double *lp[3];       /* GMPM / CPDI half-width per axis (NULL for MPM);
-                          * CPDI: the initial domain's, r_a0 = lp_a e_a */
-    /* Deformation gradient, F_ij = F[i * dim + j][p] (dim * dim arrays, the
-     * rest NULL), allocated only when mpm_needs_F() says the case reads it
-     * (today: CPDI), else all NULL.  Initialised to I at creation; updated
-     * F <- (I + dt L) F once a step by the pass that moves the particle,
-     * with the full velocity gradient L of its gather (mpm_cpdi.c: USL and
-     * MUSL the gather of the strain increment; USF the position pass, from
-     * the velocity before the nodal update).  Sorted with the particles. */
-    double *F[9];
-    /* stress, strain (MPM_NCOMP(dim) arrays; 2D: eps[2] NULL).  The strain
-     * record eps exists only when something reads it (mpm_sim.c
-     * needs_strain(): a rate-form model's record, or a linear elastic
-     * material with an initial stress); else all NULL, and the strain
-     * energy comes from the stress (mpm_strain_density()).  2D plane
-     * strain without a strain record with every material linear elastic:
-     * sig[2] is NULL too, sigma_zz = nu (sigma_xx + sigma_yy) being
-     * derived where it is read (mpm_sig_zz(); nothing in the step reads
-     * it). */
-    double *sig[6], *eps[6];
-    /* Model state, allocated only when a material's model declares it
-     * (mpm_model_ops.needs), else NULL; sorted with the particles:
-     * epsp the equivalent plastic strain, yld 1.0 when the particle flowed
-     * plastically in its last update (0.0 otherwise), vol0 the initial
-     * volume (volume update DET_F). */
-    double *epsp, *yld, *vol0;
-    uint16_t *mat; /* material index */
-    uint32_t *id;  /* creation index (particles are kept sorted by cell) */
-    /* APIC only (NULL with FLIP): affine matrix B_ab = sum_i S_ip v_ia
-     * (x_i - x_p)_b at B[3a + b] (a, b < dim; the others NULL) */
-    double *B[9];
-} mpm_particles;
-
-/* Per-material constants for the constitutive models. */
-typedef struct {
-    double E, nu, rho, lambda, mu, c; /* c: p-wave speed */
-    double K;                         /* bulk modulus lambda + 2 mu / 3 */
-    double sy0, H;                    /* VON_MISES: yield stress, hardening modulus */
-    const mpm_model_ops *ops;         /* the material's model */
-    /* DRUCKER_PRAGER, MOHR_COULOMB: mpm_plastic_init()'s parameters (in
-     * mpm_sim.plp, so that this struct, which the elastic kernels index,
-     * keeps its size); else NULL */
-    const mpm_plastic_params *pl;
-} mpm_mat_params;
-
-/* One grid's worth of scatter targets (the main grid, or a thread's private
- * copy when several threads scatter). */
-typedef struct {
-    double *m;     /* mass */
-    double *q[3];  /* momentum */
-    double *f[3];  /* rate of momentum f_ext - f_int (Eq. 13) */
-    double *q2[3]; /* MUSL: momentum of the updated particle velocities */
-} mpm_gridbuf;
-
-/* One axis of a B-spline grid: n cells (knot spans) of the open knot vector
- * t_k = clamp(k - p, 0, n), k = 0 .. n + 2p (cell units).  Span c's p + 1
- * functions belong to nodes start .. start + p, with start = c - off on
- * the interior (uniform) spans; the spans next to the ends have their own
- * start (lo_start, hi_start) and the polynomial coefficients of their
- * functions: span c < p - 1 in lo[c], span c > n - p in hi[c - (n - p +
- * 1)]; C[k][i] is the coefficient of f^i of node start + k, f = r - c.
- *
- * BSPLINE2 (p = 2): the n + 2 control points themselves (off 0).
- * BSPLINE3 (p = 3): the natural end basis, n + 1 nodes at the grid points
- * (off 1): control points 1 and n + 1 are tied to their neighbours by
- * s''(end) = 0 (c_1 = (2 c_0 + c_2) / 3, c_{n+1} = (c_n + 2 c_{n+2}) / 3),
- * so that every function's second derivative vanishes at the grid's ends;
- * mpm_bspline.c says why. */
-#define MPM_BS_EDGE 2 /* clamped spans per end, at most (p - 1, p <= 3) */
-typedef struct {
-    int p, n, off;
-    int lo_start[MPM_BS_EDGE], hi_start[MPM_BS_EDGE];
-    double lo[MPM_BS_EDGE][4][4], hi[MPM_BS_EDGE][4][4];
-} mpm_bspline_axis;
-
-/* Fills ax for degree p (2 or 3) and n cells: n >= 1 for p = 2, n >= 3 for
- * p = 3 (mpm_case_check() refuses fewer). */
-void mpm_bspline_axis_init(mpm_bspline_axis *ax, int p, int n);
-/* The coefficients C[k][i] (f^i of function c + k, k = 0 .. p) of the
- * B-splines of degree p on span c of n cells, by Cox-de Boor on the open
- * knot vector (cold: creation and tests). */
-void mpm_bspline_span(int p, int n, int c, double C[4][4]);
-
-typedef struct mpm_kernels mpm_kernels;
-
-/* Per-thread results of a particle pass, padded to a cache line. */
-typedef struct {
-    double vmax2;            /* max |v|^2 seen */
-    size_t bad;              /* first particle that left the grid or blew up */
-    double *deps[9];         /* MPM_BLOCK strain increments (scratch): the
-                              * Voigt components of dt sym(L); 2D: deps[2]
-                              * holds the spin dt W_xy = dt (L_xy - L_yx)/2
-                              * (eps_zz is 0 in plane strain); 3D with
-                              * mpm_sim.spin3: deps[6..8] the spins dt W_xy,
-                              * dt W_yz, dt W_xz (mpm_pass.h strain_of()) */
-    double wplast;           /* plastic work of the step's updates so far
-                              * (summed into mpm_sim.plastic_work after it) */
-    void *wblk;              /* MPM_BLOCK per-axis weights (mpm_kernels_scratch bytes) */
-    int blo[3], bhi[3];      /* padded nodes touched by the slice's supports
-                              * (inclusive; empty: blo > bhi) */
-    int *rlo, *rhi;          /* per row (y + z np[1]): first and last x node
-                              * touched (empty: rlo > rhi); rows outside the
-                              * box blo..bhi are always empty */
-    double ekin, estr, epot; /* partial energies (guard, mpm_sim_energy, and
-                              * the step's passes when energies are wanted) */
-    double emom[3], emass;   /* partial momentum and mass (mpm_sim_energy) */
-    double eang[3];          /* partial angular momentum (mpm_sim_energy) */
-    double edamp;            /* damping work of the thread's nodes this step */
-    int ksorted;             /* sort keys of the slice non-decreasing */
-    uint64_t *rval;          /* the sort's ring of saved slots (sort_ring */
-    uint32_t *rtag;          /* entries: values, and their slots) */
-    size_t ncell;            /* cell changes along the slice, as the last
-                              * moving pass (or mpm_ph_bbox()) recorded the
-                              * supports: its first particle counts one */
-    uint32_t kfirst, klast;  /* the slice's first and last sort key */
-    /* this step's work of the prescribed velocities' reactions and of the
-     * face friction on the thread's share of the nodes (mpm_cond.c) */
-    double wpres, wfric;
-    /* DRUCKER_PRAGER / MOHR_COULOMB updates of the step (mpm_model_block()):
-     * plastic point-updates, their substeps (a closed-form return counts
-     * 1), the most in one update, and the first particle whose integrator
-     * failed (SIZE_MAX: none); summed and reset by mpm_sim_step() */
-    long long plupd, plsub;
-    int plmax;
-    size_t plbad;
-    char pad[64];
-} mpm_thread_out;
-
-/* The team's barrier (mpm_team.c).  A thread that arrives before the last
- * spins on the generation for up to MPM_BAR_SPIN_NS, then sleeps on the
- * condition variable; the last to arrive starts the next generation and
- * wakes the sleepers.  pthread_barrier_wait() sleeps at once, and waking
- * a sleeping thread takes tens to hundreds of microseconds on a VM: at 5
- * or 6 barriers a step, 2-thread steps of 10-20 ms lost several per cent
- * to it.  Arrivals order memory as a barrier does (what a thread wrote
- * before it is visible to every thread after it). */
-#define MPM_BAR_SPIN_NS 200000L
-typedef struct {
-    atomic_uint count; /* arrivals in this generation */
-    atomic_uint gen;   /* the generation; changes when all have arrived */
-    unsigned n;        /* threads */
-    pthread_mutex_t mu;
-    pthread_cond_t cv;
-} mpm_bar;
-/* 0, or -1 when the mutex or the condition variable cannot be made. */
-int mpm_bar_init(mpm_bar *b, unsigned n);
-void mpm_bar_destroy(mpm_bar *b);
-void mpm_bar_wait(mpm_bar *b);
-
 struct mpm_sim {
     int dim;
+    /* the fast paths the job takes, chosen once at creation (mpm_plan.h);
+     * plan.ns: nodes per axis per particle, 2 (MPM; CPDI: per corner), 3
+     * or 4 (GMPM, B-splines) */
+    mpm_plan plan;
+    int avx2_ok; /* the case and the CPU allow AVX2 (mpm_plan_choose()) */
     /* the REFERENCE kernel family (mpm_case.kernel_family, mpm_ref.c): the
-     * step runs mpm_ref_step() on one thread, and none of the fast-path
-     * switches below is on (mpm_ref_init()) */
+     * step runs mpm_ref_step() on one thread, and the plan's fast paths are
+     * off (mpm_ref_init()) */
     int ref;
-    int avx2; /* the AVX2+FMA kernel families (mpm_case.kernels) */
-    /* Drucker-Prager's plastic updates four at a time (mpm_dp_lanes();
-     * the same bits): kernels not PORTABLE, and the CPU has AVX2 */
-    int dp_lanes;
     mpm_method method;
     mpm_update update;
-    int ns;  /* nodes per axis per particle: 2 (MPM; CPDI: per corner), 3 or 4
-              * (GMPM, B-splines) */
     int bsp; /* B-spline degree (2 or 3), 0 otherwise */
 
     /* grid */
@@ -304,21 +150,14 @@ struct mpm_sim {
     mpm_material_desc *mdesc; /* the case's materials (their rows, the fingerprint) */
     const mpm_model_ops *model;
     double cmax; /* largest p-wave speed */
-    /* general: the block update is mpm_model_block() (a model other than
-     * linear elasticity, or a volume update other than STRAIN_INCREMENT),
-     * chosen once per job; 0 keeps the linear-elastic path of every earlier
-     * release.  spin3: 3D strain_of() also writes the spins (deps[6..8]).
+    /* (plan.general: the block update is mpm_model_block(), a model other
+     * than linear elasticity or a volume update other than
+     * STRAIN_INCREMENT; 0 keeps the linear-elastic path of every earlier
+     * release.)  spin3: 3D strain_of() also writes the spins (deps[6..8]).
      * f_block: the block update carries F (F <- (I + dt L) F; CPDI's passes
      * do it themselves).  mixed: the materials' models differ (dispatch by
      * runs of particles of one model). */
-    int general, spin3, f_block, mixed;
-    /* el_lanes: 2D or 3D, one linear-elastic material, the default volume
-     * update, no strain record, no spins (3D) and no sigma_zz array (2D):
-     * the AVX2 kernels' USF stress pass takes a run of MPM tents from its
-     * strain to its stress (2D: and its forces) in registers
-     * (mpm_kernels.c el_block(); the same bits as the general pass, which
-     * 0 takes) */
-    int el_lanes;
+    int spin3, f_block, mixed;
     mpm_volume_update volmode;
     double plastic_work; /* cumulative sigma : d eps_p V (thread order) */
     /* frictional: a material is DRUCKER_PRAGER or MOHR_COULOMB (the step
@@ -371,16 +210,17 @@ struct mpm_sim {
      * q2/m (phantom nodes: 0); gvel_now: the grid holds them (set after
      * a step, cleared when one starts; mpm_sim_node() answers momenta) */
     int gvel, gvel_now;
-    /* Fused steps (G2P2G): fuse, the family and update scheme allow it
-     * (every family but CPDI); p2g_fields, the fields the first scatter of a
+    /* Fused steps (G2P2G; plan.fuse: never, where it pays, always; the
+     * families but CPDI's have the passes); p2g_fields, the fields the first scatter of a
      * step writes (MPM_F_M | MPM_F_Q, and MPM_F_F for USL and MUSL), kept
      * all zero in the private buffers tbuf[t] between uses (the reduction
      * zeroes what it has read); fuse_next, the running step's moving pass
      * also scatters the next step's P2G fields into tbuf[t] (never before
      * a step that sorts, nor when fuse_pays, set with the active rows,
      * says the extra buffer's pages would cost more than the pass saves,
-     * unless fuse_force); gnext, it did: the step starts with them */
-    int fuse, p2g_fields, fuse_next, gnext, fuse_pays, fuse_force;
+     * unless plan.fuse is MPM_FUSE_ALWAYS); gnext, it did: the step starts
+     * with them */
+    int p2g_fields, fuse_next, gnext, fuse_pays;
     /* tshare: the field (MPM_F_F in USF, MPM_F_Q2 in MUSL, else 0) that
      * the private buffers tbuf[t], t >= 1, keep in q's storage: a step
      * scatters it in a pass of its own, after the reduction has read and
@@ -418,10 +258,11 @@ struct mpm_sim {
     uint32_t *sperm, *shist;
     size_t *rowoff;
     int sort_now, sort_go;
-    /* sort_ring: entries of each thread's ring (a power of 2); sort_win:
-     * the running sort moves every particle less than that far, so the
-     * arrays move by a sweep through the ring (mpm_sort.c) */
-    size_t sort_ring;
+    /* plan.sort_ring: entries of each thread's ring (a power of 2, at most
+     * sort_cap, the entries allocated); sort_win: the running sort moves
+     * every particle less than that far, so the arrays move by a sweep
+     * through the ring (mpm_sort.c) */
+    size_t sort_cap;
     int sort_win;
     long sort_moved; /* sorts that moved particles (tests read it) */
     long sort_swept; /* of those, the ones that swept (sort_win) */
@@ -451,275 +292,16 @@ struct mpm_sim {
     mpm_error err; /* mpm_sim_error() */
 };
 
-/* Kernel family for one (dimension, method).  Each runs over the particles
- * [p0, p1) with scatter target gb and per-thread output o.  The passes that
- * write a particle field's last value of the step take en: nonzero, they
- * also sum the slice's energies into o (the pass writing the final stress,
- * strain and volume: o->estr; the one writing the final position and
- * velocity: o->ekin, epot, emom, eang, emass), exactly as the energy pass does.
- * en is tested once per call (two instantiations), never per particle. */
-struct mpm_kernels {
-    void (*p2g_mq)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
-    void (*p2g_mqf)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
-    void (*p2g_q2)(mpm_sim *, mpm_gridbuf *gb, size_t p0, size_t p1);
-    /* USF: strain from grid velocity, stress update, then internal forces */
-    void (*stress_force)(mpm_sim *, mpm_gridbuf *gb, mpm_thread_out *o, size_t p0, size_t p1,
-                         int en);
-    /* position and velocity update (Eqs. 30-31) */
-    void (*g2p_xv)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1, int en);
-    /* USL: position and velocity update, then strain and stress */
-    void (*g2p_xv_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1, int en);
-    /* MUSL: velocity only, then position + strain from q2 */
-    void (*g2p_v)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
-    void (*g2p_x_stress)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1, int en);
-    /* point forces of the loaded particles, scattered into the main grid */
-    void (*scatter_loads)(mpm_sim *);
-    /* support box and row extents of particles [p0, p1) into o->blo/bhi
-     * and o->rlo/rhi, without moving them */
-    void (*bbox)(mpm_sim *, mpm_thread_out *o, size_t p0, size_t p1);
-    /* sort keys: cell (x, row) of each particle numbered row-major over
-     * the rows' extents, rowoff[row] + x - ulo[row] */
-    void (*cell_keys)(const mpm_sim *, uint32_t *key, size_t p0, size_t p1);
-    /* A family has either the plain moving passes above and p2g_q2
-     * (CPDI) or, NULL there, the fused ones below (every other family).
-     * The fused passes (G2P2G): the
-     * pass that moves the particles also scatters the next step's P2G
-     * fields of each particle it moved, at its new position, into nb
-     * (nb NULL: not this step), exactly as p2g_mq (USF) or p2g_mqf (USL,
-     * MUSL) would scatter them at the start of the next step; a particle
-     * is scattered only while the thread has met no bad particle (a step
-     * that fails scatters nothing beyond the grid). */
-    void (*g2p_xv_nx)(mpm_sim *, mpm_gridbuf *nb, mpm_thread_out *o, size_t p0, size_t p1, int en);
-    void (*g2p_xv_stress_nx)(mpm_sim *, mpm_gridbuf *nb, mpm_thread_out *o, size_t p0, size_t p1,
-                             int en);
-    void (*g2p_x_stress_nx)(mpm_sim *, mpm_gridbuf *nb, mpm_thread_out *o, size_t p0, size_t p1,
-                            int en);
-    /* MUSL: the velocity update and, with the same weights, the momentum
-     * of the updated velocity into q2b (g2p_v then p2g_q2, in one pass) */
-    void (*g2p_v_q2)(mpm_sim *, mpm_gridbuf *q2b, size_t p0, size_t p1);
-};
-
-/* The family of dimension dim with ns nodes per axis: 2 (MPM), 3 (uGIMP,
- * every lp <= h/2) or 4 (uGIMP, lp up to h); bspline nonzero: the B-spline
- * family of degree ns - 1 (ns 3 or 4); blend nonzero: the particle
- * velocity update blends PIC into FLIP by s->pic (pure FLIP, blend 0, does
- * no extra work). */
-/* apic nonzero: the APIC family (mpm_case.transfer APIC), with its own
- * scatters of momentum (with the affine part) and velocity updates (PIC
- * velocity and B_p), every other pass shared; blend is then ignored. */
-const mpm_kernels *mpm_kernels_select(int dim, int ns, int bspline, int blend, int apic);
-/* The same families built for AVX2 and FMA (mpm_kernels_avx2.c): only
- * where mpm_kernels_avx2_available(). */
-const mpm_kernels *mpm_kernels_select_avx2(int dim, int ns, int bspline, int blend, int apic);
-/* 1 when that build fuses a * b + c (not in the sanitizer builds, -O1). */
-int mpm_kernels_avx2_fuses(void);
-/* 0 when the case's kernels field is valid on this machine, else
- * MPM_EINVAL naming "kernels". */
-int mpm_kernels_check(mpm_kernels_isa isa, mpm_error *err);
-/* Bytes of the per-thread weight scratch (mpm_thread_out.wblk). */
-size_t mpm_kernels_scratch(void);
-/* CPDI1's family of dimension dim (mpm_cpdi.c), blend as above, and its
- * weight scratch (wblk holds the larger of the two). */
-const mpm_kernels *mpm_cpdi_select(int dim, int blend);
-size_t mpm_cpdi_scratch(void);
 /* Whether the case reads a deformation gradient per particle (P.F): the
  * one place that decides its allocation (mpm_sim.c). */
 int mpm_needs_F(const mpm_case *c);
-/* Tests and benchmarks: switches a GMPM simulation that has not stepped yet
- * to the ns-node family (3 only if every lp <= h/2).  Returns 0 or
- * MPM_EINVAL. */
-int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns);
-/* Tests and benchmarks: on 0 the steps no longer fuse the next step's
- * first scatter into their moving pass (a scatter already made is
- * dropped), on 1 they do again where it pays (the default), on 2 always.
- * Returns 0, or MPM_EINVAL to turn fusion on where the family has no
- * fused passes (CPDI). */
-int mpm_sim_set_fused(mpm_sim *s, int on);
 
-/* Constitutive model interface.  A model's row of the material table
- * declares the per-particle state it needs (MPM_NEED_*), allocated at
- * creation only when a material of the case uses the model; its
- * operations:
- *   update  (linear elasticity only: the path of every earlier release,
- *           called directly when every material is linear elastic and the
- *           volume update is the default) the strain increments of
- *           particles [p0, p0 + n) in block-local arrays deps[c][0..n)
- *           update the particles' stress and strain;
- *   block   the general update of block slots [i0, i1) of the block
- *           starting at particle b0 (particle b0 + i, increments
- *           b->deps[c][i], spins as in mpm_thread_out.deps); F is already
- *           updated (mpm_model_block());
- *   point   (rate-form models) the stress-point update: stress sig (Voigt,
- *           6 entries, tensor shears; 1D: sig[0] only, uniaxial stress;
- *           2D: plane strain, sig[2] = sigma_zz, deps[2] = 0), the strain
- *           increment deps, and the state epsp (equivalent plastic strain)
- *           and *yielded (set 1 when it flowed, else 0); adds the plastic
- *           work density sigma : d eps_p to *dwp.  Returns 0 or a negative
- *           MPM_E* code (DP, MC: MPM_EDIVERGED, state unchanged).  J2's
- *           block (rate_block()) applies the Jaumann rotation and calls
- *           it per particle; DP and MC have their own block
- *           (frictional_block(), which also counts the substeps and
- *           reports a failed update) and the same point function for
- *           callers of one point;
- *   energy  the stored (elastic) energy of particle p (not a density).
- * The model's name and needs are in its row of the material table
- * (mpm_material.h). */
-
-typedef struct {
-    const mpm_mat_params *mats;
-    mpm_particles *P;
-    double *const *deps; /* mpm_thread_out.deps */
-    int dim;
-    double wp; /* plastic work added (sum of sigma : d eps_p V) */
-    /* frictional models (DP, MC): plastic updates, substeps, the most in
-     * one update, the first particle whose update failed (SIZE_MAX) */
-    long long nupd, nsub;
-    int maxsub;
-    size_t bad;
-    /* tests: 1 takes every frictional particle through the general
-     * per-particle path (rate_gather(), mpm_dp_trial(), rate_put()) that
-     * the 2D and 3D blocks write out (t_frictional_block.c) */
-    int general;
-    /* 1: Drucker-Prager's updates that leave the elastic trial go to
-     * mpm_dp_lanes() in queues of one material (mpm_sim.dp_lanes) */
-    int dp_lanes;
-} mpm_model_blk;
-
-struct mpm_model_ops {
-    void (*update[3])(const mpm_mat_params *mats, mpm_particles *P, size_t p0, size_t n,
-                      double *const deps[6]);
-    void (*block)(mpm_model_blk *b, size_t b0, size_t i0, size_t i1);
-    int (*point)(const mpm_mat_params *mp, int dim, double sig[6], const double deps[6],
-                 double *epsp, int *yielded, double *dwp);
-    double (*energy)(const mpm_mat_params *mp, const mpm_particles *P, int dim, size_t p);
-};
-
-/* The general block update (mpm_sim.general): F (f_block), the models
- * (one call per run of particles of one model), then the volume
- * (volmode); the plastic work into o->wplast.  deps: o->deps. */
-void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb);
 /* Stored energy of particle p by its material's model (the general path;
  * linear elasticity: 1/2 sigma : eps V, the bits of the default path). */
-static inline double mpm_model_energy(const mpm_sim *s, size_t p);
-/* Jaumann rotation of a stress (Voigt, tensor shears) by the spin
- * increment w = dt W (w[0] = W_xy, w[1] = W_yz, w[2] = W_xz):
- * sig <- sig + w sig - sig w (dim 2: w[0] only, sigma_zz unchanged). */
-void mpm_jaumann(double sig[6], const double w[3], int dim);
-/* det F of particle p (2D: F_zz = 1). */
-double mpm_det_f(const mpm_particles *P, int dim, size_t p);
-/* Neo-Hookean Cauchy stress of F (3x3; Voigt, tensor shears) and, W not
- * NULL, the stored energy per reference volume W(F). */
-void mpm_neo_hookean_stress(const mpm_mat_params *mp, const double F[3][3], double sig[6],
-                            double *W);
-/* The J2 point update (mpm_model_ops.point of VON_MISES): closed-form
- * radial return with linear isotropic hardening. */
-int mpm_j2_point(const mpm_mat_params *mp, int dim, double sig[6], const double deps[6],
-                 double *epsp, int *yielded, double *dwp);
-/* Elastic stored energy density 1/2 sigma : C^-1 : sigma (1D: sigma^2/2E). */
-double mpm_elastic_stored(const mpm_mat_params *mp, const double sig[6], int dim);
-
-/* The model's operations (its row's, mpm_material_table.c), or NULL. */
-const mpm_model_ops *mpm_model_get(mpm_model_kind kind);
-/* The integrator's parameters of a material whose model needs
- * MPM_NEED_INTEGRATOR (angles to radians, mpm_plastic_init()); 0 or
- * MPM_EINVAL naming materials[i]'s field.  The caller has checked d with
- * mpm_material_check(). */
-int mpm_model_plastic(const mpm_material_desc *d, int dim, size_t i, mpm_plastic_params *pl,
-                      mpm_error *err);
-/* The derived constants of material d (checked by mpm_material_check()). */
-void mpm_model_params(const mpm_material_desc *d, int dim, mpm_mat_params *out);
-
 static inline double mpm_model_energy(const mpm_sim *s, size_t p)
 {
     const mpm_mat_params *mp = &s->mats[s->P.mat[p]];
     return mp->ops->energy(mp, &s->P, s->dim, p);
-}
-
-/* sigma_zz of 2D particle p of material mp: stored, or, without the array
- * (mpm_particles.sig), plane strain linear elasticity's nu (sigma_xx +
- * sigma_yy) */
-static inline double mpm_sig_zz(const mpm_mat_params *mp, const mpm_particles *P, size_t p)
-{
-    return P->sig[2] ? P->sig[2][p] : mp->nu * (P->sig[0][p] + P->sig[1][p]);
-}
-
-/* The 6 Voigt stress components of particle p (material mp): those not
- * stored are 0, 2D's sigma_zz is mpm_sig_zz(). */
-static inline void mpm_particle_stress(const mpm_mat_params *mp, const mpm_particles *P, int dim,
-                                       size_t p, double sig[6])
-{
-    for (int c = 0; c < 6; c++) sig[c] = c < MPM_NCOMP(dim) && P->sig[c] ? P->sig[c][p] : 0.0;
-    if (dim == 2) sig[2] = mpm_sig_zz(mp, P, p);
-}
-
-/* sigma : eps of particle p (Voigt: shears twice; 2D plane strain has no
- * eps_zz array, its term is zero).  Without a strain record (P.eps NULL:
- * every material elastic from a zero stress, mpm_sim.c) the strain is
- * C^-1 sigma of the particle's material, and sigma : eps is twice
- * mpm_elastic_stored() (equal up to round-off to the record's sum). */
-/* x, rounded to a double where it stands.  In the AVX2+FMA build of the
- * kernels (mpm_kernels_avx2.c, -ffp-contract=fast) an empty asm that the
- * compiler must assume reads and rewrites x keeps a product from being
- * fused with the sum it feeds; the energy sums below use it, so that the
- * step's in-pass sums give the bits of the energy pass (built without
- * contraction) with either kernels.  Elsewhere it is x. */
-static inline double mpm_rn(double x)
-{
-#if defined(MPM_KERNELS_VARIANT) && defined(__GNUC__) && defined(__x86_64__)
-    __asm__("" : "+x"(x));
-#endif
-    return x;
-}
-
-static inline double mpm_strain_density(const mpm_mat_params *mats, const mpm_particles *P, int dim,
-                                        size_t p)
-{
-    if (!P->eps[0]) {
-        const mpm_mat_params *mp = &mats[P->mat[p]];
-        double sig[6];
-        mpm_particle_stress(mp, P, dim, p, sig);
-        return 2.0 * mpm_elastic_stored(mp, sig, dim);
-    }
-    double se = 0;
-    for (int c = 0; c < MPM_NCOMP(dim); c++)
-        if (P->eps[c]) se += mpm_rn((c < 3 ? 1.0 : 2.0) * P->sig[c][p] * P->eps[c][p]);
-    return se;
-}
-
-/* Adds particle p's angular momentum about the origin, m x × v, to L (D:
- * the dimension; 2D adds to L[2] only, 1D adds nothing).  The energy sums
- * (esum_particle(), mpm_pass.h) take it for single particles; esum_block()
- * is the same expression in four lanes, so all give the same bits (a
- * change here must go there too: perf_energy_pass_matches_formulas
- * compares the two bit for bit).  Likewise mpm_angmom_add_affine() below
- * (its four lanes held to APIC's conservation by
- * apic_spinning_disk_conserves_angular_momentum). */
-static inline void mpm_angmom_add(const mpm_particles *P, int D, size_t p, double m, double L[3])
-{
-    if (D == 2) {
-        L[2] += mpm_rn(m * (mpm_rn(P->x[0][p] * P->v[1][p]) - mpm_rn(P->x[1][p] * P->v[0][p])));
-    } else if (D == 3) {
-        double x = P->x[0][p], y = P->x[1][p], z = P->x[2][p];
-        double vx = P->v[0][p], vy = P->v[1][p], vz = P->v[2][p];
-        L[0] += mpm_rn(m * (mpm_rn(y * vz) - mpm_rn(z * vy)));
-        L[1] += mpm_rn(m * (mpm_rn(z * vx) - mpm_rn(x * vz)));
-        L[2] += mpm_rn(m * (mpm_rn(x * vy) - mpm_rn(y * vx)));
-    }
-}
-
-/* APIC: the spin of particle p's affine field, m eps : B^T (mpm.h,
- * mpm_energy.angular_momentum), added to L after mpm_angmom_add() by the
- * energy pass and the step's in-pass sums alike (the same bits). */
-static inline void mpm_angmom_add_affine(const mpm_particles *P, int D, size_t p, double m,
-                                         double L[3])
-{
-    if (D == 2) {
-        L[2] += mpm_rn(m * (P->B[3][p] - P->B[1][p]));
-    } else if (D == 3) {
-        L[0] += mpm_rn(m * (P->B[7][p] - P->B[5][p]));
-        L[1] += mpm_rn(m * (P->B[2][p] - P->B[6][p]));
-        L[2] += mpm_rn(m * (P->B[3][p] - P->B[1][p]));
-    }
 }
 
 /* Writes the particles of a case that passed mpm_case_check() into P, whose
@@ -731,24 +313,6 @@ int mpm_case_fill(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mat
                   mpm_error *err);
 
 /* ---- small shared helpers (inline: some run inside the passes) ---- */
-
-/* Doubles allocated (zeroed) past the end of every grid field and of
- * minv: the AVX2 kernels load and store a support's row of three nodes as
- * four lanes (gather_rows(), the scatters in mpm_kernels.c), which reads,
- * and adds +0 to, one node past a row that ends the array. */
-#define MPM_GRID_SLACK 4
-
-static inline double *mpm_dalloc(size_t n)
-{
-    return calloc(n ? n : 1, sizeof(double));
-}
-
-/* thread tid's share [a, b) of n items split evenly among T threads */
-static inline void mpm_slice(size_t n, int T, int tid, size_t *a, size_t *b)
-{
-    *a = n * (size_t)tid / (size_t)T;
-    *b = n * (size_t)(tid + 1) / (size_t)T;
-}
 
 /* thread tid's fixed contiguous slice of the particles */
 static inline void mpm_particle_slice(const mpm_sim *s, int tid, size_t *a, size_t *b)
@@ -787,21 +351,6 @@ static inline double mpm_node_coord(const mpm_sim *s, int axis, int padded_index
     return s->ncoord[axis][padded_index];
 }
 
-/* ---- the thread team (mpm_team.c) ----
- *
- * A team of nthreads (the caller's thread is thread 0) runs a phase: every
- * thread calls fn(s, tid) once, and mpm_team_run() returns when all have.
- * Inside a phase the threads meet at mpm_team_sync(). */
-typedef void (*mpm_phase_fn)(mpm_sim *, int tid);
-
-/* Runs fn on the team (serially when there is one thread). */
-void mpm_team_run(mpm_sim *s, mpm_phase_fn fn);
-/* Starts threads 1..nthreads-1.  Returns 0 or MPM_ENOMEM, after which the
- * started ones have been joined and the simulation stays serial. */
-int mpm_team_start(mpm_sim *s);
-/* Stops and joins the team and frees its synchronisation (destroy). */
-void mpm_team_stop(mpm_sim *s);
-
 /* A barrier between the passes of one phase. */
 static inline void mpm_team_sync(mpm_sim *s)
 {
@@ -831,8 +380,6 @@ static inline size_t mpm_row_node(const mpm_sim *s, size_t row, int x)
     return row * (size_t)s->np[0] + (size_t)x;
 }
 
-/* Grid fields, for mpm_scatter_buf() and the node passes' reduction. */
-enum { MPM_F_M = 1, MPM_F_Q = 2, MPM_F_F = 4, MPM_F_Q2 = 8 };
 /* Node operations of mpm_node_pass(), in the order applied to each node
  * (after the reduction of the fields named): inverse mass with phantom
  * nodes at 0, gravity f += m g, BC1 on q or on q2, BC2 on f, damping of

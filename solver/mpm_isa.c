@@ -1,10 +1,11 @@
 /*
  * mpm_isa.c - which kernels a job may run: whether this build has the
- * AVX2+FMA kernel families (mpm_kernels_avx2.c) and this CPU runs them,
+ * AVX2+FMA kernel families (mpm_kernels_*_avx2.c) and this CPU runs them,
  * and the check of mpm_case.kernels.  The families themselves and their
- * selection are in mpm_kernels.c; mpm_sim_new() chooses between them.
+ * selection are in mpm_kernels.c and mpm_kernels_avx2.c; the plan
+ * (mpm_plan.c) chooses between them.
  */
-#include "mpm_internal.h"
+#include "mpm_kernels.h"
 
 int mpm_kernels_avx2_available(void)
 {

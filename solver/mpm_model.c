@@ -31,6 +31,7 @@
  * The rate-form models share the Jaumann rotation, then the model's point
  * update (J2: rate_block() calling point(); DP, MC: frictional_block()).
  */
+#include "mpm_model.h"
 #include "mpm_internal.h"
 #include "mpm_material_ops.h"
 
@@ -541,7 +542,7 @@ static size_t dp_slot(mpm_model_blk *b, dp_queue *q, const mpm_mat_params *mp, s
 }
 
 /* frictional_update() of particle p, or its place in the queue (a
- * Drucker-Prager particle, where the job has mpm_sim.dp_lanes). */
+ * Drucker-Prager particle, where the job has mpm_sim.plan.dp_lanes). */
 static void dp_push(mpm_model_blk *b, dp_queue *q, const mpm_mat_params *mp, size_t p,
                     double sig[6], const double de[6])
 {
@@ -657,7 +658,7 @@ static void frictional_block_2d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
 }
 
 /* frictional_block_2d() for a block of one Drucker-Prager material where
- * the job has mpm_sim.dp_lanes: the elastic trials four at a time
+ * the job has mpm_sim.plan.dp_lanes: the elastic trials four at a time
  * (mpm_dp_trial2d_lanes(), MPM_DP_TRIAL_LANES_MAX particles to a call), then the particles it
  * leaves, in order, to the queue (the rotation from their unchanged
  * stress, as frictional_2d() pushes them). */
@@ -736,7 +737,7 @@ static void frictional_block_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
 }
 
 /* frictional_block_3d() for a block of one Drucker-Prager material where
- * the job has mpm_sim.dp_lanes, as frictional_lanes_2d() (the trials by
+ * the job has mpm_sim.plan.dp_lanes, as frictional_lanes_2d() (the trials by
  * mpm_dp_trial3d_lanes()). */
 static void frictional_lanes_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
@@ -772,7 +773,7 @@ static void frictional_lanes_3d(mpm_model_blk *b, size_t b0, size_t i0, size_t i
 /* The frictional models' block: frictional_block_2d() or _3d() where they
  * apply (the strain record kept, as the plastic models keep it), their
  * lanes (frictional_lanes_2d(), _3d()) for a block of one Drucker-Prager
- * material where the job has mpm_sim.dp_lanes. */
+ * material where the job has mpm_sim.plan.dp_lanes. */
 static void frictional_any(mpm_model_blk *b, size_t b0, size_t i0, size_t i1)
 {
     const mpm_particles *P = b->P;
@@ -815,7 +816,7 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
     double *const *deps = o->deps;
     mpm_particles *P = &s->P;
     if (s->f_block) f_block(s, deps, b0, nb, D);
-    mpm_model_blk b = {s->mats, P, deps, D, 0.0, 0, 0, 0, SIZE_MAX, 0, s->dp_lanes};
+    mpm_model_blk b = {s->mats, P, deps, D, 0.0, 0, 0, 0, SIZE_MAX, 0, s->plan.dp_lanes};
     if (!s->mixed) {
         s->model->block(&b, b0, 0, nb);
     } else { /* runs of particles of one model */

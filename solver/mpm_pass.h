@@ -1,6 +1,6 @@
 /*
  * mpm_pass.h - the inline pieces every particle pass shares: the MPM,
- * uGIMP and B-spline families of mpm_kernels.c and the CPDI family of
+ * uGIMP and B-spline families of mpm_kernels.inc and the CPDI family of
  * mpm_cpdi.c.  A particle's cell, the runs that record the supports a pass
  * moves (rowrun) and the thread's box and row extents they merge into,
  * two doubles at once (v2d), the checks of a moved particle (check_xv,
@@ -8,7 +8,7 @@
  * block, the energy sums made in the pass (esum, with the
  * energy pass's arithmetic; AP: APIC's affine angular momentum), the
  * velocity update (FLIP or blended with PIC) and the sort keys.
- * Private to the solver (the particle passes of mpm_kernels.c and
+ * Private to the solver (the particle passes of mpm_kernels.inc and
  * mpm_cpdi.c; mpm_rows.c's node loops take v2d), after mpm_internal.h; everything is static and
  * always inlined, so that each specialised loop (dimension, nodes per axis, ...) compiles as
  * before.
@@ -164,12 +164,12 @@ INLINE void strain_of(const mpm_sim *s, const double L[3][3], double *const deps
 
 /* Constitutive update of a block, then the volume follows the strain
  * (2D: eps_zz = 0, deps[2] is the spin).  Any other model or volume update
- * goes through mpm_model_block(), chosen once per job (s->general, one
+ * goes through mpm_model_block(), chosen once per job (s->plan.general, one
  * test per block). */
 INLINE void block_update(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb, int D)
 {
     double *const *deps = o->deps;
-    if (__builtin_expect(s->general, 0)) {
+    if (__builtin_expect(s->plan.general, 0)) {
         mpm_model_block(s, o, b0, nb);
         return;
     }
@@ -346,7 +346,7 @@ INLINE void esum_block(const mpm_sim *s, esum *e, size_t b0, size_t b1, int D, i
 INLINE void esum_strain(const mpm_sim *s, esum *e, size_t b0, size_t nb, int D)
 {
     const mpm_particles *P = &s->P;
-    if (__builtin_expect(s->general, 0)) {
+    if (__builtin_expect(s->plan.general, 0)) {
         for (size_t p = b0; p < b0 + nb; p++) e->es += mpm_model_energy(s, p);
         return;
     }

@@ -204,7 +204,7 @@ void mpm_dp_lanes(const mpm_plastic_params *P, int nc, size_t n, double *sig, co
  * of the particles whose trial is not admissible (past the cut-off,
  * outside the cone or not finite): their x, q and yld are left as they
  * were, for the caller's plastic update.  Called only where the CPU has
- * AVX2 (mpm_sim.dp_lanes); a build without the AVX2 kernels leaves every
+ * AVX2 (mpm_sim.plan.dp_lanes); a build without the AVX2 kernels leaves every
  * particle. */
 #define MPM_DP_TRIAL_LANES_MAX 64
 uint64_t mpm_dp_trial2d_lanes(const mpm_plastic_params *P, size_t n, const double *const e[4],

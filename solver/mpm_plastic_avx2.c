@@ -910,7 +910,7 @@ uint64_t mpm_dp_trial3d_lanes(const mpm_plastic_params *P, size_t n, const doubl
 
 #else
 /* no AVX2 in this build: every particle is left to mpm_plastic_update()
- * (mpm_sim.dp_lanes is 0 then, so this is not called) */
+ * (mpm_sim.plan.dp_lanes is 0 then, so this is not called) */
 void mpm_dp_lanes(const mpm_plastic_params *P, int nc, size_t n, double *sig, const double *de,
                   double *epq, double *dis, int *nsub, unsigned char *ok)
 {

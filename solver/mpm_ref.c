@@ -68,11 +68,14 @@ void mpm_ref_init(mpm_sim *s)
 {
     s->ref = 1;
     s->nthreads = 1;
-    s->avx2 = 0;
-    s->dp_lanes = 0;
-    s->el_lanes = 0;
-    s->gvel = 0; /* the grid holds momenta, as the paper's */
-    s->fuse = 0;
+    s->plan.avx2 = 0;
+    s->plan.fma = 0;
+    s->plan.dp_lanes = 0;
+    s->plan.el_lanes = 0;
+    s->plan.tlanes = 0;
+    s->plan.tlanes_x = 0;
+    s->plan.gvel = 0; /* the grid holds momenta, as the paper's (and s->gvel) */
+    s->plan.fuse = MPM_FUSE_OFF;
 }
 
 /* ---- the one-dimensional shape functions ---- */

@@ -1,11 +1,11 @@
 /*
  * mpm_shape.h - the shape functions of one axis and the per-axis weights of
- * one particle, for the particle loops of mpm_kernels.c: MPM tents, uGIMP
+ * one particle, for the particle loops of mpm_kernels.inc: MPM tents, uGIMP
  * (Eqs. 17-18: the tent integrated over the particle) and the B-splines
  * of the open knot vector; pw, a particle's weights and gradients along
  * each axis, and APIC's node offsets (aoff).  The formulas are in
- * mpm_kernels.c's opening comment.  Private: included only by
- * mpm_kernels.c, after mpm_pass.h; everything is static and always inlined
+ * mpm_kernels.inc's opening comment.  Private: included only by
+ * mpm_kernels.inc and mpm_kernels.c, after mpm_pass.h; everything is static and always inlined
  * (INLINE), so that each (D, NS, BS) family folds its constants.
  */
 #ifndef MPM_SHAPE_H

@@ -4,7 +4,7 @@
  * own modules (mpm_internal.h lists them): the thread team (mpm_team.c),
  * the active rows and node passes (mpm_rows.c), the sort (mpm_sort.c),
  * boundary conditions and loads (mpm_loads.c), the energies and the
- * divergence guard (mpm_energy.c), the particle loops (mpm_kernels.c).
+ * divergence guard (mpm_energy.c), the particle loops (mpm_kernels.inc, the plan in mpm_plan.c).
  *
  * One step follows Figs. 5-7 of the GMPM paper.  With q the grid momentum
  * and f the rate of momentum (Eq. 13: f = f_ext - f_int):
@@ -182,7 +182,7 @@ int mpm_needs_F(const mpm_case *c)
            c->volume_update == MPM_VOLUME_DET_F || (model_needs(c) & MPM_NEED_F);
 }
 
-/* Whether the particles keep a strain record P.eps (mpm_internal.h): the
+/* Whether the particles keep a strain record P.eps (mpm_particles.h): the
  * plastic models' total strain (the elastic part follows from the stress,
  * the rest is plastic), and linear elasticity from an initial stress
  * (given or geostatic), where the strain energy 1/2 sigma : eps counts
@@ -279,7 +279,7 @@ static void ph_stress_force(mpm_sim *s, int tid)
 }
 
 /* the fused passes' target of thread tid: NULL when the step does not
- * scatter the next one's fields (never when !s->fuse) */
+ * scatter the next one's fields (never when plan.fuse is off) */
 static mpm_gridbuf *next_buf(mpm_sim *s, int tid)
 {
     return s->fuse_next ? &s->tbuf[tid] : NULL;
@@ -477,29 +477,16 @@ static void next_dt(mpm_sim *s)
     s->dt = s->dt_fixed > 0 ? s->dt_fixed : s->cfl * mpm_sim_dt_limit(s);
 }
 
-/* uGIMP: 3 nodes per axis suffice when every a = lp/h <= 1/2 (the same
- * product the kernels form); lp never changes during a run. */
-static int gimp_fits3(const mpm_sim *s)
-{
-    for (int d = 0; d < s->dim; d++) {
-        const double *lp = s->P.lp[d];
-        double ih = s->inv_h[d];
-        for (size_t p = 0; p < s->P.n; p++)
-            if (!(lp[p] * ih <= 0.5)) return 0;
-    }
-    return 1;
-}
-
 /* The kernel family of the case, chosen once per job. */
 static const mpm_kernels *select_kernels(const mpm_sim *s)
 {
     if (s->method == MPM_METHOD_CPDI) return mpm_cpdi_select(s->dim, s->pic != 0);
 #ifdef MPM_HAVE_AVX2_KERNELS
-    if (s->avx2)
-        return mpm_kernels_select_avx2(s->dim, s->ns, s->bsp != 0, s->pic != 0,
+    if (s->plan.avx2)
+        return mpm_kernels_select_avx2(s->dim, s->plan.ns, s->bsp != 0, s->pic != 0,
                                        s->transfer == MPM_TRANSFER_APIC);
 #endif
-    return mpm_kernels_select(s->dim, s->ns, s->bsp != 0, s->pic != 0,
+    return mpm_kernels_select(s->dim, s->plan.ns, s->bsp != 0, s->pic != 0,
                               s->transfer == MPM_TRANSFER_APIC);
 }
 
@@ -526,23 +513,88 @@ static void clamp_bounds(mpm_sim *s, int d, int nodes)
     while ((s->hi[d] - s->x0[d]) * s->inv_h[d] >= rhi) s->hi[d] = nextafter(s->hi[d], -INFINITY);
 }
 
-int mpm_sim_set_gimp_nodes(mpm_sim *s, int ns)
+/* An override's plan p against the defaults d it re-derived: 0, or
+ * MPM_EINVAL naming the first key that cannot take its value (field
+ * "plan.KEY"). */
+static int plan_check(const mpm_sim *s, const mpm_plan *d, const mpm_plan *p, mpm_error *err)
 {
-    if (s->method != MPM_METHOD_GIMP || s->steps > 0 || (ns != 3 && ns != 4) ||
-        (ns == 3 && !gimp_fits3(s)))
-        return MPM_EINVAL;
-    s->ns = ns;
-    s->k = select_kernels(s);
-    init_order(s);
+    if (p->avx2 && (s->method == MPM_METHOD_CPDI || !mpm_kernels_avx2_available()))
+        return mpm_fail(err, MPM_EINVAL, "plan.kernels", "avx2: %s",
+                        s->method == MPM_METHOD_CPDI ? "CPDI has portable kernels only"
+                                                     : "this build or CPU has no AVX2 kernels");
+    if (p->ns != s->plan.ns) {
+        if (s->method != MPM_METHOD_GIMP || (p->ns != 3 && p->ns != 4))
+            return mpm_fail(err, MPM_EINVAL, "plan.ns", "%d: only GIMP chooses, 3 or 4 (is %d)",
+                            p->ns, s->plan.ns);
+        if (s->steps > 0) return mpm_fail(err, MPM_EINVAL, "plan.ns", "only before the first step");
+        if (p->ns == 3 && !mpm_plan_gimp_fits3(s))
+            return mpm_fail(err, MPM_EINVAL, "plan.ns", "3: a particle's lp exceeds h/2");
+    }
+    if (p->fuse > MPM_FUSE_ALWAYS)
+        return mpm_fail(err, MPM_EINVAL, "plan.fuse", "off, auto or always");
+    if (p->fuse != MPM_FUSE_OFF && (!s->k->g2p_xv_nx || !s->tbuf || !s->tbuf[0].m))
+        return mpm_fail(err, MPM_EINVAL, "plan.fuse", "the family has no fused passes (CPDI)");
+    if (p->el_lanes > d->el_lanes)
+        return mpm_fail(err, MPM_EINVAL, "plan.el_lanes",
+                        "%d: needs the AVX2 tents in 2D or 3D, one linear elastic material on "
+                        "the direct path, no strain record, no spins and no sigma_zz array",
+                        p->el_lanes);
+    if (p->dp_lanes > d->dp_lanes)
+        return mpm_fail(err, MPM_EINVAL, "plan.dp_lanes",
+                        "%d: needs a Drucker-Prager material and AVX2 allowed (kernels not "
+                        "PORTABLE, the CPU able)",
+                        p->dp_lanes);
+    if (p->sort_ring < 2 || (size_t)p->sort_ring > s->sort_cap ||
+        (p->sort_ring & (p->sort_ring - 1)))
+        return mpm_fail(err, MPM_EINVAL, "plan.sort_ring",
+                        "%d: a power of 2 in [2, %zu] (the ring allocated)", p->sort_ring,
+                        s->sort_cap);
     return 0;
 }
 
-int mpm_sim_set_fused(mpm_sim *s, int on)
+int mpm_sim_plan_override(mpm_sim *s, const char *text, mpm_error *err)
 {
-    if (on && (!s->k->g2p_xv_nx || !s->tbuf || !s->tbuf[0].m)) return MPM_EINVAL;
-    mpm_rows_drop_next(s);
-    s->fuse = on != 0;
-    s->fuse_force = on == 2;
+    mpm_error_clear(err);
+    if (!s) return mpm_fail(err, MPM_EINVAL, "plan", "no simulation");
+    mpm_plan p = s->plan;
+    unsigned given = 0;
+    int rc = mpm_plan_parse(text, &p, &given, err);
+    if (rc) return rc;
+    /* the defaults of the instruction set and nodes per axis asked for
+     * (the lanes' switches, fma and rows4 follow them), then the chosen
+     * keys given over them */
+    int allow = given & mpm_plan_key_bit("kernels") ? p.avx2 : s->avx2_ok;
+    mpm_plan d = s->plan;
+    d.ns = p.ns;
+    mpm_plan_choose(s, allow, 1, &d);
+    d.fuse = s->plan.fuse;
+    d.sort_ring = s->plan.sort_ring;
+    mpm_plan q = d;
+    q.avx2 = p.avx2;
+    if (given & mpm_plan_key_bit("fuse")) q.fuse = p.fuse;
+    if (given & mpm_plan_key_bit("el_lanes")) q.el_lanes = p.el_lanes;
+    if (given & mpm_plan_key_bit("dp_lanes")) q.dp_lanes = p.dp_lanes;
+    if (given & mpm_plan_key_bit("sort_ring")) q.sort_ring = p.sort_ring;
+    if ((rc = plan_check(s, &d, &q, err))) return rc;
+    /* a derived key given: only with the value the plan has */
+    for (unsigned b = 0; mpm_plan_key_name(b); b++) {
+        const char *key = mpm_plan_key_name(b);
+        if (!(given & (1u << b)) || mpm_plan_key_chosen(key)) continue;
+        if (mpm_plan_value(&p, b) != mpm_plan_value(&q, b)) {
+            char cur[MPM_PLAN_TEXT_MAX];
+            mpm_plan_format(&q, cur, sizeof cur);
+            return mpm_fail(err, MPM_EINVAL, "plan",
+                            "%s follows from the case and the chosen keys: %s", key, cur);
+        }
+    }
+    int reselect = q.avx2 != s->plan.avx2 || q.ns != s->plan.ns;
+    if (q.fuse != s->plan.fuse) mpm_rows_drop_next(s);
+    s->plan = q;
+    s->avx2_ok = allow;
+    if (reselect) {
+        s->k = select_kernels(s);
+        if (s->steps == 0) init_order(s);
+    }
     return 0;
 }
 
@@ -569,12 +621,8 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     s->update = c->update;
     const mpm_method_props *mp = mpm_method_props_of(c->method);
     s->bsp = mp->bspline;
-    s->ns = mp->support;
     s->pad = mp->ghost;
     s->nthreads = c->threads > 1 ? c->threads : 1;
-    s->avx2 = (mp->flags & MPM_METH_AVX2) && c->kernels != MPM_KERNELS_PORTABLE &&
-              mpm_kernels_avx2_available();
-    s->dp_lanes = c->kernels != MPM_KERNELS_PORTABLE && mpm_kernels_avx2_available();
     atomic_init(&s->cancel, 0);
     s->nn = 1;
     for (int d = 0; d < 3; d++) {
@@ -620,7 +668,6 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     /* the block update's path, once per job (mpm_pass.h block_update()) */
     unsigned needs = model_needs(c);
     s->volmode = c->volume_update;
-    s->general = s->mixed || !s->model->update[0] || s->volmode != MPM_VOLUME_STRAIN_INCREMENT;
     s->f_block = mpm_needs_F(c) && !(mp->flags & MPM_METH_DOMAIN_F);
     s->spin3 = dim == 3 && ((needs & MPM_NEED_SPIN) || s->f_block);
 
@@ -632,16 +679,17 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     if ((needs & MPM_NEED_PLASTIC) &&
         (!(s->P.epsp = stag_alloc(np, &s->stag)) || !(s->P.yld = stag_alloc(np, &s->stag))))
         goto nomem;
-    s->el_lanes = dim > 1 && !s->general && s->nmat == 1 &&
-                  c->materials[0].model == MPM_MODEL_LINEAR_ELASTIC && !s->P.eps[0] &&
-                  (dim == 2 ? !s->P.sig[2] : !s->spin3);
     if (s->volmode == MPM_VOLUME_DET_F && !(s->P.vol0 = stag_alloc(np, &s->stag))) goto nomem;
     if (mpm_case_fill(c, &s->P, s->mats, &s->vmax, err)) goto fail;
     if (s->P.vol0) memcpy(s->P.vol0, s->P.vol, np * sizeof *s->P.vol0);
-    if (c->method == MPM_METHOD_GIMP && gimp_fits3(s)) s->ns = 3;
     s->pic = c->pic_fraction;
+    /* the plan: the fast paths, from the case and the CPU, once */
+    s->avx2_ok = c->kernels != MPM_KERNELS_PORTABLE && mpm_kernels_avx2_available();
+    mpm_plan_choose(s, s->avx2_ok, 0, &s->plan);
+    /* dispatch: the REFERENCE family turns the plan's fast paths off */
+    if (c->kernel_family == MPM_KERNEL_FAMILY_REFERENCE) mpm_ref_init(s);
     s->k = select_kernels(s);
-    s->gvel = !(mp->flags & MPM_METH_DOMAIN_F);
+    s->gvel = !(mp->flags & MPM_METH_DOMAIN_F) && !s->ref;
     if (!(s->sperm = malloc((np ? np : 1) * sizeof *s->sperm)) ||
         !(s->shist = calloc(s->nn + 1, sizeof *s->shist)))
         goto nomem;
@@ -655,24 +703,20 @@ mpm_sim *mpm_sim_new(const mpm_case *c, const mpm_case_info *checked, mpm_error 
     }
     s->p2g_fields = MPM_F_M | MPM_F_Q | (c->update == MPM_USF ? 0 : MPM_F_F);
     s->tshare = c->update == MPM_USF ? MPM_F_F : musl ? MPM_F_Q2 : 0;
-    s->fuse = s->k->g2p_xv_nx != NULL;
-    /* dispatch: the REFERENCE family turns the fast-path switches off */
-    if (c->kernel_family == MPM_KERNEL_FAMILY_REFERENCE) mpm_ref_init(s);
-    if (s->nthreads > 1 || s->fuse) {
+    int fuse = s->plan.fuse != MPM_FUSE_OFF;
+    if (s->nthreads > 1 || fuse) {
         if (!(s->tbuf = calloc((size_t)s->nthreads, sizeof *s->tbuf))) goto nomem;
         /* thread 0 scatters into the grid, and the fused passes into
          * tbuf[0] (the P2G fields) */
-        if (s->fuse && alloc_gridbuf(&s->tbuf[0], s->nn, dim, s->p2g_fields, 0, &s->stag))
-            goto nomem;
+        if (fuse && alloc_gridbuf(&s->tbuf[0], s->nn, dim, s->p2g_fields, 0, &s->stag)) goto nomem;
         for (int t = 1; t < s->nthreads; t++)
             if (alloc_gridbuf(&s->tbuf[t], s->nn, dim, gfields, s->tshare, &s->stag)) goto nomem;
     }
     if (!(s->tout = calloc((size_t)s->nthreads, sizeof *s->tout))) goto nomem;
-    for (s->sort_ring = 2; s->sort_ring < np && s->sort_ring < MPM_SORT_RING; s->sort_ring *= 2) {
-    }
+    s->sort_cap = (size_t)s->plan.sort_ring;
     for (int t = 0; t < s->nthreads; t++)
-        if (!(s->tout[t].rval = malloc(s->sort_ring * sizeof *s->tout[t].rval)) ||
-            !(s->tout[t].rtag = malloc(s->sort_ring * sizeof *s->tout[t].rtag)))
+        if (!(s->tout[t].rval = malloc(s->sort_cap * sizeof *s->tout[t].rval)) ||
+            !(s->tout[t].rtag = malloc(s->sort_cap * sizeof *s->tout[t].rtag)))
             goto nomem;
     for (int t = 0; t < s->nthreads; t++) {
         s->tout[t].plbad = SIZE_MAX;
@@ -897,7 +941,8 @@ int mpm_sim_step(mpm_sim *s)
     /* fused: the step starts with the grid the last one scattered, and
      * scatters the next one's (a sort comes after that scatter) */
     if (s->gnext) mpm_rows_swap_next(s);
-    s->fuse_next = s->fuse && (s->fuse_pays || s->fuse_force);
+    s->fuse_next =
+        s->plan.fuse == MPM_FUSE_ALWAYS || (s->plan.fuse == MPM_FUSE_AUTO && s->fuse_pays);
     s->gvel_now = 0;
     if (s->ref) {           /* dispatch: the REFERENCE family's step (mpm_ref.c) */
         s->step_energy = 0; /* it sums no energies in its passes */
@@ -907,7 +952,7 @@ int mpm_sim_step(mpm_sim *s)
     }
     s->gvel_now = s->gvel;
     s->gnext = s->fuse_next;
-    if (s->general) /* the plastic work of the step, in thread order */
+    if (s->plan.general) /* the plastic work of the step, in thread order */
         for (int t = 0; t < s->nthreads; t++) {
             s->plastic_work += s->tout[t].wplast;
             s->tout[t].wplast = 0;
@@ -999,7 +1044,11 @@ int mpm_sim_dim(const mpm_sim *s)
 }
 const char *mpm_sim_kernels(const mpm_sim *s)
 {
-    return s->ref ? "reference" : s->avx2 ? "avx2-fma" : "portable";
+    return s->ref ? "reference" : s->plan.avx2 ? "avx2-fma" : "portable";
+}
+int mpm_sim_plan(const mpm_sim *s, char *buf, size_t n)
+{
+    return mpm_plan_format(&s->plan, buf, n);
 }
 const mpm_error *mpm_sim_error(const mpm_sim *s)
 {

@@ -140,7 +140,7 @@ static void ph_permute(mpm_sim *s, int tid)
     if (!nm && !ids) return;
     if (s->sort_win) {
         mpm_thread_out *o = &s->tout[tid];
-        size_t R = s->sort_ring;
+        size_t R = (size_t)s->plan.sort_ring;
         for (int f = 0; f < nm; f++) sweep_f64(a[f], dest, P->n, o->rval, o->rtag, R);
         if (ids) {
             sweep_u16(P->mat, dest, P->n, o->rval, o->rtag, R);
@@ -222,7 +222,7 @@ static int sort_slots(mpm_sim *s)
         far = d > far ? d : far;
     }
     for (size_t i = 0; i < s->nload; i++) s->load_p[i] = key[s->load_p[i]];
-    s->sort_win = far < s->sort_ring;
+    s->sort_win = far < (size_t)s->plan.sort_ring;
     s->sort_swept += s->sort_win;
     if (!s->sort_win) mark_cycles(key, n);
     s->sort_moved++;

@@ -9,7 +9,7 @@
  * only once all of them exist, so a failed pthread_create() leaves no
  * thread waiting at a barrier of the wrong size: the started ones are
  * released through the gate, joined, and the simulation stays serial.
- * The barriers spin briefly before they sleep (mpm_bar, mpm_internal.h).
+ * The barriers spin briefly before they sleep (mpm_bar, mpm_team.h).
  */
 #include "mpm_internal.h"
 

@@ -11,9 +11,9 @@
  * read (wts(): x, and lp for uGIMP, F and lp for CPDI), what the stress
  * update reads and writes (upd(): the model's arrays and the volume
  * update's), and the fixed arrays of the scatters and gathers.  When the
- * passes of mpm_kernels.c / mpm_cpdi.c change (fusing G2P with the next
+ * passes of mpm_kernels.inc / mpm_cpdi.c change (fusing G2P with the next
  * P2G, narrower storage), the table here changes with them.  Fused jobs
- * (mpm_sim.fuse, every family but CPDI): the pass that moves the particles
+ * (mpm_sim.plan.fuse, every family but CPDI): the pass that moves the particles
  * also makes the next step's first scatter, which then reads only what
  * that pass has not touched yet (mass, mostly), in every step: a step
  * that sorts does so after that scatter (mpm_sim.c sort_after_first()).
@@ -111,7 +111,7 @@ static double field_bytes(const mpm_sim *s, unsigned f)
 }
 
 /* What the weights of one particle read: x; uGIMP lp; CPDI its domain,
- * F and lp (mpm_kernels.c weights_n0(), mpm_cpdi.c cweights()). */
+ * F and lp (mpm_kernels.inc weights_n0(), mpm_cpdi.c cweights()). */
 static unsigned wts(const mpm_sim *s)
 {
     unsigned f = mpm_method_props_of(s->method)->flags;
@@ -122,7 +122,7 @@ static unsigned wts(const mpm_sim *s)
  * fields read into *rd, written into *wr. */
 static void upd(const mpm_sim *s, unsigned *rd, unsigned *wr)
 {
-    if (!s->general) { /* linear elasticity, V *= 1 + tr deps */
+    if (!s->plan.general) { /* linear elasticity, V *= 1 + tr deps */
         *rd |= TF_MAT | TF_SIG | TF_EPS | TF_VOL;
         *wr |= TF_SIG | TF_EPS | TF_VOL;
         return;
@@ -178,15 +178,15 @@ static void moves(const mpm_sim *s, unsigned *rd, unsigned *wr)
     }
 }
 
-/* the job's steps fuse (mpm_sim.fuse, where it pays or forced) */
+/* the job's steps fuse (mpm_sim.plan.fuse: where it pays, or always) */
 static int fused(const mpm_sim *s)
 {
-    return s->fuse && (s->fuse_pays || s->fuse_force);
+    return s->plan.fuse == MPM_FUSE_ALWAYS || (s->plan.fuse == MPM_FUSE_AUTO && s->fuse_pays);
 }
 
-/* The next step's first scatter, made by a fused pass (s->fuse) at the
+/* The next step's first scatter, made by a fused pass (plan.fuse) at the
  * particles' new positions: it reads what its scatter needs (scat) that
- * the pass has not read or written already (mpm_kernels.c p2g_one()). */
+ * the pass has not read or written already (mpm_kernels.inc p2g_one()). */
 static void next_scatter(unsigned scat, unsigned *rd, unsigned wr)
 {
     *rd |= scat & ~(*rd | wr);

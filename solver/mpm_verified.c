@@ -11,7 +11,7 @@
  * mpm_case_verified() when a case arrives (protocol/mpp_case.c), so what a
  * user submits is refused here, with the reason, before it runs.
  */
-#include "mpm_internal.h"
+#include "mpm.h"
 
 #include <stdio.h>
 

@@ -43,6 +43,7 @@ static const char usage[] =
     "       mpmbench --cpdi-vs-gimp [--particles N] [--steps S] [--update U] [--csv]\n"
     "       mpmbench --checkpoint [--particles N] [--threads T]\n"
     "       mpmbench --triad [--threads T] [--csv]\n"
+    "       mpmbench --hashes   (the same-bits harness: one hash per run of a fixed matrix)\n"
     "Throughput of the mpmd solver: millions of particle-steps per second,\n"
     "the median of 3 timed runs after a warm-up, and peak memory per particle.\n"
     "Scenes:\n"
@@ -1113,6 +1114,7 @@ int main(int argc, char **argv)
 {
     opts o;
     signal(SIGPIPE, SIG_IGN); /* a dead child's pipe is an error, not a death */
+    if (argc == 2 && !strcmp(argv[1], "--hashes")) return pb_hashes();
     int rc = parse_args(argc, argv, &o);
     if (rc) return rc > 0 ? 0 : 2;
     csv_mode = o.csv;

@@ -194,4 +194,8 @@ const char *pb_exe_dir(void);
  * the same blob. */
 int pb_checkpoint_bench(long particles, int threads);
 
+/* `mpmbench --hashes` (hashes.c): the same-bits harness, one line per run
+ * of a fixed matrix (name and hash) on stdout.  Returns 0. */
+int pb_hashes(void);
+
 #endif

@@ -788,6 +788,7 @@ static void show_text(const json_t *r)
                    100 * cj_num(le, "balanceError", 0));
         if (*cj_str(r, "warning", "")) printf("  warning     %s\n", cj_str(r, "warning", ""));
     }
+    if (*cj_str(r, "plan", "")) printf("  plan        %s\n", cj_str(r, "plan", ""));
     if (json_is_array(snaps) && json_array_size(snaps)) {
         size_t n = json_array_size(snaps);
         printf("  snapshots   %zu stored, steps", n);

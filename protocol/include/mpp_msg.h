@@ -161,6 +161,7 @@ typedef struct {
     int64_t checkpoint_step;
     double checkpoint_t;
     uint32_t resumes;       /* RunInfo.resumes: sent when > 0 */
+    const char *plan;       /* RunInfo.plan: NULL (decoded: "") when none */
     const void *case_bytes; /* packed Case to include, or NULL; its
                                method, update and transfer are sent as
                                the three fields above say (encode only:

@@ -6,6 +6,7 @@
  * to see the solver work and to try a method, update scheme or time step.
  */
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_paper.h"
 
 #include <errno.h>
@@ -29,6 +30,8 @@ static const char *usage =
     "  --t-end T       end time (default: the case's)\n"
     "  --every N       print energies every N steps (default: 20 lines a run)\n"
     "  --threads T     solver threads (default 1)\n"
+    "  --plan TEXT     force fast-path variants: key=value pairs of the plan's text\n"
+    "                  (printed at the start; e.g. 'kernels=portable fuse=off')\n"
     "  --csv           print the energy series as CSV (step,t,kinetic,strain,total)\n"
     "  -h, --help      this text\n";
 
@@ -55,6 +58,7 @@ static int parse_double(const char *opt, const char *s, double lo, double *out)
 int main(int argc, char **argv)
 {
     const char *cname = "disks-fine", *method = NULL, *update = "usf", *transfer = "flip";
+    const char *plan = NULL;
     double dt = 1e-3, cfl = 0, tend = -1, every = 0, threads = 1;
     int csv = 0;
     for (int i = 1; i < argc; i++) {
@@ -81,6 +85,8 @@ int main(int argc, char **argv)
             update = v;
         else if (!strcmp(a, "--transfer"))
             transfer = v;
+        else if (!strcmp(a, "--plan"))
+            plan = v;
         else if (!strcmp(a, "--dt"))
             rc = parse_double(a, v, 0, &dt);
         else if (!strcmp(a, "--cfl"))
@@ -161,11 +167,20 @@ int main(int argc, char **argv)
                 mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
         return 1;
     }
+    if (plan && mpm_sim_plan_override(s, plan, &me)) {
+        fprintf(stderr, "mpmrun: --plan: %s\n",
+                mpm_error_text(&me, MPM_FIELD_PROTO, err, sizeof err));
+        mpm_sim_destroy(&s);
+        return 2;
+    }
     long nsteps = (long)ceil(tend / mpm_sim_dt(s) - 1e-9);
     long step_every = every > 0 ? (long)every : (nsteps / 20 > 0 ? nsteps / 20 : 1);
     int tty = isatty(STDERR_FILENO);
     printf("# case %s: %s %s, %zu particles, %zu nodes, dt %g, t_end %g (%ld steps)\n", cname,
            mname, update, mpm_sim_particles(s), mpm_sim_nodes(s), mpm_sim_dt(s), tend, nsteps);
+    char ptext[MPM_PLAN_LEN];
+    mpm_sim_plan(s, ptext, sizeof ptext);
+    printf("# plan: %s\n", ptext);
     if (csv)
         printf("step,t,kinetic,strain,total\n");
     else

@@ -642,6 +642,14 @@ void srv_job_run(const srv_job_env *e, void *push, srv_job *j)
     pthread_mutex_unlock(e->mu);
     srv_log(j->id, "running: %zu particles, %zu nodes, %d thread%s", n, mpm_sim_nodes(sim), threads,
             threads > 1 ? "s" : "");
+    char plan[MPM_PLAN_LEN];
+    mpm_sim_plan(sim, plan, sizeof plan);
+    /* the fast paths the job runs (mpm_sim_plan()), logged and stored with
+     * the run (RunInfo.plan); a plan the store could not queue is only
+     * logged */
+    srv_log(j->id, "plan: %s", plan);
+    if (store_run_plan(p->st, (int64_t)j->id, plan))
+        srv_warn(j->id, "plan not recorded: %s", store_error()->message);
 
     mpm_energy_sample last;
     snapbuf sb = {0};

@@ -57,6 +57,7 @@ static void run_info(daemon_t *d, const store_run *r, mpp_run_info *ri, mpm_ener
     ri->transfer = r->transfer;
     ri->warning = r->warning;
     ri->owner = r->owner && r->owner[0] ? r->owner : NULL;
+    ri->plan = r->plan && r->plan[0] ? r->plan : NULL;
     ri->has_balance = r->has_balance;
     ri->balance_error = r->balance_error;
     ri->has_checkpoint = r->has_checkpoint, ri->checkpoint_step = r->checkpoint_step;

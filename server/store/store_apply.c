@@ -45,6 +45,7 @@ static const char *const writer_sql[WS_COUNT] = {
                       " WHERE id = ?1" NOT_ENDED,
     [WS_UPD_PROGRESS] = "UPDATE runs SET steps = ?2, wall_s = ?3, psteps_per_s = ?4"
                         " WHERE id = ?1" NOT_ENDED,
+    [WS_PLAN] = "UPDATE runs SET plan = ?2 WHERE id = ?1" NOT_ENDED,
     [WS_FINISH] = "UPDATE runs SET status = ?2, finished_at = ?3, steps = ?4,"
                   " wall_s = ?5, psteps_per_s = ?6, kinetic = ?7, strain = ?8,"
                   " potential = ?9, external_work = ?10, total = ?11, error = ?12,"
@@ -335,6 +336,13 @@ int sti_apply_op(store *s, op *o)
         BIND(bind_static(st, 2, sti_status_name(o->u.st.status)));
         BIND(bind_time(st, 3, o->u.st.at));
         BIND(bind_text_or_null(st, 4, o->u.st.error));
+        break;
+    case OP_RUN_PLAN:
+        st = s->ws[WS_PLAN];
+        what = "record run plan";
+        is_update = 1;
+        BIND(sqlite3_bind_int64(st, 1, id));
+        BIND(bind_static(st, 2, o->u.plan));
         break;
     case OP_RUN_PROGRESS:
         st = s->ws[WS_UPD_PROGRESS];

@@ -49,7 +49,8 @@ typedef enum {
     OP_ENERGY,
     OP_SNAPSHOT,
     OP_RUN_CHECKPOINT,
-    OP_RUN_RESUME
+    OP_RUN_RESUME,
+    OP_RUN_PLAN
 } op_kind;
 
 typedef struct op {
@@ -79,7 +80,8 @@ typedef struct op {
         struct {
             int has;
             store_checkpoint ck;
-        } ck; /* RUN_CHECKPOINT, RUN_RESUME */
+        } ck;             /* RUN_CHECKPOINT, RUN_RESUME */
+        const char *plan; /* RUN_PLAN */
     } u;
     /* copies of strings / blobs / samples follow, at OP_HDR */
 } op;
@@ -100,6 +102,7 @@ enum {
     WS_RESUME_RUN,
     WS_RESUME_ENERGY,
     WS_RESUME_SNAPS,
+    WS_PLAN,
     WS_COUNT
 };
 

@@ -166,6 +166,10 @@ static const char *const migrations[] = {
     "ALTER TABLE runs ADD COLUMN checkpoint_bytes INTEGER;"
     "ALTER TABLE runs ADD COLUMN checkpoint_seq INTEGER;"
     "ALTER TABLE runs ADD COLUMN resumes INTEGER NOT NULL DEFAULT 0;",
+    /* 8 -> 9: the solver's plan of a run (RunInfo.plan), one line of
+     * key=value pairs recorded when it starts.  Runs stored before have
+     * none (NULL). */
+    "ALTER TABLE runs ADD COLUMN plan TEXT;",
 };
 
 _Static_assert(sizeof migrations / sizeof migrations[0] == STORE_SCHEMA_VERSION,

@@ -147,8 +147,8 @@ static int col_blobdup(sqlite3 *db, sqlite3_stmt *st, int i, const void **out, s
     " status, submitted_at, started_at, finished_at, steps, wall_s,"          \
     " psteps_per_s, kinetic, strain, potential, external_work, total, error," \
     " server_version, transfer, balance_error, warning, owner,"               \
-    " checkpoint_step, checkpoint_t, checkpoint_bytes, checkpoint_seq, resumes"
-#define RUN_COL_CASE 31
+    " checkpoint_step, checkpoint_t, checkpoint_bytes, checkpoint_seq, resumes, plan"
+#define RUN_COL_CASE 32
 
 void store_run_clear(store_run *r)
 {
@@ -159,6 +159,7 @@ void store_run_clear(store_run *r)
     free((void *)r->server_version);
     free((void *)r->warning);
     free((void *)r->owner);
+    free((void *)r->plan);
     memset(r, 0, sizeof *r);
 }
 
@@ -205,7 +206,8 @@ static int read_run_row(sqlite3 *db, sqlite3_stmt *st, store_run *r, int with_ca
     int rc;
     if ((rc = col_strdup(db, st, 1, &r->name)) || (rc = col_strdup(db, st, 20, &r->error)) ||
         (rc = col_strdup(db, st, 21, &r->server_version)) ||
-        (rc = col_strdup(db, st, 24, &r->warning)) || (rc = col_strdup(db, st, 25, &r->owner))) {
+        (rc = col_strdup(db, st, 24, &r->warning)) || (rc = col_strdup(db, st, 25, &r->owner)) ||
+        (rc = col_strdup(db, st, 31, &r->plan))) {
         store_run_clear(r);
         return rc;
     }

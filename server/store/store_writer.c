@@ -416,6 +416,7 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out)
     r->server_version = tail_str(&cur, ver);
     r->owner = tail_str(&cur, owner);
     r->error = tail_str(&cur, run->error);
+    r->plan = NULL; /* recorded when the run starts (store_run_plan) */
     r->case_pb = run->case_len ? tail_put(&cur, run->case_pb, run->case_len) : NULL;
     if (r->submitted_at == 0) r->submitted_at = store_time_now();
 
@@ -443,6 +444,16 @@ int store_run_set_status(store *s, int64_t id, mpp_status status, double at, con
     o->u.st.status = status;
     o->u.st.at = at == 0 ? store_time_now() : at;
     o->u.st.error = tail_str(&cur, error);
+    return submit(s, o, 0);
+}
+
+int store_run_plan(store *s, int64_t id, const char *plan)
+{
+    if (!s || !plan) return sti_fail(MPM_EINVAL, "store_run_plan: NULL argument");
+    char *cur;
+    op *o = op_new(OP_RUN_PLAN, id, str_room(plan), &cur);
+    if (!o) return MPM_ENOMEM;
+    o->u.plan = tail_str(&cur, plan);
     return submit(s, o, 0);
 }
 

@@ -548,6 +548,14 @@ size_t mpm_sim_nodes(const mpm_sim *sim); /* real grid nodes */
 int mpm_sim_dim(const mpm_sim *sim);
 /* The kernels the simulation runs: "avx2-fma", "portable" or "reference". */
 const char *mpm_sim_kernels(const mpm_sim *sim);
+/* The plan of the job: the fast paths the simulation runs, chosen once at
+ * creation from the case and the CPU, as one line of key=value pairs
+ * ("kernels=avx2 fma=1 dim=2 shape=tent ns=2 ... sort_ring=8192";
+ * docs/solver.md, "The plan").  Writes at most n bytes (NUL included) and
+ * returns the length of the whole text, as snprintf().  MPM_PLAN_LEN
+ * bytes always hold it. */
+#define MPM_PLAN_LEN 256
+int mpm_sim_plan(const mpm_sim *sim, char *buf, size_t n);
 /* 1 when this build has the AVX2+FMA kernels and this CPU runs them. */
 int mpm_kernels_avx2_available(void);
 /* The error that stopped the simulation or refused the last call (code 0

@@ -1,8 +1,9 @@
 /*
  * mpm_diag.h - the solver's diagnostic interface, for tests, benchmarks and
  * tools, not for mpmd or its clients: the grid state after a step, the
- * shape weights of one axis, CPDI's weights of one particle, and the
- * modelled memory traffic of a step.  Implemented beside what they expose
+ * shape weights of one axis, CPDI's weights of one particle, the
+ * modelled memory traffic of a step, and forcing fast-path variants
+ * (mpm_sim_plan_override()).  Implemented beside what they expose
  * (mpm_sim.c, mpm_kernels.c, mpm_cpdi.c, mpm_traffic.c); the product API
  * is mpm.h, which this extends.
  */
@@ -69,5 +70,17 @@ typedef struct {
 } mpm_traffic;
 /* Fills *out for sim's job; returns 0, or MPM_EINVAL (sim or out NULL). */
 int mpm_sim_traffic(const mpm_sim *sim, mpm_traffic *out);
+
+/* Forces variants of sim's plan (mpm_sim_plan()): text is key=value pairs
+ * of its text form.  The chosen keys set their switch: kernels
+ * (portable|avx2), ns (GIMP: 3|4, before the first step), fuse
+ * (off|auto|always; off drops a next-step scatter already made), el_lanes
+ * and dp_lanes (0|1; 1 only where the job's default is 1 for those
+ * kernels), sort_ring (a power of 2 up to the default); a new kernels
+ * value brings its own defaults of the others.  The derived keys may be
+ * given with the value they have (a whole plan's text is accepted back).
+ * Between steps only.  Returns 0, or MPM_EINVAL with err naming
+ * "plan.KEY" (nothing changed). */
+int mpm_sim_plan_override(mpm_sim *sim, const char *text, mpm_error *err);
 
 #endif

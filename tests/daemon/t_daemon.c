@@ -346,6 +346,9 @@ DTEST(daemon_basic_run)
                json_object_get(r, "finishedAt") && !json_object_get(r, "case"),
            "show 1 --json: status %s, steps %lld, samples %lld", jstr(r, "status"),
            jint(r, "steps"), jint(r, "energySamples"));
+    /* the solver's plan, recorded when the run started (RunInfo.plan) */
+    CHECKF(strstr(jstr(r, "plan"), "dim=1 shape=tent ns=2") && strstr(jstr(r, "plan"), "fuse="),
+           "show 1 --json: plan '%s'", jstr(r, "plan"));
     {
         json_t *ss = json_object_get(r, "snapshotSteps");
         size_t ns = json_array_size(ss);
@@ -358,7 +361,7 @@ DTEST(daemon_basic_run)
     json_decref(r);
     CHECK(td_ctl(&d, 30, &e, "show", "1", NULL) == 0);
     CHECKF(e.status == 0 && strstr(e.out, "status      FINISHED") &&
-               strstr(e.out, "method      MPM, USF"),
+               strstr(e.out, "method      MPM, USF") && strstr(e.out, "plan        kernels="),
            "show 1: %s", e.out);
     td_out_free(&e);
     CHECK(td_ctl(&d, 30, &e, "show", "1", "--case", NULL) == 0);

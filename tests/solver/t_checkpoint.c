@@ -17,6 +17,7 @@
  */
 #include "t.h"
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_material.h"
 
@@ -837,7 +838,7 @@ TEST(ckpt_failed_run_stays_failed)
  * A step's moving pass also scatters the next step's first grid fields
  * (G2P2G), before a step that sorts the particles too (the sort comes
  * after that scatter has been reduced).  The same spec run straight to
- * CK_N with fusion off (mpm_sim_set_fused(s, 0): every step scatters on
+ * CK_N with fusion off (plan fuse=off: every step scatters on
  * its own, as every release before) and on must end with the same bits:
  * the fused scatter does the same arithmetic in the same order into the
  * same per-thread sums.  The fused run must have fused: after steps 16
@@ -859,9 +860,10 @@ static int fu_compare(const ck_spec *sp, char *msg, size_t nmsg, int *moved)
             snprintf(msg, nmsg, "%s: mpm_sim_new failed", sp->name);
             goto out;
         }
-        int rc = mpm_sim_set_fused(s, fused ? 2 : 0); /* 2: even where it would not pay */
+        /* always: even where it would not pay */
+        int rc = mpm_sim_plan_override(s, fused ? "fuse=always" : "fuse=off", NULL);
         if (fused && cpdi ? rc != MPM_EINVAL : rc != 0) {
-            snprintf(msg, nmsg, "%s: mpm_sim_set_fused(%d) returned %d", sp->name, fused, rc);
+            snprintf(msg, nmsg, "%s: plan fuse %d returned %d", sp->name, fused, rc);
             mpm_sim_destroy(&s);
             goto out;
         }

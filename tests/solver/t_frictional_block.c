@@ -9,7 +9,7 @@
  * non-finite increments that the update refuses.
  */
 #include "mpm.h"
-#include "mpm_internal.h"
+#include "mpm_model.h"
 #include "t.h"
 
 #include <stdint.h>

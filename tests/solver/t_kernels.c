@@ -10,6 +10,7 @@
  */
 #include "mpm.h"
 #include "mpm_collapse.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
 #include "t.h"
@@ -280,7 +281,7 @@ TEST(kernels_avx2_matches_portable)
 /* A support whose last row ends the grid arrays.  The AVX2 kernels load
  * and store a row of a 3-node support as four lanes, so the row that ends
  * an array reaches one double past its last node: the grid fields and
- * minv have MPM_GRID_SLACK doubles there (mpm_internal.h).  A box in the
+ * minv have MPM_GRID_SLACK doubles there (mpm_grid.h).  A box in the
  * grid's top corner, moving into it at (1, 1) m/s (2D; 3D (1, 1, 1)):
  * the B-splines' supports reach the last node of the padded grid at once
  * (no padding), GIMP's when the body has moved into the padding (2D: step
@@ -533,7 +534,7 @@ TEST(kernels_first_bad_particle)
     CHECK(runs == 48);
 }
 
-/* The tents by lanes (mpm_tlane.h): four particles of one cell's run at a
+/* The tents by lanes (mpm_tlane.inc): four particles of one cell's run at a
  * time, the lanes past the run not moved, a cell with a phantom corner
  * and a block's last particles one by one.  Explicit particles put 1 .. 9
  * (2D) or 1 .. 8 (3D) in a cell, so that runs of every length start at
@@ -691,7 +692,7 @@ static int run_snap(mpm_sim *s, long steps, kstate *k)
 }
 
 /* USF's stress pass from strain to stress (2D: to force) in registers
- * (mpm_sim.el_lanes, el_block() of the AVX2 kernels): the same bits as the
+ * (mpm_sim.plan.el_lanes, el_block() of the AVX2 kernels): the same bits as the
  * general pass (strains, stresses and forces of a block in turn), in 2D
  * and 3D, with runs of 1-9 (3D: 1-8) particles per cell, phantom corners
  * and the blend, on 1-3 threads. */
@@ -725,8 +726,9 @@ TEST(kernels_el_same_bits)
                         ok = 0;
                         break;
                     }
-                    if (side == 0) on = s->el_lanes;
-                    s->el_lanes = side == 0; /* side 1: the general pass */
+                    if (side == 0) on = s->plan.el_lanes;
+                    /* side 1: the general pass */
+                    if (side == 1 && mpm_sim_plan_override(s, "el_lanes=0", NULL)) ok = 0;
                     ok &= run_snap(s, 300, &k[side]) == 0;
                     mpm_sim_destroy(&s);
                 }

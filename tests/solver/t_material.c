@@ -907,7 +907,7 @@ TEST(material_plastic_work_threads)
 }
 
 /* Linear elasticity from a zero stress keeps no strain record and,
- * in 2D, no sigma_zz array (mpm_internal.h); the same case with a second,
+ * in 2D, no sigma_zz array (mpm_particles.h); the same case with a second,
  * unused VON_MISES material keeps both (the plastic models' record) and
  * takes the general path, which has linear elasticity's bits.  Positions,
  * velocities and the stored stresses are the same bits after an impact; the derived

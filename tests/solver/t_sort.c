@@ -9,6 +9,7 @@
  */
 #include "t.h"
 #include "mpm.h"
+#include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
 
@@ -156,7 +157,7 @@ TEST(perf_sort_sweep_equals_cycles)
         for (int k = 0; k < 2; k++) {
             mpm_sim *s = crossing_disks(T);
             CHECK(s);
-            if (k) s->sort_ring = 2;
+            if (k) CHECK(mpm_sim_plan_override(s, "sort_ring=2", NULL) == 0);
             long m0 = s->sort_moved, w0 = s->sort_swept;
             CHECK(mpm_sim_run(s, 160) == 0);
             moved[k] = s->sort_moved - m0;

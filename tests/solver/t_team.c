@@ -6,7 +6,7 @@
  * already asleep (a thread that arrives milliseconds late), and with more
  * threads than CPUs.
  */
-#include "mpm_internal.h"
+#include "mpm_team.h"
 #include "t.h"
 
 #include <pthread.h>

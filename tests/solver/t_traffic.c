@@ -70,7 +70,8 @@ static mpm_sim *sim_of(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm
 static mpm_sim *job(int dim, mpm_method m, mpm_update u, mpm_transfer tr, mpm_model_kind model)
 {
     mpm_sim *s = sim_of(dim, m, u, tr, model, (geom){12, 0.1, 0.3, 0.6, 0.0});
-    if (s && m != MPM_METHOD_CPDI && mpm_sim_set_fused(s, 2)) mpm_sim_destroy(&s);
+    if (s && m != MPM_METHOD_CPDI && mpm_sim_plan_override(s, "fuse=always", NULL))
+        mpm_sim_destroy(&s);
     return s;
 }
 
@@ -87,13 +88,13 @@ static double traffic(mpm_sim *s, const char *what, mpm_traffic *t)
     return t->total;
 }
 
-/* the job's figure unfused (mpm_sim_set_fused(s, 0)), then fused again
+/* the job's figure unfused (plan fuse=off), then fused again
  * (forced, as job() makes it) */
 static double unfused(mpm_sim *s, const char *what, mpm_traffic *t)
 {
-    if (!s || mpm_sim_set_fused(s, 0)) return -1;
+    if (!s || mpm_sim_plan_override(s, "fuse=off", NULL)) return -1;
     double r = traffic(s, what, t);
-    return mpm_sim_set_fused(s, 2) ? -1 : r;
+    return mpm_sim_plan_override(s, "fuse=always", NULL) ? -1 : r;
 }
 
 /* Linear elasticity from a stress-free start keeps no strain record, and
@@ -199,7 +200,7 @@ TEST(traffic_usf_plastic_and_cpdi)
     s = job(2, MPM_METHOD_CPDI, MPM_USF, MPM_TRANSFER_FLIP, MPM_MODEL_LINEAR_ELASTIC);
     CHECK(traffic(s, "2D CPDI USF elastic", &t) == 362);
     CHECK(t.npass == 3 && t.pass[2].read == 80 && t.pass[2].write == 64);
-    CHECK(mpm_sim_set_fused(s, 1) == MPM_EINVAL);
+    CHECK(mpm_sim_plan_override(s, "fuse=auto", NULL) == MPM_EINVAL);
     mpm_sim_destroy(&s);
     CHECK(mpm_sim_traffic(NULL, &t) == MPM_EINVAL);
 }
@@ -227,7 +228,7 @@ TEST(fuse_where_it_pays)
         mpm_sim *s = box2d(cs[i].nodes, 20);
         CHECK(s != NULL);
         CHECK(mpm_sim_particles(s) == 1600);
-        if (cs[i].force) CHECK(mpm_sim_set_fused(s, 2) == 0);
+        if (cs[i].force) CHECK(mpm_sim_plan_override(s, "fuse=always", NULL) == 0);
         CHECK(mpm_sim_step(s) == 0 && mpm_sim_step(s) == 0);
         TLOG("%4d-node-wide grid%s: %s", cs[i].nodes, cs[i].force ? ", forced" : "",
              s->gnext ? "fused" : "not fused");

@@ -72,12 +72,14 @@ TEST(store_run_lifecycle)
     store_run_clear(&r);
     CHECKF(ok, "running: status/started_at wrong");
 
-    /* progress */
+    /* the solver's plan (schema 9), then progress */
+    CHECK(store_run_plan(s, id, "kernels=portable fuse=auto") == 0);
+    CHECK(store_run_plan(s, id, NULL) == MPM_EINVAL);
     CHECK(store_run_progress(s, id, 50, 1.25, 4.0e6) == 0);
     CHECK(store_flush(s) == 0);
     CHECK(store_run_get(s, id, &r) == 0);
     ok = r.status == MPP_STATUS_RUNNING && r.steps == 50 && r.wall_s == 1.25 &&
-         r.psteps_per_s == 4.0e6;
+         r.psteps_per_s == 4.0e6 && r.plan && !strcmp(r.plan, "kernels=portable fuse=auto");
     store_run_clear(&r);
     CHECKF(ok, "progress not recorded");
 

@@ -5,7 +5,8 @@
  * every run, energy sample and snapshot reads back as it was written; runs
  * written before schema 5 read back as FLIP, the transfer they ran; runs
  * written before schema 7 read back with no owner (""), runs written before
- * schema 8 with no checkpoint and no resumes.
+ * schema 8 with no checkpoint and no resumes, runs written before schema 9
+ * with no plan.
  */
 #include "store.h"
 #include "t.h"
@@ -117,11 +118,11 @@ TEST(store_migrate_old_schema)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-1 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 8"), "%s",
+    CHECKF(lc.n_migrated == 1 && lc.n_new == 0 && strstr(lc.migrated, "from version 1 to 9"), "%s",
            lc.migrated);
     int v = -1;
     CHECK(store_schema_version(s, &v) == 0);
-    CHECKF(v == 8 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
+    CHECKF(v == 9 && v == STORE_SCHEMA_VERSION, "user_version %d after migration", v);
     store_stats st;
     store_get_stats(s, &st);
     CHECK(st.recovered_running == 1 && st.recovered_queued == 0);
@@ -138,7 +139,7 @@ TEST(store_migrate_old_schema)
              r.energy.strain == 2.25 && r.energy.potential == -3.0 &&
              r.energy.external_work == 0.125 && r.energy.total == 0.625 && r.energy.mass == 0 &&
              r.error == NULL && !strcmp(r.server_version, "0.3.0") &&
-             r.transfer == MPM_TRANSFER_FLIP;
+             r.transfer == MPM_TRANSFER_FLIP && r.plan == NULL;
     store_run_clear(&r);
     CHECKF(ok, "the old finished run reads back differently");
 
@@ -308,9 +309,9 @@ TEST(store_migrate_v2)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-2 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 8"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 2 to 9"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 8);
+    CHECK(store_schema_version(s, &v) == 0 && v == 9);
 
     mpm_energy_sample *es = NULL;
     size_t nes = 0;
@@ -450,9 +451,9 @@ TEST(store_migrate_v4)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-4 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 8"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 4 to 9"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 9 && v == STORE_SCHEMA_VERSION);
 
     /* the old runs: FLIP, everything else as written */
     store_run r;
@@ -587,9 +588,9 @@ TEST(store_migrate_v5)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-5 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 5 to 8"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 5 to 9"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 9 && v == STORE_SCHEMA_VERSION);
 
     store_run r;
     CHECK(store_run_get(s, 7, &r) == 0);
@@ -680,9 +681,9 @@ TEST(store_migrate_v6)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-6 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 6 to 8"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 6 to 9"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 9 && v == STORE_SCHEMA_VERSION);
 
     store_run r;
     CHECK(store_run_get(s, 7, &r) == 0);
@@ -773,9 +774,9 @@ TEST(store_migrate_v7)
     store *s = NULL;
     CHECKF(store_open(path, &o, &s) == 0, "opening a version-7 database: %s",
            store_error()->message);
-    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 7 to 8"), "%s", lc.migrated);
+    CHECKF(lc.n_migrated == 1 && strstr(lc.migrated, "from version 7 to 9"), "%s", lc.migrated);
     int v = -1;
-    CHECK(store_schema_version(s, &v) == 0 && v == 8 && v == STORE_SCHEMA_VERSION);
+    CHECK(store_schema_version(s, &v) == 0 && v == 9 && v == STORE_SCHEMA_VERSION);
 
     store_run r;
     CHECK(store_run_get(s, 7, &r) == 0);

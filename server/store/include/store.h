@@ -46,7 +46,7 @@
 #include <stdint.h>
 
 /* Latest schema version (PRAGMA user_version after store_open). */
-#define STORE_SCHEMA_VERSION 8
+#define STORE_SCHEMA_VERSION 9
 
 /* Bit of a status in store_run_filter.status_mask. */
 #define STORE_STATUS_BIT(st) (1u << (unsigned)(st))
@@ -100,6 +100,9 @@ typedef struct {
     double checkpoint_t;
     int64_t checkpoint_bytes, checkpoint_seq;
     int64_t resumes;
+    /* the solver's plan of the run (schema 9; store_run_plan): NULL when
+     * not recorded (not started, or stored before; insert ignores it) */
+    const char *plan;
 } store_run;
 
 /* A checkpoint of a run as the store records it (store_run_checkpoint,
@@ -277,6 +280,11 @@ int store_run_insert(store *s, const store_run *run, int64_t *id_out);
  * to a run still 'queued' or 'running': a terminal status is final, and an
  * update of an ended run fails (as a write error: "run N already ended"). */
 int store_run_set_status(store *s, int64_t id, mpp_status status, double at, const char *error);
+
+/* Records the plan of a running run (schema 9; mpm_sim_plan()'s text):
+ * the solver's fast paths it runs.  Like progress, only for a run not
+ * ended. */
+int store_run_plan(store *s, int64_t id, const char *plan);
 
 /* Records progress: steps done, wall seconds so far, particle-steps/s. */
 int store_run_progress(store *s, int64_t id, int64_t steps, double wall_s, double psteps_per_s);
