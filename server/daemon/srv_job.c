@@ -648,7 +648,7 @@ void srv_job_run(const srv_job_env *e, void *push, srv_job *j)
      * the run (RunInfo.plan); a plan the store could not queue is only
      * logged */
     srv_log(j->id, "plan: %s", plan);
-    if (store_run_plan(p->st, (int64_t)j->id, plan))
+    if (store_run_plan(e->st, (int64_t)j->id, plan))
         srv_warn(j->id, "plan not recorded: %s", store_error()->message);
 
     mpm_energy_sample last;
