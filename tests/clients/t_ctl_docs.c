@@ -188,7 +188,8 @@ TEST(ctl_man_pages)
 
 /* The completions bash gives for the words (the last one being completed),
  * with the completion script sourced; into out (a line). */
-static int complete(const char *dir, const char *env, const char *words, char **out)
+static int complete_line(const char *dir, const char *env, const char *words, const char *line,
+                         char **out)
 {
     char script[512], cmd[1024];
     snprintf(script, sizeof script, "%s/complete.sh", dir);
@@ -196,12 +197,17 @@ static int complete(const char *dir, const char *env, const char *words, char **
     if (!f) return -1;
     fprintf(f,
             "source clients/mpmctl/completion/mpmctl.bash\n"
-            "COMP_WORDS=(%s)\nCOMP_CWORD=$((${#COMP_WORDS[@]} - 1))\n"
+            "COMP_WORDS=(%s)\nCOMP_CWORD=$((${#COMP_WORDS[@]} - 1))\n%s%s%s"
             "_mpmctl\necho \"${COMPREPLY[*]}\"\n",
-            words);
+            words, line ? "COMP_LINE=\"" : "", line ? line : "", line ? "\"\n" : "");
     if (fclose(f)) return -1;
     snprintf(cmd, sizeof cmd, "%s bash --norc --noprofile %s", env, script);
     return sh_out(cmd, dir, "complete.out", out);
+}
+
+static int complete(const char *dir, const char *env, const char *words, char **out)
+{
+    return complete_line(dir, env, words, NULL, out);
 }
 
 DTEST(ctl_completion)
@@ -254,5 +260,28 @@ DTEST(ctl_completion)
     CHECKF(rc == 0 && out && !strcmp(out, "2 1"), "run ids: exit %d, got '%s', want '2 1'", rc,
            out ? out : "");
     TLOG("mpmctl --endpoint EP show <TAB> -> %s (runs --json of a real mpmd)", out);
+    free(out);
+
+    /* as bash gives them: the endpoint split at its colons in COMP_WORDS,
+     * whole in COMP_LINE */
+    char split[512], line[1024];
+    size_t k = 0;
+    for (const char *c = d.ep; *c && k + 8 < sizeof split; c++)
+        if (*c == ':') {
+            memcpy(split + k, "' ':' '", 7);
+            k += 7;
+        } else {
+            split[k++] = *c;
+        }
+    split[k] = 0;
+    snprintf(words, sizeof words, "'%s' --endpoint '%s' show ''", ctl, split);
+    snprintf(line, sizeof line, "%s --endpoint %s show ", ctl, d.ep);
+    rc = complete_line(tmp, "", words, line, &out);
+    nl = out ? strchr(out, '\n') : NULL;
+    if (nl) *nl = 0;
+    CHECKF(rc == 0 && out && !strcmp(out, "2 1"),
+           "run ids, endpoint split at its colons: exit %d, got '%s', want '2 1'", rc,
+           out ? out : "");
+    TLOG("the same, COMP_WORDS split at the endpoint's colons as bash does -> %s", out);
     free(out);
 }

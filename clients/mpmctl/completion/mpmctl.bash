@@ -14,10 +14,18 @@
 _mpmctl_runs()
 {
     [[ ${MPMCTL_COMPLETE_RUNS:-1} == 0 ]] && return
-    local ctl=${COMP_WORDS[0]} ep=() i
+    local ctl=${COMP_WORDS[0]} ep=() w prev=""
     command -v "$ctl" >/dev/null 2>&1 || return
-    for ((i = 1; i < ${#COMP_WORDS[@]} - 1; i++)); do
-        [[ ${COMP_WORDS[i]} == --endpoint ]] && ep=(--endpoint "${COMP_WORDS[i + 1]}")
+    # the endpoint from the line as typed: bash splits COMP_WORDS at the
+    # colons of tcp://host:port and ipc://path (COMP_WORDBREAKS), so the
+    # words are taken from COMP_LINE, split at blanks, quotes removed
+    # (ctl_completion checks both forms)
+    for w in ${COMP_LINE:-${COMP_WORDS[*]}}; do
+        w=${w//\'/}
+        w=${w//\"/}
+        [[ $prev == --endpoint ]] && ep=(--endpoint "$w")
+        [[ $w == --endpoint=* ]] && ep=(--endpoint "${w#--endpoint=}")
+        prev=$w
     done
     "$ctl" "${ep[@]}" --timeout 1 runs --json 2>/dev/null |
         sed -n 's/.*"runId": *"\{0,1\}\([0-9][0-9]*\).*/\1/p'
@@ -65,7 +73,12 @@ _mpmctl()
     for ((i = 1; i < COMP_CWORD; i++)); do
         w=${COMP_WORDS[i]}
         if [[ $w == -* ]]; then
-            [[ " $withval " == *" $w "* ]] && ((i++))
+            [[ " $withval " == *" $w "* ]] || continue
+            ((i++))
+            # a value bash split at its colons (tcp://host:port): its pieces
+            while ((i + 1 < COMP_CWORD)) && [[ ${COMP_WORDS[i + 1]} == : || ${COMP_WORDS[i]} == : ]]; do
+                ((i++))
+            done
         elif [[ -z $cmd ]]; then
             cmd=$w
         else
