@@ -37,24 +37,30 @@ _Static_assert(sizeof(mpm_mc_match) == sizeof(int), "an enum parameter is stored
 #define HI_OPEN MPM_PARAM_HI_OPEN
 #define FINITE MPM_PARAM_FINITE
 
-/* name, offset, type, lo, hi, hi_param, flags, unit, default (names) */
+/* name, offset, type, lo, hi, hi_param, flags, unit, default, names, n_names
+ * (every field given: clang's -Wmissing-field-initializers) */
 static const mpm_material_param params[P_COUNT] = {
-    [P_E] = {"youngs_modulus", AT(youngs_modulus), REAL, 0, HUGE_VAL, -1, LO_OPEN | FINITE, "", 0},
+    [P_E] = {"youngs_modulus", AT(youngs_modulus), REAL, 0, HUGE_VAL, -1, LO_OPEN | FINITE, "", 0,
+             NULL, 0},
     [P_NU] = {"poisson_ratio", AT(poisson_ratio), REAL, -1, 0.5, -1,
-              LO_OPEN | HI_OPEN | MPM_PARAM_NOT_1D, "", 0},
-    [P_RHO] = {"density", AT(density), REAL, 0, HUGE_VAL, -1, LO_OPEN | FINITE, "", 0},
-    [P_SY] = {"yield_stress", AT(yield_stress), REAL, 0, HUGE_VAL, -1, LO_OPEN | FINITE, "", 0},
-    [P_H] = {"hardening_modulus", AT(hardening_modulus), REAL, 0, HUGE_VAL, -1, FINITE, "", 0},
+              LO_OPEN | HI_OPEN | MPM_PARAM_NOT_1D, "", 0, NULL, 0},
+    [P_RHO] = {"density", AT(density), REAL, 0, HUGE_VAL, -1, LO_OPEN | FINITE, "", 0, NULL, 0},
+    [P_SY] = {"yield_stress", AT(yield_stress), REAL, 0, HUGE_VAL, -1, LO_OPEN | FINITE, "", 0,
+              NULL, 0},
+    [P_H] = {"hardening_modulus", AT(hardening_modulus), REAL, 0, HUGE_VAL, -1, FINITE, "", 0, NULL,
+             0},
     [P_PHI] = {"friction_angle", AT(friction_angle), REAL, 0, 90, -1, LO_OPEN | HI_OPEN, "degrees",
+               0, NULL, 0},
+    [P_PSI] = {"dilatancy_angle", AT(dilatancy_angle), REAL, 0, 90, P_PHI, 0, "degrees", 0, NULL,
                0},
-    [P_PSI] = {"dilatancy_angle", AT(dilatancy_angle), REAL, 0, 90, P_PHI, 0, "degrees", 0},
-    [P_C] = {"cohesion", AT(cohesion), REAL, 0, HUGE_VAL, -1, FINITE, "", 0},
+    [P_C] = {"cohesion", AT(cohesion), REAL, 0, HUGE_VAL, -1, FINITE, "", 0, NULL, 0},
     /* absent: no cut-off below the apex (HUGE_VAL, capped there) */
-    [P_TENSION] = {"tension_cutoff", AT(tension_cutoff), REAL, 0, HUGE_VAL, -1, 0, "", HUGE_VAL},
+    [P_TENSION] = {"tension_cutoff", AT(tension_cutoff), REAL, 0, HUGE_VAL, -1, 0, "", HUGE_VAL,
+                   NULL, 0},
     [P_MATCH] = {"mc_match", AT(mc_match), MPM_PARAM_ENUM, 0, 0, -1, 0, "", MPM_MC_COMPRESSION,
                  mc_match_names, 3},
     /* 0: the integrator's default (mpm_plastic_init()) */
-    [P_TOL] = {"substep_tolerance", AT(substep_tolerance), REAL, 0, 1, -1, HI_OPEN, "", 0},
+    [P_TOL] = {"substep_tolerance", AT(substep_tolerance), REAL, 0, 1, -1, HI_OPEN, "", 0, NULL, 0},
 };
 
 #define ELASTIC (BIT(P_E) | BIT(P_NU) | BIT(P_RHO))
