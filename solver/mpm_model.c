@@ -503,6 +503,10 @@ typedef struct {
  * its own; a particle the lanes leave goes through frictional_update(). */
 static void dp_flush(mpm_model_blk *b, dp_queue *q)
 {
+    /* every caller sets q->n = 0 before its loop and dp_push() fills the
+     * slots below q->n, the only ones read (cppcheck's cross-file check
+     * sees the struct unset) */
+    // cppcheck-suppress ctuuninitvar
     if (!q->n) return;
     mpm_particles *P = b->P;
     double epq[MPM_DP_LANES_MAX], dis[MPM_DP_LANES_MAX];

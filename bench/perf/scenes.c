@@ -214,6 +214,28 @@ static int build_cube(const pb_cfg *c, mpm_paper *t, char *err, size_t errlen)
 #endif
 }
 
+/* The spinning disk's particles (2 x 2 per cell of h within radius R of
+ * (xc, xc), angular speed w): their count, and, t->x set, their positions,
+ * velocities and volumes written into t. */
+static size_t sparse_points(mpm_paper *t, int rc, double h, double R, double xc, double w)
+{
+    size_t k = 0;
+    for (int i = -2 * rc; i < 2 * rc; i++)
+        for (int j = -2 * rc; j < 2 * rc; j++) {
+            double px = (i + 0.5) * h / 2, py = (j + 0.5) * h / 2;
+            if (px * px + py * py > R * R) continue;
+            if (t && t->x) {
+                t->x[2 * k] = xc + px;
+                t->x[2 * k + 1] = xc + py;
+                t->v[2 * k] = -w * py;
+                t->v[2 * k + 1] = w * px;
+                t->vol[k] = h * h / 4;
+            }
+            k++;
+        }
+    return k;
+}
+
 static int build_sparse(const pb_cfg *c, int wide, mpm_paper *t, char *err, size_t errlen)
 {
     memset(t, 0, sizeof *t);
@@ -233,34 +255,17 @@ static int build_sparse(const pb_cfg *c, int wide, mpm_paper *t, char *err, size
     int nodes = wide ? SPARSE_WIDE_NODES : tight;
     int ci = wide ? SPARSE_WIDE_NODES / 2 : rc + SPARSE_MARGIN; /* centre on a node */
     double xc = ci * h, w = SPARSE_OMEGA;
-    size_t n = 0;
-    for (int pass = 0; pass < 2; pass++) {
-        if (pass) {
-            t->x = malloc(2 * n * sizeof(double));
-            t->v = malloc(2 * n * sizeof(double));
-            t->vol = malloc(n * sizeof(double));
-            if (!t->x || !t->v || !t->vol) {
-                mpm_paper_free(t);
-                snprintf(err, errlen, "out of memory for %zu particles", n);
-                return -1;
-            }
-        }
-        size_t k = 0;
-        for (int i = -2 * rc; i < 2 * rc; i++)
-            for (int j = -2 * rc; j < 2 * rc; j++) {
-                double px = (i + 0.5) * h / 2, py = (j + 0.5) * h / 2;
-                if (px * px + py * py > R * R) continue;
-                if (pass) {
-                    t->x[2 * k] = xc + px;
-                    t->x[2 * k + 1] = xc + py;
-                    t->v[2 * k] = -w * py;
-                    t->v[2 * k + 1] = w * px;
-                    t->vol[k] = h * h / 4;
-                }
-                k++;
-            }
-        n = k;
+    /* counted first, then allocated once and filled */
+    size_t n = sparse_points(NULL, rc, h, R, xc, w);
+    t->x = malloc(2 * n * sizeof(double));
+    t->v = malloc(2 * n * sizeof(double));
+    t->vol = malloc(n * sizeof(double));
+    if (!t->x || !t->v || !t->vol) {
+        mpm_paper_free(t);
+        snprintf(err, errlen, "out of memory for %zu particles", n);
+        return -1;
     }
+    sparse_points(t, rc, h, R, xc, w);
     t->mat[0] = (mpm_material_desc){.model = MPM_MODEL_LINEAR_ELASTIC,
                                     .youngs_modulus = 1.0,
                                     .poisson_ratio = 0.2,
