@@ -14,7 +14,10 @@
  * shape, each with volume prod(h/ppc) and uGIMP half-width h/(2 ppc) (also
  * the initial CPDI domain).
  */
+#include "mpm_case.h"
+#include "mpm_cond.h"
 #include "mpm_internal.h"
+#include "mpm_isa.h"
 #include "mpm_method.h"
 #include "mpm_ref.h"
 

@@ -41,6 +41,9 @@
  * always detected (a few ms for 10^6 particles).
  */
 #include "mpm_internal.h"
+#include "mpm_loads.h"
+#include "mpm_rows.h"
+#include "mpm_team.h"
 
 #include <stdio.h>
 #include <string.h>

@@ -31,6 +31,7 @@
  * Both lists are sorted by node and visited by segment, as the fixed DOFs
  * are (mpm_loads.c); a scene without them runs none of this.
  */
+#include "mpm_cond.h"
 #include "mpm_internal.h"
 #include "mpm_method.h"
 

@@ -56,6 +56,7 @@
 #pragma GCC optimize("O3")
 #endif
 
+#include "mpm_cpdi.h"
 #include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_pass.h"

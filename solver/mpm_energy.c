@@ -6,8 +6,11 @@
  * count; the guard compares them with what the initial state and the loads
  * can supply.
  */
+#include "mpm_energy.h"
 #include "mpm_internal.h"
+#include "mpm_model.h"
 #include "mpm_pass.h"
+#include "mpm_team.h"
 
 #include <math.h>
 #include <stdio.h>

@@ -1,15 +1,20 @@
 /*
  * mpm_internal.h - the simulation's private state (struct mpm_sim) and the
- * declarations of the modules that work on it, for the solver's files
- * only.  The data of each concern has its own header, included here:
+ * small inline helpers and constants its modules share, for the solver's
+ * files only.  It declares no module's functions: each module has its own
+ * header (mpm_rows.h, mpm_sort.h, mpm_loads.h, mpm_cond.h, mpm_energy.h,
+ * mpm_case.h, mpm_team.h, mpm_plan.h, mpm_kernels.h, mpm_model.h, ...),
+ * which includes this one where it needs the struct, so that the includes
+ * form no circle (tests/include_graph.py, make layers).  The data of each
+ * concern has its own header of types, included here:
  *   mpm_particles.h  the particles' arrays;   mpm_grid.h  the grid's
- *   mpm_model.h      the constitutive models (mpm_model.c, mpm_plastic.h);
+ *   mpm_model_types.h  the constitutive models (mpm_model.h, mpm_plastic.h);
  *                    their rows and parameters: mpm_material.h
  *                    (mpm_material_table.c)
- *   mpm_team.h       the thread team (mpm_team.c)
- *   mpm_kernels.h    the kernel families and their per-thread output
- *   mpm_plan.h       the plan: the fast-path switches of a job
- * and the modules declared here:
+ *   mpm_team_types.h     the thread team's barrier (mpm_team.h)
+ *   mpm_kernels_types.h  the kernel families and their per-thread output
+ *   mpm_plan_types.h     the plan: the fast-path switches of a job
+ * and the modules that work on it, each declared in its own header:
  *   mpm_sim.c      the public API: creation, the step, results
  *   mpm_rows.c     the active rows, the scatter targets and the node passes
  *   mpm_sort.c     the particles' sort by cell
@@ -19,7 +24,7 @@
  *   mpm_case.c     checking a case and generating its particles
  *   mpm_checkpoint.c  the solver state as a self-checking blob (save, load)
  * A file that needs only one concern includes only its header
- * (mpm_bspline.c mpm_grid.h, mpm_isa.c mpm_kernels.h).
+ * (mpm_bspline.c mpm_grid.h, mpm_isa.c mpm_isa.h).
  *
  * Hot data is struct-of-arrays: particle field c of particle p is
  * P.field[c][p].  The grid is padded by two ghost layers per side for GMPM,
@@ -40,13 +45,13 @@
 
 #include "mpm.h"
 #include "mpm_grid.h"
-#include "mpm_kernels.h"
+#include "mpm_kernels_types.h"
 #include "mpm_material.h"
-#include "mpm_model.h"
+#include "mpm_model_types.h"
 #include "mpm_particles.h"
-#include "mpm_plan.h"
+#include "mpm_plan_types.h"
 #include "mpm_plastic.h"
-#include "mpm_team.h"
+#include "mpm_team_types.h"
 #include "mpm_timefn.h"
 
 #include <pthread.h>
@@ -292,10 +297,6 @@ struct mpm_sim {
     mpm_error err; /* mpm_sim_error() */
 };
 
-/* Whether the case reads a deformation gradient per particle (P.F): the
- * one place that decides its allocation (mpm_sim.c). */
-int mpm_needs_F(const mpm_case *c);
-
 /* Stored energy of particle p by its material's model (the general path;
  * linear elasticity: 1/2 sigma : eps V, the bits of the default path). */
 static inline double mpm_model_energy(const mpm_sim *s, size_t p)
@@ -303,14 +304,6 @@ static inline double mpm_model_energy(const mpm_sim *s, size_t p)
     const mpm_mat_params *mp = &s->mats[s->P.mat[p]];
     return mp->ops->energy(mp, &s->P, s->dim, p);
 }
-
-/* Writes the particles of a case that passed mpm_case_check() into P, whose
- * arrays are allocated for the count the check found (P->n), with material
- * constants mats, in one pass; *vmax (if not NULL) gets the largest initial
- * speed.  Returns 0, or MPM_EINVAL when the case no longer makes P->n
- * particles (nothing is written beyond them). */
-int mpm_case_fill(const mpm_case *c, mpm_particles *P, const mpm_mat_params *mats, double *vmax,
-                  mpm_error *err);
 
 /* ---- small shared helpers (inline: some run inside the passes) ---- */
 
@@ -351,13 +344,7 @@ static inline double mpm_node_coord(const mpm_sim *s, int axis, int padded_index
     return s->ncoord[axis][padded_index];
 }
 
-/* A barrier between the passes of one phase. */
-static inline void mpm_team_sync(mpm_sim *s)
-{
-    if (s->nthreads > 1) mpm_bar_wait(&s->bar_end);
-}
-
-/* ---- the active rows and the node passes (mpm_rows.c) ---- */
+/* ---- the active rows and the node passes (mpm_rows.h) ---- */
 
 /* rows (y, z) of box lo..hi (inclusive); 0 when empty */
 static inline size_t mpm_box_rows(const int lo[3], const int hi[3])
@@ -406,36 +393,7 @@ enum {
 #define MPM_W_NODE 3
 #define MPM_W_COPY 1
 
-/* Allocates the row extents (all empty) of the simulation and of each
- * thread, and the sort's row offsets.  Returns 0 or MPM_ENOMEM. */
-int mpm_rows_init(mpm_sim *s);
-/* Makes the active rows those the last particle pass recorded (serial). */
-void mpm_rows_update(mpm_sim *s);
-
-/* The share of the active nodes (as numbered by acc, 0 .. nact) that a
- * node pass gives thread tid: [*n0, *n1), the threads' shares in order
- * and together all of them; weighted (a pass that reduces the private
- * grids, 2 threads or more): the work units of wacc split evenly, else
- * the nodes. */
-void mpm_node_share(const mpm_sim *s, int tid, int weighted, size_t *n0, size_t *n1);
-
-/* Thread tid's scatter target, zeroed over its rows for the fields named
- * (a private buffer's P2G fields and s->tshare are all zero already). */
-mpm_gridbuf *mpm_scatter_buf(mpm_sim *s, int tid, int fields);
-/* Fused steps: swaps the main grid's P2G fields with thread 0's next-step
- * buffer (serial, between steps), which then holds the last grid until
- * the step's first node pass zeroes it (MPM_N_Z0). */
-void mpm_rows_swap_next(mpm_sim *s);
-/* Drops a next-step scatter that will not be used (the private buffers'
- * P2G fields zeroed over the rows they were scattered into); serial. */
-void mpm_rows_drop_next(mpm_sim *s);
-/* A node pass over thread tid's share of the active nodes: ops is MPM_F_*
- * fields to reduce | MPM_N_* operations. */
-void mpm_node_pass(mpm_sim *s, int tid, int ops);
-/* Phase: records the support box and row extents of the thread's slice. */
-void mpm_ph_bbox(mpm_sim *s, int tid);
-
-/* ---- sorting by cell (mpm_sort.c) ---- */
+/* ---- sorting by cell (mpm_sort.h) ---- */
 
 #define MPM_SORT_EVERY 16 /* the longest interval between sorts */
 /* the shortest, when the particles' cell runs have fallen apart: more than
@@ -450,92 +408,15 @@ void mpm_ph_bbox(mpm_sim *s, int tid);
 /* Fused steps need this many particles per page of a grid field the
  * active rows touch (mpm_rows.c fuse_pays()). */
 #define MPM_FUSE_PER_PAGE 400
-/* Sorts the particles by cell over the active rows (stable; nothing moves
- * when they are in order already).  The rows stay valid. */
-void mpm_sort_particles(mpm_sim *s);
-/* The same inside a team phase, called by every thread: the keys and the
- * moves on the team, the counting sort on thread 0 between barriers; then
- * each thread records its slice's support box and rows (mpm_ph_bbox()).
- * Returns after a barrier. */
-void mpm_sort_team(mpm_sim *s, int tid);
-/* The cell changes along all the particles (a particle in another cell
- * than the one before it, the first one included) as the last moving pass
- * or mpm_ph_bbox() recorded them in mpm_thread_out.ncell, the same for
- * every thread count.  Serial. */
-size_t mpm_sort_cell_changes(const mpm_sim *s);
 
-/* ---- boundary conditions and loads (mpm_loads.c) ---- */
+/* ---- prescribed velocities and face friction (mpm_cond.h) ---- */
 
-/* The fixed nodes of the face masks and the node set.  0 or MPM_ENOMEM. */
-int mpm_bc_build(mpm_sim *s, const mpm_bc_desc *bc);
-/* BC1 / BC2: zeroes the fixed components of field over the flat nodes
- * first..last (one segment of a row). */
-void mpm_bc_zero(const mpm_sim *s, double *const field[3], size_t first, size_t last);
-/* The tractions' shares of the particles in their regions.  0 or
- * MPM_ENOMEM. */
-int mpm_loads_build(mpm_sim *s, const mpm_case *c);
-/* Before a step: the loaded particles' positions; after it: the work of
- * their forces over the step (external_work, external_work_abs). */
-void mpm_loads_begin_step(mpm_sim *s);
-void mpm_loads_end_step(mpm_sim *s);
-/* mpm_sim_set_particle_forces() once f is checked (f NULL: zero).  0 or
- * MPM_ENOMEM. */
-int mpm_loads_set_forces(mpm_sim *s, const double *f);
-/* The switch mpm_loads_set_forces() makes at its first call: one load slot
- * per particle (load_p[i] = i), the tractions' shares kept in trac_f, the
- * forces those shares (pforces = 1); nothing when already done.  0 or
- * MPM_ENOMEM (nothing changed). */
-int mpm_loads_per_particle(mpm_sim *s);
-
-/* ---- prescribed velocities and face friction (mpm_cond.c) ---- */
-
-/* Checks c->prescribed and c->bc.friction (and that no direction is both
- * prescribed and fixed, prescribed twice, or on a friction face).  0 or
- * MPM_EINVAL naming the field. */
-int mpm_cond_check(const mpm_case *c, mpm_error *err);
-/* Builds the prescribed and friction node lists (after mpm_bc_build()).
- * 0 or MPM_ENOMEM. */
-int mpm_cond_build(mpm_sim *s, const mpm_case *c);
-void mpm_cond_free(mpm_sim *s);
-/* Before a step (serial): the prescribed velocities at t^n and t^{n+1},
- * the per-thread work sums cleared. */
-void mpm_cond_begin_step(mpm_sim *s);
-/* After a step (serial): the per-thread work sums into the totals. */
-void mpm_cond_end_step(mpm_sim *s);
 /* A friction node's state in the running step (mpm_sim.fric_stick): it did
  * not press on its face, it pressed and stuck, it pressed and slid. */
 enum { MPM_FRIC_FREE = 0, MPM_FRIC_STICK = 1, MPM_FRIC_SLIDE = 2 };
-/* Node passes over the flat nodes first..last: BC1 (q = m v(t^n)), BC1 on
- * MUSL's q2 (q2 = m v(t^{n+1}); a pressing friction node's tangential q2 =
- * its q^{n+1}), and BC2 (friction on the free rate of momentum, then f = m
- * (v(t^{n+1}) - v(t^n)) / dt), summing the work into tout[tid]; each
- * before the fixed DOFs' zeroing of the same field. */
-void mpm_cond_bc1(const mpm_sim *s, size_t first, size_t last);
-void mpm_cond_bc1q2(const mpm_sim *s, size_t first, size_t last);
-void mpm_cond_bc2(mpm_sim *s, int tid, size_t first, size_t last);
-/* whether flat node n lies on face f (2 d + side) as a face condition
- * covers it (ghost layers behind and beside the face included) */
-int mpm_node_on_face(const mpm_sim *s, size_t n, int face);
-/* Time-varying tractions: the loads' forces at the step's midpoint time
- * (serial, before the step). */
-void mpm_loads_update(mpm_sim *s);
 
-/* ---- energies and the divergence guard (mpm_energy.c) ---- */
+/* ---- energies and the divergence guard (mpm_energy.h) ---- */
 
 #define MPM_GUARD_EVERY 16
-/* Phase: the energies of the thread's slice into its tout (all of them,
- * angular momentum included). */
-void mpm_ph_energy(mpm_sim *s, int tid);
-/* The partial sums in tout combined in thread order (external work and
- * total left out). */
-void mpm_energy_sum(const mpm_sim *s, mpm_energy *e);
-/* The guard: 0, or MPM_EDIVERGED with s->err set and s->failed. */
-int mpm_guard(mpm_sim *s);
-/* The cumulative works of the run into e (external, damping, and the
- * other helpers' dissipations), then the total and the balance error:
- * the one place they are computed (mpm_sim_energy() and the guard). */
-void mpm_energy_finish(const mpm_sim *s, mpm_energy *e);
-/* The elastic energy stored by the initial stress (U0, see mpm_guard()). */
-double mpm_initial_stress_energy(const mpm_sim *s);
 
 #endif

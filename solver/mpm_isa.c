@@ -5,7 +5,9 @@
  * selection are in mpm_kernels.c and mpm_kernels_avx2.c; the plan
  * (mpm_plan.c) chooses between them.
  */
+#include "mpm_isa.h"
 #include "mpm_kernels.h"
+#include "mpm_kernels_avx2.h"
 
 int mpm_kernels_avx2_available(void)
 {

@@ -11,6 +11,7 @@
  * (mpm_kernels_<unit>_avx2.c), whose families mpm_kernels_avx2.c selects.
  * The plan (mpm_plan.h) says which family a job runs.
  */
+#include "mpm_kernels.h"
 #include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_pass.h"

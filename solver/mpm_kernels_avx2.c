@@ -18,7 +18,9 @@
 #if !defined(__AVX2__) || !defined(__FMA__)
 #error "mpm_kernels_avx2.c needs -mavx2 -mfma (the Makefile gives them)"
 #endif
+#include "mpm_kernels_avx2.h"
 #include "mpm_internal.h"
+#include "mpm_kernels.h"
 
 /* 1 when this build of the families fuses a * b + c: the exact product
  * 1 - 2^-60 rounds to 1, so only a fused operation leaves -2^-60.  (GCC

@@ -16,6 +16,7 @@
  * times those shares.  Prescribed velocities and face friction:
  * mpm_cond.c.
  */
+#include "mpm_loads.h"
 #include "mpm_internal.h"
 
 #include <math.h>

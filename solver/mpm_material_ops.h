@@ -1,7 +1,7 @@
 /*
  * mpm_material_ops.h - the constitutive models' operations, one object per
  * model, defined in mpm_model.c beside the functions they point at
- * (struct mpm_model_ops, mpm_internal.h: the stress update of a block, the
+ * (struct mpm_model_ops, mpm_model_types.h: the stress update of a block, the
  * point update of the rate-form models, the stored energy) and referenced
  * by the model's row of the material table (mpm_material_table.c).  A new
  * model adds its object here and there (docs/architecture.md, "Adding a

@@ -12,6 +12,7 @@
  * _proto (a row per schema field and model), ckpt_fingerprint_every
  * _material_param (every parameter of every model is fingerprinted).
  */
+#include "mpm_material_table.h"
 #include "mpm_material.h"
 
 #include "mpm_material_ops.h"
@@ -104,6 +105,28 @@ const mpm_material_param *mpm_material_param_at(int k)
 const mpm_material_model *mpm_material_model_of(mpm_model_kind kind)
 {
     return (unsigned)kind < (unsigned)N_MODELS ? &models[kind] : NULL;
+}
+
+const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
+{
+    const mpm_material_model *m = mpm_material_model_of(kind);
+    return m ? m->ops : NULL;
+}
+
+void mpm_model_params(const mpm_material_desc *d, int dim, mpm_mat_params *out)
+{
+    double nu = dim == 1 ? 0.0 : d->poisson_ratio;
+    memset(out, 0, sizeof *out);
+    out->E = d->youngs_modulus;
+    out->nu = nu;
+    out->rho = d->density;
+    out->lambda = out->E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    out->mu = out->E / (2.0 * (1.0 + nu));
+    out->K = out->lambda + 2.0 * out->mu / 3.0;
+    out->c = mpm_material_wave_speed(d, dim);
+    out->sy0 = d->yield_stress;
+    out->H = d->hardening_modulus;
+    out->ops = mpm_model_get(d->model);
 }
 
 double mpm_material_get(const mpm_material_desc *d, const mpm_material_param *p)

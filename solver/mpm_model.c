@@ -34,6 +34,7 @@
 #include "mpm_model.h"
 #include "mpm_internal.h"
 #include "mpm_material_ops.h"
+#include "mpm_plastic_avx2.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -806,12 +807,6 @@ const mpm_model_ops mpm_ops_drucker_prager = {
 const mpm_model_ops mpm_ops_mohr_coulomb = {
     {NULL, NULL, NULL}, frictional_any, frictional_point, j2_energy};
 
-const mpm_model_ops *mpm_model_get(mpm_model_kind kind)
-{
-    const mpm_material_model *m = mpm_material_model_of(kind);
-    return m ? m->ops : NULL;
-}
-
 /* ---- the general block update ---- */
 
 void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
@@ -851,22 +846,6 @@ void mpm_model_block(mpm_sim *s, mpm_thread_out *o, size_t b0, size_t nb)
     } else if (s->volmode == MPM_VOLUME_DET_F) {
         for (size_t i = 0; i < nb; i++) vol[i] = P->vol0[b0 + i] * mpm_det_f(P, D, b0 + i);
     } /* CONSTANT: never changes */
-}
-
-void mpm_model_params(const mpm_material_desc *d, int dim, mpm_mat_params *out)
-{
-    double nu = dim == 1 ? 0.0 : d->poisson_ratio;
-    memset(out, 0, sizeof *out);
-    out->E = d->youngs_modulus;
-    out->nu = nu;
-    out->rho = d->density;
-    out->lambda = out->E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
-    out->mu = out->E / (2.0 * (1.0 + nu));
-    out->K = out->lambda + 2.0 * out->mu / 3.0;
-    out->c = mpm_material_wave_speed(d, dim);
-    out->sy0 = d->yield_stress;
-    out->H = d->hardening_modulus;
-    out->ops = mpm_model_get(d->model);
 }
 
 int mpm_model_plastic(const mpm_material_desc *d, int dim, size_t i, mpm_plastic_params *pl,

@@ -4,7 +4,7 @@
  * dimension, the constitutive block's size, and the small inline sums
  * over one particle that the kernels and the energy pass share (mpm_rn(),
  * the angular momentum).  Allocated and sorted by mpm_sim.c and
- * mpm_sort.c, filled by mpm_case.c (mpm_case_fill(), mpm_internal.h).
+ * mpm_sort.c, filled by mpm_case.c (mpm_case_fill(), mpm_case.h).
  */
 #ifndef MPM_PARTICLES_H
 #define MPM_PARTICLES_H

@@ -17,6 +17,7 @@
 #define MPM_PASS_H
 
 #include "mpm_internal.h"
+#include "mpm_model.h"
 
 #include <limits.h>
 #include <math.h>

@@ -8,8 +8,10 @@
  * through it (fuse_, perf_el_lanes_same_bits, sort_ring).
  */
 #include "mpm_plan.h"
+#include "mpm_kernels_avx2.h"
 
 #include "mpm_internal.h"
+#include "mpm_material_table.h"
 
 #include <stdio.h>
 #include <string.h>

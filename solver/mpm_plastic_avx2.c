@@ -21,7 +21,7 @@
  * Built only on x86-64 (MPM_HAVE_AVX2_KERNELS) and called only where the
  * CPU has AVX2.
  */
-#include "mpm_plastic.h"
+#include "mpm_plastic_avx2.h"
 #include "mpm_plastic_tol.h"
 
 #if defined(MPM_HAVE_AVX2_KERNELS) && defined(__AVX2__)

@@ -23,6 +23,8 @@
  * compare with the fast families'.
  */
 #include "mpm_ref.h"
+#include "mpm_cond.h"
+#include "mpm_loads.h"
 
 #include "mpm_internal.h"
 #include "mpm_pass.h" /* strain_of(), block_update(): the solver's stress update */

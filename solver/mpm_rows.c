@@ -10,7 +10,10 @@
  * union's extents is kept all zero.  The cost of a step, and the pages of
  * the grids ever touched, follow the particles, not the grid.
  */
+#include "mpm_rows.h"
+#include "mpm_cond.h"
 #include "mpm_internal.h"
+#include "mpm_loads.h"
 #include "mpm_pass.h"
 
 #include <limits.h>

@@ -51,10 +51,24 @@
  * for everything public.  Built with -DMPM_LEAN, gravity, loads and fixed
  * boundaries are compiled out and cases using them are refused.
  */
+#include "mpm_case.h"
+#include "mpm_cond.h"
+#include "mpm_cpdi.h"
 #include "mpm_diag.h"
+#include "mpm_energy.h"
 #include "mpm_internal.h"
+#include "mpm_isa.h"
+#include "mpm_kernels.h"
+#include "mpm_kernels_avx2.h"
+#include "mpm_loads.h"
+#include "mpm_material_table.h"
 #include "mpm_method.h"
+#include "mpm_model.h"
+#include "mpm_plan.h"
 #include "mpm_ref.h"
+#include "mpm_rows.h"
+#include "mpm_sort.h"
+#include "mpm_team.h"
 
 #include <limits.h>
 #include <math.h>
@@ -176,7 +190,9 @@ static unsigned model_needs(const mpm_case *c)
     return n;
 }
 
-int mpm_needs_F(const mpm_case *c)
+/* Whether the case reads a deformation gradient per particle (P.F): the
+ * one place that decides its allocation. */
+static int mpm_needs_F(const mpm_case *c)
 {
     return (mpm_method_props_of(c->method)->flags & MPM_METH_DOMAIN_F) ||
            c->volume_update == MPM_VOLUME_DET_F || (model_needs(c) & MPM_NEED_F);

@@ -24,7 +24,10 @@
  * array at once that they replace: docs/performance.md).  The order does not
  * depend on the thread count.
  */
+#include "mpm_sort.h"
 #include "mpm_internal.h"
+#include "mpm_rows.h"
+#include "mpm_team.h"
 
 #include <string.h>
 

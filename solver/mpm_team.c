@@ -11,6 +11,7 @@
  * released through the gate, joined, and the simulation stays serial.
  * The barriers spin briefly before they sleep (mpm_bar, mpm_team.h).
  */
+#include "mpm_team.h"
 #include "mpm_internal.h"
 
 #include <sched.h>

@@ -28,7 +28,7 @@ import sys
 
 # The libraries whose cycles fail the check; extend this one line as a
 # library is cleared.
-CHECKED = ["protocol", "server/store", "server/daemon"]
+CHECKED = ["solver", "protocol", "server/store", "server/daemon"]
 
 # Every library: its folder (sources in it, public headers in include/).
 LIBS = ["solver", "protocol", "server/store", "server/daemon", "clients/ctl", "scenes"]

@@ -11,7 +11,7 @@
  * the temp file a crash mid-write leaves (removed at start).
  */
 #define _GNU_SOURCE
-#include "mpm_kernels.h"
+#include "mpm_kernels_avx2.h"
 #include "t_daemon.h"
 #include "t_daemon_util.h"
 

@@ -10,6 +10,7 @@
 #include "mpm.h"
 #include "mpm_diag.h"
 #include "mpm_internal.h"
+#include "mpm_model.h"
 #include "mpm_paper.h"
 #include "t.h"
 

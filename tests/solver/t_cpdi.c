@@ -17,6 +17,8 @@
 #include "mpm.h"
 #include "mpm_diag.h"
 #include "mpm_internal.h"
+#include "mpm_rows.h"
+#include "mpm_team.h"
 #include "t.h"
 
 #include <stdint.h>

@@ -13,7 +13,7 @@
  * Skipped where the CPU has no AVX2.
  */
 #include "mpm.h"
-#include "mpm_plastic.h"
+#include "mpm_plastic_avx2.h"
 #include "t.h"
 
 #include <stdint.h>

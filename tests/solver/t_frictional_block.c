@@ -9,6 +9,7 @@
  * non-finite increments that the update refuses.
  */
 #include "mpm.h"
+#include "mpm_material_table.h"
 #include "mpm_model.h"
 #include "t.h"
 

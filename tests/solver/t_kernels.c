@@ -12,6 +12,7 @@
 #include "mpm_collapse.h"
 #include "mpm_diag.h"
 #include "mpm_internal.h"
+#include "mpm_kernels_avx2.h"
 #include "mpm_paper.h"
 #include "t.h"
 

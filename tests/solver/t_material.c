@@ -10,6 +10,8 @@
  */
 #include "mpm.h"
 #include "mpm_internal.h"
+#include "mpm_material_table.h"
+#include "mpm_model.h"
 #include "t.h"
 
 #include <math.h>

@@ -13,6 +13,7 @@
 #include "mpm_collapse.h"
 #include "mpm_diag.h"
 #include "mpm_internal.h"
+#include "mpm_model.h"
 #include "mpm_paper.h"
 #include "t.h"
 

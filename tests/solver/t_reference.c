@@ -18,6 +18,7 @@
 #include "mpm.h"
 #include "mpm_diag.h"
 #include "mpm_internal.h"
+#include "mpm_kernels_avx2.h"
 #include "mpp_case.h"
 #include "t.h"
 

@@ -10,6 +10,7 @@
 #include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
+#include "mpm_rows.h"
 #include "t.h"
 
 #include <math.h>

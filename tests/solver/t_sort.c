@@ -12,6 +12,7 @@
 #include "mpm_diag.h"
 #include "mpm_internal.h"
 #include "mpm_paper.h"
+#include "mpm_sort.h"
 
 #include <stdio.h>
 #include <stdlib.h>
